@@ -1,0 +1,1 @@
+"""Robot and map-server nodes of twinfleet, and their pure domain code."""

@@ -1,0 +1,113 @@
+"""Behaviour profiles: every switch between the paper's model and the intended behaviour.
+
+REFERENCE.md §12 lists the knobs. ``REBECA`` reproduces the Timed Rebeca model
+(MODEL HEAD) bit for bit where that matters; ``FIXED`` is the corrected,
+intended behaviour and the default.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Literal
+
+
+@dataclass(frozen=True, slots=True)
+class Profile:
+    """All behaviour switches of the robot system (REFERENCE.md §12).
+
+    Attributes:
+        name: profile name as written in scenario files.
+        round_model: True = the model's ``round_m`` (trunc + sign, +1 on integers);
+            False = round half away from zero.
+        planner_neighbours: 7 (the model's A*, no SE) or 8.
+        planner_relax: False = first discovery wins (model); True = standard A*
+            with decrease-key.
+        occupancy: ``"gray204"`` (occupied iff gray < 204) or ``"ros_trinary"``
+            (ROS map_server thresholds from the YAML, unknown counts as occupied).
+        scan_mode: ``"model"`` (§5.1 exactly) or ``"exact"`` (centre origin,
+            -90..+90 every increment, exact trig).
+        collision: ``"corner_box"`` (strict two-corner box test, §7.2) or ``"sat"``
+            (exact oriented rectangles with margin).
+        rotation: ``"model"`` (125·|Δ|+1, no wrap) or ``"shortest"``.
+        validate_backoff: drop back-off candidates whose target is off-map or blocked.
+    """
+
+    name: str
+    round_model: bool
+    planner_neighbours: Literal[7, 8]
+    planner_relax: bool
+    occupancy: Literal["gray204", "ros_trinary"]
+    scan_mode: Literal["model", "exact"]
+    collision: Literal["corner_box", "sat"]
+    rotation: Literal["model", "shortest"]
+    validate_backoff: bool
+
+    def round(self, x: float) -> int:
+        """Round ``x`` to an int by this profile's rule.
+
+        Args:
+            x: the value.
+
+        Returns:
+            ``round_m(x)`` for the model, else round half away from zero.
+        """
+        return round_m(x) if self.round_model else round_half_away(x)
+
+
+def round_m(x: float) -> int:
+    """The model's rounding: ``trunc(x) + sign(x)`` (round_m(2.0) == 3, round_m(0) == 0)."""
+    t = math.trunc(x)
+    return t + (1 if x > 0 else -1 if x < 0 else 0)
+
+
+def round_half_away(x: float) -> int:
+    """Ordinary rounding, halves away from zero (Python's ``round`` is banker's)."""
+    r = math.floor(abs(x) + 0.5)
+    return r if x >= 0 else -r
+
+
+REBECA = Profile(
+    name="rebeca",
+    round_model=True,
+    planner_neighbours=7,
+    planner_relax=False,
+    occupancy="gray204",
+    scan_mode="model",
+    collision="corner_box",
+    rotation="model",
+    validate_backoff=False,
+)
+
+FIXED = Profile(
+    name="fixed",
+    round_model=False,
+    planner_neighbours=8,
+    planner_relax=True,
+    occupancy="ros_trinary",
+    scan_mode="exact",
+    collision="sat",
+    rotation="shortest",
+    validate_backoff=True,
+)
+
+PROFILES: dict[str, Profile] = {p.name: p for p in (FIXED, REBECA)}
+
+
+def profile_named(name: str) -> Profile:
+    """Look a profile up by name.
+
+    Args:
+        name: ``"fixed"`` or ``"rebeca"``.
+
+    Returns:
+        The profile.
+
+    Raises:
+        ValueError: unknown name; the message lists the valid names.
+    """
+    try:
+        return PROFILES[name]
+    except KeyError:
+        valid = ", ".join(sorted(PROFILES))
+        raise ValueError(f"unknown profile {name!r}; valid names: {valid}") from None

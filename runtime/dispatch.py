@@ -1,0 +1,57 @@
+"""`run_handler`: the one place where a handler is run, for both drivers."""
+
+from __future__ import annotations
+
+import traceback
+from dataclasses import dataclass
+from typing import Any
+
+from runtime.context import Context, Effect
+from runtime.messages import is_message
+from runtime.node import Node
+
+
+@dataclass(frozen=True, slots=True)
+class HandlerError:
+    """An exception raised by a handler (or a bad return value of a service)."""
+
+    node: str
+    handler: str
+    message: str
+    traceback: str = ""
+
+    def __str__(self) -> str:
+        return f"{self.node}.{self.handler}: {self.message}"
+
+
+@dataclass(frozen=True, slots=True)
+class HandlerOutcome:
+    """What a handler did: its reply (services), effects, choices made, error if any."""
+
+    reply: Any
+    effects: tuple[Effect, ...]
+    choices: tuple[int, ...]
+    error: HandlerError | None
+
+
+def run_handler(node: Node, method: str, ctx: Context, args: tuple[Any, ...] = (),
+                *, expects_reply: bool = False) -> HandlerOutcome:
+    """Run `node.<method>(ctx, *args)` to completion and collect what it did.
+
+    Exceptions never escape: they come back as `HandlerOutcome.error`, with the
+    effects recorded before the exception discarded (the handler did not complete).
+    """
+    fn = getattr(node, method, None)
+    if fn is None:
+        err = HandlerError(node.name, method, f"node has no handler {method!r}")
+        return HandlerOutcome(None, (), tuple(ctx.choices), err)
+    try:
+        reply = fn(ctx, *args)
+    except Exception as exc:
+        err = HandlerError(node.name, method, f"{type(exc).__name__}: {exc}",
+                           traceback.format_exc(limit=8))
+        return HandlerOutcome(None, (), tuple(ctx.choices), err)
+    if expects_reply and not is_message(reply):
+        err = HandlerError(node.name, method, f"service handler returned {reply!r:.60}, not a message")
+        return HandlerOutcome(None, tuple(ctx.effects), tuple(ctx.choices), err)
+    return HandlerOutcome(reply, tuple(ctx.effects), tuple(ctx.choices), None)

@@ -1,0 +1,159 @@
+"""Message types and the msgpack wire codec.
+
+A message is a frozen dataclass registered with `@message("pkg/Name")`. Its
+fields hold plain values: bool, int, float, str, bytes, None, tuples of those,
+and nested messages. On the wire every sample is a msgpack map, the
+*envelope*::
+
+    {"type": "geometry_msgs/Pose2D", "stamp_ms": 1200, "seq": 7,
+     "sender": "/r1", "data": {"x": 1.0, "y": 2.0, "theta": 0.0}}
+
+`data` maps field names to values; a nested message is a map with an extra
+`"_type"` key; tuples travel as arrays. A plain zenoh-python + msgpack script
+can read it without importing twinfleet.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import msgpack
+
+T = TypeVar("T")
+
+_REGISTRY: dict[str, type] = {}
+
+
+class DecodeError(ValueError):
+    """A payload is not a valid twinfleet envelope or message."""
+
+
+def message(type_name: str) -> Callable[[type[T]], type[T]]:
+    """Class decorator: make a frozen dataclass and register it under `type_name`."""
+
+    def register(cls: type[T]) -> type[T]:
+        if not dataclasses.is_dataclass(cls):
+            cls = dataclass(frozen=True, slots=True)(cls)
+        existing = _REGISTRY.get(type_name)
+        if existing is not None and existing.__qualname__ != cls.__qualname__:
+            raise TypeError(f"message type {type_name!r} registered twice")
+        cls.__message_type__ = type_name  # type: ignore[attr-defined]
+        _REGISTRY[type_name] = cls
+        return cls
+
+    return register
+
+
+def is_message(obj: object) -> bool:
+    """True for instances of a registered message class."""
+    return hasattr(type(obj), "__message_type__")
+
+
+def type_name_of(msg: object) -> str:
+    """The registered type name of a message instance or class."""
+    cls = msg if isinstance(msg, type) else type(msg)
+    try:
+        return cls.__message_type__  # type: ignore[attr-defined]
+    except AttributeError:
+        raise TypeError(f"{cls.__name__} is not a registered message type") from None
+
+
+def message_class(type_name: str) -> type:
+    """The class registered under `type_name`."""
+    try:
+        return _REGISTRY[type_name]
+    except KeyError:
+        raise DecodeError(f"unknown message type {type_name!r}") from None
+
+
+def registered_types() -> dict[str, type]:
+    """A copy of the registry: type name → class."""
+    return dict(_REGISTRY)
+
+
+def to_plain(value: Any) -> Any:
+    """Convert a message (recursively) into msgpack-ready maps and arrays."""
+    if is_message(value):
+        out = {f.name: to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
+        out["_type"] = type_name_of(value)
+        return out
+    if isinstance(value, tuple | list):
+        return [to_plain(v) for v in value]
+    return value
+
+
+def from_plain(value: Any) -> Any:
+    """Inverse of `to_plain`: maps with `_type` become messages, arrays become tuples."""
+    if isinstance(value, dict):
+        if "_type" not in value:
+            return {k: from_plain(v) for k, v in value.items()}
+        fields = {k: from_plain(v) for k, v in value.items() if k != "_type"}
+        cls = message_class(value["_type"])
+        try:
+            return cls(**fields)
+        except TypeError as exc:
+            raise DecodeError(f"{value['_type']}: {exc}") from None
+    if isinstance(value, list | tuple):
+        return tuple(from_plain(v) for v in value)
+    return value
+
+
+@dataclass(frozen=True, slots=True)
+class Envelope:
+    """One sample as it travels: the message plus its stamp, sequence number and sender."""
+
+    msg: Any
+    stamp_ms: int
+    seq: int
+    sender: str
+
+
+def encode(msg: Any, *, stamp_ms: int = 0, seq: int = 0, sender: str = "") -> bytes:
+    """Encode a message into an envelope."""
+    plain = to_plain(msg)
+    type_name = plain.pop("_type")
+    return msgpack.packb(
+        {"type": type_name, "stamp_ms": stamp_ms, "seq": seq, "sender": sender, "data": plain},
+        use_bin_type=True,
+    )
+
+
+def decode(payload: bytes) -> Envelope:
+    """Decode an envelope; raise DecodeError with the reason on any malformed payload."""
+    try:
+        raw = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    except Exception as exc:  # msgpack raises several unrelated types
+        raise DecodeError(f"not msgpack: {exc}") from None
+    if not isinstance(raw, dict) or not {"type", "data"} <= raw.keys():
+        raise DecodeError("not a twinfleet envelope (needs 'type' and 'data')")
+    data = raw["data"]
+    if not isinstance(data, dict) or not isinstance(raw["type"], str):
+        raise DecodeError("envelope 'type' must be a string and 'data' a map")
+    msg = from_plain({**data, "_type": raw["type"]})
+    stamp, seq, sender = raw.get("stamp_ms", 0), raw.get("seq", 0), raw.get("sender", "")
+    if not isinstance(stamp, int) or not isinstance(seq, int) or not isinstance(sender, str):
+        raise DecodeError("envelope 'stamp_ms'/'seq' must be integers and 'sender' a string")
+    return Envelope(msg, stamp, seq, sender)
+
+
+@message("twinfleet/CallError")
+class CallError:
+    """Delivered to a caller's reply handler when a service call fails."""
+
+    service: str
+    reason: str  # "timeout", "no server", "server error: ..."
+
+
+@message("std_msgs/Empty")
+class Empty:
+    """A message with no fields."""
+
+
+@message("std_msgs/String")
+class String:
+    """A text message."""
+
+    data: str = ""

@@ -1,0 +1,70 @@
+"""Name resolution as in ROS 2: relative names live in the node's namespace.
+
+`resolve("scan", "/r2")` is `/r2/scan`; `resolve("/map", "/r2")` is `/map`;
+`resolve("~/status", "/r2", "r2")` is `/r2/r2/status`. `key_expr` turns a fully
+qualified name into the Zenoh key expression `twinfleet/<fleet>/<name>`.
+Pure functions: both the live transport and the checker use them.
+"""
+
+from __future__ import annotations
+
+import re
+
+KEY_PREFIX = "twinfleet"
+_TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+
+class InvalidName(ValueError):
+    """A topic, service, node or namespace name breaks the naming rules."""
+
+
+def validate_token(token: str, what: str = "name") -> None:
+    """Check one path component: letters, digits, underscore; no leading digit, no `__`."""
+    if not _TOKEN.match(token) or "__" in token:
+        raise InvalidName(
+            f"invalid {what} component {token!r}: use letters, digits and '_', "
+            "not starting with a digit, without '__'"
+        )
+
+
+def normalise_namespace(namespace: str | None) -> str:
+    """Return a namespace as '/a/b' ('' for the root namespace)."""
+    if not namespace or namespace == "/":
+        return ""
+    ns = "/" + namespace.strip("/")
+    for part in ns[1:].split("/"):
+        validate_token(part, "namespace")
+    return ns
+
+
+def resolve(name: str, namespace: str | None = "", node_name: str | None = None) -> str:
+    """Return the fully qualified name of `name` seen from a node in `namespace`."""
+    if not name or name.endswith("/"):
+        raise InvalidName(f"invalid name {name!r}: empty or ending with '/'")
+    ns = normalise_namespace(namespace)
+    if name.startswith("~"):
+        if node_name is None:
+            raise InvalidName(f"private name {name!r} needs a node name")
+        rest = name[1:].lstrip("/")
+        full = f"{ns}/{node_name}" + (f"/{rest}" if rest else "")
+    elif name.startswith("/"):
+        full = name
+    else:
+        full = f"{ns}/{name}"
+    for part in full[1:].split("/"):
+        validate_token(part, "name")
+    return full
+
+
+def key_expr(fleet: str, fq_name: str) -> str:
+    """Zenoh key expression of a fully qualified name: `twinfleet/<fleet>/<name>`."""
+    validate_token(fleet, "fleet")
+    return f"{KEY_PREFIX}/{fleet}{fq_name}"
+
+
+def name_of_key(fleet: str, key: str) -> str:
+    """Inverse of `key_expr`: the fully qualified name of a data key."""
+    prefix = f"{KEY_PREFIX}/{fleet}"
+    if not key.startswith(prefix + "/"):
+        raise InvalidName(f"key {key!r} is not in fleet {fleet!r}")
+    return key[len(prefix):]

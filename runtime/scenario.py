@@ -1,0 +1,316 @@
+"""Scenario files: one YAML describes a fleet for both `launch` and `check`.
+
+Layout (every key but `nodes` optional)::
+
+    name: c1a                      # also the Zenoh fleet name unless `fleet:` is given
+    description: free text
+    map: ../maps/map50.yaml        # relative to this file; given to nodes whose Params has `map`
+    profile: fixed                 # robot behaviour: fixed | rebeca
+    semantics: ros                 # checker message rules: ros | rebeca
+    seed: 1                        # live randomness (ctx.choose)
+    params: {scan_rate_ms: 100}    # merged into every node whose Params has the field
+    nodes:
+      - name: r1
+        class: nodes.robot:Robot   # module:Class, a subclass of runtime.Node
+        namespace: /r1             # default: root
+        priority: 3                # node-instance priority (checker, rebeca semantics)
+        respawn: false             # live: restart the process if it dies
+        params: {start: [5, 5], goal: [45, 45]}
+    properties:                    # see checker/properties.py for the kinds
+      - {name: no_collision, kind: invariant, expr: "map_server.collisions == 0"}
+    check: {max_states: 100000, max_depth: 0, max_time_s: 0, latency: [0, 0]}
+    live: {timeout_s: 120, stop_on_error: false, time_scale: 1.0}
+
+Every error names the file, the key and what was expected, and is raised
+before anything starts.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import types
+import typing
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from runtime.names import InvalidName, normalise_namespace, validate_token
+from runtime.node import Node
+
+PROFILES = ("fixed", "rebeca")
+SEMANTICS = ("ros", "rebeca")
+PROPERTY_KINDS = ("invariant", "no_failure", "deadlock", "quiescence", "eventually", "within")
+_TOP_KEYS = {"name", "fleet", "description", "map", "profile", "semantics", "seed", "params",
+             "nodes", "properties", "check", "live"}
+_NODE_KEYS = {"name", "class", "namespace", "priority", "respawn", "params"}
+_CHECK_KEYS = {"max_states", "max_depth", "max_time_s", "latency", "global_priority",
+               "search", "stop_at_first"}
+_LIVE_KEYS = {"timeout_s", "stop_on_error", "time_scale"}
+
+
+class ScenarioError(ValueError):
+    """A scenario file is invalid; the message names the file, the key and the rule."""
+
+
+@dataclass(frozen=True)
+class NodeConfig:
+    """One node of a scenario, with its parameters already built and checked."""
+
+    name: str
+    cls: type[Node]
+    class_path: str
+    namespace: str
+    priority: int
+    respawn: bool
+    params: Any
+    raw_params: Mapping[str, Any]
+
+    def instantiate(self) -> Node:
+        """A fresh node object for this entry."""
+        return self.cls(self.name, self.params, namespace=self.namespace)
+
+
+@dataclass(frozen=True)
+class PropertyConfig:
+    """A property named in the scenario."""
+
+    name: str
+    kind: str
+    expr: str | None = None
+    within_ms: int | None = None
+
+
+@dataclass(frozen=True)
+class Scenario:
+    """A parsed, validated scenario file."""
+
+    path: Path
+    name: str
+    fleet: str
+    description: str
+    map_path: Path | None
+    profile: str
+    semantics: str
+    seed: int
+    nodes: tuple[NodeConfig, ...]
+    properties: tuple[PropertyConfig, ...]
+    check: Mapping[str, Any] = field(default_factory=dict)
+    live: Mapping[str, Any] = field(default_factory=dict)
+
+    def node(self, name: str) -> NodeConfig:
+        """The node entry called `name`."""
+        for cfg in self.nodes:
+            if cfg.name == name:
+                return cfg
+        raise KeyError(name)
+
+
+def load_scenario(path: str | Path, overrides: Mapping[str, Any] | None = None) -> Scenario:
+    """Read and validate a scenario file; `overrides` replace top-level keys (e.g. profile)."""
+    path = Path(path)
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise ScenarioError(f"{path}: cannot read scenario file: {exc.strerror}") from None
+    except yaml.YAMLError as exc:
+        raise ScenarioError(f"{path}: not valid YAML: {exc}") from None
+    if not isinstance(doc, dict):
+        raise ScenarioError(f"{path}: expected a mapping at the top level")
+    doc = {**doc, **(overrides or {})}
+    return parse_scenario(doc, path)
+
+
+def parse_scenario(doc: Mapping[str, Any], path: Path) -> Scenario:
+    """Validate a scenario mapping read from `path`."""
+    err = _Errors(path)
+    err.unknown_keys(doc, _TOP_KEYS, "")
+    name = _get(doc, "name", str, err, default=path.stem)
+    fleet = _get(doc, "fleet", str, err, default=name.replace("-", "_"))
+    try:
+        validate_token(fleet, "fleet")
+    except InvalidName as exc:
+        err.fail("fleet" if "fleet" in doc else "name", str(exc))
+    profile = _choice(doc, "profile", PROFILES, err)
+    semantics = _choice(doc, "semantics", SEMANTICS, err)
+    map_path = None
+    if "map" in doc:
+        map_path = (path.parent / _get(doc, "map", str, err)).resolve()
+        if not map_path.is_file():
+            err.fail("map", f"file {map_path} does not exist")
+    common = _get(doc, "params", dict, err, default={})
+    raw_nodes = doc.get("nodes")
+    if not isinstance(raw_nodes, list) or not raw_nodes:
+        err.fail("nodes", "expected a non-empty list of nodes")
+    context = {"map": str(map_path) if map_path else None, "profile": profile}
+    nodes = tuple(_node(i, n, common, context, err) for i, n in enumerate(raw_nodes))
+    names = [n.name for n in nodes]
+    for dup in sorted({n for n in names if names.count(n) > 1}):
+        err.fail("nodes", f"node name {dup!r} is used twice")
+    props = tuple(_property(i, p, err) for i, p in enumerate(doc.get("properties") or []))
+    check = _get(doc, "check", dict, err, default={})
+    err.unknown_keys(check, _CHECK_KEYS, "check.")
+    live = _get(doc, "live", dict, err, default={})
+    err.unknown_keys(live, _LIVE_KEYS, "live.")
+    return Scenario(path=path, name=name, fleet=fleet,
+                    description=_get(doc, "description", str, err, default=""),
+                    map_path=map_path, profile=profile, semantics=semantics,
+                    seed=_get(doc, "seed", int, err, default=0), nodes=nodes,
+                    properties=props, check=check, live=live)
+
+
+class _Errors:
+    def __init__(self, path: Path) -> None:
+        self.path = path
+
+    def fail(self, key: str, what: str) -> typing.NoReturn:
+        raise ScenarioError(f"{self.path}: {key}: {what}")
+
+    def unknown_keys(self, doc: Mapping[str, Any], allowed: set[str], prefix: str) -> None:
+        for key in doc:
+            if key not in allowed:
+                self.fail(f"{prefix}{key}", f"unknown key; expected one of {', '.join(sorted(allowed))}")
+
+
+def _get(doc: Mapping[str, Any], key: str, typ: type, err: _Errors, *, default: Any = ...,
+         where: str = "") -> Any:
+    if key not in doc:
+        if default is ...:
+            err.fail(where + key, f"missing; expected a {typ.__name__}")
+        return default
+    value = doc[key]
+    if not isinstance(value, typ) or (typ is int and isinstance(value, bool)):
+        err.fail(where + key, f"expected a {typ.__name__}, got {value!r}")
+    return value
+
+
+def _choice(doc: Mapping[str, Any], key: str, options: tuple[str, ...], err: _Errors) -> str:
+    value = _get(doc, key, str, err, default=options[0])
+    if value not in options:
+        err.fail(key, f"expected one of {', '.join(options)}, got {value!r}")
+    return value
+
+
+def _node(i: int, raw: Any, common: Mapping[str, Any], context: Mapping[str, Any],
+          err: _Errors) -> NodeConfig:
+    where = f"nodes[{i}]."
+    if not isinstance(raw, dict):
+        err.fail(f"nodes[{i}]", "expected a mapping with name, class and params")
+    err.unknown_keys(raw, _NODE_KEYS, where)
+    name = _get(raw, "name", str, err, where=where)
+    try:
+        validate_token(name, "node name")
+        namespace = normalise_namespace(_get(raw, "namespace", str, err, default="", where=where))
+    except InvalidName as exc:
+        err.fail(where + "name", str(exc))
+    class_path = _get(raw, "class", str, err, where=where)
+    cls = _import_node_class(class_path, err, where + "class")
+    given = _get(raw, "params", dict, err, default={}, where=where)
+    params = build_params(cls.Params, given, common, context, err, where + "params")
+    return NodeConfig(name=name, cls=cls, class_path=class_path, namespace=namespace,
+                      priority=_get(raw, "priority", int, err, default=0, where=where),
+                      respawn=_get(raw, "respawn", bool, err, default=False, where=where),
+                      params=params, raw_params=dict(given))
+
+
+def _import_node_class(class_path: str, err: _Errors, key: str) -> type[Node]:
+    module_name, _, attr = class_path.partition(":")
+    if not attr:
+        err.fail(key, f"expected 'module:Class', got {class_path!r}")
+    try:
+        cls = getattr(importlib.import_module(module_name), attr)
+    except (ImportError, AttributeError) as exc:
+        err.fail(key, f"unknown node class {class_path!r} ({exc})")
+    if not (isinstance(cls, type) and issubclass(cls, Node)):
+        err.fail(key, f"{class_path!r} is not a subclass of runtime.Node")
+    return cls
+
+
+def build_params(params_cls: type, given: Mapping[str, Any], common: Mapping[str, Any],
+                 context: Mapping[str, Any], err: _Errors, where: str) -> Any:
+    """Build a frozen Params dataclass from scenario values, checking names and types."""
+    fields = {f.name: f for f in dataclasses.fields(params_cls)}
+    for key in given:
+        if key not in fields:
+            expected = ", ".join(fields) or "no parameters"
+            err.fail(f"{where}.{key}", f"unknown parameter of {params_cls.__name__}; expected {expected}")
+    values = {k: v for k, v in context.items() if k in fields and v is not None}
+    values.update({k: v for k, v in common.items() if k in fields})
+    values.update(given)
+    hints = typing.get_type_hints(params_cls)
+    converted = {k: _convert(v, hints.get(k, Any), err, f"{where}.{k}") for k, v in values.items()}
+    missing = [f.name for f in fields.values() if f.name not in converted
+               and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
+    if missing:
+        err.fail(f"{where}.{missing[0]}", f"missing; {params_cls.__name__} needs {', '.join(missing)}")
+    try:
+        return params_cls(**converted)
+    except (TypeError, ValueError) as exc:
+        err.fail(where, str(exc))
+
+
+def _convert(value: Any, hint: Any, err: _Errors, key: str) -> Any:
+    """Check a YAML value against a type hint; lists become tuples for tuple fields."""
+    origin = typing.get_origin(hint)
+    if hint is Any:
+        return value
+    if origin in (typing.Union, types.UnionType):
+        for option in typing.get_args(hint):
+            try:
+                return _convert(value, option, _Silent(), key)
+            except ScenarioError:
+                continue
+        err.fail(key, f"expected {_hint_name(hint)}, got {value!r}")
+    if hint is type(None):
+        if value is None:
+            return None
+        err.fail(key, f"expected null, got {value!r}")
+    if origin is tuple:
+        if not isinstance(value, list | tuple):
+            err.fail(key, f"expected a list ({_hint_name(hint)}), got {value!r}")
+        args = typing.get_args(hint)
+        if len(args) == 2 and args[1] is Ellipsis:
+            return tuple(_convert(v, args[0], err, f"{key}[{i}]") for i, v in enumerate(value))
+        if len(args) != len(value):
+            err.fail(key, f"expected {len(args)} values ({_hint_name(hint)}), got {value!r}")
+        return tuple(_convert(v, a, err, f"{key}[{i}]") for i, (v, a) in enumerate(zip(args, value)))
+    if hint is float and isinstance(value, int) and not isinstance(value, bool):
+        return float(value)
+    if isinstance(hint, type) and not isinstance(value, hint) or (hint is int and isinstance(value, bool)):
+        err.fail(key, f"expected {_hint_name(hint)}, got {value!r}")
+    return value
+
+
+class _Silent(_Errors):
+    def __init__(self) -> None:
+        super().__init__(Path("?"))
+
+
+def _hint_name(hint: Any) -> str:
+    return getattr(hint, "__name__", None) or str(hint).replace("typing.", "")
+
+
+def _property(i: int, raw: Any, err: _Errors) -> PropertyConfig:
+    where = f"properties[{i}]."
+    if not isinstance(raw, dict):
+        err.fail(f"properties[{i}]", "expected a mapping with kind (and name, expr, within_ms)")
+    err.unknown_keys(raw, {"name", "kind", "expr", "within_ms"}, where)
+    kind = _get(raw, "kind", str, err, where=where)
+    if kind not in PROPERTY_KINDS:
+        err.fail(where + "kind", f"expected one of {', '.join(PROPERTY_KINDS)}, got {kind!r}")
+    expr = _get(raw, "expr", str, err, default=None, where=where)
+    if kind in ("invariant", "eventually", "within") and expr is None:
+        err.fail(where + "expr", f"a {kind} property needs an expression over node states")
+    if expr is not None:
+        try:
+            compile(expr, f"{err.path}:{where}expr", "eval")
+        except SyntaxError as exc:
+            err.fail(where + "expr", f"not a Python expression: {exc.msg}")
+    within = _get(raw, "within_ms", int, err, default=None, where=where)
+    if kind == "within" and (within is None or within <= 0):
+        err.fail(where + "within_ms", "a within property needs within_ms > 0")
+    return PropertyConfig(name=_get(raw, "name", str, err, default=f"{kind}_{i}", where=where),
+                          kind=kind, expr=expr, within_ms=within)
