@@ -150,6 +150,8 @@ def parse_scenario(doc: Mapping[str, Any], path: Path) -> Scenario:
     names = [n.name for n in nodes]
     for dup in sorted({n for n in names if names.count(n) > 1}):
         err.fail("nodes", f"node name {dup!r} is used twice")
+    for i, cfg in enumerate(nodes):
+        _try_instantiate(i, cfg, err)
     props = tuple(_property(i, p, err) for i, p in enumerate(doc.get("properties") or []))
     check = _get(doc, "check", dict, err, default={})
     err.unknown_keys(check, _CHECK_KEYS, "check.")
@@ -216,6 +218,14 @@ def _node(i: int, raw: Any, common: Mapping[str, Any], context: Mapping[str, Any
                       params=params, raw_params=dict(given))
 
 
+def _try_instantiate(i: int, cfg: NodeConfig, err: _Errors) -> None:
+    """Build the node once so that bad parameters fail before anything starts."""
+    try:
+        cfg.instantiate()
+    except (ValueError, TypeError, OSError) as exc:
+        err.fail(f"nodes[{i}] ({cfg.name})", str(exc))
+
+
 def _import_node_class(class_path: str, err: _Errors, key: str) -> type[Node]:
     module_name, _, attr = class_path.partition(":")
     if not attr:
@@ -276,7 +286,7 @@ def _convert(value: Any, hint: Any, err: _Errors, key: str) -> Any:
             return tuple(_convert(v, args[0], err, f"{key}[{i}]") for i, v in enumerate(value))
         if len(args) != len(value):
             err.fail(key, f"expected {len(args)} values ({_hint_name(hint)}), got {value!r}")
-        return tuple(_convert(v, a, err, f"{key}[{i}]") for i, (v, a) in enumerate(zip(args, value)))
+        return tuple(_convert(v, a, err, f"{key}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True)))
     if hint is float and isinstance(value, int) and not isinstance(value, bool):
         return float(value)
     if isinstance(hint, type) and not isinstance(value, hint) or (hint is int and isinstance(value, bool)):

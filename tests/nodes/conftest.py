@@ -1,0 +1,28 @@
+"""Shared fixtures for the domain-code tests."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from nodes.grid import inflate
+from nodes.mapfile import OccupancyMap, load_map
+from nodes.profile import REBECA
+
+MAPS = Path(__file__).resolve().parents[2] / "maps"
+
+
+@pytest.fixture(scope="session")
+def map50() -> OccupancyMap:
+    return load_map(MAPS / "map50.yaml")
+
+
+@pytest.fixture(scope="session")
+def occ50(map50):
+    return map50.occupied(REBECA)
+
+
+@pytest.fixture(scope="session")
+def inflated50(occ50):
+    return inflate(occ50)

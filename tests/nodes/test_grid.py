@@ -1,0 +1,105 @@
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from nodes.grid import (
+    NB,
+    Dims,
+    cell_centre,
+    cell_to_world,
+    chebyshev,
+    dir_to_heading,
+    direction_between,
+    heading_to_dir,
+    in_bounds,
+    inflate,
+    is_diagonal,
+    octile,
+    step,
+    world_to_cell,
+)
+
+
+def test_nb_is_ccw_from_east():
+    assert NB[0] == (1, 0) and NB[2] == (0, 1) and NB[4] == (-1, 0) and NB[7] == (1, -1)
+
+
+@pytest.mark.parametrize("d", range(8))
+def test_direction_between_inverts_nb(d):
+    assert direction_between((5, 5), step((5, 5), d, 3)) == d
+    assert direction_between((5, 5), (5 + 7 * NB[d][0], 5 + 2 * NB[d][1])) == d
+
+
+def test_direction_between_same_cell_raises():
+    with pytest.raises(ValueError, match="itself"):
+        direction_between((1, 1), (1, 1))
+
+
+def test_octile_and_chebyshev():
+    assert octile((0, 0), (3, 1)) == pytest.approx(0.4142 + 3)
+    assert octile((2, 2), (2, 2)) == 0
+    assert chebyshev((0, 0), (3, -5)) == 5
+
+
+def test_is_diagonal():
+    assert [is_diagonal(d) for d in range(8)] == [False, True] * 4
+
+
+def test_cell_world_round_trip():
+    assert cell_centre((0, 0), 0.255) == (0.1275, 0.1275)
+    for cell in [(0, 0), (5, 7), (49, 3)]:
+        x, y = cell_to_world(cell, 0.255, (-6.375, -6.375))
+        assert world_to_cell(x, y, 0.255, (-6.375, -6.375)) == cell
+    assert world_to_cell(-0.01, 0.0, 0.255) == (-1, 0)
+
+
+def test_heading_dir():
+    assert [dir_to_heading(d) for d in (0, 2, 7)] == [0.0, 90.0, 315.0]
+    assert heading_to_dir(44.9) == 0 and heading_to_dir(45) == 1 and heading_to_dir(-1) == 7
+    assert heading_to_dir(44.9, nearest=True) == 1 and heading_to_dir(350, nearest=True) == 0
+
+
+def test_in_bounds():
+    assert in_bounds((0, 0), (2, 3)) and in_bounds((1, 2), (2, 3))
+    assert not in_bounds((2, 0), (2, 3)) and not in_bounds((0, -1), (2, 3))
+
+
+def _inflate_brute(occ):
+    rows, cols = occ.shape
+    out = occ.copy()
+    for x in range(rows):
+        for y in range(cols):
+            if occ[x, y]:
+                for dx, dy in NB:
+                    if 0 <= x + dx < rows and 0 <= y + dy < cols:
+                        out[x + dx, y + dy] = True
+    return out
+
+
+def test_inflate_matches_brute_force():
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        occ = rng.random((int(rng.integers(1, 12)), int(rng.integers(1, 12)))) < 0.1
+        assert (inflate(occ) == _inflate_brute(occ)).all()
+        assert (inflate(occ, 2) == _inflate_brute(_inflate_brute(occ))).all()
+    assert (inflate(occ, 0) == occ).all()
+
+
+def test_inflate_does_not_wrap():
+    occ = np.zeros((3, 4), dtype=bool)
+    occ[0, 3] = True
+    out = inflate(occ)
+    assert not out[1, 0] and not out[0, 0] and out[1, 2]
+
+
+def test_inflate_map50_model_count(occ50):
+    assert occ50.sum() == 213
+    assert inflate(occ50).sum() > 213
+
+
+def test_dims():
+    d = Dims()
+    assert d.steplen(0) == 0.255 and d.steplen(1) == pytest.approx(0.360621)
+    with pytest.raises(ValueError, match="res"):
+        Dims(res=0)

@@ -1,0 +1,228 @@
+from __future__ import annotations
+
+import heapq
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from nodes.grid import NB, SQRT2, Dims, direction_between, inflate
+from nodes.planning import (
+    OtherRobot,
+    astar,
+    consolidate_waypoints,
+    generate_path,
+    plan_waypoints,
+    planning_grid,
+    remove_zigzags,
+)
+from nodes.profile import FIXED, REBECA
+
+R1 = (
+    "6,6 7,7 8,8 9,9 10,10 11,11 12,12 13,13 14,14 15,15 16,16 18,16 20,16 22,16 24,16 26,16 "
+    "27,17 28,18 28,20 29,21 30,22 31,23 32,24 33,25 34,26 35,27 36,28 36,30 36,32 36,34 36,36 "
+    "37,37 38,38 39,39 40,40 41,41 42,42 43,43 44,44 45,45"
+)
+
+
+def cells(text):
+    return [tuple(int(v) for v in c.split(",")) for c in text.split()]
+
+
+def initial_plan(occ50, inflated50, start, goal):
+    grid = planning_grid(inflated50, occ50, [], start, Dims(), REBECA)
+    res = astar(grid, start, goal, REBECA)
+    return res, remove_zigzags(res.path)
+
+
+def test_golden_r1(occ50, inflated50):
+    res, wps = initial_plan(occ50, inflated50, (5, 5), (45, 45))
+    assert wps == cells(R1)
+    assert len(res.path) == 51 and res.max_open == 124
+
+
+def test_golden_r2(occ50, inflated50):
+    res, wps = initial_plan(occ50, inflated50, (5, 15), (45, 35))
+    assert len(res.path) == 41 and res.max_open == 78
+    assert wps[:11] == [(r, 15) for r in range(6, 25, 2)] + [(25, 15)]
+    assert wps[11:] == [(26 + k, 16 + k) for k in range(20)]
+
+
+def test_golden_r3(occ50, inflated50):
+    res, wps = initial_plan(occ50, inflated50, (5, 25), (45, 25))
+    assert len(res.path) == 44 and res.max_open == 80
+    assert wps == [(6, 25)] + [(r, 25) for r in range(8, 35, 2)] + cells(
+        "35,25 36,26 37,27 38,28 40,28 42,28 43,27 44,26 45,25"
+    )
+
+
+def test_golden_r4(occ50, inflated50):
+    res, wps = initial_plan(occ50, inflated50, (5, 35), (45, 15))
+    assert len(res.path) == 61 and res.max_open == 137
+    assert wps == [(6, 35)] + [(r, 35) for r in range(8, 27, 2)] + cells(
+        "27,34 28,33 28,31 30,31 31,30 32,29 33,28 34,27 35,26 35,24 35,22 36,21 37,20 38,19 "
+        "40,19 42,19 43,18 44,17 45,16 45,15"
+    )
+
+
+def test_golden_r5(occ50, inflated50):
+    res, wps = initial_plan(occ50, inflated50, (5, 45), (45, 5))
+    assert len(res.path) == 81 and res.max_open == 123
+    assert wps == [(6 + k, 45 - k) for k in range(33)] + cells("40,13 40,11 41,10 42,9 43,8 44,7 45,6 45,5")
+
+
+def test_model_astar_never_steps_se(occ50, inflated50):
+    res, _ = initial_plan(occ50, inflated50, (5, 45), (45, 5))
+    steps = {(b[0] - a[0], b[1] - a[1]) for a, b in zip(res.path, res.path[1:], strict=False)}
+    assert (1, -1) not in steps
+
+
+def dijkstra_cost(grid, start, goal):
+    rows, cols = grid.shape
+    dist = {start: 0.0}
+    pq = [(0.0, start)]
+    while pq:
+        d, c = heapq.heappop(pq)
+        if c == goal:
+            return d
+        if d > dist[c]:
+            continue
+        for k, (dx, dy) in enumerate(NB):
+            n = (c[0] + dx, c[1] + dy)
+            if 0 <= n[0] < rows and 0 <= n[1] < cols and not grid[n]:
+                nd = d + (SQRT2 if k % 2 else 1.0)
+                if nd < dist.get(n, float("inf")):
+                    dist[n] = nd
+                    heapq.heappush(pq, (nd, n))
+    return None
+
+
+def path_cost(path):
+    return sum(SQRT2 if a[0] != b[0] and a[1] != b[1] else 1.0 for a, b in zip(path, path[1:], strict=False))
+
+
+@settings(max_examples=150, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    rows=st.integers(1, 14),
+    cols=st.integers(1, 14),
+    density=st.floats(0.0, 0.45),
+)
+def test_fixed_astar_is_optimal(seed, rows, cols, density):
+    rng = np.random.default_rng(seed)
+    grid = rng.random((rows, cols)) < density
+    start = (int(rng.integers(rows)), int(rng.integers(cols)))
+    goal = (int(rng.integers(rows)), int(rng.integers(cols)))
+    grid[start] = False
+    want = dijkstra_cost(grid, start, goal)
+    path = generate_path(grid, start, goal, FIXED)
+    if want is None:
+        assert path is None
+        return
+    assert path is not None and path[0] == start and path[-1] == goal
+    for a, b in zip(path, path[1:], strict=False):
+        assert max(abs(a[0] - b[0]), abs(a[1] - b[1])) == 1 and not grid[b]
+    assert path_cost(path) == pytest.approx(want, abs=1e-9)
+
+
+def test_fixed_astar_deterministic(occ50, inflated50):
+    a = generate_path(inflated50, (5, 45), (45, 5), FIXED)
+    assert a == generate_path(inflated50, (5, 45), (45, 5), FIXED)
+    assert path_cost(a) == pytest.approx(dijkstra_cost(inflated50, (5, 45), (45, 5)))
+
+
+def test_astar_goal_blocked_or_start_outside(inflated50):
+    assert generate_path(inflated50, (5, 5), (20, 20), REBECA) is None
+    assert generate_path(inflated50, (5, 5), (20, 20), FIXED) is None
+    assert generate_path(inflated50, (-1, -1), (5, 5), REBECA) is None
+
+
+def test_plan_waypoints_start_equals_goal_fails(inflated50):
+    for p in (REBECA, FIXED):
+        assert plan_waypoints(inflated50, (5, 5), (5, 5), p) == []
+        assert plan_waypoints(inflated50, (5, 5), (20, 20), p) == []
+        assert plan_waypoints(inflated50, (5, 5), (6, 6), p) == [(6, 6)]
+
+
+def test_remove_zigzags_rules():
+    assert remove_zigzags([(0, 0)]) == []
+    assert remove_zigzags([(0, 0), (1, 0)]) == [(1, 0)]
+    # straight run: every second interior point dropped, never two in a row
+    run = [(i, 0) for i in range(6)]
+    assert remove_zigzags(run) == [(1, 0), (3, 0), (5, 0)]
+    # staircase becomes diagonals
+    stair = [(0, 0), (1, 0), (1, 1), (2, 1), (2, 2)]
+    assert remove_zigzags(stair) == [(1, 0), (2, 1), (2, 2)]
+    # the last point is never dropped
+    assert remove_zigzags([(0, 0), (1, 0), (2, 0)]) == [(1, 0), (2, 0)]
+
+
+def test_zigzag_gaps_walkable(occ50, inflated50):
+    """Every gap is one diagonal or two straight cells, so the sign walk lands on waypoints."""
+    for start, goal in [((5, 5), (45, 45)), ((5, 45), (45, 5)), ((5, 35), (45, 15))]:
+        _, wps = initial_plan(occ50, inflated50, start, goal)
+        prev = start
+        for w in wps:
+            dx, dy = w[0] - prev[0], w[1] - prev[1]
+            assert (abs(dx), abs(dy)) in {(1, 0), (0, 1), (1, 1), (2, 0), (0, 2)}
+            prev = w
+
+
+def test_consolidate_waypoints():
+    start = (0, 0)
+    wps = [(1, 0), (3, 0), (5, 0), (6, 1), (7, 2), (7, 4)]
+    assert consolidate_waypoints(start, wps) == [(5, 0), (7, 2), (7, 4)]
+    assert consolidate_waypoints(start, []) == []
+
+
+def test_consolidated_plan_walks_same_cells(occ50, inflated50):
+    def walk(start, wps):
+        cur, seen = start, []
+        for w in wps:
+            while cur != w:
+                d = direction_between(cur, w)
+                cur = (cur[0] + NB[d][0], cur[1] + NB[d][1])
+                seen.append(cur)
+        return seen
+
+    grid = planning_grid(inflated50, occ50, [], (5, 5), Dims(), REBECA)
+    raw = plan_waypoints(grid, (5, 5), (45, 45), REBECA)
+    cons = plan_waypoints(grid, (5, 5), (45, 45), REBECA, consolidate=True)
+    assert len(cons) < len(raw) and walk((5, 5), cons) == walk((5, 5), raw)
+
+
+def test_planning_grid_other_robot_lookahead_and_unblock(occ50, inflated50):
+    dims = Dims()
+    other = OtherRobot((10, 30), 0, 2)
+    g = planning_grid(inflated50, occ50, [other], (5, 5), dims, REBECA)
+    assert g[10, 30] and g[11, 30] and g[12, 30] and not g[13, 30]
+    still = planning_grid(inflated50, occ50, [OtherRobot((10, 30), 0, 0)], (5, 5), dims, REBECA)
+    assert still[10, 30] and not still[11, 30]
+    # requester next to the other robot: its neighbours are freed, its own cell not tested
+    g2 = planning_grid(inflated50, occ50, [other], (10, 31), dims, REBECA)
+    assert not g2[10, 30] and not g2[11, 30] and g2[12, 30]
+    # statically occupied neighbours stay blocked; inflation-only ones are freed
+    g3 = planning_grid(inflated50, occ50, [], (9, 17), dims, REBECA)
+    assert g3[9, 18] and not g3[8, 17]
+
+
+def test_planning_grid_unknown_robot_ignored(occ50, inflated50):
+    g = planning_grid(inflated50, occ50, [OtherRobot((-1, -1), 0, 3)], (5, 5), Dims(), REBECA)
+    assert (g == planning_grid(inflated50, occ50, [], (5, 5), Dims(), REBECA)).all()
+
+
+def test_planning_grid_gap_rule():
+    occ = np.zeros((50, 50), dtype=bool)
+    inf = inflate(occ)
+    dims = Dims()
+    g = planning_grid(inf, occ, [OtherRobot((20, 1), 2, 0)], (40, 40), dims, REBECA)
+    assert g[20, 0] and g[20, 1] and not g[20, 2]
+    g = planning_grid(inf, occ, [OtherRobot((20, 48), 2, 0)], (40, 40), dims, REBECA)
+    assert not g[20, 49]  # far side only triggers at 49 (50 − 48 = 2 is not < 2)
+    g = planning_grid(inf, occ, [OtherRobot((49, 20), 2, 0)], (10, 10), dims, REBECA)
+    assert g[49, 20] and g[48, 20] is np.False_ or not g[48, 20]
+    g = planning_grid(inf, occ, [OtherRobot((1, 20), 2, 0)], (40, 40), dims, REBECA)
+    assert g[0, 20]
+    g = planning_grid(inf, occ, [OtherRobot((20, 49), 6, 0)], (40, 40), dims, REBECA)
+    assert g[20, 49] and not g[20, 48]  # nothing beyond 49 to mark
