@@ -7,6 +7,7 @@ array index ``[row, col]`` is the model's cell ``(x, y)``.
 from __future__ import annotations
 
 import math
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -136,7 +137,8 @@ def read_pgm(path: str | Path) -> tuple[np.ndarray, int]:
             raise MapError(f"{path}: PGM size mismatch: {len(raster)} data bytes, expected {size}")
         arr = np.frombuffer(raster, dtype=np.uint8).reshape(height, width).copy()
     else:
-        words = data[end:].split()
+        # ASCII rasters may carry comments too.
+        words = re.sub(rb"#[^\r\n]*", b" ", data[end:]).split()
         if len(words) != size:
             raise MapError(f"{path}: PGM size mismatch: {len(words)} samples, expected {size}")
         try:

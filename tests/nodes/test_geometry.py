@@ -28,9 +28,11 @@ def test_shadow_box_shapes():
     x0, y0, x1, y1 = shadow_box((0, 0), 0, 0.255, 0.22, 0.22)
     assert (x1 - x0, y1 - y0) == pytest.approx((0.44, 0.44))
     x0, y0, x1, y1 = shadow_box((0, 0), 1, 0.255, 0.22, 0.22)
-    assert x1 - x0 == 0 and y1 - y0 == pytest.approx(0.622, abs=1e-3)
+    assert x1 - x0 == 0
+    assert y1 - y0 == pytest.approx(0.622, abs=1e-3)
     x0, y0, x1, y1 = shadow_box((0, 0), 3, 0.255, 0.22, 0.22)
-    assert y1 - y0 == 0 and x1 - x0 == pytest.approx(0.622, abs=1e-3)
+    assert y1 - y0 == 0
+    assert x1 - x0 == pytest.approx(0.622, abs=1e-3)
 
 
 @pytest.mark.parametrize("di", CARD)

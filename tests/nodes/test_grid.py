@@ -22,7 +22,10 @@ from nodes.grid import (
 
 
 def test_nb_is_ccw_from_east():
-    assert NB[0] == (1, 0) and NB[2] == (0, 1) and NB[4] == (-1, 0) and NB[7] == (1, -1)
+    assert NB[0] == (1, 0)
+    assert NB[2] == (0, 1)
+    assert NB[4] == (-1, 0)
+    assert NB[7] == (1, -1)
 
 
 @pytest.mark.parametrize("d", range(8))
@@ -56,13 +59,18 @@ def test_cell_world_round_trip():
 
 def test_heading_dir():
     assert [dir_to_heading(d) for d in (0, 2, 7)] == [0.0, 90.0, 315.0]
-    assert heading_to_dir(44.9) == 0 and heading_to_dir(45) == 1 and heading_to_dir(-1) == 7
-    assert heading_to_dir(44.9, nearest=True) == 1 and heading_to_dir(350, nearest=True) == 0
+    assert heading_to_dir(44.9) == 0
+    assert heading_to_dir(45) == 1
+    assert heading_to_dir(-1) == 7
+    assert heading_to_dir(44.9, nearest=True) == 1
+    assert heading_to_dir(350, nearest=True) == 0
 
 
 def test_in_bounds():
-    assert in_bounds((0, 0), (2, 3)) and in_bounds((1, 2), (2, 3))
-    assert not in_bounds((2, 0), (2, 3)) and not in_bounds((0, -1), (2, 3))
+    assert in_bounds((0, 0), (2, 3))
+    assert in_bounds((1, 2), (2, 3))
+    assert not in_bounds((2, 0), (2, 3))
+    assert not in_bounds((0, -1), (2, 3))
 
 
 def _inflate_brute(occ):
@@ -90,7 +98,9 @@ def test_inflate_does_not_wrap():
     occ = np.zeros((3, 4), dtype=bool)
     occ[0, 3] = True
     out = inflate(occ)
-    assert not out[1, 0] and not out[0, 0] and out[1, 2]
+    assert not out[1, 0]
+    assert not out[0, 0]
+    assert out[1, 2]
 
 
 def test_inflate_map50_model_count(occ50):
@@ -100,6 +110,7 @@ def test_inflate_map50_model_count(occ50):
 
 def test_dims():
     d = Dims()
-    assert d.steplen(0) == 0.255 and d.steplen(1) == pytest.approx(0.360621)
+    assert d.steplen(0) == 0.255
+    assert d.steplen(1) == pytest.approx(0.360621)
     with pytest.raises(ValueError, match="res"):
         Dims(res=0)

@@ -74,7 +74,9 @@ def test_scan_rate_rule():
     # C2c's r5 (1.0 m/s, 256 ms < 280 ms) breaks Eq. 1; C2a's 0.9 m/s (284 ms) satisfies it.
     assert check_scan_rate_rule(0.9, 0.255, 140, REBECA) is None
     msg = check_scan_rate_rule(1.0, 0.255, 140, REBECA)
-    assert msg is not None and "256" in msg and "0.9107" in msg
+    assert msg is not None
+    assert "256" in msg
+    assert "0.9107" in msg
     assert check_scan_rate_rule(0.5, 0.255, 100, FIXED) is None
 
 

@@ -39,19 +39,22 @@ def initial_plan(occ50, inflated50, start, goal):
 def test_golden_r1(occ50, inflated50):
     res, wps = initial_plan(occ50, inflated50, (5, 5), (45, 45))
     assert wps == cells(R1)
-    assert len(res.path) == 51 and res.max_open == 124
+    assert len(res.path) == 51
+    assert res.max_open == 124
 
 
 def test_golden_r2(occ50, inflated50):
     res, wps = initial_plan(occ50, inflated50, (5, 15), (45, 35))
-    assert len(res.path) == 41 and res.max_open == 78
+    assert len(res.path) == 41
+    assert res.max_open == 78
     assert wps[:11] == [(r, 15) for r in range(6, 25, 2)] + [(25, 15)]
     assert wps[11:] == [(26 + k, 16 + k) for k in range(20)]
 
 
 def test_golden_r3(occ50, inflated50):
     res, wps = initial_plan(occ50, inflated50, (5, 25), (45, 25))
-    assert len(res.path) == 44 and res.max_open == 80
+    assert len(res.path) == 44
+    assert res.max_open == 80
     assert wps == [(6, 25)] + [(r, 25) for r in range(8, 35, 2)] + cells(
         "35,25 36,26 37,27 38,28 40,28 42,28 43,27 44,26 45,25"
     )
@@ -59,7 +62,8 @@ def test_golden_r3(occ50, inflated50):
 
 def test_golden_r4(occ50, inflated50):
     res, wps = initial_plan(occ50, inflated50, (5, 35), (45, 15))
-    assert len(res.path) == 61 and res.max_open == 137
+    assert len(res.path) == 61
+    assert res.max_open == 137
     assert wps == [(6, 35)] + [(r, 35) for r in range(8, 27, 2)] + cells(
         "27,34 28,33 28,31 30,31 31,30 32,29 33,28 34,27 35,26 35,24 35,22 36,21 37,20 38,19 "
         "40,19 42,19 43,18 44,17 45,16 45,15"
@@ -68,7 +72,8 @@ def test_golden_r4(occ50, inflated50):
 
 def test_golden_r5(occ50, inflated50):
     res, wps = initial_plan(occ50, inflated50, (5, 45), (45, 5))
-    assert len(res.path) == 81 and res.max_open == 123
+    assert len(res.path) == 81
+    assert res.max_open == 123
     assert wps == [(6 + k, 45 - k) for k in range(33)] + cells("40,13 40,11 41,10 42,9 43,8 44,7 45,6 45,5")
 
 
@@ -120,9 +125,12 @@ def test_fixed_astar_is_optimal(seed, rows, cols, density):
     if want is None:
         assert path is None
         return
-    assert path is not None and path[0] == start and path[-1] == goal
+    assert path is not None
+    assert path[0] == start
+    assert path[-1] == goal
     for a, b in zip(path, path[1:], strict=False):
-        assert max(abs(a[0] - b[0]), abs(a[1] - b[1])) == 1 and not grid[b]
+        assert max(abs(a[0] - b[0]), abs(a[1] - b[1])) == 1
+        assert not grid[b]
     assert path_cost(path) == pytest.approx(want, abs=1e-9)
 
 
@@ -189,22 +197,30 @@ def test_consolidated_plan_walks_same_cells(occ50, inflated50):
     grid = planning_grid(inflated50, occ50, [], (5, 5), Dims(), REBECA)
     raw = plan_waypoints(grid, (5, 5), (45, 45), REBECA)
     cons = plan_waypoints(grid, (5, 5), (45, 45), REBECA, consolidate=True)
-    assert len(cons) < len(raw) and walk((5, 5), cons) == walk((5, 5), raw)
+    assert len(cons) < len(raw)
+    assert walk((5, 5), cons) == walk((5, 5), raw)
 
 
 def test_planning_grid_other_robot_lookahead_and_unblock(occ50, inflated50):
     dims = Dims()
     other = OtherRobot((10, 30), 0, 2)
     g = planning_grid(inflated50, occ50, [other], (5, 5), dims, REBECA)
-    assert g[10, 30] and g[11, 30] and g[12, 30] and not g[13, 30]
+    assert g[10, 30]
+    assert g[11, 30]
+    assert g[12, 30]
+    assert not g[13, 30]
     still = planning_grid(inflated50, occ50, [OtherRobot((10, 30), 0, 0)], (5, 5), dims, REBECA)
-    assert still[10, 30] and not still[11, 30]
+    assert still[10, 30]
+    assert not still[11, 30]
     # requester next to the other robot: its neighbours are freed, its own cell not tested
     g2 = planning_grid(inflated50, occ50, [other], (10, 31), dims, REBECA)
-    assert not g2[10, 30] and not g2[11, 30] and g2[12, 30]
+    assert not g2[10, 30]
+    assert not g2[11, 30]
+    assert g2[12, 30]
     # statically occupied neighbours stay blocked; inflation-only ones are freed
     g3 = planning_grid(inflated50, occ50, [], (9, 17), dims, REBECA)
-    assert g3[9, 18] and not g3[8, 17]
+    assert g3[9, 18]
+    assert not g3[8, 17]
 
 
 def test_planning_grid_unknown_robot_ignored(occ50, inflated50):
@@ -217,12 +233,16 @@ def test_planning_grid_gap_rule():
     inf = inflate(occ)
     dims = Dims()
     g = planning_grid(inf, occ, [OtherRobot((20, 1), 2, 0)], (40, 40), dims, REBECA)
-    assert g[20, 0] and g[20, 1] and not g[20, 2]
+    assert g[20, 0]
+    assert g[20, 1]
+    assert not g[20, 2]
     g = planning_grid(inf, occ, [OtherRobot((20, 48), 2, 0)], (40, 40), dims, REBECA)
     assert not g[20, 49]  # far side only triggers at 49 (50 − 48 = 2 is not < 2)
     g = planning_grid(inf, occ, [OtherRobot((49, 20), 2, 0)], (10, 10), dims, REBECA)
-    assert g[49, 20] and g[48, 20] is np.False_ or not g[48, 20]
+    assert g[49, 20]
+    assert not g[48, 20]
     g = planning_grid(inf, occ, [OtherRobot((1, 20), 2, 0)], (40, 40), dims, REBECA)
     assert g[0, 20]
     g = planning_grid(inf, occ, [OtherRobot((20, 49), 6, 0)], (40, 40), dims, REBECA)
-    assert g[20, 49] and not g[20, 48]  # nothing beyond 49 to mark
+    assert g[20, 49]
+    assert not g[20, 48]

@@ -71,14 +71,16 @@ def brute_exact_scan(occ, cell, d, others, tables):
 def test_model_tables_shape():
     t = build_tables(REBECA)
     assert t.beams == 92
-    assert t.beam_angles[0, 0] == 360 - 91 and t.beam_angles[0, -1] == 91
+    assert t.beam_angles[0, 0] == 360 - 91
+    assert t.beam_angles[0, -1] == 91
     assert t.dx.shape[2] == 50  # 0.8 accumulated stays below 40 for the 50th sample
 
 
 def test_exact_tables_shape():
     t = build_tables(FIXED)
     assert t.beams == 91
-    assert t.beam_angles[2, 0] == 0 and t.beam_angles[2, -1] == 180
+    assert t.beam_angles[2, 0] == 0
+    assert t.beam_angles[2, -1] == 180
 
 
 def test_model_scan_matches_brute_force(occ50):
