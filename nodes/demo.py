@@ -8,7 +8,18 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from runtime import CallError, Context, Node, String, every, handler, message, on_start, service, subscribe
+from runtime import (
+    CallError,
+    Context,
+    Node,
+    String,
+    every,
+    handler,
+    message,
+    on_start,
+    service,
+    subscribe,
+)
 
 
 @message("example_interfaces/AddTwoInts_Request")

@@ -77,9 +77,7 @@ class RobotStatus:
     mode: str  # planning | rotating | moving | waiting | backing_off | arrived | stuck
     cell: Cell
     goal: Cell
-    hops: int
     waits: int
-    backoffs: int
     failures: int
     time_ms: int
 

@@ -22,9 +22,9 @@ from nodes.grid import Cell, Dims, direction_between, in_bounds, inflate, is_dia
 from nodes.mapfile import OccupancyMap, load_map
 from nodes.motion import (
     cells_per_second,
-    distance_to_target,
     check_cell_size_rule,
     check_scan_rate_rule,
+    distance_to_target,
     hop_time_ms,
     max_waiting_rounds,
     rotation_time_ms,
@@ -60,7 +60,9 @@ class RobotParams:
 
 @dataclass
 class RobotState:
-    """Everything a robot changes. No absolute times: they would break time-shift equivalence."""
+    """Everything a robot changes, and nothing more: no absolute times (they would break
+    time-shift equivalence) and no statistics counters (they would split states the model
+    merges); live statistics are counted by `nodes.report` from the published messages."""
 
     cell: Cell
     dir: int
@@ -75,8 +77,6 @@ class RobotState:
     failures: int = 0
     done: bool = False
     stuck: bool = False
-    hops: int = 0
-    backoffs: int = 0
 
 
 class Robot(Node):
@@ -202,7 +202,6 @@ class Robot(Node):
         nxt = step(st.cell, st.dir)
         if in_bounds(nxt, self.shape):
             st.cell = nxt
-            st.hops += 1
             self._report_pose(ctx)
             st.distance = distance_to_target(st.cell, tuple(self.params.goal), self.profile)
             if st.cell == st.moves[st.move_idx]:
@@ -237,7 +236,6 @@ class Robot(Node):
                 self._request_path(ctx, st.targets[-1])
             return
         choice = ctx.choose(options)
-        st.backoffs += 1
         self._report_status(ctx, "backing_off")
         self._set_target(ctx, choice.target)
 
@@ -270,8 +268,8 @@ class Robot(Node):
 
     def _report_status(self, ctx: Context, mode: str) -> None:
         st = self.state
-        ctx.publish("status", RobotStatus(self.name, mode, st.cell, tuple(self.params.goal), st.hops,
-                                          st.waits, st.backoffs, st.failures, ctx.now()))
+        ctx.publish("status", RobotStatus(self.name, mode, st.cell, tuple(self.params.goal),
+                                          st.waits, st.failures, ctx.now()))
 
 
 @cache
