@@ -173,3 +173,23 @@ def test_unsafe_speed_is_refused_unless_allowed():
 def test_start_outside_the_map_or_in_an_obstacle_is_refused(cell):
     with pytest.raises(ValueError, match="start"):
         Robot("r1", RobotParams(map=MAP50, start=cell, goal=(45, 45)))
+
+
+def test_report_counts_hops_waits_and_collisions_from_messages():
+    from nodes.msgs import RobotStatus
+    from nodes.report import FleetReport
+
+    rep = FleetReport(("r1", "r2"))
+    assert "/r2/status" in rep.topics()
+    for cell in [(5, 5), (5, 5), (6, 6), (7, 6)]:
+        rep.on_message("/poses", RobotPose("r1", cell, 1, 2))
+    for mode in ["planning", "moving", "waiting", "waiting", "backing_off", "moving", "arrived"]:
+        rep.on_message("/r1/status", RobotStatus("r1", mode, (7, 6), (7, 6), 0, 1, 4200))
+    rec = rep.records["r1"]
+    assert (rec.hops, rec.waits, rec.backoffs, rec.arrived, rec.arrival_ms) == (2, 1, 1, True, 4200)
+    assert rec.distance_m == pytest.approx(0.255 * (2 ** 0.5 + 1))
+    assert not rep.passed()  # r2 never arrived
+    rep.on_message("/collisions", Collision("r1", "r2", (7, 6), (7, 7), 5000))
+    text = rep.render()
+    assert "collisions: 1" in text
+    assert "FAILED" in text
