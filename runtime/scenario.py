@@ -19,7 +19,8 @@ Layout (every key but `nodes` optional)::
     properties:                    # see checker/properties.py for the kinds
       - {name: no_collision, kind: invariant, expr: "map_server.collisions == 0"}
     check: {max_states: 100000, max_depth: 0, max_time_s: 0, latency: [0, 0]}
-    live: {timeout_s: 120, stop_on_error: false, time_scale: 1.0}
+    live: {timeout_s: 120, stop_on_error: false, time_scale: 1.0,
+           report: "nodes.report:report_for"}  # factory(scenario) -> report, see launcher
 
 Every error names the file, the key and what was expected, and is raised
 before anything starts.
@@ -49,7 +50,7 @@ _TOP_KEYS = {"name", "fleet", "description", "map", "profile", "semantics", "see
 _NODE_KEYS = {"name", "class", "namespace", "priority", "respawn", "params"}
 _CHECK_KEYS = {"max_states", "max_depth", "max_time_s", "latency", "global_priority",
                "search", "stop_at_first"}
-_LIVE_KEYS = {"timeout_s", "stop_on_error", "time_scale"}
+_LIVE_KEYS = {"timeout_s", "stop_on_error", "time_scale", "report", "summary_topics"}
 
 
 class ScenarioError(ValueError):
