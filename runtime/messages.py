@@ -157,3 +157,20 @@ class String:
     """A text message."""
 
     data: str = ""
+
+
+@message("twinfleet/NodeAlive")
+class NodeAlive:
+    """A node appeared (`alive=True`) or disappeared; delivered to `@subscribe("/_liveliness")`."""
+
+    name: str
+    alive: bool
+
+
+@message("twinfleet/Violation")
+class Violation:
+    """Published on `/violations` when a handler calls `ctx.fail` or raises."""
+
+    node: str
+    handler: str
+    reason: str
