@@ -104,3 +104,15 @@ def test_fixed_flags_every_neighbour(di, dj):
         for dy in (-1, 0, 1):
             assert shadows_intersect((10, 10), di, (10 + dx, 10 + dy), dj, dims, FIXED)
     assert not shadows_intersect((10, 10), di, (13, 10), dj, dims, FIXED)
+
+
+def test_parallel_close_but_not_touching_rectangles_do_not_collide():
+    # Two 0.44 m shadows side by side with centres 0.45 m apart: a 1 cm gap.
+    assert not rects_overlap((0.0, 0.0), 0.0, (0.45, 0.0), 0.0, 0.22, 0.22)
+    assert rects_overlap((0.0, 0.0), 0.0, (0.43, 0.0), 0.0, 0.22, 0.22)
+    # Two cells apart on the grid (0.51 m) heading the same cardinal way: clear.
+    assert not shadows_intersect((10, 10), 0, (10, 12), 0, Dims(), FIXED)
+    # The same two cells with both robots heading diagonally: the rotated squares reach
+    # 0.311 m from their centres, so they overlap (a real near miss the model never counts).
+    assert shadows_intersect((10, 10), 1, (10, 12), 1, Dims(), FIXED)
+    assert not shadows_intersect((10, 10), 1, (10, 12), 1, Dims(), REBECA)
