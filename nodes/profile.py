@@ -31,6 +31,10 @@ class Profile:
             (exact oriented rectangles with margin).
         rotation: ``"model"`` (125·|Δ|+1, no wrap) or ``"shortest"``.
         validate_backoff: drop back-off candidates whose target is off-map or blocked.
+        robot_aware_stop: the stop check widens its lateral band for scanned cells
+            that are not static obstacles (other robots) to a whole robot width, so
+            robots in the neighbouring lane stop instead of brushing past (the
+            model's point-sized band lets diagonal neighbours overlap).
     """
 
     name: str
@@ -42,6 +46,7 @@ class Profile:
     collision: Literal["corner_box", "sat"]
     rotation: Literal["model", "shortest"]
     validate_backoff: bool
+    robot_aware_stop: bool
 
     def round(self, x: float) -> int:
         """Round ``x`` to an int by this profile's rule.
@@ -77,6 +82,7 @@ REBECA = Profile(
     collision="corner_box",
     rotation="model",
     validate_backoff=False,
+    robot_aware_stop=False,
 )
 
 FIXED = Profile(
@@ -89,6 +95,7 @@ FIXED = Profile(
     collision="sat",
     rotation="shortest",
     validate_backoff=True,
+    robot_aware_stop=True,
 )
 
 PROFILES: dict[str, Profile] = {p.name: p for p in (FIXED, REBECA)}

@@ -87,7 +87,7 @@ class Robot(Node):
     def configure(self) -> None:
         p = self.params
         self.profile = profile_named(p.profile)
-        occ_map, self.inflated_static = _maps(p.map, p.profile)
+        occ_map, self.static, self.inflated_static = _maps(p.map, p.profile)
         self.shape = occ_map.shape
         self.dims = Dims(res=occ_map.resolution, length=p.robot_length, width=p.robot_width,
                          safe_margin=p.safe_margin, stop_zone=p.stop_zone)
@@ -104,7 +104,7 @@ class Robot(Node):
             cell = tuple(getattr(p, key))
             if not in_bounds(cell, self.shape):
                 raise ValueError(f"{self.name}: {key} {list(cell)} is outside the {self.shape[0]}x{self.shape[1]} map")
-            if occ_map.occupied(self.profile)[cell]:
+            if self.static[cell]:
                 raise ValueError(f"{self.name}: {key} {list(cell)} lies inside an obstacle")
         if p.max_wait_ms <= 0 or p.scan_rate_ms <= 0 or p.tolerance < 0:
             raise ValueError(f"{self.name}: max_wait_ms and scan_rate_ms must be > 0, tolerance >= 0")
@@ -161,12 +161,20 @@ class Robot(Node):
         heading = direction_between(st.cell, st.moves[st.move_idx])
         if heading != st.dir:
             self._rotate(ctx, heading, move_next)
-        elif can_hop(st.cell, st.dir, st.obstacles, self.dims):
+        elif self._can_hop():
             self._hop(ctx, move_next)
         else:
             self._wait(ctx)
 
     # -- steps ------------------------------------------------------------------
+
+    def _can_hop(self) -> bool:
+        st = self.state
+        if not self.profile.robot_aware_stop:
+            return can_hop(st.cell, st.dir, st.obstacles, self.dims)
+        static = [c for c in st.obstacles if self.static[c]]
+        robots = [c for c in st.obstacles if not self.static[c]]
+        return can_hop(st.cell, st.dir, static, self.dims, robots)
 
     def _moves_exhausted(self, ctx: Context) -> None:
         st = self.state
@@ -273,9 +281,11 @@ class Robot(Node):
 
 
 @cache
-def _maps(map_path: str, profile_name: str) -> tuple[OccupancyMap, np.ndarray]:
-    """The map and its one-cell inflation, loaded once per (map, profile) in a process."""
+def _maps(map_path: str, profile_name: str) -> tuple[OccupancyMap, np.ndarray, np.ndarray]:
+    """The map, its occupancy and its one-cell inflation, loaded once per (map, profile)."""
     occ_map = load_map(map_path)
-    inflated = inflate(occ_map.occupied(profile_named(profile_name)), 1)
+    static = occ_map.occupied(profile_named(profile_name))
+    inflated = inflate(static, 1)
+    static.setflags(write=False)
     inflated.setflags(write=False)
-    return occ_map, inflated
+    return occ_map, static, inflated

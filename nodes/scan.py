@@ -247,7 +247,16 @@ def stop_threshold(d: int, dims: Dims) -> float:
     return dims.steplen(d) + dims.length / 2 + dims.stop_zone
 
 
-def can_hop(robot_cell: Cell, d: int, obstacles: Sequence[Cell], dims: Dims) -> bool:
-    """True if the robot may hop one cell in direction ``d`` (§6.3 B2/B3)."""
+def can_hop(robot_cell: Cell, d: int, obstacles: Sequence[Cell], dims: Dims,
+            robots: Sequence[Cell] = ()) -> bool:
+    """True if the robot may hop one cell in direction ``d`` (§6.3 B2/B3).
+
+    ``obstacles`` are point-sized (the model's ±(W/2 + margin) band); ``robots``
+    are cells known to hold another robot, tested with a band one robot width
+    wider, because their body reaches into the neighbouring lane.
+    """
     f = frontal_clearance(robot_cell, d, obstacles, dims.res, dims.width, dims.safe_margin)
+    if robots:
+        wide = 2 * dims.width + 2 * dims.safe_margin  # band W + 2·margin either side
+        f = min(f, frontal_clearance(robot_cell, d, robots, dims.res, wide, dims.safe_margin))
     return f > stop_threshold(d, dims)

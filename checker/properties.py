@@ -1,0 +1,187 @@
+"""Properties named in a scenario, and how each is checked on worlds.
+
+Expressions are Python, evaluated with every node name bound to that node's
+decoded state object, `nodes` bound to a dict name → state and `now` to the
+world's logical time (e.g. ``map_server.collisions == 0``). They must not
+change what they read. Kinds (`runtime.scenario.PROPERTY_KINDS`):
+
+- `invariant`: `expr` holds in every reachable world.
+- `no_failure`: no handler calls `ctx.fail` or raises. Always checked; naming
+  it only gives the check a name.
+- `deadlock`: no reachable world has no pending event while the goal `expr`
+  is false. Without `expr` no goal can be met, so every world with nothing
+  pending is a deadlock (the same check as `quiescence`, under this name).
+- `quiescence`: no reachable world has no pending event at all (what RMC calls
+  deadlock, R11).
+- `eventually`: on every path `expr` holds at some point; violated by a lasso
+  (a reachable cycle) or a path to a world with nothing pending, on which
+  `expr` never holds. Checked by `checker.search.find_lasso`. No fairness is
+  assumed, but the time rule (semantics Rule 1) already prevents starvation
+  across time.
+- `within`: on every path `expr` holds at some world whose time is at most
+  `within_ms`. Each world carries the names of the `within` properties not yet
+  met on its path (`World.monitors`); it is violated in a world where one is
+  still pending and the next event is later than `within_ms` (or none is).
+"""
+
+from __future__ import annotations
+
+import builtins
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Any, final
+
+from runtime.scenario import Scenario
+
+if TYPE_CHECKING:
+    from checker.system import Failure, System
+    from checker.world import Event, World
+
+_GLOBALS = {"__builtins__": builtins}
+
+
+class PropertyError(ValueError):
+    """A property expression could not be evaluated (a name error, a type error...)."""
+
+
+@final
+class Expr:
+    """A compiled property expression over node states."""
+
+    __slots__ = ("code", "needed", "source", "uses_all", "where")
+
+    def __init__(self, source: str, names: Sequence[str], where: str) -> None:
+        self.source = source
+        self.where = where
+        self.code = compile(source, where, "eval")
+        used = set(self.code.co_names)
+        self.uses_all = "nodes" in used
+        self.needed = tuple((i, n) for i, n in enumerate(names) if n in used)
+
+    def holds(self, system: System, states: Sequence[bytes], now: int) -> bool:
+        """Evaluate on node states (snapshot bytes, in scenario order) at time `now`."""
+        env: dict[str, Any] = {"now": now}
+        for i, name in self.needed:
+            env[name] = system.decode(i, states[i])
+        if self.uses_all:
+            env["nodes"] = {n: system.decode(i, states[i]) for i, n in enumerate(system.names)}
+        try:
+            return bool(eval(self.code, _GLOBALS, env))
+        except Exception as exc:
+            raise PropertyError(f"{self.where}: {self.source!r} raised "
+                                f"{type(exc).__name__}: {exc}") from None
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class Property:
+    """One property to check."""
+
+    name: str
+    kind: str
+    expr: Expr | None = None
+    within_ms: int | None = None
+
+    def describe(self) -> str:
+        """A one-line description: name, kind, expression."""
+        text = f"{self.name} ({self.kind}"
+        if self.expr is not None:
+            text += f": {self.expr.source}"
+        if self.within_ms is not None:
+            text += f" within {self.within_ms} ms"
+        return text + ")"
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class Violation:
+    """A property found violated; `shape` says what kind of trace shows it."""
+
+    property: str
+    kind: str
+    message: str
+    shape: str = "path"  # "path", "terminal" or "lasso"
+    failure: Failure | None = None
+
+
+@final
+class PropertySet:
+    """The properties of a scenario, compiled against its node names."""
+
+    def __init__(self, properties: Sequence[Property]) -> None:
+        self.all = tuple(properties)
+        self._failure_name = next((p.name for p in self.all if p.kind == "no_failure"),
+                                  "no_failure")
+        self.invariants = [p for p in self.all if p.kind == "invariant"]
+        self.terminal = [p for p in self.all if p.kind in ("deadlock", "quiescence")]
+        self.eventually = [p for p in self.all if p.kind == "eventually"]
+        self.within = [p for p in self.all if p.kind == "within"]
+        self._within_by_name = {p.name: p for p in self.within}
+
+    @classmethod
+    def from_scenario(cls, scenario: Scenario) -> PropertySet:
+        """Compile the scenario's `properties:` list."""
+        names = [n.name for n in scenario.nodes]
+        props = []
+        for i, cfg in enumerate(scenario.properties):
+            where = f"{scenario.path}:properties[{i}]"
+            expr = Expr(cfg.expr, names, where) if cfg.expr is not None else None
+            props.append(Property(cfg.name, cfg.kind, expr, cfg.within_ms))
+        return cls(props)
+
+    def names(self) -> list[str]:
+        """Every property checked, including the implicit handler-failure check."""
+        named = [p.describe() for p in self.all]
+        if not any(p.kind == "no_failure" for p in self.all):
+            named.append("no_failure (implicit: ctx.fail and handler exceptions)")
+        return named
+
+    def update(self, system: System, parent: World | None, now: int,
+               states: tuple[bytes, ...], events: tuple[Event, ...]) -> tuple[str, ...]:
+        """The `within` monitors still pending in a new world (those whose expr is still false)."""
+        pending = parent.monitors if parent is not None else tuple(p.name for p in self.within)
+        if not pending:
+            return ()
+        keep = []
+        for name in pending:
+            prop = self._within_by_name[name]
+            assert prop.expr is not None
+            if not prop.expr.holds(system, states, now):
+                keep.append(name)
+        return tuple(keep)
+
+    def check_world(self, system: System, world: World) -> Violation | None:
+        """The first safety property violated in `world`, or None."""
+        for prop in self.invariants:
+            assert prop.expr is not None
+            if not prop.expr.holds(system, world.states, world.now):
+                return Violation(prop.name, prop.kind,
+                                 f"invariant {prop.expr.source!r} is false at t={world.now} ms")
+        for name in world.monitors:
+            prop = self._within_by_name[name]
+            nxt = world.next_time
+            if nxt is None or prop.within_ms is None or nxt > prop.within_ms:
+                return Violation(prop.name, prop.kind,
+                                 f"{prop.expr.source if prop.expr else ''!r} did not hold within "
+                                 f"{prop.within_ms} ms (false at t={world.now} ms, next event "
+                                 f"{'never' if nxt is None else f'at {nxt} ms'})")
+        if world.terminal:
+            return self._check_terminal(system, world)
+        return None
+
+    def _check_terminal(self, system: System, world: World) -> Violation | None:
+        for prop in self.terminal:
+            if prop.kind == "quiescence":
+                return Violation(prop.name, prop.kind,
+                                 f"quiescent: no event pending at t={world.now} ms", "terminal")
+            if prop.expr is None or not prop.expr.holds(system, world.states, world.now):
+                goal = f" while {prop.expr.source!r} is false" if prop.expr else ""
+                return Violation(prop.name, prop.kind,
+                                 f"deadlock: no event pending at t={world.now} ms{goal}",
+                                 "terminal")
+        return None
+
+    def check_failure(self, failure: Failure) -> Violation:
+        """The violation a handler failure stands for."""
+        name = self._failure_name if failure.kind == "handler failure" else "debug_state"
+        return Violation(name, failure.kind, str(failure), "path", failure)
