@@ -198,9 +198,9 @@ def test_report_counts_hops_waits_and_collisions_from_messages():
 @pytest.mark.parametrize(("profile", "hops"), [("fixed", False), ("rebeca", True)])
 def test_robot_in_the_neighbouring_diagonal_lane_blocks_only_in_the_fixed_profile(profile, hops):
     r = robot(profile)
-    run(r, "on_path", Path(((21, 21),)))
-    r.state.cell, r.state.dir = (20, 20), 1
+    run(r, "on_path", Path(((43, 43),)))
+    r.state.cell, r.state.dir = (42, 42), 1
     # Another robot two rows down: 0.36 m ahead and 0.36 m aside of a NE hop.
-    run(r, "on_scan", ObstacleScan("r1", ((22, 20),)))
+    run(r, "on_scan", ObstacleScan("r1", ((44, 42),)))
     run(r, "update_moving_status", True)
-    assert (r.state.cell == (21, 21)) is hops
+    assert (r.state.cell == (43, 43)) is hops

@@ -1,0 +1,128 @@
+"""Entry point of one node process: ``python -m runtime.node_main --scenario F --node NAME ...``.
+
+Loads the scenario, builds the node, opens one Zenoh session (client of the
+launcher's router, or of any router given with ``--connect``), runs a
+`NodeHost` until SIGTERM/SIGINT, then undeclares and closes the session with a
+watchdog so a hung close cannot keep the process alive. Exit code 0, 1 when
+the node stopped on a handler error (``live.stop_on_error``), 2 on bad input.
+
+The process also serves its statistics on ``twinfleet/<fleet>/@stats/<node>``
+(a msgpack map), which `twinfleet node list --stats` reads.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import ctypes
+import dataclasses
+import faulthandler
+import os
+import signal
+import sys
+from collections.abc import Sequence
+
+import msgpack
+
+from runtime.clock import FleetClock
+from runtime.host import NodeHost
+from runtime.names import KEY_PREFIX
+from runtime.scenario import Scenario, ScenarioError, load_scenario
+from runtime.transport import Respond
+from runtime.zenoh_transport import ZenohTransport, zenoh_config
+
+_PR_SET_PDEATHSIG = 1
+PARENT_ENV = "TWINFLEET_LAUNCHER_PID"
+
+
+def die_with_parent() -> None:
+    """Ask Linux to SIGTERM this process when the launcher dies (even by SIGKILL)."""
+    expected = os.environ.get(PARENT_ENV)
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
+    except (OSError, AttributeError):
+        return  # not Linux: rely on the launcher's shutdown
+    if expected is not None and os.getppid() != int(expected):
+        sys.exit(0)  # the launcher died before prctl took effect
+
+
+def stats_key(fleet: str, node: str) -> str:
+    """Key of the statistics queryable of a node process."""
+    return f"{KEY_PREFIX}/{fleet}/@stats/{node}"
+
+
+def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
+    """Parse the node process's command line."""
+    p = argparse.ArgumentParser(prog="python -m runtime.node_main",
+                                description="Run one twinfleet node (normally started by the launcher).")
+    p.add_argument("--scenario", required=True, help="scenario YAML file")
+    p.add_argument("--node", required=True, help="name of the node entry to run")
+    p.add_argument("--connect", required=True, help="Zenoh endpoint of the router, e.g. tcp/127.0.0.1:7447")
+    p.add_argument("--epoch-ns", type=int, default=None,
+                   help="fleet epoch as time.time_ns() (default: now)")
+    p.add_argument("--time-scale", type=float, default=None,
+                   help="fleet ms per wall ms (default: scenario live.time_scale or 1)")
+    p.add_argument("--seed", type=int, default=None, help="fleet seed (default: scenario seed)")
+    p.add_argument("--stop-on-error", action="store_true", default=None,
+                   help="exit with code 1 at the first handler exception")
+    p.add_argument("--no-wait", action="store_true",
+                   help="run @on_start without waiting for the other nodes of the scenario")
+    p.add_argument("--close-timeout", type=float, default=5.0,
+                   help="seconds allowed for closing Zenoh before the process is forced out")
+    return p.parse_args(argv)
+
+
+async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
+    """Run the node until a signal or stop_on_error; return the exit code."""
+    cfg = scenario.node(args.node)
+    node = cfg.instantiate()
+    live = scenario.live
+    time_scale = args.time_scale if args.time_scale is not None else live.get("time_scale", 1.0)
+    stop_on_error = bool(args.stop_on_error if args.stop_on_error is not None
+                         else live.get("stop_on_error", False))
+    clock = FleetClock(args.epoch_ns, time_scale)
+    transport = ZenohTransport(zenoh_config(connect=[args.connect]))
+    await transport.open()
+    peers = () if args.no_wait else tuple(n.name for n in scenario.nodes)
+    host = NodeHost(node, transport, clock,
+                    seed=args.seed if args.seed is not None else scenario.seed,
+                    fleet=scenario.fleet, stop_on_error=stop_on_error, wait_for=peers)
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, host.stop)
+
+    def serve_stats(_payload: bytes, respond: Respond) -> None:
+        respond(msgpack.packb(dataclasses.asdict(host.statistics())), "")
+
+    transport.serve(stats_key(scenario.fleet, node.name), serve_stats)
+    try:
+        await host.run()
+    finally:
+        faulthandler.dump_traceback_later(args.close_timeout, exit=True)
+        await transport.close()
+        faulthandler.cancel_dump_traceback_later()
+    stats = host.statistics()
+    fields = " ".join(f"{k}={v}" for k, v in dataclasses.asdict(stats).items())
+    print(f"stopped: {fields}", file=sys.stderr, flush=True)
+    return 1 if host.failed else 0
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Process entry point."""
+    die_with_parent()
+    args = parse_args(argv)
+    try:
+        scenario = load_scenario(args.scenario)
+        scenario.node(args.node)
+    except ScenarioError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except KeyError:
+        print(f"error: {args.scenario}: nodes: no node named {args.node!r}", file=sys.stderr)
+        return 2
+    return asyncio.run(run_node(args, scenario))
+
+
+if __name__ == "__main__":
+    sys.exit(main())
