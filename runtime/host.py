@@ -132,6 +132,7 @@ class NodeHost:
         self._pub_seq: dict[str, int] = {}
         self._last_seq: dict[tuple[str, str], int] = {}
         self._drain_scheduled = False
+        self._stop_requested = False
         self._stop: asyncio.Event | None = None
         self._alive_changed: asyncio.Event | None = None
         self._n = dict.fromkeys(("received", "undecodable", "errors", "failures", "gaps",
@@ -142,6 +143,8 @@ class NodeHost:
     async def run(self) -> None:
         """Declare the node's graph, wait for peers, run `@on_start`, then serve until stopped."""
         self._stop = asyncio.Event()
+        if self._stop_requested:
+            return
         self._alive_changed = asyncio.Event()
         try:
             self._declare()
@@ -157,8 +160,11 @@ class NodeHost:
 
     def stop(self) -> None:
         """Make `run()` return (safe to call from signal handlers on the loop)."""
+        self._stop_requested = True
         if self._stop is not None:
             self._stop.set()
+        if self._alive_changed is not None:
+            self._alive_changed.set()
 
     def statistics(self) -> HostStatistics:
         """Counters since start, as a frozen record."""
@@ -192,7 +198,7 @@ class NodeHost:
         wanted = set(self.wait_for)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + self.ready_timeout_s
-        while not wanted <= self.alive:
+        while not wanted <= self.alive and not self._stop_requested:
             remaining = deadline - loop.time()
             if remaining <= 0:
                 missing = ", ".join(sorted(wanted - self.alive))

@@ -83,14 +83,23 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
                          else live.get("stop_on_error", False))
     clock = FleetClock(args.epoch_ns, time_scale)
     transport = ZenohTransport(zenoh_config(connect=[args.connect]))
-    await transport.open()
     peers = () if args.no_wait else tuple(n.name for n in scenario.nodes)
     host = NodeHost(node, transport, clock,
                     seed=args.seed if args.seed is not None else scenario.seed,
                     fleet=scenario.fleet, stop_on_error=stop_on_error, wait_for=peers)
+    stopping = asyncio.Event()
+
+    def on_signal() -> None:
+        stopping.set()
+        host.stop()
+
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
-        loop.add_signal_handler(sig, host.stop)
+        loop.add_signal_handler(sig, on_signal)
+    await transport.open()
+    if stopping.is_set():
+        await transport.close()
+        return 0
 
     def serve_stats(_payload: bytes, respond: Respond) -> None:
         respond(msgpack.packb(dataclasses.asdict(host.statistics())), "")
@@ -110,6 +119,8 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Process entry point."""
+    for sig in (signal.SIGINT, signal.SIGTERM):  # until the loop installs its handlers
+        signal.signal(sig, lambda *_: sys.exit(0))
     die_with_parent()
     args = parse_args(argv)
     try:

@@ -1,0 +1,136 @@
+"""The `check` and `replay` subcommands: a thin argparse layer over `checker.check`.
+
+`runtime/cli.py` calls `register(subparsers)`; `python -m checker SCENARIO`
+runs `main()` here. Exit codes: 0 holds (or replay confirmed), 1 violated,
+2 bad input, a limit reached before an answer, or a replay that diverged.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from checker.check import CheckOptions, CheckResult, check, load
+from checker.properties import PropertyError, PropertySet
+from checker.search import SearchStatistics
+from checker.system import System
+from checker.trace import NondeterminismError, TraceError, load_trace, replay
+from runtime.node import NodeDefinitionError
+from runtime.scenario import ScenarioError
+
+BAD_INPUT = (ScenarioError, PropertyError, NodeDefinitionError, TraceError)
+
+
+def register(subparsers: Any) -> None:
+    """Add the `check` and `replay` subcommands to an argparse subparsers object."""
+    p = subparsers.add_parser("check", help="explore every interleaving of a scenario",
+                              description="Check a scenario's properties exhaustively "
+                              "(exit 0 holds, 1 violated, 2 bad input or no answer).")
+    p.add_argument("scenario", help="scenario YAML file")
+    p.add_argument("--search", choices=("bfs", "dfs", "random"), default=None,
+                   help="search order: bfs (shortest counterexample, default), dfs, or random walks")
+    p.add_argument("--walks", type=int, default=100, help="number of random walks (--search random)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of the random walks (default: the scenario's seed)")
+    p.add_argument("--max-states", type=int, default=None,
+                   help="stop after this many distinct states (default: check.max_states)")
+    p.add_argument("--max-time", type=float, default=None,
+                   help="stop after this many seconds (default: check.max_time_s)")
+    p.add_argument("--max-depth", type=int, default=None,
+                   help="do not expand worlds deeper than this many steps (random: walk length)")
+    p.add_argument("--semantics", choices=("ros", "rebeca"), default=None,
+                   help="message rules: ros (per-sender FIFO) or rebeca (RMC); default: scenario")
+    p.add_argument("--profile", choices=("fixed", "rebeca"), default=None,
+                   help="robot behaviour profile passed to the nodes; default: scenario")
+    p.add_argument("--trace-out", default=None,
+                   help="where to write a counterexample trace (default: out/<name>.trace.json)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+    p.add_argument("--debug-state", action="store_true",
+                   help="report handlers that change node attributes other than self.state")
+    p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
+    p.set_defaults(func=check_command)
+    r = subparsers.add_parser("replay", help="re-execute a counterexample trace",
+                              description="Re-run a trace written by `check`, verify every "
+                              "step's world digest and confirm the violation (exit 1 when "
+                              "confirmed, 2 when not or when the replay diverges).")
+    r.add_argument("trace", help="trace JSON file written by `twinfleet check`")
+    r.add_argument("--quiet", action="store_true", help="print only the verdict line")
+    r.set_defaults(func=replay_command)
+
+
+def _progress(stats: SearchStatistics) -> None:
+    print(f"\r[check] states {stats.states:,}  transitions {stats.transitions:,}  "
+          f"{stats.states_per_s:,.0f} states/s  depth {stats.depth}  "
+          f"frontier {stats.frontier:,}  mem {stats.peak_rss_mb:.0f} MB", file=sys.stderr,
+          end="", flush=True)
+
+
+def check_command(args: argparse.Namespace) -> int:
+    """Run `check` for parsed arguments; return the exit code."""
+    trace_out = args.trace_out or str(Path("out") / f"{Path(args.scenario).stem}.trace.json")
+    options = CheckOptions(search=args.search, walks=args.walks, seed=args.seed,
+                           max_states=args.max_states, max_time_s=args.max_time,
+                           max_depth=args.max_depth, semantics=args.semantics,
+                           profile=args.profile, trace_out=trace_out,
+                           debug_state=args.debug_state,
+                           progress=None if args.quiet or args.json else _progress)
+    try:
+        result = check(args.scenario, options)
+    except BAD_INPUT as exc:
+        print(f"twinfleet check: {exc}", file=sys.stderr)
+        return 2
+    if options.progress is not None:
+        print(file=sys.stderr)
+    _report(result, as_json=args.json)
+    return result.exit_code
+
+
+def _report(result: CheckResult, *, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(result.to_json(), indent=1))
+        return
+    print(result.summary())
+    if result.exit_code == 2:
+        print(f"exit 2: no answer ({result.reason})")
+
+
+def replay_command(args: argparse.Namespace) -> int:
+    """Run `replay` for parsed arguments; return the exit code."""
+    try:
+        trace = load_trace(args.trace)
+        scenario = load(trace["scenario"], profile=trace.get("profile"),
+                        semantics=trace.get("semantics"))
+        props = PropertySet.from_scenario(scenario)
+        latency = trace.get("latency")
+        system = System(scenario, latency=tuple(latency) if latency else None,
+                        global_priority=trace.get("global_priority"),
+                        debug_state=bool(trace.get("debug_state")), monitors=props)
+        result = replay(system, trace, props)
+    except BAD_INPUT as exc:
+        print(f"twinfleet replay: {exc}", file=sys.stderr)
+        return 2
+    except NondeterminismError as exc:
+        print(f"twinfleet replay: {exc}", file=sys.stderr)
+        return 2
+    if result.confirmed:
+        print(f"replay confirmed: {result.property} violated after {result.steps} steps "
+              f"({result.message})")
+        return 1
+    print(f"replay NOT confirmed: {result.property}: {result.message}")
+    return 2
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """`python -m checker [check|replay] ...`; a bare scenario path means `check`."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] not in ("check", "replay", "-h", "--help"):
+        argv.insert(0, "check")
+    parser = argparse.ArgumentParser(prog="python -m checker",
+                                     description="twinfleet's model checker")
+    register(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return int(args.func(args))

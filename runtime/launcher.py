@@ -1,0 +1,331 @@
+"""The launcher: an embedded Zenoh router plus one OS process per node.
+
+`run_fleet` opens a Zenoh session in router mode on ``tcp/127.0.0.1:<free
+port>`` (or joins ``--connect EP`` as a client), starts every node of the
+scenario with `asyncio.create_subprocess_exec` (``python -m
+runtime.node_main``; never fork after a session, never `multiprocessing`),
+prefixes every output line with ``[node]``, and supervises the processes: a
+node that dies is reported with its exit code and last lines, restarted if the
+scenario says ``respawn: true``, and otherwise ends the run as failed.
+
+The run ends at the timeout, when a node publishes a `String` on
+``/twinfleet/shutdown``, when every node has exited, when a node fails, or on
+SIGINT/SIGTERM. Shutdown escalates SIGINT → SIGTERM → SIGKILL per process;
+children also get PR_SET_PDEATHSIG, so none outlives a SIGKILLed launcher.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import os
+import signal
+import socket
+import sys
+import threading
+import time
+from collections import deque
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, TextIO, final
+
+import msgpack
+
+from runtime.messages import DecodeError, decode
+from runtime.names import key_expr
+from runtime.node import QOS_DEFAULT
+from runtime.node_main import PARENT_ENV
+from runtime.scenario import NodeConfig, Scenario
+from runtime.zenoh_transport import ZenohTransport, zenoh_config
+
+SHUTDOWN_TOPIC = "/twinfleet/shutdown"
+PROJECT_ROOT = Path(__file__).resolve().parent.parent
+_LAST_LINES = 15
+_GRACE_S = (3.0, 2.0)  # after SIGINT, after SIGTERM; then SIGKILL
+_RESPAWN_DELAY_S = 0.5
+
+
+@dataclass(frozen=True)
+class FleetResult:
+    """How a run ended.
+
+    Attributes:
+        fleet: the fleet name (Zenoh key prefix `twinfleet/<fleet>`).
+        endpoint: the router endpoint the nodes connected to.
+        reason: why the run ended ("timeout after 5 s", "shutdown requested by ...", ...).
+        exit_codes: last exit code of every node (negative: killed by that signal).
+        failed: nodes that failed (non-zero exit, or had to be killed).
+        restarts: respawn count per node.
+        last_messages: last message seen on each `live.summary_topics` topic.
+        duration_s: wall time of the run.
+    """
+
+    fleet: str
+    endpoint: str
+    reason: str
+    exit_codes: Mapping[str, int | None]
+    failed: tuple[str, ...]
+    restarts: Mapping[str, int] = field(default_factory=dict)
+    last_messages: Mapping[str, Any] = field(default_factory=dict)
+    duration_s: float = 0.0
+
+    @property
+    def ok(self) -> bool:
+        """True when no node failed."""
+        return not self.failed
+
+
+def free_port() -> int:
+    """A TCP port on 127.0.0.1 that was free a moment ago."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@final
+class _NodeProcess:
+    """One supervised node process and its output pump."""
+
+    def __init__(self, cfg: NodeConfig, argv: list[str], out: TextIO) -> None:
+        self.cfg, self.argv, self.out = cfg, argv, out
+        self.proc: asyncio.subprocess.Process | None = None
+        self.last_lines: deque[str] = deque(maxlen=_LAST_LINES)
+        self.restarts = 0
+        self.exit_code: int | None = None
+        self._pump: asyncio.Task[None] | None = None
+
+    async def start(self) -> None:
+        env = dict(os.environ)
+        paths = [str(PROJECT_ROOT), os.getcwd(), env.get("PYTHONPATH", "")]
+        env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
+        env["PYTHONUNBUFFERED"] = "1"
+        env[PARENT_ENV] = str(os.getpid())
+        self.exit_code = None
+        self.proc = await asyncio.create_subprocess_exec(
+            *self.argv, stdin=asyncio.subprocess.DEVNULL, stdout=asyncio.subprocess.PIPE,
+            stderr=asyncio.subprocess.STDOUT, env=env, start_new_session=True)
+        self._pump = asyncio.create_task(self._copy_output(self.proc))
+
+    async def _copy_output(self, proc: asyncio.subprocess.Process) -> None:
+        assert proc.stdout is not None
+        async for raw in proc.stdout:
+            line = raw.decode(errors="replace").rstrip("\n")
+            self.last_lines.append(line)
+            _emit(self.out, f"[{self.cfg.name}] {line}")
+
+    async def wait(self) -> int:
+        """Wait for the process to exit and its output to be copied; return the exit code."""
+        assert self.proc is not None
+        code = await self.proc.wait()
+        if self._pump is not None:
+            await asyncio.wait([self._pump], timeout=2.0)
+        self.exit_code = code
+        return code
+
+    def running(self) -> bool:
+        return self.proc is not None and self.proc.returncode is None
+
+    def signal(self, sig: int) -> None:
+        if self.running():
+            assert self.proc is not None
+            with contextlib.suppress(ProcessLookupError):
+                self.proc.send_signal(sig)
+
+
+def _emit(out: TextIO, line: str) -> None:
+    out.write(line + "\n")
+    out.flush()
+
+
+@final
+class Fleet:
+    """A running fleet; `run_fleet` is the usual way to use it."""
+
+    def __init__(self, scenario: Scenario, *, time_scale: float, seed: int,
+                 connect: str | None, listen: str | None, out: TextIO) -> None:
+        self.scenario, self.time_scale, self.seed, self.out = scenario, time_scale, seed, out
+        self.connect = connect
+        self.endpoint = connect or listen or f"tcp/127.0.0.1:{free_port()}"
+        self.transport: ZenohTransport | None = None
+        self.epoch_ns = time.time_ns()
+        self.processes: dict[str, _NodeProcess] = {}
+        self.last_messages: dict[str, Any] = {}
+        self.ended: asyncio.Future[str] | None = None
+        self.shutting_down = False
+        self.failed: list[str] = []
+
+    def log(self, text: str) -> None:
+        """A launcher line on the output."""
+        _emit(self.out, f"[launcher] {text}")
+
+    def end(self, reason: str) -> None:
+        """End the run (first reason wins)."""
+        if self.ended is not None and not self.ended.done():
+            self.ended.set_result(reason)
+
+    async def open(self) -> None:
+        """Open the router (or client) session and the launcher's subscriptions."""
+        self.ended = asyncio.get_running_loop().create_future()
+        if self.connect:
+            conf = zenoh_config(connect=[self.connect], mode="client")
+        else:
+            conf = zenoh_config(listen=[self.endpoint], mode="router")
+        self.transport = ZenohTransport(conf)
+        await self.transport.open()
+        fleet = self.scenario.fleet
+        self.transport.subscribe(key_expr(fleet, SHUTDOWN_TOPIC), self._on_shutdown, QOS_DEFAULT)
+        for topic in self.scenario.live.get("summary_topics", []) or []:
+            self.transport.subscribe(key_expr(fleet, topic), self._summary(topic), QOS_DEFAULT)
+
+    def _on_shutdown(self, _key: str, payload: bytes) -> None:
+        try:
+            env = decode(payload)
+            text = getattr(env.msg, "data", str(env.msg))
+            self.end(f"shutdown requested by {env.sender or '?'}: {text}")
+        except DecodeError:
+            self.end("shutdown requested (undecodable reason)")
+
+    def _summary(self, topic: str) -> Any:
+        def deliver(_key: str, payload: bytes) -> None:
+            try:
+                self.last_messages[topic] = decode(payload).msg
+            except DecodeError:
+                with contextlib.suppress(Exception):
+                    self.last_messages[topic] = msgpack.unpackb(payload, raw=False)
+        return deliver
+
+    def _argv(self, cfg: NodeConfig) -> list[str]:
+        return [sys.executable, "-m", "runtime.node_main", "--scenario", str(self.scenario.path),
+                "--node", cfg.name, "--connect", self.endpoint, "--epoch-ns", str(self.epoch_ns),
+                "--time-scale", repr(self.time_scale), "--seed", str(self.seed)]
+
+    async def start_nodes(self) -> list[asyncio.Task[None]]:
+        """Start every node process and one supervisor task per node."""
+        tasks = []
+        for cfg in self.scenario.nodes:
+            proc = _NodeProcess(cfg, self._argv(cfg), self.out)
+            self.processes[cfg.name] = proc
+            await proc.start()
+            tasks.append(asyncio.create_task(self._supervise(proc)))
+        return tasks
+
+    async def _supervise(self, proc: _NodeProcess) -> None:
+        while True:
+            code = await proc.wait()
+            if self.shutting_down:
+                return
+            self.log(f"node {proc.cfg.name} exited with code {code}; last lines:")
+            for line in proc.last_lines:
+                _emit(self.out, f"    {line}")
+            if proc.cfg.respawn:
+                proc.restarts += 1
+                self.log(f"respawning {proc.cfg.name} (restart {proc.restarts})")
+                await asyncio.sleep(_RESPAWN_DELAY_S)
+                if self.shutting_down:
+                    return
+                await proc.start()
+                continue
+            if code != 0:
+                self.failed.append(proc.cfg.name)
+                self.end(f"node {proc.cfg.name} failed (exit code {code})")
+            elif not any(p.running() for p in self.processes.values()):
+                self.end("all nodes exited")
+            return
+
+    async def shutdown(self) -> None:
+        """Stop every process: SIGINT, then SIGTERM, then SIGKILL; close the session."""
+        self.shutting_down = True
+        procs = list(self.processes.values())
+        for sig, grace in ((signal.SIGINT, _GRACE_S[0]), (signal.SIGTERM, _GRACE_S[1]),
+                           (signal.SIGKILL, 5.0)):
+            alive = [p for p in procs if p.running()]
+            if not alive:
+                break
+            if sig != signal.SIGINT:
+                self.log(f"sending {signal.Signals(sig).name} to "
+                         + ", ".join(p.cfg.name for p in alive))
+            for p in alive:
+                p.signal(sig)
+            await asyncio.wait([asyncio.ensure_future(p.wait()) for p in alive], timeout=grace)
+        for p in procs:
+            code = p.exit_code if p.exit_code is not None else (p.proc and p.proc.returncode)
+            p.exit_code = code
+            if code not in (0, None) and p.cfg.name not in self.failed:
+                self.failed.append(p.cfg.name)
+        if self.transport is not None:
+            await self.transport.close()
+
+
+async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
+                    timeout_s: float | None = None, seed: int | None = None,
+                    connect: str | None = None, listen: str | None = None,
+                    out: TextIO = sys.stdout, handle_signals: bool = True) -> FleetResult:
+    """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
+
+    Args:
+        scenario: a validated scenario (`runtime.scenario.load_scenario`).
+        time_scale: fleet speed-up (default: scenario `live.time_scale`, else 1).
+        timeout_s: wall seconds before the run ends (default: `live.timeout_s`, else none).
+        seed: fleet seed (default: the scenario's).
+        connect: join this Zenoh router instead of embedding one.
+        listen: endpoint of the embedded router (default: tcp/127.0.0.1:<free port>).
+        out: where the prefixed output lines go.
+        handle_signals: end the run on SIGINT/SIGTERM (main thread only).
+    """
+    live = scenario.live
+    time_scale = float(time_scale if time_scale is not None else live.get("time_scale", 1.0))
+    timeout_s = timeout_s if timeout_s is not None else live.get("timeout_s")
+    seed = scenario.seed if seed is None else seed
+    fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
+                  out=out)
+    started = time.monotonic()
+    loop = asyncio.get_running_loop()
+    signals = _install_signals(loop, fleet) if handle_signals else []
+    tasks: list[asyncio.Task[None]] = []
+    try:
+        await fleet.open()
+        fleet.log(f"fleet {scenario.fleet!r} on {fleet.endpoint} "
+                  f"(time scale {time_scale:g}, seed {seed}); monitor with: "
+                  f"twinfleet node list --connect {fleet.endpoint} --fleet {scenario.fleet}")
+        tasks = await fleet.start_nodes()
+        assert fleet.ended is not None
+        try:
+            reason = await asyncio.wait_for(asyncio.shield(fleet.ended), timeout_s)
+        except TimeoutError:
+            reason = f"timeout after {timeout_s:g} s"
+        fleet.log(f"run ended: {reason}")
+    finally:
+        await fleet.shutdown()
+        for task in tasks:
+            task.cancel()
+        for sig in signals:
+            loop.remove_signal_handler(sig)
+    codes = {name: p.exit_code for name, p in fleet.processes.items()}
+    return FleetResult(fleet=scenario.fleet, endpoint=fleet.endpoint, reason=reason,
+                       exit_codes=codes, failed=tuple(fleet.failed),
+                       restarts={n: p.restarts for n, p in fleet.processes.items()},
+                       last_messages=dict(fleet.last_messages),
+                       duration_s=time.monotonic() - started)
+
+
+def _install_signals(loop: asyncio.AbstractEventLoop, fleet: Fleet) -> list[int]:
+    if threading.current_thread() is not threading.main_thread():
+        return []
+    sigs = [signal.SIGINT, signal.SIGTERM]
+    for sig in sigs:
+        loop.add_signal_handler(sig, fleet.end, f"{signal.Signals(sig).name} received")
+    return sigs
+
+
+def format_result(result: FleetResult) -> list[str]:
+    """Human-readable summary lines of a run."""
+    lines = [f"run ended after {result.duration_s:.1f} s: {result.reason}"]
+    for name, code in result.exit_codes.items():
+        status = "FAILED" if name in result.failed else "ok"
+        extra = f", restarts {result.restarts[name]}" if result.restarts.get(name) else ""
+        lines.append(f"  {name}: exit code {code} ({status}{extra})")
+    for topic, msg in result.last_messages.items():
+        lines.append(f"  last on {topic}: {msg}")
+    return lines
+
