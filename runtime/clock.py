@@ -118,6 +118,12 @@ class ManualClock:
         """How many scheduled callbacks have not run or been cancelled."""
         return sum(1 for entry in self._heap if not entry[2].cancelled)
 
+    def next_due(self) -> int | None:
+        """Fleet time of the earliest pending callback, or None."""
+        while self._heap and self._heap[0][2].cancelled:
+            heapq.heappop(self._heap)
+        return self._heap[0][0] if self._heap else None
+
     def advance(self, ms: int) -> int:
         """Move time forward by `ms`, running every callback that falls due; return how many ran."""
         target = self._now + ms

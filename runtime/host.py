@@ -46,7 +46,7 @@ from runtime.messages import (
     encode,
 )
 from runtime.names import key_expr
-from runtime.node import QOS_DEFAULT, HandlerSpec, Node, QoS, Reliability
+from runtime.node import QOS_DEFAULT, HandlerSpec, Node, Reliability
 from runtime.transport import Respond, Transport, graph_key, parse_graph_key
 
 LIVELINESS_TOPIC = "/_liveliness"
@@ -150,6 +150,7 @@ class NodeHost:
             self._declare()
             await self._wait_ready()
             now = self.clock.now_ms()
+            self._line(f"t={now} started ({len(self.alive)} nodes alive)")
             for spec in self.spec.of_kind("start"):
                 self._enqueue(now, spec.priority, spec.method, ())
             for spec in self.spec.of_kind("every"):
@@ -336,10 +337,6 @@ class NodeHost:
         payload = encode(msg, stamp_ms=now, seq=seq, sender=self.node.name)
         self.transport.put(key_expr(self.fleet, topic), payload, qos)
         self._n["published"] += 1
-
-    def publish_qos(self, topic: str) -> QoS:
-        """The QoS this node publishes `topic` with (declared in `publications`, else default)."""
-        return self.publications.get(topic, QOS_DEFAULT)
 
     # ---------------------------------------------------------------- timers and calls
 

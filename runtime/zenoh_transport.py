@@ -26,6 +26,7 @@ query is finalised with no reply, "no server" (finalised early) or "timeout".
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import time
 import traceback
@@ -246,10 +247,8 @@ class ZenohTransport:
         if self._handoff is not None:
             self._handoff.closed = True
         for entity in [*self._advanced, *self._publishers.values(), *self._entities]:
-            try:
+            with contextlib.suppress(Exception):  # already undeclared: nothing to do
                 entity.undeclare()
-            except Exception:  # noqa: S110 - already undeclared (advanced publishers listed twice)
-                pass
         self._advanced.clear()
         self._publishers.clear()
         self._entities.clear()

@@ -1,0 +1,230 @@
+"""The `twinfleet` command line: a thin argparse layer over the launcher and monitors.
+
+    twinfleet launch SCENARIO [--time-scale K] [--timeout S] [--seed S] [--runs N]
+                              [--connect EP] [--listen EP]
+    twinfleet topic list|echo|hz|pub ...     twinfleet service list|call ...
+    twinfleet node list
+
+Connection options are defined once (`add_connection_arguments`); `--connect`
+defaults to $TWINFLEET_CONNECT and `--fleet` to $TWINFLEET_FLEET. `check` and
+`replay` come from `checker.commands.register` when the checker is installed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import os
+import sys
+from collections.abc import Sequence
+
+DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
+
+
+def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add --connect and --fleet to a monitoring command."""
+    group = parser.add_argument_group("connection")
+    group.add_argument("--connect", metavar="EP", default=os.environ.get("TWINFLEET_CONNECT", DEFAULT_CONNECT),
+                       help="Zenoh endpoint of the fleet's router, as printed by `twinfleet launch` "
+                            "(default: $TWINFLEET_CONNECT or %(default)s)")
+    group.add_argument("--fleet", default=os.environ.get("TWINFLEET_FLEET", "*"),
+                       help="fleet name (the scenario's name); '*' means every fleet "
+                            "(default: $TWINFLEET_FLEET or %(default)s)")
+    group.add_argument("--query-timeout", type=float, default=1.0, metavar="S",
+                       help="seconds to wait for discovery answers (default: %(default)s)")
+
+
+def _conf(args: argparse.Namespace):  # noqa: ANN202 - zenoh imported lazily
+    from runtime.zenoh_transport import zenoh_config
+
+    return zenoh_config(connect=[args.connect], mode="client")
+
+
+def _need_fleet(args: argparse.Namespace) -> str | None:
+    if args.fleet == "*":
+        print(f"error: {args.command} {args.action} needs --fleet NAME (or $TWINFLEET_FLEET)",
+              file=sys.stderr)
+        return None
+    return args.fleet
+
+
+def cmd_launch(args: argparse.Namespace) -> int:
+    """`twinfleet launch`: validate, run the fleet `--runs` times, print summaries."""
+    from runtime.scenario import ScenarioError, load_scenario
+
+    try:
+        scenario = load_scenario(args.scenario)
+    except ScenarioError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    from runtime.launcher import format_result, run_fleet
+
+    worst = 0
+    for run in range(args.runs):
+        seed = (args.seed if args.seed is not None else scenario.seed) + run
+        if args.runs > 1:
+            print(f"[launcher] run {run + 1}/{args.runs} (seed {seed})", flush=True)
+        result = asyncio.run(run_fleet(scenario, time_scale=args.time_scale,
+                                       timeout_s=args.timeout, seed=seed,
+                                       connect=args.connect, listen=args.listen))
+        for line in format_result(result):
+            print(f"[launcher] {line}", flush=True)
+        worst = max(worst, 0 if result.ok else 1)
+        if result.reason.startswith(("SIGINT", "SIGTERM")):
+            break
+    return worst
+
+
+def cmd_topic(args: argparse.Namespace) -> int:
+    """`twinfleet topic ...`."""
+    from runtime import monitor
+
+    out = sys.stdout
+    if args.action == "list":
+        return monitor.topic_list(_conf(args), args.fleet, out=out, verbose=args.verbose,
+                                  timeout_s=args.query_timeout)
+    if args.action == "echo":
+        return monitor.topic_echo(_conf(args), args.fleet, args.topic, out=out,
+                                  count=args.count, duration_s=args.duration)
+    if args.action == "hz":
+        return monitor.topic_hz(_conf(args), args.fleet, args.topic, out=out,
+                                window=args.window, duration_s=args.duration)
+    fleet = _need_fleet(args)
+    if fleet is None:
+        return 2
+    _import_modules(args.module)
+    return monitor.topic_pub(_conf(args), fleet, args.topic, args.type,
+                             monitor.parse_data(args.data), out=out, rate_hz=args.rate,
+                             count=None if args.count == 0 else args.count)
+
+
+def cmd_service(args: argparse.Namespace) -> int:
+    """`twinfleet service ...`."""
+    from runtime import monitor
+
+    if args.action == "list":
+        return monitor.service_list(_conf(args), args.fleet, out=sys.stdout,
+                                    verbose=args.verbose, timeout_s=args.query_timeout)
+    fleet = _need_fleet(args)
+    if fleet is None:
+        return 2
+    _import_modules(args.module)
+    return monitor.service_call(_conf(args), fleet, args.service, args.type,
+                                monitor.parse_data(args.data), out=sys.stdout,
+                                timeout_s=args.timeout)
+
+
+def cmd_node(args: argparse.Namespace) -> int:
+    """`twinfleet node list`."""
+    from runtime import monitor
+
+    return monitor.node_list(_conf(args), args.fleet, out=sys.stdout, stats=args.stats,
+                             timeout_s=args.query_timeout)
+
+
+def _import_modules(modules: Sequence[str]) -> None:
+    import importlib
+
+    for name in modules:
+        importlib.import_module(name)
+
+
+def _add_message_arguments(p: argparse.ArgumentParser) -> None:
+    p.add_argument("type", help="message type name, e.g. std_msgs/String")
+    p.add_argument("data", nargs="?", default="",
+                   help="message fields as YAML, e.g. \"{data: hello}\" (default: no fields)")
+    p.add_argument("--module", action="append", default=[], metavar="MODULE",
+                   help="import MODULE first so its message types are validated (repeatable)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The full argument parser."""
+    parser = argparse.ArgumentParser(prog="twinfleet", description=__doc__.splitlines()[0])
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    _launch_parser(sub)
+    _topic_parser(sub)
+    _service_parser(sub)
+    node = sub.add_parser("node", help="inspect running nodes")
+    node_sub = node.add_subparsers(dest="action", required=True, metavar="ACTION")
+    nl = node_sub.add_parser("list", help="list running nodes (from liveliness tokens)")
+    nl.add_argument("--stats", action="store_true", help="also show each node's counters")
+    add_connection_arguments(nl)
+    nl.set_defaults(func=cmd_node)
+    try:
+        from checker.commands import register  # type: ignore[import-not-found]
+    except ImportError:
+        pass
+    else:
+        register(sub)
+    return parser
+
+
+def _launch_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("launch", help="run a scenario live: a router plus one process per node")
+    p.add_argument("scenario", help="scenario YAML file (see launch/)")
+    p.add_argument("--time-scale", type=float, default=None, metavar="K",
+                   help="run fleet time K times faster than wall time (default: live.time_scale or 1)")
+    p.add_argument("--timeout", type=float, default=None, metavar="S",
+                   help="end the run after S wall seconds (default: live.timeout_s, else never)")
+    p.add_argument("--seed", type=int, default=None, help="fleet seed (default: the scenario's)")
+    p.add_argument("--runs", type=int, default=1, metavar="N",
+                   help="run the fleet N times with seeds S, S+1, ... (default: 1)")
+    p.add_argument("--connect", default=None, metavar="EP",
+                   help="join the Zenoh router at EP (e.g. tcp/10.0.0.2:7447) instead of embedding one")
+    p.add_argument("--listen", default=None, metavar="EP",
+                   help="endpoint of the embedded router (default: tcp/127.0.0.1:<free port>)")
+    p.set_defaults(func=cmd_launch)
+
+
+def _topic_parser(sub: argparse._SubParsersAction) -> None:
+    topic = sub.add_parser("topic", help="list, echo, measure or publish topics")
+    ts = topic.add_subparsers(dest="action", required=True, metavar="ACTION")
+    tl = ts.add_parser("list", help="list topics with publishers or subscribers")
+    tl.add_argument("-v", "--verbose", action="store_true", help="show which nodes publish/subscribe")
+    te = ts.add_parser("echo", help="print messages on a topic")
+    te.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
+    te.add_argument("--count", type=int, default=None, metavar="N", help="exit after N messages")
+    te.add_argument("--duration", type=float, default=None, metavar="S", help="exit after S seconds")
+    th = ts.add_parser("hz", help="print the rate of a topic every second")
+    th.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
+    th.add_argument("--window", type=int, default=100, metavar="N",
+                    help="number of recent messages the rate is computed over (default: 100)")
+    th.add_argument("--duration", type=float, default=None, metavar="S", help="exit after S seconds")
+    tp = ts.add_parser("pub", help="publish a message on a topic")
+    tp.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
+    _add_message_arguments(tp)
+    tp.add_argument("--rate", type=float, default=1.0, metavar="HZ",
+                    help="messages per second (default: 1)")
+    tp.add_argument("--count", type=int, default=1, metavar="N",
+                    help="number of messages, 0 for until Ctrl-C (default: 1)")
+    for p in (tl, te, th, tp):
+        add_connection_arguments(p)
+        p.set_defaults(func=cmd_topic)
+
+
+def _service_parser(sub: argparse._SubParsersAction) -> None:
+    service = sub.add_parser("service", help="list or call services")
+    ss = service.add_subparsers(dest="action", required=True, metavar="ACTION")
+    sl = ss.add_parser("list", help="list served services")
+    sl.add_argument("-v", "--verbose", action="store_true", help="show which nodes serve them")
+    sc = ss.add_parser("call", help="call a service once and print the reply")
+    sc.add_argument("service", help="fully qualified service name, e.g. /add_two_ints")
+    _add_message_arguments(sc)
+    sc.add_argument("--timeout", type=float, default=2.0, metavar="S",
+                    help="seconds to wait for the reply (default: 2)")
+    for p in (sl, sc):
+        add_connection_arguments(p)
+        p.set_defaults(func=cmd_service)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Console script `twinfleet`."""
+    args = build_parser().parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,484 @@
+"""NodeHost over LoopbackTransport with a ManualClock: ordering, timers, calls, failures."""
+
+from __future__ import annotations
+
+import asyncio
+import hashlib
+import io
+from collections.abc import Coroutine
+from dataclasses import dataclass, field
+from typing import Any
+
+from runtime import (
+    CallError,
+    Context,
+    Node,
+    String,
+    every,
+    handler,
+    message,
+    on_start,
+    service,
+    subscribe,
+)
+from runtime.clock import ManualClock
+from runtime.host import NodeHost, derive_seed
+from runtime.messages import NodeAlive, Violation, decode, encode
+from runtime.names import key_expr
+from runtime.node import QOS_DEFAULT, QOS_LATCHED
+from runtime.transport import LoopbackBus, LoopbackTransport
+
+FLEET = "t"
+
+
+@message("test_msgs/Num")
+class Num:
+    value: int
+
+
+@dataclass
+class Log:
+    seen: list[Any] = field(default_factory=list)
+
+
+class Recorder(Node):
+    """Records (time, event) pairs; two timers with different priorities; an `after` chain."""
+
+    def initial_state(self) -> Log:
+        return Log()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        self.state.seen.append((ctx.now(), "start"))
+        ctx.after(50, self.later, "x")
+
+    @handler(priority=3)
+    def later(self, ctx: Context, tag: str) -> None:
+        self.state.seen.append((ctx.now(), f"later {tag}"))
+
+    @every(100, priority=2)
+    def slow_tick(self, ctx: Context) -> None:
+        self.state.seen.append((ctx.now(), "tick p2"))
+
+    @every(100, priority=1)
+    def fast_tick(self, ctx: Context) -> None:
+        self.state.seen.append((ctx.now(), "tick p1"))
+
+    @subscribe("/low", priority=5)
+    def on_low(self, ctx: Context, msg: Num) -> None:
+        self.state.seen.append((ctx.now(), f"low {msg.value}"))
+
+    @subscribe("/high", priority=0)
+    def on_high(self, ctx: Context, msg: Num) -> None:
+        self.state.seen.append((ctx.now(), f"high {msg.value}"))
+
+
+class Doubler(Node):
+    """Serves /double; raises for negative input; `ctx.fail` for 13."""
+
+    @service("/double")
+    def double(self, ctx: Context, req: Num) -> Num:
+        if req.value < 0:
+            raise ValueError("negative")
+        if req.value == 13:
+            ctx.fail("unlucky number")
+        return Num(req.value * 2)
+
+
+@dataclass(frozen=True)
+class AskerParams:
+    service: str = "/double"
+    value: int = 21
+    timeout_ms: int = 200
+
+
+class Asker(Node):
+    """Calls a service once at start and records the reply."""
+
+    Params = AskerParams
+
+    def initial_state(self) -> Log:
+        return Log()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.call(self.params.service, Num(self.params.value), self.on_reply,
+                 timeout_ms=self.params.timeout_ms)
+
+    @handler()
+    def on_reply(self, ctx: Context, reply: Num | CallError) -> None:
+        self.state.seen.append(reply)
+
+
+class Fragile(Node):
+    """Raises on odd numbers, counts even ones; watches liveliness."""
+
+    def initial_state(self) -> Log:
+        return Log()
+
+    @subscribe("/nums")
+    def on_num(self, ctx: Context, msg: Num) -> None:
+        if msg.value % 2:
+            raise RuntimeError(f"odd {msg.value}")
+        self.state.seen.append(msg.value)
+
+    @subscribe("/_liveliness")
+    def on_alive(self, ctx: Context, msg: NodeAlive) -> None:
+        self.state.seen.append(msg)
+
+
+class LatchedListener(Node):
+    def initial_state(self) -> Log:
+        return Log()
+
+    @subscribe("/map", qos=QOS_LATCHED)
+    def on_map(self, ctx: Context, msg: String) -> None:
+        self.state.seen.append(msg.data)
+
+
+def run(coro: Coroutine[Any, Any, Any], timeout: float = 10.0) -> Any:
+    """Run a test coroutine with a deadline."""
+    return asyncio.run(asyncio.wait_for(coro, timeout))
+
+
+async def settle(*hosts: NodeHost, rounds: int = 2000) -> None:
+    """Let the loop run until every host is idle for a few iterations in a row."""
+    streak = 0
+    for _ in range(rounds):
+        await asyncio.sleep(0)
+        streak = streak + 1 if all(h.idle() for h in hosts) else 0
+        if streak >= 10:
+            return
+    raise AssertionError("hosts did not settle")
+
+
+class Harness:
+    """Hosts on one loopback bus and one manual clock."""
+
+    def __init__(self) -> None:
+        self.bus = LoopbackBus()
+        self.clock = ManualClock()
+        self.hosts: list[NodeHost] = []
+        self.tasks: list[asyncio.Task[None]] = []
+        self.out = io.StringIO()
+
+    async def start(self, node: Node, **kw: Any) -> NodeHost:
+        transport = LoopbackTransport(self.bus)
+        await transport.open()
+        host = NodeHost(node, transport, self.clock, seed=7, fleet=FLEET, out=self.out, **kw)
+        self.hosts.append(host)
+        self.tasks.append(asyncio.create_task(host.run()))
+        await settle(*self.hosts)
+        return host
+
+    async def raw(self) -> LoopbackTransport:
+        transport = LoopbackTransport(self.bus)
+        await transport.open()
+        return transport
+
+    async def advance(self, ms: int) -> None:
+        """Advance in steps, letting the hosts run between due times (as live time would)."""
+        target = self.clock.now_ms() + ms
+        while (due := self.clock.next_due()) is not None and due <= target:
+            self.clock.advance(due - self.clock.now_ms())
+            await settle(*self.hosts)
+        self.clock.advance(target - self.clock.now_ms())
+        await settle(*self.hosts)
+
+    async def stop(self) -> None:
+        for host in self.hosts:
+            host.stop()
+        await asyncio.gather(*self.tasks)
+
+
+def test_start_after_and_timer_priorities() -> None:
+    async def body() -> list[Any]:
+        h = Harness()
+        node = Recorder("rec")
+        await h.start(node)
+        await h.advance(200)
+        await h.stop()
+        return node.state.seen
+
+    assert run(body()) == [(0, "start"), (50, "later x"), (100, "tick p1"), (100, "tick p2"),
+                           (200, "tick p1"), (200, "tick p2")]
+
+
+def test_simultaneous_messages_run_by_priority_then_arrival() -> None:
+    async def body() -> list[Any]:
+        h = Harness()
+        node = Recorder("rec")
+        await h.start(node)
+        raw = await h.raw()
+        for topic, value in (("/low", 1), ("/high", 2), ("/low", 3), ("/high", 4)):
+            raw.put(key_expr(FLEET, topic), encode(Num(value), seq=value), QOS_DEFAULT)
+        await settle(*h.hosts)
+        await h.stop()
+        return [event for _, event in node.state.seen[1:]]
+
+    assert run(body()) == ["high 2", "high 4", "low 1", "low 3"]
+
+
+def test_every_is_drift_free_and_counts_pending_timers() -> None:
+    async def body() -> tuple[list[int], int]:
+        h = Harness()
+        node = Recorder("rec")
+        host = await h.start(node)
+        for _ in range(7):
+            await h.advance(143)  # steps that do not divide the period
+        pending = host.statistics().timers_pending
+        await h.stop()
+        return [t for t, e in node.state.seen if e == "tick p1"], pending
+
+    ticks, pending = run(body())
+    assert ticks == [100, 200, 300, 400, 500, 600, 700, 800, 900, 1000]
+    assert pending == 2  # the two @every timers, re-armed
+
+
+def test_service_call_and_reply() -> None:
+    async def body() -> list[Any]:
+        h = Harness()
+        await h.start(Doubler("doubler"))
+        asker = Asker("asker")
+        await h.start(asker)
+        await h.stop()
+        return asker.state.seen
+
+    assert run(body()) == [Num(42)]
+
+
+def test_call_without_server_gets_no_server_error() -> None:
+    async def body() -> list[Any]:
+        h = Harness()
+        asker = Asker("asker", AskerParams(service="/missing"))
+        await h.start(asker)
+        await h.stop()
+        return asker.state.seen
+
+    assert run(body()) == [CallError("/missing", "no server")]
+
+
+def test_call_timeout_is_a_clock_timer() -> None:
+    async def body() -> tuple[list[Any], list[Any]]:
+        h = Harness()
+        mute = await h.raw()
+        mute.serve(key_expr(FLEET, "/double"), lambda payload, respond: None)  # never answers
+        asker = Asker("asker", AskerParams(timeout_ms=200))
+        await h.start(asker)
+        before = list(asker.state.seen)
+        await h.advance(199)
+        before += asker.state.seen
+        await h.advance(1)
+        await h.stop()
+        return before, asker.state.seen
+
+    before, after = run(body())
+    assert before == []
+    assert after == [CallError("/double", "timeout")]
+
+
+def test_server_exception_becomes_call_error_and_server_keeps_serving() -> None:
+    async def body() -> tuple[list[Any], list[Any], int]:
+        h = Harness()
+        server = await h.start(Doubler("doubler"))
+        bad = Asker("bad", AskerParams(value=-1))
+        good = Asker("good", AskerParams(value=5))
+        await h.start(bad)
+        await h.start(good)
+        await h.stop()
+        return bad.state.seen, good.state.seen, server.statistics().handler_errors
+
+    bad, good, errors = run(body())
+    assert bad == [CallError("/double", "server error: ValueError: negative")]
+    assert good == [Num(10)]
+    assert errors == 1
+
+
+def test_handler_exception_is_logged_counted_published_and_node_keeps_serving() -> None:
+    async def body() -> tuple[list[Any], Any, list[Violation], str]:
+        h = Harness()
+        violations: list[Violation] = []
+        raw = await h.raw()
+        raw.subscribe(key_expr(FLEET, "/violations"),
+                      lambda k, p: violations.append(decode(p).msg), QOS_DEFAULT)
+        node = Fragile("fragile")
+        host = await h.start(node)
+        for seq, value in enumerate((2, 3, 4), start=1):
+            raw.put(key_expr(FLEET, "/nums"), encode(Num(value), seq=seq), QOS_DEFAULT)
+        await settle(*h.hosts)
+        await h.stop()
+        return node.state.seen, host.statistics(), violations, h.out.getvalue()
+
+    seen, stats, violations, _ = run(body())
+    assert [v for v in seen if isinstance(v, int)] == [2, 4]
+    assert stats.handler_errors == 1
+    assert violations == [Violation("fragile", "on_num", "RuntimeError: odd 3")]
+
+
+def test_stop_on_error_stops_the_host() -> None:
+    async def body() -> tuple[bool, list[Any]]:
+        h = Harness()
+        raw = await h.raw()
+        node = Fragile("fragile")
+        host = await h.start(node, stop_on_error=True)
+        for seq, value in enumerate((3, 4), start=1):
+            raw.put(key_expr(FLEET, "/nums"), encode(Num(value), seq=seq), QOS_DEFAULT)
+        await asyncio.wait_for(h.tasks[0], 5)  # run() returns by itself
+        return host.failed, node.state.seen
+
+    failed, seen = run(body())
+    assert failed
+    assert 4 not in seen
+
+
+def test_fail_effect_is_counted_and_published() -> None:
+    async def body() -> tuple[list[Any], int]:
+        h = Harness()
+        violations: list[Any] = []
+        raw = await h.raw()
+        raw.subscribe(key_expr(FLEET, "/violations"),
+                      lambda k, p: violations.append(decode(p).msg), QOS_DEFAULT)
+        server = await h.start(Doubler("doubler"))
+        asker = Asker("asker", AskerParams(value=13))
+        await h.start(asker)
+        await h.stop()
+        return violations, server.statistics().failures
+
+    violations, failures = run(body())
+    assert violations == [Violation("doubler", "", "unlucky number")]
+    assert failures == 1
+
+
+def test_undecodable_payload_is_counted_and_dropped() -> None:
+    async def body() -> tuple[list[Any], Any]:
+        h = Harness()
+        raw = await h.raw()
+        node = Fragile("fragile")
+        host = await h.start(node)
+        raw.put(key_expr(FLEET, "/nums"), b"\xc1 not msgpack", QOS_DEFAULT)
+        raw.put(key_expr(FLEET, "/nums"), encode(String("wrong type?")), QOS_DEFAULT)
+        raw.put(key_expr(FLEET, "/nums"), encode(Num(8), seq=3), QOS_DEFAULT)
+        await settle(*h.hosts)
+        await h.stop()
+        return node.state.seen, host.statistics()
+
+    seen, stats = run(body())
+    assert 8 in seen
+    assert stats.dropped_undecodable == 1
+    assert stats.received == 3
+
+
+def test_sequence_gaps_are_counted_per_sender() -> None:
+    async def body() -> int:
+        h = Harness()
+        raw = await h.raw()
+        host = await h.start(Fragile("fragile"))
+        for sender, seq in (("a", 1), ("b", 1), ("a", 2), ("a", 5), ("b", 2), ("a", 6)):
+            raw.put(key_expr(FLEET, "/nums"), encode(Num(2), seq=seq, sender=sender), QOS_DEFAULT)
+        await settle(*h.hosts)
+        await h.stop()
+        return host.statistics().gaps
+
+    assert run(body()) == 2
+
+
+def test_liveliness_changes_reach_a_liveliness_subscriber() -> None:
+    async def body() -> list[Any]:
+        h = Harness()
+        node = Fragile("watcher")
+        await h.start(node)
+        other = LatchedListener("other")
+        await h.start(other)
+        h.hosts[1].stop()
+        await h.tasks[1]
+        await h.hosts[1].transport.close()
+        await settle(h.hosts[0])
+        h.hosts.pop(1)
+        h.tasks.pop(1)
+        await h.stop()
+        return [m for m in node.state.seen if isinstance(m, NodeAlive)]
+
+    assert run(body()) == [NodeAlive("watcher", True), NodeAlive("other", True),
+                           NodeAlive("other", False)]
+
+
+def test_latched_topic_reaches_a_late_joiner() -> None:
+    class MapPublisher(Node):
+        publications = {"/map": QOS_LATCHED}
+
+        @on_start
+        def start(self, ctx: Context) -> None:
+            ctx.publish("/map", String("v1"))
+            ctx.publish("/map", String("v2"))
+
+    async def body() -> list[str]:
+        h = Harness()
+        await h.start(MapPublisher("map_server"))
+        late = LatchedListener("late")
+        await h.start(late)
+        await h.stop()
+        return late.state.seen
+
+    assert run(body()) == ["v2"]
+
+
+def test_on_start_waits_for_peers() -> None:
+    async def body() -> tuple[list[Any], list[Any]]:
+        h = Harness()
+        node = Recorder("rec")
+        await h.start(node, wait_for=("rec", "peer"))
+        before = list(node.state.seen)
+        await h.start(Doubler("peer"))
+        await h.stop()
+        return before, node.state.seen
+
+    before, after = run(body())
+    assert before == []
+    assert (0, "start") in after
+
+
+def test_derive_seed_is_stable_and_distinct() -> None:
+    assert derive_seed(1, "r1") == derive_seed(1, "r1")
+    assert derive_seed(1, "r1") != derive_seed(1, "r2")
+    assert derive_seed(1, "r1") != derive_seed(2, "r1")
+    expected = int.from_bytes(hashlib.sha256(b"1:r1").digest()[:8], "big")
+    assert derive_seed(1, "r1") == expected  # independent of PYTHONHASHSEED
+
+
+def test_choose_is_reproducible_for_a_seed() -> None:
+    class Picker(Node):
+        def initial_state(self) -> Log:
+            return Log()
+
+        @every(10)
+        def tick(self, ctx: Context) -> None:
+            self.state.seen.append(ctx.choose(range(1000)))
+
+    async def picks() -> list[int]:
+        h = Harness()
+        node = Picker("picker")
+        await h.start(node)
+        await h.advance(100)
+        await h.stop()
+        return node.state.seen
+
+    first, second = run(picks()), run(picks())
+    assert first == second
+    assert len(set(first)) > 1
+
+
+
+def test_manual_clock_runs_due_callbacks_in_time_then_schedule_order() -> None:
+    clock = ManualClock(10)
+    fired: list[str] = []
+    clock.call_at(30, fired.append, "c")
+    clock.call_at(20, fired.append, "a")
+    clock.call_at(20, fired.append, "b")
+    clock.call_at(5, fired.append, "past")  # due in the past: runs at the next advance
+    handle = clock.call_at(25, fired.append, "cancelled")
+    handle.cancel()
+    assert clock.advance(0) == 1
+    clock.advance(15)
+    assert fired == ["past", "a", "b"]
+    assert clock.now_ms() == 25
+    assert clock.pending() == 1
