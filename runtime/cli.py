@@ -59,7 +59,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         return 2
     from runtime.launcher import format_result, run_fleet
 
-    worst = 0
+    worst, passed = 0, 0
     for run in range(args.runs):
         seed = (args.seed if args.seed is not None else scenario.seed) + run
         if args.runs > 1:
@@ -69,9 +69,13 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                        connect=args.connect, listen=args.listen))
         for line in format_result(result):
             print(f"[launcher] {line}", flush=True)
-        worst = max(worst, 0 if result.ok else 1)
+        worst = max(worst, 0 if result.passed else 1)
+        passed += result.passed
         if result.reason.startswith(("SIGINT", "SIGTERM")):
             break
+    if args.runs > 1:
+        print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "
+              f"{args.runs - passed}/{args.runs} failed", flush=True)
     return worst
 
 

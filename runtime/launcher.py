@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import importlib
 import os
 import signal
 import socket
@@ -69,11 +70,17 @@ class FleetResult:
     restarts: Mapping[str, int] = field(default_factory=dict)
     last_messages: Mapping[str, Any] = field(default_factory=dict)
     duration_s: float = 0.0
+    report: Any = None
 
     @property
     def ok(self) -> bool:
         """True when no node failed."""
         return not self.failed
+
+    @property
+    def passed(self) -> bool:
+        """True when no node failed and the scenario's report (if any) says the run passed."""
+        return self.ok and (self.report is None or self.report.passed())
 
 
 def free_port() -> int:
@@ -154,6 +161,7 @@ class Fleet:
         self.ended: asyncio.Future[str] | None = None
         self.shutting_down = False
         self.failed: list[str] = []
+        self.report = load_report(scenario)
 
     def log(self, text: str) -> None:
         """A launcher line on the output."""
@@ -177,6 +185,8 @@ class Fleet:
         self.transport.subscribe(key_expr(fleet, SHUTDOWN_TOPIC), self._on_shutdown, QOS_DEFAULT)
         for topic in self.scenario.live.get("summary_topics", []) or []:
             self.transport.subscribe(key_expr(fleet, topic), self._summary(topic), QOS_DEFAULT)
+        for topic in self.report.topics() if self.report is not None else ():
+            self.transport.subscribe(key_expr(fleet, topic), self._reported(topic), QOS_DEFAULT)
 
     def _on_shutdown(self, _key: str, payload: bytes) -> None:
         try:
@@ -193,6 +203,12 @@ class Fleet:
             except DecodeError:
                 with contextlib.suppress(Exception):
                     self.last_messages[topic] = msgpack.unpackb(payload, raw=False)
+        return deliver
+
+    def _reported(self, topic: str) -> Any:
+        def deliver(_key: str, payload: bytes) -> None:
+            with contextlib.suppress(DecodeError):
+                self.report.on_message(topic, decode(payload).msg)
         return deliver
 
     def _argv(self, cfg: NodeConfig) -> list[str]:
@@ -306,7 +322,21 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                        exit_codes=codes, failed=tuple(fleet.failed),
                        restarts={n: p.restarts for n, p in fleet.processes.items()},
                        last_messages=dict(fleet.last_messages),
-                       duration_s=time.monotonic() - started)
+                       duration_s=time.monotonic() - started, report=fleet.report)
+
+
+def load_report(scenario: Scenario) -> Any:
+    """The run report named by the scenario's `live.report` ("module:factory"), or None.
+
+    The factory takes the scenario and returns an object with `topics()`,
+    `on_message(topic, msg)`, `passed()` and `render()`; the launcher feeds it
+    every message on those topics (e.g. `nodes.report:report_for`).
+    """
+    path = scenario.live.get("report")
+    if not path:
+        return None
+    module, _, attr = str(path).partition(":")
+    return getattr(importlib.import_module(module), attr)(scenario)
 
 
 def _install_signals(loop: asyncio.AbstractEventLoop, fleet: Fleet) -> list[int]:
@@ -327,5 +357,7 @@ def format_result(result: FleetResult) -> list[str]:
         lines.append(f"  {name}: exit code {code} ({status}{extra})")
     for topic, msg in result.last_messages.items():
         lines.append(f"  last on {topic}: {msg}")
+    if result.report is not None:
+        lines += result.report.render().splitlines()
     return lines
 
