@@ -181,3 +181,55 @@ def scenario_view(scenario: Any, *, scan_of: str | None = None) -> FleetView:
                      half_length=server.dims.length / 2 + server.dims.collision_margin,
                      half_width=server.dims.width / 2 + server.dims.collision_margin,
                      scan_of=scan_of, caption=f"{scenario.name}: starts, goals and first plans")
+
+
+def _as_state(value: Mapping[str, Any]) -> Any:
+    from types import SimpleNamespace
+
+    return SimpleNamespace(**value)
+
+
+def trace_views(scenario: Any, trace: Mapping[str, Any], *, scan_of: str | None = None,
+                every_step: bool = False) -> list[FleetView]:
+    """One view per step of a checker trace (JSON), the last one showing the violation.
+
+    Without `every_step`, only steps in which a robot's cell or heading changed,
+    and the last step, get a frame.
+    """
+    states = {name: _as_state(s) for name, s in trace["initial"]["states"].items()}
+    views = [states_view(scenario, states, scan_of=scan_of, caption="t=0 ms: start")]
+    steps = trace["steps"]
+    for k, step in enumerate(steps):
+        moved = False
+        for name, value in step.get("changed", {}).items():
+            old = states.get(name)
+            states[name] = _as_state(value)
+            moved |= old is None or getattr(old, "cell", None) != value.get("cell") \
+                or getattr(old, "dir", None) != value.get("dir")
+        last = k == len(steps) - 1
+        if not (moved or every_step or last):
+            continue
+        collision = None
+        server = next((s for s in states.values() if hasattr(s, "collided")), None)
+        if last and server is not None and server.collided:
+            collision = tuple(server.collided[-1])
+        caption = f"t={step['time']} ms  step {step['index']}: {step['node']}.{step['handler']}"
+        if last:
+            caption += f"  -- {trace.get('message', '')}"
+        views.append(states_view(scenario, states, collision=collision, scan_of=scan_of,
+                                 caption=caption[:110]))
+    return views
+
+
+def save_pictures(views: Sequence[FleetView], out: str, *, cell_px: int = 12,
+                  frame_ms: int = 120) -> int:
+    """Write one PNG (the last view) or an animated GIF (every view); return the frame count."""
+    lower = out.lower()
+    if lower.endswith(".gif"):
+        frames = [draw_world(v, cell_px) for v in views]
+        frames[0].save(out, save_all=True, append_images=frames[1:], duration=frame_ms, loop=0)
+        return len(frames)
+    if lower.endswith(".png"):
+        draw_world(views[-1], cell_px).save(out)
+        return 1
+    raise ValueError(f"{out}: choose a .png (last moment) or .gif (every step) file name")

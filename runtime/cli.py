@@ -79,6 +79,34 @@ def cmd_launch(args: argparse.Namespace) -> int:
     return worst
 
 
+def cmd_render(args: argparse.Namespace) -> int:
+    """`twinfleet render`: draw a scenario's start or a checker trace to PNG/GIF."""
+    import json
+
+    from runtime.scenario import ScenarioError, load_scenario
+
+    source = args.source
+    try:
+        if source.endswith(".json"):
+            with open(source) as f:
+                trace = json.load(f)
+            if trace.get("format") != "twinfleet-trace/1":
+                raise ValueError(f"{source}: not a twinfleet trace (format {trace.get('format')!r})")
+            scenario = load_scenario(trace["scenario"], {"profile": trace.get("profile", "fixed")})
+        else:
+            trace, scenario = None, load_scenario(source)
+        from nodes.render import save_pictures, scenario_view, trace_views
+
+        views = (trace_views(scenario, trace, scan_of=args.scan_of, every_step=args.every_step)
+                 if trace else [scenario_view(scenario, scan_of=args.scan_of)])
+        frames = save_pictures(views, args.output, cell_px=args.cell_px)
+    except (ScenarioError, ValueError, KeyError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.output} ({frames} frame{'s' if frames > 1 else ''})")
+    return 0
+
+
 def cmd_topic(args: argparse.Namespace) -> int:
     """`twinfleet topic ...`."""
     from runtime import monitor
@@ -146,6 +174,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="twinfleet", description=__doc__.splitlines()[0])
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     _launch_parser(sub)
+    _render_parser(sub)
     _topic_parser(sub)
     _service_parser(sub)
     node = sub.add_parser("node", help="inspect running nodes")
@@ -178,6 +207,21 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--listen", default=None, metavar="EP",
                    help="endpoint of the embedded router (default: tcp/127.0.0.1:<free port>)")
     p.set_defaults(func=cmd_launch)
+
+
+def _render_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("render", help="draw a scenario (start, goals, first plans) or a checker trace")
+    p.add_argument("source", help="scenario YAML, or a trace JSON written by `twinfleet check`")
+    p.add_argument("-o", "--output", required=True, metavar="FILE",
+                   help="FILE.png: one picture (a trace's last step, with the collision circled); "
+                        "FILE.gif: one frame per step in which a robot moved")
+    p.add_argument("--scan-of", metavar="ROBOT", default=None,
+                   help="draw the scan rays of this robot (e.g. r1)")
+    p.add_argument("--every-step", action="store_true",
+                   help="for a GIF of a trace, one frame per step even when nothing moved")
+    p.add_argument("--cell-px", type=int, default=12, metavar="N",
+                   help="pixels per grid cell (default: %(default)s)")
+    p.set_defaults(func=cmd_render)
 
 
 def _topic_parser(sub: argparse._SubParsersAction) -> None:

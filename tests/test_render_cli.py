@@ -1,0 +1,60 @@
+"""`twinfleet render` on a scenario and on a checker counterexample, checked by pixels."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from checker.check import CheckOptions, check
+from nodes.render import robot_colour
+from runtime.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+PX = 12
+
+
+def colour_near(arr: np.ndarray, cell: tuple[int, int], colour: tuple[int, int, int]) -> bool:
+    r, c = cell
+    patch = arr[int((r - 0.3) * PX):int((r + 1.3) * PX), int((c - 0.3) * PX):int((c + 1.3) * PX)]
+    return bool(np.all(patch == colour, axis=-1).any())
+
+
+def test_render_scenario_png(tmp_path, capsys):
+    out = tmp_path / "c1a.png"
+    assert main(["render", str(ROOT / "launch" / "c1a.yaml"), "-o", str(out), "--scan-of", "r3"]) == 0
+    arr = np.asarray(Image.open(out).convert("RGB"))
+    assert arr.shape == (50 * PX + 18, 50 * PX, 3)
+    for i, start in enumerate([(5, 5), (5, 15), (5, 25), (5, 35), (5, 45)]):
+        assert colour_near(arr, start, robot_colour(i))
+
+
+@pytest.mark.slow
+def test_render_c2a_counterexample_shows_the_colliding_pair(tmp_path):
+    trace_path = tmp_path / "c2a.trace.json"
+    result = check(ROOT / "launch" / "c2a.yaml", CheckOptions(trace_out=str(trace_path)))
+    assert result.status == "violated"
+    last = result.trace["steps"][-1]
+    pair = last["changed"]["map_server"]["collided"][-1]
+    cells = dict(zip(["r1", "r2", "r3", "r4", "r5"], last["changed"]["map_server"]["cells"], strict=True))
+    out = tmp_path / "c2a.png"
+    assert main(["render", str(trace_path), "-o", str(out)]) == 0
+    arr = np.asarray(Image.open(out).convert("RGB"))
+    assert arr.shape == (50 * PX + 18, 50 * PX, 3)
+    for name in pair:
+        index = int(name[1:]) - 1
+        assert colour_near(arr, tuple(cells[name]), robot_colour(index)), name
+        assert colour_near(arr, tuple(cells[name]), (255, 0, 0)), f"no collision marker at {name}"
+    gif = tmp_path / "c2a.gif"
+    assert main(["render", str(trace_path), "-o", str(gif)]) == 0
+    assert Image.open(gif).n_frames > 10
+
+
+def test_render_rejects_bad_input(tmp_path, capsys):
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"format": "other"}')
+    assert main(["render", str(bad), "-o", str(tmp_path / "x.png")]) == 2
+    assert "not a twinfleet trace" in capsys.readouterr().err
+    assert main(["render", str(ROOT / "launch" / "c1a.yaml"), "-o", str(tmp_path / "x.bmp")]) == 2
