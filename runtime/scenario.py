@@ -159,7 +159,7 @@ def parse_scenario(doc: Mapping[str, Any], path: Path) -> Scenario:
     live = _get(doc, "live", dict, err, default={})
     err.unknown_keys(live, _LIVE_KEYS, "live.")
     if "report" in live:
-        _import_attr(str(live["report"]), err, "live.report")
+        _import_attr(str(live["report"]), err, "live.report", "report factory")
     return Scenario(path=path, name=name, fleet=fleet,
                     description=_get(doc, "description", str, err, default=""),
                     map_path=map_path, profile=profile, semantics=semantics,
@@ -229,18 +229,18 @@ def _try_instantiate(i: int, cfg: NodeConfig, err: _Errors) -> None:
         err.fail(f"nodes[{i}] ({cfg.name})", str(exc))
 
 
-def _import_attr(path: str, err: _Errors, key: str) -> Any:
+def _import_attr(path: str, err: _Errors, key: str, what: str = "name") -> Any:
     module_name, _, attr = path.partition(":")
     if not attr:
-        err.fail(key, f"expected 'module:Name', got {path!r}")
+        err.fail(key, f"expected 'module:{what.split()[-1].capitalize()}', got {path!r}")
     try:
         return getattr(importlib.import_module(module_name), attr)
     except (ImportError, AttributeError) as exc:
-        err.fail(key, f"cannot import {path!r} ({exc})")
+        err.fail(key, f"unknown {what} {path!r} ({exc})")
 
 
 def _import_node_class(class_path: str, err: _Errors, key: str) -> type[Node]:
-    cls = _import_attr(class_path, err, key)
+    cls = _import_attr(class_path, err, key, "node class")
     if not (isinstance(cls, type) and issubclass(cls, Node)):
         err.fail(key, f"{class_path!r} is not a subclass of runtime.Node")
     return cls

@@ -58,8 +58,8 @@ def mutate(path: str, value):
 @pytest.mark.parametrize(
     ("path", "value", "expected"),
     [
-        ("nodes.1.class", "nodes.robot:Robott", r"nodes\[1\]\.class: cannot import 'nodes.robot:Robott'"),
-        ("nodes.1.class", "nodes.robot", r"expected 'module:Name'"),
+        ("nodes.1.class", "nodes.robot:Robott", r"nodes\[1\]\.class: unknown node class 'nodes.robot:Robott'"),
+        ("nodes.1.class", "nodes.robot", r"expected 'module:Class'"),
         ("nodes.1.params.speeed", 0.5, r"nodes\[1\]\.params\.speeed: unknown parameter of RobotParams"),
         ("nodes.1.params.start", "five", r"nodes\[1\]\.params\.start: expected a list"),
         ("nodes.1.params.start", [5], r"expected 2 values"),

@@ -1,0 +1,33 @@
+"""The paper's case C1a live: a map server and five robots as six processes over Zenoh."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from itest_support import ROOT, child_env, kill_all, processes_mentioning
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(150)]
+
+
+def test_c1a_live_all_robots_arrive_without_collision():
+    scenario = str(ROOT / "launch" / "c1a.yaml")
+    cmd = [sys.executable, "-m", "runtime.cli", "launch", scenario, "--time-scale", "10",
+           "--timeout", "60"]
+    try:
+        result = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=child_env(),
+                                cwd=ROOT, check=False)
+    finally:
+        kill_all(processes_mentioning(scenario))
+    out = result.stdout
+    assert "shutdown requested by map_server: all robots arrived" in out, out[-3000:]
+    node_processes = {line.split("]")[0] for line in out.splitlines() if line.startswith("[r")}
+    assert node_processes == {"[r1", "[r2", "[r3", "[r4", "[r5"}
+    for robot in ("r1", "r2", "r3", "r4", "r5"):
+        assert f"[launcher] {robot:<6} yes" in out, out[-3000:]
+    assert "collisions: none" in out
+    assert "result: PASSED" in out
+    assert result.returncode == 0
+    assert not processes_mentioning(scenario)
