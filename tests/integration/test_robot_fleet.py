@@ -6,7 +6,6 @@ import subprocess
 import sys
 
 import pytest
-
 from itest_support import ROOT, child_env, kill_all, processes_mentioning
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(150)]
