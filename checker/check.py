@@ -4,6 +4,8 @@ Exit codes of a `CheckResult`: 0 every property holds, 1 a property is
 violated, 2 no answer (a limit was reached, the search was interrupted, or
 random walks found nothing, which proves nothing). Bad input raises before
 a result exists (`ScenarioError`, `PropertyError`, `NodeDefinitionError`).
+The search always stops at the first violation (RMC does the same, R11), so
+the scenario key `check.stop_at_first` is accepted but has no other value.
 """
 
 from __future__ import annotations
@@ -75,7 +77,7 @@ class CheckResult:
                 "message": self.violation.message, "shape": self.violation.shape},
             "properties": self.properties, "states": s.states, "transitions": s.transitions,
             "rmc_transitions": self.rmc_transitions, "initial_states": s.initial_states,
-            "liveness_transitions": s.liveness_transitions, "depth": s.depth,
+            "depth": s.depth,
             "wall_time_s": round(s.elapsed_s, 3), "peak_memory_mb": round(s.peak_rss_mb, 1),
             "trace": self.trace_path,
             "trace_steps": None if self.trace is None else len(self.trace["steps"]),
@@ -100,8 +102,6 @@ class CheckResult:
                  f"initial states {s.initial_states}",
                  f"time {s.elapsed_s:.2f} s ({s.transitions_per_s:,.0f} transitions/s)  "
                  f"peak memory {s.peak_rss_mb:.0f} MB"]
-        if s.liveness_transitions:
-            lines.append(f"liveness search transitions {s.liveness_transitions:,}")
         if self.trace is not None:
             where = self.trace_path or "(not written)"
             lines.append(f"trace: {where} ({len(self.trace['steps'])} steps, "

@@ -63,10 +63,12 @@ def register(subparsers: Any) -> None:
 
 
 def _progress(stats: SearchStatistics) -> None:
-    print(f"\r[check] states {stats.states:,}  transitions {stats.transitions:,}  "
-          f"{stats.states_per_s:,.0f} states/s  depth {stats.depth}  "
-          f"frontier {stats.frontier:,}  mem {stats.peak_rss_mb:.0f} MB", file=sys.stderr,
-          end="", flush=True)
+    tty = sys.stderr.isatty()
+    lead = "\r" if tty else ""
+    print(f"{lead}[check] states {stats.states:,}  "
+          f"transitions {stats.transitions:,}  {stats.states_per_s:,.0f} states/s  "
+          f"depth {stats.depth}  frontier {stats.frontier:,}  mem {stats.peak_rss_mb:.0f} MB",
+          file=sys.stderr, end="" if tty else "\n", flush=True)
 
 
 def check_command(args: argparse.Namespace) -> int:
@@ -83,7 +85,7 @@ def check_command(args: argparse.Namespace) -> int:
     except BAD_INPUT as exc:
         print(f"twinfleet check: {exc}", file=sys.stderr)
         return 2
-    if options.progress is not None:
+    if options.progress is not None and sys.stderr.isatty():
         print(file=sys.stderr)
     _report(result, as_json=args.json)
     return result.exit_code

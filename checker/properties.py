@@ -129,6 +129,10 @@ class PropertySet:
             props.append(Property(cfg.name, cfg.kind, expr, cfg.within_ms))
         return cls(props)
 
+    def eventually_named(self, name: str) -> Property:
+        """The `eventually` property called `name`."""
+        return next(p for p in self.eventually if p.name == name)
+
     def names(self) -> list[str]:
         """Every property checked, including the implicit handler-failure check."""
         named = [p.describe() for p in self.all]

@@ -3,17 +3,15 @@
 `Search.run("bfs")` explores breadth-first, so the first violation found has
 a shortest trace; "dfs" pops the newest world first (less memory on deep
 spaces); both check every safety property on every new world and every
-handler failure on every transition, and stop at the first violation. When
-the safety search finishes without a violation, each `eventually` property is
-checked by `_lasso`: a depth-first search restricted to worlds where its
-expression is false, with an on-stack colour, so a back edge is a reachable
-cycle on which the expression never holds (a lasso) and a world with nothing
-pending is a finite counterexample. "random" runs seeded random walks instead
-and can only find violations, never prove their absence.
+handler failure on every transition, and stop at the first violation. Visited
+states live in a `checker.graph.StateGraph`; when the scenario has
+`eventually` properties it also records every edge, and once the safety search
+is complete each of them is checked on that graph by `find_lasso` (no handler
+is re-run). "random" runs seeded random walks instead and can only find
+violations, never prove their absence.
 
-Counters (`SearchStatistics`): `states` are distinct world digests,
-`transitions` every handler run of the safety search (one per choice
-variant, revisits included), `liveness_transitions` those of lasso searches.
+Counters (`SearchStatistics`): `states` are distinct world digests and
+`transitions` every handler run (one per choice variant, revisits included).
 """
 
 from __future__ import annotations
@@ -22,17 +20,17 @@ import random
 import resource
 import time
 from collections import deque
-from collections.abc import Callable, Iterator
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import final
 
 from checker.choices import RandomChooser
+from checker.graph import StateGraph, find_lasso, steps_along
 from checker.properties import Property, PropertySet, Violation
 from checker.system import Step, System, Transition
 from checker.world import World
 
 HOLDS, VIOLATED, UNKNOWN = "holds", "violated", "unknown"
-_GRAY, _BLACK = 1, 2
 
 
 @final
@@ -57,7 +55,6 @@ class SearchStatistics:
     frontier: int
     elapsed_s: float
     peak_rss_mb: float
-    liveness_transitions: int = 0
 
     @property
     def states_per_s(self) -> float:
@@ -67,8 +64,7 @@ class SearchStatistics:
     @property
     def transitions_per_s(self) -> float:
         """Transitions executed per second of wall time."""
-        total = self.transitions + self.liveness_transitions
-        return total / self.elapsed_s if self.elapsed_s > 0 else 0.0
+        return self.transitions / self.elapsed_s if self.elapsed_s > 0 else 0.0
 
 
 @final
@@ -128,10 +124,10 @@ class Search:
         self.limits = limits
         self._progress = progress
         self._interval = progress_interval
-        self._parents: dict[bytes, tuple[bytes | None, Step]] = {}
-        self._frontier: deque[tuple[World, int]] = deque()
+        live = tuple(p.name for p in properties.eventually)
+        self.graph = StateGraph(record_edges=bool(live), flags=live)
+        self._frontier: deque[tuple[World, int, int]] = deque()
         self._transitions = 0
-        self._liveness = 0
         self._initial = 0
         self._depth = 0
         self._pruned = False
@@ -140,9 +136,9 @@ class Search:
 
     def statistics(self) -> SearchStatistics:
         """The counters so far."""
-        return SearchStatistics(len(self._parents), self._transitions, self._initial, self._depth,
+        return SearchStatistics(len(self.graph), self._transitions, self._initial, self._depth,
                                 len(self._frontier), time.monotonic() - self._start,
-                                peak_rss_mb(), self._liveness)
+                                peak_rss_mb())
 
     def run(self, strategy: str = "bfs", *, walks: int = 100, seed: int = 0) -> Outcome:
         """Search with `strategy` ("bfs", "dfs" or "random") until a verdict or a limit."""
@@ -158,9 +154,6 @@ class Search:
                                      "before the search finished")
             for prop in self.properties.eventually:
                 self._lasso(prop)
-            if self._pruned:
-                return self._outcome(UNKNOWN, f"max-depth {self.limits.max_depth} reached "
-                                     "during the liveness search")
             return self._outcome(HOLDS, "every property holds")
         except _Found as found:
             return self._outcome(VIOLATED, found.violation.property, found.violation, found.path)
@@ -171,60 +164,59 @@ class Search:
 
     def _outcome(self, status: str, reason: str, violation: Violation | None = None,
                  path: Path | None = None) -> Outcome:
-        stats = self.statistics()
-        if self._progress is not None:
-            self._progress(stats)
-        return Outcome(status, reason, stats, violation, path)
+        return Outcome(status, reason, self.statistics(), violation, path)
 
     # -------------------------------------------------------- safety search
 
     def _explore(self, *, lifo: bool) -> None:
         max_depth = self.limits.max_depth
+        edges = self.graph.edges
         for init in self.system.initial():
             self._initial += 1
-            self._discover(init, None, 0)
+            self._discover(init, -1, 0)
         frontier = self._frontier
         pop = frontier.pop if lifo else frontier.popleft
         while frontier:
-            world, depth = pop()
+            world, sid, depth = pop()
             if max_depth is not None and depth >= max_depth:
                 self._pruned = True
                 continue
             for t in self.system.successors(world):
                 self._transitions += 1
-                self._discover(t, world, depth + 1)
+                child = self._discover(t, sid, depth + 1)
+                if edges is not None:
+                    edges[sid].append(child)
             self._tick()
 
-    def _discover(self, t: Transition, parent: World | None, depth: int) -> None:
-        pd = parent.digest if parent is not None else None
+    def _discover(self, t: Transition, parent: int, depth: int) -> int:
         if t.failure is not None:
-            path = self._path_to(pd, t.step) if pd is not None else Path(t.step.choices, ())
-            raise _Found(self.properties.check_failure(t.failure), path)
+            raise _Found(self.properties.check_failure(t.failure), self._path_to(parent, t))
         world = t.world
-        digest = world.digest
-        if digest in self._parents:
-            return
-        self._parents[digest] = (pd, t.step)
+        sid, new = self.graph.add(world.digest, parent, terminal=world.terminal)
+        if not new:
+            return sid
+        if parent < 0:
+            self.graph.roots[sid] = t.step.choices
         if depth > self._depth:
             self._depth = depth
+        for name, bits in self.graph.holds.items():
+            bits.append(self._holds(self.properties.eventually_named(name), world))
         violation = self.properties.check_world(self.system, world)
         if violation is not None:
-            raise _Found(violation, self._path_to(digest))
-        self._frontier.append((world, depth))
-        if self.limits.max_states is not None and len(self._parents) >= self.limits.max_states:
+            raise _Found(violation, self._path_to(sid))
+        self._frontier.append((world, sid, depth))
+        if self.limits.max_states is not None and len(self.graph) >= self.limits.max_states:
             raise _Stop(f"max-states {self.limits.max_states} reached before the search finished")
+        return sid
 
-    def _path_to(self, digest: bytes | None, last: Step | None = None) -> Path:
-        steps = [] if last is None else [last]
-        initial: tuple[int, ...] = ()
-        while digest is not None:
-            parent, step = self._parents[digest]
-            if parent is None:
-                initial = step.choices
-            else:
-                steps.append(step)
-            digest = parent
-        return Path(initial, tuple(reversed(steps)))
+    def _path_to(self, sid: int, failing: Transition | None = None) -> Path:
+        if sid < 0:  # a start handler failed: no steps
+            assert failing is not None
+            return Path(failing.step.choices, ())
+        initial, steps = steps_along(self.system, self.graph, self.graph.path_ids(sid))
+        if failing is not None:
+            steps.append(failing.step)
+        return Path(initial, tuple(steps))
 
     def _tick(self) -> None:
         now = time.monotonic()
@@ -236,63 +228,21 @@ class Search:
 
     # ------------------------------------------------------- liveness search
 
-    def _lasso(self, prop: Property) -> None:
-        assert prop.expr is not None
-        colour: dict[bytes, int] = {}
-        for init in self.system.initial():
-            if init.failure is not None or colour.get(init.world.digest):
-                continue
-            if not self._holds(prop, init.world):
-                self._lasso_from(prop, init, colour)
-
     def _holds(self, prop: Property, world: World) -> bool:
         assert prop.expr is not None
         return prop.expr.holds(self.system, world.states, world.now)
 
-    def _lasso_from(self, prop: Property, init: Transition, colour: dict[bytes, int]) -> None:
-        stack: list[tuple[World, Iterator[Transition], Step]] = []
-        self._push_lasso(prop, stack, colour, init.world, init.step)
-        max_depth = self.limits.max_depth
-        while stack:
-            world, successors, _ = stack[-1]
-            t = next(successors, None)
-            if t is None:
-                colour[world.digest] = _BLACK
-                stack.pop()
-                self._tick()
-                continue
-            self._liveness += 1
-            nxt = t.world
-            if t.failure is not None or self._holds(prop, nxt):
-                continue
-            seen = colour.get(nxt.digest)
-            if seen == _GRAY:
-                start = next(i for i, entry in enumerate(stack) if entry[0].digest == nxt.digest)
-                self._raise_lasso(prop, stack, t.step, start)
-            if seen == _BLACK:
-                continue
-            if max_depth is not None and len(stack) > max_depth:
-                self._pruned = True
-                continue
-            self._push_lasso(prop, stack, colour, nxt, t.step)
-
-    def _push_lasso(self, prop: Property, stack: list[tuple[World, Iterator[Transition], Step]],
-                    colour: dict[bytes, int], world: World, step: Step) -> None:
-        colour[world.digest] = _GRAY
-        stack.append((world, self.system.successors(world), step))
-        if world.terminal:
-            self._raise_lasso(prop, stack, None, None)
-
-    def _raise_lasso(self, prop: Property, stack: list[tuple[World, Iterator[Transition], Step]],
-                     closing: Step | None, start: int | None) -> None:
+    def _lasso(self, prop: Property) -> None:
+        found = find_lasso(self.graph, prop.name)
+        if found is None:
+            return
+        ids, start = found
+        initial, steps = steps_along(self.system, self.graph, ids)
+        path = Path(initial, tuple(steps), start)
         assert prop.expr is not None
-        steps = [entry[2] for entry in stack[1:]]
-        if closing is not None:
-            steps.append(closing)
-        path = Path(stack[0][2].choices, tuple(steps), start)
         if start is None:
             message = (f"{prop.expr.source!r} never holds on a path that ends with nothing "
-                       f"pending at t={stack[-1][0].now} ms")
+                       f"pending ({len(steps)} steps)")
             raise _Found(Violation(prop.name, prop.kind, message, "terminal"), path)
         message = (f"{prop.expr.source!r} never holds on a reachable cycle "
                    f"(steps {start + 1}..{len(steps)} repeat for ever)")
@@ -307,7 +257,6 @@ class Search:
         max_depth = self.limits.max_depth or 1000
         for _ in range(walks):
             self._walk(rng, initials, max_depth)
-            self._tick()
         return self._outcome(UNKNOWN, f"random search is not exhaustive: no violation in {walks} "
                              f"walks of at most {max_depth} steps (seed {seed})")
 
@@ -325,6 +274,7 @@ class Search:
                 return
             t = self.system.run(world, rng.choice(enabled), RandomChooser(rng))
             self._transitions += 1
+            self._tick()
             steps.append(t.step)
             self._record_walk(t, init.step.choices, steps)
             world = t.world
@@ -337,11 +287,11 @@ class Search:
     def _record_walk(self, t: Transition, initial: tuple[int, ...], steps: list[Step]) -> None:
         if t.failure is not None:
             raise _Found(self.properties.check_failure(t.failure), Path(initial, tuple(steps)))
-        self._parents.setdefault(t.world.digest, (None, t.step))
+        self.graph.add(t.world.digest, -1)
         violation = self.properties.check_world(self.system, t.world)
         if violation is not None:
             raise _Found(violation, Path(initial, tuple(steps)))
-        if self.limits.max_states is not None and len(self._parents) >= self.limits.max_states:
+        if self.limits.max_states is not None and len(self.graph) >= self.limits.max_states:
             raise _Stop(f"max-states {self.limits.max_states} reached before the search finished")
 
     def _walk_end(self, never: list[Property], init: Transition, steps: list[Step],
@@ -357,3 +307,22 @@ class Search:
         message = f"{prop.expr.source!r} never holds on a reachable cycle"
         raise _Found(Violation(prop.name, prop.kind, message, "lasso"), path)
 
+
+def bfs(system: System, properties: PropertySet, limits: Limits = Limits(),
+        progress: Callable[[SearchStatistics], None] | None = None) -> Outcome:
+    """Breadth-first search: the first violation found has a shortest trace."""
+    return Search(system, properties, limits, progress=progress).run("bfs")
+
+
+def dfs(system: System, properties: PropertySet, limits: Limits = Limits(),
+        progress: Callable[[SearchStatistics], None] | None = None) -> Outcome:
+    """Depth-first order (newest world first)."""
+    return Search(system, properties, limits, progress=progress).run("dfs")
+
+
+def random_walk(system: System, properties: PropertySet, limits: Limits = Limits(), *,
+                walks: int = 100, seed: int = 0,
+                progress: Callable[[SearchStatistics], None] | None = None) -> Outcome:
+    """`walks` seeded random walks of at most `limits.max_depth` (default 1000) steps."""
+    return Search(system, properties, limits, progress=progress).run("random", walks=walks,
+                                                                     seed=seed)

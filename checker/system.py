@@ -21,7 +21,7 @@ from __future__ import annotations
 import pickle
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
-from typing import Any, final
+from typing import TYPE_CHECKING, Any, final
 
 from checker.choices import ChoiceMismatch, PrefixChooser
 from checker.semantics import Semantics
@@ -40,8 +40,11 @@ from runtime.context import After, Call, Chooser, Context, Fail, Log, Publish
 from runtime.dispatch import run_handler
 from runtime.messages import CallError
 from runtime.node import Node
-from runtime.scenario import Scenario
+from runtime.scenario import Scenario, ScenarioError
 from runtime.snapshot import SnapshotError, restore, snapshot
+
+if TYPE_CHECKING:
+    from checker.properties import PropertySet
 
 FAILURE = "handler failure"
 DEBUG_STATE = "state outside self.state"
@@ -99,21 +102,22 @@ class System:
 
     def __init__(self, scenario: Scenario, *, semantics: str | None = None,
                  latency: tuple[int, int] | None = None, global_priority: bool | None = None,
-                 debug_state: bool = False, monitors: Any = None) -> None:
+                 debug_state: bool = False, monitors: PropertySet | None = None) -> None:
         self.scenario = scenario
         self.nodes: tuple[Node, ...] = tuple(cfg.instantiate() for cfg in scenario.nodes)
         self.names: tuple[str, ...] = tuple(cfg.name for cfg in scenario.nodes)
         self.index = {name: i for i, name in enumerate(self.names)}
         check = scenario.check
-        if latency is None and check.get("latency") is not None:
-            lo, hi = check["latency"]
-            latency = None if (lo, hi) == (0, 0) else (int(lo), int(hi))
-        self.semantics = Semantics(
-            semantics or scenario.semantics,
-            tuple(cfg.priority for cfg in scenario.nodes),
-            bool(check.get("global_priority", False) if global_priority is None else global_priority),
-            latency,
-        )
+        if latency is None:
+            latency = _latency(scenario)
+        if global_priority is None:
+            global_priority = check.get("global_priority", False)
+        try:
+            self.semantics = Semantics(semantics or scenario.semantics,
+                                       tuple(cfg.priority for cfg in scenario.nodes),
+                                       bool(global_priority), latency)
+        except ValueError as exc:
+            raise ScenarioError(f"{scenario.path}: check: {exc}") from None
         self.debug_state = debug_state
         self.monitors = monitors
         self._current: list[bytes | None] = [None] * len(self.nodes)
@@ -133,7 +137,12 @@ class System:
                 topic = node.resolve(h.name or "")
                 self._subscribers.setdefault(topic, []).append((i, h.method, h.priority))
             for h in spec.of_kind("service"):
-                self._servers[node.resolve(h.name or "")] = (i, h.method, h.priority)
+                name = node.resolve(h.name or "")
+                if name in self._servers:
+                    other = self.names[self._servers[name][0]]
+                    raise ScenarioError(f"{self.scenario.path}: nodes: service {name} is served "
+                                        f"by both {other} and {self.names[i]}")
+                self._servers[name] = (i, h.method, h.priority)
             for h in spec.of_kind("every"):
                 self._periods[(i, h.method)] = node.period_ms(h)
 
@@ -307,6 +316,16 @@ class System:
     def states_of(self, world: World) -> dict[str, Any]:
         """Fresh decoded state objects of every node, by name."""
         return {name: restore(data) for name, data in zip(self.names, world.states, strict=True)}
+
+
+def _latency(scenario: Scenario) -> tuple[int, int] | None:
+    raw = scenario.check.get("latency")
+    if raw is None:
+        return None
+    if (not isinstance(raw, list | tuple) or len(raw) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) for v in raw)):
+        raise ScenarioError(f"{scenario.path}: check.latency: expected [min, max] in ms, got {raw!r}")
+    return None if tuple(raw) == (0, 0) else (raw[0], raw[1])
 
 
 def _fingerprint(node: Node) -> dict[str, bytes]:

@@ -65,8 +65,8 @@ class Event:
         self.priority = priority
         self.reply_to = reply_to
         self.rank = rank
-        self.key = key if key is not None else snapshot(
-            (kind, target, method, sender, reply_to, args))
+        self.key = key if key is not None else event_key(kind, target, method, sender,
+                                                         reply_to, args)
 
     @property
     def channel(self) -> tuple[int, int, bool]:
@@ -127,6 +127,23 @@ class World:
 
     def __repr__(self) -> str:
         return f"World(now={self.now}, events={len(self.events)}, digest={self.digest.hex()[:12]})"
+
+
+_HEADERS: dict[tuple[str, int, str, int, str], bytes] = {}
+_NO_ARGS = snapshot(())
+
+
+def event_key(kind: str, target: int, method: str, sender: int, reply_to: str,
+              args: tuple[Any, ...]) -> bytes:
+    """Canonical untimed encoding of an event: a cached header, then the encoded args.
+
+    msgpack values are self-delimiting, so the concatenation is unambiguous.
+    """
+    head = (kind, target, method, sender, reply_to)
+    header = _HEADERS.get(head)
+    if header is None:
+        header = _HEADERS[head] = snapshot(head)
+    return header + (snapshot(args) if args else _NO_ARGS)
 
 
 def world_digest(states: tuple[bytes, ...], events: tuple[Event, ...],

@@ -1,0 +1,9 @@
+"""`python -m checker SCENARIO [options]` (or `check ...` / `replay TRACE`)."""
+
+from __future__ import annotations
+
+import sys
+
+from checker.commands import main
+
+sys.exit(main())

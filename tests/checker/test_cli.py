@@ -1,0 +1,104 @@
+"""The check/replay commands: exit codes, JSON output, bad input, the demo scenario."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from checker import commands
+from tests.checker.helpers import node, scenario
+
+pytestmark = pytest.mark.timeout(60)
+
+ROOT = Path(__file__).resolve().parents[2]
+DOOR = [node("opener", "Opener"), node("locker", "Locker"), node("door", "Door")]
+
+
+def test_check_exit_codes_and_json(tmp_path, capsys):
+    ok = scenario(tmp_path, [node("ping", "Ping"), node("pong", "Pong")], name="ok")
+    assert commands.main([str(ok), "--json"]) == 0
+    out = json.loads(capsys.readouterr().out)
+    assert (out["verdict"], out["states"], out["transitions"], out["rmc_transitions"]) == (
+        "holds", 7, 6, 7)
+    assert out["exit_code"] == 0
+    assert out["peak_memory_mb"] > 0
+
+    bad = scenario(tmp_path, DOOR, name="race")
+    trace = tmp_path / "race.json"
+    assert commands.main(["check", str(bad), "--trace-out", str(trace), "--quiet"]) == 1
+    text = capsys.readouterr().out
+    assert "VIOLATED no_failure" in text
+    assert f"twinfleet replay {trace}" in text
+    assert commands.main(["replay", str(trace)]) == 1
+    assert "replay confirmed" in capsys.readouterr().out
+
+    inf = scenario(tmp_path, [node("c", "Counter", modulo=0)], name="inf")
+    assert commands.main([str(inf), "--max-states", "20", "--quiet"]) == 2
+    assert "exit 2: no answer (max-states 20" in capsys.readouterr().out
+
+
+def test_bad_scenario_exit_2_without_traceback(tmp_path, capsys):
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("nodes:\n  - {name: x, class: 'no.such:Thing'}\n")
+    assert commands.main([str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert "nodes[0].class" in err
+    assert "Traceback" not in err
+    missing = tmp_path / "missing.yaml"
+    assert commands.main([str(missing)]) == 2
+    assert "cannot read scenario file" in capsys.readouterr().err
+    wrong = scenario(tmp_path, [node("c", "Counter")], name="wrong", properties=[
+        {"name": "p", "kind": "invariant", "expr": "c.nonexistent > 0"}])
+    assert commands.main([str(wrong)]) == 2
+    assert "AttributeError" in capsys.readouterr().err
+    not_trace = tmp_path / "x.json"
+    not_trace.write_text("{}")
+    assert commands.main(["replay", str(not_trace)]) == 2
+
+
+def test_every_flag_has_help():
+    parser = argparse.ArgumentParser()
+    commands.register(parser.add_subparsers())
+    subs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for name in ("check", "replay"):
+        for action in subs.choices[name]._actions:
+            assert action.help, f"{name} {action.option_strings or action.dest} has no help"
+
+
+def test_python_m_checker_subprocess_and_cross_process_replay(tmp_path):
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "PYTHONHASHSEED": "12345"}
+    path = scenario(tmp_path, [node("ping", "Ping"), node("pong", "Pong")], name="pp")
+    proc = subprocess.run([sys.executable, "-m", "checker", str(path), "--json"],
+                          capture_output=True, text=True, cwd=ROOT, timeout=60, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert json.loads(proc.stdout)["states"] == 7
+    # A trace written by this process replays in another one with another hash seed.
+    race = scenario(tmp_path, DOOR, name="race")
+    trace = tmp_path / "race.trace.json"
+    assert commands.main([str(race), "--quiet", "--trace-out", str(trace)]) == 1
+    proc = subprocess.run([sys.executable, "-m", "checker", "replay", str(trace)],
+                          capture_output=True, text=True, cwd=ROOT, timeout=60, env=env)
+    assert proc.returncode == 1, proc.stderr
+    assert proc.stdout.startswith("replay confirmed: no_failure violated after 3 steps")
+
+
+def test_demo_scenario_checks_with_a_limit(tmp_path, capsys):
+    demo = ROOT / "launch" / "demo.yaml"
+    code = commands.main([str(demo), "--max-states", "3000", "--json",
+                          "--trace-out", str(tmp_path / "demo.json")])
+    out = json.loads(capsys.readouterr().out)
+    # The talker counts for ever: no finite answer, but no violation in 3000 states.
+    assert code == 2
+    assert out["verdict"] == "unknown"
+    assert out["states"] == 3000
+    assert out["violation"] is None
+    code = commands.main([str(demo), "--max-depth", "40", "--json", "--semantics", "rebeca"])
+    out = json.loads(capsys.readouterr().out)
+    assert code == 2
+    assert out["semantics"] == "rebeca"
+    assert "max-depth 40" in out["reason"]
