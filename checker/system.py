@@ -331,8 +331,8 @@ def _latency(scenario: Scenario) -> tuple[int, int] | None:
 def _fingerprint(node: Node) -> dict[str, bytes]:
     out = {}
     for attr, value in vars(node).items():
-        if attr == "state":
-            continue
+        if attr == "state" or getattr(value, "pure_memo", False):
+            continue  # a declared memo of a pure function may fill up: that is not state
         try:
             out[attr] = snapshot(value)
         except (SnapshotError, TypeError, ValueError):

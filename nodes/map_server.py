@@ -24,7 +24,7 @@ from nodes.msgs import (
     PathRequest,
     RobotPose,
 )
-from nodes.planning import OtherRobot, plan_waypoints, planning_grid
+from nodes.planning import OtherRobot, PathPlanner
 from nodes.profile import profile_named
 from nodes.scan import Scanner, build_tables
 from runtime import QOS_LATCHED, Context, Node, String, handler, on_start, service, subscribe
@@ -88,6 +88,7 @@ class MapServer(Node):
         tables = build_tables(self.profile, p.fov_deg, p.max_range_m, p.angle_inc_deg, self.map.resolution)
         self.scanner = Scanner(self.static, tables)
         self.index = {name: i for i, name in enumerate(p.robots)}
+        self.planner = PathPlanner(self.inflated, self.static, self.dims, self.profile)
 
     def initial_state(self) -> MapServerState:
         n = len(self.params.robots)
@@ -117,9 +118,7 @@ class MapServer(Node):
         st = self.state
         others = [OtherRobot(st.cells[j], st.dirs[j], st.velocities[j])
                   for j in range(len(st.cells)) if j != i and st.cells[j] != UNKNOWN]
-        grid = planning_grid(self.inflated, self.static, others, tuple(req.start), self.dims, self.profile)
-        cells = plan_waypoints(grid, tuple(req.start), tuple(req.goal), self.profile)
-        return Path(tuple(cells))
+        return Path(self.planner.plan(others, tuple(req.start), tuple(req.goal)))
 
     @subscribe("/poses", priority=5)
     def on_pose(self, ctx: Context, msg: RobotPose) -> None:

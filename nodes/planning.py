@@ -13,6 +13,7 @@ inflation by one cell already keeps paths off obstacle corners).
 from __future__ import annotations
 
 import heapq
+from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -295,3 +296,33 @@ def plan_waypoints(
         return []
     wps = remove_zigzags(path)
     return consolidate_waypoints(start, wps) if consolidate else wps
+
+
+class PathPlanner:
+    """Memoised planning on one static map: `plan` is a pure function of its arguments.
+
+    The checker asks for the same plan (same start, goal and robot positions)
+    again and again on different interleavings; the memo answers those at once.
+    """
+
+    pure_memo = True  # the checker's --debug-state ignores the memo filling up
+
+    def __init__(self, static_inflated: np.ndarray, omap: np.ndarray, dims: Dims,
+                 profile: Profile, maxsize: int = 65536) -> None:
+        self.static_inflated, self.omap, self.dims, self.profile = static_inflated, omap, dims, profile
+        self._memo: OrderedDict[tuple, tuple[Cell, ...]] = OrderedDict()
+        self._maxsize = maxsize
+
+    def plan(self, others: Sequence[OtherRobot], start: Cell, goal: Cell) -> tuple[Cell, ...]:
+        """Waypoints from `start` (excluded) to `goal` around `others`; () when none."""
+        key = (tuple(others), start, goal)
+        memo = self._memo
+        if key in memo:
+            memo.move_to_end(key)
+            return memo[key]
+        grid = planning_grid(self.static_inflated, self.omap, others, start, self.dims, self.profile)
+        result = tuple(plan_waypoints(grid, start, goal, self.profile))
+        memo[key] = result
+        if len(memo) > self._maxsize:
+            memo.popitem(last=False)
+        return result

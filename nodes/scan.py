@@ -173,6 +173,8 @@ class Scanner:
         maxsize: number of memo entries kept (least recently used evicted).
     """
 
+    pure_memo = True  # its memo changes, its answers do not (the checker's --debug-state skips it)
+
     def __init__(self, static_occ: np.ndarray, tables: ScanTables, maxsize: int = 65536) -> None:
         self._occ = np.array(static_occ, dtype=bool)
         self._occ.setflags(write=False)

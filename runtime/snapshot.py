@@ -4,20 +4,26 @@ The checker stores every node's state as bytes, hashes them and restores them
 before each handler; the same bytes must come out for equal states, and the
 restored value must have the same Python types (tuple stays tuple, a dataclass
 comes back as itself). msgpack arrays are lists; tuples, dicts, sets, numpy
-arrays and dataclasses travel as msgpack extension types.
+arrays and dataclasses travel as msgpack extension types. A dataclass whose
+fields are all *declared* as plain values and tuples takes a fast path: its
+arrays travel natively and come back as tuples (a value that breaks its own
+declaration, a list in a tuple field, comes back as a tuple).
 """
 
 from __future__ import annotations
 
 import dataclasses
 import importlib
+import types
+import typing
 from functools import cache
 from typing import Any
 
 import msgpack
 import numpy as np
 
-_TUPLE, _DICT, _SET, _ARRAY, _DATACLASS = 1, 2, 3, 4, 5
+_TUPLE, _DICT, _SET, _ARRAY, _DATACLASS, _FLAT_DATACLASS = 1, 2, 3, 4, 5, 6
+_PLAIN = (int, float, bool, str, bytes, type(None))
 
 
 class SnapshotError(TypeError):
@@ -25,26 +31,79 @@ class SnapshotError(TypeError):
 
 
 def _default(obj: Any) -> msgpack.ExtType:
+    if isinstance(obj, _SortedItems):
+        return msgpack.ExtType(_DICT, _pack([list(kv) for kv in obj]))
     if isinstance(obj, tuple):
         return msgpack.ExtType(_TUPLE, _pack(list(obj)))
-    if isinstance(obj, dict):
-        items = sorted(obj.items(), key=lambda kv: _pack(kv[0]))
-        return msgpack.ExtType(_DICT, _pack([list(kv) for kv in items]))
     if isinstance(obj, set | frozenset):
         return msgpack.ExtType(_SET, _pack(sorted(obj, key=_pack)))
     if isinstance(obj, np.ndarray):
         return msgpack.ExtType(_ARRAY, _pack([obj.dtype.str, list(obj.shape), obj.tobytes()]))
     if dataclasses.is_dataclass(obj) and not isinstance(obj, type):
         cls = type(obj)
-        values = tuple(getattr(obj, f.name) for f in dataclasses.fields(obj))
-        return msgpack.ExtType(_DATACLASS, _pack([f"{cls.__module__}:{cls.__qualname__}", list(values)]))
+        values = [getattr(obj, name) for name in _field_names(cls)]
+        if _tuples_only(cls):
+            # Fast path: every field is declared as plain values and tuples, so arrays
+            # can travel natively and come back as tuples (no extension per tuple).
+            return msgpack.ExtType(_FLAT_DATACLASS, _pack_loose([_class_path(cls), values]))
+        return msgpack.ExtType(_DATACLASS, _pack([_class_path(cls), [_canonical(v) for v in values]]))
     if isinstance(obj, np.generic):
         return obj.item()
     raise SnapshotError(f"cannot snapshot a value of type {type(obj).__name__}: {obj!r:.80}")
 
 
+class _SortedItems(tuple):
+    """A dict's items in canonical order (msgpack would keep insertion order)."""
+
+
+def _canonical(value: Any) -> Any:
+    """Replace dicts (at any depth of lists and tuples) by their sorted items."""
+    kind = type(value)
+    if kind is dict:
+        items = ((_canonical(k), _canonical(v)) for k, v in value.items())
+        return _SortedItems(sorted(items, key=lambda kv: _pack(kv[0])))
+    if kind is list:
+        return [_canonical(v) for v in value]
+    if kind is tuple:
+        return tuple(_canonical(v) for v in value)
+    return value
+
+
 def _pack(obj: Any) -> bytes:
     return msgpack.packb(obj, default=_default, use_bin_type=True, strict_types=True)
+
+
+def _pack_loose(obj: Any) -> bytes:
+    return msgpack.packb(obj, default=_default, use_bin_type=True)
+
+
+@cache
+def _class_path(cls: type) -> str:
+    return f"{cls.__module__}:{cls.__qualname__}"
+
+
+@cache
+def _field_names(cls: type) -> tuple[str, ...]:
+    return tuple(f.name for f in dataclasses.fields(cls))
+
+
+@cache
+def _tuples_only(cls: type) -> bool:
+    """True when every field is declared as plain values, tuples of them, or Optional."""
+    try:
+        hints = typing.get_type_hints(cls)
+    except Exception:  # unresolvable annotations: take the general path
+        return False
+    return all(_plain_hint(hints.get(name)) for name in _field_names(cls))
+
+
+def _plain_hint(hint: Any) -> bool:
+    if hint in _PLAIN:
+        return True
+    origin = typing.get_origin(hint)
+    if origin is tuple or origin in (typing.Union, types.UnionType):
+        return all(a is Ellipsis or _plain_hint(a) for a in typing.get_args(hint))
+    return False
 
 
 @cache
@@ -57,7 +116,7 @@ def _class_named(path: str) -> type:
 
 
 def _ext_hook(code: int, data: bytes) -> Any:
-    value = _unpack(data)
+    value = _unpack_tuples(data) if code == _FLAT_DATACLASS else _unpack(data)
     if code == _TUPLE:
         return tuple(value)
     if code == _DICT:
@@ -67,7 +126,7 @@ def _ext_hook(code: int, data: bytes) -> Any:
     if code == _ARRAY:
         dtype, shape, raw = value
         return np.frombuffer(raw, dtype=np.dtype(dtype)).reshape(tuple(shape)).copy()
-    if code == _DATACLASS:
+    if code in (_DATACLASS, _FLAT_DATACLASS):
         path, values = value
         cls = _class_named(path)
         obj = cls.__new__(cls)
@@ -81,9 +140,13 @@ def _unpack(data: bytes) -> Any:
     return msgpack.unpackb(data, ext_hook=_ext_hook, use_list=True, raw=False, strict_map_key=False)
 
 
+def _unpack_tuples(data: bytes) -> Any:
+    return msgpack.unpackb(data, ext_hook=_ext_hook, use_list=False, raw=False, strict_map_key=False)
+
+
 def snapshot(value: Any) -> bytes:
     """Encode `value` canonically (equal values give equal bytes)."""
-    return _pack(value)
+    return _pack(_canonical(value))
 
 
 def restore(data: bytes) -> Any:
