@@ -1,0 +1,297 @@
+"""`twinfleet record` and `twinfleet play`: fleet topics to an MCAP file and back onto Zenoh.
+
+File layout (MCAP, written with the `mcap` package, zstd chunks, full index):
+
+* one **schema** per message type: name = the envelope's type name (e.g.
+  ``twinfleet_msgs/RobotPose``), encoding ``jsonschema``, data = a JSON Schema
+  of the envelope ``{type, stamp_ms, seq, sender, data}`` whose ``data`` lists
+  the dataclass fields of the registered message class (inferred from the
+  first sample, and said so, when the class is not imported);
+* one **channel** per topic key (and type): topic = the fully qualified name
+  (``/r1/scan``), message encoding ``msgpack``, metadata ``key`` (the Zenoh
+  key), ``fleet`` and ``durability`` (``transient_local`` for ``/map``);
+* **messages**: the raw envelope bytes as received; log time = receive time
+  (ns since the Unix epoch, made strictly increasing so that log-time order
+  is arrival order), publish time = log time, sequence = arrival index.
+* one metadata record ``twinfleet`` (fleet, scenario, time scale, seed).
+
+`record_scenario` makes the recorder's session the fleet's router and then
+launches the fleet with `run_fleet(connect=...)`, so the recorder is subscribed
+before the first node starts. `record_live` joins a running fleet.
+`play` re-publishes the messages in log-time order at the recorded pace
+divided by `rate`, latched topics through advanced publishers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import dataclasses
+import json
+import sys
+import time
+import types
+import typing
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, BinaryIO, TextIO, final
+
+import msgpack
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from runtime.messages import is_message, registered_types
+from runtime.names import KEY_PREFIX
+from runtime.tap import LATCHED_TOPICS, FleetTap
+from runtime.zenoh_transport import zenoh_config
+
+DRAIN_S = 0.3
+LINGER_S = 0.5
+ENVELOPE_FIELDS = {"stamp_ms": {"type": "integer", "description": "ms since the fleet's start"},
+                   "seq": {"type": "integer", "description": "per-publisher sequence number"},
+                   "sender": {"type": "string", "description": "publishing node"}}
+
+
+def message_schema(type_name: str, sample: Any = None) -> dict[str, Any]:
+    """JSON Schema of an envelope carrying `type_name` (the registered class, else `sample`)."""
+    cls = registered_types().get(type_name)
+    data = dataclass_schema(cls) if cls is not None else {
+        **_value_schema(sample), "description": "inferred from the first recorded sample"}
+    return {"title": type_name, "type": "object",
+            "description": "twinfleet envelope, msgpack-encoded (runtime/messages.py)",
+            "properties": {"type": {"const": type_name}, **ENVELOPE_FIELDS, "data": data},
+            "required": ["type", "data"]}
+
+
+def dataclass_schema(cls: type) -> dict[str, Any]:
+    """JSON Schema of a message dataclass's fields, from its type hints."""
+    hints = typing.get_type_hints(cls)
+    props, required = {}, []
+    for f in dataclasses.fields(cls):
+        props[f.name] = _hint_schema(hints.get(f.name, Any))
+        if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
+            required.append(f.name)
+    return {"type": "object", "properties": props, "required": required}
+
+
+def _hint_schema(hint: Any) -> dict[str, Any]:
+    simple = {bool: "boolean", int: "integer", float: "number", str: "string",
+              type(None): "null"}
+    if hint in simple:
+        return {"type": simple[hint]}
+    if hint is bytes:
+        return {"type": "string", "contentMediaType": "application/octet-stream",
+                "description": "msgpack bin"}
+    origin, args = typing.get_origin(hint), typing.get_args(hint)
+    if origin in (typing.Union, types.UnionType):
+        return {"anyOf": [_hint_schema(a) for a in args]}
+    if origin in (tuple, list):
+        if origin is list or (len(args) == 2 and args[1] is Ellipsis):
+            return {"type": "array", "items": _hint_schema(args[0]) if args else {}}
+        return {"type": "array", "prefixItems": [_hint_schema(a) for a in args],
+                "minItems": len(args), "maxItems": len(args)}
+    if isinstance(hint, type) and is_message(hint):
+        nested = dataclass_schema(hint)
+        nested["properties"]["_type"] = {"const": hint.__message_type__}  # type: ignore[attr-defined]
+        return nested
+    return {}
+
+
+def _value_schema(value: Any) -> dict[str, Any]:
+    if isinstance(value, bool):
+        return {"type": "boolean"}
+    if isinstance(value, int | float | str) or value is None:
+        return _hint_schema(type(value))
+    if isinstance(value, bytes):
+        return _hint_schema(bytes)
+    if isinstance(value, list | tuple):
+        return {"type": "array", "items": _value_schema(value[0]) if value else {}}
+    if isinstance(value, Mapping):
+        return {"type": "object", "properties": {str(k): _value_schema(v) for k, v in value.items()}}
+    return {}
+
+
+@final
+class McapRecorder:
+    """Writes raw envelopes to an MCAP file: a schema per type, a channel per topic key.
+
+    Args:
+        stream: a binary file opened for writing (closed by `close`).
+        latched: fully qualified names recorded with durability ``transient_local``.
+    """
+
+    def __init__(self, stream: BinaryIO, *, latched: tuple[str, ...] = LATCHED_TOPICS) -> None:
+        self._stream = stream
+        self._writer = Writer(stream)
+        self._writer.start(profile="", library="twinfleet")
+        self.latched = latched
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[tuple[str, str], int] = {}
+        self._last_ns = 0
+        self.messages = 0
+        self.undecodable = 0
+
+    def metadata(self, values: Mapping[str, Any]) -> None:
+        """Add the ``twinfleet`` metadata record (values become strings)."""
+        self._writer.add_metadata("twinfleet", {k: str(v) for k, v in values.items()})
+
+    def write(self, key: str, payload: bytes) -> None:
+        """Record one sample of `key` received now."""
+        parts = key.split("/", 2)
+        if len(parts) < 3 or parts[0] != KEY_PREFIX:
+            return
+        try:
+            env = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+            type_name = env["type"] if isinstance(env, dict) and isinstance(env.get("type"), str) else None
+        except Exception:  # msgpack raises several unrelated types
+            env, type_name = None, None
+        if type_name is None:
+            self.undecodable += 1
+            type_name = "twinfleet/Undecodable"
+        channel = self._channel(key, parts[1], "/" + parts[2], type_name, env)
+        now = max(time.time_ns(), self._last_ns + 1)
+        self._last_ns = now
+        self._writer.add_message(channel, log_time=now, data=payload, publish_time=now,
+                                 sequence=self.messages)
+        self.messages += 1
+
+    def _channel(self, key: str, fleet: str, topic: str, type_name: str, env: Any) -> int:
+        channel = self._channels.get((key, type_name))
+        if channel is not None:
+            return channel
+        schema = self._schemas.get(type_name)
+        if schema is None:
+            sample = env.get("data") if isinstance(env, dict) else None
+            text = json.dumps(message_schema(type_name, sample), indent=1).encode()
+            schema = self._writer.register_schema(type_name, "jsonschema", text)
+            self._schemas[type_name] = schema
+        durability = "transient_local" if topic in self.latched else "volatile"
+        channel = self._writer.register_channel(topic, "msgpack", schema, {
+            "key": key, "fleet": fleet, "durability": durability})
+        self._channels[(key, type_name)] = channel
+        return channel
+
+    def close(self) -> None:
+        """Write the summary and close the file."""
+        self._writer.finish()
+        self._stream.close()
+
+    @property
+    def topics(self) -> int:
+        """Number of channels written so far."""
+        return len(self._channels)
+
+
+async def record_scenario(scenario: Any, path: str | Path, *, time_scale: float | None = None,
+                          duration_s: float | None = None, seed: int | None = None,
+                          listen: str | None = None, out: TextIO = sys.stdout) -> tuple[Any, McapRecorder]:
+    """Launch `scenario` with the recorder as its router; record until the run ends.
+
+    Returns the launcher's `FleetResult` and the (closed) recorder with its counts.
+    """
+    from runtime.launcher import free_port, run_fleet
+
+    endpoint = listen or f"tcp/127.0.0.1:{free_port()}"
+    recorder = McapRecorder(open(path, "wb"))  # noqa: SIM115 - closed by recorder.close()
+    recorder.metadata({"fleet": scenario.fleet, "scenario": scenario.path,
+                       "seed": scenario.seed if seed is None else seed,
+                       "time_scale": time_scale or scenario.live.get("time_scale", 1.0)})
+    tap = FleetTap(lambda: zenoh_config(listen=[endpoint], mode="router"), scenario.fleet,
+                   recorder.write, retry=False)
+    try:
+        await tap.open()
+        result = await run_fleet(scenario, time_scale=time_scale, timeout_s=duration_s, seed=seed,
+                                 connect=endpoint, out=out)
+        await asyncio.sleep(DRAIN_S)  # the last samples may still be on their way
+    finally:
+        await tap.close()
+        recorder.close()
+    return result, recorder
+
+
+async def record_live(connect: str, fleet: str, path: str | Path, *,
+                      duration_s: float | None = None, stop: asyncio.Event | None = None,
+                      handle_signals: bool = False) -> McapRecorder:
+    """Record a running fleet reached at `connect` for `duration_s` or until `stop` is set
+    (with `handle_signals`, also until SIGINT/SIGTERM)."""
+    import signal
+
+    stop = stop or asyncio.Event()
+    if handle_signals:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            asyncio.get_running_loop().add_signal_handler(sig, stop.set)
+    recorder = McapRecorder(open(path, "wb"))  # noqa: SIM115 - closed by recorder.close()
+    recorder.metadata({"fleet": fleet, "connect": connect})
+    tap = FleetTap(lambda: zenoh_config(connect=[connect], mode="client"), fleet, recorder.write,
+                   retry=False)
+    try:
+        await tap.open()
+        waiter = asyncio.ensure_future(stop.wait())
+        await asyncio.wait([waiter], timeout=duration_s)
+        waiter.cancel()
+    finally:
+        await tap.close()
+        recorder.close()
+    return recorder
+
+
+def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
+         fleet: str | None = None, out: TextIO = sys.stdout, wait_s: float = 2.0,
+         linger_s: float = LINGER_S) -> int:
+    """Publish every recorded message in log-time order, at the recorded pace divided by `rate`.
+
+    Args:
+        make_config: builds the Zenoh config (client of a router, or a router itself).
+        path: the MCAP file.
+        rate: speed factor (2 = twice as fast); must be > 0.
+        fleet: publish into this fleet instead of the recorded one.
+        out: where progress lines go.
+        wait_s: wait up to this long for a subscriber to match before publishing.
+        linger_s: keep the session open this long after the last message.
+
+    Returns 0, or 2 when the file holds no twinfleet messages.
+    """
+    import zenoh
+    from zenoh import ext
+
+    if not rate > 0:
+        raise ValueError(f"rate must be > 0, got {rate}")
+    with open(path, "rb") as stream, zenoh.open(make_config()) as session:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        pubs: dict[int, Any] = {}
+
+        def publisher(channel: Any) -> Any:
+            key = f"{KEY_PREFIX}/{fleet}{channel.topic}" if fleet else channel.metadata.get("key")
+            if not key:
+                raise ValueError(f"{path}: channel {channel.topic} has no 'key' metadata; "
+                                 "give the fleet to publish into")
+            if channel.metadata.get("durability") == "transient_local":
+                pub = ext.declare_advanced_publisher(session, key, cache=ext.CacheConfig(1),
+                                                     publisher_detection=True)
+            else:
+                pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+            pubs[channel.id] = pub
+            return pub
+
+        for channel in (summary.channels.values() if summary else ()):
+            publisher(channel)
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline and not any(
+                getattr(p, "matching_status", None) and p.matching_status.matching for p in pubs.values()):
+            time.sleep(0.02)
+        count, started, first = 0, time.monotonic(), None
+        try:
+            for _schema, channel, message in reader.iter_messages(log_time_order=True):
+                first = message.log_time if first is None else first
+                delay = started + (message.log_time - first) / 1e9 / rate - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                (pubs.get(channel.id) or publisher(channel)).put(message.data)
+                count += 1
+            time.sleep(linger_s)
+        finally:
+            for pub in pubs.values():
+                pub.undeclare()
+    print(f"played {count} messages on {len(pubs)} topics in {time.monotonic() - started:.1f} s",
+          file=out, flush=True)
+    return 0 if count else 2

@@ -1,0 +1,119 @@
+"""Issue 5, acceptance 3: record a C1a run to MCAP, read it back, play it to `topic echo`.
+
+One recording (C1a at time scale 10, the recorder as the fleet's router) is
+shared by the module. The file must open with the `mcap` reader, hold one
+channel per fleet topic with the schema of its message type, and lose nothing
+(every publisher's sequence numbers complete from 1). `twinfleet play` must
+then re-publish it so that `twinfleet topic echo /poses` prints the same
+messages in the same order and a raw subscriber sees every recorded payload,
+byte for byte, in recorded order.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from collections import defaultdict
+from pathlib import Path
+
+import msgpack
+import pytest
+import yaml
+import zenoh
+from mcap.reader import make_reader
+from viewer_support import ROOT, child_env, free_port, poll
+
+import nodes.msgs  # noqa: F401 - registers the fleet's message classes
+from runtime.messages import registered_types
+from runtime.zenoh_transport import zenoh_config
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
+
+ROBOTS = ["r1", "r2", "r3", "r4", "r5"]
+TOPICS = {"/map", "/poses", "/fleet_status", "/twinfleet/shutdown",
+          *(f"/{r}/scan" for r in ROBOTS), *(f"/{r}/status" for r in ROBOTS)}
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("mcap") / "c1a.mcap"
+    proc = subprocess.run([sys.executable, "-m", "runtime.cli", "record",
+                           str(ROOT / "launch" / "c1a.yaml"), "--time-scale", "10", "-o", str(out)],
+                          capture_output=True, text=True, timeout=70, env=child_env(), cwd=ROOT,
+                          check=False)
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    assert f"wrote {out}" in proc.stdout
+    return out
+
+
+def _messages(path: Path) -> list[tuple[str, str, bytes]]:
+    """(topic, key, payload) of every message in log-time order."""
+    with path.open("rb") as f:
+        return [(ch.topic, ch.metadata["key"], msg.data)
+                for _, ch, msg in make_reader(f).iter_messages(log_time_order=True)]
+
+
+def test_recording_holds_every_topic_with_its_schema(recording):
+    with recording.open("rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        rows = list(reader.iter_messages(log_time_order=True))
+    assert summary is not None
+    channels = summary.channels.values()
+    assert {ch.topic for ch in channels} == TOPICS
+    assert summary.statistics.message_count == len(rows)
+    types = registered_types()
+    seqs: dict[tuple[str, str], list[int]] = defaultdict(list)
+    for schema, channel, message in rows:
+        env = msgpack.unpackb(message.data, raw=False)
+        assert channel.message_encoding == "msgpack"
+        assert schema.name == env["type"] and schema.encoding == "jsonschema"
+        seqs[(channel.topic, env["sender"])].append(env["seq"])
+    for schema in summary.schemas.values():
+        doc = json.loads(schema.data)
+        fields = set(types[schema.name].__dataclass_fields__)
+        assert set(doc["properties"]["data"]["properties"]) == fields, schema.name
+    for (topic, sender), numbers in seqs.items():
+        assert numbers == list(range(1, len(numbers) + 1)), f"{topic} from {sender} lost or reordered"
+    durability = {ch.topic: ch.metadata["durability"] for ch in channels}
+    assert durability.pop("/map") == "transient_local"
+    assert set(durability.values()) == {"volatile"}
+    assert len([1 for topic, _, _ in _messages(recording) if topic == "/poses"]) >= 5 * 40
+
+
+def _wait_matched(session: zenoh.Session, key: str) -> None:
+    probe = session.declare_publisher(key)
+    try:
+        poll(lambda: probe.matching_status.matching, 15, f"a subscriber on {key}")
+    finally:
+        probe.undeclare()
+
+
+def test_play_republishes_what_topic_echo_and_a_subscriber_saw(recording, cli):
+    recorded = _messages(recording)
+    poses = [msgpack.unpackb(p, raw=False) for topic, _, p in recorded if topic == "/poses"]
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    seen: list[tuple[str, bytes]] = []
+    with zenoh.open(zenoh_config(listen=[endpoint], mode="router")) as router:
+        echo = cli("topic", "echo", "/poses", "--connect", endpoint, "--fleet", "c1a",
+                   "--count", str(len(poses)), "--duration", "40", log="echo.log")
+        _wait_matched(router, "twinfleet/c1a/poses")
+        sub = router.declare_subscriber(
+            "twinfleet/c1a/**", lambda s: seen.append((str(s.key_expr), s.payload.to_bytes())))
+        try:
+            played = subprocess.run([sys.executable, "-m", "runtime.cli", "play", str(recording),
+                                     "--connect", endpoint, "--rate", "10"],
+                                    capture_output=True, text=True, timeout=40, env=child_env(),
+                                    cwd=ROOT, check=False)
+            assert played.returncode == 0, played.stdout + played.stderr
+            assert f"played {len(recorded)} messages on {len(TOPICS)} topics" in played.stdout
+            poll(lambda: len(seen) >= len(recorded), 10, "every played message")
+            assert echo.wait(timeout=20) == 0
+        finally:
+            sub.undeclare()
+    assert seen == [(key, payload) for _, key, payload in recorded]
+    echoed = [doc for doc in yaml.safe_load_all(echo.log.read_text()) if doc]
+    assert len(echoed) == len(poses)
+    for got, want in zip(echoed, poses, strict=True):
+        assert got == want
