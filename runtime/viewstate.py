@@ -148,6 +148,8 @@ class LiveState:
         if field is not None and isinstance(data.get("robot"), str):
             self._new_run_check(data["robot"], env.get("stamp_ms"))
             self._robot(data["robot"], field, data)
+        elif kind == "nav_msgs/Path" and topic.count("/") == 2 and topic.endswith("/path"):
+            self._robot(topic.split("/")[1], "path", data)  # /<robot>/path: its latest plan
         elif kind == "nav_msgs/OccupancyGrid":
             ident = (env.get("sender"), env.get("seq"), env.get("stamp_ms"), data.get("data"))
             if ident != self.map_id:  # the latched copy from history repeats the live one
@@ -185,8 +187,8 @@ class LiveState:
     def _robot(self, name: str, field: str, data: dict[str, Any]) -> None:
         robot = self.robots.setdefault(name, {})
         trail = self.trails.setdefault(name, _Log(MAX_TRAIL))
-        if field == "scan":
-            robot["scan"] = data.get("cells", [])
+        if field in ("scan", "path"):
+            robot[field] = data.get("cells", [])
         else:
             robot[field] = data
         if field == "pose" and (not trail.items or trail.items[-1] != data.get("cell")):

@@ -90,8 +90,12 @@
       g.lineWidth = 2; g.strokeStyle = rgb(light(c));
       if (r.trail && r.trail.items.length > 1) { poly(r.trail.items.map(centre)); g.stroke(); }
       if (r.path && r.path.length && here) {
+        // A live plan still holds the waypoints already passed: draw from the robot on.
+        const at = r.path.findIndex((p) => p[0] === here[0] && p[1] === here[1]);
+        const ahead = r.path.slice(at + 1);
         g.setLineDash([4, 3]); g.strokeStyle = rgb(c, 0.8);
-        poly([here, ...r.path].map(centre)); g.stroke(); g.setLineDash([]);
+        if (ahead.length) { poly([here, ...ahead].map(centre)); g.stroke(); }
+        g.setLineDash([]);
       }
       if (r.start) {
         const [sx, sy] = centre(r.start);
@@ -218,7 +222,7 @@
     if (msg.order) view.order = msg.order;
     for (const [name, e] of Object.entries(msg.robots || {})) {
       const r = view.robots[name] || (view.robots[name] = { trail: emptyLog() });
-      for (const k of ["pose", "status", "scan"]) if (k in e) r[k] = e[k];
+      for (const k of ["pose", "status", "scan", "path"]) if (k in e) r[k] = e[k];
       if (e.trail) applyLog(r.trail, e.trail);
       if (!view.order.includes(name)) view.order = [...view.order, name];
     }

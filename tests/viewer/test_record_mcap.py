@@ -32,7 +32,8 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
 ROBOTS = ["r1", "r2", "r3", "r4", "r5"]
 TOPICS = {"/map", "/poses", "/fleet_status", "/twinfleet/shutdown",
-          *(f"/{r}/scan" for r in ROBOTS), *(f"/{r}/status" for r in ROBOTS)}
+          *(f"/{r}/scan" for r in ROBOTS), *(f"/{r}/status" for r in ROBOTS),
+          *(f"/{r}/path" for r in ROBOTS)}
 
 
 @pytest.fixture(scope="module")
