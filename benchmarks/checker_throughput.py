@@ -1,31 +1,59 @@
-"""Checker throughput on a synthetic model with trivial handlers.
+"""Checker throughput and memory per visited state, on C1a and on a synthetic ring.
 
-Prints one JSON line: states, transitions, seconds, transitions/s, states/s,
-peak RSS and bytes of RSS growth per visited state. The model: N `Spinner`
-nodes, each with a 10 or 20 ms timer that bumps a counter modulo M and sends a
-message to the next node on a ring, which adds it to a sum modulo M. Timers
-fire together every 20 ms, so rounds interleave up to N timers and N
-deliveries: many states, each handler a few attribute updates.
+By default runs `launch/c1a.yaml` and `launch/c1a_rebeca.yaml` (BFS, to the
+end) with three state stores, each in a fresh child process pinned to one core:
 
-    PYTHONPATH=. python benchmarks/checker_throughput.py [--nodes 4] [--modulo 3]
+- `baseline`: the checker as it was before the compact store (git commit
+  ef95c3a, extracted with `git archive`; skipped if git cannot provide it):
+  dict of 128-bit digests, a Python array per state for edges, no
+  transition cache;
+- `exact`: today's checker with `--exact-states` (dict of 128-bit digests);
+- `compact`: today's default (numpy table of 64-bit digests, int32 parents,
+  CSR edges, transition cache, interned node states).
+
+For each it prints transitions/s, store bytes per visited state (what the
+visited set, parent records, flags and edges hold), RSS growth per visited
+state (peak RSS minus RSS before the search: includes every cache, the node
+code's own memos and allocator slack, so it is a fixed cost plus the store),
+the marginal RSS per state over the second half of the search (sampled every
+50 ms; RSS is page-granular and the allocator keeps freed memory, so treat it
+as an estimate),
+and the estimated digest-collision probability (n²/2^65 for 64-bit digests,
+TLC-style, plus the content hashes that feed them).
+
+    PYTHONPATH=. python benchmarks/checker_throughput.py [--stores baseline,exact,compact]
+    PYTHONPATH=. python benchmarks/checker_throughput.py --scenarios launch/c1b.yaml
+    PYTHONPATH=. python benchmarks/checker_throughput.py --ring --nodes 7 --modulo 3
+
+`--json` prints one JSON line per run instead of the table. Targets (issue 4):
+>= 20,000 transitions/s on one core and <= 200 B per visited state.
 """
 
 from __future__ import annotations
 
 import argparse
+import gc
 import json
+import os
+import subprocess
 import sys
+import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 ROOT = Path(__file__).resolve().parents[1]
-sys.path[:0] = [str(ROOT), str(Path(__file__).resolve().parent)]
+HERE = Path(__file__).resolve().parent
+BASELINE_REV = "ef95c3a"
+SCENARIOS = ("launch/c1a.yaml", "launch/c1a_rebeca.yaml")
+STORES = ("baseline", "exact", "compact")
+if str(HERE) not in sys.path:
+    sys.path.insert(0, str(HERE))
+if str(ROOT) not in sys.path:
+    sys.path.insert(1, str(ROOT))
 
-from checker import Limits, PropertySet, Search, System  # noqa: E402
-from checker.search import peak_rss_mb  # noqa: E402
 from runtime import Context, Node, every, message, subscribe  # noqa: E402
-from runtime.scenario import parse_scenario  # noqa: E402
 
 
 @message("twinfleet_bench/Token")
@@ -70,41 +98,190 @@ class Spinner(Node):
         self.state.total = (self.state.total + msg.value) % self.params.modulo
 
 
-def build(nodes: int, modulo: int, semantics: str) -> System:
-    """A System for the ring of `nodes` spinners."""
+def ring_scenario(nodes: int, modulo: int, semantics: str) -> Any:
+    """The ring of `nodes` spinners: each ticks and passes a token on; rounds interleave."""
+    from runtime.scenario import parse_scenario
+
     doc = {"name": "bench", "semantics": semantics, "nodes": [
         {"name": f"s{i}", "namespace": f"/s{i}", "class": "checker_throughput:Spinner",
          "params": {"next": f"/s{(i + 1) % nodes}/in", "modulo": modulo,
                     "period_ms": 10 * (1 + i % 2)}}
         for i in range(nodes)],
         "properties": [{"name": "bounded", "kind": "invariant", "expr": f"s0.total < {modulo}"}]}
-    scenario = parse_scenario(doc, ROOT / "benchmarks" / "bench.yaml")
-    return System(scenario, monitors=PropertySet.from_scenario(scenario))
+    return parse_scenario(doc, ROOT / "benchmarks" / "bench.yaml")
+
+
+# ----------------------------------------------------------------- child
+
+
+def _rss_now_mb() -> float:
+    with open("/proc/self/statm") as f:
+        return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
+
+
+def _old_graph_bytes(graph: Any) -> int:
+    """What the baseline's StateGraph holds (dict of 16-byte digests, arrays per state)."""
+    n = len(graph.ids)
+    total = sys.getsizeof(graph.ids) + n * sys.getsizeof(b"\0" * 16)
+    total += sum(sys.getsizeof(v) for v in graph.ids.values() if v > 256)
+    total += sys.getsizeof(graph.parent) + sys.getsizeof(graph.terminal)
+    total += sum(sys.getsizeof(b) for b in graph.holds.values())
+    if graph.edges is not None:
+        total += sys.getsizeof(graph.edges) + sum(sys.getsizeof(a) for a in graph.edges)
+    return total
+
+
+def child(args: argparse.Namespace) -> None:
+    """Run one search in this process and print its JSON line."""
+    if args.checker_path:
+        sys.path.insert(0, args.checker_path)
+    if hasattr(os, "sched_setaffinity"):
+        os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[-1]})
+    from checker import PropertySet, Search, System
+    from checker.check import load
+    from checker.search import peak_rss_mb
+
+    if args.scenario == "ring":
+        scenario = ring_scenario(args.nodes, args.modulo, args.semantics)
+    else:
+        scenario = load(ROOT / args.scenario)
+    props = PropertySet.from_scenario(scenario)
+    kwargs: dict[str, Any] = {}
+    if args.store in ("exact", "compact", "compact-nocache"):
+        kwargs["exact_states"] = args.store == "exact"
+        kwargs["transition_cache"] = args.store != "compact-nocache"
+    system = System(scenario, monitors=props, **kwargs)
+    system.initial()
+    gc.collect()
+    rss0 = _rss_now_mb()
+    samples: list[tuple[int, float]] = []
+
+    def sample(stats: Any) -> None:
+        samples.append((stats.states, _rss_now_mb()))
+
+    search = Search(system, props, progress=sample, progress_interval=0.05)
+    start = time.perf_counter()
+    outcome = search.run("bfs")
+    wall = time.perf_counter() - start
+    s = outcome.statistics
+    store = getattr(search, "store", None)
+    n = s.states
+    if store is not None:
+        store_bytes, collision = store.nbytes(), s.collision_probability
+    else:
+        store_bytes, collision = _old_graph_bytes(search.graph), n * (n - 1) / 2.0**129
+    caches = system.cache_sizes() if hasattr(system, "cache_sizes") else {}
+    # Marginal RSS per state over the second half of the search, when the caches are warm.
+    half = next(((k, r) for k, r in samples if k >= n // 2), None)
+    end = _rss_now_mb()
+    marginal = None if half is None or n == half[0] else (end - half[1]) * 2**20 / (n - half[0])
+    print(json.dumps({
+        "benchmark": "checker_throughput", "scenario": args.scenario, "store": args.store,
+        "verdict": outcome.status, "states": n, "transitions": s.transitions,
+        "depth": s.depth, "seconds": round(wall, 3),
+        "transitions_per_s": round(s.transitions / wall), "states_per_s": round(n / wall),
+        "store_bytes_per_state": round(store_bytes / n, 1),
+        "rss_growth_bytes_per_state": round((peak_rss_mb() - rss0) * 2**20 / n),
+        "marginal_rss_bytes_per_state": None if marginal is None else round(marginal),
+        "peak_rss_mb": round(peak_rss_mb(), 1),
+        "collision_probability": collision,
+        "handler_runs": caches.get("handler_runs"), "peak_frontier": getattr(s, "peak_frontier", None),
+    }))
+
+
+# ---------------------------------------------------------------- parent
+
+
+def _baseline_checker(tmp: str, rev: str) -> str | None:
+    """Extract `checker/` at `rev` into `tmp`; None (with a note) if git cannot."""
+    try:
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", rev, "checker"],
+                                 capture_output=True, check=True, timeout=60).stdout
+        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True, timeout=60)
+    except (OSError, subprocess.SubprocessError) as exc:
+        print(f"baseline {rev} unavailable ({exc}); skipping it", file=sys.stderr)
+        return None
+    return tmp
+
+
+def _run_child(scenario: str, store: str, args: argparse.Namespace,
+               checker_path: str | None) -> dict[str, Any]:
+    cmd = [sys.executable, __file__, "--child", "--scenario", scenario, "--store", store,
+           "--nodes", str(args.nodes), "--modulo", str(args.modulo),
+           "--semantics", args.semantics]
+    if checker_path:
+        cmd += ["--checker-path", checker_path]
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env, timeout=3600)
+    if proc.returncode != 0:
+        raise RuntimeError(f"{scenario} / {store} failed:\n{proc.stderr}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _num(value: int | None) -> str:
+    return "-" if value is None else f"{value:,}"
+
+
+def _table(rows: list[dict[str, Any]]) -> None:
+    head = (f"{'scenario':<24}{'store':<16}{'states':>9}{'transitions':>13}{'s':>7}"
+            f"{'trans/s':>9}{'store B/st':>11}{'RSS B/st':>10}{'marg. B/st':>11}"
+            f"{'P(collision)':>14}")
+    print(head)
+    print("-" * len(head))
+    for r in rows:
+        print(f"{r['scenario']:<24}{r['store']:<16}{r['states']:>9,}{r['transitions']:>13,}"
+              f"{r['seconds']:>7.2f}{r['transitions_per_s']:>9,}"
+              f"{r['store_bytes_per_state']:>11.1f}{r['rss_growth_bytes_per_state']:>10,}"
+              f"{_num(r['marginal_rss_bytes_per_state']):>11}"
+              f"{r['collision_probability']:>14.1e}")
+    by_scenario: dict[str, set[tuple[int, int, str]]] = {}
+    for r in rows:
+        by_scenario.setdefault(r["scenario"], set()).add((r["states"], r["transitions"],
+                                                          r["verdict"]))
+    same = all(len(v) == 1 for v in by_scenario.values())
+    print(f"\nsame verdict, states and transitions in every store: {'yes' if same else 'NO'}")
+    for r in rows:
+        if r.get("handler_runs"):
+            print(f"{r['scenario']} / {r['store']}: {r['handler_runs']:,} handler runs "
+                  f"for {r['transitions']:,} transitions; peak frontier {r['peak_frontier']:,}")
 
 
 def main() -> None:
-    """Run the benchmark and print its JSON line."""
+    """Run the benchmark (or, with --child, one measurement)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--nodes", type=int, default=7, help="spinners on the ring")
-    ap.add_argument("--modulo", type=int, default=3, help="counter modulus")
-    ap.add_argument("--semantics", default="ros", choices=("ros", "rebeca"), help="message rules")
-    ap.add_argument("--search", default="bfs", choices=("bfs", "dfs"), help="search order")
-    ap.add_argument("--max-states", type=int, default=None, help="state limit")
+    ap.add_argument("--scenarios", default=",".join(SCENARIOS),
+                    help="comma-separated scenario files (relative to the repository)")
+    ap.add_argument("--stores", default=",".join(STORES),
+                    help="comma-separated: baseline, exact, compact, compact-nocache")
+    ap.add_argument("--baseline-rev", default=BASELINE_REV, help="git revision of the baseline")
+    ap.add_argument("--ring", action="store_true", help="run the synthetic ring instead")
+    ap.add_argument("--nodes", type=int, default=7, help="ring: spinners on the ring")
+    ap.add_argument("--modulo", type=int, default=3, help="ring: counter modulus")
+    ap.add_argument("--semantics", default="ros", choices=("ros", "rebeca"), help="ring: rules")
+    ap.add_argument("--json", action="store_true", help="print JSON lines, not a table")
+    ap.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--scenario", help=argparse.SUPPRESS)
+    ap.add_argument("--store", help=argparse.SUPPRESS)
+    ap.add_argument("--checker-path", help=argparse.SUPPRESS)
     args = ap.parse_args()
-    system = build(args.nodes, args.modulo, args.semantics)
-    rss0 = peak_rss_mb()
-    start = time.perf_counter()
-    outcome = Search(system, system.monitors, Limits(max_states=args.max_states)).run(args.search)
-    wall = time.perf_counter() - start
-    s = outcome.statistics
-    print(json.dumps({
-        "benchmark": "checker_throughput", "nodes": args.nodes, "modulo": args.modulo,
-        "semantics": args.semantics, "search": args.search, "verdict": outcome.status,
-        "states": s.states, "transitions": s.transitions, "seconds": round(wall, 3),
-        "transitions_per_s": round(s.transitions / wall), "states_per_s": round(s.states / wall),
-        "peak_rss_mb": round(s.peak_rss_mb, 1),
-        "rss_bytes_per_state": round((s.peak_rss_mb - rss0) * 2**20 / max(s.states, 1)),
-    }))
+    if args.child:
+        child(args)
+        return
+    scenarios = ["ring"] if args.ring else args.scenarios.split(",")
+    stores = args.stores.split(",")
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        old = _baseline_checker(tmp, args.baseline_rev) if "baseline" in stores else None
+        for scenario in scenarios:
+            for store in stores:
+                if store == "baseline" and old is None:
+                    continue
+                row = _run_child(scenario, store, args, old if store == "baseline" else None)
+                rows.append(row)
+                if args.json:
+                    print(json.dumps(row), flush=True)
+    if not args.json:
+        _table(rows)
 
 
 if __name__ == "__main__":

@@ -3,9 +3,19 @@
 Imports nothing from Zenoh or asyncio. Entry points: `check()` (scenario file →
 `CheckResult`), `System` + `Search` for programmatic use, `replay()` for traces,
 and `checker.commands.register` for the CLI.
+
+Modules: `world` (worlds, events, identities), `semantics` (enabling rules),
+`system` (successors; handler outcomes cached), `transition` (steps and what
+they did), `faults` (optional `check:` settings: latency, deadlines, queue
+bounds, drop/duplicate/crash faults), `store` (visited states: 64-bit digest
+table, parents, edges), `graph` (paths, lassos), `search` (BFS/DFS/random),
+`checkpoint` (save and resume a search), `properties`, `trace`, `check`,
+`commands`.
 """
 
 from checker.check import CheckOptions, CheckResult, check
+from checker.checkpoint import CheckpointError
+from checker.faults import CheckSettings
 from checker.properties import PropertyError, PropertySet, Violation
 from checker.search import (
     Limits,
@@ -18,6 +28,7 @@ from checker.search import (
     random_walk,
 )
 from checker.semantics import Semantics
+from checker.store import StateStore
 from checker.system import Failure, Step, System, Transition
 from checker.trace import NondeterminismError, ReplayResult, TraceError, build_trace, replay
 from checker.world import Event, World
@@ -25,6 +36,8 @@ from checker.world import Event, World
 __all__ = [
     "CheckOptions",
     "CheckResult",
+    "CheckSettings",
+    "CheckpointError",
     "Event",
     "Failure",
     "Limits",
@@ -37,6 +50,7 @@ __all__ = [
     "Search",
     "SearchStatistics",
     "Semantics",
+    "StateStore",
     "Step",
     "System",
     "TraceError",

@@ -6,6 +6,11 @@ random walks found nothing, which proves nothing). Bad input raises before
 a result exists (`ScenarioError`, `PropertyError`, `NodeDefinitionError`).
 The search always stops at the first violation (RMC does the same, R11), so
 the scenario key `check.stop_at_first` is accepted but has no other value.
+
+`CheckOptions.checkpoint` saves the search to a file every
+`checkpoint_every_s` seconds and when it stops early (a limit, Ctrl-C);
+`CheckOptions.resume` continues such a file with the settings it was started
+with (the scenario file must be unchanged: its hash is recorded).
 """
 
 from __future__ import annotations
@@ -15,6 +20,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, final
 
+from checker import checkpoint as ckpt
+from checker.checkpoint import CheckpointError
 from checker.properties import PropertySet, Violation
 from checker.search import HOLDS, VIOLATED, Limits, Search, SearchStatistics
 from checker.system import System
@@ -37,6 +44,12 @@ class CheckOptions:
     profile: str | None = None
     trace_out: str | None = None
     debug_state: bool = False
+    exact_states: bool = False
+    check_determinism: bool = False
+    transition_cache: bool = True
+    checkpoint: str | None = None
+    checkpoint_every_s: float = 300.0
+    resume: str | None = None
     progress: Callable[[SearchStatistics], None] | None = field(default=None, compare=False)
 
 
@@ -55,6 +68,8 @@ class CheckResult:
     violation: Violation | None = None
     trace: dict[str, Any] | None = None
     trace_path: str | None = None
+    checkpoint: str | None = None
+    resumed_from: str | None = None
 
     @property
     def rmc_transitions(self) -> int:
@@ -79,6 +94,9 @@ class CheckResult:
             "rmc_transitions": self.rmc_transitions, "initial_states": s.initial_states,
             "depth": s.depth,
             "wall_time_s": round(s.elapsed_s, 3), "peak_memory_mb": round(s.peak_rss_mb, 1),
+            "store_bytes": s.store_bytes, "bytes_per_state": round(s.bytes_per_state, 1),
+            "digest_bits": s.digest_bits, "collision_probability": s.collision_probability,
+            "checkpoint": self.checkpoint, "resumed_from": self.resumed_from,
             "trace": self.trace_path,
             "trace_steps": None if self.trace is None else len(self.trace["steps"]),
             "exit_code": self.exit_code,
@@ -101,7 +119,15 @@ class CheckResult:
                  f"(RMC-style {self.rmc_transitions:,})  depth {s.depth}  "
                  f"initial states {s.initial_states}",
                  f"time {s.elapsed_s:.2f} s ({s.transitions_per_s:,.0f} transitions/s)  "
-                 f"peak memory {s.peak_rss_mb:.0f} MB"]
+                 f"peak memory {s.peak_rss_mb:.0f} MB",
+                 f"visited-state store {s.store_bytes / 2**20:.1f} MB "
+                 f"({s.bytes_per_state:.0f} B/state, {s.digest_bits}-bit digests, "
+                 f"collision probability <= {s.collision_probability:.1e})"]
+        if self.resumed_from:
+            lines.append(f"resumed from checkpoint {self.resumed_from}")
+        if self.checkpoint:
+            lines.append(f"checkpoint: {self.checkpoint} (continue with: twinfleet check "
+                         f"--resume {self.checkpoint})")
         if self.trace is not None:
             where = self.trace_path or "(not written)"
             lines.append(f"trace: {where} ({len(self.trace['steps'])} steps, "
@@ -134,19 +160,42 @@ def limits_for(options: CheckOptions, check: Mapping[str, Any]) -> Limits:
                   max_depth=_limit(options.max_depth, check.get("max_depth")))
 
 
-def check(path: str | Path, options: CheckOptions = CheckOptions()) -> CheckResult:
-    """Check the scenario at `path`; write a trace to `options.trace_out` on a violation."""
-    scenario = load(path, profile=options.profile, semantics=options.semantics)
+def check(path: str | Path | None, options: CheckOptions = CheckOptions()) -> CheckResult:
+    """Check the scenario at `path`; write a trace to `options.trace_out` on a violation.
+
+    With `options.resume`, continue that checkpoint (`path` may then be None).
+    """
+    data = None
+    if options.resume is not None:
+        data = ckpt.load(options.resume)
+        path = _resume_path(path, options, data["meta"])
+    if path is None:
+        raise ScenarioError("no scenario file given (pass one, or --resume CHECKPOINT)")
+    meta = data["meta"] if data is not None else {}
+    scenario = load(path, profile=meta.get("profile", options.profile),
+                    semantics=meta.get("semantics", options.semantics))
     props = PropertySet.from_scenario(scenario)
-    system = System(scenario, debug_state=options.debug_state, monitors=props)
-    strategy = options.search or scenario.check.get("search") or "bfs"
+    flags = {key: meta.get(key, getattr(options, key)) for key in _SEARCH_FLAGS}
+    system = System(scenario, monitors=props, **flags)
+    strategy = meta.get("strategy") or options.search or scenario.check.get("search") or "bfs"
     if strategy not in ("bfs", "dfs", "random"):
         raise ScenarioError(f"{path}: check.search: expected bfs, dfs or random, got {strategy!r}")
-    search = Search(system, props, limits_for(options, scenario.check), progress=options.progress)
+    meta = {"scenario": str(Path(path).resolve()), "sha256": ckpt.file_sha256(path),
+            "semantics": system.semantics.name, "profile": scenario.profile,
+            "strategy": strategy, **flags}
+    search = Search(system, props, limits_for(options, scenario.check), progress=options.progress,
+                    checkpoint=options.checkpoint or options.resume,
+                    checkpoint_every_s=options.checkpoint_every_s, checkpoint_meta=meta)
+    if data is not None:
+        search.restore(data)
     seed = options.seed if options.seed is not None else scenario.seed
     outcome = search.run(strategy, walks=options.walks, seed=seed)
+    names = props.names()
+    if system.check_determinism:
+        names.append("determinism (every transition run twice and compared)")
     result = CheckResult(str(path), system.semantics.name, strategy, outcome.status,
-                         outcome.reason, props.names(), outcome.statistics, outcome.violation)
+                         outcome.reason, names, outcome.statistics, outcome.violation,
+                         checkpoint=outcome.checkpoint, resumed_from=options.resume)
     if outcome.violation is not None and outcome.path is not None:
         result.trace = build_trace(system, outcome.violation, outcome.path,
                                    scenario_path=str(Path(path).resolve()), search=strategy)
@@ -154,3 +203,30 @@ def check(path: str | Path, options: CheckOptions = CheckOptions()) -> CheckResu
             write_trace(result.trace, options.trace_out)
             result.trace_path = options.trace_out
     return result
+
+
+_SEARCH_FLAGS = ("debug_state", "exact_states", "check_determinism", "transition_cache")
+
+
+def _resume_path(path: str | Path | None, options: CheckOptions,
+                 meta: Mapping[str, Any]) -> str:
+    """The scenario a checkpoint was written for, after checking it still fits."""
+    recorded = meta["scenario"]
+    where = options.resume
+    if path is not None and Path(path).resolve() != Path(recorded):
+        raise CheckpointError(f"{where}: written for {recorded}, not {path}")
+    if not Path(recorded).is_file():
+        raise CheckpointError(f"{where}: its scenario {recorded} no longer exists")
+    if ckpt.file_sha256(recorded) != meta["sha256"]:
+        raise CheckpointError(f"{where}: {recorded} changed since the checkpoint was written")
+    for key, value in (("semantics", options.semantics), ("profile", options.profile),
+                       ("strategy", options.search)):
+        if value is not None and value != meta[key]:
+            raise CheckpointError(f"{where}: written with {key} {meta[key]}, cannot resume "
+                                  f"with {value}")
+    for key in _SEARCH_FLAGS:
+        if getattr(options, key) != getattr(CheckOptions, key) and \
+                getattr(options, key) != meta[key]:
+            raise CheckpointError(f"{where}: written with {key}={meta[key]}, cannot resume "
+                                  f"with {getattr(options, key)}")
+    return recorded

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from checker.check import CheckOptions, CheckResult, check, load
+from checker.checkpoint import CheckpointError
 from checker.properties import PropertyError, PropertySet
 from checker.search import SearchStatistics
 from checker.system import System
@@ -22,7 +23,7 @@ from checker.trace import NondeterminismError, TraceError, load_trace, replay
 from runtime.node import NodeDefinitionError
 from runtime.scenario import ScenarioError
 
-BAD_INPUT = (ScenarioError, PropertyError, NodeDefinitionError, TraceError)
+BAD_INPUT = (ScenarioError, PropertyError, NodeDefinitionError, TraceError, CheckpointError)
 
 
 def register(subparsers: Any) -> None:
@@ -30,7 +31,8 @@ def register(subparsers: Any) -> None:
     p = subparsers.add_parser("check", help="explore every interleaving of a scenario",
                               description="Check a scenario's properties exhaustively "
                               "(exit 0 holds, 1 violated, 2 bad input or no answer).")
-    p.add_argument("scenario", help="scenario YAML file")
+    p.add_argument("scenario", nargs="?", default=None,
+                   help="scenario YAML file (optional with --resume)")
     p.add_argument("--search", choices=("bfs", "dfs", "random"), default=None,
                    help="search order: bfs (shortest counterexample, default), dfs, or random walks")
     p.add_argument("--walks", type=int, default=100, help="number of random walks (--search random)")
@@ -51,6 +53,23 @@ def register(subparsers: Any) -> None:
     p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
     p.add_argument("--debug-state", action="store_true",
                    help="report handlers that change node attributes other than self.state")
+    p.add_argument("--check-determinism", action="store_true",
+                   help="run every transition twice from the same state and report any "
+                   "difference (slower: also turns off the transition cache)")
+    p.add_argument("--exact-states", action="store_true",
+                   help="store 128-bit digests of full world encodings instead of 64-bit "
+                   "digests (about 3x the memory per state; false merges ~n^2/2^129)")
+    p.add_argument("--no-transition-cache", action="store_true",
+                   help="re-run every handler instead of reusing the outcome of the same "
+                   "(node state, event, time) (for comparison; same results, slower)")
+    p.add_argument("--checkpoint", default=None, metavar="FILE",
+                   help="save the search to FILE periodically and when it stops early "
+                   "(a limit or Ctrl-C); continue it with --resume FILE")
+    p.add_argument("--checkpoint-every", type=float, default=300.0, metavar="SECONDS",
+                   help="seconds between periodic checkpoints (default 300)")
+    p.add_argument("--resume", default=None, metavar="FILE",
+                   help="continue the search saved in checkpoint FILE (and keep saving to it "
+                   "unless --checkpoint names another file)")
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
     p.set_defaults(func=check_command)
     r = subparsers.add_parser("replay", help="re-execute a counterexample trace",
@@ -73,12 +92,20 @@ def _progress(stats: SearchStatistics) -> None:
 
 def check_command(args: argparse.Namespace) -> int:
     """Run `check` for parsed arguments; return the exit code."""
-    trace_out = args.trace_out or str(Path("out") / f"{Path(args.scenario).stem}.trace.json")
+    if args.scenario is None and args.resume is None:
+        print("twinfleet check: give a scenario file, or --resume CHECKPOINT", file=sys.stderr)
+        return 2
+    stem = Path(args.scenario or args.resume).stem
+    trace_out = args.trace_out or str(Path("out") / f"{stem}.trace.json")
     options = CheckOptions(search=args.search, walks=args.walks, seed=args.seed,
                            max_states=args.max_states, max_time_s=args.max_time,
                            max_depth=args.max_depth, semantics=args.semantics,
                            profile=args.profile, trace_out=trace_out,
-                           debug_state=args.debug_state,
+                           debug_state=args.debug_state, exact_states=args.exact_states,
+                           check_determinism=args.check_determinism,
+                           transition_cache=not args.no_transition_cache,
+                           checkpoint=args.checkpoint, checkpoint_every_s=args.checkpoint_every,
+                           resume=args.resume,
                            progress=None if args.quiet or args.json else _progress)
     try:
         result = check(args.scenario, options)
@@ -110,7 +137,8 @@ def replay_command(args: argparse.Namespace) -> int:
         latency = trace.get("latency")
         system = System(scenario, latency=tuple(latency) if latency else None,
                         global_priority=trace.get("global_priority"),
-                        debug_state=bool(trace.get("debug_state")), monitors=props)
+                        debug_state=bool(trace.get("debug_state")), monitors=props,
+                        check_determinism=bool(trace.get("check_determinism")))
         result = replay(system, trace, props)
     except BAD_INPUT as exc:
         print(f"twinfleet replay: {exc}", file=sys.stderr)

@@ -22,6 +22,15 @@ change what they read. Kinds (`runtime.scenario.PROPERTY_KINDS`):
   `within_ms`. Each world carries the names of the `within` properties not yet
   met on its path (`World.monitors`); it is violated in a world where one is
   still pending and the next event is later than `within_ms` (or none is).
+
+Besides the named properties, a search always reports handler failures, and
+the optional checks of `checker.faults` under fixed names: `queue_bound`
+(kind "queue overflow", from `check.queue_bound`), `deadline` (kind "deadline
+miss", from `check.deadline_ms`) and `determinism` (kind "nondeterminism",
+from `check --check-determinism`).
+
+Expressions are evaluated once per combination of the node states they read
+(and `now`, if they read it) and the result cached: they must be pure.
 """
 
 from __future__ import annotations
@@ -31,6 +40,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, final
 
+from checker.faults import parse_deadlines, parse_queue_bounds
 from runtime.scenario import Scenario
 
 if TYPE_CHECKING:
@@ -38,6 +48,10 @@ if TYPE_CHECKING:
     from checker.world import Event, World
 
 _GLOBALS = {"__builtins__": builtins}
+_CACHE_LIMIT = 100_000
+
+QUEUE_BOUND = "queue_bound"
+QUEUE_OVERFLOW = "queue overflow"
 
 
 class PropertyError(ValueError):
@@ -48,7 +62,7 @@ class PropertyError(ValueError):
 class Expr:
     """A compiled property expression over node states."""
 
-    __slots__ = ("code", "needed", "source", "uses_all", "where")
+    __slots__ = ("_cache", "_reads", "code", "needed", "source", "uses_all", "uses_now", "where")
 
     def __init__(self, source: str, names: Sequence[str], where: str) -> None:
         self.source = source
@@ -56,10 +70,25 @@ class Expr:
         self.code = compile(source, where, "eval")
         used = set(self.code.co_names)
         self.uses_all = "nodes" in used
+        self.uses_now = "now" in used
         self.needed = tuple((i, n) for i, n in enumerate(names) if n in used)
+        self._reads = tuple(range(len(names))) if self.uses_all else tuple(i for i, _ in self.needed)
+        self._cache: dict[tuple[Any, ...], bool] = {}
 
     def holds(self, system: System, states: Sequence[bytes], now: int) -> bool:
         """Evaluate on node states (snapshot bytes, in scenario order) at time `now`."""
+        key = tuple([states[i] for i in self._reads])
+        if self.uses_now:
+            key = (*key, now)
+        cache = self._cache
+        found = cache.get(key)
+        if found is None:
+            if len(cache) >= _CACHE_LIMIT:
+                cache.clear()
+            found = cache[key] = self._evaluate(system, states, now)
+        return found
+
+    def _evaluate(self, system: System, states: Sequence[bytes], now: int) -> bool:
         env: dict[str, Any] = {"now": now}
         for i, name in self.needed:
             env[name] = system.decode(i, states[i])
@@ -108,8 +137,13 @@ class Violation:
 class PropertySet:
     """The properties of a scenario, compiled against its node names."""
 
-    def __init__(self, properties: Sequence[Property]) -> None:
+    def __init__(self, properties: Sequence[Property], *,
+                 queue_bounds: Sequence[int | None] = (), node_names: Sequence[str] = (),
+                 deadlines: str = "") -> None:
         self.all = tuple(properties)
+        self.queue_bounds = tuple(queue_bounds) if any(b is not None for b in queue_bounds) else ()
+        self.node_names = tuple(node_names)
+        self.deadlines = deadlines
         self._failure_name = next((p.name for p in self.all if p.kind == "no_failure"),
                                   "no_failure")
         self.invariants = [p for p in self.all if p.kind == "invariant"]
@@ -127,7 +161,11 @@ class PropertySet:
             where = f"{scenario.path}:properties[{i}]"
             expr = Expr(cfg.expr, names, where) if cfg.expr is not None else None
             props.append(Property(cfg.name, cfg.kind, expr, cfg.within_ms))
-        return cls(props)
+        default, per = parse_deadlines(scenario, None)
+        deadlines = ", ".join([*([f"{default} ms"] if default is not None else []),
+                               *(f"{k} {v} ms" for k, v in sorted(per.items()))])
+        return cls(props, queue_bounds=parse_queue_bounds(scenario), node_names=names,
+                   deadlines=deadlines)
 
     def eventually_named(self, name: str) -> Property:
         """The `eventually` property called `name`."""
@@ -136,6 +174,12 @@ class PropertySet:
     def names(self) -> list[str]:
         """Every property checked, including the implicit handler-failure check."""
         named = [p.describe() for p in self.all]
+        if self.queue_bounds:
+            bounds = ", ".join(f"{n} {b}" for n, b in zip(self.node_names, self.queue_bounds,
+                                                           strict=True) if b is not None)
+            named.append(f"{QUEUE_BOUND} ({QUEUE_OVERFLOW}: at most {bounds} pending events)")
+        if self.deadlines:
+            named.append(f"deadline (deadline miss: messages handled within {self.deadlines})")
         if not any(p.kind == "no_failure" for p in self.all):
             named.append("no_failure (implicit: ctx.fail and handler exceptions)")
         return named
@@ -156,6 +200,10 @@ class PropertySet:
 
     def check_world(self, system: System, world: World) -> Violation | None:
         """The first safety property violated in `world`, or None."""
+        if self.queue_bounds:
+            violation = self._check_queues(world)
+            if violation is not None:
+                return violation
         for prop in self.invariants:
             assert prop.expr is not None
             if not prop.expr.holds(system, world.states, world.now):
@@ -173,6 +221,17 @@ class PropertySet:
             return self._check_terminal(system, world)
         return None
 
+    def _check_queues(self, world: World) -> Violation | None:
+        counts = [0] * len(self.queue_bounds)
+        for ev in world.events:
+            counts[ev.target] += 1
+        for i, (n, bound) in enumerate(zip(counts, self.queue_bounds, strict=True)):
+            if bound is not None and n > bound:
+                return Violation(QUEUE_BOUND, QUEUE_OVERFLOW,
+                                 f"queue overflow: {self.node_names[i]} has {n} pending events "
+                                 f"at t={world.now} ms (bound {bound})")
+        return None
+
     def _check_terminal(self, system: System, world: World) -> Violation | None:
         for prop in self.terminal:
             if prop.kind == "quiescence":
@@ -187,5 +246,7 @@ class PropertySet:
 
     def check_failure(self, failure: Failure) -> Violation:
         """The violation a handler failure stands for."""
-        name = self._failure_name if failure.kind == "handler failure" else "debug_state"
-        return Violation(name, failure.kind, str(failure), "path", failure)
+        names = {"handler failure": self._failure_name, "state outside self.state": "debug_state",
+                 "deadline miss": "deadline", "nondeterminism": "determinism"}
+        return Violation(names.get(failure.kind, failure.kind), failure.kind, str(failure), "path",
+                         failure)

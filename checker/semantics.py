@@ -40,10 +40,20 @@ Rule 4 (node-instance priority) -- `rebeca` only. Among the nodes that have an
     handler priorities of the enabled events, across nodes.
 
 Everything still enabled after these rules is a nondeterministic choice the
-search explores exhaustively. On top of the rules, `check.latency: [min, max]`
-(off by default) gives every message a delivery delay in that range, each
-value a separate branch (it is enumerated like a `ctx.choose` after the
-handler's own choices).
+search explores exhaustively.
+
+Rule 5 (latency and faults, all off by default; see `checker.faults` for the
+    scenario keys). `check.latency` gives a message a delivery delay in a
+    range, globally or per topic/service, each value a separate branch; with
+    `faults.drop` / `faults.duplicate` each delivery on a listed topic is
+    also delivered, lost or delivered twice, each a branch. These branches
+    are enumerated like `ctx.choose` options after the handler's own choices
+    (per delivery: the fault, then the delay of each copy). A crash fault is
+    not an event: it is one more alternative in every world with something
+    pending (`checker.system.System.successors`), taken at t*. A message due
+    after its deadline is a deadline miss when it is taken; because of Rule 1
+    it is taken exactly at its due time, so only latency or FIFO clamping can
+    make it late.
 """
 
 from __future__ import annotations
@@ -68,13 +78,18 @@ class Semantics:
         node_priorities: per node index, its instance priority (used by `rebeca`).
         global_priority: `rebeca` only: compare handler priorities across nodes.
         latency: (min, max) extra delivery delay of messages in ms, or None.
+        topic_latency: per topic/service name, a range overriding `latency`
+            (None: no delay on that name).
     """
 
     name: str = ROS
     node_priorities: tuple[int, ...] = ()
     global_priority: bool = False
     latency: tuple[int, int] | None = None
+    topic_latency: tuple[tuple[str, tuple[int, int] | None], ...] = ()
     fifo: bool = field(init=False)
+    has_latency: bool = field(init=False)
+    _ranges: dict[str, tuple[int, int] | None] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.name not in (ROS, REBECA):
@@ -82,6 +97,10 @@ class Semantics:
         if self.latency is not None and not 0 <= self.latency[0] <= self.latency[1]:
             raise ValueError(f"latency must be [min, max] with 0 <= min <= max, got {self.latency}")
         object.__setattr__(self, "fifo", self.name == ROS)
+        ranges = dict(self.topic_latency)
+        object.__setattr__(self, "_ranges", ranges)
+        object.__setattr__(self, "has_latency", self.latency is not None
+                           or any(r is not None for r in ranges.values()))
 
     @property
     def latency_options(self) -> int:
@@ -89,6 +108,10 @@ class Semantics:
         if self.latency is None:
             return 1
         return self.latency[1] - self.latency[0] + 1
+
+    def latency_range(self, name: str) -> tuple[int, int] | None:
+        """The delivery-delay range of messages on topic/service `name` (None: no delay)."""
+        return self._ranges.get(name, self.latency)
 
     def enabled(self, events: Sequence[Event]) -> list[int]:
         """Indices (into the canonically sorted `events`) of the events that may run next."""
@@ -131,27 +154,40 @@ class Semantics:
         if not self.fifo:
             pending.append(ev)
             return
-        chan = ev.channel
+        sender, target, kind = ev.sender, ev.target, ev.kind
+        is_msg = kind in MESSAGE_KINDS
         due = ev.due
-        if self.latency is not None and ev.kind in MESSAGE_KINDS:
+        if self.has_latency and is_msg:
             for other in pending:
-                if other.channel == chan and other.due > due:
+                if (other.due > due and other.target == target and other.sender == sender
+                        and (other.kind in MESSAGE_KINDS) == is_msg):
                     due = other.due
-        rank = sum(1 for other in pending if other.due == due and other.channel == chan)
+        rank = 0
+        for other in pending:
+            if (other.due == due and other.target == target and other.sender == sender
+                    and (other.kind in MESSAGE_KINDS) == is_msg):
+                rank += 1
         if due != ev.due or rank:
-            ev = Event(due, ev.kind, ev.target, ev.method, ev.sender, ev.args, ev.priority,
-                       ev.reply_to, rank, ev.key)
+            ev = ev.moved(due, rank)
         pending.append(ev)
 
     def remove(self, events: Sequence[Event], index: int) -> list[Event]:
         """`events` without `events[index]`, ranks of its channel-mates renumbered."""
-        gone = events[index]
-        rest = [ev for i, ev in enumerate(events) if i != index]
+        rest = list(events)
+        gone = rest.pop(index)
         if not self.fifo:
             return rest
+        # Only events with gone's due time can share its rank numbering; events are
+        # sorted by due, so they sit next to each other.
+        due, rank = gone.due, gone.rank
         chan = gone.channel
-        for i, ev in enumerate(rest):
-            if ev.rank > gone.rank and ev.due == gone.due and ev.channel == chan:
+        for i in range(len(rest)):
+            ev = rest[i]
+            if ev.due != due:
+                if ev.due > due:
+                    break
+                continue
+            if ev.rank > rank and ev.channel == chan:
                 rest[i] = ev.with_rank(ev.rank - 1)
         return rest
 

@@ -4,9 +4,11 @@ A trace (``"format": "twinfleet-trace/1"``) names the scenario, the message
 semantics and the violated property, then lists the initial world and every
 step: logical time, node, handler, event kind, sender, a summary of the
 arguments, the `ctx.choose` indices (and how many options each choice point
-had), the digest of the resulting world and the decoded state of the node
-that changed. A lasso trace also has `cycle_start`: the index of the world
-(0 = initial) that the last step returns to.
+had), the fault branches taken (`faults`), the digest of the resulting world
+and the decoded state of the node that changed. A crash fault is a step of
+kind "crash" whose `event` is the crashed node's index. A lasso trace also
+has `cycle_start`: the index of the world (0 = initial) that the last step
+returns to.
 
 `replay(system, trace)` re-runs the steps from the recorded choices, checks
 every world's digest against the file and confirms that the recorded property
@@ -27,7 +29,7 @@ import numpy as np
 from checker.properties import PropertySet, Violation
 from checker.search import Path
 from checker.system import Step, System, Transition
-from checker.world import ENVIRONMENT, World
+from checker.world import CRASH, ENVIRONMENT, World
 
 TRACE_FORMAT = "twinfleet-trace/1"
 
@@ -96,6 +98,7 @@ def build_trace(system: System, violation: Violation, path: Path, *,
         "latency": list(system.semantics.latency) if system.semantics.latency else None,
         "global_priority": system.semantics.global_priority,
         "debug_state": system.debug_state,
+        "check_determinism": system.check_determinism,
         "search": search,
         "property": {"name": violation.property, "kind": violation.kind},
         "shape": violation.shape,
@@ -126,7 +129,7 @@ def _describe(system: System, k: int, before: World, t: Transition) -> dict[str,
         "event": t.step.event, "args": _summary(ev.args),
         "choices": list(t.step.choices), "options": list(t.step.options),
         "digest": after.digest.hex(), "next_time": after.next_time,
-        "pending": len(after.events), "changed": changed,
+        "pending": len(after.events), "changed": changed, "faults": list(t.faults),
         "logs": [{"event": log.event, **{k2: to_json_value(v) for k2, v in log.fields}}
                  for log in t.logs],
         "failure": _failure(t),
@@ -193,6 +196,12 @@ def replay(system: System, trace: Mapping[str, Any],
 
 def _replay_step(system: System, world: World, rec: Mapping[str, Any]) -> Transition:
     k, index = rec["index"], rec["event"]
+    if rec.get("kind") == CRASH:
+        if system.crash is None or index not in system.crash.nodes:
+            raise NondeterminismError(k, rec["node"], "crash", "the scenario does not let this "
+                                      "node crash (check.faults.crash)")
+        t = system.execute(world, Step(index, tuple(rec["choices"]), tuple(rec["options"]), True))
+        return _check_digest(t, k, rec)
     if not 0 <= index < len(world.events):
         raise NondeterminismError(k, rec["node"], rec["handler"],
                                   f"event {index} does not exist ({len(world.events)} pending)")
@@ -201,6 +210,10 @@ def _replay_step(system: System, world: World, rec: Mapping[str, Any]) -> Transi
         raise NondeterminismError(k, rec["node"], rec["handler"],
                                   f"pending event {index} is {system.names[ev.target]}.{ev.method}")
     t = system.execute(world, Step(index, tuple(rec["choices"]), tuple(rec["options"])))
+    return _check_digest(t, k, rec)
+
+
+def _check_digest(t: Transition, k: int, rec: Mapping[str, Any]) -> Transition:
     if t.world.digest.hex() != rec["digest"]:
         raise NondeterminismError(k, rec["node"], rec["handler"],
                                   f"world digest {t.world.digest.hex()} != recorded {rec['digest']}")

@@ -49,7 +49,7 @@ _TOP_KEYS = {"name", "fleet", "description", "map", "profile", "semantics", "see
              "nodes", "properties", "check", "live"}
 _NODE_KEYS = {"name", "class", "namespace", "priority", "respawn", "params"}
 _CHECK_KEYS = {"max_states", "max_depth", "max_time_s", "latency", "global_priority",
-               "search", "stop_at_first"}
+               "search", "stop_at_first", "faults", "deadline_ms", "queue_bound"}
 _LIVE_KEYS = {"timeout_s", "stop_on_error", "time_scale", "report", "summary_topics"}
 
 

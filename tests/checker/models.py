@@ -500,3 +500,113 @@ class Crasher(Node):
     @handler()
     def explode(self, ctx: Context) -> None:
         raise RuntimeError("boom")
+
+
+# ------------------------------------------------ queue bounds, determinism
+
+
+@dataclass(frozen=True)
+class BurstParams:
+    """Parameters of Burst."""
+
+    count: int = 3
+
+
+class Burst(Node):
+    """At t=1 publishes `count` messages on /sink at once."""
+
+    Params = BurstParams
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.after(1, self.burst)
+
+    @handler()
+    def burst(self, ctx: Context) -> None:
+        for k in range(self.params.count):
+            ctx.publish("/sink", Num(k))
+
+
+class Sink(Node):
+    """Counts what arrives on /sink."""
+
+    def initial_state(self) -> CountState:
+        return CountState()
+
+    @subscribe("/sink")
+    def on_msg(self, ctx: Context, msg: Num) -> None:
+        self.state.count += 1
+
+
+class Flaky(Node):
+    """Copies a call counter kept outside self.state into its state (a contract violation
+    that changes what the handler does, which --check-determinism finds)."""
+
+    def configure(self) -> None:
+        self.calls = 0
+
+    def initial_state(self) -> PickState:
+        return PickState()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.after(1, self.tick)
+
+    @handler()
+    def tick(self, ctx: Context) -> None:
+        self.calls += 1
+        self.state.value = self.calls
+
+
+# ------------------------------------------------------------ faults
+
+
+@dataclass(frozen=True)
+class HeartbeatParams:
+    """Parameters of Heartbeat."""
+
+    beats: int = 2
+
+
+@dataclass
+class BeatState:
+    """State of Heartbeat and Watchdog."""
+
+    count: int = 0
+
+
+class Heartbeat(Node):
+    """Publishes /beat at t=10, 20, ... (`beats` times)."""
+
+    Params = HeartbeatParams
+
+    def initial_state(self) -> BeatState:
+        return BeatState()
+
+    @every(10)
+    def beat(self, ctx: Context) -> None:
+        if self.state.count < self.params.beats:
+            self.state.count += 1
+            ctx.publish("/beat", Num(self.state.count))
+
+
+class Watchdog(Node):
+    """Fails if heartbeat k has not arrived when it checks at t = 10k + 5."""
+
+    def initial_state(self) -> BeatState:
+        return BeatState()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.after(15, self.check, 1)
+
+    @subscribe("/beat")
+    def on_beat(self, ctx: Context, msg: Num) -> None:
+        self.state.count = msg.value
+
+    @handler()
+    def check(self, ctx: Context, expected: int) -> None:
+        if self.state.count < expected:
+            ctx.fail(f"heartbeat {expected} missing at t={ctx.now()}")
+        elif expected < 2:
+            ctx.after(10, self.check, expected + 1)

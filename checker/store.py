@@ -1,0 +1,252 @@
+"""The visited-state store: fixed-size digests, compact parent records, compact edges.
+
+States get integer ids in discovery order. Per id the store keeps:
+
+- its key in an index: by default `DigestTable`, a numpy open-addressing
+  table of 64-bit digests (linear probing, doubled when 60 % full) mapping
+  to int32 ids, about 12 bytes per slot; with `--exact-states`, `ExactIndex`,
+  a dict of 128-bit digests (about 100 bytes per state);
+- its parent id (int32, -1 for initial worlds) for shortest/first-found paths;
+  a path of ids is turned back into steps by re-running each world's
+  successors and taking the one whose key maps to the next id
+  (`checker.graph.steps_along`), so no step is stored;
+- one byte "nothing pending" and one byte per `eventually` property
+  ("its expression holds here");
+- when `eventually` properties are checked, its successors' ids, deduplicated,
+  in one shared int32 array (compressed sparse rows: start offset and count
+  per expanded state), about 12 bytes per state plus 4 per distinct edge.
+
+A 64-bit digest can merge two different states (a false merge: the second
+is taken as already visited, so part of the state space may go unexplored).
+For n stored states the probability of any such merge is about n²/2^65
+(`collision_probability`, TLC's estimate); the content hashes of node states
+and events that feed the key add the same term for their own counts. At a
+million states that is under 3·10⁻⁸; `--exact-states` makes it ~n²/2^129.
+"""
+
+from __future__ import annotations
+
+import sys
+from array import array
+from typing import Any, final
+
+import numpy as np
+
+_MAX_LOAD = 0.6
+
+
+@final
+class DigestTable:
+    """Open addressing: 64-bit keys (0 = empty slot) → int32 ids, grown by doubling."""
+
+    def __init__(self, capacity: int = 1 << 12) -> None:
+        if capacity & (capacity - 1):
+            raise ValueError(f"capacity must be a power of two, got {capacity}")
+        self._alloc(capacity)
+        self._n = 0
+
+    def _alloc(self, capacity: int) -> None:
+        self._keys = np.zeros(capacity, dtype=np.uint64)
+        self._ids = np.zeros(capacity, dtype=np.int32)
+        self._kv = memoryview(self._keys)  # scalar access from Python is ~30 % faster
+        self._iv = memoryview(self._ids)
+        self._mask = capacity - 1
+        self._limit = int(capacity * _MAX_LOAD)
+
+    def __len__(self) -> int:
+        return self._n
+
+    @property
+    def capacity(self) -> int:
+        """Number of slots."""
+        return self._mask + 1
+
+    def get(self, key: int) -> int:
+        """The id stored for `key`, or -1."""
+        key = key or 1
+        kv, mask = self._kv, self._mask
+        i = key & mask
+        while True:
+            k = kv[i]
+            if k == key:
+                return self._iv[i]
+            if k == 0:
+                return -1
+            i = (i + 1) & mask
+
+    def setdefault(self, key: int, sid: int) -> int:
+        """The id stored for `key`; if there is none, store `sid` and return it."""
+        key = key or 1  # 0 marks empty slots: digest 0 shares a slot with digest 1
+        kv, mask = self._kv, self._mask
+        i = key & mask
+        while True:
+            k = kv[i]
+            if k == key:
+                return self._iv[i]
+            if k == 0:
+                break
+            i = (i + 1) & mask
+        kv[i] = key
+        self._iv[i] = sid
+        self._n += 1
+        if self._n > self._limit:
+            self._grow()
+        return sid
+
+    def _grow(self) -> None:
+        """Double the table and re-insert every key, vectorised in probing rounds."""
+        used = self._keys != 0
+        keys, ids = self._keys[used], self._ids[used]
+        self._alloc(2 * self.capacity)
+        mask = np.uint64(self._mask)
+        slots = (keys & mask).astype(np.int64)
+        todo = np.arange(len(keys))
+        while len(todo):
+            cand = slots[todo]
+            free = self._keys[cand] == 0
+            # One winner per free slot; the rest (and those facing a full slot) probe on.
+            uniq, first = np.unique(cand[free], return_index=True)
+            winners = todo[free][first]
+            self._keys[uniq] = keys[winners]
+            self._ids[uniq] = ids[winners]
+            placed = np.zeros(len(keys), dtype=bool)
+            placed[winners] = True
+            todo = todo[~placed[todo]]
+            slots[todo] = (slots[todo] + 1) & self._mask
+
+    def nbytes(self) -> int:
+        """Bytes held by the table's arrays."""
+        return int(self._keys.nbytes + self._ids.nbytes)
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"keys": self._keys, "ids": self._ids, "n": self._n}
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self._alloc(len(state["keys"]))
+        self._keys[:] = state["keys"]
+        self._ids[:] = state["ids"]
+        self._n = state["n"]
+
+
+@final
+class ExactIndex:
+    """A dict of 16-byte digests → ids, with DigestTable's interface (`--exact-states`)."""
+
+    def __init__(self) -> None:
+        self._ids: dict[bytes, int] = {}
+
+    def __len__(self) -> int:
+        return len(self._ids)
+
+    def get(self, key: bytes) -> int:
+        """The id stored for `key`, or -1."""
+        return self._ids.get(key, -1)
+
+    def setdefault(self, key: bytes, sid: int) -> int:
+        """The id stored for `key`; if there is none, store `sid` and return it."""
+        return self._ids.setdefault(key, sid)
+
+    def nbytes(self) -> int:
+        """Bytes of the dict, its keys and its (mostly non-cached) int values."""
+        n = len(self._ids)
+        return sys.getsizeof(self._ids) + n * (sys.getsizeof(b"\0" * 16) + sys.getsizeof(1 << 20))
+
+
+@final
+class EdgeStore:
+    """Successor ids per expanded state in compressed sparse rows."""
+
+    def __init__(self) -> None:
+        self.targets = array("i")
+        self.start = array("q")  # per state: offset into targets, -1 if not expanded
+        self.count = array("i")
+
+    def new_state(self) -> None:
+        """Make room for one more state id."""
+        self.start.append(-1)
+        self.count.append(0)
+
+    def set(self, sid: int, children: list[int]) -> None:
+        """Record the successors of `sid` (duplicates dropped, first-seen order kept)."""
+        unique = list(dict.fromkeys(children))
+        self.start[sid] = len(self.targets)
+        self.count[sid] = len(unique)
+        self.targets.extend(unique)
+
+    def out(self, sid: int) -> range:
+        """Positions in `targets` of the successors of `sid`."""
+        begin = self.start[sid]
+        return range(0) if begin < 0 else range(begin, begin + self.count[sid])
+
+    def nbytes(self) -> int:
+        """Bytes held by the three arrays (allocated size)."""
+        return sum(sys.getsizeof(a) for a in (self.targets, self.start, self.count))
+
+
+@final
+class StateStore:
+    """Visited states: index (digest → id), parents, flags, roots and optional edges.
+
+    Args:
+        exact: key worlds by their 128-bit `World.digest` in a dict instead
+            of 64-bit `World.key`s in a `DigestTable`.
+        record_edges: keep successor ids (needed by `eventually` properties).
+        flags: names of the `eventually` properties, one byte each per state.
+    """
+
+    def __init__(self, *, exact: bool = False, record_edges: bool = False,
+                 flags: tuple[str, ...] = ()) -> None:
+        self.exact = exact
+        self.index: DigestTable | ExactIndex = ExactIndex() if exact else DigestTable()
+        self.parent = array("i")
+        self.terminal = bytearray()
+        self.holds: dict[str, bytearray] = {name: bytearray() for name in flags}
+        self.roots: dict[int, tuple[int, ...]] = {}
+        self.edges = EdgeStore() if record_edges else None
+        self.digest_bits = 128 if exact else 64
+
+    def __len__(self) -> int:
+        return len(self.parent)
+
+    def add(self, key: Any, parent: int, *, terminal: bool = False) -> tuple[int, bool]:
+        """The id of `key`, and whether it is new (then `parent` is recorded; -1 = root)."""
+        sid = len(self.parent)
+        found = self.index.setdefault(key, sid)
+        if found != sid:
+            return found, False
+        self.parent.append(parent)
+        self.terminal.append(terminal)
+        if self.edges is not None:
+            self.edges.new_state()
+        return sid, True
+
+    def find(self, key: Any) -> int:
+        """The id of `key`, or -1."""
+        return self.index.get(key)
+
+    def path_ids(self, sid: int) -> list[int]:
+        """Ids from a root to `sid` along first-discovery parents."""
+        ids = [sid]
+        while self.parent[ids[-1]] >= 0:
+            ids.append(self.parent[ids[-1]])
+        return ids[::-1]
+
+    def nbytes(self) -> int:
+        """Bytes held by the store (index, per-state records, edges, roots)."""
+        total = self.index.nbytes() + sys.getsizeof(self.parent) + sys.getsizeof(self.terminal)
+        total += sum(sys.getsizeof(b) for b in self.holds.values())
+        total += sys.getsizeof(self.roots) + sum(sys.getsizeof(c) for c in self.roots.values())
+        if self.edges is not None:
+            total += self.edges.nbytes()
+        return total
+
+    def collision_probability(self, hashed: int = 0) -> float:
+        """Estimated probability that some stored state was merged with another by a digest.
+
+        Args:
+            hashed: how many distinct node states and events got content hashes
+                (they feed the 64-bit key; an upper bound is fine).
+        """
+        n = len(self)
+        bits = self.digest_bits
+        return min(1.0, (n * (n - 1) + hashed * (hashed - 1)) / 2.0 ** (bits + 1))

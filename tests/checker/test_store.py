@@ -1,0 +1,164 @@
+"""The compact store and the speed-ups are invisible: same verdicts, counts and traces.
+
+Every optimisation is compared with the unoptimised search: 64-bit digests vs
+`exact_states` (128-bit digests of the full encoding), the transition cache vs
+re-running every handler, on every small model (both semantics, faults on and
+off) and on C1a in the paper's profile.
+"""
+
+from __future__ import annotations
+
+import pickle
+import random
+from pathlib import Path
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from checker import PropertySet, Search, System
+from checker.check import load
+from checker.graph import find_lasso
+from checker.store import DigestTable, EdgeStore, StateStore
+from checker.world import World
+from tests.checker.helpers import node, run, scenario
+
+pytestmark = pytest.mark.timeout(120)
+
+ROOT = Path(__file__).resolve().parents[2]
+PP = [node("ping", "Ping", rounds=3), node("pong", "Pong")]
+GOAL = "a.stage == 'done' and b.stage == 'done'"
+WAITERS = [node("a", "WaiterA", inbox="/go_a", outbox="/go_b", first=True),
+           node("b", "WaiterB", inbox="/go_b", outbox="/go_a")]
+
+MODELS: dict[str, tuple[list, dict]] = {
+    "ping_pong": (PP, {"properties": [{"name": "b", "kind": "invariant",
+                                       "expr": "ping.sent - pong.received <= 1"}]}),
+    "sums": ([node("two", "TwoSender"), node("four", "FourSender"), node("sum", "Summer")], {}),
+    "door_race": ([node("opener", "Opener"), node("locker", "Locker"), node("door", "Door")], {}),
+    "ticks": ([node("a", "TickA"), node("b", "TickB")], {}),
+    "waiters": (WAITERS, {"properties": [{"name": "f", "kind": "eventually", "expr": GOAL}]}),
+    "deadlock": ([node("a", "WaiterA", inbox="/go_a", outbox="/go_b"),
+                  node("b", "WaiterB", inbox="/go_b", outbox="/go_a")],
+                 {"properties": [{"name": "f", "kind": "eventually", "expr": GOAL}]}),
+    "livelock": ([node("server", "BallServer"), node("returner", "BallReturner")],
+                 {"properties": [{"name": "s", "kind": "eventually", "expr": "server.scored"}]}),
+    "picker": ([node("p", "Picker", second=[0, 100])], {}),
+    "within": ([node("c", "Counter", modulo=0, cap=5)],
+               {"properties": [{"name": "w", "kind": "within", "expr": "c.count >= 3",
+                                "within_ms": 300}]}),
+    "service": ([node("client", "Client"), node("adder", "Adder")], {"latency": [0, 2]}),
+    "drop_dup": (PP, {"faults": {"drop": ["/pong"], "duplicate": ["/ping"]}}),
+    "crash": (PP, {"faults": {"crash": {"nodes": ["ping", "pong"], "max": 2}},
+                   "properties": [{"name": "b", "kind": "invariant",
+                                   "expr": "ping.sent - pong.received <= 1"}]}),
+    "deadline": (PP, {"latency": {"/ping": [0, 2]}, "deadline_ms": 1}),
+}
+
+VARIANTS = [{"exact_states": True}, {"transition_cache": False},
+            {"exact_states": True, "transition_cache": False}]
+
+
+def _summary(result):
+    s = result.statistics
+    trace = None
+    if result.trace is not None:
+        trace = (result.trace["initial"]["choices"],
+                 [(x["node"], x["handler"], x["choices"], x["digest"])
+                  for x in result.trace["steps"]], result.trace["cycle_start"])
+    return (result.status, result.violation and result.violation.property, s.states,
+            s.transitions, s.depth, s.initial_states, trace)
+
+
+@pytest.mark.parametrize("model", sorted(MODELS))
+@pytest.mark.parametrize("semantics", ["ros", "rebeca"])
+@pytest.mark.parametrize("search", ["bfs", "dfs"])
+def test_optimisations_match_the_unoptimised_search(tmp_path, model, semantics, search):
+    nodes, extra = MODELS[model]
+    path = scenario(tmp_path, nodes, semantics=semantics, name=model, **extra)
+    expected = _summary(run(path, search=search))
+    for options in VARIANTS:
+        assert _summary(run(path, search=search, **options)) == expected, options
+
+
+def test_c1a_rebeca_counts_are_the_same_in_every_mode():
+    path = ROOT / "launch" / "c1a_rebeca.yaml"
+    fast = run(path, trace_out=None)
+    assert (fast.statistics.states, fast.rmc_transitions) == (19_559, 45_481)
+    for options in VARIANTS[:2]:
+        other = run(path, trace_out=None, **options)
+        assert _summary(other) == _summary(fast), options
+    exact = run(path, trace_out=None, exact_states=True)
+    assert exact.statistics.digest_bits == 128
+    assert fast.statistics.digest_bits == 64
+    assert fast.statistics.bytes_per_state < 40 < exact.statistics.bytes_per_state
+    assert 0 < fast.statistics.collision_probability < 1e-9
+
+
+def test_world_key_is_time_shift_invariant_and_content_based():
+    a = World(0, (b"x",), ())
+    b = World(500, (b"x",), ())
+    c = World(0, (b"y",), ())
+    assert a.key == b.key != c.key
+    assert a.digest == b.digest != c.digest
+    assert isinstance(a.key, int) and 0 <= a.key < 2**64
+
+
+@given(st.lists(st.integers(min_value=0, max_value=2**64 - 1), max_size=400))
+@settings(max_examples=60, deadline=None)
+def test_digest_table_behaves_like_a_dict(keys):
+    table = DigestTable(capacity=8)
+    ref: dict[int, int] = {}
+    for k in keys:
+        sid = len(ref)
+        expected = ref.setdefault(k or 1, sid)  # 0 is stored as 1 (documented)
+        assert table.setdefault(k, sid) == expected
+    assert len(table) == len(ref)
+    for k, sid in ref.items():
+        assert table.get(k) == sid
+    assert table.capacity * 0.6 >= len(ref)
+    again = pickle.loads(pickle.dumps(table))
+    assert all(again.get(k) == sid for k, sid in ref.items())
+    assert again.setdefault(12345678901, -7) == ref.get(12345678901, -7)
+
+
+def test_digest_table_grows_and_stays_compact():
+    rng = random.Random(5)
+    table = DigestTable()
+    keys = [rng.getrandbits(64) for _ in range(100_000)]
+    for sid, k in enumerate(keys):
+        table.setdefault(k, sid)
+    assert [table.get(k) for k in keys[:1000]] == list(range(1000))
+    assert table.get(rng.getrandbits(64)) == -1
+    assert table.nbytes() / len(table) < 12 / 0.29  # load factor between 0.3 and 0.6
+
+
+def test_edge_store_deduplicates_and_lasso_search_uses_it():
+    store = StateStore(record_edges=True, flags=("p",))
+    for key in range(4):
+        store.add(key + 10, key - 1)
+        store.holds["p"].append(False)
+    store.roots[0] = ()
+    edges = store.edges
+    assert isinstance(edges, EdgeStore)
+    edges.set(0, [1, 1, 2])
+    edges.set(1, [3])
+    edges.set(2, [])
+    edges.set(3, [1, 1])
+    assert [edges.targets[k] for k in edges.out(0)] == [1, 2]
+    assert find_lasso(store, "p") == ([0, 1, 3, 1], 1)
+
+
+def test_store_holds_far_fewer_bytes_per_state_than_the_exact_store(tmp_path):
+    path = scenario(tmp_path, [node("c", "Counter", modulo=0)], name="big")
+    scen = load(path)
+    props = PropertySet.from_scenario(scen)
+    stats = {}
+    for exact in (False, True):
+        search = Search(System(scen, monitors=props, exact_states=exact), props)
+        search.limits = type(search.limits)(max_states=20_000)
+        stats[exact] = search.run("bfs").statistics
+    assert stats[False].states == stats[True].states == 20_000
+    # Just after the table doubled: 12 B / 0.3 load + parent, flags and roots.
+    assert stats[False].bytes_per_state < 50
+    assert stats[True].bytes_per_state > 2 * stats[False].bytes_per_state
