@@ -18,7 +18,16 @@ Layout (every key but `nodes` optional)::
         params: {start: [5, 5], goal: [45, 45]}
     properties:                    # see checker/properties.py for the kinds
       - {name: no_collision, kind: invariant, expr: "map_server.collisions == 0"}
-    check: {max_states: 100000, max_depth: 0, max_time_s: 0, latency: [0, 0]}
+    check:                         # checker settings, all optional (checker/faults.py has details)
+      max_states: 100000           # also max_depth, max_time_s, search: bfs|dfs|random
+      latency: [0, 0]              # delivery delay branches, or {default: [a, b], /topic: [a, b]}
+      global_priority: false       # rebeca: node priority of the head message (RMC @globalPriority)
+      deadline_ms: 50              # or {default: 100, /topic: 50}: a later delivery is a violation
+      queue_bound: 8               # or {default: 8, node: 20}: more pending events = queue overflow
+      faults:                      # off unless given
+        drop: [/topic_or_service]  # each delivery: delivered | lost
+        duplicate: [/topic]        # each delivery: delivered | delivered twice
+        crash: {nodes: [r1], max: 1, durable: []}   # crash-and-restart branches
     live: {timeout_s: 120, stop_on_error: false, time_scale: 1.0,
            report: "nodes.report:report_for"}  # factory(scenario) -> report, see launcher
 
