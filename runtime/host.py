@@ -19,7 +19,20 @@ through `runtime.dispatch.run_handler`, then performs the recorded effects:
 Handler exceptions are logged (node, handler, message, traceback), counted and
 published as violations; the node keeps serving unless ``stop_on_error``.
 Undecodable samples are logged with their key, counted and dropped. Receivers
-of reliable topics count sequence gaps per (sender, topic).
+count sequence gaps per (sender, topic): on reliable topics as ``gaps`` (a
+loss the tests treat as a bug), on best-effort ones as ``dropped_best_effort``.
+
+Bounded inbox. Each subscription keeps at most ``qos.depth`` received but not
+yet handled messages (KEEP_LAST, a ``deque(maxlen=depth)``): when a message
+arrives with ``depth`` already waiting, the oldest waiting one is dropped and
+counted (``dropped_keep_last``); the inbox holds one slot per waiting message,
+and a slot runs the oldest message of its subscription. Gaps are counted
+before that, on every decoded sample, so they measure losses below the host
+(network, or the transport's own bounded hand-off, ``dropped_overflow``).
+
+Hot path. Inbox entries are plain tuples (compared in C), key expressions and
+per-topic sequence counters are cached, and a handler's effects are
+performed right after it returns, in the order it recorded them.
 """
 
 from __future__ import annotations
@@ -30,6 +43,7 @@ import heapq
 import itertools
 import random
 import sys
+from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, TextIO, final
@@ -85,16 +99,28 @@ class HostStatistics:
     timers_pending: int
     published: int
     handled: int
+    dropped_keep_last: int = 0
+    dropped_overflow: int = 0
+    dropped_best_effort: int = 0
 
 
-@dataclass(order=True, slots=True)
-class _Item:
-    arrival_ms: int
-    priority: int
-    seq: int
-    method: str = ""
-    args: tuple[Any, ...] = ()
-    respond: Respond | None = None
+@final
+class _Subscription:
+    """One declared subscription: its handler and its KEEP_LAST queue of waiting messages."""
+
+    __slots__ = ("method", "priority", "topic", "gap_counter", "waiting")
+
+    def __init__(self, spec: HandlerSpec, topic: str) -> None:
+        self.method, self.priority, self.topic = spec.method, spec.priority, topic
+        reliable = spec.qos.reliability is Reliability.RELIABLE
+        self.gap_counter = "gaps" if reliable else "best_effort"  # a bug vs. drops by design
+        self.waiting: deque[Any] = deque(maxlen=max(1, spec.qos.depth))
+
+
+# An inbox entry: (arrival_ms, priority, seq, work) with work either a _Subscription
+# (run its oldest waiting message) or (method, args, respond). seq is unique, so
+# tuples never compare their work.
+_Entry = tuple[int, int, int, Any]
 
 
 @final
@@ -125,18 +151,21 @@ class NodeHost:
         self.failed = False
         self.alive: set[str] = set()
         self._chooser = RandomChooser(derive_seed(seed, node.name))
-        self._inbox: list[_Item] = []
+        self._inbox: list[_Entry] = []
         self._counter = itertools.count()
         self._timers: dict[int, TimerHandle] = {}
         self._calls: dict[int, tuple[str, str, TimerHandle]] = {}
-        self._pub_seq: dict[str, int] = {}
+        self._topics: dict[str, list[Any]] = {}  # topic -> [key expression, qos, last seq]
         self._last_seq: dict[tuple[str, str], int] = {}
+        self._priorities = {s.method: s.priority for s in self.spec.handlers}
+        self._liveliness = next((s for s in self.spec.of_kind("subscribe")
+                                 if node.resolve(s.name or "") == LIVELINESS_TOPIC), None)
         self._drain_scheduled = False
         self._stop_requested = False
         self._stop: asyncio.Event | None = None
         self._alive_changed: asyncio.Event | None = None
         self._n = dict.fromkeys(("received", "undecodable", "errors", "failures", "gaps",
-                                 "published", "handled"), 0)
+                                 "published", "handled", "keep_last", "best_effort"), 0)
 
     # ---------------------------------------------------------------- lifecycle
 
@@ -170,10 +199,14 @@ class NodeHost:
     def statistics(self) -> HostStatistics:
         """Counters since start, as a frozen record."""
         n = self._n
+        transport_stats = getattr(self.transport, "statistics", None)
+        overflow = transport_stats().get("overflow", 0) if callable(transport_stats) else 0
         return HostStatistics(received=n["received"], dropped_undecodable=n["undecodable"],
                               handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
                               inbox_depth=len(self._inbox), timers_pending=len(self._timers),
-                              published=n["published"], handled=n["handled"])
+                              published=n["published"], handled=n["handled"],
+                              dropped_keep_last=n["keep_last"], dropped_overflow=overflow,
+                              dropped_best_effort=n["best_effort"])
 
     def idle(self) -> bool:
         """True when no inbox item is waiting and no drain is scheduled."""
@@ -181,6 +214,9 @@ class NodeHost:
 
     def _declare(self) -> None:
         node, t = self.node, self.transport
+        after_burst = getattr(t, "after_burst", None)
+        if after_burst is not None:  # run what a burst of samples brought before the next poll
+            after_burst(self._flush)
         for spec in self.spec.of_kind("subscribe"):
             topic = node.resolve(spec.name or "")
             if topic == LIVELINESS_TOPIC:
@@ -215,34 +251,41 @@ class NodeHost:
     # ---------------------------------------------------------------- arrivals
 
     def _make_deliver(self, spec: HandlerSpec, topic: str) -> Callable[[str, bytes], None]:
-        count_gaps = spec.qos.reliability is Reliability.RELIABLE
+        sub = _Subscription(spec, topic)
+        n, last_seq, now_ms = self._n, self._last_seq, self.clock.now_ms
 
         def deliver(key: str, payload: bytes) -> None:
-            self._n["received"] += 1
+            n["received"] += 1
             try:
                 env = decode(payload)
-            except DecodeError as exc:
-                self._n["undecodable"] += 1
+            except Exception as exc:  # DecodeError (anything else would be a codec bug)
+                n["undecodable"] += 1
                 self._line(f"dropped undecodable sample on {key}: {exc}", err=True)
                 return
-            if count_gaps:
-                self._count_gap(env.sender, topic, env.seq)
-            self._enqueue(self.clock.now_ms(), spec.priority, spec.method, (env.msg,))
+            origin = (env.sender, topic)
+            last = last_seq.get(origin)
+            if last is not None and env.seq > last + 1:
+                n[sub.gap_counter] += env.seq - last - 1
+            last_seq[origin] = env.seq
+            waiting = sub.waiting
+            if len(waiting) == waiting.maxlen:  # KEEP_LAST: the oldest waiting message goes
+                waiting.append(env.msg)
+                n["keep_last"] += 1
+                return
+            waiting.append(env.msg)
+            heapq.heappush(self._inbox, (now_ms(), sub.priority, next(self._counter), sub))
+            if not self._drain_scheduled:
+                self._drain_scheduled = True
+                asyncio.get_running_loop().call_soon(self._drain)
 
         return deliver
-
-    def _count_gap(self, sender: str, topic: str, seq: int) -> None:
-        last = self._last_seq.get((sender, topic))
-        if last is not None and seq > last + 1:
-            self._n["gaps"] += seq - last - 1
-        self._last_seq[(sender, topic)] = seq
 
     def _make_serve(self, spec: HandlerSpec) -> Callable[[bytes, Respond], None]:
         def on_request(payload: bytes, respond: Respond) -> None:
             self._n["received"] += 1
             try:
                 request = decode(payload).msg
-            except DecodeError as exc:
+            except Exception as exc:  # DecodeError (anything else would be a codec bug)
                 self._n["undecodable"] += 1
                 self._line(f"undecodable request for {spec.name}: {exc}", err=True)
                 respond(None, f"server error: undecodable request ({exc})")
@@ -256,49 +299,67 @@ class NodeHost:
         (self.alive.add if alive else self.alive.discard)(name)
         if self._alive_changed is not None:
             self._alive_changed.set()
-        spec = next((s for s in self.spec.of_kind("subscribe")
-                     if self.node.resolve(s.name or "") == LIVELINESS_TOPIC), None)
+        spec = self._liveliness
         if spec is not None:
             self._enqueue(self.clock.now_ms(), spec.priority, spec.method, (NodeAlive(name, alive),))
 
     def _enqueue(self, arrival_ms: int, priority: int, method: str, args: tuple[Any, ...],
                  respond: Respond | None = None) -> None:
-        heapq.heappush(self._inbox, _Item(arrival_ms, priority, next(self._counter),
-                                          method, args, respond))
+        heapq.heappush(self._inbox, (arrival_ms, priority, next(self._counter),
+                                     (method, args, respond)))
         if not self._drain_scheduled:
             self._drain_scheduled = True
             asyncio.get_running_loop().call_soon(self._drain)
 
+    def _flush(self) -> None:
+        if self._inbox and self._drain_scheduled:
+            self._drain()  # the call_soon'd drain then finds less (or nothing) to do
+
     def _drain(self) -> None:
         self._drain_scheduled = False
+        inbox, pop = self._inbox, heapq.heappop
         for _ in range(_DRAIN_BATCH):
-            if not self._inbox or (self._stop is not None and self._stop.is_set()):
+            if not inbox or self._stop_requested:
                 return
-            self._dispatch(heapq.heappop(self._inbox))
-        if self._inbox and not self._drain_scheduled:
+            work = pop(inbox)[3]
+            if type(work) is _Subscription:
+                self._dispatch(work.method, (work.waiting.popleft(),), None)
+            else:
+                self._dispatch(*work)
+        if inbox and not self._drain_scheduled:
             self._drain_scheduled = True
             asyncio.get_running_loop().call_soon(self._drain)
 
     # ---------------------------------------------------------------- dispatch
 
-    def _dispatch(self, item: _Item) -> None:
+    def _dispatch(self, method: str, args: tuple[Any, ...], respond: Respond | None) -> None:
         now = self.clock.now_ms()
         ctx = Context(self.node, now_ms=now, chooser=self._chooser)
-        outcome = run_handler(self.node, item.method, ctx, item.args,
-                              expects_reply=item.respond is not None)
+        outcome = run_handler(self.node, method, ctx, args, expects_reply=respond is not None)
         self._n["handled"] += 1
-        if outcome.error is not None:
-            self._handler_error(outcome.error, item)
-        self._perform(outcome, now)
-        if item.respond is not None:
-            if outcome.error is None:
-                item.respond(encode(outcome.reply, stamp_ms=now, sender=self.node.name), "")
+        error = outcome.error
+        if outcome.effects:
+            try:
+                self._perform(outcome, now)
+            except Exception as exc:  # e.g. a message msgpack cannot encode (an int ≥ 2**64)
+                error = error or HandlerError(self.node.name, method, f"effect failed: {exc!r}")
+        reply = None
+        if error is None and respond is not None:
+            try:
+                reply = encode(outcome.reply, stamp_ms=now, sender=self.node.name)
+            except Exception as exc:
+                error = HandlerError(self.node.name, method, f"unencodable reply: {exc!r}")
+        if error is not None:
+            self._handler_error(error, args)
+        if respond is not None:
+            if error is None:
+                respond(reply, "")
             else:
-                item.respond(None, f"server error: {outcome.error.message}")
+                respond(None, f"server error: {error.message}")
 
-    def _handler_error(self, error: HandlerError, item: _Item) -> None:
+    def _handler_error(self, error: HandlerError, args: tuple[Any, ...]) -> None:
         self._n["errors"] += 1
-        detail = ", ".join(repr(a)[:120] for a in item.args)
+        detail = ", ".join(repr(a)[:120] for a in args)
         self._line(f"error in handler {error} (args: {detail})", err=True)
         if error.traceback:
             self._line(error.traceback.rstrip(), err=True)
@@ -324,18 +385,19 @@ class NodeHost:
                     text = " ".join(f"{k}={v!r}" for k, v in fields)
                     self._line(f"t={now} {event}" + (f" {text}" if text else ""))
                 case _:  # After
-                    due = now + effect.delay_ms
-                    spec = self.spec.by_method(effect.handler)
-                    self._timer(due, spec.priority if spec else 0, effect.handler, effect.args)
+                    self._timer(now + effect.delay_ms, self._priorities.get(effect.handler, 0),
+                                effect.handler, effect.args)
 
     def _publish(self, topic: str, msg: Any, now: int) -> None:
-        seq = self._pub_seq.get(topic, 0) + 1
-        self._pub_seq[topic] = seq
-        if seq == 1:
+        entry = self._topics.get(topic)
+        if entry is None:
+            entry = [key_expr(self.fleet, topic), self.publications.get(topic, QOS_DEFAULT), 0]
+            self._topics[topic] = entry
             self.transport.announce(graph_key(self.fleet, "pub", self.node.name, topic))
-        qos = self.publications.get(topic, QOS_DEFAULT)
-        payload = encode(msg, stamp_ms=now, seq=seq, sender=self.node.name)
-        self.transport.put(key_expr(self.fleet, topic), payload, qos)
+        seq = entry[2] + 1
+        payload = encode(msg, stamp_ms=now, seq=seq, sender=self.node.name)  # may raise: no gap
+        entry[2] = seq
+        self.transport.put(entry[0], payload, entry[1])
         self._n["published"] += 1
 
     # ---------------------------------------------------------------- timers and calls
@@ -390,8 +452,7 @@ class NodeHost:
                 result = decode(reply).msg
             except DecodeError as exc:
                 result = CallError(service, f"server error: undecodable reply ({exc})")
-        spec = self.spec.by_method(reply_to)
-        self._enqueue(self.clock.now_ms(), spec.priority if spec else 0, reply_to, (result,))
+        self._enqueue(self.clock.now_ms(), self._priorities.get(reply_to, 0), reply_to, (result,))
 
     def _cancel_timers(self) -> None:
         for handle in self._timers.values():

@@ -12,6 +12,10 @@ The run ends at the timeout, when a node publishes a `String` on
 ``/twinfleet/shutdown``, when every node has exited, when a node fails, or on
 SIGINT/SIGTERM. Shutdown escalates SIGINT → SIGTERM → SIGKILL per process;
 children also get PR_SET_PDEATHSIG, so none outlives a SIGKILLed launcher.
+
+With ``run_record=PATH`` the run is also written as JSON lines, one flushed
+line per event (start, node exits and respawns, end reason, node statistics,
+summary): see `runtime.run_record`.
 """
 
 from __future__ import annotations
@@ -36,7 +40,8 @@ import msgpack
 from runtime.messages import DecodeError, decode
 from runtime.names import key_expr
 from runtime.node import QOS_DEFAULT
-from runtime.node_main import PARENT_ENV
+from runtime.node_main import PARENT_ENV, stats_key
+from runtime.run_record import RunRecord, versions
 from runtime.scenario import NodeConfig, Scenario
 from runtime.zenoh_transport import ZenohTransport, zenoh_config
 
@@ -150,8 +155,10 @@ class Fleet:
     """A running fleet; `run_fleet` is the usual way to use it."""
 
     def __init__(self, scenario: Scenario, *, time_scale: float, seed: int,
-                 connect: str | None, listen: str | None, out: TextIO) -> None:
+                 connect: str | None, listen: str | None, out: TextIO,
+                 record: RunRecord | None = None) -> None:
         self.scenario, self.time_scale, self.seed, self.out = scenario, time_scale, seed, out
+        self.record = record
         self.connect = connect
         self.endpoint = connect or listen or f"tcp/127.0.0.1:{free_port()}"
         self.transport: ZenohTransport | None = None
@@ -234,9 +241,14 @@ class Fleet:
             self.log(f"node {proc.cfg.name} exited with code {code}; last lines:")
             for line in proc.last_lines:
                 _emit(self.out, f"    {line}")
+            if self.record is not None:
+                self.record.write("node_exit", node=proc.cfg.name, code=code,
+                                  last_lines=list(proc.last_lines))
             if proc.cfg.respawn:
                 proc.restarts += 1
                 self.log(f"respawning {proc.cfg.name} (restart {proc.restarts})")
+                if self.record is not None:
+                    self.record.write("respawn", node=proc.cfg.name, restart=proc.restarts)
                 await asyncio.sleep(_RESPAWN_DELAY_S)
                 if self.shutting_down:
                     return
@@ -248,6 +260,23 @@ class Fleet:
             elif not any(p.running() for p in self.processes.values()):
                 self.end("all nodes exited")
             return
+
+    async def node_statistics(self, timeout_s: float = 0.5) -> dict[str, Any]:
+        """Each running node's `HostStatistics`, read from its statistics queryable."""
+        if self.transport is None or self.transport.session is None:
+            return {}
+        key = stats_key(self.scenario.fleet, "*")
+
+        def query() -> dict[str, Any]:
+            found: dict[str, Any] = {}
+            for reply in self.transport.session.get(key, timeout=timeout_s):  # type: ignore[union-attr]
+                if reply.ok is not None:
+                    node = str(reply.ok.key_expr).rsplit("/", 1)[-1]
+                    with contextlib.suppress(Exception):
+                        found[node] = msgpack.unpackb(reply.ok.payload.to_bytes())
+            return found
+
+        return await asyncio.to_thread(query)
 
     async def shutdown(self) -> None:
         """Stop every process: SIGINT, then SIGTERM, then SIGKILL; close the session."""
@@ -276,7 +305,8 @@ class Fleet:
 async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     timeout_s: float | None = None, seed: int | None = None,
                     connect: str | None = None, listen: str | None = None,
-                    out: TextIO = sys.stdout, handle_signals: bool = True) -> FleetResult:
+                    out: TextIO = sys.stdout, handle_signals: bool = True,
+                    run_record: str | None = None) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
@@ -288,18 +318,27 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         listen: endpoint of the embedded router (default: tcp/127.0.0.1:<free port>).
         out: where the prefixed output lines go.
         handle_signals: end the run on SIGINT/SIGTERM (main thread only).
+        run_record: write the run as JSON lines to this file (`runtime.run_record`).
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.get("time_scale", 1.0))
     timeout_s = timeout_s if timeout_s is not None else live.get("timeout_s")
     seed = scenario.seed if seed is None else seed
+    record = RunRecord(run_record) if run_record else None
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
-                  out=out)
+                  out=out, record=record)
     started = time.monotonic()
     loop = asyncio.get_running_loop()
     signals = _install_signals(loop, fleet) if handle_signals else []
     tasks: list[asyncio.Task[None]] = []
+    reason = "launcher error"
     try:
+        if record is not None:
+            record.write("start", scenario=str(scenario.path), name=scenario.name,
+                         fleet=scenario.fleet, seed=seed, time_scale=time_scale,
+                         timeout_s=timeout_s, endpoint=fleet.endpoint, versions=versions(),
+                         nodes=[{"name": c.name, "class": c.class_path, "respawn": c.respawn}
+                                for c in scenario.nodes])
         await fleet.open()
         fleet.log(f"fleet {scenario.fleet!r} on {fleet.endpoint} "
                   f"(time scale {time_scale:g}, seed {seed}); monitor with: "
@@ -311,18 +350,39 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         except TimeoutError:
             reason = f"timeout after {timeout_s:g} s"
         fleet.log(f"run ended: {reason}")
+        if record is not None:
+            record.write("end", reason=reason)
+            record.write("node_stats", stats=await fleet.node_statistics())
     finally:
         await fleet.shutdown()
         for task in tasks:
             task.cancel()
         for sig in signals:
             loop.remove_signal_handler(sig)
+        if record is not None and sys.exc_info()[0] is not None:
+            record.write("end", reason=f"launcher error: {sys.exc_info()[1]!r}")
+            record.close()
     codes = {name: p.exit_code for name, p in fleet.processes.items()}
-    return FleetResult(fleet=scenario.fleet, endpoint=fleet.endpoint, reason=reason,
-                       exit_codes=codes, failed=tuple(fleet.failed),
-                       restarts={n: p.restarts for n, p in fleet.processes.items()},
-                       last_messages=dict(fleet.last_messages),
-                       duration_s=time.monotonic() - started, report=fleet.report)
+    result = FleetResult(fleet=scenario.fleet, endpoint=fleet.endpoint, reason=reason,
+                         exit_codes=codes, failed=tuple(fleet.failed),
+                         restarts={n: p.restarts for n, p in fleet.processes.items()},
+                         last_messages=dict(fleet.last_messages),
+                         duration_s=time.monotonic() - started, report=fleet.report)
+    if record is not None:
+        _record_summary(record, result)
+        record.close()
+    return result
+
+
+def _record_summary(record: RunRecord, result: FleetResult) -> None:
+    report = None
+    if result.report is not None:
+        report = {"passed": result.report.passed(), "text": result.report.render(),
+                  "data": result.report}
+    record.write("summary", ok=result.ok, passed=result.passed, reason=result.reason,
+                 exit_codes=result.exit_codes, failed=result.failed, restarts=result.restarts,
+                 duration_s=round(result.duration_s, 3), last_messages=result.last_messages,
+                 report=report)
 
 
 def load_report(scenario: Scenario) -> Any:

@@ -65,7 +65,7 @@ def message_class(type_name: str) -> type:
     """The class registered under `type_name`."""
     try:
         return _REGISTRY[type_name]
-    except KeyError:
+    except (KeyError, TypeError):  # TypeError: an unhashable `_type` in a decoded payload
         raise DecodeError(f"unknown message type {type_name!r}") from None
 
 
@@ -74,11 +74,30 @@ def registered_types() -> dict[str, type]:
     return dict(_REGISTRY)
 
 
+_SCALARS = frozenset({bool, int, float, str, bytes, type(None)})
+_FIELD_NAMES: dict[type, tuple[str, ...]] = {}
+
+
+def _field_names(cls: type) -> tuple[str, ...]:
+    """Field names of a message class, in declaration order (cached: encoding is a hot path)."""
+    names = _FIELD_NAMES.get(cls)
+    if names is None:
+        names = _FIELD_NAMES[cls] = tuple(f.name for f in dataclasses.fields(cls))
+    return names
+
+
 def to_plain(value: Any) -> Any:
     """Convert a message (recursively) into msgpack-ready maps and arrays."""
-    if is_message(value):
-        out = {f.name: to_plain(getattr(value, f.name)) for f in dataclasses.fields(value)}
-        out["_type"] = type_name_of(value)
+    cls = type(value)
+    if cls in _SCALARS:
+        return value
+    type_name = getattr(cls, "__message_type__", None)
+    if type_name is not None:
+        out = {}
+        for name in _field_names(cls):
+            field_value = getattr(value, name)
+            out[name] = field_value if type(field_value) in _SCALARS else to_plain(field_value)
+        out["_type"] = type_name
         return out
     if isinstance(value, tuple | list):
         return [to_plain(v) for v in value]
@@ -87,18 +106,26 @@ def to_plain(value: Any) -> Any:
 
 def from_plain(value: Any) -> Any:
     """Inverse of `to_plain`: maps with `_type` become messages, arrays become tuples."""
+    if type(value) in _SCALARS:
+        return value
     if isinstance(value, dict):
         if "_type" not in value:
             return {k: from_plain(v) for k, v in value.items()}
-        fields = {k: from_plain(v) for k, v in value.items() if k != "_type"}
-        cls = message_class(value["_type"])
-        try:
-            return cls(**fields)
-        except TypeError as exc:
-            raise DecodeError(f"{value['_type']}: {exc}") from None
+        return _build(value["_type"], value)
     if isinstance(value, list | tuple):
         return tuple(from_plain(v) for v in value)
     return value
+
+
+def _build(type_name: Any, data: dict[Any, Any]) -> Any:
+    """The message `type_name` from the field map `data` (its `_type` key ignored)."""
+    fields = {k: v if type(v) in _SCALARS else from_plain(v)
+              for k, v in data.items() if k != "_type"}
+    cls = message_class(type_name)
+    try:
+        return cls(**fields)
+    except Exception as exc:  # wrong fields, or a message class that validates its values
+        raise DecodeError(f"{type_name}: {exc}") from None
 
 
 @dataclass(frozen=True, slots=True)
@@ -132,7 +159,10 @@ def decode(payload: bytes) -> Envelope:
     data = raw["data"]
     if not isinstance(data, dict) or not isinstance(raw["type"], str):
         raise DecodeError("envelope 'type' must be a string and 'data' a map")
-    msg = from_plain({**data, "_type": raw["type"]})
+    try:
+        msg = _build(raw["type"], data)
+    except RecursionError:
+        raise DecodeError("message nested too deeply") from None
     stamp, seq, sender = raw.get("stamp_ms", 0), raw.get("seq", 0), raw.get("sender", "")
     if not isinstance(stamp, int) or not isinstance(seq, int) or not isinstance(sender, str):
         raise DecodeError("envelope 'stamp_ms'/'seq' must be integers and 'sender' a string")

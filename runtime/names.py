@@ -8,6 +8,7 @@ Pure functions: both the live transport and the checker use them.
 
 from __future__ import annotations
 
+import functools
 import re
 
 KEY_PREFIX = "twinfleet"
@@ -37,6 +38,7 @@ def normalise_namespace(namespace: str | None) -> str:
     return ns
 
 
+@functools.lru_cache(maxsize=4096)  # pure, and on the publish hot path
 def resolve(name: str, namespace: str | None = "", node_name: str | None = None) -> str:
     """Return the fully qualified name of `name` seen from a node in `namespace`."""
     if not name or name.endswith("/"):

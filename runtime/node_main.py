@@ -82,7 +82,12 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
     stop_on_error = bool(args.stop_on_error if args.stop_on_error is not None
                          else live.get("stop_on_error", False))
     clock = FleetClock(args.epoch_ns, time_scale)
-    transport = ZenohTransport(zenoh_config(connect=[args.connect]))
+    try:
+        config = zenoh_config(connect=[args.connect])
+    except ValueError as exc:  # a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    transport = ZenohTransport(config)
     peers = () if args.no_wait else tuple(n.name for n in scenario.nodes)
     host = NodeHost(node, transport, clock,
                     seed=args.seed if args.seed is not None else scenario.seed,

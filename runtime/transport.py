@@ -94,6 +94,10 @@ class Transport(Protocol):
         """Undeclare everything and disconnect."""
         ...
 
+    def statistics(self) -> dict[str, int]:
+        """Transport counters; ``overflow``: samples dropped by a bounded hand-off to the loop."""
+        ...
+
 
 def key_matches(pattern: str, key: str) -> bool:
     """Whether a concrete `key` matches `pattern` with Zenoh's `*` and `**` wildcards."""
@@ -204,6 +208,10 @@ class LoopbackTransport:
         for token in sorted(self.bus.tokens):
             if key_matches(key_expr, token):
                 self.loop.call_soon(on_change, token, True)
+
+    def statistics(self) -> dict[str, int]:
+        """Delivery is unbounded in memory: nothing is ever dropped."""
+        return {"wakeups": 0, "overflow": 0}
 
     async def close(self) -> None:
         """Remove this transport's entities; its tokens disappear for the watchers."""

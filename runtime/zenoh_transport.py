@@ -7,9 +7,21 @@ loop per burst (`call_soon_threadsafe` only when no drain is pending). The
 drain runs the host's callbacks on the loop. No handler, decoding or session
 method ever runs on a Zenoh thread.
 
+Bounded hand-off. Samples wait in that deque only until the loop drains it;
+if the loop stalls (a long handler, a suspended process), at most
+``max_pending`` samples wait and later ones are dropped and counted
+(``statistics()["overflow"]``) rather than blocking Zenoh's thread. Queries,
+replies and liveliness changes are never dropped (they are rare, and losing
+one would hang a caller or hide a node). Per-subscription KEEP_LAST depth is
+the host's job, after decoding (see `runtime.host`).
+
 Configuration. `zenoh_config` is the only place a Zenoh config is built: it
 always disables multicast scouting and shared memory and enables timestamping
-(needed by the advanced publisher of latched topics).
+(needed by the advanced publisher of latched topics). The environment variable
+``TWINFLEET_ZENOH_CONFIG_OVERRIDE='key=json5;key=json5'`` adjusts other keys
+for every session of a fleet (the launcher's environment reaches its nodes),
+e.g. ``transport/link/tx/lease=1000`` to notice a cut link within a second;
+keys under ``scouting/multicast`` and ``transport/shared_memory`` are refused.
 
 QoS mapping. Reliable topics publish with congestion control BLOCK,
 best-effort ones with DROP. Transient-local ("latched") topics use
@@ -28,6 +40,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import os
 import time
 import traceback
 from collections import deque
@@ -40,6 +53,30 @@ from zenoh import ext
 from runtime.node import Durability, QoS, Reliability
 from runtime.transport import Deliver, OnChange, OnDone, OnRequest
 
+OVERRIDE_ENV = "TWINFLEET_ZENOH_CONFIG_OVERRIDE"
+_LOCKED = ("scouting/multicast", "transport/shared_memory")
+
+
+def config_overrides(text: str | None = None) -> list[tuple[str, str]]:
+    """Parse ``key=json5;key=json5`` (default: the `OVERRIDE_ENV` variable) into pairs.
+
+    Raises:
+        ValueError: on a malformed entry or a key that would re-enable multicast
+            scouting or shared memory.
+    """
+    text = os.environ.get(OVERRIDE_ENV, "") if text is None else text
+    pairs = []
+    for entry in filter(None, (e.strip() for e in text.split(";"))):
+        key, sep, value = entry.partition("=")
+        key = key.strip().strip("/")
+        if not sep or not key or not value.strip():
+            raise ValueError(f"{OVERRIDE_ENV}: expected key=value, got {entry!r}")
+        if key.startswith(_LOCKED) or any(lock.startswith(key) for lock in _LOCKED):
+            raise ValueError(f"{OVERRIDE_ENV}: {key} cannot be overridden "
+                             "(multicast scouting and shared memory stay off)")
+        pairs.append((key, value.strip()))
+    return pairs
+
 
 def zenoh_config(*, connect: Sequence[str] = (), listen: Sequence[str] = (),
                  mode: str = "client") -> zenoh.Config:
@@ -49,6 +86,9 @@ def zenoh_config(*, connect: Sequence[str] = (), listen: Sequence[str] = (),
         connect: endpoints to connect to, e.g. ``["tcp/127.0.0.1:7447"]``.
         listen: endpoints to listen on (routers and peers).
         mode: "client", "peer" or "router".
+
+    Raises:
+        ValueError: on a bad mode, or a bad ``TWINFLEET_ZENOH_CONFIG_OVERRIDE`` entry.
     """
     if mode not in ("client", "peer", "router"):
         raise ValueError(f"mode must be client, peer or router, got {mode!r}")
@@ -60,18 +100,35 @@ def zenoh_config(*, connect: Sequence[str] = (), listen: Sequence[str] = (),
     conf.insert_json5("timestamping/enabled", "true")
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    for key, value in config_overrides():
+        try:
+            conf.insert_json5(key, value)
+        except zenoh.ZError as exc:
+            raise ValueError(f"{OVERRIDE_ENV}: {key}={value}: {exc}") from None
     return conf
 
 
-class Handoff:
-    """Coalesced hand-off of work from Zenoh threads to one asyncio loop."""
+DEFAULT_MAX_PENDING = 20_000
 
-    def __init__(self, loop: asyncio.AbstractEventLoop) -> None:
+
+class Handoff:
+    """Coalesced hand-off of work from Zenoh threads to one asyncio loop.
+
+    Args:
+        loop: the loop that runs the queued calls.
+        capacity: how many calls `offer` lets wait; `push` is not bounded.
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, capacity: int = DEFAULT_MAX_PENDING,
+                 ) -> None:
         self.loop = loop
+        self.capacity = capacity
         self.pending: deque[tuple[Callable[..., Any], tuple[Any, ...]]] = deque()
         self.scheduled = False
         self.closed = False
         self.wakeups = 0
+        self.overflow = 0
+        self.after_drain: list[Callable[[], None]] = []
 
     def push(self, fn: Callable[..., Any], *args: Any) -> None:
         """Queue `fn(*args)` to run on the loop (any thread)."""
@@ -86,13 +143,23 @@ class Handoff:
             except RuntimeError:  # loop closed during shutdown
                 self.closed = True
 
+    def offer(self, fn: Callable[..., Any], *args: Any) -> bool:
+        """Like `push`, but drop and count the call when `capacity` calls already wait."""
+        if len(self.pending) >= self.capacity:
+            self.overflow += 1
+            return False
+        self.push(fn, *args)
+        return True
+
     def drain(self) -> None:
-        """Run every queued call (on the loop)."""
+        """Run every queued call, then the `after_drain` callbacks (on the loop)."""
         self.scheduled = False  # before popping: a push racing with us schedules again
         pending = self.pending
         while pending and not self.closed:
             fn, args = pending.popleft()
             fn(*args)
+        for fn in self.after_drain:
+            fn()
 
 
 @final
@@ -101,10 +168,12 @@ class ZenohTransport:
 
     Args:
         config: a config from `zenoh_config`.
+        max_pending: samples allowed to wait for the loop before new ones are dropped.
     """
 
-    def __init__(self, config: zenoh.Config) -> None:
+    def __init__(self, config: zenoh.Config, *, max_pending: int = DEFAULT_MAX_PENDING) -> None:
         self.config = config
+        self.max_pending = max_pending
         self.session: zenoh.Session | None = None
         self._handoff: Handoff | None = None
         self._publishers: dict[str, Any] = {}
@@ -124,7 +193,7 @@ class ZenohTransport:
 
     async def open(self) -> None:
         """Open the session (in a worker thread: connecting may take a moment)."""
-        self._handoff = Handoff(asyncio.get_running_loop())
+        self._handoff = Handoff(asyncio.get_running_loop(), self.max_pending)
         self.session = await asyncio.to_thread(zenoh.open, self.config)
 
     async def __aenter__(self) -> ZenohTransport:
@@ -136,10 +205,13 @@ class ZenohTransport:
 
     def subscribe(self, key: str, deliver: Deliver, qos: QoS) -> None:
         """Subscribe; latched QoS uses an advanced subscriber with history."""
-        push = self._h.push
-
-        def on_sample(sample: zenoh.Sample) -> None:
-            push(deliver, str(sample.key_expr), sample.payload.to_bytes())
+        offer = self._h.offer
+        if "*" in key:
+            def on_sample(sample: zenoh.Sample) -> None:
+                offer(deliver, str(sample.key_expr), sample.payload.to_bytes())
+        else:  # a concrete key: every sample carries exactly this key
+            def on_sample(sample: zenoh.Sample) -> None:
+                offer(deliver, key, sample.payload.to_bytes())
 
         if qos.durability is Durability.TRANSIENT_LOCAL:
             history = ext.HistoryConfig(detect_late_publishers=True, max_samples=max(1, qos.depth))
@@ -238,9 +310,18 @@ class ZenohTransport:
         self._entities.append(self._s.liveliness().declare_subscriber(key_expr, on_sample,
                                                                       history=True))
 
+    def after_burst(self, fn: Callable[[], None]) -> None:
+        """Call `fn()` on the loop after each burst of deliveries has been handed over.
+
+        The host runs its handlers there, in the same loop iteration as the burst
+        (one loop iteration less per message than a `call_soon`).
+        """
+        self._h.after_drain.append(fn)
+
     def statistics(self) -> dict[str, int]:
-        """Loop wake-ups used so far (one per burst of samples)."""
-        return {"wakeups": self._handoff.wakeups if self._handoff else 0}
+        """Loop wake-ups used so far (one per burst) and samples dropped by the bounded hand-off."""
+        h = self._handoff
+        return {"wakeups": h.wakeups if h else 0, "overflow": h.overflow if h else 0}
 
     async def close(self) -> None:
         """Undeclare (advanced entities first), then close the session, on the loop thread."""

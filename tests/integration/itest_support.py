@@ -70,3 +70,15 @@ def run_cli(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess[st
     """Run `python -m runtime.cli ARGS` and capture its output."""
     return subprocess.run([sys.executable, "-m", "runtime.cli", *args], capture_output=True,
                           text=True, timeout=timeout, env=child_env(), cwd=ROOT, check=False)
+
+
+def node_pid(scenario: Path | str, node: str) -> int | None:
+    """PID of the live node process running `node` of `scenario` (a /proc scan)."""
+    for pid in processes_mentioning(str(scenario)):
+        try:
+            argv = (Path("/proc") / str(pid) / "cmdline").read_bytes().split(b"\0")
+        except OSError:
+            continue
+        if b"runtime.node_main" in argv and argv[argv.index(b"--node") + 1] == node.encode():
+            return pid
+    return None

@@ -25,7 +25,7 @@ from runtime.clock import ManualClock
 from runtime.host import NodeHost, derive_seed
 from runtime.messages import NodeAlive, Violation, decode, encode
 from runtime.names import key_expr
-from runtime.node import QOS_DEFAULT, QOS_LATCHED
+from runtime.node import QOS_DEFAULT, QOS_LATCHED, QoS, Reliability
 from runtime.transport import LoopbackBus, LoopbackTransport
 
 FLEET = "t"
@@ -482,3 +482,130 @@ def test_manual_clock_runs_due_callbacks_in_time_then_schedule_order() -> None:
     assert fired == ["past", "a", "b"]
     assert clock.now_ms() == 25
     assert clock.pending() == 1
+
+
+class Shallow(Node):
+    """Keeps at most three waiting messages per subscription (KEEP_LAST depth 3)."""
+
+    def initial_state(self) -> Log:
+        return Log()
+
+    @subscribe("/nums", qos=QoS(depth=3))
+    def on_num(self, ctx: Context, msg: Num) -> None:
+        self.state.seen.append(msg.value)
+
+    @subscribe("/other", qos=QoS(Reliability.BEST_EFFORT, depth=1))
+    def on_other(self, ctx: Context, msg: Num) -> None:
+        self.state.seen.append(-msg.value)
+
+
+def test_keep_last_drops_the_oldest_waiting_messages_and_counts_them() -> None:
+    async def body() -> tuple[list[Any], Any]:
+        h = Harness()
+        raw = await h.raw()
+        node = Shallow("shallow")
+        host = await h.start(node)
+        for seq in range(1, 11):  # ten arrive before the host gets to run any of them
+            raw.put(key_expr(FLEET, "/nums"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
+        for seq in range(1, 4):
+            raw.put(key_expr(FLEET, "/other"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
+        await settle(*h.hosts)
+        raw.put(key_expr(FLEET, "/nums"), encode(Num(11), seq=11, sender="a"), QOS_DEFAULT)
+        await settle(*h.hosts)
+        await h.stop()
+        return node.state.seen, host.statistics()
+
+    seen, stats = run(body())
+    assert seen == [8, 9, 10, -3, 11]  # arrival order kept among the survivors
+    assert stats.dropped_best_effort == 0
+    assert stats.dropped_keep_last == 7 + 2
+    assert stats.received == 14
+    assert stats.gaps == 0  # dropped on purpose by the subscriber, not lost on the way
+    assert stats.inbox_depth == 0
+
+
+def test_keep_last_loses_nothing_when_the_host_keeps_up() -> None:
+    async def body() -> tuple[list[Any], Any]:
+        h = Harness()
+        raw = await h.raw()
+        node = Shallow("shallow")
+        host = await h.start(node)
+        for seq in range(1, 21):
+            raw.put(key_expr(FLEET, "/nums"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
+            if seq % 3 == 0:
+                await settle(*h.hosts)
+        await settle(*h.hosts)
+        await h.stop()
+        return node.state.seen, host.statistics()
+
+    seen, stats = run(body())
+    assert seen == list(range(1, 21))
+    assert stats.dropped_keep_last == 0
+
+
+def test_statistics_report_the_transport_overflow() -> None:
+    class Overflowing(LoopbackTransport):
+        def statistics(self) -> dict[str, int]:
+            return {"wakeups": 1, "overflow": 5}
+
+    async def body() -> Any:
+        h = Harness()
+        transport = Overflowing(h.bus)
+        await transport.open()
+        host = NodeHost(Shallow("s"), transport, h.clock, seed=1, fleet=FLEET, out=h.out)
+        return host.statistics()
+
+    assert run(body()).dropped_overflow == 5
+
+
+def test_best_effort_gaps_are_counted_as_drops_not_as_gaps() -> None:
+    async def body() -> Any:
+        h = Harness()
+        raw = await h.raw()
+        host = await h.start(Shallow("shallow"))
+        for seq in (1, 2, 5, 6, 9):
+            raw.put(key_expr(FLEET, "/other"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
+            await settle(*h.hosts)
+        await h.stop()
+        return host.statistics()
+
+    stats = run(body())
+    assert (stats.gaps, stats.dropped_best_effort) == (0, 4)
+
+
+class Overflower(Node):
+    """Publishes and replies with an int msgpack cannot encode when asked to."""
+
+    @subscribe("/nums")
+    def on_num(self, ctx: Context, msg: Num) -> None:
+        ctx.publish("/out", Num(msg.value * 2**64))
+
+    @service("/double")
+    def double(self, ctx: Context, req: Num) -> Num:
+        return Num(req.value * 2**64)
+
+
+def test_unencodable_effects_and_replies_are_handler_errors_not_crashes() -> None:
+    async def body() -> tuple[list[Any], Any, list[Any], list[int]]:
+        h = Harness()
+        raw = await h.raw()
+        host = await h.start(Overflower("overflower"))
+        violations: list[Any] = []
+        out_seqs: list[int] = []
+        raw.subscribe(key_expr(FLEET, "/violations"),
+                      lambda k, p: violations.append(decode(p).msg), QOS_DEFAULT)
+        raw.subscribe(key_expr(FLEET, "/out"), lambda k, p: out_seqs.append(decode(p).seq),
+                      QOS_DEFAULT)
+        raw.put(key_expr(FLEET, "/nums"), encode(Num(1), seq=1), QOS_DEFAULT)
+        asker = Asker("asker")
+        await h.start(asker)
+        raw.put(key_expr(FLEET, "/nums"), encode(Num(0), seq=2), QOS_DEFAULT)  # still serving
+        await settle(*h.hosts)
+        await h.stop()
+        return asker.state.seen, host.statistics(), violations, out_seqs
+
+    seen, stats, violations, out_seqs = run(body())
+    assert len(seen) == 1 and seen[0].reason.startswith("server error: unencodable reply")
+    assert stats.handler_errors == 2 and stats.handled == 3
+    assert [v.handler for v in violations] == ["on_num", "double"]
+    assert out_seqs == [1]  # the failed publish used no sequence number: receivers see no gap

@@ -1,0 +1,28 @@
+"""The runtime overhead benchmark still runs end to end (tiny windows; figures not asserted)."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+
+import pytest
+from itest_support import ROOT, child_env
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
+
+
+def test_runtime_overhead_benchmark_smoke() -> None:
+    result = subprocess.run(
+        [sys.executable, str(ROOT / "benchmarks" / "runtime_overhead.py"), "--pairs", "1",
+         "--sizes", "64", "--rounds", "300", "--chunk", "100", "--warmup", "50", "--floods", "1",
+         "--flood-s", "0.2", "--child-timeout", "30"],
+        capture_output=True, text=True, timeout=80, env=child_env(), cwd=ROOT, check=False)
+    assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
+    assert "twinfleet vs raw (median of 1 pairs)" in result.stdout
+    summary = json.loads(result.stdout.splitlines()[-1])["summary"]["64"]
+    for impl in ("raw", "asyncio", "twinfleet"):
+        row = summary[impl]
+        assert row["rounds"] > 0 and row["msg_per_s"] > 0, (impl, row)
+        assert row["lost"] == 0 and row["gaps"] == 0, (impl, row)
+    assert summary["twinfleet"]["wire_bytes"] > 64  # the envelope travels with the payload
