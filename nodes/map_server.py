@@ -27,7 +27,7 @@ from nodes.msgs import (
 from nodes.planning import OtherRobot, PathPlanner
 from nodes.profile import profile_named
 from nodes.scan import Scanner, build_tables
-from runtime import QOS_LATCHED, Context, Node, String, handler, on_start, service, subscribe
+from runtime import QOS_LATCHED, Context, Node, QoS, String, handler, on_start, service, subscribe
 
 UNKNOWN: Cell = (-1, -1)
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"
@@ -120,7 +120,7 @@ class MapServer(Node):
                   for j in range(len(st.cells)) if j != i and st.cells[j] != UNKNOWN]
         return Path(self.planner.plan(others, tuple(req.start), tuple(req.goal)))
 
-    @subscribe("/poses", priority=5)
+    @subscribe("/poses", priority=5, qos=QoS(depth=10_000))  # every pose counts for collisions
     def on_pose(self, ctx: Context, msg: RobotPose) -> None:
         """Track a robot's report and test its shadow against every other robot's."""
         i = self.index.get(msg.robot)

@@ -32,7 +32,7 @@ from nodes.motion import (
 from nodes.msgs import ObstacleScan, Path, PathRequest, RobotPose, RobotStatus
 from nodes.profile import profile_named
 from nodes.scan import can_hop
-from runtime import CallError, Context, Node, handler, on_start, subscribe
+from runtime import CallError, Context, Node, QoS, handler, on_start, subscribe
 
 MAX_FAILURES = 2  # a third failed plan leaves the robot stuck (the model's livelock bound)
 
@@ -124,7 +124,7 @@ class Robot(Node):
     def start(self, ctx: Context) -> None:
         self._set_target(ctx, tuple(self.params.goal))
 
-    @subscribe("scan", priority=3)
+    @subscribe("scan", priority=3, qos=QoS(depth=1000))  # a lagging robot must not lose scans
     def on_scan(self, ctx: Context, msg: ObstacleScan) -> None:
         """Keep the latest scan; while waiting, re-evaluate at once (the waiting loop)."""
         self.state.obstacles = tuple(tuple(c) for c in msg.cells)

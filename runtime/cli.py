@@ -67,9 +67,14 @@ def cmd_launch(args: argparse.Namespace) -> int:
         seed = (args.seed if args.seed is not None else scenario.seed) + run
         if args.runs > 1:
             print(f"[launcher] run {run + 1}/{args.runs} (seed {seed})", flush=True)
-        result = asyncio.run(run_fleet(scenario, time_scale=args.time_scale,
-                                       timeout_s=args.timeout, seed=seed,
-                                       connect=args.connect, listen=args.listen))
+        try:
+            result = asyncio.run(run_fleet(scenario, time_scale=args.time_scale,
+                                           timeout_s=args.timeout, seed=seed,
+                                           connect=args.connect, listen=args.listen,
+                                           run_record=args.record_run))
+        except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
         for line in format_result(result):
             print(f"[launcher] {line}", flush=True)
         worst = max(worst, 0 if result.passed else 1)
@@ -279,6 +284,9 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                    help="join the Zenoh router at EP (e.g. tcp/10.0.0.2:7447) instead of embedding one")
     p.add_argument("--listen", default=None, metavar="EP",
                    help="endpoint of the embedded router (default: tcp/127.0.0.1:<free port>)")
+    p.add_argument("--record-run", default=None, metavar="FILE",
+                   help="append a run record to FILE as JSON lines, flushed per line (scenario, "
+                        "seed, versions, node exits and respawns, end reason, statistics, summary)")
     p.set_defaults(func=cmd_launch)
 
 
