@@ -140,11 +140,12 @@ def replay_command(args: argparse.Namespace) -> int:
                         debug_state=bool(trace.get("debug_state")), monitors=props,
                         check_determinism=bool(trace.get("check_determinism")))
         result = replay(system, trace, props)
-    except BAD_INPUT as exc:
-        print(f"twinfleet replay: {exc}", file=sys.stderr)
+    except (*BAD_INPUT, NondeterminismError) as exc:
+        print(f"twinfleet replay: {args.trace}: {exc}", file=sys.stderr)
         return 2
-    except NondeterminismError as exc:
-        print(f"twinfleet replay: {exc}", file=sys.stderr)
+    except (KeyError, TypeError, ValueError, IndexError) as exc:  # fits no node of the scenario
+        print(f"twinfleet replay: {args.trace}: the trace does not fit its scenario "
+              f"({type(exc).__name__}: {exc})", file=sys.stderr)
         return 2
     if result.confirmed:
         print(f"replay confirmed: {result.property} violated after {result.steps} steps "

@@ -96,11 +96,13 @@ def cmd_render(args: argparse.Namespace) -> int:
     source = args.source
     try:
         if source.endswith(".json"):
-            with open(source) as f:
-                trace = json.load(f)
-            if trace.get("format") != "twinfleet-trace/1":
-                raise ValueError(f"{source}: not a twinfleet trace (format {trace.get('format')!r})")
-            scenario = load_scenario(trace["scenario"], {"profile": trace.get("profile", "fixed")})
+            from checker.trace import TraceError, load_trace
+
+            try:
+                trace = load_trace(source)
+            except TraceError as exc:
+                raise ValueError(str(exc)) from None
+            scenario = load_scenario(trace["scenario"], {"profile": trace.get("profile") or "fixed"})
         else:
             trace, scenario = None, load_scenario(source)
         from nodes.render import save_pictures, scenario_view, trace_views
@@ -110,6 +112,9 @@ def cmd_render(args: argparse.Namespace) -> int:
         frames = save_pictures(views, args.output, cell_px=args.cell_px)
     except (ScenarioError, ValueError, KeyError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
+        return 2
+    except (TypeError, AttributeError) as exc:  # well-formed trace, states of another system
+        print(f"error: {source}: the trace does not fit its scenario's nodes ({exc})", file=sys.stderr)
         return 2
     print(f"wrote {args.output} ({frames} frame{'s' if frames > 1 else ''})")
     return 0

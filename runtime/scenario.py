@@ -126,6 +126,8 @@ def load_scenario(path: str | Path, overrides: Mapping[str, Any] | None = None) 
         doc = yaml.safe_load(path.read_text())
     except OSError as exc:
         raise ScenarioError(f"{path}: cannot read scenario file: {exc.strerror}") from None
+    except UnicodeDecodeError as exc:
+        raise ScenarioError(f"{path}: not a text file ({exc.reason} at byte {exc.start})") from None
     except yaml.YAMLError as exc:
         raise ScenarioError(f"{path}: not valid YAML: {exc}") from None
     if not isinstance(doc, dict):
@@ -162,7 +164,10 @@ def parse_scenario(doc: Mapping[str, Any], path: Path) -> Scenario:
         err.fail("nodes", f"node name {dup!r} is used twice")
     for i, cfg in enumerate(nodes):
         _try_instantiate(i, cfg, err)
-    props = tuple(_property(i, p, err) for i, p in enumerate(doc.get("properties") or []))
+    raw_props = doc.get("properties") or []
+    if not isinstance(raw_props, list):
+        err.fail("properties", f"expected a list of properties, got {raw_props!r:.60}")
+    props = tuple(_property(i, p, err) for i, p in enumerate(raw_props))
     check = _get(doc, "check", dict, err, default={})
     err.unknown_keys(check, _CHECK_KEYS, "check.")
     live = _get(doc, "live", dict, err, default={})
