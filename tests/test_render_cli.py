@@ -56,5 +56,5 @@ def test_render_rejects_bad_input(tmp_path, capsys):
     bad = tmp_path / "bad.json"
     bad.write_text('{"format": "other"}')
     assert main(["render", str(bad), "-o", str(tmp_path / "x.png")]) == 2
-    assert "not a twinfleet trace" in capsys.readouterr().err
+    assert "not a twinfleet-trace/1 trace" in capsys.readouterr().err
     assert main(["render", str(ROOT / "launch" / "c1a.yaml"), "-o", str(tmp_path / "x.bmp")]) == 2
