@@ -89,7 +89,6 @@ def cmd_launch(args: argparse.Namespace) -> int:
 
 def cmd_render(args: argparse.Namespace) -> int:
     """`twinfleet render`: draw a scenario's start or a checker trace to PNG/GIF."""
-
     from runtime.scenario import ScenarioError, load_scenario
 
     source = args.source
