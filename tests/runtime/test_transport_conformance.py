@@ -160,7 +160,10 @@ def test_latched_topic_reaches_late_joiner(make: Factory) -> None:
             pub.put("twinfleet/conf/map", b"v2", QOS_LATCHED)
             got: list[bytes] = []
             late.subscribe("twinfleet/conf/map", lambda k, p: got.append(p), QOS_LATCHED)
-            await eventually(lambda: got == [b"v2"])
+            # The late joiner ends up with the latest value. It may also see v1 (the puts can
+            # still be in flight when it subscribes) or v2 twice (history, then live).
+            await eventually(lambda: bool(got) and got[-1] == b"v2")
+            assert set(got) <= {b"v1", b"v2"}
 
     run(body())
 
