@@ -31,7 +31,8 @@ before letting the node's next ping go (the twinfleet round around each switch
 is not counted). The first `--warmup` rounds of each implementation are dropped.
 
 Throughput: the sender publishes back to back (reliable, congestion control
-BLOCK) for `--flood-s`, then an end marker carrying the count sent; the
+BLOCK) for `--flood-s` (twinfleet: a fixed count, FLOOD_MSGS_PER_S per second of
+--flood-s, since node code has no wall clock), then an end marker carrying the count sent; the
 receiver checks sequence numbers (gaps, reordering), counts, and answers. Rate
 = received / (end marker handled − first sample received), on the receiver.
 Twinfleet, raw and asyncio floods alternate, `--floods` of each per pair.
@@ -120,8 +121,11 @@ class PingParams:
     rounds: int = 2000
     chunk: int = 250
     floods: int = 2
-    flood_ms: int = 500
+    flood_msgs: int = 30_000
     burst: int = 64
+
+
+FLOOD_MSGS_PER_S = 60_000  # twinfleet's flood size per second of --flood-s (about its rate)
 
 
 @dataclass
@@ -131,7 +135,7 @@ class PingState:
     seq: int = 0
     watched: int = -1
     phase: str = "latency"
-    flood_until: int = 0
+    flood_target: int = 0
     floods: int = 0
     sent: int = 0
     done: bool = False
@@ -177,7 +181,9 @@ class PingNode(Node):
 
     @handler()
     def flood_start(self, ctx: Context) -> None:
-        self.state.flood_until = ctx.now() + self.params.flood_ms
+        # A count, not a time: `ctx.now()` of an `after(0)` chain stays at its due time
+        # (as in the checker), so node code cannot loop "until" a wall-clock instant.
+        self.state.flood_target = self.state.sent + self.params.flood_msgs
         self.flood(ctx)
 
     @handler()
@@ -186,7 +192,7 @@ class PingNode(Node):
         for _ in range(self.params.burst):
             ctx.publish("/bench/flood", Data(st.sent, self.blob))
             st.sent += 1
-        if ctx.now() < st.flood_until:
+        if st.sent < st.flood_target:
             ctx.after(0, self.flood)
         else:
             ctx.publish("/bench/flood", Data(-1, b""))
@@ -494,7 +500,7 @@ async def ping_process(args: argparse.Namespace) -> dict[str, Any]:
     on_loop.wait_matching(10.0)
     probe = Probe(transport, raw, on_loop, args.flood_s)
     params = PingParams(size=args.size, rounds=args.rounds, chunk=args.chunk, floods=args.floods,
-                        flood_ms=int(args.flood_s * 1000))
+                        flood_msgs=max(1000, int(args.flood_s * FLOOD_MSGS_PER_S)))
     node = PingNode("ping", params)
     host = NodeHost(node, probe, FleetClock(args.epoch_ns), seed=1, fleet=FLEET,  # type: ignore[arg-type]
                     wait_for=("echo",), out=open(os.devnull, "w"))  # noqa: SIM115

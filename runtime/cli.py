@@ -7,6 +7,8 @@
     twinfleet view [--connect EP] [--fleet F] [--port P] [--trace FILE]
     twinfleet record SCENARIO|--connect EP -o run.mcap [--duration S]
     twinfleet play run.mcap [--rate K] [--connect EP]
+    twinfleet launch SCENARIO --record-events FILE; twinfleet validate FILE SCENARIO
+    twinfleet replay TRACE --live
 
 Connection options are defined once (`add_connection_arguments`); `--connect`
 defaults to $TWINFLEET_CONNECT and `--fleet` to $TWINFLEET_FLEET. `check` and
@@ -17,9 +19,10 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import functools
 import os
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 
@@ -71,7 +74,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
             result = asyncio.run(run_fleet(scenario, time_scale=args.time_scale,
                                            timeout_s=args.timeout, seed=seed,
                                            connect=args.connect, listen=args.listen,
-                                           run_record=args.record_run))
+                                           run_record=args.record_run,
+                                           record_events=_events_path(args, run)))
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
             print(f"error: {exc}", file=sys.stderr)
             return 2
@@ -85,6 +89,13 @@ def cmd_launch(args: argparse.Namespace) -> int:
         print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "
               f"{args.runs - passed}/{args.runs} failed", flush=True)
     return worst
+
+
+def _events_path(args: argparse.Namespace, run: int) -> str | None:
+    """Where run `run` of `launch --record-events FILE` writes: FILE, or FILE.<k> with --runs."""
+    if not args.record_events or args.runs == 1:
+        return args.record_events
+    return f"{args.record_events}.{run + 1}"
 
 
 def cmd_render(args: argparse.Namespace) -> int:
@@ -270,7 +281,65 @@ def build_parser() -> argparse.ArgumentParser:
         pass
     else:
         register(sub)
+        _add_live_replay(sub)
+    _validate_parser(sub)
+    from agreement.commands import register as register_experiment
+
+    register_experiment(sub)
     return parser
+
+
+def _add_live_replay(sub: argparse._SubParsersAction) -> None:
+    """`replay TRACE --live`: the checker's replay command, plus a live re-enactment."""
+    replay = sub.choices.get("replay")
+    if replay is None:
+        return
+    replay.add_argument("--live", action="store_true",
+                        help="re-enact the trace on the real multi-process fleet over Zenoh: a "
+                             "coordinator grants each node's deliveries, timers and ctx.choose "
+                             "answers in the trace's order (logical time, as fast as the "
+                             "processes go) and confirms the violation on the live processes "
+                             "(exit 1 confirmed, 2 not)")
+    replay.set_defaults(func=functools.partial(_replay_or_live, replay.get_default("func")))
+
+
+def _replay_or_live(original: Callable[[argparse.Namespace], int],
+                    args: argparse.Namespace) -> int:
+    if not args.live:
+        return original(args)
+    from agreement.live_replay import live_replay_command
+
+    return live_replay_command(args)
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    """`twinfleet validate`: is a recorded live run a path of the checker's transitions?"""
+    from agreement.validate import validate_command
+
+    return validate_command(args)
+
+
+def _validate_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("validate", help="check that a live run recorded with `launch "
+                                        "--record-events` is a path of the checker's transitions",
+                       description="Find an interleaving of the nodes' logged events that the "
+                       "checker's transition relation can run, with the same arguments, "
+                       "ctx.choose answers and node states; report the first step it cannot "
+                       "explain (exit 0 valid, 1 unexplained, 2 bad input).")
+    p.add_argument("events", help="event log written by `twinfleet launch --record-events FILE`")
+    p.add_argument("scenario", help="the scenario YAML the run used")
+    p.add_argument("--tolerance-ms", type=int, default=None, metavar="T",
+                   help="also judge timing: events whose model times differ by at most T ms may "
+                        "run in either order; 0 = the checker's exact rules (default: judge "
+                        "order and state only, and report the first step outside the exact "
+                        "timing rules and the tolerance this run needs)")
+    p.add_argument("--window-ms", type=int, default=5, metavar="W",
+                   help="live events of different nodes dispatched within W ms of each other "
+                        "may be taken in either order (default: %(default)s)")
+    p.add_argument("--semantics", choices=("ros", "rebeca"), default=None,
+                   help="checker message rules (default: the scenario's)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=cmd_validate)
 
 
 def _launch_parser(sub: argparse._SubParsersAction) -> None:
@@ -290,6 +359,10 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--record-run", default=None, metavar="FILE",
                    help="append a run record to FILE as JSON lines, flushed per line (scenario, "
                         "seed, versions, node exits and respawns, end reason, statistics, summary)")
+    p.add_argument("--record-events", default=None, metavar="FILE",
+                   help="write every event each node dispatches to FILE as JSON lines (handler, "
+                        "kind, sender, seq, stamp, choices, state digest), for `twinfleet "
+                        "validate FILE SCENARIO`; with --runs N, FILE.1 ... FILE.N")
     p.set_defaults(func=cmd_launch)
 
 

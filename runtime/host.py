@@ -33,6 +33,16 @@ before that, on every decoded sample, so they measure losses below the host
 Hot path. Inbox entries are plain tuples (compared in C), key expressions and
 per-topic sequence counters are cached, and a handler's effects are
 performed right after it returns, in the order it recorded them.
+
+Event log and replay gate (issue 6): with ``events=EventLog(...)`` every
+dispatched event becomes one flushed JSON line, and with ``gated=True`` a
+replay coordinator grants each event in a trace's order
+(`runtime.replay_gate`). Without either, the hot path only pays a few
+`None` tests.
+
+Start first. Whatever arrives while a node waits for its peers stays in the
+inbox until its `@on_start` handlers have run, as in the checker, whose
+initial world runs every start handler before any event.
 """
 
 from __future__ import annotations
@@ -61,11 +71,25 @@ from runtime.messages import (
 )
 from runtime.names import key_expr
 from runtime.node import QOS_DEFAULT, HandlerSpec, Node, Reliability
+from runtime.replay_gate import (
+    EventLog,
+    EventMeta,
+    LogicalClock,
+    ReadyEvent,
+    RecordingChooser,
+    ReplayGate,
+    gate_key,
+    payload_digest,
+    state_digest,
+    summarise,
+)
+from runtime.snapshot import snapshot
 from runtime.transport import Respond, Transport, graph_key, parse_graph_key
 
 LIVELINESS_TOPIC = "/_liveliness"
 VIOLATIONS_TOPIC = "/violations"
 _DRAIN_BATCH = 256  # handlers per loop callback before yielding to I/O
+_BEFORE_ALL = -(1 << 62)  # inbox arrival key of start handlers
 
 
 def derive_seed(seed: int, node_name: str) -> int:
@@ -84,6 +108,7 @@ class RandomChooser:
     def choose(self, n: int) -> int:
         """A uniformly random index in range(n)."""
         return self._rng.randrange(n)
+
 
 
 @dataclass(frozen=True, slots=True)
@@ -108,17 +133,18 @@ class HostStatistics:
 class _Subscription:
     """One declared subscription: its handler and its KEEP_LAST queue of waiting messages."""
 
-    __slots__ = ("method", "priority", "topic", "gap_counter", "waiting")
+    __slots__ = ("method", "priority", "topic", "gap_counter", "waiting", "traced")
 
-    def __init__(self, spec: HandlerSpec, topic: str) -> None:
+    def __init__(self, spec: HandlerSpec, topic: str, traced: bool = False) -> None:
         self.method, self.priority, self.topic = spec.method, spec.priority, topic
+        self.traced = traced  # `waiting` holds envelopes (the sender is logged), not messages
         reliable = spec.qos.reliability is Reliability.RELIABLE
         self.gap_counter = "gaps" if reliable else "best_effort"  # a bug vs. drops by design
         self.waiting: deque[Any] = deque(maxlen=max(1, spec.qos.depth))
 
 
 # An inbox entry: (arrival_ms, priority, seq, work) with work either a _Subscription
-# (run its oldest waiting message) or (method, args, respond). seq is unique, so
+# (run its oldest waiting message) or (method, args, respond, meta). seq is unique, so
 # tuples never compare their work.
 _Entry = tuple[int, int, int, Any]
 
@@ -137,11 +163,16 @@ class NodeHost:
         wait_for: node names whose liveliness tokens must be seen before `@on_start` runs.
         ready_timeout_s: give up waiting for `wait_for` after this many wall seconds.
         out: where log lines go.
+        events: log every dispatched event there (module docstring).
+        gated: run only events granted by a replay coordinator (needs a `LogicalClock`).
     """
 
     def __init__(self, node: Node, transport: Transport, clock: Clock, *, seed: int,
                  fleet: str, stop_on_error: bool = False, wait_for: Sequence[str] = (),
-                 ready_timeout_s: float = 10.0, out: TextIO | None = None) -> None:
+                 ready_timeout_s: float = 10.0, out: TextIO | None = None,
+                 events: EventLog | None = None, gated: bool = False) -> None:
+        if gated and not isinstance(clock, LogicalClock):
+            raise ValueError("a gated NodeHost needs a LogicalClock")
         self.node, self.transport, self.clock = node, transport, clock
         self.fleet, self.stop_on_error = fleet, stop_on_error
         self.wait_for, self.ready_timeout_s = tuple(wait_for), ready_timeout_s
@@ -160,12 +191,19 @@ class NodeHost:
         self._priorities = {s.method: s.priority for s in self.spec.handlers}
         self._liveliness = next((s for s in self.spec.of_kind("subscribe")
                                  if node.resolve(s.name or "") == LIVELINESS_TOPIC), None)
-        self._drain_scheduled = False
+        # Nothing runs before @on_start, as in the checker (start handlers are constructors):
+        # what arrives while the node waits for its peers stays in the inbox until run()
+        # has queued the start handlers first and starts draining.
+        self._drain_scheduled = True
+        self._started = False
         self._stop_requested = False
         self._stop: asyncio.Event | None = None
         self._alive_changed: asyncio.Event | None = None
         self._n = dict.fromkeys(("received", "undecodable", "errors", "failures", "gaps",
                                  "published", "handled", "keep_last", "best_effort"), 0)
+        self._events = events
+        self._gate = ReplayGate(self) if gated else None
+        self._traced = events is not None or gated  # keep each event's kind and sender
 
     # ---------------------------------------------------------------- lifecycle
 
@@ -180,8 +218,12 @@ class NodeHost:
             await self._wait_ready()
             now = self.clock.now_ms()
             self._line(f"t={now} started ({len(self.alive)} nodes alive)")
-            for spec in self.spec.of_kind("start"):
-                self._enqueue(now, spec.priority, spec.method, ())
+            name = self.node.name
+            for spec in self.spec.of_kind("start"):  # ahead of anything that already arrived
+                self._enqueue(_BEFORE_ALL, spec.priority, spec.method, (), None,
+                              ("start", name, "", 0, None, now) if self._traced else None)
+            self._started = True
+            asyncio.get_running_loop().call_soon(self._drain)
             for spec in self.spec.of_kind("every"):
                 self._arm_every(spec, self._first_due(spec, now))
             await self._stop.wait()
@@ -203,20 +245,25 @@ class NodeHost:
         overflow = transport_stats().get("overflow", 0) if callable(transport_stats) else 0
         return HostStatistics(received=n["received"], dropped_undecodable=n["undecodable"],
                               handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
-                              inbox_depth=len(self._inbox), timers_pending=len(self._timers),
+                              inbox_depth=len(self._inbox) + (len(self._gate.ready)
+                                                              if self._gate else 0),
+                              timers_pending=len(self._timers),
                               published=n["published"], handled=n["handled"],
                               dropped_keep_last=n["keep_last"], dropped_overflow=overflow,
                               dropped_best_effort=n["best_effort"])
 
     def idle(self) -> bool:
-        """True when no inbox item is waiting and no drain is scheduled."""
-        return not self._inbox and not self._drain_scheduled
+        """True when nothing can run now: no inbox item waits and no drain is scheduled,
+        or the node has not started yet (what arrives waits for its `@on_start`)."""
+        return not self._started or (not self._inbox and not self._drain_scheduled)
 
     def _declare(self) -> None:
         node, t = self.node, self.transport
         after_burst = getattr(t, "after_burst", None)
         if after_burst is not None:  # run what a burst of samples brought before the next poll
             after_burst(self._flush)
+        if self._gate is not None:  # before the node token: the coordinator waits for that
+            t.serve(gate_key(self.fleet, node.name), self._gate.on_request)
         for spec in self.spec.of_kind("subscribe"):
             topic = node.resolve(spec.name or "")
             if topic == LIVELINESS_TOPIC:
@@ -225,7 +272,7 @@ class NodeHost:
             t.announce(graph_key(self.fleet, "sub", node.name, topic))
         for spec in self.spec.of_kind("service"):
             name = node.resolve(spec.name or "")
-            t.serve(key_expr(self.fleet, name), self._make_serve(spec))
+            t.serve(key_expr(self.fleet, name), self._make_serve(spec, name))
             t.announce(graph_key(self.fleet, "srv", node.name, name))
         t.watch(graph_key(self.fleet, "node", "*"), self._on_liveliness)
         t.announce(graph_key(self.fleet, "node", node.name))
@@ -251,7 +298,10 @@ class NodeHost:
     # ---------------------------------------------------------------- arrivals
 
     def _make_deliver(self, spec: HandlerSpec, topic: str) -> Callable[[str, bytes], None]:
-        sub = _Subscription(spec, topic)
+        if self._gate is not None:
+            return self._make_gated_deliver(spec, topic, self._gate)
+        traced = self._events is not None
+        sub = _Subscription(spec, topic, traced)
         n, last_seq, now_ms = self._n, self._last_seq, self.clock.now_ms
 
         def deliver(key: str, payload: bytes) -> None:
@@ -269,10 +319,10 @@ class NodeHost:
             last_seq[origin] = env.seq
             waiting = sub.waiting
             if len(waiting) == waiting.maxlen:  # KEEP_LAST: the oldest waiting message goes
-                waiting.append(env.msg)
+                waiting.append(env if traced else env.msg)
                 n["keep_last"] += 1
                 return
-            waiting.append(env.msg)
+            waiting.append(env if traced else env.msg)
             heapq.heappush(self._inbox, (now_ms(), sub.priority, next(self._counter), sub))
             if not self._drain_scheduled:
                 self._drain_scheduled = True
@@ -280,17 +330,37 @@ class NodeHost:
 
         return deliver
 
-    def _make_serve(self, spec: HandlerSpec) -> Callable[[bytes, Respond], None]:
+    def _make_gated_deliver(self, spec: HandlerSpec, topic: str,
+                            gate: ReplayGate) -> Callable[[str, bytes], None]:
+        n = self._n
+
+        def deliver(key: str, payload: bytes) -> None:  # every message waits for its grant
+            n["received"] += 1
+            try:
+                env = decode(payload)
+            except Exception as exc:  # DecodeError
+                n["undecodable"] += 1
+                self._line(f"dropped undecodable sample on {key}: {exc}", err=True)
+                return
+            gate.add(ReadyEvent(spec.method, (env.msg,), None,
+                            ("delivery", env.sender, topic, env.seq, env.stamp_ms, None)))
+
+        return deliver
+
+    def _make_serve(self, spec: HandlerSpec, name: str = "") -> Callable[[bytes, Respond], None]:
         def on_request(payload: bytes, respond: Respond) -> None:
             self._n["received"] += 1
             try:
-                request = decode(payload).msg
+                env = decode(payload)
             except Exception as exc:  # DecodeError (anything else would be a codec bug)
                 self._n["undecodable"] += 1
                 self._line(f"undecodable request for {spec.name}: {exc}", err=True)
                 respond(None, f"server error: undecodable request ({exc})")
                 return
-            self._enqueue(self.clock.now_ms(), spec.priority, spec.method, (request,), respond)
+            meta = (("request", env.sender, name, env.seq, env.stamp_ms, None)
+                    if self._traced else None)
+            self._enqueue(self.clock.now_ms(), spec.priority, spec.method, (env.msg,), respond,
+                          meta)
 
         return on_request
 
@@ -301,18 +371,25 @@ class NodeHost:
             self._alive_changed.set()
         spec = self._liveliness
         if spec is not None:
-            self._enqueue(self.clock.now_ms(), spec.priority, spec.method, (NodeAlive(name, alive),))
+            meta = ("liveliness", "", LIVELINESS_TOPIC, 0, None, None) if self._traced else None
+            self._enqueue(self.clock.now_ms(), spec.priority, spec.method,
+                          (NodeAlive(name, alive),), None, meta)
 
     def _enqueue(self, arrival_ms: int, priority: int, method: str, args: tuple[Any, ...],
-                 respond: Respond | None = None) -> None:
+                 respond: Respond | None = None, meta: EventMeta | None = None,
+                 due_ms: int | None = None) -> None:
+        if self._gate is not None:
+            assert meta is not None
+            self._gate.add(ReadyEvent(method, args, respond, meta))
+            return
         heapq.heappush(self._inbox, (arrival_ms, priority, next(self._counter),
-                                     (method, args, respond)))
+                                     (method, args, respond, meta, due_ms)))
         if not self._drain_scheduled:
             self._drain_scheduled = True
             asyncio.get_running_loop().call_soon(self._drain)
 
     def _flush(self) -> None:
-        if self._inbox and self._drain_scheduled:
+        if self._inbox and self._drain_scheduled and self._started:
             self._drain()  # the call_soon'd drain then finds less (or nothing) to do
 
     def _drain(self) -> None:
@@ -323,18 +400,32 @@ class NodeHost:
                 return
             work = pop(inbox)[3]
             if type(work) is _Subscription:
-                self._dispatch(work.method, (work.waiting.popleft(),), None)
+                item = work.waiting.popleft()
+                if work.traced:
+                    self._dispatch(work.method, (item.msg,), None,
+                                   ("delivery", item.sender, work.topic, item.seq, item.stamp_ms,
+                                    None))
+                else:
+                    self._dispatch(work.method, (item,), None)
             else:
-                self._dispatch(*work)
+                method, args, respond, meta, due_ms = work
+                self._dispatch(method, args, respond, meta, due_ms=due_ms)
         if inbox and not self._drain_scheduled:
             self._drain_scheduled = True
             asyncio.get_running_loop().call_soon(self._drain)
 
     # ---------------------------------------------------------------- dispatch
 
-    def _dispatch(self, method: str, args: tuple[Any, ...], respond: Respond | None) -> None:
-        now = self.clock.now_ms()
-        ctx = Context(self.node, now_ms=now, chooser=self._chooser)
+    def _dispatch(self, method: str, args: tuple[Any, ...], respond: Respond | None,
+                  meta: EventMeta | None = None, chooser: RecordingChooser | None = None,
+                  due_ms: int | None = None) -> tuple[HandlerOutcome, HandlerError | None]:
+        # A timer runs at its due time, as in the checker: a late loop must not push every
+        # later `ctx.after` of the chain later still (that drift adds up over a run).
+        now = self.clock.now_ms() if due_ms is None else due_ms
+        events = self._events
+        if chooser is None and events is not None:
+            chooser = RecordingChooser(self._chooser)
+        ctx = Context(self.node, now_ms=now, chooser=chooser or self._chooser)
         outcome = run_handler(self.node, method, ctx, args, expects_reply=respond is not None)
         self._n["handled"] += 1
         error = outcome.error
@@ -349,6 +440,9 @@ class NodeHost:
                 reply = encode(outcome.reply, stamp_ms=now, sender=self.node.name)
             except Exception as exc:
                 error = HandlerError(self.node.name, method, f"unencodable reply: {exc!r}")
+        if events is not None:
+            assert chooser is not None
+            self._record(events, now, method, args, meta, chooser, error)
         if error is not None:
             self._handler_error(error, args)
         if respond is not None:
@@ -356,6 +450,22 @@ class NodeHost:
                 respond(reply, "")
             else:
                 respond(None, f"server error: {error.message}")
+        return outcome, error
+
+    def _record(self, events: EventLog, now: int, method: str, args: tuple[Any, ...],
+                meta: EventMeta | None, chooser: RecordingChooser, error: HandlerError | None) -> None:
+        kind, sender, topic, seq, stamp, due = meta or ("?", "", "", 0, None, None)
+        try:
+            digest = state_digest(snapshot(self.node.state))
+        except Exception as exc:  # the checker reports this too; the log says it
+            digest = f"unsnapshotable: {exc}"
+        record = {"node": self.node.name, "t": now, "kind": kind, "handler": method,
+                  "sender": sender, "topic": topic, "seq": seq, "stamp": stamp, "due": due,
+                  "args": payload_digest(args), "summary": summarise(args),
+                  "choices": chooser.indices, "options": chooser.options, "digest": digest}
+        if error is not None:
+            record["error"] = error.message
+        events.event(record)
 
     def _handler_error(self, error: HandlerError, args: tuple[Any, ...]) -> None:
         self._n["errors"] += 1
@@ -403,6 +513,10 @@ class NodeHost:
     # ---------------------------------------------------------------- timers and calls
 
     def _timer(self, due_ms: int, priority: int, method: str, args: tuple[Any, ...]) -> None:
+        if self._gate is not None:
+            self._gate.add(ReadyEvent(method, args, None,
+                                  ("after", self.node.name, "", 0, None, due_ms)))
+            return
         tid = next(self._counter)
         self._timers[tid] = self.clock.call_at(due_ms, self._fire, tid, due_ms, priority,
                                                method, args)
@@ -410,7 +524,8 @@ class NodeHost:
     def _fire(self, tid: int, due_ms: int, priority: int, method: str,
               args: tuple[Any, ...]) -> None:
         self._timers.pop(tid, None)
-        self._enqueue(due_ms, priority, method, args)
+        meta = ("after", self.node.name, "", 0, None, due_ms) if self._traced else None
+        self._enqueue(due_ms, priority, method, args, None, meta, due_ms)
 
     def _first_due(self, spec: HandlerSpec, now: int) -> int:
         period = self.node.period_ms(spec)
@@ -418,12 +533,17 @@ class NodeHost:
         return spec.phase_ms + k * period
 
     def _arm_every(self, spec: HandlerSpec, due_ms: int) -> None:
+        if self._gate is not None:  # re-armed by the gate once this firing has run
+            self._gate.add(ReadyEvent(spec.method, (), None,
+                                  ("timer", self.node.name, "", 0, None, due_ms)))
+            return
         tid = next(self._counter)
         self._timers[tid] = self.clock.call_at(due_ms, self._fire_every, tid, spec, due_ms)
 
     def _fire_every(self, tid: int, spec: HandlerSpec, due_ms: int) -> None:
         self._timers.pop(tid, None)
-        self._enqueue(due_ms, spec.priority, spec.method, ())
+        meta = ("timer", self.node.name, "", 0, None, due_ms) if self._traced else None
+        self._enqueue(due_ms, spec.priority, spec.method, (), None, meta, due_ms)
         period = self.node.period_ms(spec)
         next_due = due_ms + period
         now = self.clock.now_ms()
@@ -447,12 +567,16 @@ class NodeHost:
         service, reply_to, timer = pending
         timer.cancel()
         result: Any = CallError(service, reason or "no reply")
+        sender, seq, stamp = self.node.name, 0, None  # a CallError comes from the caller's side
         if reply is not None:
             try:
-                result = decode(reply).msg
+                env = decode(reply)
+                result, sender, seq, stamp = env.msg, env.sender, env.seq, env.stamp_ms
             except DecodeError as exc:
                 result = CallError(service, f"server error: undecodable reply ({exc})")
-        self._enqueue(self.clock.now_ms(), self._priorities.get(reply_to, 0), reply_to, (result,))
+        meta = ("reply", sender, service, seq, stamp, None) if self._traced else None
+        self._enqueue(self.clock.now_ms(), self._priorities.get(reply_to, 0), reply_to, (result,),
+                      None, meta)
 
     def _cancel_timers(self) -> None:
         for handle in self._timers.values():

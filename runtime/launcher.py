@@ -16,21 +16,32 @@ children also get PR_SET_PDEATHSIG, so none outlives a SIGKILLed launcher.
 With ``run_record=PATH`` the run is also written as JSON lines, one flushed
 line per event (start, node exits and respawns, end reason, node statistics,
 summary): see `runtime.run_record`.
+
+With ``record_events=PATH`` every node logs each event it dispatches
+(`runtime.replay_gate.EventLog`) into ``PATH.parts/<node>.jsonl``, flushed per line;
+after shutdown the launcher merges the parts into PATH: a ``fleet`` header
+line, the node headers, then every event in dispatch-time order (each
+node's own order kept), and removes the parts. ``node_args`` are appended to
+every node's command line (``--gate`` for a live replay), and a ``driver``
+coroutine, started once the nodes are, ends the run with the reason it returns.
 """
 
 from __future__ import annotations
 
 import asyncio
 import contextlib
+import heapq
 import importlib
+import json
 import os
+import shutil
 import signal
 import socket
 import sys
 import threading
 import time
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Awaitable, Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO, final
@@ -41,6 +52,7 @@ from runtime.messages import DecodeError, decode
 from runtime.names import key_expr
 from runtime.node import QOS_DEFAULT
 from runtime.node_main import PARENT_ENV, stats_key
+from runtime.replay_gate import EVENTS_FORMAT
 from runtime.run_record import RunRecord, versions
 from runtime.scenario import NodeConfig, Scenario
 from runtime.zenoh_transport import ZenohTransport, zenoh_config
@@ -156,9 +168,11 @@ class Fleet:
 
     def __init__(self, scenario: Scenario, *, time_scale: float, seed: int,
                  connect: str | None, listen: str | None, out: TextIO,
-                 record: RunRecord | None = None) -> None:
+                 record: RunRecord | None = None, node_args: Sequence[str] = (),
+                 events_dir: Path | None = None) -> None:
         self.scenario, self.time_scale, self.seed, self.out = scenario, time_scale, seed, out
         self.record = record
+        self.node_args, self.events_dir = tuple(node_args), events_dir
         self.connect = connect
         self.endpoint = connect or listen or f"tcp/127.0.0.1:{free_port()}"
         self.transport: ZenohTransport | None = None
@@ -219,9 +233,13 @@ class Fleet:
         return deliver
 
     def _argv(self, cfg: NodeConfig) -> list[str]:
-        return [sys.executable, "-m", "runtime.node_main", "--scenario", str(self.scenario.path),
+        argv = [sys.executable, "-m", "runtime.node_main", "--scenario", str(self.scenario.path),
                 "--node", cfg.name, "--connect", self.endpoint, "--epoch-ns", str(self.epoch_ns),
-                "--time-scale", repr(self.time_scale), "--seed", str(self.seed)]
+                "--time-scale", repr(self.time_scale), "--seed", str(self.seed),
+                *self.node_args]
+        if self.events_dir is not None:
+            argv += ["--record-events", str(self.events_dir / f"{cfg.name}.jsonl")]
+        return argv
 
     async def start_nodes(self) -> list[asyncio.Task[None]]:
         """Start every node process and one supervisor task per node."""
@@ -306,7 +324,9 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     timeout_s: float | None = None, seed: int | None = None,
                     connect: str | None = None, listen: str | None = None,
                     out: TextIO = sys.stdout, handle_signals: bool = True,
-                    run_record: str | None = None) -> FleetResult:
+                    run_record: str | None = None, record_events: str | None = None,
+                    node_args: Sequence[str] = (),
+                    driver: Callable[[Fleet], Awaitable[str]] | None = None) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
@@ -319,14 +339,20 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         out: where the prefixed output lines go.
         handle_signals: end the run on SIGINT/SIGTERM (main thread only).
         run_record: write the run as JSON lines to this file (`runtime.run_record`).
+        record_events: write every dispatched event to this file (module docstring).
+        node_args: extra arguments for every node process (`runtime.node_main`).
+        driver: a coroutine function run with the fleet once its nodes started; the run
+            ends with the reason it returns (an exception it raises is re-raised).
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.get("time_scale", 1.0))
     timeout_s = timeout_s if timeout_s is not None else live.get("timeout_s")
     seed = scenario.seed if seed is None else seed
     record = RunRecord(run_record) if run_record else None
+    events_dir = _fresh_parts_dir(record_events) if record_events else None
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
-                  out=out, record=record)
+                  out=out, record=record, node_args=node_args, events_dir=events_dir)
+    driving: asyncio.Task[str] | None = None
     started = time.monotonic()
     loop = asyncio.get_running_loop()
     signals = _install_signals(loop, fleet) if handle_signals else []
@@ -345,6 +371,9 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                   f"twinfleet node list --connect {fleet.endpoint} --fleet {scenario.fleet}")
         tasks = await fleet.start_nodes()
         assert fleet.ended is not None
+        if driver is not None:
+            driving = asyncio.create_task(driver(fleet))
+            driving.add_done_callback(lambda task: fleet.end(_driver_reason(task)))
         try:
             reason = await asyncio.wait_for(asyncio.shield(fleet.ended), timeout_s)
         except TimeoutError:
@@ -354,9 +383,19 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             record.write("end", reason=reason)
             record.write("node_stats", stats=await fleet.node_statistics())
     finally:
+        if driving is not None and not driving.done():
+            driving.cancel()
+            await asyncio.wait([driving], timeout=5.0)
         await fleet.shutdown()
         for task in tasks:
             task.cancel()
+        if events_dir is not None and record_events is not None:
+            try:
+                count = merge_events(events_dir, record_events, fleet)
+                fleet.log(f"{count} events written to {record_events}; check them with: "
+                          f"twinfleet validate {record_events} {scenario.path}")
+            except OSError as exc:  # the parts stay; `validate` reads them too
+                fleet.log(f"could not merge the event logs in {events_dir}: {exc}")
         for sig in signals:
             loop.remove_signal_handler(sig)
         if record is not None and sys.exc_info()[0] is not None:
@@ -371,7 +410,53 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     if record is not None:
         _record_summary(record, result)
         record.close()
+    if driving is not None and not driving.cancelled() and driving.exception() is not None:
+        raise driving.exception()  # type: ignore[misc]
     return result
+
+
+def _driver_reason(task: asyncio.Task[str]) -> str:
+    if task.cancelled():
+        return "driver cancelled"
+    exc = task.exception()
+    return f"driver failed: {exc!r}" if exc is not None else str(task.result())
+
+
+def _fresh_parts_dir(path: str) -> Path:
+    parts = Path(f"{path}.parts")
+    if parts.exists():
+        shutil.rmtree(parts)
+    parts.mkdir(parents=True)
+    return parts
+
+
+def merge_events(parts: Path, path: str, fleet: Fleet) -> int:
+    """Merge the per-node event logs in `parts` into `path` (module docstring); return how
+    many events there are."""
+    headers, streams, restarts = [], [], {}
+    for cfg in fleet.scenario.nodes:
+        part = parts / f"{cfg.name}.jsonl"
+        lines = part.read_text().splitlines() if part.exists() else []
+        records = []
+        for line in lines:
+            with contextlib.suppress(json.JSONDecodeError):  # a torn last line
+                records.append(json.loads(line))
+        heads = [r for r in records if r.get("kind") == "header"]
+        headers += heads[:1]
+        if len(heads) > 1:
+            restarts[cfg.name] = len(heads) - 1
+        streams.append([r for r in records if r.get("kind") != "header"])
+    with open(path, "w", encoding="utf-8") as f:
+        f.write(json.dumps({"format": EVENTS_FORMAT, "kind": "fleet",
+                            "scenario": str(fleet.scenario.path), "fleet": fleet.scenario.fleet,
+                            "seed": fleet.seed, "time_scale": fleet.time_scale,
+                            "epoch_ns": fleet.epoch_ns, "node_args": list(fleet.node_args),
+                            "nodes": [c.name for c in fleet.scenario.nodes],
+                            "restarts": restarts}) + "\n")
+        for record in [*headers, *heapq.merge(*streams, key=lambda r: r["t"])]:
+            f.write(json.dumps(record, separators=(",", ":")) + "\n")
+    shutil.rmtree(parts, ignore_errors=True)
+    return sum(len(s) for s in streams)
 
 
 def _record_summary(record: RunRecord, result: FleetResult) -> None:

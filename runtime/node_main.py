@@ -8,6 +8,10 @@ the node stopped on a handler error (``live.stop_on_error``), 2 on bad input.
 
 The process also serves its statistics on ``twinfleet/<fleet>/@stats/<node>``
 (a msgpack map), which `twinfleet node list --stats` reads.
+
+``--record-events FILE`` logs every dispatched event to FILE as JSON lines
+(`runtime.replay_gate.EventLog`); ``--gate`` runs the node under a replay
+coordinator: logical time, and only granted events run (`runtime.replay_gate.ReplayGate`).
 """
 
 from __future__ import annotations
@@ -24,9 +28,10 @@ from collections.abc import Sequence
 
 import msgpack
 
-from runtime.clock import FleetClock
+from runtime.clock import Clock, FleetClock
 from runtime.host import NodeHost
 from runtime.names import KEY_PREFIX
+from runtime.replay_gate import EventLog, LogicalClock
 from runtime.scenario import Scenario, ScenarioError, load_scenario
 from runtime.transport import Respond
 from runtime.zenoh_transport import ZenohTransport, zenoh_config
@@ -70,6 +75,13 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                    help="run @on_start without waiting for the other nodes of the scenario")
     p.add_argument("--close-timeout", type=float, default=5.0,
                    help="seconds allowed for closing Zenoh before the process is forced out")
+    p.add_argument("--record-events", default=None, metavar="FILE",
+                   help="append every dispatched event to FILE as JSON lines, flushed per line")
+    p.add_argument("--profile", default=None,
+                   help="override the scenario's behaviour profile, as `check --profile` does")
+    p.add_argument("--gate", action="store_true",
+                   help="replay mode: logical time, and run only the events a replay "
+                        "coordinator grants (twinfleet replay --live)")
     return p.parse_args(argv)
 
 
@@ -81,7 +93,7 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
     time_scale = args.time_scale if args.time_scale is not None else live.get("time_scale", 1.0)
     stop_on_error = bool(args.stop_on_error if args.stop_on_error is not None
                          else live.get("stop_on_error", False))
-    clock = FleetClock(args.epoch_ns, time_scale)
+    clock: Clock = LogicalClock() if args.gate else FleetClock(args.epoch_ns, time_scale)
     try:
         config = zenoh_config(connect=[args.connect])
     except ValueError as exc:  # a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
@@ -89,9 +101,15 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
         return 2
     transport = ZenohTransport(config)
     peers = () if args.no_wait else tuple(n.name for n in scenario.nodes)
-    host = NodeHost(node, transport, clock,
-                    seed=args.seed if args.seed is not None else scenario.seed,
-                    fleet=scenario.fleet, stop_on_error=stop_on_error, wait_for=peers)
+    seed = args.seed if args.seed is not None else scenario.seed
+    events = None
+    if args.record_events:
+        events = EventLog(args.record_events, node=node.name, scenario=str(scenario.path),
+                          seed=seed, time_scale=time_scale, epoch_ns=getattr(clock, "epoch_ns", None),
+                          gated=bool(args.gate))
+    host = NodeHost(node, transport, clock, seed=seed, fleet=scenario.fleet,
+                    stop_on_error=stop_on_error, wait_for=peers, events=events,
+                    gated=bool(args.gate))
     stopping = asyncio.Event()
 
     def on_signal() -> None:
@@ -116,6 +134,8 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
         faulthandler.dump_traceback_later(args.close_timeout, exit=True)
         await transport.close()
         faulthandler.cancel_dump_traceback_later()
+        if events is not None:
+            events.close()
     stats = host.statistics()
     fields = " ".join(f"{k}={v}" for k, v in dataclasses.asdict(stats).items())
     print(f"stopped: {fields}", file=sys.stderr, flush=True)
@@ -129,7 +149,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     die_with_parent()
     args = parse_args(argv)
     try:
-        scenario = load_scenario(args.scenario)
+        scenario = load_scenario(args.scenario,
+                                 {"profile": args.profile} if args.profile else None)
         scenario.node(args.node)
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)

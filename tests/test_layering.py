@@ -1,7 +1,8 @@
 """Import layering, checked on the source with `ast` (STYLE.md, "Layout").
 
-- checker/ imports nothing from zenoh or asyncio;
+- checker/ imports nothing from zenoh or asyncio, nor agreement;
 - nodes/ and runtime/ (except runtime/cli.py) never import checker;
+- agreement/ (the layer over both) may import checker and runtime; nothing below imports it;
 - nodes/ never imports random, time, asyncio, threading, socket or zenoh;
 - `import checker` in a fresh interpreter does not load zenoh.
 """
@@ -38,6 +39,18 @@ def _imports(path: Path) -> set[str]:
     return found
 
 
+def _dotted_imports(path: Path) -> set[str]:
+    """Full dotted names of every module imported with `import a.b` or `from a.b import c`."""
+    found: set[str] = set()
+    for item in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+        if isinstance(item, ast.Import):
+            found.update(alias.name for alias in item.names)
+        elif isinstance(item, ast.ImportFrom) and item.level == 0 and item.module:
+            found.add(item.module)
+            found.update(f"{item.module}.{alias.name}" for alias in item.names)
+    return found
+
+
 def _modules(package: str) -> list[Path]:
     return sorted((ROOT / package).rglob("*.py"))
 
@@ -62,6 +75,17 @@ def test_checker_imports_no_transport():
 def test_runtime_and_nodes_do_not_import_checker():
     assert _offences("runtime", {"checker"}, skip={"runtime/cli.py"}) == []
     assert _offences("nodes", {"checker"}) == []
+
+
+def test_only_the_cli_imports_agreement():
+    assert _offences("checker", {"agreement"}) == []
+    live = {"runtime.launcher", "runtime.host", "runtime.zenoh_transport", "runtime.node_main",
+            "runtime.cli", "runtime.clock"}
+    bad = [f"{path.relative_to(ROOT).as_posix()} imports {sorted(hits)}"
+           for path in _modules("checker") if (hits := _dotted_imports(path) & live)]
+    assert bad == []
+    assert _offences("nodes", {"agreement"}) == []
+    assert _offences("runtime", {"agreement"}, skip={"runtime/cli.py"}) == []
 
 
 def test_nodes_import_no_sources_of_nondeterminism():

@@ -1,0 +1,9 @@
+"""`python -m agreement experiment SCENARIO... [options]` (a bare SCENARIO means `experiment`)."""
+
+from __future__ import annotations
+
+import sys
+
+from agreement.commands import main
+
+sys.exit(main())

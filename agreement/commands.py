@@ -1,0 +1,120 @@
+"""The `experiment` subcommand: `register(subparsers)` for `twinfleet`, `main()` for
+`python -m agreement`.
+
+    twinfleet experiment SCENARIO... [--runs N] [--time-scale K]
+                         [--semantics both|ros|rebeca] [--out DIR] [--jobs 1]
+
+Exit codes: 0 done, and no live run contradicted a checker verdict; 1 a live
+run did what the checker says cannot happen (a collision in a scenario the
+checker proved collision-free, say); 2 bad input; 130 interrupted (the
+outputs written so far are kept).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from agreement import DEFAULT_TIME_SCALE
+from agreement.table import to_markdown
+
+_SEMANTICS = {"both": ("ros", "rebeca"), "ros": ("ros",), "rebeca": ("rebeca",)}
+
+
+def register(subparsers: Any) -> None:
+    """Add the `experiment` subcommand to an argparse subparsers object (imports nothing
+    heavy: the checker and the live runtime are loaded when the command runs)."""
+    p = subparsers.add_parser(
+        "experiment", help="the paper's Table 4/5: checker verdicts and N live runs per scenario",
+        description="For each scenario: run the checker (both semantics by default) and N live "
+        "runs with seeds S, S+1, ..., then print the paper's Table 4/5 rows with the paper's own "
+        "figures beside ours, and write them as Markdown and CSV into --out.")
+    p.add_argument("scenarios", nargs="+", metavar="SCENARIO", help="scenario YAML files")
+    p.add_argument("--runs", type=int, default=20, metavar="N",
+                   help="live runs per scenario; 0 runs the checker only (default: %(default)s)")
+    p.add_argument("--time-scale", type=float, default=DEFAULT_TIME_SCALE, metavar="K",
+                   help="live fleet time K times faster than wall time (default: %(default)g, "
+                        "measured in docs/experiment.md)")
+    p.add_argument("--semantics", choices=tuple(_SEMANTICS), default="both",
+                   help="checker message rules to run (default: %(default)s)")
+    p.add_argument("--out", default="out/experiment", metavar="DIR",
+                   help="where experiment.md/.csv/.json, traces/ and logs/ go "
+                        "(default: %(default)s)")
+    p.add_argument("--jobs", type=int, default=1, metavar="1",
+                   help="only 1: live runs are sequential so that no fleet shares the CPU with "
+                        "another (timing is what is being measured)")
+    p.add_argument("--seed", type=int, default=None, metavar="S",
+                   help="seed of the first live run (default: the scenario's seed)")
+    p.add_argument("--max-states", type=int, default=None, metavar="N",
+                   help="checker state limit (default: the scenario's check.max_states)")
+    p.add_argument("--max-time", type=float, default=None, metavar="S",
+                   help="checker time limit per semantics (default: the scenario's)")
+    p.add_argument("--horizon", type=float, default=180.0, metavar="S",
+                   help="fleet seconds a live run may last before it counts as not arrived "
+                        "(default: %(default)g)")
+    p.add_argument("--keep-going", action="store_true",
+                   help="do not end a live run at its first collision")
+    p.set_defaults(func=experiment_command)
+
+
+def experiment_command(args: argparse.Namespace) -> int:
+    """Run `experiment` for parsed arguments; return the exit code."""
+    from agreement.experiment import ExperimentOptions, run_experiment
+    from checker.commands import BAD_INPUT
+
+    if args.jobs != 1:
+        print("twinfleet experiment: --jobs: only 1 is supported; live fleets run one at a "
+              "time so that their timing is not disturbed", file=sys.stderr)
+        return 2
+    if args.runs < 0 or args.time_scale <= 0:
+        print("twinfleet experiment: --runs must be >= 0 and --time-scale > 0", file=sys.stderr)
+        return 2
+    options = ExperimentOptions(runs=args.runs, time_scale=args.time_scale,
+                                semantics=_SEMANTICS[args.semantics], out=Path(args.out),
+                                seed=args.seed, max_states=args.max_states,
+                                max_time_s=args.max_time, horizon_s=args.horizon,
+                                stop_on_collision=not args.keep_going)
+    command = command_line(args)
+    try:
+        exp = run_experiment(args.scenarios, options, command=command)
+    except (*BAD_INPUT, ValueError) as exc:
+        print(f"twinfleet experiment: {exc}", file=sys.stderr)
+        return 2
+    print(to_markdown(exp.rows, options.semantics), end="")
+    print(f"wrote {options.out / 'experiment.md'}, {options.out / 'experiment.csv'}, "
+          f"{options.out / 'experiment.json'}; node output in {options.out / 'logs'}")
+    if exp.interrupted:
+        return 130
+    return 1 if exp.contradictions else 0
+
+
+def command_line(args: argparse.Namespace) -> str:
+    """The `twinfleet experiment` command that reproduces these arguments, every option spelled."""
+    words = ["twinfleet", "experiment", *args.scenarios, "--runs", str(args.runs),
+             "--time-scale", f"{args.time_scale:g}", "--semantics", args.semantics,
+             "--out", args.out]
+    for flag, value in (("--seed", args.seed), ("--max-states", args.max_states),
+                        ("--max-time", args.max_time)):
+        if value is not None:
+            words += [flag, f"{value:g}" if isinstance(value, float) else str(value)]
+    if args.horizon != 180.0:
+        words += ["--horizon", f"{args.horizon:g}"]
+    if args.keep_going:
+        words.append("--keep-going")
+    return " ".join(shlex.quote(w) for w in words)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """`python -m agreement [experiment] SCENARIO... [options]`."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] not in ("experiment", "-h", "--help"):
+        argv.insert(0, "experiment")
+    parser = argparse.ArgumentParser(prog="python -m agreement",
+                                     description="twinfleet's model-system agreement tools")
+    register(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return int(args.func(args))

@@ -1,0 +1,195 @@
+"""`twinfleet replay TRACE --live`: checker traces re-enacted by gated nodes.
+
+The fast tests run the gated hosts and the coordinator in one process over
+the loopback transport; the slow ones take the C2a counterexample from the
+checker and replay it on the real multi-process fleet over Zenoh.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import io
+import os
+import signal
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+
+from agreement import validate as v
+from agreement.live_replay import (
+    Coordinator,
+    LiveReplayResult,
+    Plan,
+    compare_node_logs,
+    plan,
+    replay_live,
+)
+from checker.check import CheckOptions, check
+from runtime.host import NodeHost
+from runtime.replay_gate import EventLog, LogicalClock
+from runtime.transport import LoopbackBus, LoopbackTransport
+
+ROOT = Path(__file__).resolve().parents[2]
+HEADON = ROOT / "launch" / "headon.yaml"
+C2A = ROOT / "launch" / "c2a.yaml"
+
+
+def trace_of(scenario: Path, out: Path) -> Path:
+    result = check(scenario, CheckOptions(trace_out=str(out)))
+    assert result.violation is not None and result.violation.property == "no_collision"
+    return out
+
+
+@pytest.fixture(scope="module")
+def headon_plan(tmp_path_factory: pytest.TempPathFactory) -> Plan:
+    return plan(trace_of(HEADON, tmp_path_factory.mktemp("headon") / "headon.trace.json"))
+
+
+async def replay_in_process(p: Plan, events: Path, *,
+                            step_timeout_s: float = 5.0) -> LiveReplayResult:
+    """Gated hosts of the plan's scenario on one loopback bus, driven by a Coordinator."""
+    bus = LoopbackBus()
+    names = tuple(cfg.name for cfg in p.scenario.nodes)
+    events.mkdir()
+    hosts, logs = [], []
+    for cfg in p.scenario.nodes:
+        transport = LoopbackTransport(bus)
+        await transport.open()
+        log = EventLog(str(events / f"{cfg.name}.jsonl"), node=cfg.name)
+        logs.append(log)
+        hosts.append(NodeHost(cfg.instantiate(), transport, LogicalClock(), seed=1,
+                              fleet=p.scenario.fleet, wait_for=names, gated=True, events=log,
+                              out=io.StringIO()))
+    tasks = [asyncio.create_task(h.run()) for h in hosts]
+    result = LiveReplayResult(p.trace_path, "no_collision", "", len(p.steps),
+                              expected_collisions=p.collisions)
+    coordinator = Coordinator(p, result, step_timeout_s=step_timeout_s)
+    transport = LoopbackTransport(bus)
+    await transport.open()
+    try:
+        result.fleet_reason = await coordinator.run(transport)
+    finally:
+        for h in hosts:
+            h.stop()
+        await asyncio.gather(*tasks)
+        for log in logs:
+            log.close()
+    return result
+
+
+def test_gated_hosts_follow_the_trace_and_show_its_collision(headon_plan, tmp_path):
+    result = asyncio.run(asyncio.wait_for(replay_in_process(headon_plan, tmp_path / "ev"), 60))
+    assert result.divergence is None, result.divergence
+    assert result.granted == len(headon_plan.starts) + len(headon_plan.steps)
+    assert result.final_states_match
+    (step, robots, cells), = headon_plan.collisions
+    assert int(step) == len(headon_plan.steps)  # the trace ends at the collision
+    assert [(f"{a},{b}", f"{ca},{cb}") for a, b, ca, cb, _ in result.live_collisions] == [
+        (robots, cells)]
+    assert result.live_collisions[0][4] == headon_plan.steps[-1].t  # logical time, as the trace
+    assert result.collisions_match and result.confirmed
+
+
+def test_a_state_the_live_node_does_not_reach_stops_the_replay(headon_plan, tmp_path):
+    k = next(k for k, g in enumerate(headon_plan.steps) if g.node == "r1" and g.kind == "reply")
+    steps = list(headon_plan.steps)
+    steps[k] = replace(steps[k], digest="0" * 24)
+    result = asyncio.run(asyncio.wait_for(
+        replay_in_process(replace(headon_plan, steps=steps), tmp_path / "ev"), 60))
+    assert result.divergence is not None
+    assert result.divergence.startswith(f"step {steps[k].step}: r1.on_path (reply) at t=")
+    assert "live state digest" in result.divergence and "0" * 24 in result.divergence
+    assert result.granted == len(headon_plan.starts) + k
+    assert not result.confirmed
+
+
+def test_an_event_that_never_comes_is_reported_with_what_the_node_holds(headon_plan, tmp_path):
+    steps = list(headon_plan.steps)
+    k = next(k for k, g in enumerate(steps) if g.node == "map_server" and g.kind == "delivery")
+    steps[k] = replace(steps[k], args="feedfacefeedface")  # a pose nobody sent
+    result = asyncio.run(asyncio.wait_for(replay_in_process(
+        replace(headon_plan, steps=steps), tmp_path / "ev", step_timeout_s=0.5), 60))
+    assert result.divergence is not None and "did not run on_pose" in result.divergence
+    held = result.divergence.split("node holds: ", 1)[1]
+    assert "on_pose(RobotPose(robot='r1'" in held and "(delivery from r1)" in held
+
+
+def test_node_logs_of_an_in_process_replay_match_the_trace(headon_plan, tmp_path):
+    result = asyncio.run(asyncio.wait_for(replay_in_process(headon_plan, tmp_path / "ev"), 60))
+    assert result.confirmed
+    merged = tmp_path / "events.jsonl"
+    lines = []
+    for part in sorted((tmp_path / "ev").glob("*.jsonl")):
+        lines += part.read_text().splitlines()
+    merged.write_text("\n".join(lines) + "\n")
+    ok, detail = compare_node_logs(headon_plan, str(merged))
+    assert ok, detail
+    # the replayed run is timed by the trace itself: the checker's exact rules explain it
+    strict = v.validate(merged, HEADON, tolerance_ms=0)
+    assert strict.ok and strict.events == len(headon_plan.steps), strict.summary()
+
+
+# ------------------------------------------------------------------ real processes
+
+
+def _my_node_processes() -> list[int]:
+    """Node processes started by this test process (children running runtime.node_main)."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        with contextlib.suppress(OSError, IndexError, ValueError):
+            ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
+            if ppid == os.getpid() and b"runtime.node_main" in (entry / "cmdline").read_bytes():
+                found.append(int(entry.name))
+    return found
+
+
+@pytest.fixture
+def reap_nodes():
+    """Kill any node process this test started that is still there at the end."""
+    yield
+    for pid in _my_node_processes():
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(120)
+def test_c2a_counterexample_replayed_live_collides_the_same_way(tmp_path, reap_nodes):
+    trace = trace_of(C2A, tmp_path / "c2a.trace.json")
+    p = plan(trace)
+    out = io.StringIO()
+    events = tmp_path / "replay.events.jsonl"
+    result = asyncio.run(asyncio.wait_for(
+        replay_live(trace, out=out, events_out=str(events), timeout_s=90), 110))
+    text = out.getvalue()
+    assert result.divergence is None, result.divergence + text[-3000:]
+    assert result.granted == len(p.starts) + len(p.steps) > 1000
+    assert result.final_states_match
+    # the live map server reported exactly the checker's collision: same robots, same cells
+    (_, robots, cells), = p.collisions
+    assert [(f"{a},{b}", f"{ca},{cb}") for a, b, ca, cb, _ in result.live_collisions] == [
+        (robots, cells)]
+    assert f"[map_server] t={p.steps[-1].t} collision cells='{cells}' robots='{robots}'" in text
+    assert result.node_logs_match, result.node_logs
+    assert result.confirmed
+    # the nodes' own event logs of the replay are a path of the checker, even strictly timed
+    strict = v.validate(events, C2A, tolerance_ms=0)
+    assert strict.ok, strict.summary()
+    assert strict.violations[0][1] == "no_collision"
+    assert not _my_node_processes()
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(120)
+def test_replay_live_command(tmp_path, capsys, reap_nodes):
+    from runtime.cli import main
+
+    trace = trace_of(C2A, tmp_path / "c2a.trace.json")
+    assert main(["replay", str(trace), "--live", "--quiet"]) == 1
+    assert "live replay CONFIRMED: no_collision" in capsys.readouterr().out
+    assert main(["replay", str(trace), "--quiet"]) == 1  # without --live: the checker's replay
+    assert "replay confirmed" in capsys.readouterr().out

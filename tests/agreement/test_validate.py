@@ -1,0 +1,440 @@
+"""`twinfleet validate`: event logs of live runs against the checker's transition relation.
+
+Fast tests build logs from checker paths (what a perfectly timed run would
+record) and tamper with them; the slow ones record a real multi-process C1a
+run with `twinfleet launch --record-events` and validate it.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import io
+import json
+import os
+import signal
+import subprocess
+import sys
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from agreement import validate as v
+from agreement.events import EventLogFile, LiveEvent, load_events
+from agreement.live_replay import plan
+from checker.check import CheckOptions, check, load
+from checker.choices import PrefixChooser
+from checker.system import System
+from runtime import Context, Node, String, handler, on_start, subscribe
+from runtime.clock import ManualClock
+from runtime.host import NodeHost
+from runtime.replay_gate import EVENTS_FORMAT, EventLog, payload_digest, state_digest
+from runtime.snapshot import snapshot
+from runtime.transport import LoopbackBus, LoopbackTransport
+
+ROOT = Path(__file__).resolve().parents[2]
+HEADON = ROOT / "launch" / "headon.yaml"
+C1A = ROOT / "launch" / "c1a.yaml"
+
+
+# ------------------------------------------------------------------ helpers
+
+
+def write_log(path: Path, records: list[dict[str, Any]], nodes: list[str]) -> Path:
+    """An event log file as the launcher writes it."""
+    lines = [{"format": EVENTS_FORMAT, "kind": "fleet", "nodes": nodes, "restarts": {}}]
+    lines += [{"format": EVENTS_FORMAT, "kind": "header", "node": n} for n in nodes]
+    path.write_text("".join(json.dumps(r) + "\n" for r in [*lines, *records]))
+    return path
+
+
+def trace_records(trace_path: Path) -> tuple[list[dict[str, Any]], list[str]]:
+    """The event records a perfectly timed live run of a trace would log (live t = logical t)."""
+    p = plan(trace_path)
+    counters: dict[str, int] = {}
+    records = []
+    for g in [*p.starts, *p.steps]:
+        i = counters.get(g.node, 0)
+        counters[g.node] = i + 1
+        records.append({"node": g.node, "i": i, "t": g.t, "kind": g.kind, "handler": g.handler,
+                        "sender": g.sender, "args": g.args, "summary": g.summary,
+                        "choices": list(g.choices), "options": list(g.options or ()),
+                        "digest": g.digest})
+    return records, [cfg.name for cfg in p.scenario.nodes]
+
+
+@pytest.fixture(scope="module")
+def headon_trace(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    out = tmp_path_factory.mktemp("headon") / "headon.trace.json"
+    result = check(HEADON, CheckOptions(trace_out=str(out)))
+    assert result.violation is not None and result.violation.property == "no_collision"
+    return out
+
+
+def index_of(records: list[dict[str, Any]], **match: Any) -> int:
+    return next(k for k, r in enumerate(records) if all(r.get(a) == b for a, b in match.items()))
+
+
+# ------------------------------------------------------------------ logs of checker paths
+
+
+def test_a_checker_path_logged_as_events_validates_strictly(headon_trace, tmp_path):
+    records, nodes = trace_records(headon_trace)
+    log = write_log(tmp_path / "events.jsonl", records, nodes)
+    result = v.validate(log, HEADON, tolerance_ms=0)
+    assert result.ok, result.summary()
+    assert result.explained == result.events == len(records) - len(nodes)
+    assert result.max_ahead_ms == 0
+    # the trace ends in the collision: the validator sees the invariant fail at the last step
+    assert result.violations[0][:2] == (result.events, "no_collision")
+
+
+def test_a_changed_choice_is_the_first_unexplained_step(headon_trace, tmp_path):
+    records, nodes = trace_records(headon_trace)
+    k = next(k for k, r in enumerate(records) if r["choices"])
+    assert records[k]["options"] == [3]
+    chosen = records[k]["choices"][0]
+    records[k]["choices"] = [5]  # no such option
+    result = v.validate(write_log(tmp_path / "e.jsonl", records, nodes), HEADON)
+    assert result.failure is not None
+    assert result.failure.reason == v.CHOICES
+    assert result.failure.step == k - len(nodes) + 1
+    assert (result.failure.event.node, result.failure.event.index) == (records[k]["node"],
+                                                                       records[k]["i"])
+    # another valid option: the checker takes it, and the node's state no longer matches
+    records[k]["choices"] = [(chosen + 1) % 3]
+    result = v.validate(write_log(tmp_path / "e2.jsonl", records, nodes), HEADON)
+    assert result.failure is not None and result.failure.reason == v.STATE
+    assert result.failure.step == k - len(nodes) + 1
+
+
+def test_a_changed_state_digest_is_reported_with_the_checker_state(headon_trace, tmp_path):
+    records, nodes = trace_records(headon_trace)
+    k = index_of(records, node="map_server", handler="on_pose")
+    records[k]["digest"] = "0" * 24
+    result = v.validate(write_log(tmp_path / "e.jsonl", records, nodes), HEADON)
+    f = result.failure
+    assert f is not None and f.reason == v.STATE
+    assert (f.event.node, f.event.handler, f.event.index) == ("map_server", "on_pose",
+                                                              records[k]["i"])
+    assert "MapServerState(" in f.expected and f.seen == "digest " + "0" * 24
+    assert result.failure.step == k - len(nodes) + 1
+    assert result.explained >= k - len(nodes)  # other nodes' events at the same time may follow
+
+
+def test_a_dropped_message_leaves_its_stream_blocked(headon_trace, tmp_path):
+    records, nodes = trace_records(headon_trace)
+    scans = [k for k, r in enumerate(records) if r["node"] == "r2" and r["handler"] == "on_scan"]
+    # a scan that changes nothing (same state before and after) and is followed by another scan
+    k = next(k for a, k, b in zip(scans, scans[1:], scans[2:], strict=False)
+             if records[a]["digest"] == records[k]["digest"] and _next_of(records, k) == b)
+    dropped = records.pop(k)
+    result = v.validate(write_log(tmp_path / "e.jsonl", records, nodes), HEADON, tolerance_ms=None)
+    f = result.failure
+    assert f is not None and f.reason == v.ORDER
+    assert (f.event.node, f.event.handler) == ("r2", "on_scan")
+    assert "r2.on_scan" in f.expected and "first (same stream)" in f.expected
+    # identical scans after the gap are explained by the pending ones, shifted by one; the
+    # first scan with new content shows that one is missing
+    between = [r for r in records if r["node"] == "r2" and r["handler"] == "on_scan"
+               and dropped["i"] < r["i"] < f.event.index]
+    assert between and all(r["args"] == dropped["args"] for r in between)
+    assert f.event.args != dropped["args"]
+
+
+def _next_of(records: list[dict[str, Any]], k: int) -> int:
+    node = records[k]["node"]
+    return next(j for j in range(k + 1, len(records)) if records[j]["node"] == node)
+
+
+def test_a_different_message_is_model_drift(headon_trace, tmp_path):
+    records, nodes = trace_records(headon_trace)
+    k = index_of(records, node="map_server", handler="on_pose")
+    records[k]["args"] = payload_digest(("something else",))
+    result = v.validate(write_log(tmp_path / "e.jsonl", records, nodes), HEADON)
+    assert result.failure is not None and result.failure.reason == v.PAYLOAD
+    assert "RobotPose(" in result.failure.expected
+
+
+def test_a_message_before_on_start_is_a_startup_difference(headon_trace, tmp_path):
+    records, nodes = trace_records(headon_trace)
+    start = index_of(records, node="r2", kind="start")
+    scan = index_of(records, node="r2", handler="on_scan")
+    records[start]["i"], records[scan]["i"] = records[scan]["i"], records[start]["i"]
+    result = v.validate(write_log(tmp_path / "e.jsonl", records, nodes), HEADON)
+    assert result.failure is not None and result.failure.reason == v.START
+    assert result.failure.step == 0
+
+
+# ------------------------------------------------------------------ timing rules
+
+
+@dataclass
+class TickState:
+    ticks: int = 0
+
+
+@dataclass(frozen=True)
+class TickParams:
+    period_ms: int = 30
+
+
+class Ticker(Node):
+    """Counts its own ticks; two of them never interact, so only timing orders them."""
+
+    Params = TickParams
+
+    def initial_state(self) -> TickState:
+        return TickState()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.after(self.params.period_ms, self.tick)
+
+    @handler()
+    def tick(self, ctx: Context) -> None:
+        self.state.ticks += 1
+        ctx.after(self.params.period_ms, self.tick)
+
+
+def tickers(tmp_path: Path) -> Path:
+    doc = {"name": "tickers", "nodes": [
+        {"name": "a", "class": "test_validate:Ticker", "params": {"period_ms": 30}},
+        {"name": "b", "class": "test_validate:Ticker", "params": {"period_ms": 50}}]}
+    path = tmp_path / "tickers.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def walk_records(scenario: Path, steps: int) -> tuple[list[dict[str, Any]], list[str]]:
+    """Records of the path that always takes the first enabled event."""
+    system = System(load(scenario))
+    t = system.initial_world()
+    records, counters = [], {}
+
+    def emit(node: int, ev_t: int, kind: str, method: str, digest: str) -> None:
+        name = system.names[node]
+        counters[name] = counters.get(name, -1) + 1
+        records.append({"node": name, "i": counters[name], "t": ev_t, "kind": kind,
+                        "handler": method, "sender": name, "args": payload_digest(()),
+                        "choices": [], "options": [], "digest": digest})
+
+    for i in range(len(system.names)):
+        emit(i, 0, "start", "start", state_digest(t.world.states[i]))
+    world = t.world
+    for _ in range(steps):
+        k = system.semantics.enabled(world.events)[0]
+        ev = world.events[k]
+        world = system.run(world, k, PrefixChooser()).world
+        emit(ev.target, ev.due, "after", ev.method, state_digest(world.states[ev.target]))
+    return records, list(system.names)
+
+
+def test_timing_rules_strict_tolerance_and_untimed(tmp_path):
+    scenario = tickers(tmp_path)
+    records, nodes = walk_records(scenario, 8)
+    # a@30, b@50, a@60, a@90, b@100, a@120, a@150, b@150 (model times): b@50 ran at live t=20,
+    # more than the 5 ms window before a@30
+    k = index_of(records, node="b", t=50)
+    records[k]["t"] = 20
+    records.sort(key=lambda r: r["t"])
+    log = write_log(tmp_path / "e.jsonl", records, nodes)
+    strict = v.validate(log, scenario, tolerance_ms=0)
+    assert strict.failure is not None and strict.failure.reason == v.TIMING
+    assert strict.failure.event.node == "b" and strict.failure.step == 1
+    assert "t*=30 ms" in strict.failure.expected and "due at t=50 ms" in strict.failure.expected
+    assert not v.validate(log, scenario, tolerance_ms=19).ok
+    wide = v.validate(log, scenario, tolerance_ms=20)
+    assert wide.ok and (wide.max_ahead_ms, wide.ahead_steps) == (20, 1)
+    untimed = v.validate(log, scenario, tolerance_ms=None)
+    assert untimed.ok and untimed.max_ahead_ms == 20
+
+
+def test_equal_time_events_of_different_nodes_within_the_window_interleave(tmp_path):
+    scenario = tickers(tmp_path)
+    records, nodes = walk_records(scenario, 8)
+    # a@150 and b@150: the checker allows either order; so does the live order b, a
+    a, b = index_of(records, node="a", t=150), index_of(records, node="b", t=150)
+    records[a], records[b] = records[b], records[a]
+    result = v.validate(write_log(tmp_path / "e.jsonl", records, nodes), scenario)
+    assert result.ok, result.summary()
+
+
+def test_cli_exit_codes_and_json(headon_trace, tmp_path):
+    from runtime.cli import main
+
+    records, nodes = trace_records(headon_trace)
+    good = write_log(tmp_path / "good.jsonl", records, nodes)
+    records[-1]["digest"] = "f" * 24
+    bad = write_log(tmp_path / "bad.jsonl", records, nodes)
+    out = io.StringIO()
+    with contextlib.redirect_stdout(out):
+        assert main(["validate", str(good), str(HEADON)]) == 0
+        assert main(["validate", str(bad), str(HEADON), "--tolerance-ms", "0"]) == 1
+        assert main(["validate", str(bad), str(HEADON), "--json"]) == 1
+    text = out.getvalue()
+    assert "VALID" in text and "strict timing (the checker's exact rules): every step" in text
+    record = json.loads(text[text.index("{"):])
+    assert record["failure"]["reason"] == v.STATE and record["strict"]["ok"] is False
+    assert main(["validate", str(tmp_path / "missing.jsonl"), str(HEADON)]) == 2
+
+
+# ------------------------------------------------------------------ the host's event log
+
+
+@dataclass
+class Heard:
+    seen: tuple[str, ...] = ()
+
+
+class Talker(Node):
+    def initial_state(self) -> Heard:
+        return Heard()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.publish("/chat", String(ctx.choose(["hi", "ho"])))
+
+
+class Listener(Node):
+    def initial_state(self) -> Heard:
+        return Heard()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        self.state.seen = (*self.state.seen, "start")
+
+    @subscribe("/chat")
+    def on_chat(self, ctx: Context, msg: String) -> None:
+        self.state.seen = (*self.state.seen, msg.data)
+
+
+def test_host_logs_each_dispatch_and_runs_on_start_before_earlier_messages(tmp_path):
+    async def body() -> tuple[Heard, list[LiveEvent]]:
+        bus, clock = LoopbackBus(), ManualClock(start_ms=40)
+        log = EventLog(str(tmp_path / "listener.jsonl"), node="listener")
+        hosts = []
+        # the listener waits for a peer that never comes: the talker's message arrives first
+        waiting = {"wait_for": ("talker", "ghost"), "ready_timeout_s": 0.2, "events": log}
+        for node, kw in ((Listener("listener"), waiting), (Talker("talker"), {})):
+            transport = LoopbackTransport(bus)
+            await transport.open()
+            hosts.append(NodeHost(node, transport, clock, seed=3, fleet="f", out=io.StringIO(),
+                                  **kw))
+        listener_task = asyncio.create_task(hosts[0].run())
+        talker_task = asyncio.create_task(hosts[1].run())
+        await asyncio.sleep(0.4)
+        for h in hosts:
+            h.stop()
+        await asyncio.gather(listener_task, talker_task)
+        log.close()
+        return hosts[0].node.state, load_events(tmp_path / "listener.jsonl").events
+
+    state, events = asyncio.run(asyncio.wait_for(body(), 10))
+    assert state.seen[0] == "start"  # the talker's message arrived first, but waited
+    start, chat = events
+    assert (start.kind, start.handler, start.index, start.t) == ("start", "start", 0, 40)
+    assert (chat.kind, chat.handler, chat.sender, chat.topic, chat.seq, chat.stamp) == (
+        "delivery", "on_chat", "talker", "/chat", 1, 40)
+    assert chat.args == payload_digest((String(state.seen[1]),))
+    assert chat.digest == state_digest(snapshot(state))
+
+
+def test_host_logs_choices_with_their_option_counts(tmp_path):
+    async def body() -> list[LiveEvent]:
+        transport = LoopbackTransport(LoopbackBus())
+        await transport.open()
+        log = EventLog(str(tmp_path / "talker.jsonl"), node="talker")
+        host = NodeHost(Talker("talker"), transport, ManualClock(), seed=3, fleet="f",
+                        out=io.StringIO(), events=log)
+        task = asyncio.create_task(host.run())
+        await asyncio.sleep(0.01)
+        host.stop()
+        await task
+        log.close()
+        return load_events(tmp_path / "talker.jsonl").events
+
+    (start,) = asyncio.run(asyncio.wait_for(body(), 10))
+    assert start.options == (2,) and start.choices[0] in (0, 1)
+
+
+# ------------------------------------------------------------------ a real live run
+
+
+def _children_of(pid: int) -> list[int]:
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError, IndexError, ValueError):
+                stat = (entry / "stat").read_text()
+                if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                    found.append(int(entry.name))
+    return found
+
+
+@pytest.fixture(scope="module")
+def c1a_events(tmp_path_factory: pytest.TempPathFactory) -> EventLogFile:
+    """A live C1a run (six processes over Zenoh, time scale 10) with its event log."""
+    path = tmp_path_factory.mktemp("c1a") / "c1a.events.jsonl"
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
+    proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", "launch", str(C1A),
+                             "--time-scale", "10", "--timeout", "60", "--record-events",
+                             str(path)], cwd=ROOT, env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.STDOUT, text=True, start_new_session=True)
+    try:
+        out, _ = proc.communicate(timeout=100)
+    finally:
+        nodes = _children_of(proc.pid)
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+        for pid in nodes:
+            with contextlib.suppress(ProcessLookupError):
+                os.kill(pid, signal.SIGKILL)
+    assert "shutdown requested by map_server: all robots arrived" in out, out[-3000:]
+    return load_events(path)
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(150)
+def test_live_c1a_run_is_a_path_of_the_checker(c1a_events):
+    result = v.validate(c1a_events, C1A, tolerance_ms=None)
+    assert result.ok, result.summary()
+    assert result.events > 3000
+    assert not result.violations  # no collision, no livelock on the live path
+    # timing: the same run under the checker's exact rules stops at its first timing difference
+    strict = v.validate(c1a_events, C1A, tolerance_ms=0, max_backtracks=2_000)
+    assert not strict.ok and strict.failure is not None
+    assert strict.failure.reason == v.TIMING, strict.summary()
+    # ... and the gap the untimed path reports is a tolerance that explains the run
+    assert v.validate(c1a_events, C1A, tolerance_ms=max(1, result.max_ahead_ms)).ok
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(150)
+def test_tampered_live_c1a_logs_show_the_first_unexplained_step(c1a_events):
+    events = list(c1a_events.events)
+    k = next(k for k, e in enumerate(events) if e.node == "r3" and e.handler == "on_path")
+    bad = replace(events[k], digest="0" * 24)
+    result = v.validate(_with(c1a_events, {k: bad}), C1A, tolerance_ms=None)
+    assert result.failure is not None and result.failure.reason == v.STATE
+    assert result.failure.event == bad
+    bad = replace(events[k], choices=(1,), options=(2,))
+    result = v.validate(_with(c1a_events, {k: bad}), C1A, tolerance_ms=None)
+    assert result.failure is not None and result.failure.reason == v.CHOICES
+    assert result.failure.event == bad
+    # dropping the map server's first pose report from r3: its next one cannot come first
+    k = next(k for k, e in enumerate(events)
+             if e.node == "map_server" and e.handler == "on_pose" and e.sender == "r3")
+    result = v.validate(_with(c1a_events, {k: None}), C1A, tolerance_ms=None)
+    f = result.failure
+    assert f is not None and f.event is not None and f.event.node == "map_server"
+    assert f.reason in (v.ORDER, v.STATE), result.summary()
+    assert f.event.index == events[k].index + 1
+
+
+def _with(log: EventLogFile, changes: dict[int, LiveEvent | None]) -> EventLogFile:
+    events = [changes.get(k, e) for k, e in enumerate(log.events)]
+    return EventLogFile(log.path, log.header, log.node_headers, [e for e in events if e])
