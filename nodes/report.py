@@ -75,6 +75,14 @@ class FleetReport:
         if msg.mode == "arrived" and not rec.arrived:
             rec.arrived, rec.arrival_ms = True, msg.time_ms
 
+    def finished(self) -> bool:
+        """True when every robot has arrived or is stuck for good: nothing more will happen.
+
+        This ends live runs of the `rebeca` profile too, whose robots (like the
+        paper's model) never tell the map server that they are done.
+        """
+        return all(r.arrived or r.mode == "stuck" for r in self.records.values())
+
     def passed(self) -> bool:
         """True when every robot arrived and no collision was seen."""
         return not self.collisions and all(r.arrived for r in self.records.values())

@@ -62,6 +62,7 @@ PROJECT_ROOT = Path(__file__).resolve().parent.parent
 _LAST_LINES = 15
 _GRACE_S = (3.0, 2.0)  # after SIGINT, after SIGTERM; then SIGKILL
 _RESPAWN_DELAY_S = 0.5
+_REPORT_GRACE_S = 0.5  # wall seconds between the report's "finished" and the end of the run
 
 
 @dataclass(frozen=True)
@@ -183,6 +184,7 @@ class Fleet:
         self.shutting_down = False
         self.failed: list[str] = []
         self.report = load_report(scenario)
+        self._finishing = False
 
     def log(self, text: str) -> None:
         """A launcher line on the output."""
@@ -230,6 +232,13 @@ class Fleet:
         def deliver(_key: str, payload: bytes) -> None:
             with contextlib.suppress(DecodeError):
                 self.report.on_message(topic, decode(payload).msg)
+            finished = getattr(self.report, "finished", None)
+            if finished is not None and finished() and not self._finishing:
+                # A grace period: messages already in flight from other nodes (a collision
+                # found on the last pose) still reach the report.
+                self._finishing = True
+                asyncio.get_running_loop().call_later(
+                    _REPORT_GRACE_S, self.end, "the run report says every robot is done")
         return deliver
 
     def _argv(self, cfg: NodeConfig) -> list[str]:
@@ -474,8 +483,9 @@ def load_report(scenario: Scenario) -> Any:
     """The run report named by the scenario's `live.report` ("module:factory"), or None.
 
     The factory takes the scenario and returns an object with `topics()`,
-    `on_message(topic, msg)`, `passed()` and `render()`; the launcher feeds it
-    every message on those topics (e.g. `nodes.report:report_for`).
+    `on_message(topic, msg)`, `passed()` and `render()`, and optionally
+    `finished()` (True ends the run); the launcher feeds it every message on
+    those topics (e.g. `nodes.report:report_for`).
     """
     path = scenario.live.get("report")
     if not path:
