@@ -248,7 +248,9 @@ async def live_run(scenario: Scenario, *, time_scale: float, seed: int, timeout_
     if isinstance(report, TimedReport):
         record.collisions = [(c.robot_a, c.robot_b, c.time_ms) for c in report.collisions]
         record.arrived = {n: r.arrived for n, r in report.records.items()}
-        record.arrival_ms = {n: r.arrival_ms for n, r in report.records.items()}
+        # FleetReport's arrival counts from the robot's own start; keep fleet time here.
+        record.arrival_ms = {n: None if r.arrival_ms is None or r.start_ms is None
+                             else r.arrival_ms + r.start_ms for n, r in report.records.items()}
         record.start_ms = {n: report.start_ms.get(n) for n in report.records}
         record.stuck = tuple(sorted(report.stuck))
     return record

@@ -24,7 +24,8 @@ class RobotRecord:
     """What one robot did in a live run."""
 
     arrived: bool = False
-    arrival_ms: int | None = None
+    arrival_ms: int | None = None  # since the robot's own start (its first status)
+    start_ms: int | None = None
     hops: int = 0
     distance_m: float = 0.0
     waits: int = 0
@@ -67,13 +68,17 @@ class FleetReport:
 
     @staticmethod
     def _on_status(rec: RobotRecord, msg: RobotStatus) -> None:
+        if rec.start_ms is None:
+            # Fleet time counts from the launcher's epoch, before the node processes
+            # started; a robot's first status marks its own time zero.
+            rec.start_ms = msg.time_ms
         if msg.mode != rec.mode:
             rec.waits += msg.mode == "waiting"
             rec.backoffs += msg.mode == "backing_off"
         rec.mode = msg.mode
         rec.failures = msg.failures
         if msg.mode == "arrived" and not rec.arrived:
-            rec.arrived, rec.arrival_ms = True, msg.time_ms
+            rec.arrived, rec.arrival_ms = True, msg.time_ms - rec.start_ms
 
     def finished(self) -> bool:
         """True when every robot has arrived or is stuck for good: nothing more will happen.

@@ -183,8 +183,9 @@ def test_report_counts_hops_waits_and_collisions_from_messages():
     assert "/r2/status" in rep.topics()
     for cell in [(5, 5), (5, 5), (6, 6), (7, 6)]:
         rep.on_message("/poses", RobotPose("r1", cell, 1, 2))
-    for mode in ["planning", "moving", "waiting", "waiting", "backing_off", "moving", "arrived"]:
-        rep.on_message("/r1/status", RobotStatus("r1", mode, (7, 6), (7, 6), 0, 1, 4200))
+    for t, mode in enumerate(["planning", "moving", "waiting", "waiting", "backing_off", "moving",
+                              "arrived"]):
+        rep.on_message("/r1/status", RobotStatus("r1", mode, (7, 6), (7, 6), 0, 1, 1000 + 700 * t))
     rec = rep.records["r1"]
     assert (rec.hops, rec.waits, rec.backoffs, rec.arrived, rec.arrival_ms) == (2, 1, 1, True, 4200)
     assert rec.distance_m == pytest.approx(0.255 * (2 ** 0.5 + 1))
