@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nodes.geometry import shadows_intersect
-from nodes.grid import Cell, Dims, inflate
-from nodes.mapfile import load_map
+from nodes.grid import Cell, Dims
+from nodes.mapfile import static_grids
 from nodes.msgs import (
     Collision,
     FleetStatus,
@@ -77,14 +77,10 @@ class MapServer(Node):
         if p.scan_rate_ms <= 0:
             raise ValueError(f"{self.name}: params.scan_rate_ms must be > 0, got {p.scan_rate_ms}")
         self.profile = profile_named(p.profile)
-        self.map = load_map(p.map)
+        self.map, self.static, self.inflated = static_grids(p.map, p.profile)
         self.dims = Dims(res=self.map.resolution, length=p.robot_length, width=p.robot_width,
                          safe_margin=p.safe_margin, stop_zone=p.stop_zone,
                          collision_margin=p.collision_margin)
-        self.static = self.map.occupied(self.profile)
-        self.static.setflags(write=False)
-        self.inflated = inflate(self.static, 1)
-        self.inflated.setflags(write=False)
         tables = build_tables(self.profile, p.fov_deg, p.max_range_m, p.angle_inc_deg, self.map.resolution)
         self.scanner = Scanner(self.static, tables)
         self.index = {name: i for i, name in enumerate(p.robots)}

@@ -9,12 +9,14 @@ from __future__ import annotations
 import math
 import re
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 
 import numpy as np
 import yaml
 
-from nodes.profile import Profile
+from nodes.grid import inflate
+from nodes.profile import Profile, profile_named
 
 #: Model threshold: occupied iff gray < 204 (= 0.8 · 255), REFERENCE §3.1.
 MODEL_FREE_GRAY = 204
@@ -263,3 +265,18 @@ def save_map(
         "free_thresh: 0.196\n"
     )
     return pgm
+
+
+@cache
+def static_grids(map_path: str, profile_name: str) -> tuple[OccupancyMap, np.ndarray, np.ndarray]:
+    """A map, its occupancy by the profile's rule and its one-cell inflation, read-only.
+
+    Loaded once per (map, profile) in a process: the map server and every robot of a
+    checker run share them.
+    """
+    occ_map = load_map(map_path)
+    static = occ_map.occupied(profile_named(profile_name))
+    inflated = inflate(static, 1)
+    static.setflags(write=False)
+    inflated.setflags(write=False)
+    return occ_map, static, inflated

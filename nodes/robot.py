@@ -13,13 +13,10 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import dataclass
-from functools import cache
-
-import numpy as np
 
 from nodes.congestion import backoff_candidates, backoff_options, clamp_target, target_margin
-from nodes.grid import Cell, Dims, direction_between, in_bounds, inflate, is_diagonal, step
-from nodes.mapfile import OccupancyMap, load_map
+from nodes.grid import Cell, Dims, direction_between, in_bounds, is_diagonal, step
+from nodes.mapfile import OccupancyMap, static_grids
 from nodes.motion import (
     cells_per_second,
     check_cell_size_rule,
@@ -87,7 +84,7 @@ class Robot(Node):
     def configure(self) -> None:
         p = self.params
         self.profile = profile_named(p.profile)
-        occ_map, self.static, self.inflated_static = _maps(p.map, p.profile)
+        occ_map, self.static, self.inflated_static = static_grids(p.map, p.profile)
         self.shape = occ_map.shape
         self.dims = Dims(res=occ_map.resolution, length=p.robot_length, width=p.robot_width,
                          safe_margin=p.safe_margin, stop_zone=p.stop_zone)
@@ -279,14 +276,3 @@ class Robot(Node):
         st = self.state
         ctx.publish("status", RobotStatus(self.name, mode, st.cell, tuple(self.params.goal),
                                           st.waits, st.failures, ctx.now()))
-
-
-@cache
-def _maps(map_path: str, profile_name: str) -> tuple[OccupancyMap, np.ndarray, np.ndarray]:
-    """The map, its occupancy and its one-cell inflation, loaded once per (map, profile)."""
-    occ_map = load_map(map_path)
-    static = occ_map.occupied(profile_named(profile_name))
-    inflated = inflate(static, 1)
-    static.setflags(write=False)
-    inflated.setflags(write=False)
-    return occ_map, static, inflated
