@@ -38,6 +38,7 @@ from __future__ import annotations
 import builtins
 from collections.abc import Sequence
 from dataclasses import dataclass
+from types import CodeType
 from typing import TYPE_CHECKING, Any, final
 
 from checker.faults import parse_deadlines, parse_queue_bounds
@@ -47,7 +48,6 @@ if TYPE_CHECKING:
     from checker.system import Failure, System
     from checker.world import Event, World
 
-_GLOBALS = {"__builtins__": builtins}
 _CACHE_LIMIT = 100_000
 
 QUEUE_BOUND = "queue_bound"
@@ -56,6 +56,15 @@ QUEUE_OVERFLOW = "queue overflow"
 
 class PropertyError(ValueError):
     """A property expression could not be evaluated (a name error, a type error...)."""
+
+
+def _names_used(code: CodeType) -> set[str]:
+    """Global names read by `code` and by every code object nested in it."""
+    used = set(code.co_names)
+    for const in code.co_consts:
+        if isinstance(const, CodeType):
+            used |= _names_used(const)
+    return used
 
 
 @final
@@ -68,7 +77,7 @@ class Expr:
         self.source = source
         self.where = where
         self.code = compile(source, where, "eval")
-        used = set(self.code.co_names)
+        used = _names_used(self.code)
         self.uses_all = "nodes" in used
         self.uses_now = "now" in used
         self.needed = tuple((i, n) for i, n in enumerate(names) if n in used)
@@ -89,13 +98,15 @@ class Expr:
         return found
 
     def _evaluate(self, system: System, states: Sequence[bytes], now: int) -> bool:
-        env: dict[str, Any] = {"now": now}
+        # Node names go into the globals so nested scopes (generator expressions,
+        # comprehensions, lambdas) see them too; locals would hide them there.
+        env: dict[str, Any] = {"__builtins__": builtins, "now": now}
         for i, name in self.needed:
             env[name] = system.decode(i, states[i])
         if self.uses_all:
             env["nodes"] = {n: system.decode(i, states[i]) for i, n in enumerate(system.names)}
         try:
-            return bool(eval(self.code, _GLOBALS, env))
+            return bool(eval(self.code, env))
         except Exception as exc:
             raise PropertyError(f"{self.where}: {self.source!r} raised "
                                 f"{type(exc).__name__}: {exc}") from None

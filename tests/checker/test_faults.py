@@ -271,3 +271,16 @@ def test_bad_settings_are_scenario_errors(tmp_path, check, match):
     path = scenario(tmp_path, nodes, name="bad", **check)
     with pytest.raises(ScenarioError, match=match):
         System(load(path), monitors=PropertySet.from_scenario(load(path)))
+
+
+def test_invariant_may_use_comprehensions_over_node_states(tmp_path):
+    # Generator expressions and comprehensions see node names (they are nested scopes, so
+    # the names must be globals of the evaluation, and must be found in nested code).
+    ok = [{"name": "gen", "kind": "invariant",
+           "expr": "all(n <= 3 for n in (ping.sent, pong.received))"}]
+    assert run(scenario(tmp_path, PING_PONG, name="gen_ok", properties=ok)).status == "holds"
+    bad = [{"name": "gen", "kind": "invariant",
+            "expr": "sum([x for x in (ping.sent, pong.received)]) < 3"}]
+    result = run(scenario(tmp_path, PING_PONG, name="gen_bad", properties=bad))
+    assert result.status == "violated" and result.violation.property == "gen"
+    assert replay_confirms(result)
