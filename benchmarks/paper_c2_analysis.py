@@ -71,7 +71,7 @@ def closest_approach(case: str, workdir: Path) -> tuple[str, str]:
         if result.status == "violated":
             last = result.trace["steps"][-1]
             tracked = last["changed"]["map_server"]
-            cells = ", ".join(f"{tuple(c)}d{d}" for c, d in zip(tracked["cells"], tracked["dirs"]))
+            cells = ", ".join(f"{tuple(c)}d{d}" for c, d in zip(tracked["cells"], tracked["dirs"], strict=True))
             return str(k), f"t={last['time']} ms: {cells}"
     return "> 2", ""
 
@@ -83,7 +83,7 @@ def sweep(case: str, workdir: Path) -> set[int]:
             PRIORITY_ORDERS.items(), MAX_WAITS.items(), (100, 140)):
         doc = load_case(case)
         doc["params"]["scan_rate_ms"] = rate
-        for node, prio, wait in zip(robots(doc), prios, waits):
+        for node, prio, wait in zip(robots(doc), prios, waits, strict=True):
             node["priority"] = prio
             node["params"]["max_wait_ms"] = wait
             node["params"]["allow_unsafe_speed"] = True

@@ -7,35 +7,19 @@ import contextlib
 import json
 import os
 import signal
-import socket
 import subprocess
 import time
 import urllib.request
 from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[2]
+from tests.support import ROOT, child_env  # noqa: F401 (re-exported)
+from tests.support import pick_free_port as free_port  # noqa: F401
+
 ARTIFACTS = ROOT / "out" / "test-artifacts"
 
-
-def free_port() -> int:
-    """A TCP port on 127.0.0.1 that was free a moment ago."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-def child_env() -> dict[str, str]:
-    """Environment for CLI subprocesses: the project on PYTHONPATH, no inherited fleet."""
-    env = dict(os.environ)
-    env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)
-    env["PYTHONUNBUFFERED"] = "1"
-    env.pop("TWINFLEET_CONNECT", None)
-    env.pop("TWINFLEET_FLEET", None)
-    return env
 
 
 def stop_process(proc: subprocess.Popen) -> None:
