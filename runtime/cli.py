@@ -7,6 +7,7 @@
     twinfleet view [--connect EP] [--fleet F] [--port P] [--trace FILE]
     twinfleet record SCENARIO|--connect EP -o run.mcap [--duration S]
     twinfleet play run.mcap [--rate K] [--connect EP]
+    twinfleet export run.mcap -o run.json.mcap   (JSON copy for Foxglove)
     twinfleet launch SCENARIO --record-events FILE; twinfleet validate FILE SCENARIO
     twinfleet replay TRACE --live
 
@@ -242,6 +243,21 @@ def cmd_play(args: argparse.Namespace) -> int:
     except (ValueError, OSError, zenoh.ZError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+
+
+def cmd_export(args: argparse.Namespace) -> int:
+    """`twinfleet export`: a JSON-encoded copy of a recording."""
+    from mcap.exceptions import McapError
+
+    from runtime.mcap_export import export_json
+
+    try:
+        count = export_json(args.file, args.output)
+    except (ValueError, OSError, McapError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    print(f"wrote {args.output}: {count} messages, JSON-encoded", flush=True)
+    return 0
 
 
 def _import_modules(modules: Sequence[str]) -> None:
@@ -482,6 +498,15 @@ def _record_parsers(sub: argparse._SubParsersAction) -> None:
                         "(default: %(default)s)")
     _add_endpoint_arguments(p, "publish into this fleet; '*' keeps the recorded fleet")
     p.set_defaults(func=cmd_play)
+    e = sub.add_parser("export", help="write a JSON-encoded copy of a recording (for Foxglove)",
+                       description="Copy an MCAP file written by `twinfleet record` with every "
+                                   "message as JSON (bytes as base64) and schemas to match, so "
+                                   "that viewers like Foxglove Studio decode it. `twinfleet play` "
+                                   "needs the original (msgpack) recording.")
+    e.add_argument("file", help="MCAP file written by `twinfleet record`")
+    e.add_argument("-o", "--output", required=True, metavar="FILE",
+                   help="JSON-encoded MCAP file to write, e.g. run.json.mcap")
+    e.set_defaults(func=cmd_export)
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -261,6 +261,9 @@ def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
         pubs: dict[int, Any] = {}
 
         def publisher(channel: Any) -> Any:
+            if channel.message_encoding != "msgpack":
+                raise ValueError(f"{path}: channel {channel.topic} is {channel.message_encoding}-"
+                                 "encoded (an exported copy?); play needs the msgpack recording")
             key = f"{KEY_PREFIX}/{fleet}{channel.topic}" if fleet else channel.metadata.get("key")
             if not key:
                 raise ValueError(f"{path}: channel {channel.topic} has no 'key' metadata; "

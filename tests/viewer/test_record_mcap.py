@@ -11,6 +11,7 @@ byte for byte, in recorded order.
 
 from __future__ import annotations
 
+import base64
 import json
 import subprocess
 import sys
@@ -118,3 +119,39 @@ def test_play_republishes_what_topic_echo_and_a_subscriber_saw(recording, cli):
     assert len(echoed) == len(poses)
     for got, want in zip(echoed, poses, strict=True):
         assert got == want
+
+
+def test_export_writes_json_that_foxglove_can_decode(recording, tmp_path):
+    out = tmp_path / "c1a.json.mcap"
+    done = subprocess.run([sys.executable, "-m", "runtime.cli", "export", str(recording), "-o",
+                           str(out)], capture_output=True, text=True, timeout=60, env=child_env(),
+                          cwd=ROOT, check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
+    original = list(_rows(recording))
+    exported = list(_rows(out))
+    assert f"wrote {out}: {len(original)} messages, JSON-encoded" in done.stdout
+    assert len(exported) == len(original)
+    for (_, ch_a, msg_a), (schema, ch_b, msg_b) in zip(original, exported, strict=True):
+        assert (ch_b.topic, ch_b.metadata, ch_b.message_encoding) == (ch_a.topic, ch_a.metadata, "json")
+        assert (msg_b.log_time, msg_b.sequence) == (msg_a.log_time, msg_a.sequence)
+        env = msgpack.unpackb(msg_a.data, raw=False)
+        doc = json.loads(msg_b.data)
+        if ch_b.topic == "/map":  # bytes travel as base64, and the schema says so
+            data_schema = json.loads(schema.data)["properties"]["data"]["properties"]["data"]
+            assert data_schema["contentEncoding"] == "base64"
+            assert base64.b64decode(doc["data"]["data"]) == env["data"]["data"]
+        else:
+            assert doc == json.loads(json.dumps(env))
+    played = subprocess.run([sys.executable, "-m", "runtime.cli", "play", str(out), "--listen",
+                             f"tcp/127.0.0.1:{free_port()}", "--wait", "0"], capture_output=True,
+                            text=True, timeout=30, env=child_env(), cwd=ROOT, check=False)
+    assert played.returncode == 2 and "play needs the msgpack recording" in played.stderr
+    again = subprocess.run([sys.executable, "-m", "runtime.cli", "export", str(out), "-o",
+                            str(out)], capture_output=True, text=True, timeout=30, env=child_env(),
+                           cwd=ROOT, check=False)
+    assert again.returncode == 2 and "needs a new file" in again.stderr
+
+
+def _rows(path: Path) -> list[tuple]:
+    with path.open("rb") as f:
+        return list(make_reader(f).iter_messages(log_time_order=True))
