@@ -13,7 +13,8 @@
 
 Connection options are defined once (`add_connection_arguments`); `--connect`
 defaults to $TWINFLEET_CONNECT and `--fleet` to $TWINFLEET_FLEET. `check` and
-`replay` come from `checker.commands.register` when the checker is installed.
+`replay` come from `checker.commands.register` when the checker is installed;
+`record`, `play` and `export` from `runtime.recording_cli`.
 """
 
 from __future__ import annotations
@@ -28,17 +29,19 @@ from collections.abc import Callable, Sequence
 DEFAULT_CONNECT = "tcp/127.0.0.1:7447"
 
 
-def add_connection_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add --connect and --fleet to a monitoring command."""
+def add_connection_arguments(parser: argparse.ArgumentParser, *,
+                             fleet_help: str = "fleet name (the scenario's name); '*' means every fleet",
+                             discovery: bool = True) -> None:
+    """Add --connect and --fleet (and, with `discovery`, --query-timeout) to a command."""
     group = parser.add_argument_group("connection")
     group.add_argument("--connect", metavar="EP", default=os.environ.get("TWINFLEET_CONNECT", DEFAULT_CONNECT),
                        help="Zenoh endpoint of the fleet's router, as printed by `twinfleet launch` "
                             "(default: $TWINFLEET_CONNECT or %(default)s)")
     group.add_argument("--fleet", default=os.environ.get("TWINFLEET_FLEET", "*"),
-                       help="fleet name (the scenario's name); '*' means every fleet "
-                            "(default: $TWINFLEET_FLEET or %(default)s)")
-    group.add_argument("--query-timeout", type=float, default=1.0, metavar="S",
-                       help="seconds to wait for discovery answers (default: %(default)s)")
+                       help=fleet_help + " (default: $TWINFLEET_FLEET or %(default)s)")
+    if discovery:
+        group.add_argument("--query-timeout", type=float, default=1.0, metavar="S",
+                           help="seconds to wait for discovery answers (default: %(default)s)")
 
 
 def _conf(args: argparse.Namespace):  # noqa: ANN202 - zenoh imported lazily
@@ -147,7 +150,7 @@ def cmd_topic(args: argparse.Namespace) -> int:
     fleet = _need_fleet(args)
     if fleet is None:
         return 2
-    _import_modules(args.module)
+    import_modules(args.module)
     return monitor.topic_pub(_conf(args), fleet, args.topic, args.type,
                              monitor.parse_data(args.data), out=out, rate_hz=args.rate,
                              count=None if args.count == 0 else args.count)
@@ -163,7 +166,7 @@ def cmd_service(args: argparse.Namespace) -> int:
     fleet = _need_fleet(args)
     if fleet is None:
         return 2
-    _import_modules(args.module)
+    import_modules(args.module)
     return monitor.service_call(_conf(args), fleet, args.service, args.type,
                                 monitor.parse_data(args.data), out=sys.stdout,
                                 timeout_s=args.timeout)
@@ -189,78 +192,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         return 2
 
 
-def cmd_record(args: argparse.Namespace) -> int:
-    """`twinfleet record`: launch a scenario (or join a fleet) and write its topics to MCAP."""
-    import zenoh
-
-    from runtime import recorder
-    from runtime.launcher import format_result
-    from runtime.scenario import ScenarioError, load_scenario
-
-    _import_modules(args.module)
-    if args.scenario is not None and args.connect:
-        print("error: give a SCENARIO to launch or --connect EP of a running fleet, not both "
-              "(with a SCENARIO the recorder is the fleet's router: see --listen)", file=sys.stderr)
-        return 2
-    connect = args.connect or os.environ.get("TWINFLEET_CONNECT")
-    try:
-        if args.scenario is None:
-            if not connect:
-                print("error: record needs a SCENARIO to launch or --connect EP of a running "
-                      "fleet", file=sys.stderr)
-                return 2
-            result, rec = None, asyncio.run(recorder.record_live(
-                connect, args.fleet, args.output, duration_s=args.duration, handle_signals=True))
-        else:
-            result, rec = asyncio.run(recorder.record_scenario(
-                load_scenario(args.scenario), args.output, time_scale=args.time_scale,
-                duration_s=args.duration, seed=args.seed, listen=args.listen))
-    except (ScenarioError, OSError, zenoh.ZError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    for line in format_result(result) if result is not None else ():
-        print(f"[launcher] {line}", flush=True)
-    print(f"wrote {args.output}: {rec.messages} messages on {rec.topics} topics", flush=True)
-    return 0 if result is None or result.passed else 1
-
-
-def cmd_play(args: argparse.Namespace) -> int:
-    """`twinfleet play`: re-publish a recording onto Zenoh."""
-    from runtime.recorder import play
-    from runtime.zenoh_transport import zenoh_config
-
-    if args.listen:
-        def make_config():  # noqa: ANN202 - zenoh imported lazily
-            return zenoh_config(listen=[args.listen], mode="router")
-    else:
-        def make_config():  # noqa: ANN202 - zenoh imported lazily
-            return zenoh_config(connect=[args.connect], mode="client")
-    import zenoh
-
-    try:
-        return play(make_config, args.file, rate=args.rate,
-                    fleet=None if args.fleet == "*" else args.fleet, wait_s=args.wait)
-    except (ValueError, OSError, zenoh.ZError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-
-
-def cmd_export(args: argparse.Namespace) -> int:
-    """`twinfleet export`: a JSON-encoded copy of a recording."""
-    from mcap.exceptions import McapError
-
-    from runtime.mcap_export import export_json
-
-    try:
-        count = export_json(args.file, args.output)
-    except (ValueError, OSError, McapError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-    print(f"wrote {args.output}: {count} messages, JSON-encoded", flush=True)
-    return 0
-
-
-def _import_modules(modules: Sequence[str]) -> None:
+def import_modules(modules: Sequence[str]) -> None:
     import importlib
 
     for name in modules:
@@ -284,7 +216,9 @@ def build_parser() -> argparse.ArgumentParser:
     _topic_parser(sub)
     _service_parser(sub)
     _view_parser(sub)
-    _record_parsers(sub)
+    from runtime.recording_cli import register as register_recording
+
+    register_recording(sub)
     node = sub.add_parser("node", help="inspect running nodes")
     node_sub = node.add_subparsers(dest="action", required=True, metavar="ACTION")
     nl = node_sub.add_parser("list", help="list running nodes (from liveliness tokens)")
@@ -446,67 +380,9 @@ def _view_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trace", default=None, metavar="FILE",
                    help="step through this checker trace JSON (from `twinfleet check --trace-out`) "
                         "instead of watching a live fleet")
-    _add_endpoint_arguments(p, "fleet to show; '*' shows the first fleet whose data arrives")
+    add_connection_arguments(p, fleet_help="fleet to show; '*' shows the first fleet whose data "
+                             "arrives", discovery=False)
     p.set_defaults(func=cmd_view)
-
-
-def _add_endpoint_arguments(p: argparse.ArgumentParser, fleet_help: str) -> None:
-    group = p.add_argument_group("connection")
-    group.add_argument("--connect", metavar="EP",
-                       default=os.environ.get("TWINFLEET_CONNECT", DEFAULT_CONNECT),
-                       help="Zenoh endpoint of the fleet's router, as printed by `twinfleet launch` "
-                            "(default: $TWINFLEET_CONNECT or %(default)s)")
-    group.add_argument("--fleet", default=os.environ.get("TWINFLEET_FLEET", "*"),
-                       help=fleet_help + " (default: $TWINFLEET_FLEET or %(default)s)")
-
-
-def _record_parsers(sub: argparse._SubParsersAction) -> None:
-    r = sub.add_parser("record", help="record every fleet topic to an MCAP file")
-    r.add_argument("scenario", nargs="?", default=None,
-                   help="scenario YAML to launch and record (omit to record a running fleet "
-                        "given with --connect)")
-    r.add_argument("-o", "--output", required=True, metavar="FILE",
-                   help="MCAP file to write, e.g. run.mcap")
-    r.add_argument("--duration", type=float, default=None, metavar="S",
-                   help="stop after S wall seconds (default: with a SCENARIO, when the run ends; "
-                        "with --connect, at Ctrl-C)")
-    r.add_argument("--connect", default=None, metavar="EP",
-                   help="record the running fleet behind this Zenoh router "
-                        "(default without SCENARIO: $TWINFLEET_CONNECT)")
-    r.add_argument("--fleet", default=os.environ.get("TWINFLEET_FLEET", "*"),
-                   help="with --connect: the fleet to record, '*' for every fleet "
-                        "(default: $TWINFLEET_FLEET or %(default)s)")
-    r.add_argument("--time-scale", type=float, default=None, metavar="K",
-                   help="with a SCENARIO: run fleet time K times faster (default: live.time_scale or 1)")
-    r.add_argument("--seed", type=int, default=None,
-                   help="with a SCENARIO: fleet seed (default: the scenario's)")
-    r.add_argument("--listen", default=None, metavar="EP",
-                   help="with a SCENARIO: endpoint of the recorder's router, which the fleet joins "
-                        "(default: tcp/127.0.0.1:<free port>)")
-    r.add_argument("--module", action="append", default=[], metavar="MODULE",
-                   help="import MODULE first so its message classes give exact schemas (repeatable; "
-                        "a SCENARIO imports its nodes' messages itself)")
-    r.set_defaults(func=cmd_record)
-    p = sub.add_parser("play", help="re-publish an MCAP recording onto Zenoh")
-    p.add_argument("file", help="MCAP file written by `twinfleet record`")
-    p.add_argument("--rate", type=float, default=1.0, metavar="K",
-                   help="playback speed factor: 1 = as recorded, 2 = twice as fast (default: 1)")
-    p.add_argument("--listen", default=None, metavar="EP",
-                   help="be the router on EP (e.g. tcp/127.0.0.1:7447) instead of joining --connect")
-    p.add_argument("--wait", type=float, default=2.0, metavar="S",
-                   help="wait up to S seconds for a subscriber to match before playing "
-                        "(default: %(default)s)")
-    _add_endpoint_arguments(p, "publish into this fleet; '*' keeps the recorded fleet")
-    p.set_defaults(func=cmd_play)
-    e = sub.add_parser("export", help="write a JSON-encoded copy of a recording (for Foxglove)",
-                       description="Copy an MCAP file written by `twinfleet record` with every "
-                                   "message as JSON (bytes as base64) and schemas to match, so "
-                                   "that viewers like Foxglove Studio decode it. `twinfleet play` "
-                                   "needs the original (msgpack) recording.")
-    e.add_argument("file", help="MCAP file written by `twinfleet record`")
-    e.add_argument("-o", "--output", required=True, metavar="FILE",
-                   help="JSON-encoded MCAP file to write, e.g. run.json.mcap")
-    e.set_defaults(func=cmd_export)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
