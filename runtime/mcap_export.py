@@ -12,7 +12,6 @@ metadata; messages keep their log and publish times and sequence numbers.
 
 from __future__ import annotations
 
-import base64
 import json
 from pathlib import Path
 from typing import Any
@@ -21,18 +20,7 @@ import msgpack
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-UNDECODABLE = "twinfleet/Undecodable"
-
-
-def jsonable(value: Any) -> Any:
-    """`value` (decoded msgpack) with bytes as base64 strings and map keys as strings."""
-    if isinstance(value, bytes):
-        return base64.b64encode(value).decode("ascii")
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [jsonable(v) for v in value]
-    return value
+from runtime.viewstate import jsonable
 
 
 def json_schema(schema: Any) -> Any:
