@@ -12,12 +12,14 @@ end) with three state stores, each in a fresh child process pinned to one core:
   CSR edges, transition cache, interned node states).
 
 For each it prints transitions/s, store bytes per visited state (what the
-visited set, parent records, flags and edges hold), RSS growth per visited
-state (peak RSS minus RSS before the search: includes every cache, the node
-code's own memos and allocator slack, so it is a fixed cost plus the store),
-the marginal RSS per state over the second half of the search (sampled every
-50 ms; RSS is page-granular and the allocator keeps freed memory, so treat it
-as an estimate),
+visited set, parent records, flags and edges hold), whole-process RSS growth
+per visited state (peak RSS during the search minus RSS before it, the
+kernel's peak counter reset when the search starts; "end" uses the RSS after
+the search instead of the peak: both include every cache, the node code's own
+memos and allocator slack, so they are a fixed cost plus the store), the
+marginal RSS per state between the first 50 ms sample past half the final
+state count and the end of the same run (RSS is page-granular and the
+allocator keeps freed memory, so treat it as an estimate),
 and the estimated digest-collision probability (n²/2^65 for 64-bit digests,
 TLC-style, plus the content hashes that feed them).
 
@@ -119,6 +121,16 @@ def _rss_now_mb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
+def _reset_peak_rss() -> bool:
+    """Start the kernel's peak-RSS count (VmHWM, ru_maxrss) afresh; False if it cannot."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:
+        return False
+    return True
+
+
 def _old_graph_bytes(graph: Any) -> int:
     """What the baseline's StateGraph holds (dict of 16-byte digests, arrays per state)."""
     n = len(graph.ids)
@@ -154,6 +166,8 @@ def child(args: argparse.Namespace) -> None:
     system.initial()
     gc.collect()
     rss0 = _rss_now_mb()
+    # Without the reset, a peak from loading the scenario would hide the search's own.
+    fresh_peak = _reset_peak_rss()
     samples: list[tuple[int, float]] = []
 
     def sample(stats: Any) -> None:
@@ -174,6 +188,8 @@ def child(args: argparse.Namespace) -> None:
     # Marginal RSS per state over the second half of the search, when the caches are warm.
     half = next(((k, r) for k, r in samples if k >= n // 2), None)
     end = _rss_now_mb()
+    # The kernel's RSS counters lag by up to 64 pages per thread: never report a peak below a sample.
+    peak = max([peak_rss_mb(), end, *(r for _, r in samples)])
     marginal = None if half is None or n == half[0] else (end - half[1]) * 2**20 / (n - half[0])
     print(json.dumps({
         "benchmark": "checker_throughput", "scenario": args.scenario, "store": args.store,
@@ -181,9 +197,11 @@ def child(args: argparse.Namespace) -> None:
         "depth": s.depth, "seconds": round(wall, 3),
         "transitions_per_s": round(s.transitions / wall), "states_per_s": round(n / wall),
         "store_bytes_per_state": round(store_bytes / n, 1),
-        "rss_growth_bytes_per_state": round((peak_rss_mb() - rss0) * 2**20 / n),
+        "rss_growth_bytes_per_state": round((peak - rss0) * 2**20 / n),
+        "rss_end_growth_bytes_per_state": round((end - rss0) * 2**20 / n),
         "marginal_rss_bytes_per_state": None if marginal is None else round(marginal),
-        "peak_rss_mb": round(peak_rss_mb(), 1),
+        "marginal_from_state": None if half is None else half[0], "peak_reset": fresh_peak,
+        "peak_rss_mb": round(peak, 1),
         "collision_probability": collision,
         "handler_runs": caches.get("handler_runs"), "peak_frontier": getattr(s, "peak_frontier", None),
     }))
@@ -224,7 +242,7 @@ def _num(value: int | None) -> str:
 
 def _table(rows: list[dict[str, Any]]) -> None:
     head = (f"{'scenario':<24}{'store':<16}{'states':>9}{'transitions':>13}{'s':>7}"
-            f"{'trans/s':>9}{'store B/st':>11}{'RSS B/st':>10}{'marg. B/st':>11}"
+            f"{'trans/s':>9}{'store B/st':>11}{'RSS B/st':>10}{'end B/st':>10}{'marg. B/st':>11}"
             f"{'P(collision)':>14}")
     print(head)
     print("-" * len(head))
@@ -232,6 +250,7 @@ def _table(rows: list[dict[str, Any]]) -> None:
         print(f"{r['scenario']:<24}{r['store']:<16}{r['states']:>9,}{r['transitions']:>13,}"
               f"{r['seconds']:>7.2f}{r['transitions_per_s']:>9,}"
               f"{r['store_bytes_per_state']:>11.1f}{r['rss_growth_bytes_per_state']:>10,}"
+              f"{_num(r.get('rss_end_growth_bytes_per_state')):>10}"
               f"{_num(r['marginal_rss_bytes_per_state']):>11}"
               f"{r['collision_probability']:>14.1e}")
     by_scenario: dict[str, set[tuple[int, int, str]]] = {}
@@ -240,10 +259,17 @@ def _table(rows: list[dict[str, Any]]) -> None:
                                                           r["verdict"]))
     same = all(len(v) == 1 for v in by_scenario.values())
     print(f"\nsame verdict, states and transitions in every store: {'yes' if same else 'NO'}")
+    print("RSS B/st: (peak RSS during the search - RSS before it) / states; end: the same with "
+          "the RSS after the search; marg.: RSS growth per state from the sample past half "
+          "the states to the end")
     for r in rows:
+        if not r.get("peak_reset", True):
+            print(f"{r['scenario']} / {r['store']}: peak RSS could not be reset; "
+                  "RSS B/st may hide the search's own peak")
         if r.get("handler_runs"):
             print(f"{r['scenario']} / {r['store']}: {r['handler_runs']:,} handler runs "
-                  f"for {r['transitions']:,} transitions; peak frontier {r['peak_frontier']:,}")
+                  f"for {r['transitions']:,} transitions; peak frontier {r['peak_frontier']:,}; "
+                  f"marginal from state {_num(r.get('marginal_from_state'))}")
 
 
 def main() -> None:
