@@ -35,6 +35,7 @@ import numpy as np
 
 _MAX_LOAD = 0.75
 _BLOCK_BITS = 13  # keys are kept in blocks of 8,192 (64 KiB): growing never copies them
+_PLACE_CHUNK = 2048  # keys entered per vectorised pass when the slot table grows (bounds temporaries)
 _BLOCK = 1 << _BLOCK_BITS
 _LOW = _BLOCK - 1
 
@@ -100,8 +101,10 @@ class DigestTable:
         self._n = sid + 1
         if self._n > self._limit:
             self._alloc(2 * self.capacity)
-            for b, block in enumerate(self._blocks):
-                self._place(block[:self._n - b * _BLOCK], b * _BLOCK)
+            for first in range(0, self._n, _PLACE_CHUNK):
+                block = self._blocks[first >> _BLOCK_BITS]
+                low = first & _LOW
+                self._place(block[low:low + min(_PLACE_CHUNK, self._n - first)], first)
         return sid
 
     def _place(self, keys: np.ndarray, first: int) -> None:
@@ -146,7 +149,7 @@ class DigestTable:
             self._blocks.append(block)
             self._bv.append(memoryview(block))
             self._n += len(chunk)
-            self._place(chunk, start)
+        self._place(keys, 0)
 
 
 @final

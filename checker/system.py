@@ -22,7 +22,8 @@ variant's outcome — new node state and new events — in a cache: the
 interleavings of independent nodes repeat the same local steps many times
 (C1a: 128,800 transitions, 5,595 distinct handler runs). Entries are keyed by
 absolute time, so the search drops those older than its frontier's earliest
-t* (`forget_before`), which no world left to expand can use. Equal node states
+t* (`forget_before`), which no world left to expand can use, and the cache
+starts afresh at 16,384 entries whatever the search order. Equal node states
 are interned to one bytes object, hashed once (`World.key`). The cache is off
 under `debug_state` and `check_determinism`, which must really run every
 transition; `transition_cache=False` turns it off for comparison.
@@ -79,7 +80,9 @@ from runtime.snapshot import SnapshotError, restore, snapshot
 __all__ = ["DEADLINE", "DEBUG_STATE", "FAILURE", "NONDETERMINISM", "Failure", "Step",
            "System", "Transition", "Variant"]
 
-_CACHE_LIMIT = 100_000  # entries per cache before it is emptied
+_CACHE_LIMIT = 100_000  # interned node states / content hashes kept before starting afresh
+_MEMO_LIMIT = 16_384  # cached handler outcomes kept before starting afresh (~0.7 KB each)
+_DECODED_LIMIT = 64  # decoded states kept for property expressions (~2.5 KB each on C1a)
 
 if TYPE_CHECKING:
     from checker.properties import PropertySet
@@ -311,8 +314,8 @@ class System:
     def _variants(self, data: bytes, ev: Event) -> list[Variant]:
         """Every choice variant of running `ev` on node state `data` (cached)."""
         memo = self._memo
+        mk = (data, ev.key, ev.due)  # time last (see forget_before)
         if memo is not None:
-            mk = (data, ev.key, ev.due)  # time last (see forget_before)
             found = memo.get(mk)
             if found is not None:
                 return found
@@ -325,10 +328,7 @@ class System:
                 v = self._recheck(data, ev, v)
             variants.append(v)
             prefix = chooser.next_prefix()
-        if memo is not None:
-            if len(memo) >= _CACHE_LIMIT:
-                memo.clear()
-            memo[mk] = variants
+        self._remember(mk, variants)
         return variants
 
     def _build(self, world: World, index: int, v: Variant) -> Transition:
@@ -371,9 +371,16 @@ class System:
             prefix = chooser.next_prefix()
         if self.check_determinism:
             variants = self._checked_restarts(world, j, variants)
-        if memo is not None:
-            memo[mk] = variants
+        self._remember(mk, variants)
         return variants
+
+    def _remember(self, mk: tuple[Any, ...], variants: list[Variant]) -> None:
+        """Cache the variants of one handler run (emptied when it reaches `_MEMO_LIMIT`)."""
+        memo = self._memo
+        if memo is not None:
+            if len(memo) >= _MEMO_LIMIT:
+                memo.clear()
+            memo[mk] = variants
 
     def _checked_restarts(self, world: World, j: int, variants: list[Variant]) -> list[Variant]:
         checked = []
@@ -563,7 +570,7 @@ class System:
         if value is None:
             # Small on purpose: property results are cached by state (checker.properties),
             # so decoding happens once per new combination; decoded states are large.
-            if len(self._decoded) >= 256:
+            if len(self._decoded) >= _DECODED_LIMIT:
                 self._decoded.clear()
             value = self._decoded[data] = restore(data)
         return value
