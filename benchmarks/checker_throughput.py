@@ -8,8 +8,12 @@ end) with three state stores, each in a fresh child process pinned to one core:
   dict of 128-bit digests, a Python array per state for edges, no
   transition cache;
 - `exact`: today's checker with `--exact-states` (dict of 128-bit digests);
-- `compact`: today's default (numpy table of 64-bit digests, int32 parents,
-  CSR edges, transition cache, interned node states).
+- `compact`: today's default (64-bit digests stored by id plus an int32
+  slot table, int32 parents, CSR edges, a two-generation transition cache,
+  interned node states).
+
+`--baseline-rev REV --stores baseline,compact` compares with any earlier
+checker the same way (e.g. the commit before a change).
 
 For each it prints transitions/s, store bytes per visited state (what the
 visited set, parent records, flags and edges hold), whole-process RSS growth
