@@ -8,24 +8,34 @@ end) with three state stores, each in a fresh child process pinned to one core:
   dict of 128-bit digests, a Python array per state for edges, no
   transition cache;
 - `exact`: today's checker with `--exact-states` (dict of 128-bit digests);
-- `compact`: today's default (numpy table of 64-bit digests, int32 parents,
-  CSR edges, transition cache, interned node states).
+- `compact`: today's default (64-bit digests stored by id plus an int32
+  slot table, int32 parents, CSR edges, a two-generation transition cache,
+  interned node states).
+
+`--baseline-rev REV --stores baseline,compact` compares with any earlier
+checker the same way (e.g. the commit before a change).
 
 For each it prints transitions/s, store bytes per visited state (what the
-visited set, parent records, flags and edges hold), RSS growth per visited
-state (peak RSS minus RSS before the search: includes every cache, the node
-code's own memos and allocator slack, so it is a fixed cost plus the store),
-the marginal RSS per state over the second half of the search (sampled every
-50 ms; RSS is page-granular and the allocator keeps freed memory, so treat it
-as an estimate),
+visited set, parent records, flags and edges hold), whole-process RSS growth
+per visited state (peak RSS during the search minus RSS before it, the
+kernel's peak counter reset when the search starts; "end" uses the RSS after
+the search instead of the peak: both include every cache, the node code's own
+memos and allocator slack, so they are a fixed cost plus the store), the
+marginal RSS per state between the first 50 ms sample past half the final
+state count and the end of the same run (RSS is page-granular and the
+allocator keeps freed memory, so treat it as an estimate),
 and the estimated digest-collision probability (n²/2^65 for 64-bit digests,
 TLC-style, plus the content hashes that feed them).
 
     PYTHONPATH=. python benchmarks/checker_throughput.py [--stores baseline,exact,compact]
     PYTHONPATH=. python benchmarks/checker_throughput.py --scenarios launch/c1b.yaml
+    PYTHONPATH=. python benchmarks/checker_throughput.py --scenarios launch/c1b_rebeca.yaml@ros
     PYTHONPATH=. python benchmarks/checker_throughput.py --ring --nodes 7 --modulo 3
 
-`--json` prints one JSON line per run instead of the table. Targets (issue 4):
+A scenario written `FILE@SEMANTICS` runs under those message rules instead of
+the file's own. "trans/s" is over wall time; "cpu" over this process's CPU
+time, which other work on the same core does not inflate. `--json` prints one
+JSON line per run instead of the table. Targets (issue 4):
 >= 20,000 transitions/s on one core and <= 200 B per visited state.
 """
 
@@ -119,6 +129,16 @@ def _rss_now_mb() -> float:
         return int(f.read().split()[1]) * os.sysconf("SC_PAGE_SIZE") / 2**20
 
 
+def _reset_peak_rss() -> bool:
+    """Start the kernel's peak-RSS count (VmHWM, ru_maxrss) afresh; False if it cannot."""
+    try:
+        with open("/proc/self/clear_refs", "w") as f:
+            f.write("5")
+    except OSError:
+        return False
+    return True
+
+
 def _old_graph_bytes(graph: Any) -> int:
     """What the baseline's StateGraph holds (dict of 16-byte digests, arrays per state)."""
     n = len(graph.ids)
@@ -141,28 +161,34 @@ def child(args: argparse.Namespace) -> None:
     from checker.check import load
     from checker.search import peak_rss_mb
 
+    semantics = None
     if args.scenario == "ring":
         scenario = ring_scenario(args.nodes, args.modulo, args.semantics)
     else:
-        scenario = load(ROOT / args.scenario)
+        file, _, semantics = args.scenario.partition("@")
+        scenario = load(ROOT / file)
     props = PropertySet.from_scenario(scenario)
     kwargs: dict[str, Any] = {}
     if args.store in ("exact", "compact", "compact-nocache"):
         kwargs["exact_states"] = args.store == "exact"
         kwargs["transition_cache"] = args.store != "compact-nocache"
+    if semantics:
+        kwargs["semantics"] = semantics
     system = System(scenario, monitors=props, **kwargs)
     system.initial()
     gc.collect()
     rss0 = _rss_now_mb()
+    # Without the reset, a peak from loading the scenario would hide the search's own.
+    fresh_peak = _reset_peak_rss()
     samples: list[tuple[int, float]] = []
 
     def sample(stats: Any) -> None:
         samples.append((stats.states, _rss_now_mb()))
 
     search = Search(system, props, progress=sample, progress_interval=0.05)
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     outcome = search.run("bfs")
-    wall = time.perf_counter() - start
+    wall, cpu = time.perf_counter() - start, time.process_time() - cpu
     s = outcome.statistics
     store = getattr(search, "store", None)
     n = s.states
@@ -174,16 +200,21 @@ def child(args: argparse.Namespace) -> None:
     # Marginal RSS per state over the second half of the search, when the caches are warm.
     half = next(((k, r) for k, r in samples if k >= n // 2), None)
     end = _rss_now_mb()
+    # The kernel's RSS counters lag by up to 64 pages per thread: never report a peak below a sample.
+    peak = max([peak_rss_mb(), end, *(r for _, r in samples)])
     marginal = None if half is None or n == half[0] else (end - half[1]) * 2**20 / (n - half[0])
     print(json.dumps({
         "benchmark": "checker_throughput", "scenario": args.scenario, "store": args.store,
         "verdict": outcome.status, "states": n, "transitions": s.transitions,
         "depth": s.depth, "seconds": round(wall, 3),
         "transitions_per_s": round(s.transitions / wall), "states_per_s": round(n / wall),
+        "transitions_per_cpu_s": round(s.transitions / cpu),
         "store_bytes_per_state": round(store_bytes / n, 1),
-        "rss_growth_bytes_per_state": round((peak_rss_mb() - rss0) * 2**20 / n),
+        "rss_growth_bytes_per_state": round((peak - rss0) * 2**20 / n),
+        "rss_end_growth_bytes_per_state": round((end - rss0) * 2**20 / n),
         "marginal_rss_bytes_per_state": None if marginal is None else round(marginal),
-        "peak_rss_mb": round(peak_rss_mb(), 1),
+        "marginal_from_state": None if half is None else half[0], "peak_reset": fresh_peak,
+        "peak_rss_mb": round(peak, 1),
         "collision_probability": collision,
         "handler_runs": caches.get("handler_runs"), "peak_frontier": getattr(s, "peak_frontier", None),
     }))
@@ -223,15 +254,17 @@ def _num(value: int | None) -> str:
 
 
 def _table(rows: list[dict[str, Any]]) -> None:
-    head = (f"{'scenario':<24}{'store':<16}{'states':>9}{'transitions':>13}{'s':>7}"
-            f"{'trans/s':>9}{'store B/st':>11}{'RSS B/st':>10}{'marg. B/st':>11}"
+    head = (f"{'scenario':<28}{'store':<16}{'states':>9}{'transitions':>13}{'s':>7}"
+            f"{'trans/s':>9}{'cpu':>8}{'store B/st':>11}{'RSS B/st':>10}{'end B/st':>10}{'marg. B/st':>11}"
             f"{'P(collision)':>14}")
     print(head)
     print("-" * len(head))
     for r in rows:
-        print(f"{r['scenario']:<24}{r['store']:<16}{r['states']:>9,}{r['transitions']:>13,}"
+        print(f"{r['scenario']:<28}{r['store']:<16}{r['states']:>9,}{r['transitions']:>13,}"
               f"{r['seconds']:>7.2f}{r['transitions_per_s']:>9,}"
+              f"{_num(r.get('transitions_per_cpu_s')):>8}"
               f"{r['store_bytes_per_state']:>11.1f}{r['rss_growth_bytes_per_state']:>10,}"
+              f"{_num(r.get('rss_end_growth_bytes_per_state')):>10}"
               f"{_num(r['marginal_rss_bytes_per_state']):>11}"
               f"{r['collision_probability']:>14.1e}")
     by_scenario: dict[str, set[tuple[int, int, str]]] = {}
@@ -240,17 +273,25 @@ def _table(rows: list[dict[str, Any]]) -> None:
                                                           r["verdict"]))
     same = all(len(v) == 1 for v in by_scenario.values())
     print(f"\nsame verdict, states and transitions in every store: {'yes' if same else 'NO'}")
+    print("RSS B/st: (peak RSS during the search - RSS before it) / states; end: the same with "
+          "the RSS after the search; marg.: RSS growth per state from the sample past half "
+          "the states to the end")
     for r in rows:
+        if not r.get("peak_reset", True):
+            print(f"{r['scenario']} / {r['store']}: peak RSS could not be reset; "
+                  "RSS B/st may hide the search's own peak")
         if r.get("handler_runs"):
             print(f"{r['scenario']} / {r['store']}: {r['handler_runs']:,} handler runs "
-                  f"for {r['transitions']:,} transitions; peak frontier {r['peak_frontier']:,}")
+                  f"for {r['transitions']:,} transitions; peak frontier {r['peak_frontier']:,}; "
+                  f"marginal from state {_num(r.get('marginal_from_state'))}")
 
 
 def main() -> None:
     """Run the benchmark (or, with --child, one measurement)."""
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenarios", default=",".join(SCENARIOS),
-                    help="comma-separated scenario files (relative to the repository)")
+                    help="comma-separated scenario files (relative to the repository), "
+                    "each optionally FILE@ros or FILE@rebeca")
     ap.add_argument("--stores", default=",".join(STORES),
                     help="comma-separated: baseline, exact, compact, compact-nocache")
     ap.add_argument("--baseline-rev", default=BASELINE_REV, help="git revision of the baseline")

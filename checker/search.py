@@ -45,6 +45,7 @@ from checker.world import World
 
 HOLDS, VIOLATED, UNKNOWN = "holds", "violated", "unknown"
 INTERRUPTED = "interrupted (Ctrl-C)"
+_FORGET_EVERY = 512  # expansions between two `System.forget_before` calls (at least)
 
 
 @final
@@ -168,6 +169,7 @@ class Search:
         self._depth = 0
         self._peak_frontier = 0
         self._expansions = 0
+        self._next_forget = _FORGET_EVERY
         self._pruned = False
         self._resumed = False
         self._elapsed_before = 0.0
@@ -318,12 +320,17 @@ class Search:
             self._expanding = None
             self._partial = 0
             self._expansions += 1
-            if not self._expansions & 4095:
+            if self._expansions >= self._next_forget:
                 self._forget()
             self._tick()
 
     def _forget(self) -> None:
-        """Let the system drop cached outcomes no world left to expand can use."""
+        """Let the system drop cached outcomes no world left to expand can use.
+
+        Runs every 512 expansions, or every len(frontier) when that is larger, so
+        scanning the frontier costs O(1) per expansion.
+        """
+        self._next_forget = self._expansions + max(_FORGET_EVERY, len(self._frontier))
         times = [w.events[0].due for w, _, _ in self._frontier if w.events]
         if times:
             self.system.forget_before(min(times))

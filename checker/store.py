@@ -2,10 +2,11 @@
 
 States get integer ids in discovery order. Per id the store keeps:
 
-- its key in an index: by default `DigestTable`, a numpy open-addressing
-  table of 64-bit digests (linear probing, doubled when 60 % full) mapping
-  to int32 ids, about 12 bytes per slot; with `--exact-states`, `ExactIndex`,
-  a dict of 128-bit digests (about 100 bytes per state);
+- its key in an index: by default `DigestTable`, 64-bit digests stored by id
+  (8 bytes each) plus an int32 open-addressing slot table (linear probing,
+  doubled when 75 % full), about 13-19 bytes per state; with
+  `--exact-states`, `ExactIndex`, a dict of 128-bit digests (about 100 bytes
+  per state);
 - its parent id (int32, -1 for initial worlds) for shortest/first-found paths;
   a path of ids is turned back into steps by re-running each world's
   successors and taking the one whose key maps to the next id
@@ -13,8 +14,8 @@ States get integer ids in discovery order. Per id the store keeps:
 - one byte "nothing pending" and one byte per `eventually` property
   ("its expression holds here");
 - when `eventually` properties are checked, its successors' ids, deduplicated,
-  in one shared int32 array (compressed sparse rows: start offset and count
-  per expanded state), about 12 bytes per state plus 4 per distinct edge.
+  in one shared int32 array (compressed sparse rows: int32 start offset and
+  count per expanded state), 8 bytes per state plus 4 per distinct edge.
 
 A 64-bit digest can merge two different states (a false merge: the second
 is taken as already visited, so part of the state space may go unexplored).
@@ -32,24 +33,34 @@ from typing import Any, final
 
 import numpy as np
 
-_MAX_LOAD = 0.6
+_MAX_LOAD = 0.75
+_BLOCK_BITS = 13  # keys are kept in blocks of 8,192 (64 KiB): growing never copies them
+_PLACE_CHUNK = 2048  # keys entered per vectorised pass when the slot table grows (bounds temporaries)
+_BLOCK = 1 << _BLOCK_BITS
+_LOW = _BLOCK - 1
 
 
 @final
 class DigestTable:
-    """Open addressing: 64-bit keys (0 = empty slot) → int32 ids, grown by doubling."""
+    """64-bit keys → dense ids 0, 1, 2... (in insertion order), about 13-19 bytes per key.
+
+    Keys are kept by id in fixed-size numpy blocks (8 bytes per key, never
+    copied); an int32 slot table (id + 1, 0 = empty slot) is probed linearly
+    from `key & mask` and rebuilt at twice the size when 75 % full. So growing
+    touches only 4 bytes per slot and the table holds no second copy of the keys.
+    """
 
     def __init__(self, capacity: int = 1 << 12) -> None:
         if capacity & (capacity - 1):
             raise ValueError(f"capacity must be a power of two, got {capacity}")
-        self._alloc(capacity)
+        self._blocks: list[np.ndarray] = []
+        self._bv: list[memoryview] = []  # scalar access from Python is ~30 % faster
         self._n = 0
+        self._alloc(capacity)
 
     def _alloc(self, capacity: int) -> None:
-        self._keys = np.zeros(capacity, dtype=np.uint64)
-        self._ids = np.zeros(capacity, dtype=np.int32)
-        self._kv = memoryview(self._keys)  # scalar access from Python is ~30 % faster
-        self._iv = memoryview(self._ids)
+        self._slots = np.zeros(capacity, dtype=np.int32)
+        self._sv = memoryview(self._slots)
         self._mask = capacity - 1
         self._limit = int(capacity * _MAX_LOAD)
 
@@ -61,71 +72,84 @@ class DigestTable:
         """Number of slots."""
         return self._mask + 1
 
-    def get(self, key: int) -> int:
-        """The id stored for `key`, or -1."""
-        key = key or 1
-        kv, mask = self._kv, self._mask
+    def _slot(self, key: int) -> int:
+        """The slot holding `key`, or the empty slot where it would go."""
+        sv, bv, mask = self._sv, self._bv, self._mask
         i = key & mask
         while True:
-            k = kv[i]
-            if k == key:
-                return self._iv[i]
-            if k == 0:
-                return -1
+            s = sv[i] - 1
+            if s < 0 or bv[s >> _BLOCK_BITS][s & _LOW] == key:
+                return i
             i = (i + 1) & mask
 
-    def setdefault(self, key: int, sid: int) -> int:
-        """The id stored for `key`; if there is none, store `sid` and return it."""
-        key = key or 1  # 0 marks empty slots: digest 0 shares a slot with digest 1
-        kv, mask = self._kv, self._mask
-        i = key & mask
-        while True:
-            k = kv[i]
-            if k == key:
-                return self._iv[i]
-            if k == 0:
-                break
-            i = (i + 1) & mask
-        kv[i] = key
-        self._iv[i] = sid
-        self._n += 1
+    def get(self, key: int) -> int:
+        """The id of `key`, or -1."""
+        return self._sv[self._slot(key)] - 1
+
+    def setdefault(self, key: int) -> int:
+        """The id of `key`; if it has none, give it the next id (`len(self)`) and return that."""
+        i = self._slot(key)
+        found = self._sv[i] - 1
+        if found >= 0:
+            return found
+        sid = self._n
+        if not sid & _LOW:
+            self._blocks.append(np.zeros(_BLOCK, dtype=np.uint64))
+            self._bv.append(memoryview(self._blocks[-1]))
+        self._bv[-1][sid & _LOW] = key
+        self._sv[i] = sid + 1
+        self._n = sid + 1
         if self._n > self._limit:
-            self._grow()
+            self._alloc(2 * self.capacity)
+            for first in range(0, self._n, _PLACE_CHUNK):
+                block = self._blocks[first >> _BLOCK_BITS]
+                low = first & _LOW
+                self._place(block[low:low + min(_PLACE_CHUNK, self._n - first)], first)
         return sid
 
-    def _grow(self) -> None:
-        """Double the table and re-insert every key, vectorised in probing rounds."""
-        used = self._keys != 0
-        keys, ids = self._keys[used], self._ids[used]
-        self._alloc(2 * self.capacity)
-        mask = np.uint64(self._mask)
-        slots = (keys & mask).astype(np.int64)
+    def _place(self, keys: np.ndarray, first: int) -> None:
+        """Enter `keys` (ids `first`, `first + 1`...) into the slot table, in vectorised
+        probing rounds: one winner per free slot, the rest probe on."""
+        slots = (keys & np.uint64(self._mask)).astype(np.int64)
         todo = np.arange(len(keys))
         while len(todo):
             cand = slots[todo]
-            free = self._keys[cand] == 0
-            # One winner per free slot; the rest (and those facing a full slot) probe on.
-            uniq, first = np.unique(cand[free], return_index=True)
-            winners = todo[free][first]
-            self._keys[uniq] = keys[winners]
-            self._ids[uniq] = ids[winners]
+            free = self._slots[cand] == 0
+            uniq, pick = np.unique(cand[free], return_index=True)
+            winners = todo[free][pick]
+            self._slots[uniq] = winners + first + 1
             placed = np.zeros(len(keys), dtype=bool)
             placed[winners] = True
             todo = todo[~placed[todo]]
             slots[todo] = (slots[todo] + 1) & self._mask
 
+    def keys(self) -> np.ndarray:
+        """Every key, indexed by id (a copy)."""
+        if not self._blocks:
+            return np.zeros(0, dtype=np.uint64)
+        return np.concatenate(self._blocks)[:self._n]
+
     def nbytes(self) -> int:
-        """Bytes held by the table's arrays."""
-        return int(self._keys.nbytes + self._ids.nbytes)
+        """Bytes held by the slot table and the key blocks."""
+        return int(self._slots.nbytes + len(self._blocks) * _BLOCK * 8)
 
     def __getstate__(self) -> dict[str, Any]:
-        return {"keys": self._keys, "ids": self._ids, "n": self._n}
+        return {"keys": self.keys(), "capacity": self.capacity}
 
     def __setstate__(self, state: dict[str, Any]) -> None:
-        self._alloc(len(state["keys"]))
-        self._keys[:] = state["keys"]
-        self._ids[:] = state["ids"]
-        self._n = state["n"]
+        keys = np.asarray(state["keys"], dtype=np.uint64)
+        if "ids" in state:  # an older checkpoint: a table of keys (0 = empty) and ids
+            used = keys != 0
+            keys = keys[used][np.argsort(state["ids"][used], kind="stable")]
+        self.__init__(state.get("capacity", len(state["keys"])))  # type: ignore[misc]
+        for start in range(0, len(keys), _BLOCK):
+            chunk = keys[start:start + _BLOCK]
+            block = np.zeros(_BLOCK, dtype=np.uint64)
+            block[:len(chunk)] = chunk
+            self._blocks.append(block)
+            self._bv.append(memoryview(block))
+            self._n += len(chunk)
+        self._place(keys, 0)
 
 
 @final
@@ -142,9 +166,9 @@ class ExactIndex:
         """The id stored for `key`, or -1."""
         return self._ids.get(key, -1)
 
-    def setdefault(self, key: bytes, sid: int) -> int:
-        """The id stored for `key`; if there is none, store `sid` and return it."""
-        return self._ids.setdefault(key, sid)
+    def setdefault(self, key: bytes) -> int:
+        """The id of `key`; if it has none, give it the next id (`len(self)`) and return that."""
+        return self._ids.setdefault(key, len(self._ids))
 
     def nbytes(self) -> int:
         """Bytes of the dict, its keys and its (mostly non-cached) int values."""
@@ -158,7 +182,7 @@ class EdgeStore:
 
     def __init__(self) -> None:
         self.targets = array("i")
-        self.start = array("q")  # per state: offset into targets, -1 if not expanded
+        self.start = array("i")  # per state: offset into targets, -1 if not expanded
         self.count = array("i")
 
     def new_state(self) -> None:
@@ -211,7 +235,7 @@ class StateStore:
     def add(self, key: Any, parent: int, *, terminal: bool = False) -> tuple[int, bool]:
         """The id of `key`, and whether it is new (then `parent` is recorded; -1 = root)."""
         sid = len(self.parent)
-        found = self.index.setdefault(key, sid)
+        found = self.index.setdefault(key)
         if found != sid:
             return found, False
         self.parent.append(parent)

@@ -22,7 +22,10 @@ variant's outcome — new node state and new events — in a cache: the
 interleavings of independent nodes repeat the same local steps many times
 (C1a: 128,800 transitions, 5,595 distinct handler runs). Entries are keyed by
 absolute time, so the search drops those older than its frontier's earliest
-t* (`forget_before`), which no world left to expand can use. Equal node states
+t* (`forget_before`), which no world left to expand can use; and whatever
+the search order it keeps at most two generations of 1,024 outcomes
+(`checker.cache.GenerationCache`): a breadth-first frontier can span a wide
+range of times, and outcomes not used for a generation are rarely used again. Equal node states
 are interned to one bytes object, hashed once (`World.key`). The cache is off
 under `debug_state` and `check_determinism`, which must really run every
 transition; `transition_cache=False` turns it off for comparison.
@@ -37,6 +40,7 @@ import hashlib
 from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any, final
 
+from checker.cache import GenerationCache
 from checker.choices import ChoiceMismatch, PrefixChooser
 from checker.faults import DROP, DUPLICATE, parse_settings
 from checker.semantics import Semantics
@@ -79,7 +83,9 @@ from runtime.snapshot import SnapshotError, restore, snapshot
 __all__ = ["DEADLINE", "DEBUG_STATE", "FAILURE", "NONDETERMINISM", "Failure", "Step",
            "System", "Transition", "Variant"]
 
-_CACHE_LIMIT = 100_000  # entries per cache before it is emptied
+_CACHE_LIMIT = 100_000  # interned node states / content hashes kept before starting afresh
+_MEMO_LIMIT = 1_024  # handler outcomes per cache generation (two kept; ~0.55 KB each on C1b)
+_DECODED_LIMIT = 64  # decoded states kept for property expressions (~2.5 KB each on C1a)
 
 if TYPE_CHECKING:
     from checker.properties import PropertySet
@@ -127,8 +133,9 @@ class System:
         self.check_determinism = check_determinism
         self.exact_states = exact_states
         self.monitors = monitors
-        self._memo: dict[tuple[Any, ...], list[Variant]] | None = (
-            {} if transition_cache and not debug_state and not check_determinism else None)
+        self._memo: GenerationCache[list[Variant]] | None = (
+            GenerationCache(_MEMO_LIMIT)
+            if transition_cache and not debug_state and not check_determinism else None)
         self._current: list[bytes | None] = [None] * len(self.nodes)
         self._decoded: dict[bytes, Any] = {}
         self._canon: dict[bytes, bytes] = {}
@@ -311,8 +318,8 @@ class System:
     def _variants(self, data: bytes, ev: Event) -> list[Variant]:
         """Every choice variant of running `ev` on node state `data` (cached)."""
         memo = self._memo
+        mk = (data, ev.key, ev.due)  # time last (see forget_before)
         if memo is not None:
-            mk = (data, ev.key, ev.due)  # time last (see forget_before)
             found = memo.get(mk)
             if found is not None:
                 return found
@@ -326,9 +333,7 @@ class System:
             variants.append(v)
             prefix = chooser.next_prefix()
         if memo is not None:
-            if len(memo) >= _CACHE_LIMIT:
-                memo.clear()
-            memo[mk] = variants
+            memo.put(mk, variants)
         return variants
 
     def _build(self, world: World, index: int, v: Variant) -> Transition:
@@ -361,8 +366,9 @@ class System:
         data = world.states[j] if durable else self._initial_states[j]
         memo = self._memo
         mk = (CRASH, j, data, now)  # time last, like event entries (see forget_before)
-        if memo is not None and mk in memo:
-            return memo[mk]
+        found = None if memo is None else memo.get(mk)
+        if found is not None:
+            return found
         variants = []
         prefix: tuple[int, ...] | None = ()
         while prefix is not None:
@@ -372,7 +378,7 @@ class System:
         if self.check_determinism:
             variants = self._checked_restarts(world, j, variants)
         if memo is not None:
-            memo[mk] = variants
+            memo.put(mk, variants)
         return variants
 
     def _checked_restarts(self, world: World, j: int, variants: list[Variant]) -> list[Variant]:
@@ -563,7 +569,7 @@ class System:
         if value is None:
             # Small on purpose: property results are cached by state (checker.properties),
             # so decoding happens once per new combination; decoded states are large.
-            if len(self._decoded) >= 256:
+            if len(self._decoded) >= _DECODED_LIMIT:
                 self._decoded.clear()
             value = self._decoded[data] = restore(data)
         return value
@@ -579,13 +585,7 @@ class System:
         still expand runs events at or after that time, so nothing dropped could be
         used again.
         """
-        memo = self._memo
-        if not memo:
-            return 0
-        dead = [k for k in memo if k[-1] < time_ms]
-        for k in dead:
-            del memo[k]
-        return len(dead)
+        return 0 if self._memo is None else self._memo.forget_before(time_ms)
 
     def cache_sizes(self) -> dict[str, int]:
         """Entries in the system's caches (transition outcomes, interned states, hashes)."""
