@@ -13,13 +13,13 @@ inflation by one cell already keeps paths off obstacle corners).
 from __future__ import annotations
 
 import heapq
-from collections import OrderedDict
 from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
 
 from nodes.grid import NB, SQRT2, Cell, Dims, direction_between, octile
+from nodes.memo import CellsMemo
 from nodes.profile import Profile
 
 #: The model's "infinite" g/f.
@@ -310,19 +310,12 @@ class PathPlanner:
     def __init__(self, static_inflated: np.ndarray, omap: np.ndarray, dims: Dims,
                  profile: Profile, maxsize: int = 65536) -> None:
         self.static_inflated, self.omap, self.dims, self.profile = static_inflated, omap, dims, profile
-        self._memo: OrderedDict[tuple, tuple[Cell, ...]] = OrderedDict()
-        self._maxsize = maxsize
+        self._memo = CellsMemo(maxsize)
 
     def plan(self, others: Sequence[OtherRobot], start: Cell, goal: Cell) -> tuple[Cell, ...]:
         """Waypoints from `start` (excluded) to `goal` around `others`; () when none."""
-        key = (tuple(others), start, goal)
-        memo = self._memo
-        if key in memo:
-            memo.move_to_end(key)
-            return memo[key]
+        return self._memo.get((tuple(others), start, goal), lambda: self._plan(others, start, goal))
+
+    def _plan(self, others: Sequence[OtherRobot], start: Cell, goal: Cell) -> tuple[Cell, ...]:
         grid = planning_grid(self.static_inflated, self.omap, others, start, self.dims, self.profile)
-        result = tuple(plan_waypoints(grid, start, goal, self.profile))
-        memo[key] = result
-        if len(memo) > self._maxsize:
-            memo.popitem(last=False)
-        return result
+        return tuple(plan_waypoints(grid, start, goal, self.profile))

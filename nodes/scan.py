@@ -10,13 +10,13 @@ decimals, trunc to cells); the exact mode samples from the cell centre over
 from __future__ import annotations
 
 import math
-from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from nodes.grid import COS8, SIN8, Cell, Dims, cell_centre
+from nodes.memo import CellsMemo
 from nodes.profile import Profile
 
 #: Sample step along a beam, in cells, per scan mode.
@@ -179,22 +179,13 @@ class Scanner:
         self._occ = np.array(static_occ, dtype=bool)
         self._occ.setflags(write=False)
         self.tables = tables
-        self._memo: OrderedDict[tuple, tuple[Cell, ...]] = OrderedDict()
-        self._maxsize = maxsize
+        self._memo = CellsMemo(maxsize)
 
     def scan(self, robot_cell: Cell, robot_dir: int, other_cells: Iterable[Cell]) -> tuple[Cell, ...]:
         """Scan from ``robot_cell`` heading ``robot_dir`` with the other robots at ``other_cells``."""
         others = tuple(sorted(set(other_cells)))  # order and repeats do not matter
-        key = (robot_cell, robot_dir % 8, others)
-        memo = self._memo
-        if key in memo:
-            memo.move_to_end(key)
-            return memo[key]
-        out = scan_cells(self._occ, robot_cell, robot_dir, others, self.tables)
-        memo[key] = out
-        if len(memo) > self._maxsize:
-            memo.popitem(last=False)
-        return out
+        return self._memo.get((robot_cell, robot_dir % 8, others), lambda: scan_cells(
+            self._occ, robot_cell, robot_dir, others, self.tables))
 
 
 def frontal_clearance(
