@@ -26,7 +26,10 @@ the launcher process, on its router session, as the fleet's driver
    (``--record-events``) list the same events in the same order per node.
 
 Timers fire when granted, not by wall clock, so the replay runs as fast as
-the processes go, whatever the trace's logical duration.
+the processes go, whatever the trace's logical duration. A lasso trace (a
+liveness violation) is followed by `cycles` more rounds of its cycle; each
+round must bring every live node back to the state digests it had where the
+cycle starts.
 """
 
 from __future__ import annotations
@@ -104,6 +107,7 @@ class Plan:
     final_digests: dict[str, str]
     collisions: list[tuple[str, str, str]]  # (step, "ra,rb", cells text) from the trace's logs
     file_profile: str = ""  # the profile the scenario file itself names
+    cycles: int = 0  # extra rounds of a lasso's cycle appended to the trace's steps
 
 
 @final
@@ -124,6 +128,8 @@ class LiveReplayResult:
     node_logs: str = ""
     node_logs_match: bool | None = None
     events_path: str = ""
+    cycles: int = 0
+    cycle_start: int | None = None
     startup_s: float = 0.0
     replay_s: float = 0.0
     wall_s: float = 0.0
@@ -160,13 +166,25 @@ class LiveReplayResult:
                          f"at t={t} ms")
         if self.node_logs:
             lines.append(f"node event logs: {self.node_logs} ({self.events_path})")
+        if self.cycles:
+            lines.append(f"lasso: went round the cycle from world {self.cycle_start} "
+                         f"{self.cycles} more time(s)"
+                         + ("; every round came back to the same node states"
+                            if self.divergence is None and self.final_states_match else ""))
         verdict = "CONFIRMED" if self.confirmed else "NOT confirmed"
         lines.append(f"live replay {verdict}: {self.property} ({self.message})")
         return "\n".join(lines)
 
 
-def plan(trace_path: str | Path) -> Plan:
+def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
     """Compile a trace: re-execute it with the checker and list the grants.
+
+    Args:
+        trace_path: a trace written by `twinfleet check`.
+        cycles: for a lasso trace (a liveness violation), go round its cycle this
+            many more times after the recorded steps. The world at the end of each
+            round equals (up to a shift of time) the one where the cycle starts, so
+            the live nodes must come back to the same state digests every round.
 
     Raises:
         TraceError: unreadable trace, or the code no longer produces it.
@@ -185,8 +203,15 @@ def plan(trace_path: str | Path) -> Plan:
         raise TraceError(f"{trace_path}: the initial world differs from the trace's (the code "
                          "or the scenario changed; `twinfleet replay` says more)")
     starts = _start_grants(system, init.world.states, split_start_choices(scenario, choices))
+    if cycles < 0:
+        raise ValueError(f"cycles must be >= 0, got {cycles}")
+    records = list(trace["steps"])
+    if cycles and trace.get("cycle_start") is not None:
+        records += records[trace["cycle_start"]:] * cycles
+    else:
+        cycles = 0
     steps, world = [], init.world
-    for rec in trace["steps"]:
+    for n, rec in enumerate(records, start=1):
         if rec.get("kind") == CRASH:
             raise ValueError(f"{trace_path}: step {rec['index']} is a crash fault; a live "
                              "replay cannot crash a node on cue")
@@ -195,9 +220,10 @@ def plan(trace_path: str | Path) -> Plan:
         t = system.execute(world, Step(k, tuple(rec["choices"]), tuple(rec["options"])))
         if t.world.digest.hex() != rec["digest"]:
             raise TraceError(f"{trace_path}: step {rec['index']} no longer gives the recorded "
-                             "world (run `twinfleet replay` for details)")
+                             "world (run `twinfleet replay` for details)"
+                             + (f" (round of the cycle, step {n})" if n > rec["index"] else ""))
         sender = system.names[ev.sender] if ev.sender >= 0 else ""
-        steps.append(Grant(rec["index"], system.names[ev.target], ev.method, live_kind(ev),
+        steps.append(Grant(n, system.names[ev.target], ev.method, live_kind(ev),
                            sender, payload_digest(ev.args), summarise(ev.args), ev.due,
                            tuple(t.step.choices), tuple(t.step.options),
                            state_digest(t.world.states[ev.target])))
@@ -207,7 +233,7 @@ def plan(trace_path: str | Path) -> Plan:
                   for rec in trace["steps"] for log in rec.get("logs", ())
                   if log.get("event") == "collision"]
     return Plan(str(trace_path), trace, scenario, starts, steps, final, collisions,
-                load(trace["scenario"]).profile)
+                load(trace["scenario"]).profile, cycles)
 
 
 def _start_grants(system: System, states: Sequence[bytes],
@@ -359,8 +385,8 @@ async def _query(transport: Transport | None, key: str, payload: bytes,
 
 async def replay_live(trace_path: str | Path, *, out: TextIO = sys.stdout,
                       step_timeout_s: float = 10.0, timeout_s: float = 300.0,
-                      events_out: str | None = None,
-                      handle_signals: bool = False) -> LiveReplayResult:
+                      events_out: str | None = None, handle_signals: bool = False,
+                      cycles: int = 0) -> LiveReplayResult:
     """Replay a checker trace on the real multi-process fleet (module docstring).
 
     Args:
@@ -371,12 +397,14 @@ async def replay_live(trace_path: str | Path, *, out: TextIO = sys.stdout,
         events_out: where the nodes' merged event log goes (default: beside the trace,
             ``<trace stem>.live-events.jsonl``).
         handle_signals: end the run on SIGINT/SIGTERM (main thread only).
+        cycles: for a lasso trace, extra rounds of its cycle (see `plan`).
     """
     started = time.monotonic()
-    p = plan(trace_path)
+    p = plan(trace_path, cycles=cycles)
     prop = p.trace["property"]["name"]
     result = LiveReplayResult(str(trace_path), prop, p.trace.get("message", ""), len(p.steps),
-                              expected_collisions=p.collisions)
+                              expected_collisions=p.collisions, cycles=p.cycles,
+                              cycle_start=p.trace.get("cycle_start"))
     coordinator = Coordinator(p, result, step_timeout_s=step_timeout_s)
     events = events_out or str(Path(trace_path).with_suffix(".live-events.jsonl"))
     # the node processes read the scenario file: give them the trace's profile if it differs
@@ -419,7 +447,8 @@ def live_replay_command(args: Any) -> int:
     not (or on bad input), like `replay`."""
     try:
         result = asyncio.run(replay_live(args.trace, out=io.StringIO() if args.quiet
-                                         else sys.stdout, handle_signals=True))
+                                         else sys.stdout, handle_signals=True,
+                                         cycles=getattr(args, "cycles", 0)))
     except (TraceError, ValueError, OSError) as exc:
         print(f"twinfleet replay --live: {exc}", file=sys.stderr)
         return 2

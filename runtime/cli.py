@@ -250,6 +250,10 @@ def _add_live_replay(sub: argparse._SubParsersAction) -> None:
                              "answers in the trace's order (logical time, as fast as the "
                              "processes go) and confirms the violation on the live processes "
                              "(exit 1 confirmed, 2 not)")
+    replay.add_argument("--cycles", type=int, default=2, metavar="N",
+                        help="with --live and a lasso trace (a liveness violation): go round its "
+                             "cycle N more times, checking that the live nodes come back to the "
+                             "same states every round (default: %(default)s)")
     replay.set_defaults(func=functools.partial(_replay_or_live, replay.get_default("func")))
 
 

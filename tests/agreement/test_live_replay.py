@@ -193,3 +193,44 @@ def test_replay_live_command(tmp_path, capsys, reap_nodes):
     assert "live replay CONFIRMED: no_collision" in capsys.readouterr().out
     assert main(["replay", str(trace), "--quiet"]) == 1  # without --live: the checker's replay
     assert "replay confirmed" in capsys.readouterr().out
+
+
+def lasso_trace(tmp_path: Path) -> Path:
+    """A liveness counterexample: a ball goes back and forth for ever, nobody scores."""
+    from tests.checker.helpers import node, scenario
+
+    path = scenario(tmp_path, [node("server", "BallServer"), node("returner", "BallReturner")],
+                    name="rally", properties=[{"name": "someone_scores", "kind": "eventually",
+                                               "expr": "server.scored"}])
+    out = tmp_path / "rally.trace.json"
+    result = check(path, CheckOptions(trace_out=str(out)))
+    assert result.violation is not None and result.violation.shape == "lasso"
+    return out
+
+
+def test_a_lasso_goes_round_its_cycle_again_on_gated_hosts(tmp_path):
+    trace = lasso_trace(tmp_path)
+    once, thrice = plan(trace, cycles=0), plan(trace, cycles=3)
+    # 4 recorded steps, the cycle from world 1 is the last 3 of them
+    assert len(once.steps) == 4 and len(thrice.steps) == 4 + 3 * 3
+    assert [g.handler for g in thrice.steps[1:4]] == [g.handler for g in thrice.steps[-3:]]
+    assert [g.t for g in thrice.steps[-3:]] == [g.t + 30 for g in thrice.steps[1:4]]
+    assert thrice.final_digests == once.final_digests  # same states, 30 ms later
+    result = asyncio.run(asyncio.wait_for(replay_in_process(thrice, tmp_path / "ev"), 60))
+    assert result.divergence is None and result.final_states_match
+    assert result.granted == len(thrice.starts) + 13
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(120)
+def test_replay_live_command_runs_a_lasso_cycle_on_real_processes(tmp_path, capsys, reap_nodes):
+    from runtime.cli import main
+
+    trace = lasso_trace(tmp_path)
+    assert main(["replay", str(trace), "--live", "--cycles", "5"]) == 1
+    out = capsys.readouterr().out
+    assert "lasso: went round the cycle from world 1 5 more time(s); every round came back" in out
+    assert "live replay CONFIRMED: someone_scores" in out
+    assert main(["replay", str(trace), "--live", "--cycles", "-1"]) == 2
+    assert "cycles must be >= 0" in capsys.readouterr().err
+    assert not _my_node_processes()
