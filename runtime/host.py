@@ -8,7 +8,8 @@ arrival order (timers arrive at their *due* time, so lateness of the loop does
 not reorder them). One drain callback pops items and runs them one at a time
 through `runtime.dispatch.run_handler`, then performs the recorded effects:
 
-* ``Publish`` → `transport.put` of a msgpack envelope with a per-topic seq;
+* ``Publish`` → a put (through `transport.publisher`, fetched once per topic) of a
+  msgpack envelope with a per-topic seq;
 * ``Call``    → `transport.query`; the reply (or a `CallError` for "timeout",
   "no server", "server error: ...") becomes an inbox item for ``reply_to``;
   the timeout is a clock timer, so it scales with ``--time-scale``;
@@ -188,7 +189,7 @@ class NodeHost:
         self._counter = itertools.count()
         self._timers: dict[int, TimerHandle] = {}
         self._calls: dict[int, tuple[str, str, TimerHandle]] = {}
-        self._topics: dict[str, list[Any]] = {}  # topic -> [key expression, qos, last seq]
+        self._topics: dict[str, list[Any]] = {}  # topic -> [put(payload), last seq]
         self._last_seq: dict[str, dict[str, int]] = {}  # topic -> sender -> last seq
         self._priorities = {s.method: s.priority for s in self.spec.handlers}
         self._liveliness = next((s for s in self.spec.of_kind("subscribe")
@@ -514,13 +515,14 @@ class NodeHost:
     def _publish(self, topic: str, msg: Any, now: int) -> None:
         entry = self._topics.get(topic)
         if entry is None:
-            entry = [key_expr(self.fleet, topic), self.publications.get(topic, QOS_DEFAULT), 0]
+            qos = self.publications.get(topic, QOS_DEFAULT)
+            entry = [self.transport.publisher(key_expr(self.fleet, topic), qos), 0]
             self._topics[topic] = entry
             self.transport.announce(graph_key(self.fleet, "pub", self.node.name, topic))
-        seq = entry[2] + 1
+        seq = entry[1] + 1
         payload = encode(msg, stamp_ms=now, seq=seq, sender=self.node.name)  # may raise: no gap
-        entry[2] = seq
-        self.transport.put(entry[0], payload, entry[1])
+        entry[1] = seq
+        entry[0](payload)
         self._n["published"] += 1
 
     # ---------------------------------------------------------------- timers and calls

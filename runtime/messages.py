@@ -16,7 +16,6 @@ can read it without importing twinfleet.
 from __future__ import annotations
 
 import dataclasses
-import operator
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, TypeVar
@@ -146,35 +145,31 @@ class Envelope:
 
 _PACKER = msgpack.Packer(use_bin_type=True)  # packs plain data in C, under the GIL: reentrant-safe
 _unpackb = msgpack.unpackb
-_FLAT: dict[type, tuple[str, Callable[[Any], tuple[Any, ...]], tuple[str, ...]]] = {}
+_FIELD_MAPS: dict[type, tuple[str, Callable[[Any], dict[str, Any]]]] = {}
 
 
-def _flat_codec(cls: type) -> tuple[str, Callable[[Any], tuple[Any, ...]], tuple[str, ...]]:
-    """(type name, field-values getter, field names) of a message class (cached)."""
-    codec = _FLAT.get(cls)
+def _field_map_codec(cls: type) -> tuple[str, Callable[[Any], dict[str, Any]]]:
+    """(type name, function: message -> {field: value}) of a message class (cached).
+
+    The function is generated once per class, as `dataclasses` generates `__init__`:
+    one dict display, no loop. Field names are identifiers, so the source is safe.
+    """
+    codec = _FIELD_MAPS.get(cls)
     if codec is None:
-        names = _field_names(cls)
-        if len(names) == 1:
-            one = operator.attrgetter(names[0])
-            getter: Callable[[Any], tuple[Any, ...]] = lambda m: (one(m),)  # noqa: E731
-        elif names:
-            getter = operator.attrgetter(*names)
-        else:
-            getter = lambda m: ()  # noqa: E731
-        codec = _FLAT[cls] = (type_name_of(cls), getter, names)
+        items = ", ".join(f"{name!r}: m.{name}" for name in _field_names(cls))
+        field_map = eval(f"lambda m: {{{items}}}", {})  # noqa: S307
+        codec = _FIELD_MAPS[cls] = (type_name_of(cls), field_map)
     return codec
 
 
 def encode(msg: Any, *, stamp_ms: int = 0, seq: int = 0, sender: str = "") -> bytes:
     """Encode a message into an envelope."""
-    codec = _FLAT.get(type(msg)) or _flat_codec(type(msg))
-    values = codec[1](msg)
-    if _SCALARS.issuperset(map(type, values)):  # flat message: no nested conversion
-        plain = dict(zip(codec[2], values, strict=True))
-    else:
+    type_name, field_map = _FIELD_MAPS.get(type(msg)) or _field_map_codec(type(msg))
+    plain = field_map(msg)
+    if not _SCALARS.issuperset(map(type, plain.values())):  # nested messages or sequences
         plain = to_plain(msg)
         del plain["_type"]
-    return _PACKER.pack({"type": codec[0], "stamp_ms": stamp_ms, "seq": seq, "sender": sender,
+    return _PACKER.pack({"type": type_name, "stamp_ms": stamp_ms, "seq": seq, "sender": sender,
                          "data": plain})
 
 

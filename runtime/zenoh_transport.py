@@ -253,11 +253,15 @@ class ZenohTransport:
 
     def put(self, key: str, payload: bytes, qos: QoS) -> None:
         """Publish through a per-key publisher declared on first use."""
+        self.publisher(key, qos)(payload)
+
+    def publisher(self, key: str, qos: QoS) -> Callable[[bytes], None]:
+        """The `put` of the per-key publisher (declared on first use): no lookup per message."""
         pub = self._publishers.get(key)
         if pub is None:
             pub = self._declare_publisher(key, qos)
             self._publishers[key] = pub
-        pub.put(payload)
+        return pub.put
 
     def _declare_publisher(self, key: str, qos: QoS) -> Any:
         reliable = qos.reliability is Reliability.RELIABLE
