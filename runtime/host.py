@@ -31,9 +31,14 @@ and a slot runs the oldest message of its subscription. Gaps are counted
 before that, on every decoded sample, so they measure losses below the host
 (network, or the transport's own bounded hand-off, ``dropped_overflow``).
 
-Hot path. Inbox entries are plain tuples (compared in C), key expressions and
-per-topic sequence counters are cached, and a handler's effects are
-performed right after it returns, in the order it recorded them.
+Hot path. Each subscription's delivery closure binds its queue, counters and
+per-topic last-seq map once; a sample costs one `decode_fields` (no Envelope
+object), a gap check, a deque append and a heap push. Inbox entries are plain
+tuples (compared in C). With a transport that calls back after each burst of
+samples (`after_burst`), deliveries schedule no extra loop callback: the burst's
+handlers run in the same loop iteration. Each topic's put function and sequence
+counter are fetched once, and a handler's effects are performed right after it
+returns, in the order it recorded them.
 
 Event log and replay gate (issue 6): with ``events=EventLog(...)`` every
 dispatched event becomes one flushed JSON line, and with ``gated=True`` a
