@@ -45,6 +45,9 @@ class Clock(Protocol):
         ...
 
 
+_time_ns = time.time_ns
+
+
 @final
 class FleetClock:
     """Live fleet time shared by every process of a fleet.
@@ -59,13 +62,14 @@ class FleetClock:
             raise ValueError(f"time_scale must be > 0, got {time_scale}")
         self.epoch_ns = time.time_ns() if epoch_ns is None else int(epoch_ns)
         self.time_scale = float(time_scale)
+        self._ns_per_ms = 1e6 / self.time_scale  # exactly 1e6 at scale 1: same value as before
 
     def _now_precise(self) -> float:
         return (time.time_ns() - self.epoch_ns) / 1e6 * self.time_scale
 
     def now_ms(self) -> int:
-        """Fleet milliseconds since the epoch (floored)."""
-        return int(self._now_precise())
+        """Fleet milliseconds since the epoch (floored); read for every message: one expression."""
+        return int((_time_ns() - self.epoch_ns) / self._ns_per_ms)
 
     def real_seconds(self, fleet_ms: float) -> float:
         """Wall seconds corresponding to `fleet_ms` fleet milliseconds."""

@@ -10,7 +10,7 @@ dispatch (`now_ms`) and the `Chooser` that answers `ctx.choose`.
 from __future__ import annotations
 
 from collections.abc import Callable, Hashable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
 from runtime.messages import is_message
@@ -87,15 +87,32 @@ class Log:
 Effect = Publish | Call | After | Fail | Log
 
 
-@dataclass
-class Context:
-    """What a running handler may read (`now`, `choose`) and do (everything else)."""
+_FIRST = FirstChooser()
 
-    node: Node
-    now_ms: int
-    chooser: Chooser = field(default_factory=FirstChooser)
-    effects: list[Effect] = field(default_factory=list)
-    choices: list[int] = field(default_factory=list)
+
+class Context:
+    """What a running handler may read (`now`, `choose`) and do (everything else).
+
+    A plain slotted class (one is built per dispatched event, on the live hot path).
+
+    Args:
+        node: the node whose handler runs.
+        now_ms: the time the handler sees.
+        chooser: answers `choose` (default: always option 0).
+    """
+
+    __slots__ = ("node", "now_ms", "chooser", "effects", "choices")
+
+    def __init__(self, node: Node, now_ms: int, chooser: Chooser | None = None) -> None:
+        self.node = node
+        self.now_ms = now_ms
+        self.chooser: Chooser = _FIRST if chooser is None else chooser
+        self.effects: list[Effect] = []
+        self.choices: list[int] = []
+
+    def __repr__(self) -> str:
+        return (f"Context(node={self.node.name!r}, now_ms={self.now_ms}, "
+                f"effects={self.effects!r}, choices={self.choices!r})")
 
     def now(self) -> int:
         """Milliseconds since the fleet's common start (logical time in the checker)."""
@@ -103,7 +120,7 @@ class Context:
 
     def publish(self, topic: str, msg: Any) -> None:
         """Publish a message; relative topics resolve in the node's namespace."""
-        if not is_message(msg):
+        if not hasattr(type(msg), "__message_type__"):  # is_message, inlined: a hot path
             raise ContractError(f"{self.node.name}: publish({topic!r}) needs a message, got {msg!r:.60}")
         self.effects.append(Publish(self.node.resolve(topic), msg))
 

@@ -34,24 +34,31 @@ class HandlerOutcome:
     error: HandlerError | None
 
 
-def run_handler(node: Node, method: str, ctx: Context, args: tuple[Any, ...] = (),
-                *, expects_reply: bool = False) -> HandlerOutcome:
-    """Run `node.<method>(ctx, *args)` to completion and collect what it did.
+def invoke(node: Node, method: str, ctx: Context, args: tuple[Any, ...] = (),
+           expects_reply: bool = False) -> tuple[Any, HandlerError | None]:
+    """Run `node.<method>(ctx, *args)` to completion: the handler semantics, for both drivers.
 
-    Exceptions never escape: they come back as `HandlerOutcome.error`, with the
-    effects recorded before the exception discarded (the handler did not complete).
+    Returns ``(reply, error)``; the effects stay in ``ctx.effects``. Exceptions never
+    escape: they come back as the error, with ``ctx.effects`` emptied (the handler did
+    not complete). A service handler that returns a non-message keeps its effects.
     """
     fn = getattr(node, method, None)
     if fn is None:
-        err = HandlerError(node.name, method, f"node has no handler {method!r}")
-        return HandlerOutcome(None, (), tuple(ctx.choices), err)
+        return None, HandlerError(node.name, method, f"node has no handler {method!r}")
     try:
         reply = fn(ctx, *args)
     except Exception as exc:
-        err = HandlerError(node.name, method, f"{type(exc).__name__}: {exc}",
-                           traceback.format_exc(limit=8))
-        return HandlerOutcome(None, (), tuple(ctx.choices), err)
+        ctx.effects.clear()
+        return None, HandlerError(node.name, method, f"{type(exc).__name__}: {exc}",
+                                  traceback.format_exc(limit=8))
     if expects_reply and not is_message(reply):
-        err = HandlerError(node.name, method, f"service handler returned {reply!r:.60}, not a message")
-        return HandlerOutcome(None, tuple(ctx.effects), tuple(ctx.choices), err)
-    return HandlerOutcome(reply, tuple(ctx.effects), tuple(ctx.choices), None)
+        return None, HandlerError(node.name, method,
+                                  f"service handler returned {reply!r:.60}, not a message")
+    return reply, None
+
+
+def run_handler(node: Node, method: str, ctx: Context, args: tuple[Any, ...] = (),
+                *, expects_reply: bool = False) -> HandlerOutcome:
+    """Run `node.<method>(ctx, *args)` to completion and collect what it did (see `invoke`)."""
+    reply, error = invoke(node, method, ctx, args, expects_reply)
+    return HandlerOutcome(reply, tuple(ctx.effects), tuple(ctx.choices), error)

@@ -119,9 +119,14 @@ def from_plain(value: Any) -> Any:
 
 def _build(type_name: Any, data: dict[Any, Any]) -> Any:
     """The message `type_name` from the field map `data` (its `_type` key ignored)."""
-    fields = {k: v if type(v) in _SCALARS else from_plain(v)
-              for k, v in data.items() if k != "_type"}
-    cls = message_class(type_name)
+    if "_type" not in data and _SCALARS.issuperset(map(type, data.values())):
+        fields = data  # the common case, checked in C: flat fields, nothing to convert
+    else:
+        fields = {k: v if type(v) in _SCALARS else from_plain(v)
+                  for k, v in data.items() if k != "_type"}
+    cls = _REGISTRY.get(type_name) if type(type_name) is str else None
+    if cls is None:
+        cls = message_class(type_name)  # raises the DecodeError
     try:
         return cls(**fields)
     except Exception as exc:  # wrong fields, or a message class that validates its values
@@ -138,35 +143,65 @@ class Envelope:
     sender: str
 
 
+_PACKER = msgpack.Packer(use_bin_type=True)  # packs plain data in C, under the GIL: reentrant-safe
+_unpackb = msgpack.unpackb
+_FIELD_MAPS: dict[type, tuple[str, Callable[[Any], dict[str, Any]]]] = {}
+
+
+def _field_map_codec(cls: type) -> tuple[str, Callable[[Any], dict[str, Any]]]:
+    """(type name, function: message -> {field: value}) of a message class (cached).
+
+    The function is generated once per class, as `dataclasses` generates `__init__`:
+    one dict display, no loop. Field names are identifiers, so the source is safe.
+    """
+    codec = _FIELD_MAPS.get(cls)
+    if codec is None:
+        items = ", ".join(f"{name!r}: m.{name}" for name in _field_names(cls))
+        field_map = eval(f"lambda m: {{{items}}}", {})  # noqa: S307
+        codec = _FIELD_MAPS[cls] = (type_name_of(cls), field_map)
+    return codec
+
+
 def encode(msg: Any, *, stamp_ms: int = 0, seq: int = 0, sender: str = "") -> bytes:
     """Encode a message into an envelope."""
-    plain = to_plain(msg)
-    type_name = plain.pop("_type")
-    return msgpack.packb(
-        {"type": type_name, "stamp_ms": stamp_ms, "seq": seq, "sender": sender, "data": plain},
-        use_bin_type=True,
-    )
+    type_name, field_map = _FIELD_MAPS.get(type(msg)) or _field_map_codec(type(msg))
+    plain = field_map(msg)
+    if not _SCALARS.issuperset(map(type, plain.values())):  # nested messages or sequences
+        plain = to_plain(msg)
+        del plain["_type"]
+    return _PACKER.pack({"type": type_name, "stamp_ms": stamp_ms, "seq": seq, "sender": sender,
+                         "data": plain})
 
 
-def decode(payload: bytes) -> Envelope:
-    """Decode an envelope; raise DecodeError with the reason on any malformed payload."""
+def decode_fields(payload: bytes) -> tuple[Any, int, int, str]:
+    """Decode an envelope into ``(msg, stamp_ms, seq, sender)`` (the host's hot path).
+
+    Raises:
+        DecodeError: with the reason, on any malformed payload.
+    """
     try:
-        raw = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+        raw = _unpackb(payload, raw=False, strict_map_key=False)
     except Exception as exc:  # msgpack raises several unrelated types
         raise DecodeError(f"not msgpack: {exc}") from None
-    if not isinstance(raw, dict) or not {"type", "data"} <= raw.keys():
-        raise DecodeError("not a twinfleet envelope (needs 'type' and 'data')")
-    data = raw["data"]
-    if not isinstance(data, dict) or not isinstance(raw["type"], str):
+    try:  # a str index fails on every msgpack value but a map (no cost when it succeeds)
+        type_name, data = raw["type"], raw["data"]
+    except (KeyError, TypeError):
+        raise DecodeError("not a twinfleet envelope (needs 'type' and 'data')") from None
+    if type(data) is not dict or type(type_name) is not str:
         raise DecodeError("envelope 'type' must be a string and 'data' a map")
     try:
-        msg = _build(raw["type"], data)
+        msg = _build(type_name, data)
     except RecursionError:
         raise DecodeError("message nested too deeply") from None
     stamp, seq, sender = raw.get("stamp_ms", 0), raw.get("seq", 0), raw.get("sender", "")
     if not isinstance(stamp, int) or not isinstance(seq, int) or not isinstance(sender, str):
         raise DecodeError("envelope 'stamp_ms'/'seq' must be integers and 'sender' a string")
-    return Envelope(msg, stamp, seq, sender)
+    return msg, stamp, seq, sender
+
+
+def decode(payload: bytes) -> Envelope:
+    """Decode an envelope; raise DecodeError with the reason on any malformed payload."""
+    return Envelope(*decode_fields(payload))
 
 
 @message("twinfleet/CallError")

@@ -253,7 +253,7 @@ class ReplayGate:
         assert isinstance(host.clock, LogicalClock)
         host.clock.now = int(grant["t"])
         chooser = RecordingChooser(None, grant.get("choices") or ())
-        outcome, error = host._dispatch(item.method, item.args, item.respond, item.meta, chooser)
+        effects, error = host._dispatch(item.method, item.args, item.respond, item.meta, chooser)
         self.granted += 1
         if item.meta[0] == "timer":  # re-arm a periodic timer only once it has run
             spec = host.spec.by_method(item.method)
@@ -263,7 +263,7 @@ class ReplayGate:
             digest = state_digest(snapshot(host.node.state))
         except Exception as exc:  # an unsnapshotable state is a node bug: report it
             digest = f"unsnapshotable: {exc}"
-        published = [[e.topic, type_name_of(e.msg)] for e in outcome.effects
+        published = [[e.topic, type_name_of(e.msg)] for e in effects
                      if type(e) is Publish] if error is None else []
         respond(msgpack.packb({"digest": digest, "choices": chooser.indices,
                                "options": chooser.options, "published": published,

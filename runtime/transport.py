@@ -24,6 +24,7 @@ data subscribers do not see graph keys.
 from __future__ import annotations
 
 import asyncio
+import functools
 import itertools
 from collections import defaultdict, deque
 from collections.abc import Callable
@@ -76,6 +77,13 @@ class Transport(Protocol):
 
     def put(self, key: str, payload: bytes, qos: QoS) -> None:
         """Publish `payload` on `key` (reliable → never dropped silently; latched → cached)."""
+        ...
+
+    def publisher(self, key: str, qos: QoS) -> Callable[[bytes], None]:
+        """A function that puts a payload on `key`, as `put(key, payload, qos)` does.
+
+        The host fetches one per topic, so a publish costs no per-message key lookup.
+        """
         ...
 
     def query(self, key: str, payload: bytes, timeout_ms: float, on_done: OnDone) -> None:
@@ -173,6 +181,10 @@ class LoopbackTransport:
         for _, pattern, deliver, _ in list(self.bus.subscribers):
             if key_matches(pattern, key):
                 self.loop.call_soon(deliver, key, payload)
+
+    def publisher(self, key: str, qos: QoS) -> Callable[[bytes], None]:
+        """`put` on `key` with `qos`, as a one-argument function."""
+        return functools.partial(self.put, key, qos=qos)
 
     def query(self, key: str, payload: bytes, timeout_ms: float, on_done: OnDone) -> None:
         """Send a request to the first matching server; time out after `timeout_ms` wall ms."""

@@ -135,20 +135,27 @@ class Handoff:
         if self.closed:
             return
         self.pending.append((fn, args))
-        if not self.scheduled:
-            self.scheduled = True
-            self.wakeups += 1
-            try:
-                self.loop.call_soon_threadsafe(self.drain)
-            except RuntimeError:  # loop closed during shutdown
-                self.closed = True
+        if not self.scheduled:  # after the append: a drain that already started sees it
+            self._schedule()
+
+    def _schedule(self) -> None:
+        self.scheduled = True
+        self.wakeups += 1
+        try:
+            self.loop.call_soon_threadsafe(self.drain)
+        except RuntimeError:  # loop closed during shutdown
+            self.closed = True
 
     def offer(self, fn: Callable[..., Any], *args: Any) -> bool:
         """Like `push`, but drop and count the call when `capacity` calls already wait."""
-        if len(self.pending) >= self.capacity:
+        pending = self.pending
+        if len(pending) >= self.capacity:
             self.overflow += 1
             return False
-        self.push(fn, *args)
+        if not self.closed:  # `push`, inlined: this runs on Zenoh's thread for every sample
+            pending.append((fn, args))
+            if not self.scheduled:
+                self._schedule()
         return True
 
     def drain(self) -> None:
@@ -253,11 +260,15 @@ class ZenohTransport:
 
     def put(self, key: str, payload: bytes, qos: QoS) -> None:
         """Publish through a per-key publisher declared on first use."""
+        self.publisher(key, qos)(payload)
+
+    def publisher(self, key: str, qos: QoS) -> Callable[[bytes], None]:
+        """The `put` of the per-key publisher (declared on first use): no lookup per message."""
         pub = self._publishers.get(key)
         if pub is None:
             pub = self._declare_publisher(key, qos)
             self._publishers[key] = pub
-        pub.put(payload)
+        return pub.put
 
     def _declare_publisher(self, key: str, qos: QoS) -> Any:
         reliable = qos.reliability is Reliability.RELIABLE

@@ -20,9 +20,11 @@ def test_runtime_overhead_benchmark_smoke() -> None:
         capture_output=True, text=True, timeout=80, env=child_env(), cwd=ROOT, check=False)
     assert result.returncode == 0, result.stdout[-2000:] + result.stderr[-2000:]
     assert "twinfleet vs raw (median of 1 pairs)" in result.stdout
-    summary = json.loads(result.stdout.splitlines()[-1])["summary"]["64"]
+    (line,) = [ln for ln in result.stdout.splitlines() if ln.startswith('{"summary"')]
+    summary = json.loads(line)["summary"]["64"]
     for impl in ("raw", "asyncio", "twinfleet"):
         row = summary[impl]
         assert row["rounds"] > 0 and row["msg_per_s"] > 0, (impl, row)
         assert row["lost"] == 0 and row["gaps"] == 0, (impl, row)
+    assert "64 B latency p50" in result.stdout and "64 B throughput" in result.stdout  # verdict
     assert summary["twinfleet"]["wire_bytes"] > 64  # the envelope travels with the payload
