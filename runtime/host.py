@@ -22,6 +22,9 @@ published as violations; the node keeps serving unless ``stop_on_error``.
 Undecodable samples are logged with their key, counted and dropped. Receivers
 count sequence gaps per (sender, topic): on reliable topics as ``gaps`` (a
 loss the tests treat as a bug), on best-effort ones as ``dropped_best_effort``.
+Sequence numbers come from the sender, so a jump by more than ``MAX_GAP`` is
+not believed to be a loss (a forged or corrupt number would otherwise add
+billions of gaps): it is counted once as ``sequence_jumps``.
 
 Bounded inbox. Each subscription keeps at most ``qos.depth`` received but not
 yet handled messages (KEEP_LAST, a ``deque(maxlen=depth)``): when a message
@@ -96,6 +99,7 @@ from runtime.transport import Respond, Transport, graph_key, parse_graph_key
 
 LIVELINESS_TOPIC = "/_liveliness"
 VIOLATIONS_TOPIC = "/violations"
+MAX_GAP = 1 << 16  # a larger leap in one sender's sequence numbers is not counted as lost messages
 _DRAIN_BATCH = 256  # handlers per loop callback before yielding to I/O
 _BEFORE_ALL = -(1 << 62)  # inbox arrival key of start handlers
 
@@ -135,6 +139,7 @@ class HostStatistics:
     dropped_keep_last: int = 0
     dropped_overflow: int = 0
     dropped_best_effort: int = 0
+    sequence_jumps: int = 0  # sequence numbers that leapt by more than MAX_GAP (not counted as gaps)
 
 
 @final
@@ -209,7 +214,8 @@ class NodeHost:
         self._stop: asyncio.Event | None = None
         self._alive_changed: asyncio.Event | None = None
         self._n = dict.fromkeys(("received", "undecodable", "errors", "failures", "gaps",
-                                 "published", "handled", "keep_last", "best_effort"), 0)
+                                 "published", "handled", "keep_last", "best_effort",
+                                 "seq_jumps"), 0)
         self._events = events
         self._gate = ReplayGate(self) if gated else None
         self._traced = events is not None or gated  # keep each event's kind and sender
@@ -259,7 +265,8 @@ class NodeHost:
                               timers_pending=len(self._timers),
                               published=n["published"], handled=n["handled"],
                               dropped_keep_last=n["keep_last"], dropped_overflow=overflow,
-                              dropped_best_effort=n["best_effort"])
+                              dropped_best_effort=n["best_effort"],
+                              sequence_jumps=n["seq_jumps"])
 
     def idle(self) -> bool:
         """True when nothing can run now: no inbox item waits and no drain is scheduled,
@@ -328,7 +335,10 @@ class NodeHost:
                 return
             last = last_seq.get(sender)
             if last is not None and seq > last + 1:
-                n[gap_counter] += seq - last - 1
+                if seq - last <= MAX_GAP:
+                    n[gap_counter] += seq - last - 1
+                else:  # not a loss: a sender that lies about its numbers, or a corrupt one
+                    n["seq_jumps"] += 1
             last_seq[sender] = seq
             if len(waiting) == waiting.maxlen:  # KEEP_LAST: the oldest waiting message goes
                 waiting.append(Envelope(msg, stamp, seq, sender) if traced else msg)

@@ -22,7 +22,7 @@ from runtime import (
     subscribe,
 )
 from runtime.clock import ManualClock
-from runtime.host import NodeHost, derive_seed
+from runtime.host import MAX_GAP, NodeHost, derive_seed
 from runtime.messages import NodeAlive, Violation, decode, encode
 from runtime.names import key_expr
 from runtime.node import QOS_DEFAULT, QOS_LATCHED, QoS, Reliability
@@ -380,6 +380,21 @@ def test_sequence_gaps_are_counted_per_sender() -> None:
         return host.statistics().gaps
 
     assert run(body()) == 2
+
+
+def test_a_forged_sequence_leap_is_not_counted_as_lost_messages() -> None:
+    async def body() -> tuple[int, int]:
+        h = Harness()
+        raw = await h.raw()
+        host = await h.start(Fragile("fragile"))
+        for seq in (1, 2, 4, 2 + MAX_GAP * 1000, 3 + MAX_GAP * 1000, 6 + MAX_GAP * 1000):
+            raw.put(key_expr(FLEET, "/nums"), encode(Num(2), seq=seq, sender="a"), QOS_DEFAULT)
+        await settle(*h.hosts)
+        await h.stop()
+        stats = host.statistics()
+        return stats.gaps, stats.sequence_jumps
+
+    assert run(body()) == (1 + 2, 1)  # 3 is lost, then one leap, then 4 and 5 are lost
 
 
 def test_liveliness_changes_reach_a_liveliness_subscriber() -> None:
