@@ -66,3 +66,17 @@ def test_headon_collides_and_the_shortest_trace_is_found():
     assert result.status == "violated"
     assert result.violation.property == "no_collision"
     assert len(result.trace["steps"]) == 162
+
+
+def test_paper_c2a_never_brings_two_robots_within_one_cell(capsys):
+    # benchmarks/paper_c2_analysis.py: why C2a holds in the paper's profile (docs/results.md)
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "paper_c2_analysis.py"
+    spec = importlib.util.spec_from_file_location("paper_c2_analysis", path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    assert module.main(["--cases", "c2a", "c2c", "--no-sweep"]) == 0
+    rows = [line.split(" | ") for line in capsys.readouterr().out.splitlines() if " | " in line]
+    assert rows[1][:4] == ["c2a", "holds", "5761", "2"]  # closest approach: two cells
+    assert rows[2][:4] == ["c2c", "violated", "1636", "1"]
