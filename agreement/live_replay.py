@@ -30,6 +30,12 @@ the processes go, whatever the trace's logical duration. A lasso trace (a
 liveness violation) is followed by `cycles` more rounds of its cycle; each
 round must bring every live node back to the state digests it had where the
 cycle starts.
+
+Latency and drop branches of `check.latency` / `check.faults` are the
+coordinator's to take, not the nodes': a delayed delivery is granted at its
+delayed logical time, a dropped one never (the node keeps holding it), and a
+node is asked only for its own `ctx.choose` answers (`Transition.handler_choices`).
+A duplicated message, a crash, or branches on start-handler messages are refused.
 """
 
 from __future__ import annotations
@@ -52,7 +58,7 @@ from agreement.events import (
     refuse_unreplayable,
     split_start_choices,
 )
-from checker.check import load
+from checker.check import load, system_for_trace
 from checker.system import Step, System
 from checker.trace import TraceError, load_trace
 from checker.world import CRASH
@@ -188,21 +194,23 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
 
     Raises:
         TraceError: unreadable trace, or the code no longer produces it.
-        ValueError: the trace needs branches a live fleet cannot take (latency, faults).
+        ValueError: the trace needs branches a live fleet cannot take (a duplicated message,
+            a crash, latency or drops of start-handler messages).
     """
     trace = load_trace(trace_path)
-    if trace.get("latency"):
-        raise ValueError(f"{trace_path}: a trace with check.latency cannot be replayed live")
-    scenario = load(trace["scenario"], profile=trace.get("profile"),
-                    semantics=trace.get("semantics"))
-    system = System(scenario, global_priority=trace.get("global_priority"))
-    refuse_unreplayable(system)
+    system, _ = system_for_trace(trace)
+    scenario = system.scenario
+    refuse_unreplayable(system, gated=True)
     choices = tuple(trace["initial"]["choices"])
     init = system.initial_world(choices)
     if init.world.digest.hex() != trace["initial"]["digest"]:
         raise TraceError(f"{trace_path}: the initial world differs from the trace's (the code "
                          "or the scenario changed; `twinfleet replay` says more)")
-    starts = _start_grants(system, init.world.states, split_start_choices(scenario, choices))
+    start_choices = split_start_choices(scenario, choices)
+    if sum(map(len, start_choices.values())) != len(choices):
+        raise ValueError(f"{trace_path}: the start handlers' messages take latency or drop "
+                         "branches, which a live replay cannot take before it starts granting")
+    starts = _start_grants(system, init.world.states, start_choices)
     if cycles < 0:
         raise ValueError(f"cycles must be >= 0, got {cycles}")
     records = list(trace["steps"])
@@ -223,9 +231,11 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
                              "world (run `twinfleet replay` for details)"
                              + (f" (round of the cycle, step {n})" if n > rec["index"] else ""))
         sender = system.names[ev.sender] if ev.sender >= 0 else ""
+        # the node answers its own ctx.choose; latency and drop branches are the grants' timing
+        made = len(t.step.choices) if t.handler_choices < 0 else t.handler_choices
         steps.append(Grant(n, system.names[ev.target], ev.method, live_kind(ev),
                            sender, payload_digest(ev.args), summarise(ev.args), ev.due,
-                           tuple(t.step.choices), tuple(t.step.options),
+                           tuple(t.step.choices[:made]), tuple(t.step.options[:made]),
                            state_digest(t.world.states[ev.target])))
         world = t.world
     final = {name: state_digest(world.states[i]) for i, name in enumerate(system.names)}

@@ -148,6 +148,20 @@ def load(path: str | Path, *, profile: str | None = None,
     return load_scenario(path, overrides)
 
 
+def system_for_trace(trace: Mapping[str, Any]) -> tuple[System, PropertySet]:
+    """The system a trace was found on (its scenario, profile, semantics, latency and flags),
+    with the scenario's properties watching it, as `twinfleet replay` re-executes it."""
+    scenario = load(trace["scenario"], profile=trace.get("profile"),
+                    semantics=trace.get("semantics"))
+    props = PropertySet.from_scenario(scenario)
+    latency = trace.get("latency")
+    system = System(scenario, latency=tuple(latency) if latency else None,
+                    global_priority=trace.get("global_priority"),
+                    debug_state=bool(trace.get("debug_state")), monitors=props,
+                    check_determinism=bool(trace.get("check_determinism")))
+    return system, props
+
+
 def _limit(value: Any, scenario_value: Any) -> Any:
     chosen = value if value is not None else scenario_value
     return None if chosen in (None, 0) else chosen

@@ -14,11 +14,10 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from checker.check import CheckOptions, CheckResult, check, load
+from checker.check import CheckOptions, CheckResult, check, system_for_trace
 from checker.checkpoint import CheckpointError
-from checker.properties import PropertyError, PropertySet
+from checker.properties import PropertyError
 from checker.search import SearchStatistics
-from checker.system import System
 from checker.trace import NondeterminismError, TraceError, load_trace, replay
 from runtime.node import NodeDefinitionError
 from runtime.scenario import ScenarioError
@@ -131,14 +130,7 @@ def replay_command(args: argparse.Namespace) -> int:
     """Run `replay` for parsed arguments; return the exit code."""
     try:
         trace = load_trace(args.trace)
-        scenario = load(trace["scenario"], profile=trace.get("profile"),
-                        semantics=trace.get("semantics"))
-        props = PropertySet.from_scenario(scenario)
-        latency = trace.get("latency")
-        system = System(scenario, latency=tuple(latency) if latency else None,
-                        global_priority=trace.get("global_priority"),
-                        debug_state=bool(trace.get("debug_state")), monitors=props,
-                        check_determinism=bool(trace.get("check_determinism")))
+        system, props = system_for_trace(trace)
         result = replay(system, trace, props)
     except (*BAD_INPUT, NondeterminismError) as exc:
         print(f"twinfleet replay: {args.trace}: {exc}", file=sys.stderr)

@@ -347,7 +347,8 @@ class System:
         if v.state is not states[i]:
             states = (*states[:i], v.state, *states[i + 1:])
         new = self.make_world(ev.due, states, pending, world, world.crashes)
-        return Transition(Step(index, v.choices, v.options), new, ev, v.failure, v.logs, v.faults)
+        return Transition(Step(index, v.choices, v.options), new, ev, v.failure, v.logs, v.faults,
+                          v.handler_choices)
 
     def _deadline_miss(self, world: World, index: int) -> Transition:
         ev = world.events[index]
@@ -463,9 +464,10 @@ class System:
                                 f"state cannot be snapshot: {exc}")
         new = data if new == data else self._intern(new)
         self._current[i] = new
+        handler_choices = len(getattr(chooser, "indices", ()))
         events, failure, logs, faults = self._effects(ev, outcome.effects, outcome.reply, chooser)
         return Variant(tuple(getattr(chooser, "indices", ())), tuple(getattr(chooser, "options", ())),
-                       new, tuple(events), failure, tuple(logs), tuple(faults))
+                       new, tuple(events), failure, tuple(logs), tuple(faults), handler_choices)
 
     @staticmethod
     def _failed(chooser: Chooser, data: bytes, kind: str, node: str, method: str, message: str,

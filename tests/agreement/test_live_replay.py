@@ -8,6 +8,7 @@ checker and replay it on the real multi-process fleet over Zenoh.
 from __future__ import annotations
 
 import asyncio
+import json
 import contextlib
 import io
 import os
@@ -233,4 +234,57 @@ def test_replay_live_command_runs_a_lasso_cycle_on_real_processes(tmp_path, caps
     assert "live replay CONFIRMED: someone_scores" in out
     assert main(["replay", str(trace), "--live", "--cycles", "-1"]) == 2
     assert "cycles must be >= 0" in capsys.readouterr().err
+    assert not _my_node_processes()
+
+
+def fault_trace(tmp_path: Path, name: str, props: list[dict], **check_settings) -> Path:
+    """A violation of a three-round ping-pong whose /pong takes checker branches."""
+    from tests.checker.helpers import node, scenario
+
+    path = scenario(tmp_path, [node("ping", "Ping", rounds=3), node("pong", "Pong")],
+                    name=name, properties=props, **check_settings)
+    out = tmp_path / f"{name}.trace.json"
+    result = check(path, CheckOptions(trace_out=str(out)))
+    assert result.violation is not None, result.status
+    return out
+
+
+LATE = [{"name": "quick", "kind": "within", "within_ms": 4, "expr": "ping.sent == 3"}]
+FINISHES = [{"name": "finishes", "kind": "deadlock", "expr": "ping.sent == 3 and pong.received == 3"}]
+
+
+def test_latency_and_drop_branches_are_granted_not_chosen(tmp_path):
+    # Two delayed /pongs (shortest: 2 + 3 ms > 4): the grants run ping.on_pong at its delayed
+    # time, and the nodes are not asked for the latency branches as ctx.choose answers.
+    trace = fault_trace(tmp_path, "late", LATE, latency={"/pong": [0, 3]})
+    late = plan(trace)
+    assert [(g.handler, g.t) for g in late.steps] == [("on_ping", 0), ("on_pong", 2), ("on_ping", 2)]
+    assert [rec["choices"] for rec in json.loads(trace.read_text())["steps"]] == [[2], [], [3]]
+    assert all(g.choices == () for g in late.steps)
+    result = asyncio.run(asyncio.wait_for(replay_in_process(late, tmp_path / "ev1"), 60))
+    assert result.divergence is None and result.final_states_match
+    # A dropped /pong: never granted; ping ends waiting, as in the trace.
+    lost = plan(fault_trace(tmp_path, "lost", FINISHES, faults={"drop": ["/pong"]}))
+    assert [g.handler for g in lost.steps] == ["on_ping"]
+    result = asyncio.run(asyncio.wait_for(replay_in_process(lost, tmp_path / "ev2"), 60))
+    assert result.divergence is None and result.final_states_match
+
+
+def test_duplicates_and_start_message_branches_are_refused(tmp_path):
+    with pytest.raises(ValueError, match="duplicate cannot be replayed live"):
+        plan(fault_trace(tmp_path, "dup", [{"name": "once", "kind": "invariant",
+                                             "expr": "pong.received <= ping.sent"}],
+                         faults={"duplicate": ["/ping"]}))
+    with pytest.raises(ValueError, match="start handlers' messages take latency or drop"):
+        plan(fault_trace(tmp_path, "early", LATE, latency={"/ping": [0, 3]}))
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(120)
+def test_replay_live_command_runs_a_latency_trace_on_real_processes(tmp_path, capsys, reap_nodes):
+    from runtime.cli import main
+
+    trace = fault_trace(tmp_path, "late", LATE, latency={"/pong": [0, 3]})
+    assert main(["replay", str(trace), "--live"]) == 1
+    assert "live replay CONFIRMED: quick" in capsys.readouterr().out
     assert not _my_node_processes()
