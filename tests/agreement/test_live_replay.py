@@ -8,9 +8,9 @@ checker and replay it on the real multi-process fleet over Zenoh.
 from __future__ import annotations
 
 import asyncio
-import json
 import contextlib
 import io
+import json
 import os
 import signal
 from dataclasses import replace
