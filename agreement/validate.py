@@ -392,7 +392,8 @@ class _Search:
                                f"digest {live.digest}")
         pos = (*frame.pos[:i], frame.pos[i] + 1, *frame.pos[i + 1:])
         options, why = self._options(t.world, pos)
-        ahead = ev.due - (world.next_time or ev.due)
+        now = world.next_time  # t* of the world the event ran in (0 is a time, not 'none')
+        ahead = ev.due - (ev.due if now is None else now)
         return _Frame(t.world, pos, options, why, ahead, f"{live.label()} [{live.where()}]")
 
     def _options(self, world: World, pos: tuple[int, ...]

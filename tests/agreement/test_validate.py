@@ -180,6 +180,7 @@ class TickState:
 @dataclass(frozen=True)
 class TickParams:
     period_ms: int = 30
+    first_ms: int = -1  # the first tick (default: one period after start)
 
 
 class Ticker(Node):
@@ -192,7 +193,8 @@ class Ticker(Node):
 
     @on_start
     def start(self, ctx: Context) -> None:
-        ctx.after(self.params.period_ms, self.tick)
+        p = self.params
+        ctx.after(p.first_ms if p.first_ms >= 0 else p.period_ms, self.tick)
 
     @handler()
     def tick(self, ctx: Context) -> None:
@@ -200,9 +202,10 @@ class Ticker(Node):
         ctx.after(self.params.period_ms, self.tick)
 
 
-def tickers(tmp_path: Path) -> Path:
+def tickers(tmp_path: Path, first_a: int = -1) -> Path:
     doc = {"name": "tickers", "nodes": [
-        {"name": "a", "class": "test_validate:Ticker", "params": {"period_ms": 30}},
+        {"name": "a", "class": "test_validate:Ticker",
+         "params": {"period_ms": 30, "first_ms": first_a}},
         {"name": "b", "class": "test_validate:Ticker", "params": {"period_ms": 50}}]}
     path = tmp_path / "tickers.yaml"
     path.write_text(yaml.safe_dump(doc))
@@ -251,6 +254,20 @@ def test_timing_rules_strict_tolerance_and_untimed(tmp_path):
     assert wide.ok and (wide.max_ahead_ms, wide.ahead_steps) == (20, 1)
     untimed = v.validate(log, scenario, tolerance_ms=None)
     assert untimed.ok and untimed.max_ahead_ms == 20
+
+
+def test_running_ahead_of_a_model_clock_at_zero_is_measured(tmp_path):
+    # a@0, a@30, b@50 (model); live, b@50 ran first, while the model's clock was still at 0:
+    # 50 ms ahead (t* = 0 is a time like any other)
+    scenario = tickers(tmp_path, first_a=0)
+    records, nodes = walk_records(scenario, 3)
+    records[index_of(records, node="a", t=0, kind="after")]["t"] = 1
+    records[index_of(records, node="b", t=50)]["t"] = 0
+    records.sort(key=lambda r: r["t"])
+    log = write_log(tmp_path / "e.jsonl", records, nodes)
+    untimed = v.validate(log, scenario, tolerance_ms=None)
+    assert untimed.ok and untimed.max_ahead_ms == 50, untimed.summary()
+    assert v.validate(log, scenario, tolerance_ms=50).ok
 
 
 def test_equal_time_events_of_different_nodes_within_the_window_interleave(tmp_path):
@@ -409,7 +426,8 @@ def test_live_c1a_run_is_a_path_of_the_checker(c1a_events):
     assert not strict.ok and strict.failure is not None
     assert strict.failure.reason == v.TIMING, strict.summary()
     # ... and the gap the untimed path reports is a tolerance that explains the run
-    assert v.validate(c1a_events, C1A, tolerance_ms=max(1, result.max_ahead_ms)).ok
+    tolerant = v.validate(c1a_events, C1A, tolerance_ms=max(1, result.max_ahead_ms))
+    assert tolerant.ok, tolerant.summary()
 
 
 @pytest.mark.slow
