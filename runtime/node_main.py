@@ -7,7 +7,9 @@ watchdog so a hung close cannot keep the process alive. Exit code 0, 1 when
 the node stopped on a handler error (``live.stop_on_error``), 2 on bad input.
 
 The process also serves its statistics on ``twinfleet/<fleet>/@stats/<node>``
-(a msgpack map), which `twinfleet node list --stats` reads.
+(a msgpack map), which `twinfleet node list --stats` reads, and the JSON
+Schemas of the message classes it knows on ``twinfleet/<fleet>/@types/<node>``
+(a JSON map type name → schema), which `twinfleet record --connect` reads.
 
 ``--record-events FILE`` logs every dispatched event to FILE as JSON lines
 (`runtime.replay_gate.EventLog`); ``--gate`` runs the node under a replay
@@ -21,6 +23,7 @@ import asyncio
 import ctypes
 import dataclasses
 import faulthandler
+import json
 import os
 import signal
 import sys
@@ -33,6 +36,7 @@ from runtime.host import NodeHost
 from runtime.names import KEY_PREFIX
 from runtime.replay_gate import EventLog, LogicalClock
 from runtime.scenario import Scenario, ScenarioError, load_scenario
+from runtime.schemas import registered_schemas, types_key
 from runtime.transport import Respond
 from runtime.zenoh_transport import ZenohTransport, zenoh_config
 
@@ -128,6 +132,11 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
         respond(msgpack.packb(dataclasses.asdict(host.statistics())), "")
 
     transport.serve(stats_key(scenario.fleet, node.name), serve_stats)
+
+    def serve_types(_payload: bytes, respond: Respond) -> None:
+        respond(json.dumps(registered_schemas()).encode(), "")
+
+    transport.serve(types_key(scenario.fleet, node.name), serve_types)
     try:
         await host.run()
     finally:

@@ -5,8 +5,9 @@ File layout (MCAP, written with the `mcap` package, zstd chunks, full index):
 * one **schema** per message type: name = the envelope's type name (e.g.
   ``twinfleet_msgs/RobotPose``), encoding ``jsonschema``, data = a JSON Schema
   of the envelope ``{type, stamp_ms, seq, sender, data}`` whose ``data`` lists
-  the dataclass fields of the registered message class (inferred from the
-  first sample, and said so, when the class is not imported);
+  the dataclass fields of the registered message class (`runtime.schemas`;
+  joining a running fleet, the schemas its node processes serve; inferred
+  from the first sample, and said so, when neither knows the type);
 * one **channel** per topic key (and type): topic = the fully qualified name
   (``/r1/scan``), message encoding ``msgpack``, metadata ``key`` (the Zenoh
   key), ``fleet`` and ``durability`` (``transient_local`` for ``/map``);
@@ -17,7 +18,8 @@ File layout (MCAP, written with the `mcap` package, zstd chunks, full index):
 
 `record_scenario` makes the recorder's session the fleet's router and then
 launches the fleet with `run_fleet(connect=...)`, so the recorder is subscribed
-before the first node starts. `record_live` joins a running fleet.
+before the first node starts. `record_live` joins a running fleet and asks its
+nodes for their message schemas (`fleet_schemas`).
 `play` re-publishes the messages in log-time order at the recorded pace
 divided by `rate`, latched topics through advanced publishers.
 """
@@ -25,12 +27,10 @@ divided by `rate`, latched topics through advanced publishers.
 from __future__ import annotations
 
 import asyncio
-import dataclasses
+import contextlib
 import json
 import sys
 import time
-import types
-import typing
 from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import Any, BinaryIO, TextIO, final
@@ -39,77 +39,13 @@ import msgpack
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from runtime.messages import is_message, registered_types
 from runtime.names import KEY_PREFIX
+from runtime.schemas import message_schema, types_key
 from runtime.tap import LATCHED_TOPICS, FleetTap
 from runtime.zenoh_transport import zenoh_config
 
 DRAIN_S = 0.3
 LINGER_S = 0.5
-ENVELOPE_FIELDS = {"stamp_ms": {"type": "integer", "description": "ms since the fleet's start"},
-                   "seq": {"type": "integer", "description": "per-publisher sequence number"},
-                   "sender": {"type": "string", "description": "publishing node"}}
-
-
-def message_schema(type_name: str, sample: Any = None) -> dict[str, Any]:
-    """JSON Schema of an envelope carrying `type_name` (the registered class, else `sample`)."""
-    cls = registered_types().get(type_name)
-    data = dataclass_schema(cls) if cls is not None else {
-        **_value_schema(sample), "description": "inferred from the first recorded sample"}
-    return {"title": type_name, "type": "object",
-            "description": "twinfleet envelope, msgpack-encoded (runtime/messages.py)",
-            "properties": {"type": {"const": type_name}, **ENVELOPE_FIELDS, "data": data},
-            "required": ["type", "data"]}
-
-
-def dataclass_schema(cls: type) -> dict[str, Any]:
-    """JSON Schema of a message dataclass's fields, from its type hints."""
-    hints = typing.get_type_hints(cls)
-    props, required = {}, []
-    for f in dataclasses.fields(cls):
-        props[f.name] = _hint_schema(hints.get(f.name, Any))
-        if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING:
-            required.append(f.name)
-    return {"type": "object", "properties": props, "required": required}
-
-
-def _hint_schema(hint: Any) -> dict[str, Any]:
-    simple = {bool: "boolean", int: "integer", float: "number", str: "string",
-              type(None): "null"}
-    if hint in simple:
-        return {"type": simple[hint]}
-    if hint is bytes:
-        return {"type": "string", "contentMediaType": "application/octet-stream",
-                "description": "msgpack bin"}
-    origin, args = typing.get_origin(hint), typing.get_args(hint)
-    if origin in (typing.Union, types.UnionType):
-        return {"anyOf": [_hint_schema(a) for a in args]}
-    if origin in (tuple, list):
-        if origin is list or (len(args) == 2 and args[1] is Ellipsis):
-            return {"type": "array", "items": _hint_schema(args[0]) if args else {}}
-        return {"type": "array", "prefixItems": [_hint_schema(a) for a in args],
-                "minItems": len(args), "maxItems": len(args)}
-    if isinstance(hint, type) and is_message(hint):
-        nested = dataclass_schema(hint)
-        nested["properties"]["_type"] = {"const": hint.__message_type__}  # type: ignore[attr-defined]
-        return nested
-    return {}
-
-
-def _value_schema(value: Any) -> dict[str, Any]:
-    if isinstance(value, bool):
-        return {"type": "boolean"}
-    if isinstance(value, int | float | str) or value is None:
-        return _hint_schema(type(value))
-    if isinstance(value, bytes):
-        return _hint_schema(bytes)
-    if isinstance(value, list | tuple):
-        return {"type": "array", "items": _value_schema(value[0]) if value else {}}
-    if isinstance(value, Mapping):
-        return {"type": "object", "properties": {str(k): _value_schema(v) for k, v in value.items()}}
-    return {}
-
-
 @final
 class McapRecorder:
     """Writes raw envelopes to an MCAP file: a schema per type, a channel per topic key.
@@ -120,6 +56,7 @@ class McapRecorder:
     """
 
     def __init__(self, stream: BinaryIO, *, latched: tuple[str, ...] = LATCHED_TOPICS) -> None:
+        self.known_schemas: dict[str, dict[str, Any]] = {}  # data schemas the fleet served
         self._stream = stream
         self._writer = Writer(stream)
         self._writer.start(profile="", library="twinfleet")
@@ -161,7 +98,8 @@ class McapRecorder:
         schema = self._schemas.get(type_name)
         if schema is None:
             sample = env.get("data") if isinstance(env, dict) else None
-            text = json.dumps(message_schema(type_name, sample), indent=1).encode()
+            text = json.dumps(message_schema(type_name, sample, self.known_schemas),
+                              indent=1).encode()
             schema = self._writer.register_schema(type_name, "jsonschema", text)
             self._schemas[type_name] = schema
         durability = "transient_local" if topic in self.latched else "volatile"
@@ -225,6 +163,7 @@ async def record_live(connect: str, fleet: str, path: str | Path, *,
                    retry=False)
     try:
         await tap.open()
+        recorder.known_schemas.update(await asyncio.to_thread(fleet_schemas, tap.session, fleet))
         waiter = asyncio.ensure_future(stop.wait())
         await asyncio.wait([waiter], timeout=duration_s)
         waiter.cancel()
@@ -232,6 +171,18 @@ async def record_live(connect: str, fleet: str, path: str | Path, *,
         await tap.close()
         recorder.close()
     return recorder
+
+
+def fleet_schemas(session: Any, fleet: str, timeout_s: float = 1.0) -> dict[str, dict[str, Any]]:
+    """Message data schemas served by the running node processes of `fleet` ('*': all)."""
+    found: dict[str, dict[str, Any]] = {}
+    if session is None:
+        return found
+    for reply in session.get(types_key(fleet, "*"), timeout=timeout_s):
+        if reply.ok is not None:
+            with contextlib.suppress(ValueError, TypeError):  # a node of another version
+                found.update(json.loads(reply.ok.payload.to_bytes()))
+    return found
 
 
 def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,

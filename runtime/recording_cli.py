@@ -111,7 +111,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "(default: tcp/127.0.0.1:<free port>)")
     r.add_argument("--module", action="append", default=[], metavar="MODULE",
                    help="import MODULE first so its message classes give exact schemas (repeatable; "
-                        "a SCENARIO imports its nodes' messages itself)")
+                        "a SCENARIO imports its nodes' messages itself, and with --connect the "
+                        "running nodes serve theirs; needed only for types no node knows)")
     r.set_defaults(func=cmd_record)
     p = sub.add_parser("play", help="re-publish an MCAP recording onto Zenoh")
     p.add_argument("file", help="MCAP file written by `twinfleet record`")

@@ -155,3 +155,25 @@ def test_export_writes_json_that_foxglove_can_decode(recording, tmp_path):
 def _rows(path: Path) -> list[tuple]:
     with path.open("rb") as f:
         return list(make_reader(f).iter_messages(log_time_order=True))
+
+
+def test_record_connect_gets_exact_schemas_from_the_fleets_nodes(cli, tmp_path):
+    # The recording process never imports nodes.msgs: the schemas come from the node
+    # processes (twinfleet/<fleet>/@types/<node>), not from guessing at the first samples.
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    fleet = cli("launch", str(ROOT / "launch" / "c1a.yaml"), "--time-scale", "2", "--listen",
+                endpoint, log="fleet.log")
+    poll(lambda: "started" in fleet.log.read_text(), 30, "the fleet's nodes to start")
+    out = tmp_path / "joined.mcap"
+    done = subprocess.run([sys.executable, "-m", "runtime.cli", "record", "--connect", endpoint,
+                           "--fleet", "c1a", "--duration", "2", "-o", str(out)],
+                          capture_output=True, text=True, timeout=40, env=child_env(), cwd=ROOT,
+                          check=False)
+    assert done.returncode == 0, done.stdout + done.stderr
+    with out.open("rb") as f:
+        schemas = {s.name: json.loads(s.data) for s in make_reader(f).get_summary().schemas.values()}
+    pose = schemas["twinfleet_msgs/RobotPose"]["properties"]["data"]
+    assert "inferred" not in pose.get("description", "")
+    assert set(pose["properties"]) == set(registered_types()["twinfleet_msgs/RobotPose"]
+                                          .__dataclass_fields__)
+    assert pose["required"] == ["robot", "cell", "direction", "velocity"]  # not guessable
