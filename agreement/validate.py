@@ -46,6 +46,15 @@ and state, blind to the model's timing. Whatever the rule, the report gives
 how far ahead of the model's clock the path had to run events (``ahead``:
 the event's logical due time minus t*): the timing gap between run and model.
 
+Latency and faults. A scenario's ``check.latency`` and ``check.faults``
+(drop, duplicate) are branches of the checker that no live node records: the
+live log holds only each handler's own `ctx.choose` answers. Each step first
+takes the checker's first branch on its effects (no delay, delivered once)
+and leaves every other branch as a sibling to try on backtracking, so a live
+delivery that came late may be explained by a delayed one. Branches on the
+messages of `@on_start` handlers are not searched (the first is taken), and
+crash faults are refused (a live run shows a crash as a restart).
+
 Reasons a step is unexplained: ``model drift`` (no such pending event, a
 different message, different choices, a different state, a failure on one
 side only), ``order`` (an earlier message of the same channel is pending:
@@ -211,13 +220,13 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
 
     Raises:
         EventLogError, ScenarioError: unreadable inputs.
-        ValueError: the scenario injects latency or faults, which a live run cannot replay.
+        ValueError: the scenario injects crash faults, which a live run shows as restarts.
     """
     started = time.monotonic()
     log = events if isinstance(events, EventLogFile) else load_events(events)
     scenario = load(scenario_path, semantics=semantics)
     system = System(scenario)
-    refuse_unreplayable(system)
+    refuse_unreplayable(system, gated=False)
     search = _Search(system, log, tolerance_ms, window_ms, max_backtracks)
     events_count = sum(1 for e in log.events if e.kind != "start")
     result = Validation(log.path, str(scenario_path), system.semantics.name,
@@ -232,7 +241,7 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
 class _Frame:
     world: World
     pos: tuple[int, ...]
-    options: list[tuple[int, int]]
+    options: list[tuple[int, int, tuple[int, ...] | None]]  # (node, event, choice prefix)
     why: list[Unexplained]
     ahead: int = 0  # how far ahead of t* the step that made this world ran
     label: str = ""  # that step's live event
@@ -290,9 +299,9 @@ class _Search:
                         best = (best[0], replace(best[1], notes=best[1].notes + gave_up))
                     break
                 continue
-            i, k = frame.options[frame.next]
+            i, k, prefix = frame.options[frame.next]
             frame.next += 1
-            child = self._step(frame, i, k)
+            child = self._step(frame, i, k, prefix)
             if isinstance(child, Unexplained):
                 frame.why.append(child)
                 continue
@@ -371,12 +380,20 @@ class _Search:
 
     # ------------------------------------------------------------ steps
 
-    def _step(self, frame: _Frame, i: int, k: int) -> _Frame | Unexplained:
+    def _step(self, frame: _Frame, i: int, k: int,
+              prefix: tuple[int, ...] | None) -> _Frame | Unexplained:
         world = frame.world
         live = self.queues[i][frame.pos[i]]
         ev = world.events[k]
-        t = self.system.run(world, k, PrefixChooser(live.choices))
-        made = (tuple(t.step.choices), tuple(t.step.options))
+        chooser = PrefixChooser(live.choices if prefix is None else prefix)
+        t = self.system.run(world, k, chooser)
+        # The live node made the handler's choices; the checker's own branches on the
+        # effects (latency, drop, duplicate) follow them: each is a sibling to try.
+        h = len(t.step.choices) if t.handler_choices < 0 else t.handler_choices
+        sibling = chooser.next_prefix()
+        if sibling is not None and len(sibling) > h and sibling[:h] == tuple(t.step.choices[:h]):
+            frame.options.insert(frame.next, (i, k, sibling))
+        made = (tuple(t.step.choices[:h]), tuple(t.step.options[:h]))
         if made != (live.choices, live.options) or (
                 t.failure is not None and "nondeterministic choices" in t.failure.message):
             return Unexplained(self.ordinal[live.node, live.index], live, CHOICES,
@@ -410,7 +427,7 @@ class _Search:
             matches = [k for k, ev in enumerate(world.events) if self.sigs.of(ev) == sig]
             ok = [k for k in matches if k in allowed]
             if ok:
-                options.append((i, ok[0]))
+                options.append((i, ok[0], None))
             else:
                 why.append(self._why_not(world, live, matches, allowed))
         return options, why

@@ -456,3 +456,88 @@ def test_tampered_live_c1a_logs_show_the_first_unexplained_step(c1a_events):
 def _with(log: EventLogFile, changes: dict[int, LiveEvent | None]) -> EventLogFile:
     events = [changes.get(k, e) for k, e in enumerate(log.events)]
     return EventLogFile(log.path, log.header, log.node_headers, [e for e in events if e])
+
+
+# ------------------------------------------------------------------ latency and faults
+
+
+@dataclass
+class HeardState:
+    ticked: bool = False
+    heard: bool = False
+
+
+class Sender(Node):
+    """Publishes /x from a timer at t=0."""
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.after(0, self.send)
+
+    @handler()
+    def send(self, ctx: Context) -> None:
+        ctx.publish("/x", String("x"))
+
+
+class LateListener(Node):
+    """Ticks at t=1 and records whether /x came first."""
+
+    def initial_state(self) -> HeardState:
+        return HeardState()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.after(1, self.tick)
+
+    @handler()
+    def tick(self, ctx: Context) -> None:
+        self.state.ticked = True
+
+    @subscribe("/x")
+    def on_x(self, ctx: Context, msg: String) -> None:
+        self.state.heard = True
+
+
+def sender_listener(tmp_path: Path, name: str, **check_settings: Any) -> Path:
+    doc = {"name": name, "nodes": [{"name": "s", "class": "test_validate:Sender"},
+                                   {"name": "l", "class": "test_validate:LateListener"}],
+           "properties": [{"name": "heard_first", "kind": "invariant",
+                           "expr": "l.heard or not l.ticked"}],
+           "check": check_settings}
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_latency_branches_explain_a_late_delivery_strictly(tmp_path):
+    late = sender_listener(tmp_path, "late", latency={"/x": [0, 2]})
+    trace = tmp_path / "late.trace.json"
+    assert check(late, CheckOptions(trace_out=str(trace))).status == "violated"
+    records, names = trace_records(trace)  # live: the listener ticked at t=1, /x not yet there
+    assert [(r["node"], r["handler"], r["t"]) for r in records if r["kind"] != "start"] == [
+        ("s", "send", 0), ("l", "tick", 1)]
+    log = write_log(tmp_path / "e.jsonl", records, names)
+    strict = v.validate(log, late, tolerance_ms=0)
+    assert strict.ok, strict.summary()
+    assert [name for _, name, _ in strict.violations] == ["heard_first"]
+    # without the latency branches, /x is due at t=0, before the tick: a timing difference
+    plain = v.validate(log, sender_listener(tmp_path, "plain"), tolerance_ms=0)
+    assert not plain.ok and plain.failure.reason == v.TIMING, plain.summary()
+
+
+def test_crash_faults_are_refused_but_drops_and_duplicates_are_searched(tmp_path):
+    from tests.checker.helpers import node, scenario
+
+    nodes = [node("ping", "Ping", rounds=3), node("pong", "Pong")]
+    done = [{"name": "unfinished", "kind": "invariant", "expr": "pong.received < 3"}]
+    trace = tmp_path / "ok.trace.json"
+    check(scenario(tmp_path, nodes, name="ok", properties=done), CheckOptions(trace_out=str(trace)))
+    records, names = trace_records(trace)  # the whole fault-free exchange
+    log = write_log(tmp_path / "e.jsonl", records, names)
+    faulty = scenario(tmp_path, nodes, name="faulty",
+                      faults={"drop": ["/pong"], "duplicate": ["/ping"]})
+    result = v.validate(log, faulty, tolerance_ms=0)
+    assert result.ok, result.summary()
+    crashing = scenario(tmp_path, nodes, name="crashing", faults={"crash": {"nodes": ["pong"]}})
+    with pytest.raises(ValueError, match="crash cannot be validated"):
+        v.validate(log, crashing)
