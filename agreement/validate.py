@@ -388,11 +388,8 @@ class _Search:
         chooser = PrefixChooser(live.choices if prefix is None else prefix)
         t = self.system.run(world, k, chooser)
         # The live node made the handler's choices; the checker's own branches on the
-        # effects (latency, drop, duplicate) follow them: each is a sibling to try.
+        # effects (latency, drop, duplicate) follow them.
         h = len(t.step.choices) if t.handler_choices < 0 else t.handler_choices
-        sibling = chooser.next_prefix()
-        if sibling is not None and len(sibling) > h and sibling[:h] == tuple(t.step.choices[:h]):
-            frame.options.insert(frame.next, (i, k, sibling))
         made = (tuple(t.step.choices[:h]), tuple(t.step.options[:h]))
         if made != (live.choices, live.options) or (
                 t.failure is not None and "nondeterministic choices" in t.failure.message):
@@ -407,6 +404,9 @@ class _Search:
             return Unexplained(self.ordinal[live.node, live.index], live, STATE,
                                f"digest {digest}: {self._state(i, t.world)}",
                                f"digest {live.digest}")
+        sibling = chooser.next_prefix()  # the next effect branch: tried if this one dead-ends
+        if sibling is not None and len(sibling) > h and sibling[:h] == made[0]:
+            frame.options.insert(frame.next, (i, k, sibling))
         pos = (*frame.pos[:i], frame.pos[i] + 1, *frame.pos[i + 1:])
         options, why = self._options(t.world, pos)
         now = world.next_time  # t* of the world the event ran in (0 is a time, not 'none')
