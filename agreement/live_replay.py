@@ -34,8 +34,9 @@ cycle starts.
 Latency and drop branches of `check.latency` / `check.faults` are the
 coordinator's to take, not the nodes': a delayed delivery is granted at its
 delayed logical time, a dropped one never (the node keeps holding it), and a
-node is asked only for its own `ctx.choose` answers (`Transition.handler_choices`).
-A duplicated message, a crash, or branches on start-handler messages are refused.
+node is asked only for its own `ctx.choose` answers (`Transition.branches` says
+which of a step's choices are the checker's). A duplicated message or a crash
+is refused.
 """
 
 from __future__ import annotations
@@ -195,7 +196,7 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
     Raises:
         TraceError: unreadable trace, or the code no longer produces it.
         ValueError: the trace needs branches a live fleet cannot take (a duplicated message,
-            a crash, latency or drops of start-handler messages).
+            a crash).
     """
     trace = load_trace(trace_path)
     system, _ = system_for_trace(trace)
@@ -206,10 +207,9 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
     if init.world.digest.hex() != trace["initial"]["digest"]:
         raise TraceError(f"{trace_path}: the initial world differs from the trace's (the code "
                          "or the scenario changed; `twinfleet replay` says more)")
-    start_choices = split_start_choices(scenario, choices)
-    if sum(map(len, start_choices.values())) != len(choices):
-        raise ValueError(f"{trace_path}: the start handlers' messages take latency or drop "
-                         "branches, which a live replay cannot take before it starts granting")
+    # the start handlers' own answers; the checker's branches on their messages are the
+    # grants' to take, like every later step's
+    start_choices = split_start_choices(scenario, _handler_part(choices, init.branches))
     starts = _start_grants(system, init.world.states, start_choices)
     if cycles < 0:
         raise ValueError(f"cycles must be >= 0, got {cycles}")
@@ -232,10 +232,10 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
                              + (f" (round of the cycle, step {n})" if n > rec["index"] else ""))
         sender = system.names[ev.sender] if ev.sender >= 0 else ""
         # the node answers its own ctx.choose; latency and drop branches are the grants' timing
-        made = len(t.step.choices) if t.handler_choices < 0 else t.handler_choices
         steps.append(Grant(n, system.names[ev.target], ev.method, live_kind(ev),
                            sender, payload_digest(ev.args), summarise(ev.args), ev.due,
-                           tuple(t.step.choices[:made]), tuple(t.step.options[:made]),
+                           _handler_part(t.step.choices, t.branches),
+                           _handler_part(t.step.options, t.branches),
                            state_digest(t.world.states[ev.target])))
         world = t.world
     final = {name: state_digest(world.states[i]) for i, name in enumerate(system.names)}
@@ -244,6 +244,12 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
                   if log.get("event") == "collision"]
     return Plan(str(trace_path), trace, scenario, starts, steps, final, collisions,
                 load(trace["scenario"]).profile, cycles)
+
+
+def _handler_part(values: Sequence[int], branches: Sequence[int]) -> tuple[int, ...]:
+    """The handlers' own answers among a step's choices (or options): all but the branches."""
+    skip = set(branches)
+    return tuple(v for p, v in enumerate(values) if p not in skip)
 
 
 def _start_grants(system: System, states: Sequence[bytes],

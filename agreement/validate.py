@@ -52,8 +52,8 @@ live log holds only each handler's own `ctx.choose` answers. Each step first
 takes the checker's first branch on its effects (no delay, delivered once)
 and leaves every other branch as a sibling to try on backtracking, so a live
 delivery that came late may be explained by a delayed one. Branches on the
-messages of `@on_start` handlers are not searched (the first is taken), and
-crash faults are refused (a live run shows a crash as a restart).
+messages of the `@on_start` handlers give one initial world each, tried in
+turn. Crash faults are refused (a live run shows a crash as a restart).
 
 Reasons a step is unexplained: ``model drift`` (no such pending event, a
 different message, different choices, a different state, a failure on one
@@ -84,7 +84,7 @@ from agreement.events import (
     refuse_unreplayable,
 )
 from checker.check import load
-from checker.choices import PrefixChooser
+from checker.choices import SplitChooser
 from checker.commands import BAD_INPUT
 from checker.properties import PropertySet
 from checker.system import System
@@ -271,21 +271,43 @@ class _Search:
         if outside is not None:
             result.failure = outside
             return
-        root = self._start()
-        if isinstance(root, Unexplained):
-            result.failure = root
-            return
         total = sum(len(q) for q in self.queues)
-        stack = [root]
-        visited = {(root.world.key, root.pos)}
+        visited: set[tuple[bytes, tuple[int, ...]]] = set()
         best: tuple[int, Unexplained | None] = (-1, None)
-        deepest: list[_Frame] = [root]
+        deepest: list[_Frame] = []
+        branches: tuple[int, ...] | None = ()
+        while branches is not None:  # one initial world per branch of the start messages
+            root, branches = self._start(branches)
+            if isinstance(root, Unexplained):
+                if best[1] is None:
+                    best = (0, root)
+                continue
+            if (root.world.key, root.pos) in visited:
+                continue
+            visited.add((root.world.key, root.pos))
+            found, best, deepest = self._search(root, total, visited, result, best, deepest)
+            if found is not None:
+                self._finish(result, found, None)
+                return
+            if result.backtracks > self.max_backtracks:
+                break
+        if not deepest:  # no initial world fits the log's start events
+            result.failure = best[1]
+            return
+        self._finish(result, deepest, best[1])
+
+    def _search(self, root: _Frame, total: int, visited: set[tuple[bytes, tuple[int, ...]]],
+                result: Validation, best: tuple[int, Unexplained | None],
+                deepest: list[_Frame]) -> tuple[list[_Frame] | None, tuple[int, Unexplained | None],
+                                                list[_Frame]]:
+        """Depth-first from `root`: (the whole path if found, the deepest failure so far)."""
+        stack = [root]
+        deepest = deepest or [root]
         while stack:
             frame = stack[-1]
             depth = len(stack) - 1
             if sum(frame.pos) == total:
-                self._finish(result, stack, None)
-                return
+                return list(stack), best, deepest
             if frame.next >= len(frame.options):
                 if depth > best[0] or best[1] is None:
                     best = (depth, _earliest(frame.why))
@@ -309,7 +331,7 @@ class _Search:
             if key not in visited:
                 visited.add(key)
                 stack.append(child)
-        self._finish(result, deepest, best[1])
+        return None, best, deepest
 
     def _finish(self, result: Validation, path: list[_Frame], failure: Unexplained | None) -> None:
         result.failure = failure
@@ -345,25 +367,28 @@ class _Search:
                                    "no liveliness changes)", ev.summary)
         return None
 
-    def _start(self) -> _Frame | Unexplained:
+    def _start(self, branches: tuple[int, ...]
+               ) -> tuple[_Frame | Unexplained, tuple[int, ...] | None]:
+        """The initial world whose start messages take `branches`, and the next branches
+        to try (None after the last; an unexplained start ends the enumeration too)."""
         choices: list[int] = []
         pos = []
         for i, node in enumerate(self.system.nodes):
             n = len(node.spec().of_kind("start"))
-            queue = self.queues[i]
-            head = queue[:n]
+            head = self.queues[i][:n]
             early = next((e for e in head if e.kind != "start"), None)
             if early is not None:
                 return Unexplained(0, early, START, f"{node.name} runs its @on_start first "
                                    "(the checker starts every node at t=0 before any event)",
-                                   f"{early.label()} before {node.name}'s @on_start")
+                                   f"{early.label()} before {node.name}'s @on_start"), None
             if len(head) < n:
                 return Unexplained(0, None, START, f"{n} @on_start event(s) of {node.name}",
-                                   f"{len(head)} in the log (the node never started?)")
+                                   f"{len(head)} in the log (the node never started?)"), None
             for e in head:
                 choices += e.choices
             pos.append(n)
-        init = self.system.initial_world(tuple(choices))
+        chooser = SplitChooser(choices, branches)
+        init = self.system.initial_world(chooser=chooser)
         for i, name in enumerate(self.system.names):
             if pos[i] == 0:
                 continue
@@ -371,12 +396,13 @@ class _Search:
             digest = state_digest(init.world.states[i])
             if digest != last.digest:
                 return Unexplained(0, last, STATE, f"{name}'s initial state, digest {digest}: "
-                                   f"{self._state(i, init.world)}", f"digest {last.digest}")
+                                   f"{self._state(i, init.world)}", f"digest {last.digest}"), None
         if init.failure is not None:
-            return Unexplained(0, None, ERROR, "start handlers without failure", str(init.failure))
+            return Unexplained(0, None, ERROR, "start handlers without failure",
+                               str(init.failure)), None
         pos_t = tuple(pos)
         options, why = self._options(init.world, pos_t)
-        return _Frame(init.world, pos_t, options, why)
+        return _Frame(init.world, pos_t, options, why), chooser.next_branch_prefix()
 
     # ------------------------------------------------------------ steps
 
@@ -385,12 +411,11 @@ class _Search:
         world = frame.world
         live = self.queues[i][frame.pos[i]]
         ev = world.events[k]
-        chooser = PrefixChooser(live.choices if prefix is None else prefix)
-        t = self.system.run(world, k, chooser)
         # The live node made the handler's choices; the checker's own branches on the
-        # effects (latency, drop, duplicate) follow them.
-        h = len(t.step.choices) if t.handler_choices < 0 else t.handler_choices
-        made = (tuple(t.step.choices[:h]), tuple(t.step.options[:h]))
+        # effects (latency, drop, duplicate) are searched: first the first, then the others.
+        chooser = SplitChooser(live.choices, prefix or ())
+        t = self.system.run(world, k, chooser)
+        made = (tuple(chooser.handler_indices), tuple(chooser.handler_options))
         if made != (live.choices, live.options) or (
                 t.failure is not None and "nondeterministic choices" in t.failure.message):
             return Unexplained(self.ordinal[live.node, live.index], live, CHOICES,
@@ -404,8 +429,8 @@ class _Search:
             return Unexplained(self.ordinal[live.node, live.index], live, STATE,
                                f"digest {digest}: {self._state(i, t.world)}",
                                f"digest {live.digest}")
-        sibling = chooser.next_prefix()  # the next effect branch: tried if this one dead-ends
-        if sibling is not None and len(sibling) > h and sibling[:h] == made[0]:
+        sibling = chooser.next_branch_prefix()  # tried if this branch dead-ends
+        if sibling is not None:
             frame.options.insert(frame.next, (i, k, sibling))
         pos = (*frame.pos[:i], frame.pos[i] + 1, *frame.pos[i + 1:])
         options, why = self._options(t.world, pos)

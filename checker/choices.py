@@ -12,7 +12,24 @@ from __future__ import annotations
 
 import random
 from collections.abc import Sequence
-from typing import final
+from typing import Protocol, final
+
+
+class Chooser(Protocol):
+    """What the checker's choosers offer: `choose` for a handler's `ctx.choose`, `branch`
+    for the checker's own branches on its effects (latency, drop, duplicate), and the
+    answers given so far in call order."""
+
+    indices: list[int]
+    options: list[int]
+
+    def choose(self, n: int) -> int:
+        """An index in range(n) for a handler's choice point."""
+        ...
+
+    def branch(self, n: int) -> int:
+        """An index in range(n) for one of the checker's branches."""
+        ...
 
 
 @final
@@ -41,12 +58,67 @@ class PrefixChooser:
         self.options.append(n)
         return index
 
+    branch = choose  # the checker's own branches (latency, faults) are choice points too
+
     def next_prefix(self) -> tuple[int, ...] | None:
         """The prefix of the next variant after this run, or None if this was the last."""
-        for k in range(len(self.indices) - 1, -1, -1):
-            if self.indices[k] + 1 < self.options[k]:
-                return (*self.indices[:k], self.indices[k] + 1)
-        return None
+        return _odometer(self.indices, self.options)
+
+
+def _odometer(indices: Sequence[int], options: Sequence[int]) -> tuple[int, ...] | None:
+    """The next prefix after `indices` (each below its `options`), or None after the last."""
+    for k in range(len(indices) - 1, -1, -1):
+        if indices[k] + 1 < options[k]:
+            return (*indices[:k], indices[k] + 1)
+    return None
+
+
+@final
+class SplitChooser:
+    """Answers a handler's `choose(n)` from recorded answers and the checker's own
+    `branch(n)` (latency, drop, duplicate) from a prefix, then 0 — for checking a live
+    run, whose log holds the handlers' answers but not the checker's branches.
+
+    Records every answer in call order (`indices`, `options`, like PrefixChooser) and
+    the handlers' and branches' answers apart; `next_branch_prefix` enumerates the
+    branches like an odometer, the handlers' answers staying as recorded.
+    """
+
+    __slots__ = ("_answers", "_prefix", "branch_indices", "branch_options", "handler_indices",
+                 "handler_options", "indices", "options")
+
+    def __init__(self, answers: Sequence[int], branch_prefix: Sequence[int] = ()) -> None:
+        self._answers, self._prefix = tuple(answers), tuple(branch_prefix)
+        self.indices: list[int] = []
+        self.options: list[int] = []
+        self.handler_indices: list[int] = []
+        self.handler_options: list[int] = []
+        self.branch_indices: list[int] = []
+        self.branch_options: list[int] = []
+
+    def choose(self, n: int) -> int:
+        """The recorded answer of this handler choice point (0 past the record)."""
+        return self._answer(n, self._answers, self.handler_indices, self.handler_options)
+
+    def branch(self, n: int) -> int:
+        """The forced index of this branch of the checker (0 past the prefix)."""
+        return self._answer(n, self._prefix, self.branch_indices, self.branch_options)
+
+    def _answer(self, n: int, forced: tuple[int, ...], indices: list[int],
+                options: list[int]) -> int:
+        k = len(indices)
+        index = forced[k] if k < len(forced) else 0
+        if not 0 <= index < n:
+            raise ChoiceMismatch(f"choice point {k} has {n} options, cannot force index {index}")
+        indices.append(index)
+        options.append(n)
+        self.indices.append(index)
+        self.options.append(n)
+        return index
+
+    def next_branch_prefix(self) -> tuple[int, ...] | None:
+        """The branch prefix of the next variant with the same handler answers, or None."""
+        return _odometer(self.branch_indices, self.branch_options)
 
 
 @final
@@ -66,6 +138,8 @@ class RandomChooser:
         self.indices.append(index)
         self.options.append(n)
         return index
+
+    branch = choose
 
 
 class ChoiceMismatch(ValueError):

@@ -41,7 +41,7 @@ from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any, final
 
 from checker.cache import GenerationCache
-from checker.choices import ChoiceMismatch, PrefixChooser
+from checker.choices import ChoiceMismatch, Chooser, PrefixChooser
 from checker.faults import DROP, DUPLICATE, parse_settings
 from checker.semantics import Semantics
 from checker.transition import (
@@ -73,7 +73,7 @@ from checker.world import (
     sort_events,
     world_digest,
 )
-from runtime.context import After, Call, Chooser, Context, Fail, Log, Publish
+from runtime.context import After, Call, Context, Fail, Log, Publish
 from runtime.dispatch import run_handler
 from runtime.messages import CallError
 from runtime.node import Node
@@ -182,17 +182,18 @@ class System:
             prefix = chooser.next_prefix()
         return result
 
-    def initial_world(self, choices: Sequence[int] = ()) -> Transition:
-        """Rebuild the initial world reached with the start-handler `choices`."""
-        return self._start(PrefixChooser(choices))
+    def initial_world(self, choices: Sequence[int] = (), *,
+                      chooser: Chooser | None = None) -> Transition:
+        """Rebuild the initial world reached with the start-handler `choices` (or `chooser`)."""
+        return self._start(chooser if chooser is not None else PrefixChooser(choices))
 
-    def _start(self, chooser: PrefixChooser) -> Transition:
+    def _start(self, chooser: Chooser) -> Transition:
         states = list(self._initial_states)
         pending: list[Event] = []
         for i in range(len(self.nodes)):
             for ev in self._periodic(i, 0):
                 self.semantics.add(pending, ev)
-        failure, logs, faults = None, [], []
+        failure, logs, faults, branches = None, [], [], []
         event = Event(0, START, 0, "", -1, (), 0)
         for i, node in enumerate(self.nodes):
             for h in node.spec().of_kind("start"):
@@ -201,6 +202,7 @@ class System:
                 states[i] = v.state
                 logs += v.logs
                 faults += v.faults
+                branches += v.branches  # positions in the shared chooser
                 for ev in v.events:
                     self.semantics.add(pending, ev)
                 failure = v.failure
@@ -210,7 +212,7 @@ class System:
                 break
         step = Step(-1, tuple(chooser.indices), tuple(chooser.options))
         world = self.make_world(0, tuple(states), pending, None)
-        return Transition(step, world, event, failure, tuple(logs), tuple(faults))
+        return Transition(step, world, event, failure, tuple(logs), tuple(faults), tuple(branches))
 
     def _recheck_start(self, t: Transition) -> Transition:
         self._current = [None] * len(self.nodes)
@@ -348,7 +350,7 @@ class System:
             states = (*states[:i], v.state, *states[i + 1:])
         new = self.make_world(ev.due, states, pending, world, world.crashes)
         return Transition(Step(index, v.choices, v.options), new, ev, v.failure, v.logs, v.faults,
-                          v.handler_choices)
+                          v.branches)
 
     def _deadline_miss(self, world: World, index: int) -> Transition:
         ev = world.events[index]
@@ -464,10 +466,11 @@ class System:
                                 f"state cannot be snapshot: {exc}")
         new = data if new == data else self._intern(new)
         self._current[i] = new
-        handler_choices = len(getattr(chooser, "indices", ()))
+        handler_end = len(getattr(chooser, "indices", ()))
         events, failure, logs, faults = self._effects(ev, outcome.effects, outcome.reply, chooser)
-        return Variant(tuple(getattr(chooser, "indices", ())), tuple(getattr(chooser, "options", ())),
-                       new, tuple(events), failure, tuple(logs), tuple(faults), handler_choices)
+        indices = tuple(getattr(chooser, "indices", ()))
+        return Variant(indices, tuple(getattr(chooser, "options", ())), new, tuple(events),
+                       failure, tuple(logs), tuple(faults), tuple(range(handler_end, len(indices))))
 
     @staticmethod
     def _failed(chooser: Chooser, data: bytes, kind: str, node: str, method: str, message: str,
@@ -526,7 +529,7 @@ class System:
         options = self.settings.delivery_options(name)
         if len(options) == 1:
             return 1
-        pick = options[chooser.choose(len(options))]
+        pick = options[chooser.branch(len(options))]
         if pick == DROP:
             faults.append(f"{name} to {self.names[j]}: dropped")
             return 0
@@ -542,7 +545,7 @@ class System:
         span = self.semantics.latency_range(name)
         if span is not None:
             low, high = span
-            due = now + low + (chooser.choose(high - low + 1) if high > low else 0)
+            due = now + low + (chooser.branch(high - low + 1) if high > low else 0)
         limit = self.settings.deadline_for(name) if self.settings.has_deadlines else None
         return Event(due, kind, target, method, sender, args, priority, reply_to,
                      deadline=None if limit is None else now + limit)

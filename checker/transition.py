@@ -67,7 +67,7 @@ class Transition:
     failure: Failure | None = None
     logs: tuple[Log, ...] = ()
     faults: tuple[str, ...] = ()
-    handler_choices: int = -1  # how many of step.choices the handler's ctx.choose made (-1: all)
+    branches: tuple[int, ...] = ()  # positions in step.choices of the checker's own branches
 
 
 @final
@@ -82,9 +82,9 @@ class Variant:
     failure: Failure | None = None
     logs: tuple[Log, ...] = ()
     faults: tuple[str, ...] = ()
-    # the first `handler_choices` choices are the handler's ctx.choose answers; the rest are
-    # the checker's own branches on its effects (latency, drop, duplicate); -1: all the handler's
-    handler_choices: int = -1
+    # positions in `choices` of the checker's own branches on the effects (latency, drop,
+    # duplicate); the others are the handler's ctx.choose answers
+    branches: tuple[int, ...] = ()
 
 
 CAUSES = (". Likely causes: the handler reads the wall clock or `time`, uses `random`, "

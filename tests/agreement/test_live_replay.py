@@ -270,13 +270,17 @@ def test_latency_and_drop_branches_are_granted_not_chosen(tmp_path):
     assert result.divergence is None and result.final_states_match
 
 
-def test_duplicates_and_start_message_branches_are_refused(tmp_path):
+def test_duplicates_are_refused_and_start_message_branches_are_granted(tmp_path):
     with pytest.raises(ValueError, match="duplicate cannot be replayed live"):
         plan(fault_trace(tmp_path, "dup", [{"name": "once", "kind": "invariant",
                                              "expr": "pong.received <= ping.sent"}],
                          faults={"duplicate": ["/ping"]}))
-    with pytest.raises(ValueError, match="start handlers' messages take latency or drop"):
-        plan(fault_trace(tmp_path, "early", LATE, latency={"/ping": [0, 3]}))
+    # Ping's @on_start publishes the first /ping: its delay is the grant's to take too
+    early = plan(fault_trace(tmp_path, "early", LATE, latency={"/ping": [0, 3]}))
+    assert all(g.choices == () for g in [*early.starts, *early.steps])
+    assert early.steps[0].handler == "on_ping" and early.steps[0].t > 0
+    result = asyncio.run(asyncio.wait_for(replay_in_process(early, tmp_path / "ev"), 60))
+    assert result.divergence is None and result.final_states_match
 
 
 @pytest.mark.slow

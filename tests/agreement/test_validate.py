@@ -479,6 +479,14 @@ class Sender(Node):
         ctx.publish("/x", String("x"))
 
 
+class EarlySender(Node):
+    """Publishes /x from its @on_start."""
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.publish("/x", String("x"))
+
+
 class LateListener(Node):
     """Ticks at t=1 and records whether /x came first."""
 
@@ -498,8 +506,9 @@ class LateListener(Node):
         self.state.heard = True
 
 
-def sender_listener(tmp_path: Path, name: str, **check_settings: Any) -> Path:
-    doc = {"name": name, "nodes": [{"name": "s", "class": "test_validate:Sender"},
+def sender_listener(tmp_path: Path, name: str, sender: str = "Sender",
+                    **check_settings: Any) -> Path:
+    doc = {"name": name, "nodes": [{"name": "s", "class": f"test_validate:{sender}"},
                                    {"name": "l", "class": "test_validate:LateListener"}],
            "properties": [{"name": "heard_first", "kind": "invariant",
                            "expr": "l.heard or not l.ticked"}],
@@ -522,6 +531,20 @@ def test_latency_branches_explain_a_late_delivery_strictly(tmp_path):
     assert [name for _, name, _ in strict.violations] == ["heard_first"]
     # without the latency branches, /x is due at t=0, before the tick: a timing difference
     plain = v.validate(log, sender_listener(tmp_path, "plain"), tolerance_ms=0)
+    assert not plain.ok and plain.failure.reason == v.TIMING, plain.summary()
+
+
+def test_latency_of_a_start_handler_message_is_searched_too(tmp_path):
+    late = sender_listener(tmp_path, "early", sender="EarlySender", latency={"/x": [0, 2]})
+    trace = tmp_path / "early.trace.json"
+    assert check(late, CheckOptions(trace_out=str(trace))).status == "violated"
+    records, names = trace_records(trace)  # /x, sent by s's @on_start, came after l's tick
+    assert [(r["node"], r["handler"]) for r in records if r["kind"] != "start"] == [("l", "tick")]
+    log = write_log(tmp_path / "e.jsonl", records, names)
+    strict = v.validate(log, late, tolerance_ms=0)
+    assert strict.ok and [p for _, p, _ in strict.violations] == ["heard_first"], strict.summary()
+    plain = v.validate(log, sender_listener(tmp_path, "plain", sender="EarlySender"),
+                       tolerance_ms=0)
     assert not plain.ok and plain.failure.reason == v.TIMING, plain.summary()
 
 
