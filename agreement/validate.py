@@ -241,7 +241,7 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
 class _Frame:
     world: World
     pos: tuple[int, ...]
-    options: list[tuple[int, int, tuple[int, ...] | None]]  # (node, event, choice prefix)
+    options: list[tuple[int, int, tuple[int, ...]]]  # (node, event, branch prefix)
     why: list[Unexplained]
     ahead: int = 0  # how far ahead of t* the step that made this world ran
     label: str = ""  # that step's live event
@@ -263,6 +263,8 @@ class _Search:
         later = [e for e in log.events if e.kind != "start"]
         self.ordinal = {(e.node, e.index): n for n, e in enumerate(later, start=1)}
         self.ordinal.update({(e.node, e.index): 0 for e in log.events if e.kind == "start"})
+        self._best: tuple[int, Unexplained | None] = (-1, None)  # deepest dead end, and why
+        self._deepest: list[_Frame] = []  # the path to it
 
     # ------------------------------------------------------------ driver
 
@@ -271,59 +273,57 @@ class _Search:
         if outside is not None:
             result.failure = outside
             return
-        total = sum(len(q) for q in self.queues)
         visited: set[tuple[bytes, tuple[int, ...]]] = set()
-        best: tuple[int, Unexplained | None] = (-1, None)
-        deepest: list[_Frame] = []
         branches: tuple[int, ...] | None = ()
         while branches is not None:  # one initial world per branch of the start messages
             root, branches = self._start(branches)
             if isinstance(root, Unexplained):
-                if best[1] is None:
-                    best = (0, root)
+                if self._best[1] is None:
+                    self._best = (0, root)
                 continue
             if (root.world.key, root.pos) in visited:
                 continue
             visited.add((root.world.key, root.pos))
-            found, best, deepest = self._search(root, total, visited, result, best, deepest)
+            found = self._search(root, visited, result)
             if found is not None:
                 self._finish(result, found, None)
                 return
             if result.backtracks > self.max_backtracks:
                 break
-        if not deepest:  # no initial world fits the log's start events
-            result.failure = best[1]
+        if not self._deepest:  # no initial world fits the log's start events
+            result.failure = self._best[1]
             return
-        self._finish(result, deepest, best[1])
+        self._finish(result, self._deepest, self._best[1])
 
-    def _search(self, root: _Frame, total: int, visited: set[tuple[bytes, tuple[int, ...]]],
-                result: Validation, best: tuple[int, Unexplained | None],
-                deepest: list[_Frame]) -> tuple[list[_Frame] | None, tuple[int, Unexplained | None],
-                                                list[_Frame]]:
-        """Depth-first from `root`: (the whole path if found, the deepest failure so far)."""
+    def _search(self, root: _Frame, visited: set[tuple[bytes, tuple[int, ...]]],
+                result: Validation) -> list[_Frame] | None:
+        """Depth-first from `root`: the whole path if one explains every live event, else
+        None (`_best` and `_deepest` then hold the deepest dead end so far)."""
+        total = sum(len(q) for q in self.queues)
         stack = [root]
-        deepest = deepest or [root]
+        self._deepest = self._deepest or [root]
         while stack:
             frame = stack[-1]
             depth = len(stack) - 1
             if sum(frame.pos) == total:
-                return list(stack), best, deepest
+                return list(stack)
             if frame.next >= len(frame.options):
-                if depth > best[0] or best[1] is None:
-                    best = (depth, _earliest(frame.why))
-                    deepest = list(stack)
+                if depth > self._best[0] or self._best[1] is None:
+                    self._best = (depth, _earliest(frame.why))
+                    self._deepest = list(stack)
                 stack.pop()
                 result.backtracks += 1
                 if result.backtracks > self.max_backtracks:
                     gave_up = (f"the search gave up after {self.max_backtracks} dead ends; "
                                "a path may still exist",)
+                    best = self._best
                     if best[1] is not None:
-                        best = (best[0], replace(best[1], notes=best[1].notes + gave_up))
+                        self._best = (best[0], replace(best[1], notes=best[1].notes + gave_up))
                     break
                 continue
-            i, k, prefix = frame.options[frame.next]
+            i, k, branches = frame.options[frame.next]
             frame.next += 1
-            child = self._step(frame, i, k, prefix)
+            child = self._step(frame, i, k, branches)
             if isinstance(child, Unexplained):
                 frame.why.append(child)
                 continue
@@ -331,7 +331,7 @@ class _Search:
             if key not in visited:
                 visited.add(key)
                 stack.append(child)
-        return None, best, deepest
+        return None
 
     def _finish(self, result: Validation, path: list[_Frame], failure: Unexplained | None) -> None:
         result.failure = failure
@@ -406,14 +406,14 @@ class _Search:
 
     # ------------------------------------------------------------ steps
 
-    def _step(self, frame: _Frame, i: int, k: int,
-              prefix: tuple[int, ...] | None) -> _Frame | Unexplained:
+    def _step(self, frame: _Frame, i: int, k: int, branches: tuple[int, ...]
+              ) -> _Frame | Unexplained:
         world = frame.world
         live = self.queues[i][frame.pos[i]]
         ev = world.events[k]
         # The live node made the handler's choices; the checker's own branches on the
         # effects (latency, drop, duplicate) are searched: first the first, then the others.
-        chooser = SplitChooser(live.choices, prefix or ())
+        chooser = SplitChooser(live.choices, branches)
         t = self.system.run(world, k, chooser)
         made = (tuple(chooser.handler_indices), tuple(chooser.handler_options))
         if made != (live.choices, live.options) or (
@@ -452,7 +452,7 @@ class _Search:
             matches = [k for k, ev in enumerate(world.events) if self.sigs.of(ev) == sig]
             ok = [k for k in matches if k in allowed]
             if ok:
-                options.append((i, ok[0], None))
+                options.append((i, ok[0], ()))
             else:
                 why.append(self._why_not(world, live, matches, allowed))
         return options, why
