@@ -198,6 +198,8 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
         ValueError: the trace needs branches a live fleet cannot take (a duplicated message,
             a crash).
     """
+    if cycles < 0:
+        raise ValueError(f"cycles must be >= 0, got {cycles}")
     trace = load_trace(trace_path)
     system, _ = system_for_trace(trace)
     scenario = system.scenario
@@ -211,8 +213,6 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
     # grants' to take, like every later step's
     start_choices = split_start_choices(scenario, _handler_part(choices, init.branches))
     starts = _start_grants(system, init.world.states, start_choices)
-    if cycles < 0:
-        raise ValueError(f"cycles must be >= 0, got {cycles}")
     records = list(trace["steps"])
     if cycles and trace.get("cycle_start") is not None:
         records += records[trace["cycle_start"]:] * cycles
