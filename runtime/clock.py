@@ -65,7 +65,7 @@ class FleetClock:
         self._ns_per_ms = 1e6 / self.time_scale  # exactly 1e6 at scale 1: same value as before
 
     def _now_precise(self) -> float:
-        return (time.time_ns() - self.epoch_ns) / 1e6 * self.time_scale
+        return (_time_ns() - self.epoch_ns) / self._ns_per_ms
 
     def now_ms(self) -> int:
         """Fleet milliseconds since the epoch (floored); read for every message: one expression."""
