@@ -94,8 +94,7 @@ class DigestTable:
             return found
         sid = self._n
         if not sid & _LOW:
-            self._blocks.append(np.zeros(_BLOCK, dtype=np.uint64))
-            self._bv.append(memoryview(self._blocks[-1]))
+            self._new_block()
         self._bv[-1][sid & _LOW] = key
         self._sv[i] = sid + 1
         self._n = sid + 1
@@ -123,6 +122,13 @@ class DigestTable:
             todo = todo[~placed[todo]]
             slots[todo] = (slots[todo] + 1) & self._mask
 
+    def _new_block(self) -> np.ndarray:
+        """Append an empty block of keys (and its memoryview); return it."""
+        block = np.zeros(_BLOCK, dtype=np.uint64)
+        self._blocks.append(block)
+        self._bv.append(memoryview(block))
+        return block
+
     def keys(self) -> np.ndarray:
         """Every key, indexed by id (a copy)."""
         if not self._blocks:
@@ -144,10 +150,7 @@ class DigestTable:
         self.__init__(state.get("capacity", len(state["keys"])))  # type: ignore[misc]
         for start in range(0, len(keys), _BLOCK):
             chunk = keys[start:start + _BLOCK]
-            block = np.zeros(_BLOCK, dtype=np.uint64)
-            block[:len(chunk)] = chunk
-            self._blocks.append(block)
-            self._bv.append(memoryview(block))
+            self._new_block()[:len(chunk)] = chunk
             self._n += len(chunk)
         self._place(keys, 0)
 
