@@ -12,8 +12,8 @@ checker's logical arrival times on one path), the discretization helpers,
 and `agreement.commands.register` for the `twinfleet experiment` command.
 """
 
-from agreement.paper import PAPER, PaperRow, paper_row
-from agreement.table import CheckCell, LiveSummary, Row
+from twinfleet.agreement.paper import PAPER, PaperRow, paper_row
+from twinfleet.agreement.table import CheckCell, LiveSummary, Row
 
 #: The live time scale the experiment uses unless told otherwise: the fastest scale at
 #: which every measured live run stayed on the checker's path

@@ -4,6 +4,6 @@ from __future__ import annotations
 
 import sys
 
-from agreement.commands import main
+from twinfleet.agreement.commands import main
 
 sys.exit(main())

@@ -1,5 +1,9 @@
-"""The `experiment` subcommand: `register(subparsers)` for `twinfleet`, `main()` for
-`python -m agreement`.
+"""The agreement layer's commands: `experiment`, `validate` and `replay` (with `--live`).
+
+`register(subparsers)` adds them to `twinfleet` (`twinfleet.cli`); `main()` is
+`python -m twinfleet.agreement`. `replay` is the checker's offline replay
+(`checker.commands.add_replay_parser`) plus `--live`, a re-enactment on the
+real processes, which needs both drivers and so lives in this layer.
 
     twinfleet experiment SCENARIO... [--runs N] [--time-scale K]
                          [--semantics both|ros|rebeca] [--out DIR] [--jobs 1]
@@ -19,15 +23,22 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from agreement import DEFAULT_TIME_SCALE
-from agreement.table import to_markdown
+from twinfleet.agreement import DEFAULT_TIME_SCALE
+from twinfleet.agreement.table import to_markdown
+from twinfleet.checker.commands import add_replay_parser, replay_command
 
 _SEMANTICS = {"both": ("ros", "rebeca"), "ros": ("ros",), "rebeca": ("rebeca",)}
 
 
 def register(subparsers: Any) -> None:
-    """Add the `experiment` subcommand to an argparse subparsers object (imports nothing
-    heavy: the checker and the live runtime are loaded when the command runs)."""
+    """Add `experiment`, `validate` and `replay` to an argparse subparsers object (imports
+    nothing heavy: the checker and the live runtime are loaded when a command runs)."""
+    _experiment_parser(subparsers)
+    _validate_parser(subparsers)
+    _replay_parser(subparsers)
+
+
+def _experiment_parser(subparsers: Any) -> None:
     p = subparsers.add_parser(
         "experiment", help="the paper's Table 4/5: checker verdicts and N live runs per scenario",
         description="For each scenario: run the checker (both semantics by default) and N live "
@@ -63,8 +74,8 @@ def register(subparsers: Any) -> None:
 
 def experiment_command(args: argparse.Namespace) -> int:
     """Run `experiment` for parsed arguments; return the exit code."""
-    from agreement.experiment import ExperimentOptions, run_experiment
-    from checker.commands import BAD_INPUT
+    from twinfleet.agreement.experiment import ExperimentOptions, run_experiment
+    from twinfleet.checker.commands import BAD_INPUT
 
     if args.jobs != 1:
         print("twinfleet experiment: --jobs: only 1 is supported; live fleets run one at a "
@@ -108,13 +119,67 @@ def command_line(args: argparse.Namespace) -> str:
     return " ".join(shlex.quote(w) for w in words)
 
 
+def cmd_validate(args: argparse.Namespace) -> int:
+    """`twinfleet validate`: is a recorded live run a path of the checker's transitions?"""
+    from twinfleet.agreement.validate import validate_command
+
+    return validate_command(args)
+
+
+def _validate_parser(sub: Any) -> None:
+    p = sub.add_parser("validate", help="check that a live run recorded with `launch "
+                                        "--record-events` is a path of the checker's transitions",
+                       description="Find an interleaving of the nodes' logged events that the "
+                       "checker's transition relation can run, with the same arguments, "
+                       "ctx.choose answers and node states; report the first step it cannot "
+                       "explain (exit 0 valid, 1 unexplained, 2 bad input).")
+    p.add_argument("events", help="event log written by `twinfleet launch --record-events FILE`")
+    p.add_argument("scenario", help="the scenario YAML the run used")
+    p.add_argument("--tolerance-ms", type=int, default=None, metavar="T",
+                   help="also judge timing: events whose model times differ by at most T ms may "
+                        "run in either order; 0 = the checker's exact rules (default: judge "
+                        "order and state only, and report the first step outside the exact "
+                        "timing rules and the tolerance this run needs)")
+    p.add_argument("--window-ms", type=int, default=5, metavar="W",
+                   help="live events of different nodes dispatched within W ms of each other "
+                        "may be taken in either order (default: %(default)s)")
+    p.add_argument("--semantics", choices=("ros", "rebeca"), default=None,
+                   help="checker message rules (default: the scenario's)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=cmd_validate)
+
+
+def _replay_parser(sub: Any) -> None:
+    """`replay TRACE [--live]`: the checker's replay command, plus a live re-enactment."""
+    replay = add_replay_parser(sub)
+    replay.add_argument("--live", action="store_true",
+                        help="re-enact the trace on the real multi-process fleet over Zenoh: a "
+                             "coordinator grants each node's deliveries, timers and ctx.choose "
+                             "answers in the trace's order (logical time, as fast as the "
+                             "processes go) and confirms the violation on the live processes "
+                             "(exit 1 confirmed, 2 not)")
+    replay.add_argument("--cycles", type=int, default=2, metavar="N",
+                        help="with --live and a lasso trace (a liveness violation): go round its "
+                             "cycle N more times, checking that the live nodes come back to the "
+                             "same states every round (default: %(default)s)")
+    replay.set_defaults(func=_replay_or_live)
+
+
+def _replay_or_live(args: argparse.Namespace) -> int:
+    if not args.live:
+        return replay_command(args)
+    from twinfleet.agreement.live_replay import live_replay_command
+
+    return live_replay_command(args)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
-    """`python -m agreement [experiment] SCENARIO... [options]`."""
+    """`python -m twinfleet.agreement [experiment] SCENARIO... [options]`."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] not in ("experiment", "-h", "--help"):
         argv.insert(0, "experiment")
-    parser = argparse.ArgumentParser(prog="python -m agreement",
+    parser = argparse.ArgumentParser(prog="python -m twinfleet.agreement",
                                      description="twinfleet's model-system agreement tools")
-    register(parser.add_subparsers(dest="command", required=True))
+    _experiment_parser(parser.add_subparsers(dest="command", required=True))
     args = parser.parse_args(argv)
     return int(args.func(args))

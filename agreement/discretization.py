@@ -27,11 +27,11 @@ from typing import Any, final
 import numpy as np
 import yaml
 
-from checker.check import CheckOptions, check
-from nodes.mapfile import load_map, save_map
-from nodes.motion import check_cell_size_rule, check_scan_rate_rule, hop_time_ms
-from nodes.profile import profile_named
-from runtime.scenario import load_scenario
+from twinfleet.checker.check import CheckOptions, check
+from twinfleet.nodes.mapfile import load_map, save_map
+from twinfleet.nodes.motion import check_cell_size_rule, check_scan_rate_rule, hop_time_ms
+from twinfleet.nodes.profile import profile_named
+from twinfleet.runtime.scenario import load_scenario
 
 
 def scale_map(src_yaml: str | Path, factor: Fraction, out_yaml: str | Path) -> Path:

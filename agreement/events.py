@@ -29,16 +29,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, final
 
-from checker.choices import PrefixChooser
-from checker.world import DELIVERY, PERIODIC, REPLY, REQUEST, START, TIMER, Event
-from runtime.context import Context
-from runtime.dispatch import run_handler
-from runtime.messages import CallError
-from runtime.replay_gate import EVENTS_FORMAT, payload_digest
-from runtime.scenario import Scenario
+from twinfleet.checker.choices import PrefixChooser
+from twinfleet.checker.world import DELIVERY, PERIODIC, REPLY, REQUEST, START, TIMER, Event
+from twinfleet.runtime.context import Context
+from twinfleet.runtime.dispatch import run_handler
+from twinfleet.runtime.messages import CallError
+from twinfleet.runtime.replay_gate import EVENTS_FORMAT, payload_digest
+from twinfleet.runtime.scenario import Scenario
 
 if TYPE_CHECKING:
-    from checker.system import System
+    from twinfleet.checker.system import System
 
 LIVE_KINDS = {START: "start", DELIVERY: "delivery", REQUEST: "request", REPLY: "reply",
               TIMER: "after", PERIODIC: "timer"}

@@ -29,14 +29,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO, final
 
-from agreement import DEFAULT_TIME_SCALE
-from agreement.live import RunRecord, live_run, private_copy
-from agreement.paper import paper_row
-from agreement.table import CheckCell, LiveSummary, Row, csv_record, to_csv, to_markdown
-from agreement.timing import arrival_errors, predicted_arrivals, robot_names, summarise
-from checker.check import CheckOptions, check
-from checker.search import SearchStatistics
-from runtime.scenario import Scenario, ScenarioError, load_scenario
+from twinfleet.agreement import DEFAULT_TIME_SCALE
+from twinfleet.agreement.live import RunRecord, live_run, private_copy
+from twinfleet.agreement.paper import paper_row
+from twinfleet.agreement.table import CheckCell, LiveSummary, Row, csv_record, to_csv, to_markdown
+from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, robot_names, summarise
+from twinfleet.checker.check import CheckOptions, check
+from twinfleet.checker.search import SearchStatistics
+from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario
 
 SEMANTICS = ("ros", "rebeca")
 _CHECK_PROGRESS_S = 5.0

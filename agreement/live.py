@@ -29,17 +29,17 @@ from typing import Any, TextIO, final
 
 import yaml
 
-from nodes.mapfile import load_map
-from nodes.msgs import Collision, RobotStatus
-from nodes.report import FleetReport
-from runtime import QOS_DEFAULT, String
-from runtime.launcher import SHUTDOWN_TOPIC, free_port, run_fleet
-from runtime.messages import encode
-from runtime.names import key_expr
-from runtime.scenario import Scenario, load_scenario
-from runtime.zenoh_transport import ZenohTransport, zenoh_config
+from twinfleet import QOS_DEFAULT, String
+from twinfleet.nodes.mapfile import load_map
+from twinfleet.nodes.msgs import Collision, RobotStatus
+from twinfleet.nodes.report import FleetReport
+from twinfleet.runtime.launcher import SHUTDOWN_TOPIC, free_port, run_fleet
+from twinfleet.runtime.messages import encode
+from twinfleet.runtime.names import key_expr
+from twinfleet.runtime.scenario import Scenario, load_scenario
+from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
 
-REPORT_FACTORY = "agreement.live:timed_report_for"
+REPORT_FACTORY = "twinfleet.agreement.live:timed_report_for"
 _HOOK: ContextVar[Callable[[TimedReport], None] | None] = ContextVar("agreement_report_hook",
                                                                     default=None)
 

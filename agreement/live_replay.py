@@ -52,24 +52,24 @@ from typing import Any, TextIO, final
 
 import msgpack
 
-from agreement.events import (
+from twinfleet.agreement.events import (
     live_kind,
     live_signature,
     load_events,
     refuse_unreplayable,
     split_start_choices,
 )
-from checker.check import load, system_for_trace
-from checker.system import Step, System
-from checker.trace import TraceError, load_trace
-from checker.world import CRASH
-from runtime.launcher import Fleet, format_result, run_fleet
-from runtime.messages import DecodeError, decode
-from runtime.names import key_expr
-from runtime.node import QOS_DEFAULT
-from runtime.replay_gate import gate_key, payload_digest, state_digest, summarise
-from runtime.scenario import Scenario
-from runtime.transport import Transport, graph_key, parse_graph_key
+from twinfleet.checker.check import load, system_for_trace
+from twinfleet.checker.system import Step, System
+from twinfleet.checker.world import CRASH
+from twinfleet.runtime.launcher import Fleet, format_result, run_fleet
+from twinfleet.runtime.messages import DecodeError, decode
+from twinfleet.runtime.names import key_expr
+from twinfleet.runtime.node import QOS_DEFAULT
+from twinfleet.runtime.replay_gate import gate_key, payload_digest, state_digest, summarise
+from twinfleet.runtime.scenario import Scenario
+from twinfleet.runtime.tracefile import TraceError, load_trace
+from twinfleet.runtime.transport import Transport, graph_key, parse_graph_key
 
 COLLISIONS_TOPIC = "/collisions"
 

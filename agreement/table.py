@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import final
 
-from agreement.paper import PaperRow
+from twinfleet.agreement.paper import PaperRow
 
 HOLDS, VIOLATED, UNKNOWN = "holds", "violated", "unknown"
 

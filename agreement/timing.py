@@ -16,10 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, final
 
-from checker.check import load
-from checker.choices import RandomChooser
-from checker.system import System
-from runtime.scenario import Scenario
+from twinfleet.checker.check import load
+from twinfleet.checker.choices import RandomChooser
+from twinfleet.checker.system import System
+from twinfleet.runtime.scenario import Scenario
 
 
 def robot_names(scenario: Scenario) -> tuple[str, ...]:

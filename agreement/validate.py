@@ -74,7 +74,7 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any, final
 
-from agreement.events import (
+from twinfleet.agreement.events import (
     EventLogError,
     EventLogFile,
     LiveEvent,
@@ -83,13 +83,13 @@ from agreement.events import (
     load_events,
     refuse_unreplayable,
 )
-from checker.check import load
-from checker.choices import SplitChooser
-from checker.commands import BAD_INPUT
-from checker.properties import PropertySet
-from checker.system import System
-from checker.world import MESSAGE_KINDS, Event, World
-from runtime.replay_gate import state_digest, summarise
+from twinfleet.checker.check import load
+from twinfleet.checker.choices import SplitChooser
+from twinfleet.checker.commands import BAD_INPUT
+from twinfleet.checker.properties import PropertySet
+from twinfleet.checker.system import System
+from twinfleet.checker.world import MESSAGE_KINDS, Event, World
+from twinfleet.runtime.replay_gate import state_digest, summarise
 
 START = "startup"
 NO_EVENT = "model drift: no such pending event"

@@ -27,13 +27,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from agreement.discretization import (  # noqa: E402
+from twinfleet.agreement.discretization import (  # noqa: E402
     cell_rules,
     check_setting,
     scale_map,
     scale_scenario,
 )
-from runtime.scenario import ScenarioError, load_scenario  # noqa: E402
+from twinfleet.runtime.scenario import ScenarioError, load_scenario  # noqa: E402
 
 SETTINGS = (  # name, factor, scan period multiplier
     ("paper", Fraction(1), 1),
@@ -114,7 +114,7 @@ def main() -> int:
 
 
 def _shape(scenario) -> tuple[int, int]:  # noqa: ANN001
-    from nodes.mapfile import load_map
+    from twinfleet.nodes.mapfile import load_map
 
     return load_map(scenario.map_path).shape
 

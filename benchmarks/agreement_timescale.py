@@ -32,9 +32,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from agreement.live import live_run, private_copy  # noqa: E402
-from agreement.timing import arrival_errors, predicted_arrivals, summarise  # noqa: E402
-from runtime.scenario import load_scenario  # noqa: E402
+from twinfleet.agreement.live import live_run, private_copy  # noqa: E402
+from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, summarise  # noqa: E402
+from twinfleet.runtime.scenario import load_scenario  # noqa: E402
 
 
 def parse_scales(text: str) -> list[tuple[float, int]]:

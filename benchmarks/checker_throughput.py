@@ -63,7 +63,7 @@ if str(HERE) not in sys.path:
 if str(ROOT) not in sys.path:
     sys.path.insert(1, str(ROOT))
 
-from runtime import Context, Node, every, message, subscribe  # noqa: E402
+from twinfleet import Context, Node, every, message, subscribe  # noqa: E402
 
 
 @message("twinfleet_bench/Token")
@@ -110,7 +110,7 @@ class Spinner(Node):
 
 def ring_scenario(nodes: int, modulo: int, semantics: str) -> Any:
     """The ring of `nodes` spinners: each ticks and passes a token on; rounds interleave."""
-    from runtime.scenario import parse_scenario
+    from twinfleet.runtime.scenario import parse_scenario
 
     doc = {"name": "bench", "semantics": semantics, "nodes": [
         {"name": f"s{i}", "namespace": f"/s{i}", "class": "checker_throughput:Spinner",
@@ -157,9 +157,9 @@ def child(args: argparse.Namespace) -> None:
         sys.path.insert(0, args.checker_path)
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[-1]})
-    from checker import PropertySet, Search, System
-    from checker.check import load
-    from checker.search import peak_rss_mb
+    from twinfleet.checker import PropertySet, Search, System
+    from twinfleet.checker.check import load
+    from twinfleet.checker.search import peak_rss_mb
 
     semantics = None
     if args.scenario == "ring":

@@ -68,14 +68,14 @@ sys.path.insert(0, str(ROOT))
 
 import zenoh  # noqa: E402
 
-from runtime import Context, Node, every, handler, message, on_start, subscribe  # noqa: E402
-from runtime.clock import FleetClock  # noqa: E402
-from runtime.host import NodeHost  # noqa: E402
-from runtime.launcher import free_port  # noqa: E402
-from runtime.messages import decode  # noqa: E402
-from runtime.names import key_expr  # noqa: E402
-from runtime.node import QoS  # noqa: E402
-from runtime.zenoh_transport import Handoff, ZenohTransport, zenoh_config  # noqa: E402
+from twinfleet import Context, Node, every, handler, message, on_start, subscribe  # noqa: E402
+from twinfleet.runtime.clock import FleetClock  # noqa: E402
+from twinfleet.runtime.host import NodeHost  # noqa: E402
+from twinfleet.runtime.launcher import free_port  # noqa: E402
+from twinfleet.runtime.messages import decode  # noqa: E402
+from twinfleet.runtime.names import key_expr  # noqa: E402
+from twinfleet.runtime.node import QoS  # noqa: E402
+from twinfleet.runtime.zenoh_transport import Handoff, ZenohTransport, zenoh_config  # noqa: E402
 
 FLEET = "bench"
 RAW = "rawbench"

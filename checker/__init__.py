@@ -13,11 +13,11 @@ table, parents, edges), `graph` (paths, lassos), `search` (BFS/DFS/random),
 `commands`.
 """
 
-from checker.check import CheckOptions, CheckResult, check
-from checker.checkpoint import CheckpointError
-from checker.faults import CheckSettings
-from checker.properties import PropertyError, PropertySet, Violation
-from checker.search import (
+from twinfleet.checker.check import CheckOptions, CheckResult, check
+from twinfleet.checker.checkpoint import CheckpointError
+from twinfleet.checker.faults import CheckSettings
+from twinfleet.checker.properties import PropertyError, PropertySet, Violation
+from twinfleet.checker.search import (
     Limits,
     Outcome,
     Path,
@@ -27,11 +27,12 @@ from checker.search import (
     dfs,
     random_walk,
 )
-from checker.semantics import Semantics
-from checker.store import StateStore
-from checker.system import Failure, Step, System, Transition
-from checker.trace import NondeterminismError, ReplayResult, TraceError, build_trace, replay
-from checker.world import Event, World
+from twinfleet.checker.semantics import Semantics
+from twinfleet.checker.store import StateStore
+from twinfleet.checker.system import Failure, Step, System, Transition
+from twinfleet.checker.trace import NondeterminismError, ReplayResult, build_trace, replay
+from twinfleet.checker.world import Event, World
+from twinfleet.runtime.tracefile import TraceError
 
 __all__ = [
     "CheckOptions",

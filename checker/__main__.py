@@ -4,6 +4,6 @@ from __future__ import annotations
 
 import sys
 
-from checker.commands import main
+from twinfleet.checker.commands import main
 
 sys.exit(main())

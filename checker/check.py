@@ -20,13 +20,14 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, final
 
-from checker import checkpoint as ckpt
-from checker.checkpoint import CheckpointError
-from checker.properties import PropertySet, Violation
-from checker.search import HOLDS, VIOLATED, Limits, Search, SearchStatistics
-from checker.system import System
-from checker.trace import build_trace, write_trace
-from runtime.scenario import Scenario, ScenarioError, load_scenario
+from twinfleet.checker import checkpoint as ckpt
+from twinfleet.checker.checkpoint import CheckpointError
+from twinfleet.checker.properties import PropertySet, Violation
+from twinfleet.checker.search import HOLDS, VIOLATED, Limits, Search, SearchStatistics
+from twinfleet.checker.system import System
+from twinfleet.checker.trace import build_trace
+from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario
+from twinfleet.runtime.tracefile import write_trace
 
 
 @final

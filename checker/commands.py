@@ -1,7 +1,9 @@
-"""The `check` and `replay` subcommands: a thin argparse layer over `checker.check`.
+"""The `check` and `replay` commands: argument parsing over `checker.check` and `checker.trace`.
 
-`runtime/cli.py` calls `register(subparsers)`; `python -m checker SCENARIO`
-runs `main()` here. Exit codes: 0 holds (or replay confirmed), 1 violated,
+`twinfleet.cli` calls `register(subparsers)` for `check`; `replay` is
+registered by `twinfleet.agreement.commands`, which adds `--live` to the
+arguments `add_replay_arguments` defines here. `python -m twinfleet.checker
+SCENARIO` runs `main()` here (both commands, no live replay). Exit codes: 0 holds (or replay confirmed), 1 violated,
 2 bad input, a limit reached before an answer, or a replay that diverged.
 """
 
@@ -14,19 +16,20 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from checker.check import CheckOptions, CheckResult, check, system_for_trace
-from checker.checkpoint import CheckpointError
-from checker.properties import PropertyError
-from checker.search import SearchStatistics
-from checker.trace import NondeterminismError, TraceError, load_trace, replay
-from runtime.node import NodeDefinitionError
-from runtime.scenario import ScenarioError
+from twinfleet.checker.check import CheckOptions, CheckResult, check, system_for_trace
+from twinfleet.checker.checkpoint import CheckpointError
+from twinfleet.checker.properties import PropertyError
+from twinfleet.checker.search import SearchStatistics
+from twinfleet.checker.trace import NondeterminismError, replay
+from twinfleet.runtime.node import NodeDefinitionError
+from twinfleet.runtime.scenario import ScenarioError
+from twinfleet.runtime.tracefile import TraceError, load_trace
 
 BAD_INPUT = (ScenarioError, PropertyError, NodeDefinitionError, TraceError, CheckpointError)
 
 
 def register(subparsers: Any) -> None:
-    """Add the `check` and `replay` subcommands to an argparse subparsers object."""
+    """Add the `check` subcommand to an argparse subparsers object."""
     p = subparsers.add_parser("check", help="explore every interleaving of a scenario",
                               description="Check a scenario's properties exhaustively "
                               "(exit 0 holds, 1 violated, 2 bad input or no answer).")
@@ -71,6 +74,10 @@ def register(subparsers: Any) -> None:
                    "unless --checkpoint names another file)")
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
     p.set_defaults(func=check_command)
+
+
+def add_replay_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add the `replay` subcommand (offline replay of a trace) and return its parser."""
     r = subparsers.add_parser("replay", help="re-execute a counterexample trace",
                               description="Re-run a trace written by `check`, verify every "
                               "step's world digest and confirm the violation (exit 1 when "
@@ -78,6 +85,7 @@ def register(subparsers: Any) -> None:
     r.add_argument("trace", help="trace JSON file written by `twinfleet check`")
     r.add_argument("--quiet", action="store_true", help="print only the verdict line")
     r.set_defaults(func=replay_command)
+    return r
 
 
 def _progress(stats: SearchStatistics) -> None:
@@ -148,12 +156,14 @@ def replay_command(args: argparse.Namespace) -> int:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """`python -m checker [check|replay] ...`; a bare scenario path means `check`."""
+    """`python -m twinfleet.checker [check|replay] ...`; a bare scenario path means `check`."""
     argv = list(sys.argv[1:] if argv is None else argv)
     if argv and argv[0] not in ("check", "replay", "-h", "--help"):
         argv.insert(0, "check")
-    parser = argparse.ArgumentParser(prog="python -m checker",
+    parser = argparse.ArgumentParser(prog="python -m twinfleet.checker",
                                      description="twinfleet's model checker")
-    register(parser.add_subparsers(dest="command", required=True))
+    sub = parser.add_subparsers(dest="command", required=True)
+    register(sub)
+    add_replay_parser(sub)
     args = parser.parse_args(argv)
     return int(args.func(args))

@@ -67,7 +67,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final, final
 
-from runtime.scenario import Scenario, ScenarioError
+from twinfleet.runtime.scenario import Scenario, ScenarioError
 
 DELIVER: Final = "deliver"
 DROP: Final = "drop"

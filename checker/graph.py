@@ -13,9 +13,9 @@ finite counterexample.
 
 from __future__ import annotations
 
-from checker.store import StateStore
-from checker.system import Step, System, Transition
-from checker.world import World
+from twinfleet.checker.store import StateStore
+from twinfleet.checker.system import Step, System, Transition
+from twinfleet.checker.world import World
 
 _GREY, _BLACK = 1, 2
 

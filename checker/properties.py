@@ -44,12 +44,12 @@ from dataclasses import dataclass
 from types import CodeType
 from typing import TYPE_CHECKING, Any, final
 
-from checker.faults import parse_deadlines, parse_queue_bounds
-from runtime.scenario import Scenario
+from twinfleet.checker.faults import parse_deadlines, parse_queue_bounds
+from twinfleet.runtime.scenario import Scenario
 
 if TYPE_CHECKING:
-    from checker.system import Failure, System
-    from checker.world import Event, World
+    from twinfleet.checker.system import Failure, System
+    from twinfleet.checker.world import Event, World
 
 _CACHE_LIMIT = 2_048  # entries per expression cache (see the module docstring)
 

@@ -35,13 +35,13 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, final
 
-from checker import checkpoint
-from checker.choices import RandomChooser
-from checker.graph import find_lasso, steps_along
-from checker.properties import Property, PropertySet, Violation
-from checker.store import StateStore
-from checker.system import Step, System, Transition
-from checker.world import World
+from twinfleet.checker import checkpoint
+from twinfleet.checker.choices import RandomChooser
+from twinfleet.checker.graph import find_lasso, steps_along
+from twinfleet.checker.properties import Property, PropertySet, Violation
+from twinfleet.checker.store import StateStore
+from twinfleet.checker.system import Step, System, Transition
+from twinfleet.checker.world import World
 
 HOLDS, VIOLATED, UNKNOWN = "holds", "violated", "unknown"
 INTERRUPTED = "interrupted (Ctrl-C)"

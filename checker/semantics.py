@@ -62,7 +62,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Final, final
 
-from checker.world import MESSAGE_KINDS, Event
+from twinfleet.checker.world import MESSAGE_KINDS, Event
 
 ROS: Final = "ros"
 REBECA: Final = "rebeca"

@@ -40,11 +40,11 @@ import hashlib
 from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any, final
 
-from checker.cache import GenerationCache
-from checker.choices import ChoiceMismatch, Chooser, PrefixChooser
-from checker.faults import DROP, DUPLICATE, parse_settings
-from checker.semantics import Semantics
-from checker.transition import (
+from twinfleet.checker.cache import GenerationCache
+from twinfleet.checker.choices import ChoiceMismatch, Chooser, PrefixChooser
+from twinfleet.checker.faults import DROP, DUPLICATE, parse_settings
+from twinfleet.checker.semantics import Semantics
+from twinfleet.checker.transition import (
     CAUSES,
     DEADLINE,
     DEBUG_STATE,
@@ -58,7 +58,7 @@ from checker.transition import (
     difference,
     fingerprint,
 )
-from checker.world import (
+from twinfleet.checker.world import (
     CRASH,
     DELIVERY,
     ENVIRONMENT,
@@ -73,12 +73,12 @@ from checker.world import (
     sort_events,
     world_digest,
 )
-from runtime.context import After, Call, Context, Fail, Log, Publish
-from runtime.dispatch import run_handler
-from runtime.messages import CallError
-from runtime.node import Node
-from runtime.scenario import Scenario, ScenarioError
-from runtime.snapshot import SnapshotError, restore, snapshot
+from twinfleet.runtime.context import After, Call, Context, Fail, Log, Publish
+from twinfleet.runtime.dispatch import run_handler
+from twinfleet.runtime.messages import CallError
+from twinfleet.runtime.node import Node
+from twinfleet.runtime.scenario import Scenario, ScenarioError
+from twinfleet.runtime.snapshot import SnapshotError, restore, snapshot
 
 __all__ = ["DEADLINE", "DEBUG_STATE", "FAILURE", "NONDETERMINISM", "Failure", "Step",
            "System", "Transition", "Variant"]
@@ -88,7 +88,7 @@ _MEMO_LIMIT = 1_024  # handler outcomes per cache generation (two kept; ~0.55 KB
 _DECODED_LIMIT = 64  # decoded states kept for property expressions (~2.5 KB each on C1a)
 
 if TYPE_CHECKING:
-    from checker.properties import PropertySet
+    from twinfleet.checker.properties import PropertySet
 
 
 @final

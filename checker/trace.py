@@ -18,24 +18,17 @@ is violated at the end, raising `NondeterminismError` at the first divergence.
 from __future__ import annotations
 
 import dataclasses
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from pathlib import Path as FilePath
 from typing import Any, final
 
 import numpy as np
 
-from checker.properties import PropertySet, Violation
-from checker.search import Path
-from checker.system import Step, System, Transition
-from checker.world import CRASH, ENVIRONMENT, World
-
-TRACE_FORMAT = "twinfleet-trace/1"
-
-
-class TraceError(ValueError):
-    """A trace file is unreadable or not in a supported format."""
+from twinfleet.checker.properties import PropertySet, Violation
+from twinfleet.checker.search import Path
+from twinfleet.checker.system import Step, System, Transition
+from twinfleet.checker.world import CRASH, ENVIRONMENT, World
+from twinfleet.runtime.tracefile import TRACE_FORMAT
 
 
 class NondeterminismError(RuntimeError):
@@ -142,67 +135,6 @@ def _failure(t: Transition) -> dict[str, str] | None:
         return None
     return {"kind": f.kind, "node": f.node, "handler": f.handler, "message": f.message,
             "traceback": f.traceback}
-
-
-def write_trace(trace: Mapping[str, Any], path: str | FilePath) -> None:
-    """Write a trace as indented JSON, creating parent directories."""
-    out = FilePath(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(trace, indent=1) + "\n")
-
-
-def load_trace(path: str | FilePath) -> dict[str, Any]:
-    """Read a trace file, checking its format version."""
-    try:
-        trace = json.loads(FilePath(path).read_text())
-    except (OSError, json.JSONDecodeError) as exc:
-        raise TraceError(f"{path}: cannot read trace: {exc}") from None
-    if not isinstance(trace, dict) or trace.get("format") != TRACE_FORMAT:
-        raise TraceError(f"{path}: not a {TRACE_FORMAT} trace "
-                         f"(format {trace.get('format') if isinstance(trace, dict) else None!r})")
-    problem = trace_problem(trace)
-    if problem:
-        raise TraceError(f"{path}: malformed trace: {problem}")
-    return trace
-
-
-def _ints(value: Any) -> bool:
-    return isinstance(value, list) and all(type(v) is int for v in value)
-
-
-_TOP: dict[str, Any] = {
-    "scenario": lambda v: isinstance(v, str),
-    "semantics": lambda v: v in ("ros", "rebeca"),
-    "profile": lambda v: v is None or isinstance(v, str),
-    "latency": lambda v: v is None or (_ints(v) and len(v) == 2),
-    "global_priority": lambda v: v is None or isinstance(v, bool),
-    "property": lambda v: isinstance(v, dict) and isinstance(v.get("name"), str)
-    and isinstance(v.get("kind"), str),
-    "cycle_start": lambda v: v is None or type(v) is int,
-    "initial": lambda v: isinstance(v, dict) and _ints(v.get("choices"))
-    and isinstance(v.get("digest"), str) and isinstance(v.get("states", {}), dict),
-    "steps": lambda v: isinstance(v, list),
-}
-_STEP: dict[str, Any] = {
-    "index": lambda v: type(v) is int, "time": lambda v: type(v) is int,
-    "node": lambda v: isinstance(v, str), "handler": lambda v: isinstance(v, str),
-    "event": lambda v: type(v) is int, "choices": _ints, "digest": lambda v: isinstance(v, str),
-    "changed": lambda v: isinstance(v, dict),
-}
-
-
-def trace_problem(trace: Mapping[str, Any]) -> str | None:
-    """What is wrong with a decoded trace's structure, or None if it is well formed."""
-    for key, ok in _TOP.items():
-        if not ok(trace.get(key)):
-            return f"key {key!r} is missing or has the wrong type ({trace.get(key)!r:.60})"
-    for k, step in enumerate(trace["steps"]):
-        if not isinstance(step, dict):
-            return f"steps[{k}] is not a mapping"
-        for key, ok in _STEP.items():
-            if not ok(step.get(key)):
-                return f"steps[{k}].{key} is missing or has the wrong type ({step.get(key)!r:.60})"
-    return None
 
 
 @final

@@ -14,12 +14,12 @@ import pickle
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final, final
 
-from runtime.context import Log
-from runtime.snapshot import SnapshotError, snapshot
+from twinfleet.runtime.context import Log
+from twinfleet.runtime.snapshot import SnapshotError, snapshot
 
 if TYPE_CHECKING:
-    from checker.world import Event, World
-    from runtime.node import Node
+    from twinfleet.checker.world import Event, World
+    from twinfleet.runtime.node import Node
 
 FAILURE: Final = "handler failure"
 DEBUG_STATE: Final = "state outside self.state"

@@ -35,7 +35,7 @@ from typing import Any, Final, final
 
 import msgpack
 
-from runtime.snapshot import snapshot
+from twinfleet.runtime.snapshot import snapshot
 
 # Event kinds. Deliveries, requests and replies are *messages* (one FIFO
 # channel per sender/receiver pair under `ros`); the rest are *timers*.

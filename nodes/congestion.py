@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nodes.grid import NB, Cell, Dims
-from nodes.profile import Profile
-from nodes.scan import NO_OBSTACLE, stepwise_free
+from twinfleet.nodes.grid import NB, Cell, Dims
+from twinfleet.nodes.profile import Profile
+from twinfleet.nodes.scan import NO_OBSTACLE, stepwise_free
 
 #: Back-off lengths offered by the model's ``?(4, 6, 8, 10, 12)``.
 BACKOFF_STEPS: tuple[int, ...] = (4, 6, 8, 10, 12)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from runtime import (
+from twinfleet import (
     CallError,
     Context,
     Node,

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import math
 
-from nodes.grid import COS8, SIN8, Cell, Dims, cell_centre
-from nodes.profile import Profile
+from twinfleet.nodes.grid import COS8, SIN8, Cell, Dims, cell_centre
+from twinfleet.nodes.profile import Profile
 
 Box = tuple[float, float, float, float]  # (xmin, ymin, xmax, ymax)
 

@@ -12,10 +12,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from nodes.geometry import shadows_intersect
-from nodes.grid import Cell, Dims
-from nodes.mapfile import static_grids
-from nodes.msgs import (
+from twinfleet import QOS_LATCHED, Context, Node, QoS, String, handler, on_start, service, subscribe
+from twinfleet.nodes.geometry import shadows_intersect
+from twinfleet.nodes.grid import Cell, Dims
+from twinfleet.nodes.mapfile import static_grids
+from twinfleet.nodes.msgs import (
     Collision,
     FleetStatus,
     ObstacleScan,
@@ -24,10 +25,9 @@ from nodes.msgs import (
     PathRequest,
     RobotPose,
 )
-from nodes.planning import OtherRobot, PathPlanner
-from nodes.profile import profile_named
-from nodes.scan import Scanner, build_tables
-from runtime import QOS_LATCHED, Context, Node, QoS, String, handler, on_start, service, subscribe
+from twinfleet.nodes.planning import OtherRobot, PathPlanner
+from twinfleet.nodes.profile import profile_named
+from twinfleet.nodes.scan import Scanner, build_tables
 
 UNKNOWN: Cell = (-1, -1)
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"

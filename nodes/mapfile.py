@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from nodes.grid import inflate
-from nodes.profile import Profile, profile_named
+from twinfleet.nodes.grid import inflate
+from twinfleet.nodes.profile import Profile, profile_named
 
 #: Model threshold: occupied iff gray < 204 (= 0.8 · 255), REFERENCE §3.1.
 MODEL_FREE_GRAY = 204

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nodes.mapfile import save_map
+from twinfleet.nodes.mapfile import save_map
 
 FREE = 255
 OCCUPIED = 0

@@ -11,7 +11,7 @@ from __future__ import annotations
 from collections import OrderedDict
 from collections.abc import Callable, Hashable
 
-from nodes.grid import Cell
+from twinfleet.nodes.grid import Cell
 
 
 class CellsMemo:

@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import math
 
-from nodes.grid import SQRT2, Cell, octile
-from nodes.profile import Profile
+from twinfleet.nodes.grid import SQRT2, Cell, octile
+from twinfleet.nodes.profile import Profile
 
 
 def hop_time_ms(speed_mps: float, diagonal: bool, res: float, profile: Profile) -> int:

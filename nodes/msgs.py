@@ -6,7 +6,7 @@ directions are 0..7 counter-clockwise, 45° apart (0 = +row).
 
 from __future__ import annotations
 
-from runtime import message
+from twinfleet import message
 
 Cell = tuple[int, int]
 

@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from nodes.grid import NB, SQRT2, Cell, Dims, direction_between, octile
-from nodes.memo import CellsMemo
-from nodes.profile import Profile
+from twinfleet.nodes.grid import NB, SQRT2, Cell, Dims, direction_between, octile
+from twinfleet.nodes.memo import CellsMemo
+from twinfleet.nodes.profile import Profile
 
 #: The model's "infinite" g/f.
 INF = 9999.0

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 from PIL import Image, ImageDraw
 
-from nodes.grid import NB, Cell
+from twinfleet.nodes.grid import NB, Cell
 
 PALETTE = ((220, 40, 40), (40, 90, 220), (30, 160, 60), (240, 140, 20), (150, 60, 190),
            (0, 170, 170), (200, 0, 120), (120, 120, 0))
@@ -162,9 +162,9 @@ def states_view(scenario: Any, states: Mapping[str, Any], *, collision: tuple[st
 
 def scenario_view(scenario: Any, *, scan_of: str | None = None) -> FleetView:
     """The scenario at time 0: starts, goals, first plans (no robot known yet) and first scans."""
-    from nodes.msgs import PathRequest
-    from runtime.context import Context
-    from runtime.dispatch import run_handler
+    from twinfleet.nodes.msgs import PathRequest
+    from twinfleet.runtime.context import Context
+    from twinfleet.runtime.dispatch import run_handler
 
     server_cfg, robot_cfgs = _fleet_nodes(scenario)
     server = server_cfg.instantiate()

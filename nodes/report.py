@@ -13,8 +13,8 @@ import math
 from dataclasses import dataclass, field
 from typing import Any
 
-from nodes.mapfile import load_map
-from nodes.msgs import Collision, RobotPose, RobotStatus
+from twinfleet.nodes.mapfile import load_map
+from twinfleet.nodes.msgs import Collision, RobotPose, RobotStatus
 
 CELL_M = 0.255
 

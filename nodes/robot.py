@@ -14,10 +14,16 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 
-from nodes.congestion import backoff_candidates, backoff_options, clamp_target, target_margin
-from nodes.grid import Cell, Dims, direction_between, in_bounds, is_diagonal, step
-from nodes.mapfile import OccupancyMap, static_grids
-from nodes.motion import (
+from twinfleet import CallError, Context, Node, QoS, handler, on_start, subscribe
+from twinfleet.nodes.congestion import (
+    backoff_candidates,
+    backoff_options,
+    clamp_target,
+    target_margin,
+)
+from twinfleet.nodes.grid import Cell, Dims, direction_between, in_bounds, is_diagonal, step
+from twinfleet.nodes.mapfile import OccupancyMap, static_grids
+from twinfleet.nodes.motion import (
     cells_per_second,
     check_cell_size_rule,
     check_scan_rate_rule,
@@ -26,10 +32,9 @@ from nodes.motion import (
     max_waiting_rounds,
     rotation_time_ms,
 )
-from nodes.msgs import ObstacleScan, Path, PathRequest, RobotPose, RobotStatus
-from nodes.profile import profile_named
-from nodes.scan import can_hop
-from runtime import CallError, Context, Node, QoS, handler, on_start, subscribe
+from twinfleet.nodes.msgs import ObstacleScan, Path, PathRequest, RobotPose, RobotStatus
+from twinfleet.nodes.profile import profile_named
+from twinfleet.nodes.scan import can_hop
 
 MAX_FAILURES = 2  # a third failed plan leaves the robot stuck (the model's livelock bound)
 

@@ -15,9 +15,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from nodes.grid import COS8, SIN8, Cell, Dims, cell_centre
-from nodes.memo import CellsMemo
-from nodes.profile import Profile
+from twinfleet.nodes.grid import COS8, SIN8, Cell, Dims, cell_centre
+from twinfleet.nodes.memo import CellsMemo
+from twinfleet.nodes.profile import Profile
 
 #: Sample step along a beam, in cells, per scan mode.
 MODEL_STEP = 0.8

@@ -13,10 +13,10 @@ from collections.abc import Callable, Hashable, Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Protocol, TypeVar
 
-from runtime.messages import is_message
+from twinfleet.runtime.messages import is_message
 
 if TYPE_CHECKING:
-    from runtime.node import Node
+    from twinfleet.runtime.node import Node
 
 T = TypeVar("T")
 

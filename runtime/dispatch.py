@@ -6,9 +6,9 @@ import traceback
 from dataclasses import dataclass
 from typing import Any
 
-from runtime.context import Context, Effect
-from runtime.messages import is_message
-from runtime.node import Node
+from twinfleet.runtime.context import Context, Effect
+from twinfleet.runtime.messages import is_message
+from twinfleet.runtime.node import Node
 
 
 @dataclass(frozen=True, slots=True)

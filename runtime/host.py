@@ -67,10 +67,10 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from typing import Any, TextIO, final
 
-from runtime.clock import Clock, TimerHandle
-from runtime.context import Call, Context, Effect, Fail, Log, Publish
-from runtime.dispatch import HandlerError, invoke
-from runtime.messages import (
+from twinfleet.runtime.clock import Clock, TimerHandle
+from twinfleet.runtime.context import Call, Context, Effect, Fail, Log, Publish
+from twinfleet.runtime.dispatch import HandlerError, invoke
+from twinfleet.runtime.messages import (
     CallError,
     DecodeError,
     Envelope,
@@ -80,9 +80,9 @@ from runtime.messages import (
     decode_fields,
     encode,
 )
-from runtime.names import key_expr
-from runtime.node import QOS_DEFAULT, HandlerSpec, Node, Reliability
-from runtime.replay_gate import (
+from twinfleet.runtime.names import key_expr
+from twinfleet.runtime.node import QOS_DEFAULT, HandlerSpec, Node, Reliability
+from twinfleet.runtime.replay_gate import (
     EventLog,
     EventMeta,
     LogicalClock,
@@ -94,8 +94,8 @@ from runtime.replay_gate import (
     state_digest,
     summarise,
 )
-from runtime.snapshot import snapshot
-from runtime.transport import Respond, Transport, graph_key, parse_graph_key
+from twinfleet.runtime.snapshot import snapshot
+from twinfleet.runtime.transport import Respond, Transport, graph_key, parse_graph_key
 
 LIVELINESS_TOPIC = "/_liveliness"
 VIOLATIONS_TOPIC = "/violations"

@@ -48,14 +48,14 @@ from typing import Any, TextIO, final
 
 import msgpack
 
-from runtime.messages import DecodeError, decode
-from runtime.names import key_expr
-from runtime.node import QOS_DEFAULT
-from runtime.node_main import PARENT_ENV, stats_key
-from runtime.replay_gate import EVENTS_FORMAT
-from runtime.run_record import RunRecord, versions
-from runtime.scenario import NodeConfig, Scenario
-from runtime.zenoh_transport import ZenohTransport, zenoh_config
+from twinfleet.runtime.messages import DecodeError, decode
+from twinfleet.runtime.names import key_expr
+from twinfleet.runtime.node import QOS_DEFAULT
+from twinfleet.runtime.node_main import PARENT_ENV, stats_key
+from twinfleet.runtime.replay_gate import EVENTS_FORMAT
+from twinfleet.runtime.run_record import RunRecord, versions
+from twinfleet.runtime.scenario import NodeConfig, Scenario
+from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
 
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"
 PROJECT_ROOT = Path(__file__).resolve().parent.parent
@@ -242,7 +242,7 @@ class Fleet:
         return deliver
 
     def _argv(self, cfg: NodeConfig) -> list[str]:
-        argv = [sys.executable, "-m", "runtime.node_main", "--scenario", str(self.scenario.path),
+        argv = [sys.executable, "-m", "twinfleet.runtime.node_main", "--scenario", str(self.scenario.path),
                 "--node", cfg.name, "--connect", self.endpoint, "--epoch-ns", str(self.epoch_ns),
                 "--time-scale", repr(self.time_scale), "--seed", str(self.seed),
                 *self.node_args]

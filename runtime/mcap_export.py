@@ -20,7 +20,7 @@ import msgpack
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from runtime.viewstate import jsonable
+from twinfleet.runtime.viewstate import jsonable
 
 
 def json_schema(schema: Any) -> Any:

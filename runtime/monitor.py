@@ -21,9 +21,15 @@ import msgpack
 import yaml
 import zenoh
 
-from runtime.messages import DecodeError, from_plain, message_class, to_plain, type_name_of
-from runtime.names import KEY_PREFIX
-from runtime.transport import graph_key, parse_graph_key
+from twinfleet.runtime.messages import (
+    DecodeError,
+    from_plain,
+    message_class,
+    to_plain,
+    type_name_of,
+)
+from twinfleet.runtime.names import KEY_PREFIX
+from twinfleet.runtime.transport import graph_key, parse_graph_key
 
 _POLL_S = 0.02
 CLI_SENDER = "twinfleet-cli"

@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from enum import Enum
 from typing import Any, ClassVar, Literal, TypeVar
 
-from runtime.names import normalise_namespace, resolve
+from twinfleet.runtime.names import normalise_namespace, resolve
 
 H = TypeVar("H", bound=Callable[..., Any])
 

@@ -31,14 +31,14 @@ from collections.abc import Sequence
 
 import msgpack
 
-from runtime.clock import Clock, FleetClock
-from runtime.host import NodeHost
-from runtime.names import KEY_PREFIX
-from runtime.replay_gate import EventLog, LogicalClock
-from runtime.scenario import Scenario, ScenarioError, load_scenario
-from runtime.schemas import registered_schemas, types_key
-from runtime.transport import Respond
-from runtime.zenoh_transport import ZenohTransport, zenoh_config
+from twinfleet.runtime.clock import Clock, FleetClock
+from twinfleet.runtime.host import NodeHost
+from twinfleet.runtime.names import KEY_PREFIX
+from twinfleet.runtime.replay_gate import EventLog, LogicalClock
+from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario
+from twinfleet.runtime.schemas import registered_schemas, types_key
+from twinfleet.runtime.transport import Respond
+from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
 
 _PR_SET_PDEATHSIG = 1
 PARENT_ENV = "TWINFLEET_LAUNCHER_PID"

@@ -39,10 +39,10 @@ import msgpack
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from runtime.names import KEY_PREFIX
-from runtime.schemas import message_schema, types_key
-from runtime.tap import LATCHED_TOPICS, FleetTap
-from runtime.zenoh_transport import zenoh_config
+from twinfleet.runtime.names import KEY_PREFIX
+from twinfleet.runtime.schemas import message_schema, types_key
+from twinfleet.runtime.tap import LATCHED_TOPICS, FleetTap
+from twinfleet.runtime.zenoh_transport import zenoh_config
 
 DRAIN_S = 0.3
 LINGER_S = 0.5
@@ -126,7 +126,7 @@ async def record_scenario(scenario: Any, path: str | Path, *, time_scale: float 
 
     Returns the launcher's `FleetResult` and the (closed) recorder with its counts.
     """
-    from runtime.launcher import free_port, run_fleet
+    from twinfleet.runtime.launcher import free_port, run_fleet
 
     endpoint = listen or f"tcp/127.0.0.1:{free_port()}"
     recorder = McapRecorder(open(path, "wb"))  # noqa: SIM115 - closed by recorder.close()

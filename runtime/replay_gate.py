@@ -25,18 +25,18 @@ from typing import TYPE_CHECKING, Any, final
 import msgpack
 import numpy as np
 
-from runtime.clock import TimerHandle
-from runtime.context import Chooser, Publish
-from runtime.messages import (
+from twinfleet.runtime.clock import TimerHandle
+from twinfleet.runtime.context import Chooser, Publish
+from twinfleet.runtime.messages import (
     to_plain,
     type_name_of,
 )
-from runtime.names import KEY_PREFIX
-from runtime.snapshot import snapshot
-from runtime.transport import Respond
+from twinfleet.runtime.names import KEY_PREFIX
+from twinfleet.runtime.snapshot import snapshot
+from twinfleet.runtime.transport import Respond
 
 if TYPE_CHECKING:
-    from runtime.host import NodeHost
+    from twinfleet.runtime.host import NodeHost
 
 EVENTS_FORMAT = "twinfleet-events/1"
 GATED_CALL_WALL_S = 600.0  # a gated call waits for its grant, not for a timeout

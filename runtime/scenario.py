@@ -11,7 +11,7 @@ Layout (every key but `nodes` optional)::
     params: {scan_rate_ms: 100}    # merged into every node whose Params has the field
     nodes:
       - name: r1
-        class: nodes.robot:Robot   # module:Class, a subclass of runtime.Node
+        class: twinfleet.nodes.robot:Robot   # module:Class, a subclass of runtime.Node
         namespace: /r1             # default: root
         priority: 3                # node-instance priority (checker, rebeca semantics)
         respawn: false             # live: restart the process if it dies
@@ -29,7 +29,7 @@ Layout (every key but `nodes` optional)::
         duplicate: [/topic]        # each delivery: delivered | delivered twice
         crash: {nodes: [r1], max: 1, durable: []}   # crash-and-restart branches
     live: {timeout_s: 120, stop_on_error: false, time_scale: 1.0,
-           report: "nodes.report:report_for"}  # factory(scenario) -> report, see launcher
+           report: "twinfleet.nodes.report:report_for"}  # factory(scenario) -> report, see launcher
 
 Every error names the file, the key and what was expected, and is raised
 before anything starts.
@@ -48,8 +48,8 @@ from typing import Any
 
 import yaml
 
-from runtime.names import InvalidName, normalise_namespace, validate_token
-from runtime.node import Node
+from twinfleet.runtime.names import InvalidName, normalise_namespace, validate_token
+from twinfleet.runtime.node import Node
 
 PROFILES = ("fixed", "rebeca")
 SEMANTICS = ("ros", "rebeca")

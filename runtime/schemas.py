@@ -14,8 +14,8 @@ import typing
 from collections.abc import Mapping
 from typing import Any
 
-from runtime.messages import is_message, registered_types
-from runtime.names import KEY_PREFIX
+from twinfleet.runtime.messages import is_message, registered_types
+from twinfleet.runtime.names import KEY_PREFIX
 
 ENVELOPE_FIELDS = {"stamp_ms": {"type": "integer", "description": "ms since the fleet's start"},
                    "seq": {"type": "integer", "description": "per-publisher sequence number"},

@@ -27,8 +27,8 @@ from typing import Any, final
 import zenoh
 from zenoh import ext
 
-from runtime.names import KEY_PREFIX
-from runtime.zenoh_transport import Handoff
+from twinfleet.runtime.names import KEY_PREFIX
+from twinfleet.runtime.zenoh_transport import Handoff
 
 LATCHED_TOPICS = ("/map",)
 RETRY_S = 0.25

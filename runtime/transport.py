@@ -31,8 +31,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol, final
 
-from runtime.names import KEY_PREFIX
-from runtime.node import QoS
+from twinfleet.runtime.names import KEY_PREFIX
+from twinfleet.runtime.node import QoS
 
 Deliver = Callable[[str, bytes], None]
 Respond = Callable[[bytes | None, str], None]  # (reply payload, "") or (None, error reason)

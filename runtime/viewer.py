@@ -32,7 +32,7 @@ from typing import Any, TextIO
 
 from aiohttp import WSMsgType, web
 
-from runtime.viewstate import LiveState, trace_document
+from twinfleet.runtime.viewstate import LiveState, trace_document
 
 STATIC_DIR = Path(__file__).with_name("static")
 FLUSH_S = 0.05
@@ -166,8 +166,8 @@ async def serve(*, connect: str | None, fleet: str = "*", port: int = 0,
     else:
         if connect is None:
             raise ValueError("live mode needs a Zenoh endpoint (--connect)")
-        from runtime.tap import FleetTap
-        from runtime.zenoh_transport import zenoh_config
+        from twinfleet.runtime.tap import FleetTap
+        from twinfleet.runtime.zenoh_transport import zenoh_config
 
         state = LiveState(fleet)
         tap = FleetTap(lambda: zenoh_config(connect=[connect], mode="client"), fleet,

@@ -19,19 +19,18 @@ and `runtime.messages`; other types are only counted.
 from __future__ import annotations
 
 import base64
-import json
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any, final
 
 import msgpack
 
-from runtime.names import KEY_PREFIX
+from twinfleet.runtime.names import KEY_PREFIX
+from twinfleet.runtime.tracefile import load_trace
 
 MAX_TRAIL = 20_000
 MAX_LOG = 500
 RESTART_MS = 1000  # a robot's stamps going back this far: the fleet was launched again
-TRACE_FORMAT = "twinfleet-trace/1"
 ROBOT_TYPES = {
     "twinfleet_msgs/RobotPose": "pose",
     "twinfleet_msgs/RobotStatus": "status",
@@ -246,18 +245,9 @@ def _natural(name: str) -> tuple[Any, ...]:
     return (head, int(tail) if tail else -1)
 
 
-def load_trace(path: str | Path) -> dict[str, Any]:
-    """Read a checker trace file; ValueError if it is not one."""
-    with open(path) as f:
-        trace = json.load(f)
-    if not isinstance(trace, dict) or trace.get("format") != TRACE_FORMAT:
-        raise ValueError(f"{path}: not a twinfleet trace (format {trace.get('format')!r})")
-    return trace
-
-
 def trace_document(path: str | Path) -> dict[str, Any]:
     """The page's view of a checker trace: map, robots, initial states and steps."""
-    from runtime.scenario import load_scenario
+    from twinfleet.runtime.scenario import load_scenario
 
     trace = load_trace(path)
     scenario = load_scenario(trace["scenario"], {"profile": trace.get("profile", "fixed")})
@@ -278,10 +268,10 @@ def trace_document(path: str | Path) -> dict[str, Any]:
 
 def start_map(scenario: Any) -> dict[str, Any] | None:
     """The ``/map`` message that the scenario's nodes publish at start, as JSON data."""
-    from runtime.context import Context, Publish
-    from runtime.dispatch import run_handler
-    from runtime.messages import encode
-    from runtime.node import NodeSpec
+    from twinfleet.runtime.context import Context, Publish
+    from twinfleet.runtime.dispatch import run_handler
+    from twinfleet.runtime.messages import encode
+    from twinfleet.runtime.node import NodeSpec
 
     for cfg in scenario.nodes:
         node = None

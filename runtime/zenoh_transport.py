@@ -50,8 +50,8 @@ from typing import Any, final
 import zenoh
 from zenoh import ext
 
-from runtime.node import Durability, QoS, Reliability
-from runtime.transport import Deliver, OnChange, OnDone, OnRequest
+from twinfleet.runtime.node import Durability, QoS, Reliability
+from twinfleet.runtime.transport import Deliver, OnChange, OnDone, OnRequest
 
 OVERRIDE_ENV = "TWINFLEET_ZENOH_CONFIG_OVERRIDE"
 _LOCKED = ("scouting/multicast", "transport/shared_memory")

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from checker.check import CheckOptions, check
-from nodes.render import robot_colour
-from runtime.cli import main
+from twinfleet.checker.check import CheckOptions, check
+from twinfleet.cli import main
+from twinfleet.nodes.render import robot_colour
 
 ROOT = Path(__file__).resolve().parents[1]
 PX = 12

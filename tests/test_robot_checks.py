@@ -7,10 +7,10 @@ from pathlib import Path
 
 import pytest
 
-from checker.check import CheckOptions, check, load
-from checker.properties import PropertySet
-from checker.system import System
-from checker.trace import replay
+from twinfleet.checker.check import CheckOptions, check, load
+from twinfleet.checker.properties import PropertySet
+from twinfleet.checker.system import System
+from twinfleet.checker.trace import replay
 
 ROOT = Path(__file__).resolve().parents[1]
 pytestmark = pytest.mark.timeout(300)

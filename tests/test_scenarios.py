@@ -7,7 +7,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from runtime.scenario import ScenarioError, load_scenario
+from twinfleet.runtime.scenario import ScenarioError, load_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted((ROOT / "launch").glob("*.yaml"))
@@ -15,8 +15,8 @@ GOOD = {
     "name": "t",
     "map": str(ROOT / "maps" / "corridor12.yaml"),
     "nodes": [
-        {"name": "map_server", "class": "nodes.map_server:MapServer", "params": {"robots": ["r1"]}},
-        {"name": "r1", "class": "nodes.robot:Robot", "namespace": "/r1",
+        {"name": "map_server", "class": "twinfleet.nodes.map_server:MapServer", "params": {"robots": ["r1"]}},
+        {"name": "r1", "class": "twinfleet.nodes.robot:Robot", "namespace": "/r1",
          "params": {"start": [5, 1], "goal": [5, 10]}},
     ],
 }
@@ -58,8 +58,8 @@ def mutate(path: str, value):
 @pytest.mark.parametrize(
     ("path", "value", "expected"),
     [
-        ("nodes.1.class", "nodes.robot:Robott", r"nodes\[1\]\.class: unknown node class 'nodes.robot:Robott'"),
-        ("nodes.1.class", "nodes.robot", r"expected 'module:Class'"),
+        ("nodes.1.class", "twinfleet.nodes.robot:Robott", r"nodes\[1\]\.class: unknown node class 'twinfleet.nodes.robot:Robott'"),
+        ("nodes.1.class", "twinfleet.nodes.robot", r"expected 'module:Class'"),
         ("nodes.1.params.speeed", 0.5, r"nodes\[1\]\.params\.speeed: unknown parameter of RobotParams"),
         ("nodes.1.params.start", "five", r"nodes\[1\]\.params\.start: expected a list"),
         ("nodes.1.params.start", [5], r"expected 2 values"),

@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from runtime.snapshot import restore, snapshot
+from twinfleet.runtime.snapshot import restore, snapshot
 
 Cell = tuple[int, int]
 

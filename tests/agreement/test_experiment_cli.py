@@ -11,13 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from agreement.table import columns, markdown_header
+from twinfleet.agreement.table import columns, markdown_header
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _run(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "agreement", *args], cwd=ROOT, text=True,
+    return subprocess.run([sys.executable, "-m", "twinfleet.agreement", *args], cwd=ROOT, text=True,
                           capture_output=True, timeout=timeout,
                           env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
 
@@ -90,7 +90,7 @@ def test_register_adds_experiment_without_loading_the_live_runtime():
 def test_ctrl_c_stops_and_still_writes_what_was_done(tmp_path):
     import signal
 
-    proc = subprocess.Popen([sys.executable, "-m", "agreement", "launch/headon.yaml", "--runs",
+    proc = subprocess.Popen([sys.executable, "-m", "twinfleet.agreement", "launch/headon.yaml", "--runs",
                              "5", "--time-scale", "1", "--semantics", "ros", "--out",
                              str(tmp_path)], cwd=ROOT, text=True, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE,

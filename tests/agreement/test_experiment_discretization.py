@@ -9,10 +9,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from agreement.discretization import cell_rules, hidden_overlap_m, scale_map, scale_scenario
-from nodes.mapfile import load_map
-from nodes.profile import FIXED
-from runtime.scenario import load_scenario
+from twinfleet.agreement.discretization import (
+    cell_rules,
+    hidden_overlap_m,
+    scale_map,
+    scale_scenario,
+)
+from twinfleet.nodes.mapfile import load_map
+from twinfleet.nodes.profile import FIXED
+from twinfleet.runtime.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 MAP50 = ROOT / "maps" / "map50.yaml"

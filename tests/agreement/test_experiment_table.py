@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from agreement.experiment import scenario_row
-from agreement.paper import PAPER, paper_row
-from agreement.table import (
+from twinfleet.agreement.experiment import scenario_row
+from twinfleet.agreement.paper import PAPER, paper_row
+from twinfleet.agreement.table import (
     CheckCell,
     LiveSummary,
     Row,
@@ -19,7 +19,7 @@ from agreement.table import (
     to_csv,
     to_markdown,
 )
-from runtime.scenario import load_scenario
+from twinfleet.runtime.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 BOTH = ("ros", "rebeca")

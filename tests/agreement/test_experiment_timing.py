@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from agreement.live import RunRecord, TimedReport
-from agreement.timing import arrival_errors, predicted_arrivals, summarise
-from nodes.msgs import Collision, RobotStatus
+from twinfleet.agreement.live import RunRecord, TimedReport
+from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, summarise
+from twinfleet.nodes.msgs import Collision, RobotStatus
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -69,8 +69,8 @@ def test_timed_report_stops_at_a_collision_only_when_asked():
 
 
 def test_private_copy_runs_the_same_scenario_from_elsewhere(tmp_path):
-    from agreement.live import private_copy
-    from runtime.scenario import load_scenario
+    from twinfleet.agreement.live import private_copy
+    from twinfleet.runtime.scenario import load_scenario
 
     original = load_scenario(ROOT / "launch" / "c1a.yaml")
     copy = private_copy(original, tmp_path)

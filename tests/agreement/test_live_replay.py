@@ -18,8 +18,8 @@ from pathlib import Path
 
 import pytest
 
-from agreement import validate as v
-from agreement.live_replay import (
+from twinfleet.agreement import validate as v
+from twinfleet.agreement.live_replay import (
     Coordinator,
     LiveReplayResult,
     Plan,
@@ -27,10 +27,10 @@ from agreement.live_replay import (
     plan,
     replay_live,
 )
-from checker.check import CheckOptions, check
-from runtime.host import NodeHost
-from runtime.replay_gate import EventLog, LogicalClock
-from runtime.transport import LoopbackBus, LoopbackTransport
+from twinfleet.checker.check import CheckOptions, check
+from twinfleet.runtime.host import NodeHost
+from twinfleet.runtime.replay_gate import EventLog, LogicalClock
+from twinfleet.runtime.transport import LoopbackBus, LoopbackTransport
 
 ROOT = Path(__file__).resolve().parents[2]
 HEADON = ROOT / "launch" / "headon.yaml"
@@ -143,7 +143,7 @@ def _my_node_processes() -> list[int]:
             continue
         with contextlib.suppress(OSError, IndexError, ValueError):
             ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            if ppid == os.getpid() and b"runtime.node_main" in (entry / "cmdline").read_bytes():
+            if ppid == os.getpid() and b"twinfleet.runtime.node_main" in (entry / "cmdline").read_bytes():
                 found.append(int(entry.name))
     return found
 
@@ -187,7 +187,7 @@ def test_c2a_counterexample_replayed_live_collides_the_same_way(tmp_path, reap_n
 @pytest.mark.slow
 @pytest.mark.timeout(120)
 def test_replay_live_command(tmp_path, capsys, reap_nodes):
-    from runtime.cli import main
+    from twinfleet.cli import main
 
     trace = trace_of(C2A, tmp_path / "c2a.trace.json")
     assert main(["replay", str(trace), "--live", "--quiet"]) == 1
@@ -225,7 +225,7 @@ def test_a_lasso_goes_round_its_cycle_again_on_gated_hosts(tmp_path):
 @pytest.mark.slow
 @pytest.mark.timeout(120)
 def test_replay_live_command_runs_a_lasso_cycle_on_real_processes(tmp_path, capsys, reap_nodes):
-    from runtime.cli import main
+    from twinfleet.cli import main
 
     trace = lasso_trace(tmp_path)
     assert main(["replay", str(trace), "--live", "--cycles", "5"]) == 1
@@ -286,7 +286,7 @@ def test_duplicates_are_refused_and_start_message_branches_are_granted(tmp_path)
 @pytest.mark.slow
 @pytest.mark.timeout(120)
 def test_replay_live_command_runs_a_latency_trace_on_real_processes(tmp_path, capsys, reap_nodes):
-    from runtime.cli import main
+    from twinfleet.cli import main
 
     trace = fault_trace(tmp_path, "late", LATE, latency={"/pong": [0, 3]})
     assert main(["replay", str(trace), "--live"]) == 1

@@ -22,18 +22,18 @@ from typing import Any
 import pytest
 import yaml
 
-from agreement import validate as v
-from agreement.events import EventLogFile, LiveEvent, load_events
-from agreement.live_replay import plan
-from checker.check import CheckOptions, check, load
-from checker.choices import PrefixChooser
-from checker.system import System
-from runtime import Context, Node, String, handler, on_start, subscribe
-from runtime.clock import ManualClock
-from runtime.host import NodeHost
-from runtime.replay_gate import EVENTS_FORMAT, EventLog, payload_digest, state_digest
-from runtime.snapshot import snapshot
-from runtime.transport import LoopbackBus, LoopbackTransport
+from twinfleet import Context, Node, String, handler, on_start, subscribe
+from twinfleet.agreement import validate as v
+from twinfleet.agreement.events import EventLogFile, LiveEvent, load_events
+from twinfleet.agreement.live_replay import plan
+from twinfleet.checker.check import CheckOptions, check, load
+from twinfleet.checker.choices import PrefixChooser
+from twinfleet.checker.system import System
+from twinfleet.runtime.clock import ManualClock
+from twinfleet.runtime.host import NodeHost
+from twinfleet.runtime.replay_gate import EVENTS_FORMAT, EventLog, payload_digest, state_digest
+from twinfleet.runtime.snapshot import snapshot
+from twinfleet.runtime.transport import LoopbackBus, LoopbackTransport
 
 ROOT = Path(__file__).resolve().parents[2]
 HEADON = ROOT / "launch" / "headon.yaml"
@@ -281,7 +281,7 @@ def test_equal_time_events_of_different_nodes_within_the_window_interleave(tmp_p
 
 
 def test_cli_exit_codes_and_json(headon_trace, tmp_path):
-    from runtime.cli import main
+    from twinfleet.cli import main
 
     records, nodes = trace_records(headon_trace)
     good = write_log(tmp_path / "good.jsonl", records, nodes)
@@ -397,7 +397,7 @@ def c1a_events(tmp_path_factory: pytest.TempPathFactory) -> EventLogFile:
     """A live C1a run (six processes over Zenoh, time scale 10) with its event log."""
     path = tmp_path_factory.mktemp("c1a") / "c1a.events.jsonl"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
-    proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", "launch", str(C1A),
+    proc = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", str(C1A),
                              "--time-scale", "10", "--timeout", "60", "--record-events",
                              str(path)], cwd=ROOT, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, start_new_session=True)

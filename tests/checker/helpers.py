@@ -7,8 +7,8 @@ from typing import Any
 
 import yaml
 
-from checker import CheckOptions, CheckResult, PropertySet, System, check, replay
-from checker.check import load
+from twinfleet.checker import CheckOptions, CheckResult, PropertySet, System, check, replay
+from twinfleet.checker.check import load
 
 M = "tests.checker.models:"
 

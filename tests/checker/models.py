@@ -8,7 +8,17 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from runtime import CallError, Context, Node, every, handler, message, on_start, service, subscribe
+from twinfleet import (
+    CallError,
+    Context,
+    Node,
+    every,
+    handler,
+    message,
+    on_start,
+    service,
+    subscribe,
+)
 
 
 @message("twinfleet_test/Num")

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from checker.cache import GenerationCache
+from twinfleet.checker.cache import GenerationCache
 
 
 def test_keeps_at_most_two_generations():

@@ -8,10 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from checker import checkpoint, commands
-from checker.check import CheckOptions, check
-from checker.checkpoint import CheckpointError
 from tests.checker.helpers import node, replay_confirms, scenario
+from twinfleet.checker import checkpoint, commands
+from twinfleet.checker.check import CheckOptions, check
+from twinfleet.checker.checkpoint import CheckpointError
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -94,8 +94,8 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
             raise KeyboardInterrupt
 
     ckpt = str(tmp_path / "int.ckpt")
-    from checker import PropertySet, Search, System
-    from checker.check import load
+    from twinfleet.checker import PropertySet, Search, System
+    from twinfleet.checker.check import load
 
     scen = load(path)
     props = PropertySet.from_scenario(scen)
@@ -106,7 +106,7 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
     assert outcome.checkpoint == ckpt
     assert outcome.statistics.states < whole.statistics.states
     # The meta-less checkpoint was written by the API; resume it through the API too.
-    from checker.checkpoint import load as load_checkpoint
+    from twinfleet.checker.checkpoint import load as load_checkpoint
 
     again = Search(System(scen, monitors=props), props)
     again.restore(load_checkpoint(ckpt))

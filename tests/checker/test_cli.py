@@ -10,8 +10,9 @@ from pathlib import Path
 
 import pytest
 
-from checker import commands
 from tests.checker.helpers import node, scenario
+from twinfleet.checker import commands
+from twinfleet.cli import build_parser
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -61,19 +62,31 @@ def test_bad_scenario_exit_2_without_traceback(tmp_path, capsys):
     assert commands.main(["replay", str(not_trace)]) == 2
 
 
-def test_every_flag_has_help():
-    parser = argparse.ArgumentParser()
-    commands.register(parser.add_subparsers())
-    subs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
-    for name in ("check", "replay"):
-        for action in subs.choices[name]._actions:
-            assert action.help, f"{name} {action.option_strings or action.dest} has no help"
+def _commands(parser: argparse.ArgumentParser, words: tuple[str, ...] = ()):
+    """Every (sub)command parser of the `twinfleet` command line, with its words."""
+    yield words, parser
+    for action in parser._actions:
+        if isinstance(action, argparse._SubParsersAction):
+            for name, sub in action.choices.items():
+                yield from _commands(sub, (*words, name))
+
+
+def test_every_flag_of_every_command_has_help():
+    commands_seen = set()
+    for words, parser in _commands(build_parser()):
+        commands_seen.add(" ".join(words))
+        for action in parser._actions:
+            if isinstance(action, argparse._SubParsersAction):
+                continue
+            assert action.help, f"twinfleet {' '.join(words)} " \
+                f"{action.option_strings or action.dest} has no help"
+    assert {"check", "replay", "launch", "validate", "render", "topic echo"} <= commands_seen
 
 
 def test_python_m_checker_subprocess_and_cross_process_replay(tmp_path):
     env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "PYTHONHASHSEED": "12345"}
     path = scenario(tmp_path, [node("ping", "Ping"), node("pong", "Pong")], name="pp")
-    proc = subprocess.run([sys.executable, "-m", "checker", str(path), "--json"],
+    proc = subprocess.run([sys.executable, "-m", "twinfleet.checker", str(path), "--json"],
                           capture_output=True, text=True, cwd=ROOT, timeout=60, env=env)
     assert proc.returncode == 0, proc.stderr
     assert json.loads(proc.stdout)["states"] == 7
@@ -81,7 +94,7 @@ def test_python_m_checker_subprocess_and_cross_process_replay(tmp_path):
     race = scenario(tmp_path, DOOR, name="race")
     trace = tmp_path / "race.trace.json"
     assert commands.main([str(race), "--quiet", "--trace-out", str(trace)]) == 1
-    proc = subprocess.run([sys.executable, "-m", "checker", "replay", str(trace)],
+    proc = subprocess.run([sys.executable, "-m", "twinfleet.checker", "replay", str(trace)],
                           capture_output=True, text=True, cwd=ROOT, timeout=60, env=env)
     assert proc.returncode == 1, proc.stderr
     assert proc.stdout.startswith("replay confirmed: no_failure violated after 3 steps")

@@ -9,10 +9,10 @@ from __future__ import annotations
 
 import pytest
 
-from checker import PropertySet, System
-from checker.check import load
-from checker.world import World
 from tests.checker.helpers import counts, node, run, scenario
+from twinfleet.checker import PropertySet, System
+from twinfleet.checker.check import load
+from twinfleet.checker.world import World
 
 pytestmark = pytest.mark.timeout(30)
 

@@ -12,10 +12,10 @@ from __future__ import annotations
 
 import pytest
 
-from checker import PropertySet, System, replay
-from checker.check import load
-from runtime.scenario import ScenarioError
 from tests.checker.helpers import counts, node, replay_confirms, run, scenario, steps
+from twinfleet.checker import PropertySet, System, replay
+from twinfleet.checker.check import load
+from twinfleet.runtime.scenario import ScenarioError
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -4,12 +4,12 @@ from __future__ import annotations
 
 import pytest
 
-from checker import Limits, PropertySet, Search, System, bfs, dfs
-from checker.check import load
-from checker.semantics import Semantics
-from checker.world import DELIVERY, TIMER, Event
-from runtime.scenario import ScenarioError
 from tests.checker.helpers import node, scenario
+from twinfleet.checker import Limits, PropertySet, Search, System, bfs, dfs
+from twinfleet.checker.check import load
+from twinfleet.checker.semantics import Semantics
+from twinfleet.checker.world import DELIVERY, TIMER, Event
+from twinfleet.runtime.scenario import ScenarioError
 
 pytestmark = pytest.mark.timeout(30)
 

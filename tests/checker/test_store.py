@@ -17,12 +17,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from checker import PropertySet, Search, System
-from checker.check import load
-from checker.graph import find_lasso
-from checker.store import DigestTable, EdgeStore, StateStore
-from checker.world import World
 from tests.checker.helpers import node, run, scenario
+from twinfleet.checker import PropertySet, Search, System
+from twinfleet.checker.check import load
+from twinfleet.checker.graph import find_lasso
+from twinfleet.checker.store import DigestTable, EdgeStore, StateStore
+from twinfleet.checker.world import World
 
 pytestmark = pytest.mark.timeout(120)
 

@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from checker import NondeterminismError, PropertySet, System, replay
-from checker.check import load
 from tests.checker.helpers import counts, node, replay_confirms, run, scenario, steps
+from twinfleet.checker import NondeterminismError, PropertySet, System, replay
+from twinfleet.checker.check import load
 
 pytestmark = pytest.mark.timeout(30)
 

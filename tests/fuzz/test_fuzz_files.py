@@ -17,9 +17,9 @@ import yaml
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from nodes.mapfile import MapError, load_map
-from runtime.cli import main
-from runtime.scenario import ScenarioError, load_scenario
+from twinfleet.cli import main
+from twinfleet.nodes.mapfile import MapError, load_map
+from twinfleet.runtime.scenario import ScenarioError, load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -108,7 +108,7 @@ def test_garbage_scenario_bytes_fail_with_a_scenario_error(tmp_path, raw):
 
 @pytest.fixture(scope="module")
 def headon_trace(tmp_path_factory):
-    from checker.check import CheckOptions, check
+    from twinfleet.checker.check import CheckOptions, check
 
     out = tmp_path_factory.mktemp("trace") / "headon.json"
     check(ROOT / "launch" / "headon.yaml", CheckOptions(trace_out=str(out)))
@@ -140,10 +140,10 @@ def test_fuzzed_traces_make_replay_and_render_exit_2_with_a_message(tmp_path, ca
     ["render", "{dir}/bad.json", "-o", "{dir}/x.png"], ["replay", "{dir}/missing.json"],
 ])
 def test_the_user_sees_one_message_and_no_traceback(tmp_path, argv):
-    (tmp_path / "bad.yaml").write_text("nodes: [{name: r1, class: 'nodes.robot:Robot', params: {speed: fast}}]\n")
+    (tmp_path / "bad.yaml").write_text("nodes: [{name: r1, class: 'twinfleet.nodes.robot:Robot', params: {speed: fast}}]\n")
     (tmp_path / "bad.json").write_text('{"format": "twinfleet-trace/1", "steps": 3}')
     args = [a.format(dir=tmp_path) for a in argv]
-    proc = subprocess.run([sys.executable, "-m", "runtime.cli", *args], capture_output=True, text=True,
+    proc = subprocess.run([sys.executable, "-m", "twinfleet", *args], capture_output=True, text=True,
                           timeout=60, cwd=ROOT, check=False)
     assert proc.returncode == 2, proc.stdout + proc.stderr
     assert "Traceback" not in proc.stderr

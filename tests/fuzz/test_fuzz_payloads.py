@@ -32,12 +32,12 @@ from hypothesis import strategies as st
 
 zenoh = pytest.importorskip("zenoh")
 
-from runtime.launcher import free_port  # noqa: E402
-from runtime.messages import decode, encode  # noqa: E402
-from runtime.names import key_expr  # noqa: E402
-from runtime.node_main import stats_key  # noqa: E402
-from runtime.zenoh_transport import zenoh_config  # noqa: E402
 from tests.integration.reliability_nodes import AddReply, AddRequest, Tick  # noqa: E402
+from twinfleet.runtime.launcher import free_port  # noqa: E402
+from twinfleet.runtime.messages import decode, encode  # noqa: E402
+from twinfleet.runtime.names import key_expr  # noqa: E402
+from twinfleet.runtime.node_main import stats_key  # noqa: E402
+from twinfleet.runtime.zenoh_transport import zenoh_config  # noqa: E402
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(150)]
 
@@ -148,7 +148,7 @@ def target(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Target]:
     session = zenoh.open(zenoh_config(connect=[endpoint]))
     log = tmp / "target.log"
     with log.open("w") as sink:
-        proc = subprocess.Popen([sys.executable, "-m", "runtime.node_main", "--scenario",
+        proc = subprocess.Popen([sys.executable, "-m", "twinfleet.runtime.node_main", "--scenario",
                                  str(scenario), "--node", "target", "--connect", endpoint],
                                 stdout=sink, stderr=subprocess.STDOUT, cwd=ROOT)
     publisher = session.declare_publisher(TICKS, congestion_control=zenoh.CongestionControl.BLOCK)

@@ -51,8 +51,8 @@ def kill_all(pids: list[int]) -> None:
 
 
 def run_cli(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess[str]:
-    """Run `python -m runtime.cli ARGS` and capture its output."""
-    return subprocess.run([sys.executable, "-m", "runtime.cli", *args], capture_output=True,
+    """Run `python -m twinfleet ARGS` and capture its output."""
+    return subprocess.run([sys.executable, "-m", "twinfleet", *args], capture_output=True,
                           text=True, timeout=timeout, env=child_env(), cwd=ROOT, check=False)
 
 
@@ -63,6 +63,6 @@ def node_pid(scenario: Path | str, node: str) -> int | None:
             argv = (Path("/proc") / str(pid) / "cmdline").read_bytes().split(b"\0")
         except OSError:
             continue
-        if b"runtime.node_main" in argv and argv[argv.index(b"--node") + 1] == node.encode():
+        if b"twinfleet.runtime.node_main" in argv and argv[argv.index(b"--node") + 1] == node.encode():
             return pid
     return None

@@ -8,9 +8,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from runtime import Context, Node, String, every, message, service, subscribe
-from runtime.messages import NodeAlive
-from runtime.node import QOS_SENSOR_DATA, QoS
+from twinfleet import Context, Node, String, every, message, service, subscribe
+from twinfleet.runtime.messages import NodeAlive
+from twinfleet.runtime.node import QOS_SENSOR_DATA, QoS
 
 
 @message("twinfleet_test/FleetStatus")

@@ -34,10 +34,10 @@ DEMO = """\
 name: itest
 seed: 3
 nodes:
-  - {name: talker, class: "nodes.demo:Talker", params: {period_ms: 100}}
-  - {name: listener, class: "nodes.demo:Listener"}
-  - {name: adder, class: "nodes.demo:Adder"}
-  - {name: caller, class: "nodes.demo:Caller", params: {period_ms: 200}}
+  - {name: talker, class: "twinfleet.nodes.demo:Talker", params: {period_ms: 100}}
+  - {name: listener, class: "twinfleet.nodes.demo:Listener"}
+  - {name: adder, class: "twinfleet.nodes.demo:Adder"}
+  - {name: caller, class: "twinfleet.nodes.demo:Caller", params: {period_ms: 200}}
 live: {timeout_s: 90}
 """
 
@@ -66,7 +66,7 @@ def start_fleet(tmp: Path, text: str, name: str = "itest", *extra: str) -> Runni
     endpoint = f"tcp/127.0.0.1:{pick_free_port()}"
     log = tmp / f"{name}.log"
     with log.open("w") as sink:
-        proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", "launch", str(scenario),
+        proc = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", str(scenario),
                                  "--listen", endpoint, *extra], stdout=sink,
                                 stderr=subprocess.STDOUT, env=child_env(), cwd=ROOT)
     return RunningFleet(proc, log, scenario, endpoint, name)
@@ -143,7 +143,7 @@ def test_topic_hz_measures_the_talker_rate(demo: RunningFleet) -> None:
 
 def test_service_call_and_topic_pub_from_the_cli(demo: RunningFleet) -> None:
     call = cli(demo, "service", "call", "/add_two_ints", "example_interfaces/AddTwoInts_Request",
-               "{a: 2, b: 40}", "--module", "nodes.demo")
+               "{a: 2, b: 40}", "--module", "twinfleet.nodes.demo")
     assert call.returncode == 0, call.stdout + call.stderr
     assert "data: {sum: 42}" in call.stdout
     missing = cli(demo, "service", "call", "/nothing_here", "std_msgs/Empty")
@@ -208,8 +208,8 @@ def test_shutdown_topic_ends_the_run_cleanly(demo: RunningFleet) -> None:
 CRASH = """\
 name: crash
 nodes:
-  - {name: crasher, class: "nodes.demo:Crasher", params: {crash_after_ms: 200}}
-  - {name: listener, class: "nodes.demo:Listener"}
+  - {name: crasher, class: "twinfleet.nodes.demo:Crasher", params: {crash_after_ms: 200}}
+  - {name: listener, class: "twinfleet.nodes.demo:Listener"}
 live: {timeout_s: 30, stop_on_error: true}
 """
 
@@ -233,8 +233,8 @@ def test_node_crash_is_reported_and_launch_fails(tmp_path: Path) -> None:
 SMALL = """\
 name: small
 nodes:
-  - {name: talker, class: "nodes.demo:Talker", params: {period_ms: 50}}
-  - {name: listener, class: "nodes.demo:Listener"}
+  - {name: talker, class: "twinfleet.nodes.demo:Talker", params: {period_ms: 50}}
+  - {name: listener, class: "twinfleet.nodes.demo:Listener"}
 """
 
 
@@ -258,10 +258,10 @@ def test_signals_to_the_launcher_leave_no_process(tmp_path: Path, sig: signal.Si
 
 def test_bad_scenario_fails_before_anything_starts(tmp_path: Path) -> None:
     bad = tmp_path / "bad.yaml"
-    bad.write_text("name: bad\nnodes:\n  - {name: r1, class: 'nodes.demo:Nope'}\n")
+    bad.write_text("name: bad\nnodes:\n  - {name: r1, class: 'twinfleet.nodes.demo:Nope'}\n")
     result = run_cli("launch", str(bad))
     assert result.returncode == 2
-    assert f"{bad}: nodes[0].class: unknown node class 'nodes.demo:Nope'" in result.stderr
+    assert f"{bad}: nodes[0].class: unknown node class 'twinfleet.nodes.demo:Nope'" in result.stderr
     assert "Traceback" not in result.stderr
     assert not processes_mentioning(str(bad))
 
@@ -269,8 +269,8 @@ def test_bad_scenario_fails_before_anything_starts(tmp_path: Path) -> None:
 RESPAWN = """\
 name: respawn
 nodes:
-  - {name: crasher, class: "nodes.demo:Crasher", respawn: true, params: {crash_after_ms: 100}}
-  - {name: talker, class: "nodes.demo:Talker", params: {period_ms: 50}}
+  - {name: crasher, class: "twinfleet.nodes.demo:Crasher", respawn: true, params: {crash_after_ms: 100}}
+  - {name: talker, class: "twinfleet.nodes.demo:Talker", params: {period_ms: 50}}
 live: {stop_on_error: true}
 """
 
@@ -280,9 +280,9 @@ def test_run_fleet_as_a_library_with_respawn_and_summary(tmp_path: Path) -> None
     import dataclasses
     import io
 
-    from runtime.launcher import run_fleet
-    from runtime.messages import String
-    from runtime.scenario import load_scenario
+    from twinfleet.runtime.launcher import run_fleet
+    from twinfleet.runtime.messages import String
+    from twinfleet.runtime.scenario import load_scenario
 
     path = tmp_path / "respawn.yaml"
     path.write_text(RESPAWN)

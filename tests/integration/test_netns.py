@@ -111,7 +111,7 @@ class Launch:
                                                   "transport/link/tx/keep_alive=4")
         with self.log.open("w") as sink:
             self.proc = subprocess.Popen(
-                ["ip", "netns", "exec", ns, sys.executable, "-m", "runtime.cli", "launch",
+                ["ip", "netns", "exec", ns, sys.executable, "-m", "twinfleet", "launch",
                  str(self.scenario), *args], stdout=sink, stderr=subprocess.STDOUT, env=env,
                 cwd=ROOT)
 

@@ -32,12 +32,12 @@ from itest_support import (
     processes_mentioning,
 )
 
-from runtime.launcher import SHUTDOWN_TOPIC, format_result, run_fleet
-from runtime.messages import String, encode
-from runtime.names import key_expr
-from runtime.run_record import read_run_record
-from runtime.scenario import load_scenario
-from runtime.zenoh_transport import zenoh_config
+from twinfleet.runtime.launcher import SHUTDOWN_TOPIC, format_result, run_fleet
+from twinfleet.runtime.messages import String, encode
+from twinfleet.runtime.names import key_expr
+from twinfleet.runtime.run_record import read_run_record
+from twinfleet.runtime.scenario import load_scenario
+from twinfleet.runtime.zenoh_transport import zenoh_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
@@ -168,8 +168,8 @@ def test_killed_node_is_detected_within_a_second_respawned_and_reported(tmp_path
 
 LAUNCH_SCRIPT = """
 import asyncio, sys
-from runtime.launcher import run_fleet
-from runtime.scenario import load_scenario
+from twinfleet.runtime.launcher import run_fleet
+from twinfleet.runtime.scenario import load_scenario
 asyncio.run(run_fleet(load_scenario(sys.argv[1]), run_record=sys.argv[2], listen=sys.argv[3]))
 """
 

@@ -17,7 +17,7 @@ def test_c1a_live_all_robots_arrive_without_collision(tmp_path):
     copy = tmp_path / "c1a.yaml"
     copy.write_text(text.replace("../maps/map50.yaml", str(ROOT / "maps" / "map50.yaml")))
     scenario = str(copy)
-    cmd = [sys.executable, "-m", "runtime.cli", "launch", scenario, "--time-scale", "10",
+    cmd = [sys.executable, "-m", "twinfleet", "launch", scenario, "--time-scale", "10",
            "--timeout", "60"]
     try:
         result = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=child_env(),

@@ -20,9 +20,9 @@ from pathlib import Path
 import pytest
 from itest_support import kill_all, node_pid, pick_free_port, processes_mentioning
 
-from runtime.launcher import run_fleet
-from runtime.run_record import read_run_record
-from runtime.scenario import load_scenario
+from twinfleet.runtime.launcher import run_fleet
+from twinfleet.runtime.run_record import read_run_record
+from twinfleet.runtime.scenario import load_scenario
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 

@@ -6,9 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from nodes.grid import inflate
-from nodes.mapfile import OccupancyMap, load_map
-from nodes.profile import REBECA
+from twinfleet.nodes.grid import inflate
+from twinfleet.nodes.mapfile import OccupancyMap, load_map
+from twinfleet.nodes.profile import REBECA
 
 MAPS = Path(__file__).resolve().parents[2] / "maps"
 

@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from nodes.congestion import (
+from twinfleet.nodes.congestion import (
     BACKOFF_STEPS,
     BackoffOption,
     backoff_candidates,
@@ -13,9 +13,9 @@ from nodes.congestion import (
     target_margin,
     target_valid,
 )
-from nodes.grid import Dims, inflate
-from nodes.profile import FIXED, REBECA
-from nodes.scan import stepwise_free
+from twinfleet.nodes.grid import Dims, inflate
+from twinfleet.nodes.profile import FIXED, REBECA
+from twinfleet.nodes.scan import stepwise_free
 
 
 def test_steps_constant():

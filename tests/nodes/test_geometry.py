@@ -5,9 +5,9 @@ import math
 import numpy as np
 import pytest
 
-from nodes.geometry import rects_overlap, shadow_box, shadows_intersect
-from nodes.grid import Dims
-from nodes.profile import FIXED, REBECA
+from twinfleet.nodes.geometry import rects_overlap, shadow_box, shadows_intersect
+from twinfleet.nodes.grid import Dims
+from twinfleet.nodes.profile import FIXED, REBECA
 
 CARD = (0, 2, 4, 6)
 NE_SW = (1, 5)

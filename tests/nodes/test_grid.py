@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nodes.grid import (
+from twinfleet.nodes.grid import (
     NB,
     Dims,
     cell_centre,

@@ -6,8 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nodes.mapfile import MapError, load_map, pgm_bytes, read_pgm, save_map
-from nodes.profile import FIXED, REBECA
+from twinfleet.nodes.mapfile import MapError, load_map, pgm_bytes, read_pgm, save_map
+from twinfleet.nodes.profile import FIXED, REBECA
 
 MAPS = Path(__file__).resolve().parents[2] / "maps"
 

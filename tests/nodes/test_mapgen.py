@@ -5,11 +5,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from nodes.grid import inflate
-from nodes.mapfile import load_map
-from nodes.mapgen import corridor_map, random_map, write_builtin_maps
-from nodes.planning import generate_path
-from nodes.profile import FIXED, REBECA
+from twinfleet.nodes.grid import inflate
+from twinfleet.nodes.mapfile import load_map
+from twinfleet.nodes.mapgen import corridor_map, random_map, write_builtin_maps
+from twinfleet.nodes.planning import generate_path
+from twinfleet.nodes.profile import FIXED, REBECA
 
 MAPS = Path(__file__).resolve().parents[2] / "maps"
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from nodes.memo import CellsMemo
+from twinfleet.nodes.memo import CellsMemo
 
 pytestmark = pytest.mark.timeout(10)
 

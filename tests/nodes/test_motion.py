@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import pytest
 
-from nodes.motion import (
+from twinfleet.nodes.motion import (
     cells_per_second,
     check_cell_size_rule,
     check_scan_rate_rule,
@@ -12,7 +12,7 @@ from nodes.motion import (
     rotation_time_ms,
     within_tolerance,
 )
-from nodes.profile import FIXED, REBECA
+from twinfleet.nodes.profile import FIXED, REBECA
 
 SPEEDS = (0.3, 0.4, 0.5, 0.6, 0.7, 0.8, 0.9, 1.0)
 

@@ -6,12 +6,12 @@ from pathlib import Path as FsPath
 
 import pytest
 
-from nodes.map_server import MapServer, MapServerParams
-from nodes.msgs import Collision, ObstacleScan, Path, PathRequest, RobotPose
-from nodes.robot import Robot, RobotParams
-from runtime.context import After, Call, Context, Publish
-from runtime.dispatch import run_handler
-from runtime.messages import CallError
+from twinfleet.nodes.map_server import MapServer, MapServerParams
+from twinfleet.nodes.msgs import Collision, ObstacleScan, Path, PathRequest, RobotPose
+from twinfleet.nodes.robot import Robot, RobotParams
+from twinfleet.runtime.context import After, Call, Context, Publish
+from twinfleet.runtime.dispatch import run_handler
+from twinfleet.runtime.messages import CallError
 
 MAP50 = str(FsPath(__file__).resolve().parents[2] / "maps" / "map50.yaml")
 ROBOTS = ("r1", "r2", "r3", "r4", "r5")
@@ -176,8 +176,8 @@ def test_start_outside_the_map_or_in_an_obstacle_is_refused(cell):
 
 
 def test_report_counts_hops_waits_and_collisions_from_messages():
-    from nodes.msgs import RobotStatus
-    from nodes.report import FleetReport
+    from twinfleet.nodes.msgs import RobotStatus
+    from twinfleet.nodes.report import FleetReport
 
     rep = FleetReport(("r1", "r2"))
     assert "/r2/status" in rep.topics()

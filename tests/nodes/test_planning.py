@@ -7,8 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from nodes.grid import NB, SQRT2, Dims, direction_between, inflate
-from nodes.planning import (
+from twinfleet.nodes.grid import NB, SQRT2, Dims, direction_between, inflate
+from twinfleet.nodes.planning import (
     OtherRobot,
     astar,
     consolidate_waypoints,
@@ -17,7 +17,7 @@ from nodes.planning import (
     planning_grid,
     remove_zigzags,
 )
-from nodes.profile import FIXED, REBECA
+from twinfleet.nodes.profile import FIXED, REBECA
 
 R1 = (
     "6,6 7,7 8,8 9,9 10,10 11,11 12,12 13,13 14,14 15,15 16,16 18,16 20,16 22,16 24,16 26,16 "

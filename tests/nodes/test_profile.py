@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import pytest
 
-from nodes.profile import FIXED, REBECA, profile_named, round_half_away, round_m
+from twinfleet.nodes.profile import FIXED, REBECA, profile_named, round_half_away, round_m
 
 
 @pytest.mark.parametrize(

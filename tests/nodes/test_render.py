@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from nodes.render import draw_world, robot_colour, scenario_view, states_view
-from runtime.scenario import load_scenario
+from twinfleet.nodes.render import draw_world, robot_colour, scenario_view, states_view
+from twinfleet.runtime.scenario import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 PX = 12

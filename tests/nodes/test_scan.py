@@ -6,9 +6,9 @@ import time
 import numpy as np
 import pytest
 
-from nodes.grid import NB, Dims
-from nodes.profile import FIXED, REBECA
-from nodes.scan import (
+from twinfleet.nodes.grid import NB, Dims
+from twinfleet.nodes.profile import FIXED, REBECA
+from twinfleet.nodes.scan import (
     EXACT_STEP,
     Scanner,
     build_tables,

@@ -9,7 +9,7 @@ from collections.abc import Coroutine
 from dataclasses import dataclass, field
 from typing import Any
 
-from runtime import (
+from twinfleet import (
     CallError,
     Context,
     Node,
@@ -21,12 +21,12 @@ from runtime import (
     service,
     subscribe,
 )
-from runtime.clock import ManualClock
-from runtime.host import MAX_GAP, NodeHost, derive_seed
-from runtime.messages import NodeAlive, Violation, decode, encode
-from runtime.names import key_expr
-from runtime.node import QOS_DEFAULT, QOS_LATCHED, QoS, Reliability
-from runtime.transport import LoopbackBus, LoopbackTransport
+from twinfleet.runtime.clock import ManualClock
+from twinfleet.runtime.host import MAX_GAP, NodeHost, derive_seed
+from twinfleet.runtime.messages import NodeAlive, Violation, decode, encode
+from twinfleet.runtime.names import key_expr
+from twinfleet.runtime.node import QOS_DEFAULT, QOS_LATCHED, QoS, Reliability
+from twinfleet.runtime.transport import LoopbackBus, LoopbackTransport
 
 FLEET = "t"
 

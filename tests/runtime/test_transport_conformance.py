@@ -10,13 +10,19 @@ from typing import Any
 
 import pytest
 
-from runtime.node import QOS_DEFAULT, QOS_LATCHED
-from runtime.transport import LoopbackBus, LoopbackTransport, Transport, graph_key, key_matches
+from twinfleet.runtime.node import QOS_DEFAULT, QOS_LATCHED
+from twinfleet.runtime.transport import (
+    LoopbackBus,
+    LoopbackTransport,
+    Transport,
+    graph_key,
+    key_matches,
+)
 
 zenoh = pytest.importorskip("zenoh")
 
-from runtime.launcher import free_port  # noqa: E402
-from runtime.zenoh_transport import ZenohTransport, zenoh_config  # noqa: E402
+from twinfleet.runtime.launcher import free_port  # noqa: E402
+from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config  # noqa: E402
 
 KEY = "twinfleet/conf/topic"
 

@@ -13,14 +13,14 @@ from viewer_support import ROOT, child_env, stop_process
 
 @pytest.fixture
 def cli(tmp_path: Path) -> Iterator[Callable[..., subprocess.Popen]]:
-    """Start `python -m runtime.cli ARGS` in its own process group, output to tmp_path/LOG;
+    """Start `python -m twinfleet ARGS` in its own process group, output to tmp_path/LOG;
     every one is stopped (SIGINT, then SIGKILL of its group) at teardown, whatever happened."""
     started: list[subprocess.Popen] = []
 
     def start(*args: str, log: str) -> subprocess.Popen:
         path = tmp_path / log
         with path.open("w") as sink:
-            proc = subprocess.Popen([sys.executable, "-m", "runtime.cli", *args], stdout=sink,
+            proc = subprocess.Popen([sys.executable, "-m", "twinfleet", *args], stdout=sink,
                                     stderr=subprocess.STDOUT, env=child_env(), cwd=ROOT,
                                     start_new_session=True)
         proc.log = path  # type: ignore[attr-defined]

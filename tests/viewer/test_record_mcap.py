@@ -25,9 +25,9 @@ import zenoh
 from mcap.reader import make_reader
 from viewer_support import ROOT, child_env, free_port, poll
 
-import nodes.msgs  # noqa: F401 - registers the fleet's message classes
-from runtime.messages import registered_types
-from runtime.zenoh_transport import zenoh_config
+import twinfleet.nodes.msgs  # noqa: F401 - registers the fleet's message classes
+from twinfleet.runtime.messages import registered_types
+from twinfleet.runtime.zenoh_transport import zenoh_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
@@ -40,7 +40,7 @@ TOPICS = {"/map", "/poses", "/fleet_status", "/twinfleet/shutdown",
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("mcap") / "c1a.mcap"
-    proc = subprocess.run([sys.executable, "-m", "runtime.cli", "record",
+    proc = subprocess.run([sys.executable, "-m", "twinfleet", "record",
                            str(ROOT / "launch" / "c1a.yaml"), "--time-scale", "10", "-o", str(out)],
                           capture_output=True, text=True, timeout=70, env=child_env(), cwd=ROOT,
                           check=False)
@@ -104,7 +104,7 @@ def test_play_republishes_what_topic_echo_and_a_subscriber_saw(recording, cli):
         sub = router.declare_subscriber(
             "twinfleet/c1a/**", lambda s: seen.append((str(s.key_expr), s.payload.to_bytes())))
         try:
-            played = subprocess.run([sys.executable, "-m", "runtime.cli", "play", str(recording),
+            played = subprocess.run([sys.executable, "-m", "twinfleet", "play", str(recording),
                                      "--connect", endpoint, "--rate", "10"],
                                     capture_output=True, text=True, timeout=40, env=child_env(),
                                     cwd=ROOT, check=False)
@@ -123,7 +123,7 @@ def test_play_republishes_what_topic_echo_and_a_subscriber_saw(recording, cli):
 
 def test_export_writes_json_that_foxglove_can_decode(recording, tmp_path):
     out = tmp_path / "c1a.json.mcap"
-    done = subprocess.run([sys.executable, "-m", "runtime.cli", "export", str(recording), "-o",
+    done = subprocess.run([sys.executable, "-m", "twinfleet", "export", str(recording), "-o",
                            str(out)], capture_output=True, text=True, timeout=60, env=child_env(),
                           cwd=ROOT, check=False)
     assert done.returncode == 0, done.stdout + done.stderr
@@ -142,11 +142,11 @@ def test_export_writes_json_that_foxglove_can_decode(recording, tmp_path):
             assert base64.b64decode(doc["data"]["data"]) == env["data"]["data"]
         else:
             assert doc == json.loads(json.dumps(env))
-    played = subprocess.run([sys.executable, "-m", "runtime.cli", "play", str(out), "--listen",
+    played = subprocess.run([sys.executable, "-m", "twinfleet", "play", str(out), "--listen",
                              f"tcp/127.0.0.1:{free_port()}", "--wait", "0"], capture_output=True,
                             text=True, timeout=30, env=child_env(), cwd=ROOT, check=False)
     assert played.returncode == 2 and "play needs the msgpack recording" in played.stderr
-    again = subprocess.run([sys.executable, "-m", "runtime.cli", "export", str(out), "-o",
+    again = subprocess.run([sys.executable, "-m", "twinfleet", "export", str(out), "-o",
                             str(out)], capture_output=True, text=True, timeout=30, env=child_env(),
                            cwd=ROOT, check=False)
     assert again.returncode == 2 and "needs a new file" in again.stderr
@@ -165,7 +165,7 @@ def test_record_connect_gets_exact_schemas_from_the_fleets_nodes(cli, tmp_path):
                 endpoint, log="fleet.log")
     poll(lambda: "started" in fleet.log.read_text(), 30, "the fleet's nodes to start")
     out = tmp_path / "joined.mcap"
-    done = subprocess.run([sys.executable, "-m", "runtime.cli", "record", "--connect", endpoint,
+    done = subprocess.run([sys.executable, "-m", "twinfleet", "record", "--connect", endpoint,
                            "--fleet", "c1a", "--duration", "2", "-o", str(out)],
                           capture_output=True, text=True, timeout=40, env=child_env(), cwd=ROOT,
                           check=False)

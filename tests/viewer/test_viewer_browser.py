@@ -107,7 +107,7 @@ def test_viewer_shows_the_live_c1a_fleet_moving(cli, browser_page):
 
 
 def test_viewer_steps_through_a_checker_trace(cli, browser_page, tmp_path):
-    from checker.check import CheckOptions, check
+    from twinfleet.checker.check import CheckOptions, check
 
     trace = tmp_path / "headon.trace.json"
     result = check(ROOT / "launch" / "headon.yaml", CheckOptions(trace_out=str(trace)))

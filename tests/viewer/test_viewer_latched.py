@@ -18,9 +18,9 @@ import pytest
 import zenoh
 from viewer_support import ROOT, free_port, get_json, poll
 
-from runtime.scenario import load_scenario
-from runtime.viewstate import start_map
-from runtime.zenoh_transport import zenoh_config
+from twinfleet.runtime.scenario import load_scenario
+from twinfleet.runtime.viewstate import start_map
+from twinfleet.runtime.zenoh_transport import zenoh_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
 

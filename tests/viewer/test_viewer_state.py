@@ -11,12 +11,19 @@ import pytest
 from aiohttp import test_utils
 from mcap.reader import make_reader
 
-from nodes.msgs import Collision, FleetStatus, ObstacleScan, OccupancyGrid, RobotPose, RobotStatus
-from runtime.cli import main
-from runtime.messages import String, encode
-from runtime.recorder import McapRecorder, message_schema
-from runtime.viewer import make_app
-from runtime.viewstate import LiveState, trace_document
+from twinfleet.cli import main
+from twinfleet.nodes.msgs import (
+    Collision,
+    FleetStatus,
+    ObstacleScan,
+    OccupancyGrid,
+    RobotPose,
+    RobotStatus,
+)
+from twinfleet.runtime.messages import String, encode
+from twinfleet.runtime.recorder import McapRecorder, message_schema
+from twinfleet.runtime.viewer import make_app
+from twinfleet.runtime.viewstate import LiveState, trace_document
 
 ROOT = Path(__file__).resolve().parents[2]
 GRID = OccupancyGrid(3, 2, 0.25, (0.0, 0.0, 0.0), bytes([0, 100, 0, 0, 0, 100]))
@@ -105,7 +112,7 @@ def test_web_app_serves_page_state_and_websocket_updates():
 
 
 def test_trace_document_has_map_robots_and_steps(tmp_path):
-    from checker.check import CheckOptions, check
+    from twinfleet.checker.check import CheckOptions, check
 
     trace = tmp_path / "headon.trace.json"
     assert check(ROOT / "launch" / "headon.yaml", CheckOptions(trace_out=str(trace))).status == "violated"
@@ -117,7 +124,7 @@ def test_trace_document_has_map_robots_and_steps(tmp_path):
     assert len(doc["steps"]) == len(raw["steps"]) and doc["message"] == raw["message"]
     bad = tmp_path / "bad.json"
     bad.write_text('{"format": "other"}')
-    with pytest.raises(ValueError, match="not a twinfleet trace"):
+    with pytest.raises(ValueError, match="not a twinfleet-trace/1 trace"):
         trace_document(bad)
 
 

@@ -11,16 +11,16 @@ import asyncio
 import os
 import sys
 
-from runtime.cli import add_connection_arguments, import_modules
+from twinfleet.runtime.cliargs import add_connection_arguments, import_modules
 
 
 def cmd_record(args: argparse.Namespace) -> int:
     """`twinfleet record`: launch a scenario (or join a fleet) and write its topics to MCAP."""
     import zenoh
 
-    from runtime import recorder
-    from runtime.launcher import format_result
-    from runtime.scenario import ScenarioError, load_scenario
+    from twinfleet.runtime import recorder
+    from twinfleet.runtime.launcher import format_result
+    from twinfleet.runtime.scenario import ScenarioError, load_scenario
 
     import_modules(args.module)
     if args.scenario is not None and args.connect:
@@ -51,8 +51,8 @@ def cmd_record(args: argparse.Namespace) -> int:
 
 def cmd_play(args: argparse.Namespace) -> int:
     """`twinfleet play`: re-publish a recording onto Zenoh."""
-    from runtime.recorder import play
-    from runtime.zenoh_transport import zenoh_config
+    from twinfleet.runtime.recorder import play
+    from twinfleet.runtime.zenoh_transport import zenoh_config
 
     if args.listen:
         def make_config():  # noqa: ANN202 - zenoh imported lazily
@@ -74,7 +74,7 @@ def cmd_export(args: argparse.Namespace) -> int:
     """`twinfleet export`: a JSON-encoded copy of a recording."""
     from mcap.exceptions import McapError
 
-    from runtime.mcap_export import export_json
+    from twinfleet.runtime.mcap_export import export_json
 
     try:
         count = export_json(args.file, args.output)

@@ -1,0 +1,44 @@
+"""The contract's vocabulary: what kind of event a handler runs for, and what kind of failure.
+
+One `EventKind` names an event the same way in the node contract, both drivers
+(the live node core and the checker), the live event log, checker traces and
+`twinfleet.agreement`. One `FailureKind` names why a handler run failed. Both
+are `StrEnum`s, so their values are the strings written to logs and traces.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum, unique
+
+
+@unique
+class EventKind(StrEnum):
+    """The kind of an event: what made a handler run."""
+
+    START = "start"  # @on_start, once when the node starts
+    DELIVERY = "delivery"  # a published message reaching an @subscribe handler
+    REQUEST = "request"  # a service request reaching an @service handler
+    REPLY = "reply"  # a service's answer reaching the caller's reply handler
+    TIMEOUT = "timeout"  # a call that got no answer in time: the reply handler gets a CallError
+    TIMER = "timer"  # a one-shot `ctx.after` timer firing
+    PERIODIC = "periodic"  # an @every tick
+    CRASH = "crash"  # a node crashing (a checker fault; live, the process dies)
+    LIVELINESS = "liveliness"  # a node appearing or disappearing, to /_liveliness subscribers
+
+    @property
+    def is_message(self) -> bool:
+        """True for events another node sent: they keep per-sender order (DESIGN.md §4)."""
+        return self in _MESSAGES
+
+
+_MESSAGES = frozenset({EventKind.DELIVERY, EventKind.REQUEST, EventKind.REPLY})
+
+
+@unique
+class FailureKind(StrEnum):
+    """Why a handler run counts as failed."""
+
+    HANDLER = "handler failure"  # ctx.fail(...) or an exception in the handler
+    STATE_OUTSIDE = "state outside self.state"  # a handler changed another attribute
+    DEADLINE = "deadline miss"  # a message handled after its deadline
+    NONDETERMINISM = "nondeterminism"  # the same handler run twice did different things

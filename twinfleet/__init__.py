@@ -1,0 +1,49 @@
+"""twinfleet: ROS-like robot fleets over Eclipse Zenoh, verified by a checker that runs the same code.
+
+This module is the node-author API, the contract shared by the live runtime and
+the checker (``from twinfleet import Node, Context, subscribe, ...``). Importing
+it loads neither Zenoh nor asyncio. The layers are subpackages:
+``twinfleet.runtime`` (contract + live driver), ``twinfleet.checker``,
+``twinfleet.agreement`` (both drivers side by side), ``twinfleet.nodes`` (the
+robot case study) and ``twinfleet.cli`` on top.
+"""
+
+from twinfleet.runtime.context import Context, ContractError
+from twinfleet.runtime.messages import CallError, Empty, String, message
+from twinfleet.runtime.node import (
+    QOS_DEFAULT,
+    QOS_LATCHED,
+    QOS_SENSOR_DATA,
+    Durability,
+    Node,
+    NodeDefinitionError,
+    QoS,
+    Reliability,
+    every,
+    handler,
+    on_start,
+    service,
+    subscribe,
+)
+
+__all__ = [
+    "QOS_DEFAULT",
+    "QOS_LATCHED",
+    "QOS_SENSOR_DATA",
+    "CallError",
+    "Context",
+    "ContractError",
+    "Durability",
+    "Empty",
+    "Node",
+    "NodeDefinitionError",
+    "QoS",
+    "Reliability",
+    "String",
+    "every",
+    "handler",
+    "message",
+    "on_start",
+    "service",
+    "subscribe",
+]
