@@ -197,7 +197,8 @@ def private_copy(scenario: Scenario, directory: str | Path) -> Scenario:
 def with_timed_report(scenario: Scenario) -> Scenario:
     """The same scenario with `live.report` set to `TimedReport` (the nodes are unaffected:
     node processes read the file, and the report lives in the launcher)."""
-    return dataclasses.replace(scenario, live={**scenario.live, "report": REPORT_FACTORY})
+    return dataclasses.replace(scenario,
+                               live=dataclasses.replace(scenario.live, report=REPORT_FACTORY))
 
 
 async def live_run(scenario: Scenario, *, time_scale: float, seed: int, timeout_s: float,

@@ -15,6 +15,7 @@ with (the scenario file must be unchanged: its hash is recorded).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -26,7 +27,8 @@ from twinfleet.checker.properties import PropertySet, Violation
 from twinfleet.checker.search import HOLDS, VIOLATED, Limits, Search, SearchStatistics
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
-from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario
+from twinfleet.runtime.config import SEARCHES, CheckConfig
+from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario
 from twinfleet.runtime.tracefile import write_trace
 
 
@@ -152,6 +154,9 @@ def load(path: str | Path, *, profile: str | None = None,
 def system_for_trace(trace: Mapping[str, Any]) -> tuple[System, PropertySet]:
     """The system a trace was found on (its scenario, profile, semantics, latency and flags),
     with the scenario's properties watching it, as `twinfleet replay` re-executes it."""
+    if trace.get("scenario") is None:
+        raise ScenarioError("the trace names no scenario file (its scenario was built in "
+                            "Python): replay it with checker.replay(System(scenario), trace)")
     scenario = load(trace["scenario"], profile=trace.get("profile"),
                     semantics=trace.get("semantics"))
     props = PropertySet.from_scenario(scenario)
@@ -168,34 +173,38 @@ def _limit(value: Any, scenario_value: Any) -> Any:
     return None if chosen in (None, 0) else chosen
 
 
-def limits_for(options: CheckOptions, check: Mapping[str, Any]) -> Limits:
+def limits_for(options: CheckOptions, check: CheckConfig) -> Limits:
     """Limits from the options, falling back to the scenario's `check:` block (0 = none)."""
-    return Limits(max_states=_limit(options.max_states, check.get("max_states")),
-                  max_time_s=_limit(options.max_time_s, check.get("max_time_s")),
-                  max_depth=_limit(options.max_depth, check.get("max_depth")))
+    return Limits(max_states=_limit(options.max_states, check.max_states),
+                  max_time_s=_limit(options.max_time_s, check.max_time_s),
+                  max_depth=_limit(options.max_depth, check.max_depth))
 
 
-def check(path: str | Path | None, options: CheckOptions = CheckOptions()) -> CheckResult:
-    """Check the scenario at `path`; write a trace to `options.trace_out` on a violation.
+def check(scenario: str | Path | Scenario | None,
+          options: CheckOptions = CheckOptions()) -> CheckResult:
+    """Check a scenario (a file, a shipped example's name, or a `Scenario` built in Python);
+    write a trace to `options.trace_out` on a violation.
 
-    With `options.resume`, continue that checkpoint (`path` may then be None).
+    With `options.resume`, continue that checkpoint (`scenario` may then be None).
     """
-    data = None
+    data, path = None, _scenario_file(scenario)
     if options.resume is not None:
         data = ckpt.load(options.resume)
         path = _resume_path(path, options, data["meta"])
-    if path is None:
+    if path is None and not isinstance(scenario, Scenario):
         raise ScenarioError("no scenario file given (pass one, or --resume CHECKPOINT)")
     meta = data["meta"] if data is not None else {}
-    scenario = load(path, profile=meta.get("profile", options.profile),
-                    semantics=meta.get("semantics", options.semantics))
+    scenario = _scenario(scenario if isinstance(scenario, Scenario) else path, options, meta)
+    if path is None and options.checkpoint is not None:
+        raise ScenarioError(f"{scenario.source}: a checkpoint needs a scenario file")
     props = PropertySet.from_scenario(scenario)
     flags = {key: meta.get(key, getattr(options, key)) for key in _SEARCH_FLAGS}
     system = System(scenario, monitors=props, **flags)
-    strategy = meta.get("strategy") or options.search or scenario.check.get("search") or "bfs"
-    if strategy not in ("bfs", "dfs", "random"):
-        raise ScenarioError(f"{path}: check.search: expected bfs, dfs or random, got {strategy!r}")
-    meta = {"scenario": str(Path(path).resolve()), "sha256": ckpt.file_sha256(path),
+    strategy = meta.get("strategy") or options.search or scenario.check.search
+    if strategy not in SEARCHES:
+        raise ScenarioError(f"search: expected {', '.join(SEARCHES)}, got {strategy!r}")
+    meta = {"scenario": None if path is None else str(path.resolve()),
+            "sha256": None if path is None else ckpt.file_sha256(path),
             "semantics": system.semantics.name, "profile": scenario.profile,
             "strategy": strategy, **flags}
     search = Search(system, props, limits_for(options, scenario.check), progress=options.progress,
@@ -208,12 +217,12 @@ def check(path: str | Path | None, options: CheckOptions = CheckOptions()) -> Ch
     names = props.names()
     if system.check_determinism:
         names.append("determinism (every transition run twice and compared)")
-    result = CheckResult(str(path), system.semantics.name, strategy, outcome.status,
+    result = CheckResult(scenario.source, system.semantics.name, strategy, outcome.status,
                          outcome.reason, names, outcome.statistics, outcome.violation,
                          checkpoint=outcome.checkpoint, resumed_from=options.resume)
     if outcome.violation is not None and outcome.path is not None:
         result.trace = build_trace(system, outcome.violation, outcome.path,
-                                   scenario_path=str(Path(path).resolve()), search=strategy)
+                                   scenario_path=meta["scenario"], search=strategy)
         if options.trace_out:
             write_trace(result.trace, options.trace_out)
             result.trace_path = options.trace_out
@@ -223,8 +232,28 @@ def check(path: str | Path | None, options: CheckOptions = CheckOptions()) -> Ch
 _SEARCH_FLAGS = ("debug_state", "exact_states", "check_determinism", "transition_cache")
 
 
-def _resume_path(path: str | Path | None, options: CheckOptions,
-                 meta: Mapping[str, Any]) -> str:
+def _scenario_file(scenario: str | Path | Scenario | None) -> Path | None:
+    """The file a scenario argument names (a shipped example's name resolved), if any."""
+    if isinstance(scenario, Scenario):
+        return scenario.path
+    return None if scenario is None else resolve_scenario(scenario)
+
+
+def _scenario(scenario: Path | Scenario | None, options: CheckOptions,
+              meta: Mapping[str, Any]) -> Scenario:
+    """The scenario to check, with the profile and semantics of the options or checkpoint."""
+    profile = meta.get("profile", options.profile)
+    semantics = meta.get("semantics", options.semantics)
+    if not isinstance(scenario, Scenario):
+        return load(scenario, profile=profile, semantics=semantics)
+    if profile is not None and profile != scenario.profile:
+        raise ScenarioError(f"{scenario.source}: the profile of a scenario built in Python is "
+                            "chosen when it is built (Scenario.build(..., profile=...))")
+    return scenario if semantics is None else dataclasses.replace(scenario, semantics=semantics)
+
+
+def _resume_path(path: Path | None, options: CheckOptions,
+                 meta: Mapping[str, Any]) -> Path:
     """The scenario a checkpoint was written for, after checking it still fits."""
     recorded = meta["scenario"]
     where = options.resume
@@ -244,4 +273,4 @@ def _resume_path(path: str | Path | None, options: CheckOptions,
                 getattr(options, key) != meta[key]:
             raise CheckpointError(f"{where}: written with {key}={meta[key]}, cannot resume "
                                   f"with {getattr(options, key)}")
-    return recorded
+    return Path(recorded)

@@ -1,7 +1,10 @@
 """The checker's optional `check:` settings: latency, deadlines, queue bounds and faults.
 
 Every setting is off by default; with none of them a search explores exactly
-what it did before. Schema (names are fully qualified topic or service names
+what it did before. The scenario loader parses their shapes into
+`runtime.config.CheckConfig` (a bad value fails at load); this module checks
+the topic and service names against the compiled node graph and turns them
+into `CheckSettings` for a `System`. Schema (names are fully qualified topic or service names
 as nodes resolve them, e.g. ``/r1/scan``, ``/poses``, ``/generate_path``)::
 
     check:
@@ -67,15 +70,12 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final, final
 
+from twinfleet.runtime.config import PerName
 from twinfleet.runtime.scenario import Scenario, ScenarioError
 
 DELIVER: Final = "deliver"
 DROP: Final = "drop"
 DUPLICATE: Final = "duplicate"
-
-FAULT_KEYS: Final = frozenset({"drop", "duplicate", "crash"})
-CRASH_KEYS: Final = frozenset({"nodes", "max", "durable"})
-DEFAULT: Final = "default"
 
 
 @final
@@ -122,19 +122,12 @@ class CheckSettings:
 
 
 def _fail(scenario: Scenario, key: str, what: str) -> ScenarioError:
-    return ScenarioError(f"{scenario.path}: check.{key}: {what}")
+    return ScenarioError(f"{scenario.source}: check.{key}: {what}")
 
 
-def _is_int(value: Any) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
-
-
-def _range(scenario: Scenario, key: str, raw: Any) -> tuple[int, int] | None:
-    if not isinstance(raw, list | tuple) or len(raw) != 2 or not all(_is_int(v) for v in raw):
-        raise _fail(scenario, key, f"expected [min, max] in ms, got {raw!r}")
-    if not 0 <= raw[0] <= raw[1]:
-        raise _fail(scenario, key, f"latency must be [min, max] with 0 <= min <= max, got {list(raw)}")
-    return None if tuple(raw) == (0, 0) else (raw[0], raw[1])
+def _range(latency: tuple[int, int] | None) -> tuple[int, int] | None:
+    """A latency range, None for no latency (``[0, 0]``)."""
+    return None if latency is None or tuple(latency) == (0, 0) else (latency[0], latency[1])
 
 
 def _names(scenario: Scenario, key: str, names: Iterable[str], known: set[str], what: str,
@@ -146,113 +139,46 @@ def _names(scenario: Scenario, key: str, names: Iterable[str], known: set[str], 
                         f"{name!r} is not {what}; expected one of {', '.join(sorted(known))}")
 
 
+_CHANNEL = "a topic with a subscriber or a served service"
+
+
 def parse_latency(scenario: Scenario, names: set[str]) -> tuple[tuple[int, int] | None,
                                                                  tuple[tuple[str, Any], ...]]:
-    """`check.latency`: (global range or None, per-name overrides)."""
-    raw = scenario.check.get("latency")
-    if raw is None:
-        return None, ()
-    if not isinstance(raw, Mapping):
-        return _range(scenario, "latency", raw), ()
-    default = _range(scenario, "latency.default", raw[DEFAULT]) if DEFAULT in raw else None
-    per = {k: v for k, v in raw.items() if k != DEFAULT}
-    _names(scenario, "latency", per, names, "a topic with a subscriber or a served service")
-    return default, tuple(sorted((k, _range(scenario, f"latency.{k}", v)) for k, v in per.items()))
-
-
-def _ms(scenario: Scenario, key: str, raw: Any) -> int:
-    if not _is_int(raw) or raw < 0:
-        raise _fail(scenario, key, f"expected milliseconds >= 0, got {raw!r}")
-    return raw
+    """`check.latency`: (global range or None, per-name overrides), names checked."""
+    latency = scenario.check.latency
+    _names(scenario, "latency", latency.keys(), names, _CHANNEL)
+    return _range(latency.default), tuple((k, _range(v)) for k, v in latency.names)
 
 
 def parse_deadlines(scenario: Scenario, names: set[str] | None) -> tuple[int | None,
                                                                          dict[str, int]]:
     """`check.deadline_ms`: (default or None, per-name deadlines); `names` None = unchecked."""
-    raw = scenario.check.get("deadline_ms")
-    if raw is None:
-        return None, {}
-    if not isinstance(raw, Mapping):
-        return _ms(scenario, "deadline_ms", raw), {}
-    default = _ms(scenario, "deadline_ms.default", raw[DEFAULT]) if DEFAULT in raw else None
-    per = {k: _ms(scenario, f"deadline_ms.{k}", v) for k, v in raw.items() if k != DEFAULT}
+    deadlines: PerName[int] = scenario.check.deadline_ms
     if names is not None:
-        _names(scenario, "deadline_ms", per, names,
-               "a topic with a subscriber or a served service")
-    return default, per
+        _names(scenario, "deadline_ms", deadlines.keys(), names, _CHANNEL)
+    return deadlines.default, dict(deadlines.names)
 
 
 def parse_queue_bounds(scenario: Scenario) -> tuple[int | None, ...]:
-    """`check.queue_bound`: per node (scenario order) its bound, or None."""
-    raw = scenario.check.get("queue_bound")
-    nodes = [n.name for n in scenario.nodes]
-    if raw is None:
-        return ()
-    if not isinstance(raw, Mapping):
-        bound = _bound(scenario, "queue_bound", raw)
-        return tuple(bound for _ in nodes)
-    default = _bound(scenario, "queue_bound.default", raw[DEFAULT]) if DEFAULT in raw else None
-    per = {k: v for k, v in raw.items() if k != DEFAULT}
-    _names(scenario, "queue_bound", per, set(nodes), "a node of this scenario")
-    return tuple(_bound(scenario, f"queue_bound.{n}", per[n]) if n in per else default
-                 for n in nodes)
-
-
-def _bound(scenario: Scenario, key: str, raw: Any) -> int:
-    if not _is_int(raw) or raw < 1:
-        raise _fail(scenario, key, f"expected a number of pending events >= 1, got {raw!r}")
-    return raw
-
-
-def _list(scenario: Scenario, key: str, raw: Any) -> list[str]:
-    if not isinstance(raw, list) or not all(isinstance(v, str) for v in raw):
-        raise _fail(scenario, key, f"expected a list of names, got {raw!r}")
-    return raw
+    """`check.queue_bound`: per node (scenario order) its bound, or None (node names were
+    checked when the scenario was loaded)."""
+    bounds = scenario.check.queue_bound
+    return tuple(bounds.get(n.name) for n in scenario.nodes) if bounds else ()
 
 
 def parse_faults(scenario: Scenario, topics: set[str], services: set[str]) -> tuple[
         frozenset[str], frozenset[str], CrashFaults | None]:
     """`check.faults`: (drop names, duplicate topics, crash settings or None)."""
-    raw = scenario.check.get("faults")
-    if raw is None:
-        return frozenset(), frozenset(), None
-    if not isinstance(raw, Mapping):
-        raise _fail(scenario, "faults", f"expected a mapping with drop, duplicate, crash; got {raw!r}")
-    for key in raw:
-        if key not in FAULT_KEYS:
-            raise _fail(scenario, f"faults.{key}",
-                        f"unknown key; expected one of {', '.join(sorted(FAULT_KEYS))}")
-    drop = _list(scenario, "faults.drop", raw.get("drop", []))
-    _names(scenario, "faults.drop", drop, topics | services,
-           "a topic with a subscriber or a served service", keyed=False)
-    dup = _list(scenario, "faults.duplicate", raw.get("duplicate", []))
-    _names(scenario, "faults.duplicate", dup, topics, "a topic with a subscriber "
+    faults = scenario.check.faults
+    _names(scenario, "faults.drop", faults.drop, topics | services, _CHANNEL, keyed=False)
+    _names(scenario, "faults.duplicate", faults.duplicate, topics, "a topic with a subscriber "
            "(services cannot be duplicated)", keyed=False)
-    crash = _crash(scenario, raw["crash"]) if "crash" in raw else None
-    return frozenset(drop), frozenset(dup), crash
-
-
-def _crash(scenario: Scenario, raw: Any) -> CrashFaults:
-    key = "faults.crash"
-    if not isinstance(raw, Mapping):
-        raise _fail(scenario, key, f"expected a mapping with nodes, max, durable; got {raw!r}")
-    for k in raw:
-        if k not in CRASH_KEYS:
-            raise _fail(scenario, f"{key}.{k}",
-                        f"unknown key; expected one of {', '.join(sorted(CRASH_KEYS))}")
-    index = {n.name: i for i, n in enumerate(scenario.nodes)}
-    nodes = _list(scenario, f"{key}.nodes", raw.get("nodes"))
-    if not nodes:
-        raise _fail(scenario, f"{key}.nodes", "name at least one node that may crash")
-    durable = _list(scenario, f"{key}.durable", raw.get("durable", []))
-    for name in (*nodes, *durable):
-        if name not in index:
-            raise _fail(scenario, key, f"{name!r} is not a node of this scenario")
-    most = raw.get("max", 1)
-    if not _is_int(most) or most < 1:
-        raise _fail(scenario, f"{key}.max", f"expected a number of crashes >= 1, got {most!r}")
-    return CrashFaults(tuple(sorted({index[n] for n in nodes})), most,
-                       frozenset(index[n] for n in durable))
+    crash = None
+    if faults.crash is not None:
+        index = {n.name: i for i, n in enumerate(scenario.nodes)}
+        crash = CrashFaults(tuple(sorted({index[n] for n in faults.crash.nodes})),
+                            faults.crash.max, frozenset(index[n] for n in faults.crash.durable))
+    return frozenset(faults.drop), frozenset(faults.duplicate), crash
 
 
 def parse_settings(scenario: Scenario, topics: set[str], services: set[str], *,
@@ -268,7 +194,7 @@ def parse_settings(scenario: Scenario, topics: set[str], services: set[str], *,
     """
     default, per_topic = parse_latency(scenario, topics | services)
     if latency != ():
-        default = None if latency is None or tuple(latency) == (0, 0) else (latency[0], latency[1])
+        default = None if latency is None else _range(tuple(latency))  # type: ignore[arg-type]
     deadline_default, deadlines = parse_deadlines(scenario, topics | services)
     drop, dup, crash = parse_faults(scenario, topics, services)
     return CheckSettings(default, per_topic, deadline_default, deadlines,

@@ -120,14 +120,14 @@ class System:
         self.settings = parse_settings(scenario, set(self._subscribers), set(self._servers),
                                        latency=() if latency is None else latency)
         if global_priority is None:
-            global_priority = scenario.check.get("global_priority", False)
+            global_priority = scenario.check.global_priority
         try:
             self.semantics = Semantics(semantics or scenario.semantics,
                                        tuple(cfg.priority for cfg in scenario.nodes),
                                        bool(global_priority), self.settings.latency,
                                        self.settings.topic_latency)
         except ValueError as exc:
-            raise ScenarioError(f"{scenario.path}: check: {exc}") from None
+            raise ScenarioError(f"{scenario.source}: check: {exc}") from None
         self.crash = self.settings.crash
         self.debug_state = debug_state
         self.check_determinism = check_determinism

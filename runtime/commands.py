@@ -1,12 +1,15 @@
-"""The live runtime's commands: launch, topic, service, node, view (and record, play, export).
+"""The live runtime's commands: launch, topic, service, node, view, examples (and record,
+play, export).
 
     twinfleet launch SCENARIO [--time-scale K] [--timeout S] [--seed S] [--runs N]
                               [--connect EP] [--listen EP]
+    twinfleet examples [--copy NAME [DIR]]
     twinfleet topic list|echo|hz|pub ...     twinfleet service list|call ...
     twinfleet node list
     twinfleet view [--connect EP] [--fleet F] [--port P] [--trace FILE]
 
-`register(subparsers)` adds them to the `twinfleet` command line
+SCENARIO is a scenario file or the name of a shipped example (`twinfleet examples`
+lists them). `register(subparsers)` adds them to the `twinfleet` command line
 (`twinfleet.cli`); `record`, `play` and `export` come from
 `runtime.recording_commands`. Every command imports its engine when it runs.
 """
@@ -34,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     _service_parser(sub)
     _node_parser(sub)
     _view_parser(sub)
+    _examples_parser(sub)
     recording_commands.register(sub)
 
 
@@ -72,6 +76,34 @@ def cmd_launch(args: argparse.Namespace) -> int:
         print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "
               f"{args.runs - passed}/{args.runs} failed", flush=True)
     return worst
+
+
+def cmd_examples(args: argparse.Namespace) -> int:
+    """`twinfleet examples`: list the shipped scenarios, or copy one (and its map) to edit."""
+    from twinfleet.runtime.examples import ExampleError, copy_example, describe, shipped_scenarios
+
+    if args.copy is None:
+        if args.dir is not None:
+            print("error: a directory is given only with --copy NAME", file=sys.stderr)
+            return 2
+        shipped = shipped_scenarios()
+        width = max(map(len, shipped))
+        for name, path in shipped.items():
+            print(f"{name:<{width}}  {describe(path)}")
+        print("\nrun one with `twinfleet launch NAME` or `twinfleet check NAME`; "
+              "edit a copy: `twinfleet examples --copy NAME [DIR]`")
+        return 0
+    from twinfleet.runtime.scenario import ScenarioError, load_scenario
+
+    try:
+        files = copy_example(args.copy, args.dir or ".")
+        load_scenario(files[0][0])  # the copy must load as it is
+    except (ExampleError, ScenarioError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for path, written in files:
+        print(f"{'wrote' if written else 'kept existing'} {path}")
+    return 0
 
 
 def _events_path(args: argparse.Namespace, run: int) -> str | None:
@@ -142,7 +174,8 @@ def cmd_view(args: argparse.Namespace) -> int:
 
 def _launch_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("launch", help="run a scenario live: a router plus one process per node")
-    p.add_argument("scenario", help="scenario YAML file (see launch/)")
+    p.add_argument("scenario", help="scenario YAML file, or the name of a shipped example "
+                                    "(twinfleet examples lists them)")
     p.add_argument("--time-scale", type=float, default=None, metavar="K",
                    help="run fleet time K times faster than wall time (default: live.time_scale or 1)")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
@@ -162,6 +195,18 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                         "kind, sender, seq, stamp, choices, state digest), for `twinfleet "
                         "validate FILE SCENARIO`; with --runs N, FILE.1 ... FILE.N")
     p.set_defaults(func=cmd_launch)
+
+
+def _examples_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("examples", help="list the shipped example scenarios, or copy one to edit",
+                       description="Without --copy: list the shipped scenarios (run one by name: "
+                       "twinfleet launch c1a, twinfleet check c1a_rebeca). With --copy NAME: "
+                       "copy that scenario and its map into DIR (default: here), the copy's "
+                       "map path pointing at the copied map.")
+    p.add_argument("--copy", default=None, metavar="NAME", help="the example to copy")
+    p.add_argument("dir", nargs="?", default=None, metavar="DIR",
+                   help="where --copy writes (default: the current directory)")
+    p.set_defaults(func=cmd_examples)
 
 
 def _topic_parser(sub: argparse._SubParsersAction) -> None:

@@ -38,6 +38,7 @@ import shutil
 import signal
 import socket
 import sys
+import tempfile
 import threading
 import time
 from collections import deque
@@ -55,6 +56,7 @@ from twinfleet.runtime.node_main import PARENT_ENV, stats_key
 from twinfleet.runtime.replay_gate import EVENTS_FORMAT
 from twinfleet.runtime.run_record import RunRecord, versions
 from twinfleet.runtime.scenario import NodeConfig, Scenario
+from twinfleet.runtime.scenario_file import write_scenario
 from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
 
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"
@@ -170,8 +172,8 @@ class Fleet:
     def __init__(self, scenario: Scenario, *, time_scale: float, seed: int,
                  connect: str | None, listen: str | None, out: TextIO,
                  record: RunRecord | None = None, node_args: Sequence[str] = (),
-                 events_dir: Path | None = None) -> None:
-        self.scenario, self.time_scale, self.seed, self.out = scenario, time_scale, seed, out
+                 events_dir: Path | None = None, keep_scenario_beside: str | None = None) -> None:
+        self.time_scale, self.seed, self.out = time_scale, seed, out
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
         self.connect = connect
@@ -185,6 +187,7 @@ class Fleet:
         self.failed: list[str] = []
         self.report = load_report(scenario)
         self._finishing = False
+        self.scenario, self._private_dir = launchable(scenario, keep_scenario_beside)
 
     def log(self, text: str) -> None:
         """A launcher line on the output."""
@@ -206,7 +209,7 @@ class Fleet:
         await self.transport.open()
         fleet = self.scenario.fleet
         self.transport.subscribe(key_expr(fleet, SHUTDOWN_TOPIC), self._on_shutdown, QOS_DEFAULT)
-        for topic in self.scenario.live.get("summary_topics", []) or []:
+        for topic in self.scenario.live.summary_topics:
             self.transport.subscribe(key_expr(fleet, topic), self._summary(topic), QOS_DEFAULT)
         for topic in self.report.topics() if self.report is not None else ():
             self.transport.subscribe(key_expr(fleet, topic), self._reported(topic), QOS_DEFAULT)
@@ -327,6 +330,24 @@ class Fleet:
                 self.failed.append(p.cfg.name)
         if self.transport is not None:
             await self.transport.close()
+        if self._private_dir is not None:
+            shutil.rmtree(self._private_dir, ignore_errors=True)
+
+
+def launchable(scenario: Scenario, beside: str | None) -> tuple[Scenario, Path | None]:
+    """`scenario` as node processes can load it: itself when it has a file; else (built in
+    Python) written to ``<beside>.scenario.yaml`` next to a record the caller keeps, or to a
+    temporary directory, returned for removal (`runtime.scenario_file`)."""
+    if scenario.path is not None:
+        return scenario, None
+    if beside is not None:
+        return write_scenario(scenario, f"{beside}.scenario.yaml"), None
+    private = Path(tempfile.mkdtemp(prefix="twinfleet-scenario-"))
+    try:
+        return write_scenario(scenario, private / f"{scenario.name}.yaml"), private
+    except BaseException:
+        shutil.rmtree(private, ignore_errors=True)
+        raise
 
 
 async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
@@ -339,7 +360,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
-        scenario: a validated scenario (`runtime.scenario.load_scenario`).
+        scenario: a validated scenario (`runtime.scenario.load_scenario`, or
+            `Scenario.build`: then written to a file for the node processes, see `launchable`).
         time_scale: fleet speed-up (default: scenario `live.time_scale`, else 1).
         timeout_s: wall seconds before the run ends (default: `live.timeout_s`, else none).
         seed: fleet seed (default: the scenario's).
@@ -354,13 +376,15 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             ends with the reason it returns (an exception it raises is re-raised).
     """
     live = scenario.live
-    time_scale = float(time_scale if time_scale is not None else live.get("time_scale", 1.0))
-    timeout_s = timeout_s if timeout_s is not None else live.get("timeout_s")
+    time_scale = float(time_scale if time_scale is not None else live.time_scale)
+    timeout_s = timeout_s if timeout_s is not None else live.timeout_s
     seed = scenario.seed if seed is None else seed
     record = RunRecord(run_record) if run_record else None
     events_dir = _fresh_parts_dir(record_events) if record_events else None
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
-                  out=out, record=record, node_args=node_args, events_dir=events_dir)
+                  out=out, record=record, node_args=node_args, events_dir=events_dir,
+                  keep_scenario_beside=record_events or run_record)
+    scenario = fleet.scenario  # loaded from a file node processes can read
     driving: asyncio.Task[str] | None = None
     started = time.monotonic()
     loop = asyncio.get_running_loop()
@@ -487,10 +511,10 @@ def load_report(scenario: Scenario) -> Any:
     `finished()` (True ends the run); the launcher feeds it every message on
     those topics (e.g. `nodes.report:report_for`).
     """
-    path = scenario.live.get("report")
+    path = scenario.live.report
     if not path:
         return None
-    module, _, attr = str(path).partition(":")
+    module, _, attr = path.partition(":")
     return getattr(importlib.import_module(module), attr)(scenario)
 
 

@@ -94,9 +94,9 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
     cfg = scenario.node(args.node)
     node = cfg.instantiate()
     live = scenario.live
-    time_scale = args.time_scale if args.time_scale is not None else live.get("time_scale", 1.0)
+    time_scale = args.time_scale if args.time_scale is not None else live.time_scale
     stop_on_error = bool(args.stop_on_error if args.stop_on_error is not None
-                         else live.get("stop_on_error", False))
+                         else live.stop_on_error)
     clock: Clock = LogicalClock() if args.gate else FleetClock(args.epoch_ns, time_scale)
     try:
         config = zenoh_config(connect=[args.connect])

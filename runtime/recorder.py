@@ -132,7 +132,7 @@ async def record_scenario(scenario: Any, path: str | Path, *, time_scale: float 
     recorder = McapRecorder(open(path, "wb"))  # noqa: SIM115 - closed by recorder.close()
     recorder.metadata({"fleet": scenario.fleet, "scenario": scenario.path,
                        "seed": scenario.seed if seed is None else seed,
-                       "time_scale": time_scale or scenario.live.get("time_scale", 1.0)})
+                       "time_scale": time_scale or scenario.live.time_scale})
     tap = FleetTap(lambda: zenoh_config(listen=[endpoint], mode="router"), scenario.fleet,
                    recorder.write, retry=False)
     try:

@@ -1,6 +1,6 @@
-"""Scenario files: one YAML describes a fleet for both `launch` and `check`.
+"""Scenarios: one description of a fleet for both `launch` and `check`, from YAML or Python.
 
-Layout (every key but `nodes` optional)::
+YAML layout (every key but `nodes` optional)::
 
     name: c1a                      # also the Zenoh fleet name unless `fleet:` is given
     description: free text
@@ -11,7 +11,7 @@ Layout (every key but `nodes` optional)::
     params: {scan_rate_ms: 100}    # merged into every node whose Params has the field
     nodes:
       - name: r1
-        class: twinfleet.nodes.robot:Robot   # module:Class, a subclass of runtime.Node
+        class: twinfleet.nodes.robot:Robot   # module:Class, a subclass of twinfleet.Node
         namespace: /r1             # default: root
         priority: 3                # node-instance priority (checker, rebeca semantics)
         respawn: false             # live: restart the process if it dies
@@ -31,8 +31,20 @@ Layout (every key but `nodes` optional)::
     live: {timeout_s: 120, stop_on_error: false, time_scale: 1.0,
            report: "twinfleet.nodes.report:report_for"}  # factory(scenario) -> report, see launcher
 
-Every error names the file, the key and what was expected, and is raised
-before anything starts.
+`check:` and `live:` become `runtime.config.CheckConfig` / `LiveConfig`.
+`load_scenario` accepts a path or the name of a shipped example
+(`resolve_scenario`: ``c1a`` is ``launch/c1a.yaml`` of the installed package).
+
+The same scenario from Python, with class objects, `NodeEntry` values and
+config objects (mappings in the YAML shapes work too)::
+
+    Scenario.build("pingpong", [NodeEntry("ping", Ping, {"rounds": 3}), NodeEntry("pong", Pong)],
+                   properties=[PropertyConfig("bounded", "invariant", "ping.sent <= 3")],
+                   check=CheckConfig(max_states=1000))
+
+Both ways run the same checks: every error names the file (or ``<scenario
+NAME>`` for one built in Python), the key and what was expected, and is
+raised before anything starts.
 """
 
 from __future__ import annotations
@@ -41,13 +53,22 @@ import dataclasses
 import importlib
 import types
 import typing
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, final
 
 import yaml
 
+from twinfleet.runtime.config import (
+    CheckConfig,
+    ConfigError,
+    LiveConfig,
+    check_config,
+    live_config,
+    unknown_names,
+)
+from twinfleet.runtime.examples import shipped_scenarios
 from twinfleet.runtime.names import InvalidName, normalise_namespace, validate_token
 from twinfleet.runtime.node import Node
 
@@ -57,15 +78,43 @@ PROPERTY_KINDS = ("invariant", "no_failure", "deadlock", "quiescence", "eventual
 _TOP_KEYS = {"name", "fleet", "description", "map", "profile", "semantics", "seed", "params",
              "nodes", "properties", "check", "live"}
 _NODE_KEYS = {"name", "class", "namespace", "priority", "respawn", "params"}
-_CHECK_KEYS = {"max_states", "max_depth", "max_time_s", "latency", "global_priority",
-               "search", "stop_at_first", "faults", "deadline_ms", "queue_bound"}
-_LIVE_KEYS = {"timeout_s", "stop_on_error", "time_scale", "report", "summary_topics"}
+_PROPERTY_KEYS = {"name", "kind", "expr", "within_ms"}
 
 
 class ScenarioError(ValueError):
-    """A scenario file is invalid; the message names the file, the key and the rule."""
+    """A scenario is invalid; the message names the file, the key and the rule."""
 
 
+@final
+@dataclass(frozen=True)
+class NodeEntry:
+    """One node of a scenario as written: what `Scenario.build` takes (YAML: a `nodes:` entry).
+
+    Args:
+        name: the node's name, unique in the scenario.
+        cls: a `Node` subclass, or its ``"module:Class"`` path.
+        params: a mapping merged over the scenario's `params` (as YAML does), or an
+            instance of ``cls.Params`` used as it is.
+        namespace, priority, respawn: as in YAML.
+    """
+
+    name: str
+    cls: type[Node] | str
+    params: Any = None
+    namespace: str = ""
+    priority: int = 0
+    respawn: bool = False
+
+    def as_mapping(self) -> dict[str, Any]:
+        """The YAML shape of this entry."""
+        entry = {"name": self.name, "class": self.cls, "namespace": self.namespace,
+                 "priority": self.priority, "respawn": self.respawn}
+        if self.params is not None:
+            entry["params"] = dict(self.params) if isinstance(self.params, Mapping) else self.params
+        return entry
+
+
+@final
 @dataclass(frozen=True)
 class NodeConfig:
     """One node of a scenario, with its parameters already built and checked."""
@@ -84,6 +133,7 @@ class NodeConfig:
         return self.cls(self.name, self.params, namespace=self.namespace)
 
 
+@final
 @dataclass(frozen=True)
 class PropertyConfig:
     """A property named in the scenario."""
@@ -94,11 +144,12 @@ class PropertyConfig:
     within_ms: int | None = None
 
 
+@final
 @dataclass(frozen=True)
 class Scenario:
-    """A parsed, validated scenario file."""
+    """A parsed, validated scenario; `path` is None for one built in Python (`build`)."""
 
-    path: Path
+    path: Path | None
     name: str
     fleet: str
     description: str
@@ -108,8 +159,13 @@ class Scenario:
     seed: int
     nodes: tuple[NodeConfig, ...]
     properties: tuple[PropertyConfig, ...]
-    check: Mapping[str, Any] = field(default_factory=dict)
-    live: Mapping[str, Any] = field(default_factory=dict)
+    check: CheckConfig = field(default_factory=CheckConfig)
+    live: LiveConfig = field(default_factory=LiveConfig)
+
+    @property
+    def source(self) -> str:
+        """Where the scenario came from, as error messages name it."""
+        return str(self.path) if self.path is not None else python_source(self.name)
 
     def node(self, name: str) -> NodeConfig:
         """The node entry called `name`."""
@@ -118,10 +174,52 @@ class Scenario:
                 return cfg
         raise KeyError(name)
 
+    @classmethod
+    def build(cls, name: str, nodes: Sequence[NodeEntry | Mapping[str, Any]], *,
+              properties: Sequence[PropertyConfig | Mapping[str, Any]] = (),
+              check: CheckConfig | Mapping[str, Any] | None = None,
+              live: LiveConfig | Mapping[str, Any] | None = None,
+              map_path: str | Path | None = None, profile: str = PROFILES[0],
+              semantics: str = SEMANTICS[0], seed: int = 0,
+              params: Mapping[str, Any] | None = None, fleet: str | None = None,
+              description: str = "") -> Scenario:
+        """A scenario from Python values, checked as a file is (`map_path` relative to the
+        working directory); the keywords are the YAML keys."""
+        doc: dict[str, Any] = {"name": name, "nodes": list(nodes), "properties": list(properties),
+                               "profile": profile, "semantics": semantics, "seed": seed,
+                               "description": description, "check": check, "live": live,
+                               "params": dict(params or {})}
+        if map_path is not None:
+            doc["map"] = str(map_path)
+        if fleet is not None:
+            doc["fleet"] = fleet
+        return parse_scenario(doc, None)
+
+
+def python_source(name: str) -> str:
+    """How errors name a scenario built in Python."""
+    return f"<scenario {name}>"
+
+
+def resolve_scenario(spec: str | Path) -> Path:
+    """The scenario file `spec` names: an existing file, else a shipped example of that name
+    (``c1a`` or ``c1a.yaml``); anything else is a `ScenarioError` listing the shipped names."""
+    path = Path(spec)
+    if path.exists():
+        return path
+    shipped = shipped_scenarios()
+    name = path.name.removesuffix(".yaml")
+    if path.name == str(spec) and name in shipped:
+        return shipped[name]
+    raise ScenarioError(f"{spec}: cannot read scenario file: no such file, and no shipped "
+                        f"example is called {name!r} (shipped: {', '.join(shipped)}; "
+                        "`twinfleet examples` describes them)")
+
 
 def load_scenario(path: str | Path, overrides: Mapping[str, Any] | None = None) -> Scenario:
-    """Read and validate a scenario file; `overrides` replace top-level keys (e.g. profile)."""
-    path = Path(path)
+    """Read and validate a scenario file (or shipped example, `resolve_scenario`);
+    `overrides` replace top-level keys (e.g. profile)."""
+    path = resolve_scenario(path)
     try:
         doc = yaml.safe_load(path.read_text())
     except OSError as exc:
@@ -136,11 +234,11 @@ def load_scenario(path: str | Path, overrides: Mapping[str, Any] | None = None) 
     return parse_scenario(doc, path)
 
 
-def parse_scenario(doc: Mapping[str, Any], path: Path) -> Scenario:
-    """Validate a scenario mapping read from `path`."""
-    err = _Errors(path)
+def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
+    """Validate a scenario mapping read from `path` (None: built in Python, `Scenario.build`)."""
+    err = _Errors(str(path) if path is not None else python_source(doc.get("name", "?")))
     err.unknown_keys(doc, _TOP_KEYS, "")
-    name = _get(doc, "name", str, err, default=path.stem)
+    name = _get(doc, "name", str, err, default=path.stem if path is not None else ...)
     fleet = _get(doc, "fleet", str, err, default=name.replace("-", "_"))
     try:
         validate_token(fleet, "fleet")
@@ -150,7 +248,8 @@ def parse_scenario(doc: Mapping[str, Any], path: Path) -> Scenario:
     semantics = _choice(doc, "semantics", SEMANTICS, err)
     map_path = None
     if "map" in doc:
-        map_path = (path.parent / _get(doc, "map", str, err)).resolve()
+        base = path.parent if path is not None else Path()
+        map_path = (base / _get(doc, "map", str, err)).resolve()
         if not map_path.is_file():
             err.fail("map", f"file {map_path} does not exist")
     common = _get(doc, "params", dict, err, default={})
@@ -168,12 +267,11 @@ def parse_scenario(doc: Mapping[str, Any], path: Path) -> Scenario:
     if not isinstance(raw_props, list):
         err.fail("properties", f"expected a list of properties, got {raw_props!r:.60}")
     props = tuple(_property(i, p, err) for i, p in enumerate(raw_props))
-    check = _get(doc, "check", dict, err, default={})
-    err.unknown_keys(check, _CHECK_KEYS, "check.")
-    live = _get(doc, "live", dict, err, default={})
-    err.unknown_keys(live, _LIVE_KEYS, "live.")
-    if "report" in live:
-        _import_attr(str(live["report"]), err, "live.report", "report factory")
+    check = _config(check_config, doc.get("check"), err)
+    _check_node_names(check, names, err)
+    live = _config(live_config, doc.get("live"), err)
+    if live.report is not None:
+        _import_attr(live.report, err, "live.report", "report factory")
     return Scenario(path=path, name=name, fleet=fleet,
                     description=_get(doc, "description", str, err, default=""),
                     map_path=map_path, profile=profile, semantics=semantics,
@@ -181,12 +279,30 @@ def parse_scenario(doc: Mapping[str, Any], path: Path) -> Scenario:
                     properties=props, check=check, live=live)
 
 
+def _config(parse: typing.Callable[[Any], Any], raw: Any, err: _Errors) -> Any:
+    try:
+        return parse(raw)
+    except ConfigError as exc:
+        err.fail(exc.key, exc.what)
+
+
+def _check_node_names(check: CheckConfig, names: list[str], err: _Errors) -> None:
+    """The node names `check:` mentions (queue bounds, crashes) must be nodes."""
+    expected = f"expected one of {', '.join(sorted(names))}"
+    for name in unknown_names(check.queue_bound.keys(), names):
+        err.fail(f"check.queue_bound.{name}", f"{name!r} is not a node of this scenario; {expected}")
+    crash = check.faults.crash
+    if crash is not None:
+        for name in unknown_names((*crash.nodes, *crash.durable), names):
+            err.fail("check.faults.crash", f"{name!r} is not a node of this scenario; {expected}")
+
+
 class _Errors:
-    def __init__(self, path: Path) -> None:
-        self.path = path
+    def __init__(self, source: str) -> None:
+        self.source = source
 
     def fail(self, key: str, what: str) -> typing.NoReturn:
-        raise ScenarioError(f"{self.path}: {key}: {what}")
+        raise ScenarioError(f"{self.source}: {key}: {what}")
 
     def unknown_keys(self, doc: Mapping[str, Any], allowed: set[str], prefix: str) -> None:
         for key in doc:
@@ -216,6 +332,8 @@ def _choice(doc: Mapping[str, Any], key: str, options: tuple[str, ...], err: _Er
 def _node(i: int, raw: Any, common: Mapping[str, Any], context: Mapping[str, Any],
           err: _Errors) -> NodeConfig:
     where = f"nodes[{i}]."
+    if isinstance(raw, NodeEntry):
+        raw = raw.as_mapping()
     if not isinstance(raw, dict):
         err.fail(f"nodes[{i}]", "expected a mapping with name, class and params")
     err.unknown_keys(raw, _NODE_KEYS, where)
@@ -225,14 +343,20 @@ def _node(i: int, raw: Any, common: Mapping[str, Any], context: Mapping[str, Any
         namespace = normalise_namespace(_get(raw, "namespace", str, err, default="", where=where))
     except InvalidName as exc:
         err.fail(where + "name", str(exc))
-    class_path = _get(raw, "class", str, err, where=where)
-    cls = _import_node_class(class_path, err, where + "class")
-    given = _get(raw, "params", dict, err, default={}, where=where)
-    params = build_params(cls.Params, given, common, context, err, where + "params")
+    if "class" not in raw:
+        err.fail(where + "class", "missing; expected 'module:Class' or a Node subclass")
+    cls, class_path = _node_class(raw["class"], err, where + "class")
+    given = raw.get("params")
+    if given is not None and not isinstance(given, dict) and isinstance(given, cls.Params):
+        params, raw_params = given, {f.name: getattr(given, f.name)
+                                     for f in dataclasses.fields(given)}
+    else:
+        raw_params = _get(raw, "params", dict, err, default={}, where=where)
+        params = build_params(cls.Params, raw_params, common, context, err, where + "params")
     return NodeConfig(name=name, cls=cls, class_path=class_path, namespace=namespace,
                       priority=_get(raw, "priority", int, err, default=0, where=where),
                       respawn=_get(raw, "respawn", bool, err, default=False, where=where),
-                      params=params, raw_params=dict(given))
+                      params=params, raw_params=dict(raw_params))
 
 
 def _try_instantiate(i: int, cfg: NodeConfig, err: _Errors) -> None:
@@ -253,11 +377,17 @@ def _import_attr(path: str, err: _Errors, key: str, what: str = "name") -> Any:
         err.fail(key, f"unknown {what} {path!r} ({exc})")
 
 
-def _import_node_class(class_path: str, err: _Errors, key: str) -> type[Node]:
-    cls = _import_attr(class_path, err, key, "node class")
+def _node_class(value: Any, err: _Errors, key: str) -> tuple[type[Node], str]:
+    """The node class an entry names ("module:Class" or the class itself) and its path."""
+    if isinstance(value, str):
+        cls, path = _import_attr(value, err, key, "node class"), value
+    elif isinstance(value, type):
+        cls, path = value, f"{value.__module__}:{value.__qualname__}"
+    else:
+        err.fail(key, f"expected 'module:Class' or a Node subclass, got {value!r}")
     if not (isinstance(cls, type) and issubclass(cls, Node)):
-        err.fail(key, f"{class_path!r} is not a subclass of runtime.Node")
-    return cls
+        err.fail(key, f"{path!r} is not a subclass of twinfleet.Node")
+    return cls, path
 
 
 def build_params(params_cls: type, given: Mapping[str, Any], common: Mapping[str, Any],
@@ -317,7 +447,7 @@ def _convert(value: Any, hint: Any, err: _Errors, key: str) -> Any:
 
 class _Silent(_Errors):
     def __init__(self) -> None:
-        super().__init__(Path("?"))
+        super().__init__("?")
 
 
 def _hint_name(hint: Any) -> str:
@@ -326,9 +456,11 @@ def _hint_name(hint: Any) -> str:
 
 def _property(i: int, raw: Any, err: _Errors) -> PropertyConfig:
     where = f"properties[{i}]."
+    if isinstance(raw, PropertyConfig):
+        raw = {k: v for k, v in dataclasses.asdict(raw).items() if v is not None}
     if not isinstance(raw, dict):
         err.fail(f"properties[{i}]", "expected a mapping with kind (and name, expr, within_ms)")
-    err.unknown_keys(raw, {"name", "kind", "expr", "within_ms"}, where)
+    err.unknown_keys(raw, _PROPERTY_KEYS, where)
     kind = _get(raw, "kind", str, err, where=where)
     if kind not in PROPERTY_KINDS:
         err.fail(where + "kind", f"expected one of {', '.join(PROPERTY_KINDS)}, got {kind!r}")
@@ -337,7 +469,7 @@ def _property(i: int, raw: Any, err: _Errors) -> PropertyConfig:
         err.fail(where + "expr", f"a {kind} property needs an expression over node states")
     if expr is not None:
         try:
-            compile(expr, f"{err.path}:{where}expr", "eval")
+            compile(expr, f"{err.source}:{where}expr", "eval")
         except SyntaxError as exc:
             err.fail(where + "expr", f"not a Python expression: {exc.msg}")
     within = _get(raw, "within_ms", int, err, default=None, where=where)

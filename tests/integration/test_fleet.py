@@ -287,7 +287,8 @@ def test_run_fleet_as_a_library_with_respawn_and_summary(tmp_path: Path) -> None
     path = tmp_path / "respawn.yaml"
     path.write_text(RESPAWN)
     scenario = load_scenario(path)
-    scenario = dataclasses.replace(scenario, live={**scenario.live, "summary_topics": ["/chatter"]})
+    scenario = dataclasses.replace(
+        scenario, live=dataclasses.replace(scenario.live, summary_topics=("/chatter",)))
     out = io.StringIO()
     result = asyncio.run(asyncio.wait_for(
         run_fleet(scenario, time_scale=2.0, timeout_s=6.0, seed=5, out=out, handle_signals=False),
