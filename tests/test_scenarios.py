@@ -1,4 +1,5 @@
-"""Scenario files: every shipped one loads; bad ones fail naming file, key and rule."""
+"""Scenario files: every shipped one loads (also by name); bad ones fail naming file, key and
+rule, `check:` and `live:` included; `twinfleet examples` lists and copies them."""
 
 from __future__ import annotations
 
@@ -7,7 +8,10 @@ from pathlib import Path
 import pytest
 import yaml
 
-from twinfleet.runtime.scenario import ScenarioError, load_scenario
+from twinfleet.cli import main as cli
+from twinfleet.runtime.config import CheckConfig, CrashConfig, FaultConfig, LiveConfig, PerName
+from twinfleet.runtime.examples import shipped_scenarios
+from twinfleet.runtime.scenario import ScenarioError, load_scenario, resolve_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted((ROOT / "launch").glob("*.yaml"))
@@ -79,6 +83,34 @@ def mutate(path: str, value):
         ("properties", [{"kind": "invariant"}], r"needs an expression"),
         ("properties", [{"kind": "invariant", "expr": "a ==="}], r"not a Python expression"),
         ("check", {"max_state": 1}, r"check\.max_state: unknown key"),
+        ("check", [1], r"check: expected a mapping with search, max_states"),
+        ("check", {"search": "astar"}, r"check\.search: expected one of bfs, dfs, random"),
+        ("check", {"max_states": -5}, r"check\.max_states: expected a whole number >= 0"),
+        ("check", {"max_depth": 2.5}, r"check\.max_depth: expected a whole number"),
+        ("check", {"max_time_s": "1h"}, r"check\.max_time_s: expected seconds"),
+        ("check", {"global_priority": "yes"}, r"check\.global_priority: expected true or false"),
+        ("check", {"latency": [5, 1]}, r"check\.latency: latency must be \[min, max\] with 0"),
+        ("check", {"latency": {"default": 3}}, r"check\.latency\.default: expected \[min, max\]"),
+        ("check", {"latency": {"/r1/scan": [0]}}, r"check\.latency\./r1/scan: expected \[min"),
+        ("check", {"deadline_ms": {"/poses": -1}}, r"check\.deadline_ms\./poses: expected milli"),
+        ("check", {"queue_bound": 0}, r"check\.queue_bound: expected a number of pending events"),
+        ("check", {"queue_bound": {"r9": 3}}, r"check\.queue_bound\.r9: 'r9' is not a node of "
+                                              r"this scenario; expected one of map_server, r1"),
+        ("check", {"faults": {"drop": "/poses"}}, r"check\.faults\.drop: expected a list of names"),
+        ("check", {"faults": {"explode": 1}}, r"check\.faults\.explode: unknown key"),
+        ("check", {"faults": {"crash": {"max": 1}}}, r"check\.faults\.crash\.nodes: missing"),
+        ("check", {"faults": {"crash": {"nodes": ["r1"], "max": 0}}}, r"crash\.max: expected a "
+                                                                     r"number of crashes >= 1"),
+        ("check", {"faults": {"crash": {"nodes": ["r1"], "durable": ["r7"]}}},
+         r"check\.faults\.crash: 'r7' is not a node"),
+        ("live", {"timeout": 3}, r"live\.timeout: unknown key; expected one of report, "
+                                 r"stop_on_error, summary_topics, time_scale, timeout_s"),
+        ("live", {"timeout_s": 0}, r"live\.timeout_s: expected a number > 0"),
+        ("live", {"time_scale": "fast"}, r"live\.time_scale: expected a number > 0"),
+        ("live", {"stop_on_error": 1}, r"live\.stop_on_error: expected true or false"),
+        ("live", {"report": "nodes.report"}, r"live\.report: expected 'module:factory'"),
+        ("live", {"report": "no.such:factory"}, r"live\.report: unknown report factory"),
+        ("live", {"summary_topics": "/poses"}, r"live\.summary_topics: expected a list of names"),
     ],
 )
 def test_bad_scenario_names_file_key_and_rule(tmp_path, path, value, expected):
@@ -89,9 +121,92 @@ def test_bad_scenario_names_file_key_and_rule(tmp_path, path, value, expected):
 
 
 def test_unreadable_and_non_yaml_files(tmp_path):
-    with pytest.raises(ScenarioError, match="cannot read"):
+    with pytest.raises(ScenarioError, match="cannot read scenario file: no such file"):
         load_scenario(tmp_path / "missing.yaml")
+    with pytest.raises(ScenarioError, match="cannot read scenario file: Is a directory"):
+        load_scenario(tmp_path)
     broken = tmp_path / "broken.yaml"
     broken.write_text("nodes: [\n")
     with pytest.raises(ScenarioError, match="not valid YAML"):
         load_scenario(broken)
+
+
+def test_check_and_live_sections_become_typed_frozen_config(tmp_path):
+    doc = {**GOOD, "check": {"max_states": 500, "max_time_s": 2, "latency": {"default": [0, 5],
+                                                                         "/r1/scan": [0, 0]},
+                             "deadline_ms": 50, "queue_bound": {"default": 8, "r1": 20},
+                             "faults": {"drop": ["/poses"], "crash": {"nodes": ["r1"]}}},
+           "live": {"timeout_s": 30, "summary_topics": ["/poses"]}}
+    scenario = load_scenario(write(tmp_path, doc))
+    check, live = scenario.check, scenario.live
+    assert check == CheckConfig(max_states=500, max_time_s=2.0,
+                                latency=PerName((0, 5), (("/r1/scan", (0, 0)),)),
+                                deadline_ms=PerName(50), queue_bound=PerName(8, (("r1", 20),)),
+                                faults=FaultConfig(drop=("/poses",), crash=CrashConfig(("r1",))))
+    assert isinstance(check.max_time_s, float) and check.search == "bfs"
+    assert check.queue_bound.get("r1") == 20 and check.queue_bound.get("map_server") == 8
+    assert live == LiveConfig(timeout_s=30.0, summary_topics=("/poses",))
+    with pytest.raises(AttributeError):
+        check.max_states = 1  # type: ignore[misc]
+    defaults = load_scenario(write(tmp_path, GOOD))
+    assert (defaults.check, defaults.live) == (CheckConfig(), LiveConfig())
+
+
+def test_shipped_scenarios_resolve_by_name_from_any_directory(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    shipped = shipped_scenarios()
+    assert set(shipped) == {p.stem for p in SHIPPED}
+    assert resolve_scenario("c1a") == ROOT / "launch" / "c1a.yaml"
+    assert resolve_scenario("c1a.yaml") == ROOT / "launch" / "c1a.yaml"
+    scenario = load_scenario("c1a_rebeca")
+    assert scenario.path == ROOT / "launch" / "c1a_rebeca.yaml"
+    assert scenario.map_path == ROOT / "maps" / "map50.yaml"
+    assert scenario.live.report == "twinfleet.nodes.report:report_for"
+    # A file of that name in the working directory wins: a path still works as it did.
+    (tmp_path / "c1a").write_text(yaml.safe_dump({**GOOD, "name": "mine"}))
+    assert load_scenario("c1a").name == "mine"
+    with pytest.raises(ScenarioError, match=r"^nope: cannot read scenario file: no such file, "
+                                            r"and no shipped example is called 'nope' \(shipped: "
+                                            r"c1a, c1a_rebeca, .*headon; `twinfleet examples`"):
+        load_scenario("nope")
+    with pytest.raises(ScenarioError, match="no shipped example is called 'c1b'"):
+        load_scenario("sub/c1b")  # a path, not a name
+
+
+def test_examples_lists_names_and_descriptions(capsys):
+    assert cli(["examples"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    listed = {line.split()[0]: line.split(None, 1)[1] for line in lines if line and
+              not line.startswith("run one")}
+    assert set(listed) == {p.stem for p in SHIPPED}
+    assert listed["headon"] == load_scenario(ROOT / "launch" / "headon.yaml").description
+
+
+def test_examples_copy_writes_an_editable_scenario_and_its_map(tmp_path, capsys):
+    assert cli(["examples", "--copy", "headon", str(tmp_path / "mine")]) == 0
+    out = capsys.readouterr().out
+    copied = tmp_path / "mine" / "headon.yaml"
+    assert f"wrote {copied}" in out
+    assert sorted(p.name for p in copied.parent.iterdir()) == \
+        ["corridor12.pgm", "corridor12.yaml", "headon.yaml"]
+    original = (ROOT / "launch" / "headon.yaml").read_text()
+    assert copied.read_text() == original.replace("map: ../maps/corridor12.yaml",
+                                                  "map: corridor12.yaml")
+    scenario = load_scenario(copied)
+    assert scenario.map_path == copied.parent / "corridor12.yaml"
+    assert scenario.node("map_server").params.map == str(copied.parent / "corridor12.yaml")
+    assert cli(["examples", "--copy", "headon", str(copied.parent)]) == 2
+    assert "headon.yaml exists; not overwritten" in capsys.readouterr().err
+    assert cli(["examples", "--copy", "nope"]) == 2
+    assert "nope: no shipped example of that name (shipped: c1a," in capsys.readouterr().err
+
+
+def test_examples_sharing_a_map_keep_the_first_copy(tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    assert cli(["examples", "--copy", "c1a"]) == 0
+    (tmp_path / "map50.yaml").write_text((tmp_path / "map50.yaml").read_text() + "# edited\n")
+    assert cli(["examples", "--copy", "c1a_rebeca"]) == 0
+    out = capsys.readouterr().out
+    assert "kept existing map50.yaml" in out and "wrote c1a_rebeca.yaml" in out
+    assert (tmp_path / "map50.yaml").read_text().endswith("# edited\n")
+    assert load_scenario("c1a_rebeca.yaml").map_path == tmp_path / "map50.yaml"
