@@ -146,7 +146,7 @@ def parse_latency(scenario: Scenario, names: set[str]) -> tuple[tuple[int, int] 
                                                                  tuple[tuple[str, Any], ...]]:
     """`check.latency`: (global range or None, per-name overrides), names checked."""
     latency = scenario.check.latency
-    _names(scenario, "latency", latency.keys(), names, _CHANNEL)
+    _names(scenario, "latency", latency.named(), names, _CHANNEL)
     return _range(latency.default), tuple((k, _range(v)) for k, v in latency.names)
 
 
@@ -155,7 +155,7 @@ def parse_deadlines(scenario: Scenario, names: set[str] | None) -> tuple[int | N
     """`check.deadline_ms`: (default or None, per-name deadlines); `names` None = unchecked."""
     deadlines: PerName[int] = scenario.check.deadline_ms
     if names is not None:
-        _names(scenario, "deadline_ms", deadlines.keys(), names, _CHANNEL)
+        _names(scenario, "deadline_ms", deadlines.named(), names, _CHANNEL)
     return deadlines.default, dict(deadlines.names)
 
 

@@ -20,7 +20,7 @@ scale) and `runtime.node_main` (stop_on_error, time scale).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final, Generic, TypeVar, final
 
@@ -53,7 +53,7 @@ class PerName(Generic[T]):
         """The value for `name`: its own, else the default (None: not set)."""
         return dict(self.names).get(name, self.default)
 
-    def keys(self) -> tuple[str, ...]:
+    def named(self) -> tuple[str, ...]:
         """The names that have their own value."""
         return tuple(name for name, _ in self.names)
 
@@ -280,8 +280,3 @@ def _per_name(key: str, value: Any, check: Callable[[str, Any], T]) -> PerName[T
     return PerName(None if default is None else check(default_key, default),
                    tuple(sorted((name, check(f"{key}.{name}", v)) for name, v in pairs)))
 
-
-def unknown_names(names: Iterable[str], known: Iterable[str]) -> list[str]:
-    """The names (in order, once each) that are not in `known`."""
-    known = set(known)
-    return list(dict.fromkeys(n for n in names if n not in known))

@@ -51,7 +51,6 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
-import types
 import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -66,11 +65,11 @@ from twinfleet.runtime.config import (
     LiveConfig,
     check_config,
     live_config,
-    unknown_names,
 )
 from twinfleet.runtime.examples import shipped_scenarios
 from twinfleet.runtime.names import InvalidName, normalise_namespace, validate_token
 from twinfleet.runtime.node import Node
+from twinfleet.runtime.params import build_params
 
 PROFILES = ("fixed", "rebeca")
 SEMANTICS = ("ros", "rebeca")
@@ -267,9 +266,9 @@ def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
     if not isinstance(raw_props, list):
         err.fail("properties", f"expected a list of properties, got {raw_props!r:.60}")
     props = tuple(_property(i, p, err) for i, p in enumerate(raw_props))
-    check = _config(check_config, doc.get("check"), err)
+    check = _checked(check_config, err, doc.get("check"))
     _check_node_names(check, names, err)
-    live = _config(live_config, doc.get("live"), err)
+    live = _checked(live_config, err, doc.get("live"))
     if live.report is not None:
         _import_attr(live.report, err, "live.report", "report factory")
     return Scenario(path=path, name=name, fleet=fleet,
@@ -279,22 +278,23 @@ def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
                     properties=props, check=check, live=live)
 
 
-def _config(parse: typing.Callable[[Any], Any], raw: Any, err: _Errors) -> Any:
+def _checked(parse: typing.Callable[..., Any], err: _Errors, *args: Any) -> Any:
+    """`parse(*args)`, its `ConfigError` reported as this scenario's error."""
     try:
-        return parse(raw)
+        return parse(*args)
     except ConfigError as exc:
         err.fail(exc.key, exc.what)
 
 
 def _check_node_names(check: CheckConfig, names: list[str], err: _Errors) -> None:
     """The node names `check:` mentions (queue bounds, crashes) must be nodes."""
-    expected = f"expected one of {', '.join(sorted(names))}"
-    for name in unknown_names(check.queue_bound.keys(), names):
-        err.fail(f"check.queue_bound.{name}", f"{name!r} is not a node of this scenario; {expected}")
     crash = check.faults.crash
-    if crash is not None:
-        for name in unknown_names((*crash.nodes, *crash.durable), names):
-            err.fail("check.faults.crash", f"{name!r} is not a node of this scenario; {expected}")
+    named = [(f"check.queue_bound.{n}", n) for n in check.queue_bound.named()]
+    named += [("check.faults.crash", n) for n in (*crash.nodes, *crash.durable)] if crash else []
+    for key, name in named:
+        if name not in names:
+            err.fail(key, f"{name!r} is not a node of this scenario; expected one of "
+                     f"{', '.join(sorted(names))}")
 
 
 class _Errors:
@@ -352,7 +352,8 @@ def _node(i: int, raw: Any, common: Mapping[str, Any], context: Mapping[str, Any
                                      for f in dataclasses.fields(given)}
     else:
         raw_params = _get(raw, "params", dict, err, default={}, where=where)
-        params = build_params(cls.Params, raw_params, common, context, err, where + "params")
+        params = _checked(build_params, err, cls.Params, raw_params, common, context,
+                          where + "params")
     return NodeConfig(name=name, cls=cls, class_path=class_path, namespace=namespace,
                       priority=_get(raw, "priority", int, err, default=0, where=where),
                       respawn=_get(raw, "respawn", bool, err, default=False, where=where),
@@ -388,70 +389,6 @@ def _node_class(value: Any, err: _Errors, key: str) -> tuple[type[Node], str]:
     if not (isinstance(cls, type) and issubclass(cls, Node)):
         err.fail(key, f"{path!r} is not a subclass of twinfleet.Node")
     return cls, path
-
-
-def build_params(params_cls: type, given: Mapping[str, Any], common: Mapping[str, Any],
-                 context: Mapping[str, Any], err: _Errors, where: str) -> Any:
-    """Build a frozen Params dataclass from scenario values, checking names and types."""
-    fields = {f.name: f for f in dataclasses.fields(params_cls)}
-    for key in given:
-        if key not in fields:
-            expected = ", ".join(fields) or "no parameters"
-            err.fail(f"{where}.{key}", f"unknown parameter of {params_cls.__name__}; expected {expected}")
-    values = {k: v for k, v in context.items() if k in fields and v is not None}
-    values.update({k: v for k, v in common.items() if k in fields})
-    values.update(given)
-    hints = typing.get_type_hints(params_cls)
-    converted = {k: _convert(v, hints.get(k, Any), err, f"{where}.{k}") for k, v in values.items()}
-    missing = [f.name for f in fields.values() if f.name not in converted
-               and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
-    if missing:
-        err.fail(f"{where}.{missing[0]}", f"missing; {params_cls.__name__} needs {', '.join(missing)}")
-    try:
-        return params_cls(**converted)
-    except (TypeError, ValueError) as exc:
-        err.fail(where, str(exc))
-
-
-def _convert(value: Any, hint: Any, err: _Errors, key: str) -> Any:
-    """Check a YAML value against a type hint; lists become tuples for tuple fields."""
-    origin = typing.get_origin(hint)
-    if hint is Any:
-        return value
-    if origin in (typing.Union, types.UnionType):
-        for option in typing.get_args(hint):
-            try:
-                return _convert(value, option, _Silent(), key)
-            except ScenarioError:
-                continue
-        err.fail(key, f"expected {_hint_name(hint)}, got {value!r}")
-    if hint is type(None):
-        if value is None:
-            return None
-        err.fail(key, f"expected null, got {value!r}")
-    if origin is tuple:
-        if not isinstance(value, list | tuple):
-            err.fail(key, f"expected a list ({_hint_name(hint)}), got {value!r}")
-        args = typing.get_args(hint)
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_convert(v, args[0], err, f"{key}[{i}]") for i, v in enumerate(value))
-        if len(args) != len(value):
-            err.fail(key, f"expected {len(args)} values ({_hint_name(hint)}), got {value!r}")
-        return tuple(_convert(v, a, err, f"{key}[{i}]") for i, (v, a) in enumerate(zip(value, args, strict=True)))
-    if hint is float and isinstance(value, int) and not isinstance(value, bool):
-        return float(value)
-    if isinstance(hint, type) and not isinstance(value, hint) or (hint is int and isinstance(value, bool)):
-        err.fail(key, f"expected {_hint_name(hint)}, got {value!r}")
-    return value
-
-
-class _Silent(_Errors):
-    def __init__(self) -> None:
-        super().__init__("?")
-
-
-def _hint_name(hint: Any) -> str:
-    return getattr(hint, "__name__", None) or str(hint).replace("typing.", "")
 
 
 def _property(i: int, raw: Any, err: _Errors) -> PropertyConfig:

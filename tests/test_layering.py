@@ -29,8 +29,8 @@ pytestmark = pytest.mark.timeout(60)
 ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = {"runtime": "runtime", "checker": "checker", "nodes": "nodes", "agreement": "agreement"}
 #: runtime/ modules that import neither Zenoh nor asyncio: the checker and the nodes may use them.
-CONTRACT = {"context", "dispatch", "kinds", "messages", "names", "node", "scenario", "snapshot",
-            "tracefile"}
+CONTRACT = {"config", "context", "dispatch", "examples", "kinds", "messages", "names", "node",
+            "params", "scenario", "snapshot", "tracefile"}
 ALLOWED = {
     "api": {"api", "runtime-contract"},
     "runtime-contract": {"runtime-contract"},
