@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import io
+import json
 import tempfile
 from pathlib import Path
 from typing import Any
@@ -189,7 +190,8 @@ def pong_report(scenario: Scenario) -> PongReport:
 
 @pytest.mark.slow
 @pytest.mark.timeout(90)
-def test_a_python_scenario_runs_live(tmp_path: Path) -> None:
+@pytest.mark.parametrize("record", [False, True], ids=["private-file", "beside-the-event-log"])
+def test_a_python_scenario_runs_live(tmp_path: Path, record: bool) -> None:
     from tests.integration.itest_support import poll, processes_mentioning
     from twinfleet.runtime.launcher import format_result, run_fleet
 
@@ -197,13 +199,21 @@ def test_a_python_scenario_runs_live(tmp_path: Path) -> None:
                                          NodeEntry("pong", Pong)],
                               live={"report": f"{__name__}:pong_report"})
     private_dirs = set(Path(tempfile.gettempdir()).glob("twinfleet-scenario-*"))
+    events = str(tmp_path / "events.jsonl") if record else None
     out = io.StringIO()
     result = asyncio.run(asyncio.wait_for(
-        run_fleet(scenario, timeout_s=60, out=out, handle_signals=False), 80))
+        run_fleet(scenario, timeout_s=60, out=out, handle_signals=False, record_events=events),
+        80))
     text = out.getvalue() + "\n".join(format_result(result))
     assert result.reason == "the run report says every robot is done", text
     assert result.passed and result.report.seen == [1, 2, 3], text
     assert not result.failed, text
-    # The node processes loaded a private file; it is gone, and so are they.
+    # The node processes loaded a file written for them: a private one is gone afterwards;
+    # one beside an event log stays, named by the log, so `twinfleet validate` can use it.
     assert set(Path(tempfile.gettempdir()).glob("twinfleet-scenario-*")) == private_dirs
-    assert poll(lambda: not processes_mentioning("pypong.yaml"), 5)
+    if events is not None:
+        header = json.loads(Path(events).read_text().splitlines()[0])
+        assert header["scenario"] == f"{events}.scenario.yaml"
+        assert load_scenario(header["scenario"]).node("ping").params == PingParams(rounds=3)
+    marker = f"{events}.scenario.yaml" if events is not None else "/pypong.yaml"
+    assert poll(lambda: not processes_mentioning(marker), 5)
