@@ -34,7 +34,8 @@ import msgpack
 from twinfleet.runtime.clock import Clock, FleetClock
 from twinfleet.runtime.host import NodeHost
 from twinfleet.runtime.names import KEY_PREFIX
-from twinfleet.runtime.replay_gate import EventLog, LogicalClock
+from twinfleet.runtime.eventlog import EventLog
+from twinfleet.runtime.replay_gate import LogicalClock
 from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario
 from twinfleet.runtime.schemas import registered_schemas, types_key
 from twinfleet.runtime.transport import Respond

@@ -22,7 +22,9 @@ from twinfleet import (
     subscribe,
 )
 from twinfleet.runtime.clock import ManualClock
-from twinfleet.runtime.host import MAX_GAP, NodeHost, derive_seed
+from twinfleet.runtime.choosers import derive_seed
+from twinfleet.runtime.core import MAX_GAP
+from twinfleet.runtime.host import NodeHost
 from twinfleet.runtime.messages import NodeAlive, Violation, decode, encode
 from twinfleet.runtime.names import key_expr
 from twinfleet.runtime.node import QOS_DEFAULT, QOS_LATCHED, QoS, Reliability
