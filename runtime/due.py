@@ -104,8 +104,9 @@ class DueEntries:
         return False
 
     def entries(self) -> list[Entry]:
-        """The live entries, in due order."""
-        return [key[3] for key in sorted(self._heap) if not self._void(key[3])]
+        """The live entries, in the order they would run: by due time, then priority."""
+        keys = sorted(self._heap, key=lambda key: (key[0], key[2], key[1]))
+        return [key[3] for key in keys if not self._void(key[3])]
 
     def timers(self) -> int:
         """How many `ctx.after` timers and `@every` ticks are armed (call timeouts aside)."""

@@ -32,9 +32,9 @@ from collections.abc import Sequence
 import msgpack
 
 from twinfleet.runtime.clock import Clock, FleetClock
+from twinfleet.runtime.eventlog import EventLog
 from twinfleet.runtime.host import NodeHost
 from twinfleet.runtime.names import KEY_PREFIX
-from twinfleet.runtime.eventlog import EventLog
 from twinfleet.runtime.replay_gate import LogicalClock
 from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario
 from twinfleet.runtime.schemas import registered_schemas, types_key

@@ -21,8 +21,8 @@ from twinfleet import (
     service,
     subscribe,
 )
-from twinfleet.runtime.clock import ManualClock
 from twinfleet.runtime.choosers import derive_seed
+from twinfleet.runtime.clock import ManualClock
 from twinfleet.runtime.core import MAX_GAP
 from twinfleet.runtime.host import NodeHost
 from twinfleet.runtime.messages import NodeAlive, Violation, decode, encode
