@@ -54,10 +54,10 @@ import heapq
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Final, NamedTuple, Protocol, final
+from typing import Any, Final, Protocol, final
 
 from twinfleet.runtime.choosers import RecordingChooser, SeededChooser, derive_seed
-from twinfleet.runtime.context import After, Call, Chooser, Context, Effect, Fail, Log, Publish
+from twinfleet.runtime.context import Chooser, Context, Effect
 from twinfleet.runtime.dispatch import HandlerError, invoke
 from twinfleet.runtime.due import DueEntries
 from twinfleet.runtime.entries import Entry
@@ -66,71 +66,18 @@ from twinfleet.runtime.messages import (
     CallError,
     DecodeError,
     NodeAlive,
-    Violation,
     decode_fields,
-    encode,
 )
 from twinfleet.runtime.node import HandlerSpec, Node, Reliability
+from twinfleet.runtime.outbox import Answer, Line, Outbox, Output
 
 LIVELINESS_TOPIC: Final = "/_liveliness"
-VIOLATIONS_TOPIC: Final = "/violations"
 MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is not a loss
 _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
 _TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOUT})
 _COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "published",
                     "handled", "keep_last", "best_effort", "seq_jumps")
 _NOTHING: Final[tuple[()]] = ()
-
-
-# ------------------------------------------------------------------ outputs
-
-
-class Put(NamedTuple):
-    """Put `payload` (an encoded envelope) on the absolute `topic`.
-
-    A NamedTuple, not a frozen dataclass like the other outputs: one is built per
-    published message, and a tuple is built in half the time.
-    """
-
-    topic: str
-    payload: bytes
-
-
-@dataclass(frozen=True, slots=True)
-class Query:
-    """Ask the server of `service`; hand its answer to `NodeCore.receive_reply(call, ...)`."""
-
-    call: int
-    service: str
-    payload: bytes
-    timeout_ms: int  # fleet ms; the core's TIMEOUT entry fires then whatever the transport does
-
-
-@dataclass(frozen=True, slots=True)
-class Answer:
-    """Answer the request that ran through `responder`: a payload, or None and a reason."""
-
-    responder: Any
-    payload: bytes | None
-    reason: str
-
-
-@dataclass(frozen=True, slots=True)
-class Line:
-    """A log line (`err`: a warning or an error)."""
-
-    text: str
-    err: bool = False
-
-
-@dataclass(frozen=True, slots=True)
-class Stop:
-    """Stop the node: a handler failed under ``stop_on_error``."""
-
-    reason: str
-
-
-Output = Put | Query | Answer | Line | Stop
 
 
 # ------------------------------------------------------------------ observers and statistics
@@ -181,11 +128,6 @@ _Sample = tuple[Any, int, int, str]
 Receive = Callable[[bytes, int], bool]
 
 
-def _violation(node: str, handler: str, reason: str) -> tuple[Publish]:
-    """What a failure publishes, as if the handler had: a `Violation` on /violations."""
-    return (Publish(VIOLATIONS_TOPIC, Violation(node, handler, reason)),)
-
-
 @final
 class _Subscription:
     """One declared subscription: its handler and its KEEP_LAST queue of waiting samples."""
@@ -218,15 +160,14 @@ class NodeCore:
     def __init__(self, node: Node, *, seed: int, stop_on_error: bool = False,
                  keep_last: bool = True) -> None:
         self.node, self.spec = node, node.spec()
-        self.stop_on_error = stop_on_error
         self.due = DueEntries(node)
         self._random = SeededChooser(derive_seed(seed, node.name))
         self._inbox: list[tuple[int, int, int, Entry | _Subscription]] = []
         self._counter = self.due.counter
-        self._pub_seq: dict[str, int] = {}
         self._last_seq: dict[str, dict[str, int]] = {}  # topic -> sender -> last seq
         self._observers: list[Observer] = []
         self._n = dict.fromkeys(_COUNTERS, 0)
+        self._outbox = Outbox(node.name, self.due, self._n, stop_on_error=stop_on_error)
         self._subs: dict[str, _Subscription] = {}
         self._liveliness: HandlerSpec | None = None
         for spec in self.spec.of_kind("subscribe"):
@@ -440,7 +381,7 @@ class NodeCore:
 
     def _execute(self, method: str, args: tuple[Any, ...], now: int, chooser: Chooser,
                  responder: Any) -> tuple[Sequence[Output], list[Effect], HandlerError | None]:
-        """Run one handler and translate what it did into outputs."""
+        """Run one handler; what it did, as outputs (and its effects and error, for observers)."""
         node = self.node
         ctx = Context(node, now, chooser)
         reply, error = invoke(node, method, ctx, args, responder is not None)
@@ -450,72 +391,15 @@ class NodeCore:
             if not effects:
                 return _NOTHING, effects, None
             out: list[Output] = []
-            error = self._translate(effects, now, method, out)
+            error = self._outbox.translate(effects, now, method, out)
             if error is None:
                 return out, effects, None
         else:
             out = []
             if effects:
-                error = error or self._translate(effects, now, method, out)
-        payload = None
-        if responder is not None and error is None:
-            try:
-                payload = encode(reply, stamp_ms=now, sender=node.name)
-            except Exception as exc:
-                error = HandlerError(node.name, method, f"unencodable reply: {exc!r}")
-        if error is not None:
-            self._report(error, args, now, out)
-        if responder is not None:
-            out.append(Answer(responder, payload, "") if error is None
-                       else Answer(responder, None, f"server error: {error.message}"))
+                error = error or self._outbox.translate(effects, now, method, out)
+        error = self._outbox.finish(method, args, reply, error, responder, now, out)
         return out, effects, error
-
-    def _translate(self, effects: Sequence[Effect], now: int, method: str,
-                   out: list[Output]) -> HandlerError | None:
-        """Effects → outputs, in order; an effect that fails (unencodable) ends the handler's."""
-        name, seqs, n = self.node.name, self._pub_seq, self._n
-        try:
-            for effect in effects:
-                if type(effect) is Publish:  # by far the most frequent: inline, no matching
-                    topic = effect.topic
-                    seq = seqs.get(topic, 0) + 1
-                    out.append(Put(topic, encode(effect.msg, stamp_ms=now, seq=seq, sender=name)))
-                    seqs[topic] = seq  # after the encode: an unencodable message takes no number
-                    n["published"] += 1
-                    continue
-                match effect:
-                    case Call():
-                        out.append(self._query(effect, now))
-                    case After(delay_ms=delay, handler=handler, args=args):
-                        self.due.arm(Entry(EventKind.TIMER, handler, args, name, due=now + delay))
-                    case Fail(reason=reason):
-                        n["failures"] += 1
-                        out.append(Line(f"t={now} FAIL {reason}", err=True))
-                        self._translate(_violation(name, "", reason), now, method, out)
-                    case Log(event=event, fields=fields):
-                        text = " ".join(f"{k}={v!r}" for k, v in fields)
-                        out.append(Line(f"t={now} {event}" + (f" {text}" if text else "")))
-        except Exception as exc:  # e.g. a message msgpack cannot encode (an int ≥ 2**64)
-            return HandlerError(name, method, f"effect failed: {exc!r}")
-        return None
-
-    def _query(self, call: Call, now: int) -> Query:
-        cid = self.due.open_call(call, now)
-        payload = encode(call.request, stamp_ms=now, sender=self.node.name)
-        return Query(cid, call.service, payload, call.timeout_ms)
-
-    def _report(self, error: HandlerError, args: tuple[Any, ...], now: int,
-                out: list[Output]) -> None:
-        self._n["errors"] += 1
-        detail = ", ".join(repr(a)[:120] for a in args)
-        out.append(Line(f"error in handler {error} (args: {detail})", err=True))
-        if error.traceback:
-            out.append(Line(error.traceback.rstrip(), err=True))
-        self._translate(_violation(error.node, error.handler, error.message), now, error.handler,
-                        out)
-        if self.stop_on_error:
-            out.append(Line("stopping: live.stop_on_error is set", err=True))
-            out.append(Stop(f"{error}"))
 
     def statistics(self, dropped_overflow: int = 0) -> HostStatistics:
         """Counters since start, as a frozen record (`dropped_overflow`: the transport's)."""

@@ -41,11 +41,12 @@ from collections.abc import Callable, Sequence
 from typing import TextIO, final
 
 from twinfleet.runtime.clock import Clock, TimerHandle
-from twinfleet.runtime.core import Answer, HostStatistics, Line, NodeCore, Output, Put, Query, Stop
+from twinfleet.runtime.core import HostStatistics, NodeCore
 from twinfleet.runtime.eventlog import EventLog
 from twinfleet.runtime.messages import DecodeError
 from twinfleet.runtime.names import key_expr
 from twinfleet.runtime.node import QOS_DEFAULT, Node
+from twinfleet.runtime.outbox import Answer, Line, Output, Put, Query, Stop
 from twinfleet.runtime.replay_gate import LogicalClock, ReplayGate, gate_key
 from twinfleet.runtime.transport import Respond, Transport, graph_key, parse_graph_key
 

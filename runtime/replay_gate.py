@@ -30,7 +30,7 @@ import msgpack
 from twinfleet.runtime.choosers import RecordingChooser
 from twinfleet.runtime.clock import TimerHandle
 from twinfleet.runtime.context import Publish
-from twinfleet.runtime.core import Handled, NodeCore, Output
+from twinfleet.runtime.core import Handled, NodeCore
 from twinfleet.runtime.entries import Entry
 from twinfleet.runtime.eventlog import (  # the event log's names, imported from here by agreement/
     EVENTS_FORMAT,
@@ -42,6 +42,7 @@ from twinfleet.runtime.eventlog import (  # the event log's names, imported from
 )
 from twinfleet.runtime.messages import type_name_of
 from twinfleet.runtime.names import KEY_PREFIX
+from twinfleet.runtime.outbox import Output
 from twinfleet.runtime.transport import Respond
 
 __all__ = ["EVENTS_FORMAT", "GATED_CALL_WALL_S", "EventLog", "LogicalClock", "ReplayGate",

@@ -21,21 +21,12 @@ from twinfleet import (
     subscribe,
 )
 from twinfleet.runtime.choosers import RecordingChooser
-from twinfleet.runtime.core import (
-    MAX_GAP,
-    Answer,
-    Handled,
-    Line,
-    NodeCore,
-    Output,
-    Put,
-    Query,
-    Stop,
-)
+from twinfleet.runtime.core import MAX_GAP, Handled, NodeCore
 from twinfleet.runtime.entries import Entry
 from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.messages import DecodeError, NodeAlive, Violation, decode, encode
 from twinfleet.runtime.node import QoS, Reliability
+from twinfleet.runtime.outbox import Answer, Line, Output, Put, Query, Stop
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -448,7 +439,7 @@ def test_entries_are_named_and_frozen():
     assert entry != Entry(EventKind.DELIVERY, "on_num", (Num(1),), "a", "/nums", 3, 7)  # identity
 
 
-@pytest.mark.parametrize("module", ["core", "due", "entries", "choosers"])
+@pytest.mark.parametrize("module", ["core", "due", "entries", "choosers", "outbox"])
 def test_the_core_knows_no_asyncio_and_does_no_io(module):
     tree = ast.parse((ROOT / "runtime" / f"{module}.py").read_text())
     names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}

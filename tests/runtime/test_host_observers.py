@@ -10,7 +10,7 @@ from typing import Any
 
 import msgpack
 
-from tests.runtime.test_host import (
+from tests.runtime.hosts import (
     FLEET,
     Asker,
     AskerParams,
