@@ -32,7 +32,8 @@ and never touches a socket:
 5. Running. `run_next(now)` runs the first inbox entry's handler through
    `runtime.dispatch.invoke`; `run(entry, now, chooser)` runs any pending
    entry out of order (the replay gate's way in). Both return the handler's
-   effects as *outputs*, values the driver performs in order: `Put` (an
+   effects as *outputs* (`runtime.outbox`), values the driver performs in
+   order before it asks for the next handler: `Put` (an
    envelope with the topic's next sequence number), `Query` (a service call,
    whose answer comes back through `receive_reply`), `Answer` (the reply to
    the request that ran), `Line` (a log line), `Stop` (``stop_on_error`` after
