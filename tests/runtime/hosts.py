@@ -8,9 +8,20 @@ from collections.abc import Coroutine
 from dataclasses import dataclass, field
 from typing import Any
 
-from twinfleet import CallError, Context, Node, handler, message, on_start, service
+from twinfleet import (
+    CallError,
+    Context,
+    Node,
+    every,
+    handler,
+    message,
+    on_start,
+    service,
+    subscribe,
+)
 from twinfleet.runtime.clock import ManualClock
 from twinfleet.runtime.host import NodeHost
+from twinfleet.runtime.node import QoS, Reliability
 from twinfleet.runtime.transport import LoopbackBus, LoopbackTransport
 
 FLEET = "t"
@@ -24,6 +35,53 @@ class Num:
 @dataclass
 class Log:
     seen: list[Any] = field(default_factory=list)
+
+
+class Recorder(Node):
+    """Records (time, event) pairs; two timers with different priorities; an `after` chain."""
+
+    def initial_state(self) -> Log:
+        return Log()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        self.state.seen.append((ctx.now(), "start"))
+        ctx.after(50, self.later, "x")
+
+    @handler(priority=3)
+    def later(self, ctx: Context, tag: str) -> None:
+        self.state.seen.append((ctx.now(), f"later {tag}"))
+
+    @every(100, priority=2)
+    def slow_tick(self, ctx: Context) -> None:
+        self.state.seen.append((ctx.now(), "tick p2"))
+
+    @every(100, priority=1)
+    def fast_tick(self, ctx: Context) -> None:
+        self.state.seen.append((ctx.now(), "tick p1"))
+
+    @subscribe("/low", priority=5)
+    def on_low(self, ctx: Context, msg: Num) -> None:
+        self.state.seen.append((ctx.now(), f"low {msg.value}"))
+
+    @subscribe("/high", priority=0)
+    def on_high(self, ctx: Context, msg: Num) -> None:
+        self.state.seen.append((ctx.now(), f"high {msg.value}"))
+
+
+class Shallow(Node):
+    """Keeps at most three waiting messages per subscription (KEEP_LAST depth 3)."""
+
+    def initial_state(self) -> Log:
+        return Log()
+
+    @subscribe("/nums", qos=QoS(depth=3))
+    def on_num(self, ctx: Context, msg: Num) -> None:
+        self.state.seen.append(msg.value)
+
+    @subscribe("/other", qos=QoS(Reliability.BEST_EFFORT, depth=1))
+    def on_other(self, ctx: Context, msg: Num) -> None:
+        self.state.seen.append(-msg.value)
 
 
 class Doubler(Node):

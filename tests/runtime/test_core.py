@@ -3,21 +3,18 @@
 from __future__ import annotations
 
 import ast
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import pytest
 
+from tests.runtime.hosts import Doubler, Log, Num, Recorder, Shallow
 from twinfleet import (
     CallError,
     Context,
     Node,
-    every,
     handler,
-    message,
     on_start,
-    service,
     subscribe,
 )
 from twinfleet.runtime.choosers import RecordingChooser
@@ -25,52 +22,20 @@ from twinfleet.runtime.core import MAX_GAP, Handled, NodeCore
 from twinfleet.runtime.entries import Entry
 from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.messages import DecodeError, NodeAlive, Violation, decode, encode
-from twinfleet.runtime.node import QoS, Reliability
 from twinfleet.runtime.outbox import Answer, Line, Output, Put, Query, Stop
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-@message("test_core/Num")
-class Num:
-    value: int
+class Faulty(Node):
+    """Fails in every way a handler can: raises, ctx.fail, an unencodable publish."""
 
+    def initial_state(self) -> Log:
+        return Log()
 
-@dataclass
-class Seen:
-    log: list[Any] = field(default_factory=list)
-
-
-class Busy(Node):
-    """A bit of everything: priorities, timers, a call, a service, failures."""
-
-    def initial_state(self) -> Seen:
-        return Seen()
-
-    @on_start
-    def start(self, ctx: Context) -> None:
-        self.state.log.append((ctx.now(), "start"))
-        ctx.after(50, self.later, "x")
-
-    @handler(priority=3)
-    def later(self, ctx: Context, tag: str) -> None:
-        self.state.log.append((ctx.now(), f"later {tag}"))
-
-    @every(100, priority=2)
-    def slow_tick(self, ctx: Context) -> None:
-        self.state.log.append((ctx.now(), "tick p2"))
-
-    @every(100, priority=1)
-    def fast_tick(self, ctx: Context) -> None:
-        self.state.log.append((ctx.now(), "tick p1"))
-
-    @subscribe("/low", priority=5)
-    def on_low(self, ctx: Context, msg: Num) -> None:
-        self.state.log.append((ctx.now(), f"low {msg.value}"))
-
-    @subscribe("/high", priority=0)
+    @subscribe("/high")
     def on_high(self, ctx: Context, msg: Num) -> None:
-        self.state.log.append((ctx.now(), f"high {msg.value}"))
+        self.state.seen.append((ctx.now(), f"high {msg.value}"))
         if msg.value < 0:
             raise ValueError("negative")
         if msg.value == 13:
@@ -82,8 +47,8 @@ class Busy(Node):
 
 
 class Caller(Node):
-    def initial_state(self) -> Seen:
-        return Seen()
+    def initial_state(self) -> Log:
+        return Log()
 
     @on_start
     def start(self, ctx: Context) -> None:
@@ -91,35 +56,19 @@ class Caller(Node):
 
     @handler(priority=4)
     def on_reply(self, ctx: Context, reply: Num | CallError) -> None:
-        self.state.log.append((ctx.now(), reply))
+        self.state.seen.append((ctx.now(), reply))
 
 
-class Doubler(Node):
-    @service("/double")
-    def double(self, ctx: Context, req: Num) -> Num:
-        if req.value < 0:
-            raise ValueError("negative")
-        return Num(req.value * 2)
-
-
-class Shallow(Node):
-    def initial_state(self) -> Seen:
-        return Seen()
-
-    @subscribe("/nums", qos=QoS(depth=3))
-    def on_num(self, ctx: Context, msg: Num) -> None:
-        self.state.log.append(msg.value)
-
-    @subscribe("/other", qos=QoS(Reliability.BEST_EFFORT, depth=1))
-    def on_other(self, ctx: Context, msg: Num) -> None:
-        self.state.log.append(-msg.value)
+class Watcher(Node):
+    def initial_state(self) -> Log:
+        return Log()
 
     @subscribe("/_liveliness")
     def on_alive(self, ctx: Context, msg: NodeAlive) -> None:
-        self.state.log.append(msg)
+        self.state.seen.append(msg)
 
 
-class Recorder:
+class Records:
     """An observer that keeps every record."""
 
     def __init__(self) -> None:
@@ -151,7 +100,7 @@ def started(node: Node, now: int = 0, **kw: Any) -> NodeCore:
 
 
 def test_one_millisecond_runs_by_priority_then_arrival_and_earlier_arrivals_first():
-    node = Busy("busy")
+    node = Recorder("busy")
     core = started(node)
     drain(core, 0)
     low, high = core.receiver("on_low"), core.receiver("on_high")
@@ -159,22 +108,22 @@ def test_one_millisecond_runs_by_priority_then_arrival_and_earlier_arrivals_firs
     for value, receive, arrival in ((1, low, 10), (2, high, 10), (3, low, 10), (4, high, 10)):
         receive(sample(value, seq=value + 1), arrival)
     drain(core, 11)
-    assert [e for _, e in node.state.log[1:]] == ["low 0", "high 2", "high 4", "low 1", "low 3"]
-    assert {t for t, _ in node.state.log[1:]} == {11}  # deliveries see the time they run
+    assert [e for _, e in node.state.seen[1:]] == ["low 0", "high 2", "high 4", "low 1", "low 3"]
+    assert {t for t, _ in node.state.seen[1:]} == {11}  # deliveries see the time they run
 
 
 def test_start_runs_before_what_arrived_before_it():
-    node = Busy("busy")
+    node = Recorder("busy")
     core = NodeCore(node, seed=1)
     core.receiver("on_high")(sample(1), 0)
     assert core.has_ready()
     core.start(3)
     drain(core, 3)
-    assert node.state.log == [(3, "start"), (3, "high 1")]
+    assert node.state.seen == [(3, "start"), (3, "high 1")]
 
 
 def test_after_and_every_are_due_entries_that_run_at_their_due_time():
-    node = Busy("busy")
+    node = Recorder("busy")
     core = started(node)
     drain(core, 0)
     assert core.next_due() == 50
@@ -185,18 +134,18 @@ def test_after_and_every_are_due_entries_that_run_at_their_due_time():
     assert core.release_due(100) == 2
     drain(core, 100)
     assert core.next_due() == 200  # each tick re-armed one period later: no drift
-    assert node.state.log == [(0, "start"), (50, "later x"), (100, "tick p1"), (100, "tick p2")]
+    assert node.state.seen == [(0, "start"), (50, "later x"), (100, "tick p1"), (100, "tick p2")]
     assert core.statistics().timers_pending == 2
 
 
 def test_a_late_tick_skips_the_periods_it_missed():
-    node = Busy("busy")
+    node = Recorder("busy")
     core = started(node)
     drain(core, 0)
     assert core.release_due(1000) == 3  # the after at 50, the two ticks at 100, once each
     assert core.next_due() == 1100  # the first tick after now, not 200
     drain(core, 1000)
-    assert [t for t, e in node.state.log if e.startswith("tick")] == [100, 100]
+    assert [t for t, e in node.state.seen if e.startswith("tick")] == [100, 100]
 
 
 # ---------------------------------------------------------------- KEEP_LAST, gaps, decoding
@@ -209,7 +158,7 @@ def test_keep_last_keeps_the_newest_waiting_messages_and_counts_the_others():
     added = [receive(sample(seq, seq=seq), seq) for seq in range(1, 11)]
     assert added == [True] * 3 + [False] * 7  # three slots; later ones replace the oldest
     drain(core, 20)
-    assert node.state.log == [8, 9, 10]
+    assert node.state.seen == [8, 9, 10]
     stats = core.statistics()
     assert (stats.dropped_keep_last, stats.gaps, stats.received, stats.inbox_depth) == (7, 0, 10, 0)
 
@@ -246,11 +195,11 @@ def test_an_undecodable_sample_is_counted_and_raised():
 
 
 def test_liveliness_reaches_a_liveliness_subscriber_only():
-    node = Shallow("s")
+    node = Watcher("w")
     core = started(node)
     assert core.receive_liveliness("r1", True, 4)
     drain(core, 4)
-    assert node.state.log == [NodeAlive("r1", True)]
+    assert node.state.seen == [NodeAlive("r1", True)]
     assert not started(Doubler("d")).receive_liveliness("r1", True, 4)
 
 
@@ -300,7 +249,7 @@ def test_a_reply_runs_the_reply_handler_and_voids_the_timeout():
     assert core.next_due() == 210
     assert core.receive_reply(query.call, encode(Num(42), stamp_ms=12, sender="d"), "", 15)
     drain(core, 15)
-    assert node.state.log == [(15, Num(42))]
+    assert node.state.seen == [(15, Num(42))]
     assert core.next_due() is None and core.release_due(10_000) == 0
 
 
@@ -311,19 +260,19 @@ def test_no_answer_in_time_runs_the_reply_handler_with_a_timeout_at_its_due_time
     assert core.release_due(209) == 0
     assert core.release_due(210) == 1
     drain(core, 213)
-    assert node.state.log == [(210, CallError("/double", "timeout"))]
+    assert node.state.seen == [(210, CallError("/double", "timeout"))]
     assert not core.receive_reply(query.call, encode(Num(42)), "", 300)  # too late: ignored
 
 
 def test_a_call_error_from_the_transport_is_a_timeout_event():
-    node, recorder = Caller("c"), Recorder()
+    node, recorder = Caller("c"), Records()
     core = NodeCore(node, seed=1)
     core.observe(recorder)
     core.start(10)
     query = _call(core)
     assert core.receive_reply(query.call, None, "no server", 11)
     drain(core, 11)
-    assert node.state.log == [(11, CallError("/double", "no server"))]
+    assert node.state.seen == [(11, CallError("/double", "no server"))]
     entry = recorder.records[-1].entry
     assert (entry.kind, entry.sender, entry.topic) == (EventKind.TIMEOUT, "c", "/double")
 
@@ -332,30 +281,27 @@ def test_a_call_error_from_the_transport_is_a_timeout_event():
 
 
 def test_a_handler_exception_is_reported_and_the_next_entries_still_run():
-    node = Busy("busy")
+    node = Faulty("busy")
     core = started(node)
-    drain(core, 0)
     receive = core.receiver("on_high")
     receive(sample(-1, seq=1), 1)
     receive(sample(3, seq=2), 1)
     out = drain(core, 1)
     assert [type(o) for o in out] == [Line, Line, Put]  # error, traceback, violation
     assert decode(out[2].payload).msg == Violation("busy", "on_high", "ValueError: negative")
-    assert node.state.log[-1] == (1, "high 3")
+    assert node.state.seen[-1] == (1, "high 3")
     assert core.statistics().handler_errors == 1
 
 
 def test_stop_on_error_adds_a_stop_output():
-    core = started(Busy("busy"), stop_on_error=True)
-    drain(core, 0)
+    core = started(Faulty("busy"), stop_on_error=True)
     core.receiver("on_high")(sample(-1), 1)
     out = drain(core, 1)
     assert isinstance(out[-1], Stop) and "negative" in out[-1].reason
 
 
 def test_fail_is_counted_logged_and_published():
-    core = started(Busy("busy"))
-    drain(core, 0)
+    core = started(Faulty("busy"))
     core.receiver("on_high")(sample(13), 2)
     line, put = drain(core, 2)
     assert line == Line("t=2 FAIL unlucky", err=True)
@@ -364,8 +310,7 @@ def test_fail_is_counted_logged_and_published():
 
 
 def test_an_unencodable_publish_is_a_handler_error_that_takes_no_sequence_number():
-    core = started(Busy("busy"))
-    drain(core, 0)
+    core = started(Faulty("busy"))
     receive = core.receiver("on_high")
     receive(sample(99, seq=1), 2)
     receive(sample(7, seq=2), 2)
@@ -379,7 +324,7 @@ def test_an_unencodable_publish_is_a_handler_error_that_takes_no_sequence_number
 
 
 def test_observers_see_every_run_with_a_named_entry():
-    node, recorder = Busy("busy"), Recorder()
+    node, recorder = Recorder("busy"), Records()
     core = NodeCore(node, seed=1)
     core.observe(recorder)
     core.start(0)
@@ -410,15 +355,15 @@ def test_pending_lists_everything_and_run_takes_any_of_it_out_of_turn():
     assert [e.args[0].value for e in pending] == [1, 2, 3, 4, 5]
     chooser = RecordingChooser(None)
     core.run(pending[3], 40, chooser)
-    assert node.state.log == [4]
+    assert node.state.seen == [4]
     drain(core, 50)  # the others keep their order
-    assert node.state.log == [4, 1, 2, 3, 5]
+    assert node.state.seen == [4, 1, 2, 3, 5]
     with pytest.raises(ValueError, match="not pending"):
         core.run(pending[0], 60)
 
 
 def test_run_takes_timers_before_they_are_due_and_a_taken_tick_re_arms():
-    node = Busy("busy")
+    node = Recorder("busy")
     core = NodeCore(node, seed=1)
     core.start(0)
     start, tick1, tick2 = core.pending()
@@ -428,7 +373,7 @@ def test_run_takes_timers_before_they_are_due_and_a_taken_tick_re_arms():
     later = next(e for e in core.pending() if e.kind is EventKind.TIMER)
     core.run(tick1, 100)
     core.run(later, 120)
-    assert node.state.log == [(0, "start"), (100, "tick p1"), (120, "later x")]
+    assert node.state.seen == [(0, "start"), (100, "tick p1"), (120, "later x")]
     assert [e.due for e in core.pending() if e.handler == "fast_tick"] == [200]
 
 

@@ -6,14 +6,25 @@ import asyncio
 import hashlib
 from typing import Any
 
-from tests.runtime.hosts import FLEET, Asker, AskerParams, Doubler, Harness, Log, Num, run, settle
+from tests.runtime.hosts import (
+    FLEET,
+    Asker,
+    AskerParams,
+    Doubler,
+    Harness,
+    Log,
+    Num,
+    Recorder,
+    Shallow,
+    run,
+    settle,
+)
 from twinfleet import (
     CallError,
     Context,
     Node,
     String,
     every,
-    handler,
     on_start,
     service,
     subscribe,
@@ -24,40 +35,8 @@ from twinfleet.runtime.core import MAX_GAP
 from twinfleet.runtime.host import NodeHost
 from twinfleet.runtime.messages import NodeAlive, Violation, decode, encode
 from twinfleet.runtime.names import key_expr
-from twinfleet.runtime.node import QOS_DEFAULT, QOS_LATCHED, QoS, Reliability
+from twinfleet.runtime.node import QOS_DEFAULT, QOS_LATCHED
 from twinfleet.runtime.transport import LoopbackTransport
-
-
-class Recorder(Node):
-    """Records (time, event) pairs; two timers with different priorities; an `after` chain."""
-
-    def initial_state(self) -> Log:
-        return Log()
-
-    @on_start
-    def start(self, ctx: Context) -> None:
-        self.state.seen.append((ctx.now(), "start"))
-        ctx.after(50, self.later, "x")
-
-    @handler(priority=3)
-    def later(self, ctx: Context, tag: str) -> None:
-        self.state.seen.append((ctx.now(), f"later {tag}"))
-
-    @every(100, priority=2)
-    def slow_tick(self, ctx: Context) -> None:
-        self.state.seen.append((ctx.now(), "tick p2"))
-
-    @every(100, priority=1)
-    def fast_tick(self, ctx: Context) -> None:
-        self.state.seen.append((ctx.now(), "tick p1"))
-
-    @subscribe("/low", priority=5)
-    def on_low(self, ctx: Context, msg: Num) -> None:
-        self.state.seen.append((ctx.now(), f"low {msg.value}"))
-
-    @subscribe("/high", priority=0)
-    def on_high(self, ctx: Context, msg: Num) -> None:
-        self.state.seen.append((ctx.now(), f"high {msg.value}"))
 
 
 class Fragile(Node):
@@ -392,21 +371,6 @@ def test_manual_clock_runs_due_callbacks_in_time_then_schedule_order() -> None:
     assert fired == ["past", "a", "b"]
     assert clock.now_ms() == 25
     assert clock.pending() == 1
-
-
-class Shallow(Node):
-    """Keeps at most three waiting messages per subscription (KEEP_LAST depth 3)."""
-
-    def initial_state(self) -> Log:
-        return Log()
-
-    @subscribe("/nums", qos=QoS(depth=3))
-    def on_num(self, ctx: Context, msg: Num) -> None:
-        self.state.seen.append(msg.value)
-
-    @subscribe("/other", qos=QoS(Reliability.BEST_EFFORT, depth=1))
-    def on_other(self, ctx: Context, msg: Num) -> None:
-        self.state.seen.append(-msg.value)
 
 
 def test_keep_last_drops_the_oldest_waiting_messages_and_counts_them() -> None:
