@@ -123,6 +123,17 @@ class HostStatistics:
     dropped_best_effort: int = 0
     sequence_jumps: int = 0  # sequence numbers that leapt by more than MAX_GAP (not counted as gaps)
 
+    @classmethod
+    def of(cls, n: dict[str, int], inbox_depth: int, timers_pending: int,
+           dropped_overflow: int) -> HostStatistics:
+        """The record of a core's counters `n`."""
+        return cls(received=n["received"], dropped_undecodable=n["undecodable"],
+                   handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
+                   inbox_depth=inbox_depth, timers_pending=timers_pending,
+                   published=n["published"], handled=n["handled"],
+                   dropped_keep_last=n["keep_last"], dropped_overflow=dropped_overflow,
+                   dropped_best_effort=n["best_effort"], sequence_jumps=n["seq_jumps"])
+
 
 # A received sample as `decode_fields` returns it: (msg, stamp_ms, seq, sender).
 _Sample = tuple[Any, int, int, str]
@@ -144,6 +155,17 @@ class _Subscription:
     def entry(self, sample: _Sample) -> Entry:
         msg, stamp, seq, sender = sample
         return Entry(EventKind.DELIVERY, self.method, (msg,), sender, self.topic, seq, stamp)
+
+    def take(self, entry: Entry, inbox: list[tuple[int, int, int, Any]]) -> bool:
+        """Remove the sample `entry` was made of, and one inbox slot; False if not waiting."""
+        k = next((i for i, (msg, _, seq, sender) in enumerate(self.waiting)
+                  if msg is entry.args[0] and (seq, sender) == (entry.seq, entry.sender)), None)
+        if k is None:
+            return False
+        del self.waiting[k]  # the k-th slot of a subscription stands for its k-th sample
+        inbox.remove(sorted(key for key in inbox if key[3] is self)[k])
+        heapq.heapify(inbox)
+        return True
 
 
 @final
@@ -347,15 +369,9 @@ class NodeCore:
 
     def _take(self, entry: Entry, now_ms: int) -> None:
         inbox = self._inbox
-        if entry.kind is EventKind.DELIVERY and entry.handler in self._subs:
-            sub = self._subs[entry.handler]
-            k = next((i for i, (msg, stamp, seq, sender) in enumerate(sub.waiting)
-                      if msg is entry.args[0] and (seq, sender) == (entry.seq, entry.sender)), None)
-            if k is not None:  # the k-th slot of a subscription stands for its k-th sample
-                del sub.waiting[k]
-                inbox.remove(sorted(key for key in inbox if key[3] is sub)[k])
-                heapq.heapify(inbox)
-                return
+        sub = self._subs.get(entry.handler) if entry.kind is EventKind.DELIVERY else None
+        if sub is not None and sub.take(entry, inbox):
+            return
         for i, key in enumerate(inbox):
             if key[3] is entry:
                 inbox[i] = inbox[-1]
@@ -404,10 +420,4 @@ class NodeCore:
 
     def statistics(self, dropped_overflow: int = 0) -> HostStatistics:
         """Counters since start, as a frozen record (`dropped_overflow`: the transport's)."""
-        n = self._n
-        return HostStatistics(received=n["received"], dropped_undecodable=n["undecodable"],
-                              handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
-                              inbox_depth=len(self._inbox), timers_pending=self.due.timers(),
-                              published=n["published"], handled=n["handled"],
-                              dropped_keep_last=n["keep_last"], dropped_overflow=dropped_overflow,
-                              dropped_best_effort=n["best_effort"], sequence_jumps=n["seq_jumps"])
+        return HostStatistics.of(self._n, len(self._inbox), self.due.timers(), dropped_overflow)
