@@ -13,6 +13,7 @@ the handler had published it, a "server error: ..." answer to a caller.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Final, NamedTuple, final
@@ -74,6 +75,9 @@ class Stop:
 
 Output = Put | Query | Answer | Line | Stop
 
+# `Put((topic, payload))` without the Python-level `__new__` a NamedTuple has: the hot path.
+_put: Final = functools.partial(tuple.__new__, Put)
+
 
 
 def _violation(node: str, handler: str, reason: str) -> tuple[Publish]:
@@ -107,7 +111,7 @@ class Outbox:
                 if type(effect) is Publish:  # by far the most frequent: inline, no matching
                     topic = effect.topic
                     seq = seqs.get(topic, 0) + 1
-                    out.append(Put(topic, encode(effect.msg, stamp_ms=now, seq=seq, sender=name)))
+                    out.append(_put((topic, encode(effect.msg, stamp_ms=now, seq=seq, sender=name))))
                     seqs[topic] = seq  # after the encode: an unencodable message takes no number
                     n["published"] += 1
                     continue
