@@ -11,9 +11,10 @@ The process also serves its statistics on ``twinfleet/<fleet>/@stats/<node>``
 Schemas of the message classes it knows on ``twinfleet/<fleet>/@types/<node>``
 (a JSON map type name → schema), which `twinfleet record --connect` reads.
 
-``--record-events FILE`` logs every dispatched event to FILE as JSON lines
-(`runtime.replay_gate.EventLog`); ``--gate`` runs the node under a replay
-coordinator: logical time, and only granted events run (`runtime.replay_gate.ReplayGate`).
+``--record-events FILE`` logs every handler run to FILE as JSON lines
+(`runtime.eventlog.EventLog`, an observer of the node core); ``--gate`` runs the
+node under a replay coordinator: logical time, and only granted events run
+(`runtime.replay_gate.ReplayGate`).
 """
 
 from __future__ import annotations
@@ -32,9 +33,10 @@ from collections.abc import Sequence
 import msgpack
 
 from twinfleet.runtime.clock import Clock, FleetClock
+from twinfleet.runtime.eventlog import EventLog
 from twinfleet.runtime.host import NodeHost
 from twinfleet.runtime.names import KEY_PREFIX
-from twinfleet.runtime.replay_gate import EventLog, LogicalClock
+from twinfleet.runtime.replay_gate import LogicalClock
 from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario
 from twinfleet.runtime.schemas import registered_schemas, types_key
 from twinfleet.runtime.transport import Respond

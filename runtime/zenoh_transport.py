@@ -13,7 +13,7 @@ if the loop stalls (a long handler, a suspended process), at most
 (``statistics()["overflow"]``) rather than blocking Zenoh's thread. Queries,
 replies and liveliness changes are never dropped (they are rare, and losing
 one would hang a caller or hide a node). Per-subscription KEEP_LAST depth is
-the host's job, after decoding (see `runtime.host`).
+the node core's job, after decoding (see `runtime.core`).
 
 Configuration. `zenoh_config` is the only place a Zenoh config is built: it
 always disables multicast scouting and shared memory and enables timestamping

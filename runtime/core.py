@@ -1,0 +1,423 @@
+"""NodeCore: one node's event handling, with no I/O, no clock and no asyncio (sans-IO).
+
+Theory of operation (the shape of h11's `Connection`: what arrives goes in,
+what to do next comes out as values). The driver hands the core what arrives,
+stamped with its arrival time in fleet ms — a sample (`receiver(method)`), a
+service request (`receive_request`), a call's reply or failure
+(`receive_reply`), a liveliness change (`receive_liveliness`) — and asks it
+for work, saying what time it is. The core never reads a clock, never sleeps
+and never touches a socket:
+
+1. Ordering. Whatever can run is an inbox entry keyed by ``(arrival_ms,
+   priority, n)``: events of one fleet millisecond run in handler-priority
+   order, others in arrival order, ``n`` keeps arrival order among equals.
+   `start` queues the `@on_start` handlers ahead of everything that arrived.
+2. Timed entries. `ctx.after` timers (TIMER), `@every` ticks (PERIODIC) and
+   call timeouts (TIMEOUT) are due entries of the core (`runtime.due`): the
+   driver asks `next_due()` and calls `release_due(now)`, which moves the due
+   ones into the inbox keyed by their due time (a late loop does not reorder
+   them) — the handler sees the due time as `ctx.now()`, so a chain of
+   `ctx.after` does not drift.
+3. KEEP_LAST. Each subscription keeps at most ``qos.depth`` received but not
+   yet handled messages; when one arrives with ``depth`` waiting, the oldest
+   waiting one is dropped and counted (``dropped_keep_last``). The inbox holds
+   one slot per waiting message and a slot runs the oldest waiting message of
+   its subscription, so a drop costs no inbox search.
+4. Gaps. Every decoded sample's sequence number is checked against the last
+   one of its sender on its topic: reliable topics count missing numbers as
+   ``gaps`` (a loss the tests treat as a bug), best-effort ones as
+   ``dropped_best_effort``; a leap of more than `MAX_GAP` is not believed to
+   be a loss (a forged or corrupt number) and counts once as ``sequence_jumps``.
+   Gaps are counted before KEEP_LAST, so they measure losses below the core.
+5. Running. `run_next(now)` runs the first inbox entry's handler through
+   `runtime.dispatch.invoke`; `run(entry, now, chooser)` runs any pending
+   entry out of order (the replay gate's way in). Both return the handler's
+   effects as *outputs* (`runtime.outbox`), values the driver performs in
+   order before it asks for the next handler: `Put` (an
+   envelope with the topic's next sequence number), `Query` (a service call,
+   whose answer comes back through `receive_reply`), `Answer` (the reply to
+   the request that ran), `Line` (a log line), `Stop` (``stop_on_error`` after
+   a failure). `After` and `Call` arm due entries inside the core.
+6. Failures. A handler exception, a service reply that is not a message, an
+   effect that cannot be encoded: counted, reported as `Line`s, published as a
+   `Violation` on /violations, answered "server error: ..." to a caller. The
+   state the handler left stays as it is (rolling it back is issue 13).
+7. Observers. After each handler the core calls ``handled(record)`` on its
+   observers, as trio calls its Instruments: the event log and the replay gate
+   observe the core, they are not modes of it. Without observers a delivery
+   builds no `Entry` and no record: a sample costs a `decode_fields`, a gap
+   check, a deque append and a heap push of a plain tuple.
+"""
+
+from __future__ import annotations
+
+import heapq
+from collections import deque
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any, Final, Protocol, final
+
+from twinfleet.runtime.choosers import RecordingChooser, SeededChooser, derive_seed
+from twinfleet.runtime.context import Chooser, Context, Effect
+from twinfleet.runtime.dispatch import HandlerError, invoke
+from twinfleet.runtime.due import DueEntries
+from twinfleet.runtime.entries import Entry
+from twinfleet.runtime.kinds import EventKind
+from twinfleet.runtime.messages import (
+    CallError,
+    DecodeError,
+    NodeAlive,
+    decode_fields,
+)
+from twinfleet.runtime.node import HandlerSpec, Node, Reliability
+from twinfleet.runtime.outbox import Answer, Line, Outbox, Output
+
+LIVELINESS_TOPIC: Final = "/_liveliness"
+MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is not a loss
+_BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
+_TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOUT})
+_COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "published",
+                    "handled", "keep_last", "best_effort", "seq_jumps")
+_NOTHING: Final[tuple[()]] = ()
+
+
+# ------------------------------------------------------------------ observers and statistics
+
+
+@dataclass(frozen=True, slots=True)
+class Handled:
+    """What one handler run did, as observers see it (the node's state is already the new one)."""
+
+    node: Node
+    entry: Entry
+    now: int  # the time the handler saw
+    effects: tuple[Effect, ...]  # as recorded; empty when the handler raised
+    choices: tuple[int, ...]  # answers to ctx.choose (choice points with several options)
+    options: tuple[int, ...]  # how many options each of those had
+    error: HandlerError | None
+
+
+class Observer(Protocol):
+    """Something told about every handler the core runs (the event log, the replay gate)."""
+
+    def handled(self, record: Handled) -> None:
+        """Called after each handler, before its outputs are performed."""
+        ...
+
+
+@dataclass(frozen=True, slots=True)
+class HostStatistics:
+    """A snapshot of a node's counters."""
+
+    received: int
+    dropped_undecodable: int
+    handler_errors: int
+    failures: int
+    gaps: int
+    inbox_depth: int
+    timers_pending: int
+    published: int
+    handled: int
+    dropped_keep_last: int = 0
+    dropped_overflow: int = 0
+    dropped_best_effort: int = 0
+    sequence_jumps: int = 0  # sequence numbers that leapt by more than MAX_GAP (not counted as gaps)
+
+    @classmethod
+    def of(cls, n: dict[str, int], inbox_depth: int, timers_pending: int,
+           dropped_overflow: int) -> HostStatistics:
+        """The record of a core's counters `n`."""
+        return cls(received=n["received"], dropped_undecodable=n["undecodable"],
+                   handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
+                   inbox_depth=inbox_depth, timers_pending=timers_pending,
+                   published=n["published"], handled=n["handled"],
+                   dropped_keep_last=n["keep_last"], dropped_overflow=dropped_overflow,
+                   dropped_best_effort=n["best_effort"], sequence_jumps=n["seq_jumps"])
+
+
+# A received sample as `decode_fields` returns it: (msg, stamp_ms, seq, sender).
+_Sample = tuple[Any, int, int, str]
+Receive = Callable[[bytes, int], bool]
+
+
+@final
+class _Subscription:
+    """One declared subscription: its handler and its KEEP_LAST queue of waiting samples."""
+
+    __slots__ = ("gap_counter", "method", "priority", "topic", "waiting")
+
+    def __init__(self, spec: HandlerSpec, topic: str, keep_last: bool) -> None:
+        self.method, self.priority, self.topic = spec.method, spec.priority, topic
+        reliable = spec.qos.reliability is Reliability.RELIABLE
+        self.gap_counter = "gaps" if reliable else "best_effort"  # a bug vs. drops by design
+        self.waiting: deque[_Sample] = deque(maxlen=max(1, spec.qos.depth) if keep_last else None)
+
+    def entry(self, sample: _Sample) -> Entry:
+        msg, stamp, seq, sender = sample
+        return Entry(EventKind.DELIVERY, self.method, (msg,), sender, self.topic, seq, stamp)
+
+    def take(self, entry: Entry, inbox: list[tuple[int, int, int, Any]]) -> bool:
+        """Remove the sample `entry` was made of, and one inbox slot; False if not waiting."""
+        k = next((i for i, (msg, _, seq, sender) in enumerate(self.waiting)
+                  if msg is entry.args[0] and (seq, sender) == (entry.seq, entry.sender)), None)
+        if k is None:
+            return False
+        del self.waiting[k]  # the k-th slot of a subscription stands for its k-th sample
+        inbox.remove(sorted(key for key in inbox if key[3] is self)[k])
+        heapq.heapify(inbox)
+        return True
+
+
+@final
+class NodeCore:
+    """One node's inbox, due entries and handler runs, driven from outside (module docstring).
+
+    Args:
+        node: the node object (its `state` is changed by its handlers).
+        seed: fleet seed; `ctx.choose` draws from `derive_seed(seed, node.name)`.
+        stop_on_error: add a `Stop` output after the first handler failure.
+        keep_last: bound each subscription's waiting messages by its QoS depth
+            (the replay gate holds every message until it is granted: False).
+    """
+
+    def __init__(self, node: Node, *, seed: int, stop_on_error: bool = False,
+                 keep_last: bool = True) -> None:
+        self.node, self.spec = node, node.spec()
+        self.due = DueEntries(node)
+        self._random = SeededChooser(derive_seed(seed, node.name))
+        self._inbox: list[tuple[int, int, int, Entry | _Subscription]] = []
+        self._counter = self.due.counter
+        self._last_seq: dict[str, dict[str, int]] = {}  # topic -> sender -> last seq
+        self._observers: list[Observer] = []
+        self._n = dict.fromkeys(_COUNTERS, 0)
+        self._outbox = Outbox(node.name, self.due, self._n, stop_on_error=stop_on_error)
+        self._subs: dict[str, _Subscription] = {}
+        self._liveliness: HandlerSpec | None = None
+        for spec in self.spec.of_kind("subscribe"):
+            topic = node.resolve(spec.name or "")
+            if topic != LIVELINESS_TOPIC:
+                self._subs[spec.method] = _Subscription(spec, topic, keep_last)
+            elif self._liveliness is None:
+                self._liveliness = spec
+        self.services = {s.method: node.resolve(s.name or "") for s in self.spec.of_kind("service")}
+
+    def observe(self, observer: Observer) -> None:
+        """Tell `observer` about every handler run from now on."""
+        self._observers.append(observer)
+
+    def topics(self) -> list[tuple[HandlerSpec, str]]:
+        """The subscriptions the driver must declare: (spec, absolute topic), liveliness aside."""
+        return [(self.spec.by_method(m), s.topic) for m, s in self._subs.items()]  # type: ignore[misc]
+
+    # ---------------------------------------------------------------- arrivals
+
+    def start(self, now_ms: int) -> None:
+        """Queue the `@on_start` handlers ahead of all that arrived, and arm the `@every` ticks."""
+        name = self.node.name
+        for spec in self.spec.of_kind("start"):
+            self._push(_BEFORE_ALL, spec.priority, Entry(EventKind.START, spec.method, (), name,
+                                                         due=now_ms))
+        self.due.start(self.spec.of_kind("every"), now_ms)
+
+    def receiver(self, method: str) -> Receive:
+        """The function that takes the samples of subscription `method`.
+
+        ``receive(payload, arrival_ms)`` returns True when the sample added an inbox
+        slot (False: it replaced the oldest waiting one), and raises `DecodeError`
+        (counted) for a payload that is not a twinfleet envelope.
+        """
+        sub = self._subs[method]
+        # Everything is bound once here: one sample costs a decode, a gap check, a deque
+        # append and a heap push, with no attribute chains.
+        n, counter, push, inbox = self._n, self._counter, heapq.heappush, self._inbox
+        waiting, priority, gap_counter = sub.waiting, sub.priority, sub.gap_counter
+        last_seq = self._last_seq.setdefault(sub.topic, {})  # shared by one topic's subscriptions
+
+        def receive(payload: bytes, arrival_ms: int) -> bool:
+            n["received"] += 1
+            try:
+                sample = decode_fields(payload)
+            except Exception as exc:  # DecodeError (anything else would be a codec bug)
+                n["undecodable"] += 1
+                raise DecodeError(str(exc)) from None
+            seq, sender = sample[2], sample[3]
+            last = last_seq.get(sender)
+            if last is not None and seq > last + 1:
+                if seq - last <= MAX_GAP:
+                    n[gap_counter] += seq - last - 1
+                else:  # not a loss: a sender that lies about its numbers, or a corrupt one
+                    n["seq_jumps"] += 1
+            last_seq[sender] = seq
+            if len(waiting) == waiting.maxlen:  # KEEP_LAST: the oldest waiting sample goes
+                waiting.append(sample)
+                n["keep_last"] += 1
+                return False
+            waiting.append(sample)
+            push(inbox, (arrival_ms, priority, next(counter), sub))
+            return True
+
+        return receive
+
+    def receive_request(self, method: str, payload: bytes, responder: Any,
+                        arrival_ms: int) -> Sequence[Output]:
+        """A request for service handler `method`; `responder` is handed back in its `Answer`.
+
+        Returns the outputs of a request that cannot run (undecodable): a line and the answer.
+        """
+        self._n["received"] += 1
+        try:
+            msg, stamp, seq, sender = decode_fields(payload)
+        except Exception as exc:  # DecodeError (anything else would be a codec bug)
+            self._n["undecodable"] += 1
+            return (Line(f"undecodable request for {self.services[method]}: {exc}", err=True),
+                    Answer(responder, None, f"server error: undecodable request ({exc})"))
+        self._push(arrival_ms, self.due.priority(method),
+                   Entry(EventKind.REQUEST, method, (msg,), sender, self.services[method], seq,
+                         stamp, responder=responder))
+        return _NOTHING
+
+    def receive_reply(self, call: int, payload: bytes | None, reason: str,
+                      arrival_ms: int) -> bool:
+        """The answer to `Query` `call`: a reply payload, or None and why there is none.
+
+        A CallError (no answer, or an undecodable one) runs the reply handler as a
+        TIMEOUT event. Returns False when the call is already over (it timed out).
+        """
+        opened = self.due.close_call(call)
+        if opened is None:
+            return False
+        service, reply_to = opened.service, opened.reply_to
+        error = CallError(service, reason or "no reply")
+        if payload is not None:
+            try:
+                msg, stamp, seq, sender = decode_fields(payload)
+            except DecodeError as exc:
+                error = CallError(service, f"server error: undecodable reply ({exc})")
+            else:
+                self._push(arrival_ms, self.due.priority(reply_to),
+                           Entry(EventKind.REPLY, reply_to, (msg,), sender, service, seq, stamp))
+                return True
+        # a CallError comes from the caller's own side
+        self._push(arrival_ms, self.due.priority(reply_to),
+                   Entry(EventKind.TIMEOUT, reply_to, (error,), self.node.name, service))
+        return True
+
+    def receive_liveliness(self, node: str, alive: bool, arrival_ms: int) -> bool:
+        """Node `node` appeared or disappeared; True if a `/_liveliness` handler will run."""
+        spec = self._liveliness
+        if spec is None:
+            return False
+        self._push(arrival_ms, spec.priority, Entry(EventKind.LIVELINESS, spec.method,
+                                                    (NodeAlive(node, alive),), "", LIVELINESS_TOPIC))
+        return True
+
+    def release_due(self, now_ms: int) -> int:
+        """Move the due entries due by `now_ms` into the inbox; return how many moved."""
+        released = self.due.pop_due(now_ms)
+        for due, priority, entry in released:
+            self._push(due, priority, entry)
+        return len(released)
+
+    def next_due(self) -> int | None:
+        """When the earliest due entry is due (fleet ms), or None."""
+        return self.due.next_due()
+
+    def has_ready(self) -> bool:
+        """Whether an inbox entry waits to run."""
+        return bool(self._inbox)
+
+    def _push(self, arrival_ms: int, priority: int, entry: Entry) -> None:
+        heapq.heappush(self._inbox, (arrival_ms, priority, next(self._counter), entry))
+
+    # ---------------------------------------------------------------- running
+
+    def run_next(self, now_ms: int) -> Sequence[Output] | None:
+        """Run the first inbox entry at `now_ms` (a timed one at its due time); None if none."""
+        inbox = self._inbox
+        if not inbox:
+            return None
+        work = heapq.heappop(inbox)[3]
+        if type(work) is _Subscription:
+            sample = work.waiting.popleft()
+            if not self._observers:  # the hot path: no Entry, no record
+                return self._execute(work.method, (sample[0],), now_ms, self._random, None)[0]
+            return self._run(work.entry(sample), now_ms, None)
+        if work.due is not None and work.kind in _TIMED:
+            now_ms = work.due
+        return self._run(work, now_ms, None)
+
+    def run(self, entry: Entry, now_ms: int, chooser: Chooser | None = None) -> Sequence[Output]:
+        """Take `entry` (one of `pending()`) out of turn and run it at `now_ms`.
+
+        Raises:
+            ValueError: `entry` is not pending.
+        """
+        self._take(entry, now_ms)
+        return self._run(entry, now_ms, chooser)
+
+    def pending(self) -> list[Entry]:
+        """Every entry held, in the order they would run: the inbox's, then the due ones."""
+        ready: list[Entry] = []
+        served: dict[_Subscription, int] = {}
+        for *_, work in sorted(self._inbox):  # n is unique: tuples never compare their work
+            if type(work) is _Subscription:
+                k = served[work] = served.get(work, -1) + 1
+                ready.append(work.entry(work.waiting[k]))
+            else:
+                ready.append(work)
+        return ready + self.due.entries()
+
+    def _take(self, entry: Entry, now_ms: int) -> None:
+        inbox = self._inbox
+        sub = self._subs.get(entry.handler) if entry.kind is EventKind.DELIVERY else None
+        if sub is not None and sub.take(entry, inbox):
+            return
+        for i, key in enumerate(inbox):
+            if key[3] is entry:
+                inbox[i] = inbox[-1]
+                inbox.pop()
+                heapq.heapify(inbox)
+                return
+        if not self.due.take(entry, now_ms):
+            raise ValueError(f"{self.node.name}: {entry.kind} {entry.handler} is not pending")
+
+    def _run(self, entry: Entry, now: int, chooser: Chooser | None) -> Sequence[Output]:
+        observers = self._observers
+        if not observers:
+            return self._execute(entry.handler, entry.args, now, chooser or self._random,
+                                 entry.responder)[0]
+        if not isinstance(chooser, RecordingChooser):
+            chooser = RecordingChooser(chooser or self._random)
+        outputs, effects, error = self._execute(entry.handler, entry.args, now, chooser,
+                                                entry.responder)
+        record = Handled(self.node, entry, now, tuple(effects), tuple(chooser.indices),
+                         tuple(chooser.options), error)
+        for observer in observers:
+            observer.handled(record)
+        return outputs
+
+    def _execute(self, method: str, args: tuple[Any, ...], now: int, chooser: Chooser,
+                 responder: Any) -> tuple[Sequence[Output], list[Effect], HandlerError | None]:
+        """Run one handler; what it did, as outputs (and its effects and error, for observers)."""
+        node = self.node
+        ctx = Context(node, now, chooser)
+        reply, error = invoke(node, method, ctx, args, responder is not None)
+        self._n["handled"] += 1
+        effects = ctx.effects
+        if error is None and responder is None:  # the common case: a handler that went well
+            if not effects:
+                return _NOTHING, effects, None
+            out: list[Output] = []
+            error = self._outbox.translate(effects, now, method, out)
+            if error is None:
+                return out, effects, None
+        else:
+            out = []
+            if effects:
+                error = error or self._outbox.translate(effects, now, method, out)
+        error = self._outbox.finish(method, args, reply, error, responder, now, out)
+        return out, effects, error
+
+    def statistics(self, dropped_overflow: int = 0) -> HostStatistics:
+        """Counters since start, as a frozen record (`dropped_overflow`: the transport's)."""
+        return HostStatistics.of(self._n, len(self._inbox), self.due.timers(), dropped_overflow)

@@ -1,0 +1,149 @@
+"""The event log and the replay gate attached to a NodeHost (LoopbackTransport, no Zenoh)."""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import json
+from pathlib import Path
+from typing import Any
+
+import msgpack
+
+from tests.runtime.hosts import (
+    FLEET,
+    Asker,
+    AskerParams,
+    Doubler,
+    Harness,
+    Log,
+    Num,
+    run,
+    settle,
+)
+from twinfleet import CallError, Context, Node, every, handler, on_start, subscribe
+from twinfleet.runtime.clock import ManualClock
+from twinfleet.runtime.eventlog import EVENTS_FORMAT, EventLog, payload_digest
+from twinfleet.runtime.host import NodeHost
+from twinfleet.runtime.messages import encode
+from twinfleet.runtime.names import key_expr
+from twinfleet.runtime.node import QOS_DEFAULT
+from twinfleet.runtime.replay_gate import LogicalClock, gate_key
+from twinfleet.runtime.transport import LoopbackBus, LoopbackTransport
+
+
+class Ticker(Node):
+    """A start, a ctx.after, an @every, a subscription."""
+
+    def initial_state(self) -> Log:
+        return Log()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.after(30, self.later)
+
+    @handler()
+    def later(self, ctx: Context) -> None:
+        self.state.seen.append("later")
+
+    @every(100)
+    def tick(self, ctx: Context) -> None:
+        self.state.seen.append(ctx.now())
+
+    @subscribe("/nums")
+    def on_num(self, ctx: Context, msg: Num) -> None:
+        self.state.seen.append(msg.value)
+
+
+def _events(path: Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
+    header, *events = (json.loads(line) for line in path.read_text().splitlines())
+    return header, events
+
+
+def test_the_event_log_names_each_kind_of_event(tmp_path: Path) -> None:
+    async def body() -> None:
+        h = Harness()
+        logs = {name: EventLog(str(tmp_path / f"{name}.jsonl"), node=name)
+                for name in ("ticker", "doubler", "asker", "lonely")}
+        await h.start(Ticker("ticker"), events=logs["ticker"])
+        await h.start(Doubler("doubler"), events=logs["doubler"])
+        await h.start(Asker("asker"), events=logs["asker"])
+        await h.start(Asker("lonely", AskerParams(service="/missing")), events=logs["lonely"])
+        raw = await h.raw()
+        raw.put(key_expr(FLEET, "/nums"), encode(Num(5), seq=1, sender="x"), QOS_DEFAULT)
+        await settle(*h.hosts)
+        await h.advance(100)
+        await h.stop()
+        for log in logs.values():
+            log.close()
+
+    run(body())
+    header, ticker = _events(tmp_path / "ticker.jsonl")
+    assert (header["format"], header["kind"]) == (EVENTS_FORMAT, "header") == (
+        "twinfleet-events/2", "header")
+    assert [(e["kind"], e["handler"], e["due"]) for e in ticker] == [
+        ("start", "start", 0), ("delivery", "on_num", None), ("timer", "later", 30),
+        ("periodic", "tick", 100)]
+    assert [e["i"] for e in ticker] == [0, 1, 2, 3]
+    (request,) = _events(tmp_path / "doubler.jsonl")[1]
+    assert (request["kind"], request["sender"], request["topic"]) == ("request", "asker", "/double")
+    reply = _events(tmp_path / "asker.jsonl")[1][1]
+    assert (reply["kind"], reply["sender"], reply["args"]) == (
+        "reply", "doubler", payload_digest((Num(42),)))
+    timeout = _events(tmp_path / "lonely.jsonl")[1][1]
+    assert (timeout["kind"], timeout["sender"], timeout["topic"], timeout["args"]) == (
+        "timeout", "lonely", "/missing", payload_digest((CallError("/missing", "no server"),)))
+
+
+async def _grant(transport: LoopbackTransport, node: str, **grant: Any) -> dict[str, Any]:
+    done: asyncio.Future[tuple[bytes | None, str]] = asyncio.get_running_loop().create_future()
+    transport.query(gate_key(FLEET, node), msgpack.packb(grant), 5_000.0,
+                    lambda reply, reason: done.done() or done.set_result((reply, reason)))
+    reply, reason = await done
+    assert reply is not None, reason
+    return msgpack.unpackb(reply, raw=False)
+
+
+def test_a_gated_host_runs_only_what_is_granted_and_waits_for_what_is_in_flight() -> None:
+    async def body() -> tuple[list[Any], list[dict[str, Any]], dict[str, Any]]:
+        bus = LoopbackBus()
+        transport, coordinator = LoopbackTransport(bus), LoopbackTransport(bus)
+        await transport.open()
+        await coordinator.open()
+        node = Ticker("ticker")
+        host = NodeHost(node, transport, LogicalClock(), seed=1, fleet=FLEET, gated=True,
+                        out=io.StringIO())
+        task = asyncio.create_task(host.run())
+        for _ in range(50):
+            await asyncio.sleep(0)
+        status = await _grant(coordinator, "ticker", op="status")
+        answers = [await _grant(coordinator, "ticker", kind="start", handler="start",
+                                sender="ticker", args=payload_digest(()), t=0)]
+        # a grant for a message still in flight waits for it
+        waiting = asyncio.create_task(_grant(coordinator, "ticker", kind="delivery",
+                                             handler="on_num", sender="x",
+                                             args=payload_digest((Num(5),)), t=7))
+        for _ in range(50):
+            await asyncio.sleep(0)
+        assert not waiting.done() and node.state.seen == []
+        coordinator.put(key_expr(FLEET, "/nums"), encode(Num(5), seq=1, sender="x"), QOS_DEFAULT)
+        answers.append(await waiting)
+        answers.append(await _grant(coordinator, "ticker", kind="periodic", handler="tick",
+                                    sender="ticker", args=payload_digest(()), t=100))
+        host.stop()
+        await task
+        return node.state.seen, answers, status
+
+    seen, answers, status = run(body())
+    assert seen == [5, 100]  # the after timer was never granted, so it never ran
+    assert [a["error"] for a in answers] == [None, None, None]
+    assert [r["kind"] for r in status["ready"]] == ["start", "periodic"]
+
+
+def test_a_gated_host_needs_a_logical_clock() -> None:
+    try:
+        NodeHost(Ticker("t"), LoopbackTransport(), ManualClock(), seed=1, fleet=FLEET, gated=True)
+    except ValueError as exc:
+        assert "LogicalClock" in str(exc)
+    else:
+        raise AssertionError("a gated host accepted a ManualClock")
