@@ -193,6 +193,21 @@ def sample_types(session: zenoh.Session, fleet: str, topics: Iterable[tuple[str,
     return dict(seen)
 
 
+def topic_types(session: zenoh.Session, fleet: str, topics: Iterable[tuple[str, str]],
+                timeout_s: float, infos: dict[tuple[str, str], dict[str, Any]] | None = None
+                ) -> dict[tuple[str, str], str]:
+    """(fleet, topic) → type: what the publishing nodes say (``@info`` ``publications``), else
+    the first sample within `timeout_s` (a publisher that is not a twinfleet node)."""
+    infos = node_infos(session, fleet, timeout_s) if infos is None else infos
+    said = {(f, topic): kind for (f, _), info in infos.items()
+            for topic, kind in (info.get("publications") or {}).items() if kind != "?"}
+    wanted = list(topics)
+    found = {t: said[t] for t in wanted if t in said}
+    rest = [t for t in wanted if t not in found]
+    found.update(sample_types(session, fleet, rest, timeout_s, latched_topics(infos)))
+    return found
+
+
 def group_by_type(types: dict[tuple[str, str], str]) -> dict[str, list[tuple[str, str]]]:
     """Type name → the (fleet, topic)s that carry it."""
     out: dict[str, list[tuple[str, str]]] = defaultdict(list)

@@ -7,12 +7,14 @@ handlers (`node_description`)::
     {"name", "namespace", "class", "pid",
      "params":        {name: value},            # the node's Params, overrides applied
      "subscriptions": {"/r1/scan": qos}, "services": ["/generate_path"],
-     "timers": [{"handler", "period_ms"}], "publication_qos": {"/map": qos}}
+     "timers": [{"handler", "period_ms"}], "publication_qos": {"/map": qos},
+     "publications":  {"/poses": "twinfleet_msgs/RobotPose"}}   # published so far
 
 with ``qos = {"reliability", "durability", "depth"}``. `twinfleet node info`,
 `topic info` and `param list|get` read it; what a node *publishes* is only
-known once it publishes (its ``@pub`` liveliness token), and its QoS is
-``publication_qos`` or the default.
+known once it publishes (its ``@pub`` liveliness token and ``publications``,
+which records the envelope type of each topic's first message), and its QoS
+is ``publication_qos`` or the default.
 
 Overrides. ``twinfleet launch SCENARIO r1.speed:=0.4`` (or ``--param
 r1.speed=0.4``) sets parameter `speed` of node r1; ``scan_rate_ms:=50``
@@ -86,11 +88,45 @@ def node_description(node: Any, class_path: str) -> dict[str, Any]:
 
 
 def serve_info(transport: Any, fleet: str, node: Any, class_path: str) -> None:
-    """Serve `node_description` on `info_key` through a `Transport`."""
+    """Serve `node_description` on `info_key` through a `Transport`, with ``publications``:
+    topic → message type of every topic the node has published on so far.
+
+    Call it before the host first publishes: it wraps `transport.publisher` so that the
+    first payload of each topic records its envelope type (one dict lookup per message).
+    """
     import msgpack
 
-    payload = msgpack.packb(node_description(node, class_path), use_bin_type=True)
-    transport.serve(info_key(fleet, node.name), lambda _req, respond: respond(payload, ""))
+    base = node_description(node, class_path)
+    prefix = f"{KEY_PREFIX}/{fleet}"
+    published: dict[str, str] = {}
+    make_publisher = transport.publisher
+
+    def publisher(key: str, qos: QoS) -> Any:
+        put = make_publisher(key, qos)
+        topic = key[len(prefix):] if key.startswith(prefix + "/") else key
+
+        def put_and_note(payload: bytes) -> None:
+            if topic not in published:
+                published[topic] = _envelope_type(payload)
+            put(payload)
+        return put_and_note
+
+    transport.publisher = publisher
+
+    def respond_info(_request: bytes, respond: Any) -> None:
+        respond(msgpack.packb({**base, "publications": dict(published)}, use_bin_type=True), "")
+
+    transport.serve(info_key(fleet, node.name), respond_info)
+
+
+def _envelope_type(payload: bytes) -> str:
+    import msgpack
+
+    try:
+        kind = msgpack.unpackb(payload, raw=False).get("type")
+    except Exception:  # msgpack raises several unrelated types; never break a publish
+        return "?"
+    return kind if isinstance(kind, str) else "?"
 
 
 def parse_param(text: str) -> tuple[str | None, str, Any]:

@@ -101,7 +101,8 @@ def node_info(conn: Connection, node: str, *, out: TextIO, timeout_s: float = 1.
         infos = g.node_infos(session, fleet, timeout_s, name)
         mine = graph.entities_of(fleet, name)
         topics = [(fleet, t) for t in mine["publishers"] + mine["subscribers"]]
-        types = g.sample_types(session, fleet, topics, timeout_s, g.latched_topics(infos))
+        types = g.topic_types(session, fleet, topics, timeout_s, g.node_infos(session, fleet,
+                                                                               timeout_s))
     info = infos.get((fleet, name), {})
     print(f"/{name}" + (f"  ({info['class']}, pid {info.get('pid')})" if info else ""), file=out)
     for label, key in (("Subscribers", "subscribers"), ("Publishers", "publishers"),
@@ -145,9 +146,7 @@ def topic_list(conn: Connection, *, out: TextIO, verbose: bool = False, types: b
         graph = graph_of(session, conn, timeout_s)
         found = {}
         if types:
-            infos = g.node_infos(session, conn.fleet, timeout_s)
-            found = g.sample_types(session, conn.fleet, list(graph.publishers), timeout_s,
-                                   g.latched_topics(infos))
+            found = g.topic_types(session, conn.fleet, list(graph.publishers), timeout_s)
     for fleet, topic in graph.topics():
         line = _shown(conn, fleet, topic)
         if types:
@@ -171,8 +170,7 @@ def topic_info(conn: Connection, topic: str, *, out: TextIO, verbose: bool = Fal
         where = pick(conn, graph, topic, "topic")
         known_topic(conn, graph, where)
         infos = g.node_infos(session, where[0], timeout_s)
-        kind = g.sample_types(session, where[0], [where], timeout_s,
-                              g.latched_topics(infos)).get(where)
+        kind = g.topic_types(session, where[0], [where], timeout_s, infos).get(where)
     pubs, subs = graph.publishers.get(where, []), graph.subscribers.get(where, [])
     print(f"Type: {kind or f'unknown (no message within {timeout_s:g} s)'}", file=out)
     print(f"Publisher count: {len(pubs)}", file=out)
@@ -210,9 +208,7 @@ def topic_type(conn: Connection, topic: str, *, out: TextIO, timeout_s: float = 
         graph = graph_of(session, conn, timeout_s)
         where = pick(conn, graph, topic, "topic")
         known_topic(conn, graph, where)
-        infos = g.node_infos(session, where[0], timeout_s)
-        kind = g.sample_types(session, where[0], [where], timeout_s,
-                              g.latched_topics(infos)).get(where)
+        kind = g.topic_types(session, where[0], [where], timeout_s).get(where)
     if kind is None:
         raise CommandError(f"{where[1]}: no message within {timeout_s:g} s, so its type is not "
                            "known yet (twinfleet types travel with the messages)")

@@ -147,9 +147,9 @@ class LiveState:
         if field is not None and isinstance(data.get("robot"), str):
             self._new_run_check(data["robot"], env.get("stamp_ms"))
             self._robot(data["robot"], field, data)
-        elif kind == "nav_msgs/Path" and topic.count("/") == 2 and topic.endswith("/path"):
+        elif kind == "twinfleet_msgs/Path" and topic.count("/") == 2 and topic.endswith("/path"):
             self._robot(topic.split("/")[1], "path", data)  # /<robot>/path: its latest plan
-        elif kind == "nav_msgs/OccupancyGrid":
+        elif kind == "twinfleet_msgs/OccupancyGrid":
             ident = (env.get("sender"), env.get("seq"), env.get("stamp_ms"), data.get("data"))
             if ident != self.map_id:  # the latched copy from history repeats the live one
                 self.map, self.map_id = data, ident

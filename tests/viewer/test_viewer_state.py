@@ -134,7 +134,7 @@ def test_schema_of_a_registered_type_and_of_an_unknown_one():
     assert set(data["properties"]) == {"robot", "cell", "direction", "velocity", "done"}
     assert data["properties"]["cell"]["prefixItems"] == [{"type": "integer"}] * 2
     assert data["required"] == ["robot", "cell", "direction", "velocity"]
-    grid = message_schema("nav_msgs/OccupancyGrid")["properties"]["data"]["properties"]
+    grid = message_schema("twinfleet_msgs/OccupancyGrid")["properties"]["data"]["properties"]
     assert grid["data"]["contentMediaType"] == "application/octet-stream"
     other = message_schema("x_msgs/Unknown", {"a": 1, "b": [1.5], "c": {"d": "e"}})["properties"]["data"]
     assert other["properties"]["b"] == {"type": "array", "items": {"type": "number"}}
@@ -157,7 +157,7 @@ def test_recorder_writes_channels_schemas_and_increasing_log_times(tmp_path):
     assert times == sorted(set(times))
     kinds = {ch.topic: (s.name, ch.metadata["durability"]) for s, ch, _ in rows}
     assert kinds == {"/poses": ("twinfleet_msgs/RobotPose", "volatile"),
-                     "/map": ("nav_msgs/OccupancyGrid", "transient_local"),
+                     "/map": ("twinfleet_msgs/OccupancyGrid", "transient_local"),
                      "/junk": ("twinfleet/Undecodable", "volatile")}
     assert rec.undecodable == 1 and rec.messages == 52
 
