@@ -37,6 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     _param_parser(sub)
     _interface_parser(sub)
     _view_parser(sub)
+    _foxglove_parser(sub)
     recording_commands.register(sub)
 
 
@@ -210,6 +211,30 @@ def cmd_view(args: argparse.Namespace) -> int:
     except (ValueError, KeyError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+
+
+def cmd_foxglove(args: argparse.Namespace) -> int:
+    """`twinfleet foxglove`: a Foxglove WebSocket server showing the fleet."""
+    from twinfleet.runtime.foxglove_bridge import run_foxglove
+
+    conn = connection(args)
+    try:
+        return run_foxglove(conn.endpoint, conn.fleet, port=args.port)
+    except RuntimeError as exc:  # the SDK's server could not bind the port
+        raise CommandError(f"foxglove: cannot serve on 127.0.0.1:{args.port}: {exc}") from None
+
+
+def _foxglove_parser(sub: argparse._SubParsersAction) -> None:
+    text = ("serve the live fleet to Foxglove (WebSocket, foxglove.websocket.v1): the map as a "
+            "grid, robots as scene entities, scans as point clouds, every topic as JSON")
+    p = sub.add_parser("foxglove", help=text, description=text[0].upper() + text[1:] + ". In "
+                       "Foxglove: Open connection, ws://127.0.0.1:PORT; the 3D panel draws the "
+                       "fleet in frame 'map' with no configuration.")
+    p.add_argument("--port", type=int, default=8765, metavar="P",
+                   help="TCP port on 127.0.0.1; 0 picks a free one (default: %(default)s, "
+                        "Foxglove's default)")
+    add_connection_arguments(p)
+    p.set_defaults(func=cmd_foxglove)
 
 
 def _launch_parser(sub: argparse._SubParsersAction) -> None:

@@ -48,14 +48,19 @@ def open_session(conn: Connection) -> Iterator[zenoh.Session]:
         session.close()
 
 
-def graph_of(session: zenoh.Session, conn: Connection, timeout_s: float) -> g.Graph:
-    """The fleet's graph; a fleet with no node is an error naming the fleets that are there."""
+def graph_of(session: zenoh.Session, conn: Connection, timeout_s: float,
+             warn: TextIO | None = None) -> g.Graph:
+    """The fleet's graph; a fleet with no node is an error naming the fleets that are there
+    (with `warn`, a warning line there instead)."""
     graph = g.read_graph(session, conn.fleet, timeout_s)
     if conn.fleet != "*" and not graph.nodes:
         there = g.read_graph(session, "*", timeout_s).fleets()
-        raise CommandError(f"no node of fleet {conn.fleet!r} answers at {conn.endpoint} within "
-                           f"{timeout_s:g} s" + (f"; fleets there: {', '.join(there)}" if there
-                                                 else "; no fleet runs there"))
+        text = (f"no node of fleet {conn.fleet!r} answers at {conn.endpoint} within "
+                f"{timeout_s:g} s" + (f"; fleets there: {', '.join(there)}" if there
+                                      else "; no fleet runs there"))
+        if warn is None:
+            raise CommandError(text)
+        print(f"warning: {text}; waiting", file=warn, flush=True)
     return graph
 
 

@@ -73,7 +73,7 @@ def topic_echo(conn: Connection, topic: str, *, out: TextIO, count: int | None =
     seen = 0
     deadline = None if duration_s is None else time.monotonic() + duration_s
     with open_session(conn) as session:
-        graph = graph_of(session, conn, timeout_s)
+        graph = graph_of(session, conn, timeout_s, warn=err if wait else None)
         where = pick(conn, graph, topic, "topic")
         latched = g.latched_topics(g.node_infos(session, where[0], timeout_s))
         samples: deque[bytes] = deque()

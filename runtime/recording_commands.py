@@ -126,7 +126,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     except (ValueError, OSError, McapError, RecordingError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {args.output}: {count} messages, JSON-encoded", flush=True)
+    print(f"wrote {args.output}: {count} messages, JSON-encoded, and their Foxglove view "
+          "(/foxglove/map, /foxglove/robots, /foxglove/<robot>/scan, /foxglove/collisions)",
+          flush=True)
     return 0
 
 
@@ -180,11 +182,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "message count per topic and type, schemas.")
     bi.add_argument("file", help="MCAP file, e.g. run.mcap")
     bi.set_defaults(func=cmd_bag)
-    e = sub.add_parser("export", help="write a JSON-encoded copy of a recording (for Foxglove)",
+    e = sub.add_parser("export", help="write a copy of a recording that Foxglove draws as it is",
                        description="Copy an MCAP file written by `twinfleet record` with every "
-                                   "message as JSON (bytes as base64) and schemas to match, so "
-                                   "that viewers like Foxglove Studio decode it. `twinfleet play` "
-                                   "needs the original (msgpack) recording.")
+                                   "message as JSON (bytes as base64) and schemas to match, plus "
+                                   "Foxglove's well-known messages on /foxglove/... channels "
+                                   "(foxglove.Grid map, foxglove.SceneUpdate robots and "
+                                   "collisions, foxglove.PointCloud scans), so Foxglove's 3D "
+                                   "panel draws it with no configuration. `twinfleet play` needs "
+                                   "the original (msgpack) recording.")
     e.add_argument("file", help="MCAP file written by `twinfleet record`")
     e.add_argument("-o", "--output", required=True, metavar="FILE",
                    help="JSON-encoded MCAP file to write, e.g. run.json.mcap")
