@@ -102,7 +102,7 @@ def test_bad_files(runtime_dir, tmp_path):
 
 
 def test_corrupt_and_truncated_recordings(runtime_dir, recordings):
-    for name, path in recordings.items():
+    for path in recordings.values():
         for command in (["play", str(path), "--wait", "0"], ["bag", "info", str(path)],
                         ["export", str(path), "-o", str(path) + ".json.mcap"]):
             one_line_error(tf(runtime_dir, *command), str(path), "not a readable MCAP")
