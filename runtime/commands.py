@@ -205,9 +205,15 @@ def cmd_view(args: argparse.Namespace) -> int:
     """`twinfleet view`: serve the live viewer (or a trace) on 127.0.0.1."""
     from twinfleet.runtime.viewer import run_viewer
 
+    connect, fleet = args.connect, args.fleet
+    if args.trace is None and not connect:
+        from twinfleet.runtime.registry import running_fleets
+
+        if any(fleet in ("*", e.fleet) for e in running_fleets()):
+            conn = connection(args)  # one fleet: that one; several: the one-line question
+            connect, fleet = conn.endpoint, conn.fleet
     try:
-        return run_viewer(connect=args.connect, fleet=args.fleet, port=args.port,
-                          trace_path=args.trace)
+        return run_viewer(connect=connect, fleet=fleet, port=args.port, trace_path=args.trace)
     except (ValueError, KeyError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2

@@ -149,15 +149,14 @@ async def serve_foxglove(endpoint: str, fleet: str, *, port: int = 8765,
     """Bridge the fleet behind `endpoint` to a Foxglove WebSocket server on 127.0.0.1:`port`
     until `stop` is set (0 picks a free port; `ready` gets the port)."""
     from twinfleet.runtime.recorder import fleet_schemas
-    from twinfleet.runtime.tap import FleetTap
-    from twinfleet.runtime.zenoh_transport import zenoh_config
+    from twinfleet.runtime.tap import FleetTap, tap_config
 
     context = foxglove.Context()
     bridge = FoxgloveBridge(context, fleet)
     server = foxglove.start_server(name=f"twinfleet {fleet}", host="127.0.0.1", port=port,
                                    context=context,
                                    server_listener=_Listener(asyncio.get_running_loop(), bridge))
-    tap = FleetTap(lambda: zenoh_config(connect=[endpoint], mode="client"), fleet,
+    tap = FleetTap(lambda: tap_config(endpoint), fleet,
                    bridge.on_sample, retry=True)
     try:
         opening = asyncio.ensure_future(tap.open())

@@ -13,7 +13,9 @@ at start), the robots' starts and goals, the initial node states and each
 step's changed states.
 
 Message kinds are recognised by envelope type name, the ones of `nodes.msgs`
-and `runtime.messages`; other types are only counted.
+and `runtime.messages`, and drawn; every topic of any fleet, whatever its
+type, is listed with its type, count and latest message (`topics`), which the
+page's topic list and message inspector show.
 """
 
 from __future__ import annotations
@@ -119,6 +121,8 @@ class LiveState:
         self.ended: str | None = None
         self.link = {"session": False, "router": False}
         self.counts: dict[str, int] = {}
+        self.latest: dict[str, dict[str, Any]] = {}  # topic → its last envelope (JSON values)
+        self._dirty_topics: set[str] = set()
         self.messages = 0
         self._stamps: dict[str, int] = {}
         self._dirty: dict[str, set[str]] = {}
@@ -138,6 +142,9 @@ class LiveState:
         self.messages += 1
         self.counts[topic] = self.counts.get(topic, 0) + 1
         env = read_envelope(payload)
+        self.latest[topic] = env if env is not None else {
+            "type": "(undecodable)", "data": {"bytes": len(payload)}}
+        self._dirty_topics.add(topic)
         if env is not None:
             self._apply(topic, env)
 
@@ -209,7 +216,13 @@ class LiveState:
         return {"kind": "snapshot", "fleet": self.fleet, "map": self.map, "robots": robots,
                 "order": self.order, "collisions": self.collisions.all(),
                 "violations": self.violations.all(), "fleet_status": self.fleet_status,
-                "ended": self.ended, "link": self.link, "stats": self._stats()}
+                "ended": self.ended, "link": self.link, "stats": self._stats(),
+                "topics": {t: self._topic(t) for t in sorted(self.latest)}}
+
+    def _topic(self, topic: str) -> dict[str, Any]:
+        """What the topic list and the inspector show of one topic."""
+        last = self.latest[topic]
+        return {"type": last.get("type"), "count": self.counts.get(topic, 0), "last": last}
 
     def take_update(self) -> dict[str, Any] | None:
         """The changes since the last call (None if nothing changed)."""
@@ -227,9 +240,12 @@ class LiveState:
             new = log.new()
             if new:
                 update[name] = new
+        if self._dirty_topics:
+            update["topics"] = {t: self._topic(t) for t in sorted(self._dirty_topics)}
         changed = bool(robots) or len(update) > 2
         self._dirty.clear()
         self._dirty_top.clear()
+        self._dirty_topics.clear()
         if not changed:
             return None
         update["stats"] = self._stats()

@@ -64,6 +64,12 @@ def test_live_state_folds_messages_and_hands_out_changes_once():
     snap = state.snapshot()
     assert snap["robots"]["r1"]["trail"]["items"] == [[0, 0], [0, 1]]
     assert snap["stats"]["topics"]["/poses"] == 3 and "r9" not in snap["robots"]
+    # every topic, whatever its type, with its latest message: the page's topic list
+    assert snap["topics"]["/poses"]["type"] == "twinfleet_msgs/RobotPose"
+    assert snap["topics"]["/poses"]["count"] == 3
+    assert snap["topics"]["/poses"]["last"]["data"]["cell"] == [0, 1]
+    assert second["topics"].keys() == {"/poses", "/fleet_status", "/collisions",
+                                       "/twinfleet/shutdown"}
 
 
 def test_live_state_restarts_a_robot_when_the_fleet_is_launched_again():
