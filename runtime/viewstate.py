@@ -142,9 +142,11 @@ class LiveState:
         self.messages += 1
         self.counts[topic] = self.counts.get(topic, 0) + 1
         env = read_envelope(payload)
-        self.latest[topic] = env if env is not None else {
-            "type": "(undecodable)", "data": {"bytes": len(payload)}}
-        self._dirty_topics.add(topic)
+        shown = env if env is not None else {"type": "(undecodable)",
+                                             "data": {"bytes": len(payload)}}
+        if shown != self.latest.get(topic):  # the same envelope again is a latched copy
+            self.latest[topic] = shown
+            self._dirty_topics.add(topic)
         if env is not None:
             self._apply(topic, env)
 
