@@ -1,14 +1,17 @@
-"""The live runtime's commands: launch, topic, service, node, view (and record, play, export).
+"""The live runtime's commands: launch, the ROS 2-style monitors, view, foxglove (and record,
+play, export, bag).
 
-    twinfleet launch SCENARIO [--time-scale K] [--timeout S] [--seed S] [--runs N]
-                              [--connect EP] [--listen EP]
-    twinfleet topic list|echo|hz|pub ...     twinfleet service list|call ...
-    twinfleet node list
-    twinfleet view [--connect EP] [--fleet F] [--port P] [--trace FILE]
+    twinfleet launch SCENARIO [NODE.NAME:=VALUE ...] [--param NODE.NAME=VALUE] [--time-scale K]
+                              [--timeout S] [--seed S] [--runs N] [--connect EP] [--listen EP]
+    twinfleet node list|info     twinfleet topic list|info|type|echo|hz|pub
+    twinfleet service list|call  twinfleet param list|get     twinfleet interface list|show
+    twinfleet view [--port P] [--trace FILE]      twinfleet foxglove [--port P]
 
-`register(subparsers)` adds them to the `twinfleet` command line
-(`twinfleet.cli`); `record`, `play` and `export` come from
-`runtime.recording_commands`. Every command imports its engine when it runs.
+Monitors find the fleet in the fleet registry unless --connect is given
+(`runtime.cliargs.connection`). `register(subparsers)` adds the commands to
+the `twinfleet` command line (`twinfleet.cli`); `record`, `play`, `export`
+and `bag` come from `runtime.recording_commands`. Every command imports its
+engine when it runs.
 """
 
 from __future__ import annotations
@@ -236,9 +239,9 @@ def _foxglove_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("foxglove", help=text, description=text[0].upper() + text[1:] + ". In "
                        "Foxglove: Open connection, ws://127.0.0.1:PORT; the 3D panel draws the "
                        "fleet in frame 'map' with no configuration.")
-    p.add_argument("--port", type=int, default=8765, metavar="P",
-                   help="TCP port on 127.0.0.1; 0 picks a free one (default: %(default)s, "
-                        "Foxglove's default)")
+    p.add_argument("--port", type=int, default=None, metavar="P",
+                   help="TCP port on 127.0.0.1; 0 picks a free one (default: 8765, Foxglove's "
+                        "usual one, or a free one when 8765 is taken: the URL is printed)")
     add_connection_arguments(p)
     p.set_defaults(func=cmd_foxglove)
 

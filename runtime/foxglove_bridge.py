@@ -35,7 +35,8 @@ from twinfleet.runtime.mcap_export import json_schema, message_json
 from twinfleet.runtime.schemas import message_schema
 from twinfleet.runtime.viewstate import split_key
 
-RESEND_DELAY_S = 0.05  # let the server finish a subscription before re-sending to it
+RESEND_DELAY_S = 0.05
+DEFAULT_PORT = 8765  # what Foxglove's "Open connection" proposes  # let the server finish a subscription before re-sending to it
 
 
 @final
@@ -143,19 +144,29 @@ class _Listener:
                                        self.bridge.resend, topic)
 
 
-async def serve_foxglove(endpoint: str, fleet: str, *, port: int = 8765,
+async def serve_foxglove(endpoint: str, fleet: str, *, port: int | None = None,
                          out: TextIO = sys.stdout, ready: Callable[[int], None] | None = None,
                          stop: asyncio.Event | None = None) -> None:
     """Bridge the fleet behind `endpoint` to a Foxglove WebSocket server on 127.0.0.1:`port`
-    until `stop` is set (0 picks a free port; `ready` gets the port)."""
+    until `stop` is set (None: 8765, or a free port if that one is taken; 0: a free port;
+    `ready` gets the port)."""
     from twinfleet.runtime.recorder import fleet_schemas
     from twinfleet.runtime.tap import FleetTap, tap_config
 
     context = foxglove.Context()
     bridge = FoxgloveBridge(context, fleet)
-    server = foxglove.start_server(name=f"twinfleet {fleet}", host="127.0.0.1", port=port,
-                                   context=context,
-                                   server_listener=_Listener(asyncio.get_running_loop(), bridge))
+    listener = _Listener(asyncio.get_running_loop(), bridge)
+
+    def start(on: int) -> Any:
+        return foxglove.start_server(name=f"twinfleet {fleet}", host="127.0.0.1", port=on,
+                                     context=context, server_listener=listener)
+
+    try:
+        server = start(DEFAULT_PORT if port is None else port)
+    except RuntimeError:
+        if port is not None:
+            raise
+        server = start(0)  # Foxglove's usual port is taken (by `twinfleet view`?): any other
     tap = FleetTap(lambda: tap_config(endpoint), fleet,
                    bridge.on_sample, retry=True)
     try:
@@ -175,7 +186,7 @@ async def serve_foxglove(endpoint: str, fleet: str, *, port: int = 8765,
         server.stop()
 
 
-def run_foxglove(endpoint: str, fleet: str, *, port: int = 8765) -> int:
+def run_foxglove(endpoint: str, fleet: str, *, port: int | None = None) -> int:
     """Blocking entry point of `twinfleet foxglove`: serve until SIGINT/SIGTERM."""
     import signal
 

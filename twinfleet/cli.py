@@ -1,6 +1,7 @@
 """The `twinfleet` command line, assembled from the commands each layer registers.
 
-    twinfleet launch|topic|service|node|view|record|play|export   (twinfleet.runtime.commands)
+    twinfleet launch|node|topic|service|param|interface|view|foxglove|record|play|export|bag
+                                                                  (twinfleet.runtime.commands)
     twinfleet render                                              (twinfleet.nodes.commands)
     twinfleet check                                               (twinfleet.checker.commands)
     twinfleet replay|validate|experiment                          (twinfleet.agreement.commands)
