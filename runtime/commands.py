@@ -19,6 +19,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import sys
+from typing import Any
 
 from twinfleet.runtime import recording_commands
 from twinfleet.runtime.cliargs import (
@@ -336,42 +337,50 @@ def _service_parser(sub: argparse._SubParsersAction) -> None:
         p.set_defaults(func=cmd_service)
 
 
-def _node_parser(sub: argparse._SubParsersAction) -> None:
-    node = sub.add_parser("node", help="list and inspect running nodes")
-    node_sub = node.add_subparsers(dest="action", required=True, metavar="ACTION")
-    nl = _sub(node_sub, "list", "list running nodes (from liveliness tokens)")
-    nl.add_argument("--stats", action="store_true", help="also show each node's counters")
-    ni = _sub(node_sub, "info", "show a node's topics with types, services, timers, parameters")
-    ni.add_argument("node", help="node name, e.g. r1 or /r1")
-    for p in (nl, ni):
+def _verbs(sub: argparse._SubParsersAction, name: str, text: str, func: Any,
+           verbs: dict[str, tuple[str, list[tuple[str, dict[str, Any]]]]]
+           ) -> dict[str, argparse.ArgumentParser]:
+    """A command with sub-verbs, each with its positional arguments and the connection options."""
+    parent = sub.add_parser(name, help=text)
+    actions = parent.add_subparsers(dest="action", required=True, metavar="ACTION")
+    made = {}
+    for verb, (verb_text, arguments) in verbs.items():
+        p = made[verb] = _sub(actions, verb, verb_text)
+        for arg, options in arguments:
+            p.add_argument(arg, **options)
         add_connection_arguments(p, discovery=True)
-        p.set_defaults(func=cmd_node)
+        p.set_defaults(func=func)
+    return made
+
+
+def _node_parser(sub: argparse._SubParsersAction) -> None:
+    made = _verbs(sub, "node", "list and inspect running nodes", cmd_node, {
+        "list": ("list running nodes (from liveliness tokens)", []),
+        "info": ("show a node's topics with types, services, timers, parameters",
+                 [("node", {"help": "node name, e.g. r1 or /r1"})])})
+    made["list"].add_argument("--stats", action="store_true",
+                              help="also show each node's counters")
 
 
 def _param_parser(sub: argparse._SubParsersAction) -> None:
-    param = sub.add_parser("param", help="list and read node parameters")
-    ps = param.add_subparsers(dest="action", required=True, metavar="ACTION")
-    pl = _sub(ps, "list", "list the parameters of every node, or of one")
-    pl.add_argument("node", nargs="?", default=None, help="node name (default: every node)")
-    pg = _sub(ps, "get", "print one parameter of a node")
-    pg.add_argument("node", help="node name, e.g. r1")
-    pg.add_argument("name", help="parameter name, e.g. speed")
-    for p in (pl, pg):
-        add_connection_arguments(p, discovery=True)
-        p.set_defaults(func=cmd_param)
+    _verbs(sub, "param", "list and read node parameters", cmd_param, {
+        "list": ("list the parameters of every node, or of one",
+                 [("node", {"nargs": "?", "default": None,
+                            "help": "node name (default: every node)"})]),
+        "get": ("print one parameter of a node",
+                [("node", {"help": "node name, e.g. r1"}),
+                 ("name", {"help": "parameter name, e.g. speed"})])})
 
 
 def _interface_parser(sub: argparse._SubParsersAction) -> None:
-    iface = sub.add_parser("interface", help="list message types and show their fields")
-    its = iface.add_subparsers(dest="action", required=True, metavar="ACTION")
-    il = _sub(its, "list", "list the message types known here and to the running fleet")
-    ish = _sub(its, "show", "show the fields of a message type")
-    ish.add_argument("type", help="type name, e.g. twinfleet_msgs/RobotPose or std_msgs/msg/String")
-    for p in (il, ish):
+    made = _verbs(sub, "interface", "list message types and show their fields", cmd_interface, {
+        "list": ("list the message types known here and to the running fleet", []),
+        "show": ("show the fields of a message type",
+                 [("type", {"help": "type name, e.g. twinfleet_msgs/RobotPose or "
+                                    "std_msgs/msg/String"})])})
+    for p in made.values():
         p.add_argument("--module", action="append", default=[], metavar="MODULE",
                        help="import MODULE first so its message types are known (repeatable)")
-        add_connection_arguments(p, discovery=True)
-        p.set_defaults(func=cmd_interface)
 
 
 def _view_parser(sub: argparse._SubParsersAction) -> None:

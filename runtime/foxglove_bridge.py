@@ -33,7 +33,7 @@ import msgpack
 from twinfleet.runtime.foxglove_scene import MAP_TOPIC, ROBOTS_TOPIC, FoxgloveScene
 from twinfleet.runtime.mcap_export import json_schema, message_json
 from twinfleet.runtime.schemas import message_schema
-from twinfleet.runtime.viewstate import split_key
+from twinfleet.runtime.viewstate import in_fleet
 
 RESEND_DELAY_S = 0.05
 DEFAULT_PORT = 8765  # what Foxglove's "Open connection" proposes  # let the server finish a subscription before re-sending to it
@@ -72,14 +72,10 @@ class FoxgloveBridge:
         if self._waiting is not None:
             self._waiting.append((key, payload))
             return
-        where = split_key(key)
+        where = in_fleet(self.fleet, key)
         if where is None:
             return
-        fleet, topic = where
-        if self.fleet == "*":
-            self.fleet = fleet
-        if fleet != self.fleet:
-            return
+        self.fleet, topic = where  # '*' locks onto the first fleet whose data arrives
         try:
             env = msgpack.unpackb(payload, raw=False, strict_map_key=False)
         except Exception:  # msgpack raises several unrelated types

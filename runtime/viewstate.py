@@ -71,6 +71,12 @@ def split_key(key: str) -> tuple[str, str] | None:
     return parts[1], "/" + parts[2]
 
 
+def in_fleet(wanted: str, key: str) -> tuple[str, str] | None:
+    """`split_key` of a key of fleet `wanted` (``*``: of any fleet), else None."""
+    where = split_key(key)
+    return where if where is not None and wanted in ("*", where[0]) else None
+
+
 @final
 class _Log:
     """An append-only list with a cursor of what was already sent."""
@@ -130,15 +136,13 @@ class LiveState:
 
     def on_sample(self, key: str, payload: bytes) -> None:
         """Fold one sample of key `twinfleet/<fleet>/<topic>` into the state."""
-        where = split_key(key)
+        where = in_fleet(self.fleet, key)
         if where is None:
             return
         fleet, topic = where
-        if self.fleet == "*":
+        if self.fleet == "*":  # the first fleet whose data arrives is the one shown
             self.fleet = fleet
             self._dirty_top.add("fleet")
-        if fleet != self.fleet:
-            return
         self.messages += 1
         self.counts[topic] = self.counts.get(topic, 0) + 1
         env = read_envelope(payload)

@@ -10,15 +10,13 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import socket
 import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
-from itest_support import ROOT, child_env, kill_all, pick_free_port, poll, processes_mentioning
+from itest_support import ROOT, launch_in, pick_free_port, poll, run_cli_in, stop_launch
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
@@ -30,10 +28,7 @@ def runtime_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("xdg-runtime")
 
 
-def tf(runtime_dir: Path, *args: str, timeout: float = 30.0) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "twinfleet", *args], capture_output=True,
-                          text=True, timeout=timeout, env=child_env(runtime_dir), cwd=ROOT,
-                          check=False)
+tf = run_cli_in
 
 
 def one_line_error(result: subprocess.CompletedProcess[str], *needles: str) -> str:
@@ -51,19 +46,13 @@ def one_line_error(result: subprocess.CompletedProcess[str], *needles: str) -> s
 @pytest.fixture(scope="module")
 def demo(runtime_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     log = tmp_path_factory.mktemp("demo") / "fleet.log"
-    with log.open("w") as sink:
-        proc = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", DEMO,
-                                 "--timeout", "100"], stdout=sink, stderr=subprocess.STDOUT,
-                                env=child_env(runtime_dir), cwd=ROOT, start_new_session=True)
+    proc = launch_in(runtime_dir, log, DEMO, "--timeout", "100")
     try:
         assert poll(lambda: log.read_text().count("started") >= 4 or proc.poll() is not None, 40)
         assert proc.poll() is None, log.read_text()
         yield log
     finally:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGINT)
-            proc.wait(timeout=15)
-        kill_all([p for p in processes_mentioning(DEMO) if p != proc.pid])
+        stop_launch(proc, DEMO)
 
 
 @pytest.fixture

@@ -12,15 +12,13 @@ fleets make a bare `node list` ask for --fleet.
 from __future__ import annotations
 
 import re
-import signal
 import subprocess
-import sys
 from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
 import yaml
-from itest_support import ROOT, child_env, kill_all, poll, processes_mentioning
+from itest_support import ROOT, launch_in, poll, run_cli_in, stop_launch
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
@@ -33,55 +31,33 @@ def runtime_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return tmp_path_factory.mktemp("xdg-runtime")
 
 
-def tf(runtime_dir: Path, *args: str, timeout: float = 30.0) -> subprocess.CompletedProcess[str]:
-    """`twinfleet ARGS` with the module's registry and no connection options."""
-    return subprocess.run([sys.executable, "-m", "twinfleet", *args], capture_output=True,
-                          text=True, timeout=timeout, env=child_env(runtime_dir), cwd=ROOT,
-                          check=False)
-
-
-def _launch(runtime_dir: Path, log: Path, *args: str) -> subprocess.Popen:
-    with log.open("w") as sink:
-        return subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", *args],
-                                stdout=sink, stderr=subprocess.STDOUT, env=child_env(runtime_dir),
-                                cwd=ROOT, start_new_session=True)
-
-
-def _stop(proc: subprocess.Popen, scenario: str) -> None:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
-        try:
-            proc.wait(timeout=15)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait(timeout=5)
-    kill_all([p for p in processes_mentioning(scenario) if p != proc.pid])
+tf = run_cli_in
 
 
 @pytest.fixture(scope="module")
 def c1a(runtime_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     log = tmp_path_factory.mktemp("c1a") / "fleet.log"
-    proc = _launch(runtime_dir, log, str(C1A), "--time-scale", "1", "--timeout", "110")
+    proc = launch_in(runtime_dir, log, str(C1A), "--time-scale", "1", "--timeout", "110")
     try:
         assert poll(lambda: log.read_text().count("] t=") >= 6 or proc.poll() is not None, 40)
         assert proc.poll() is None, log.read_text()
         yield log
     finally:
-        _stop(proc, str(C1A))
+        stop_launch(proc, str(C1A))
 
 
 @pytest.fixture(scope="module")
 def demo(runtime_dir: Path, c1a: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     log = tmp_path_factory.mktemp("demo") / "fleet.log"
     scenario = str(ROOT / "launch" / "demo.yaml")
-    proc = _launch(runtime_dir, log, scenario, "talker.period_ms:=250", "--param",
+    proc = launch_in(runtime_dir, log, scenario, "talker.period_ms:=250", "--param",
                    "caller.period_ms=300", "--timeout", "100")
     try:
         assert poll(lambda: log.read_text().count("started") >= 4 or proc.poll() is not None, 40)
         assert proc.poll() is None, log.read_text()
         yield log
     finally:
-        _stop(proc, scenario)
+        stop_launch(proc, scenario)
 
 
 def ok(result: subprocess.CompletedProcess[str]) -> str:
