@@ -11,7 +11,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # The fleet registry of every process a test starts (runtime/registry.py): one private
 # directory per test session, so test fleets never mix with a developer's own fleets or with
 # another test session's, and a test that finds "the running fleet" finds its own.
-_RUNTIME_DIR = tempfile.mkdtemp(prefix="twinfleet-test-runtime-")
+RUNTIME_DIR = tempfile.mkdtemp(prefix="twinfleet-test-runtime-")
 
 
 def pick_free_port() -> int:
@@ -26,8 +26,8 @@ def child_env(runtime_dir: str | Path | None = None) -> dict[str, str]:
     inherited from the developer's shell (TWINFLEET_CONNECT / TWINFLEET_FLEET), and the
     session's private fleet registry (or `runtime_dir`'s) as the per-user runtime directory."""
     env = dict(os.environ)
-    env["XDG_RUNTIME_DIR"] = str(runtime_dir or _RUNTIME_DIR)
-    env.pop("TWINFLEET_RUNTIME_DIR", None)
+    env["XDGRUNTIME_DIR"] = str(runtime_dir or RUNTIME_DIR)
+    env.pop("TWINFLEETRUNTIME_DIR", None)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)
     env["PYTHONUNBUFFERED"] = "1"
     env.pop("TWINFLEET_CONNECT", None)
