@@ -11,9 +11,10 @@ An entry is a JSON object (`FleetEntry`): ``format`` (``twinfleet-fleet/1``),
 ``fleet``, ``endpoint`` (the Zenoh router the fleet's nodes use), ``pid`` and
 ``started`` (the process start tick from /proc, so a recycled pid is not taken
 for the launcher), ``scenario`` (its path), ``kind`` (``launch`` or ``play``),
-``params`` (the launch-time parameter overrides) and ``extra`` (a free
-mapping: later fields, e.g. per-fleet credentials, go there without a format
-change; readers ignore what they do not know). The directory and the files
+``params`` (the launch-time parameter overrides), ``time`` (when it was
+registered) and ``extra`` (a free mapping: later fields, e.g. per-fleet
+credentials, go there without a format change; readers ignore what they do
+not know). The directory and the files
 are owner-only because entries may hold secrets later; a directory that
 another user owns, or that others can write, is refused.
 
@@ -57,6 +58,7 @@ class FleetEntry:
     kind: str = "launch"
     params: Mapping[str, Any] = field(default_factory=dict)
     extra: Mapping[str, Any] = field(default_factory=dict)
+    time: float = 0.0
     path: Path | None = None
 
     def describe(self) -> str:
@@ -149,7 +151,8 @@ def _read(path: Path) -> FleetEntry | None:
         return FleetEntry(fleet=str(doc["fleet"]), endpoint=str(doc["endpoint"]),
                           pid=int(doc["pid"]), started=doc.get("started"),
                           scenario=str(doc.get("scenario", "")), kind=str(doc.get("kind", "launch")),
-                          params=doc.get("params") or {}, extra=doc.get("extra") or {}, path=path)
+                          params=doc.get("params") or {}, extra=doc.get("extra") or {},
+                          time=float(doc.get("time") or 0.0), path=path)
     except (OSError, ValueError, KeyError, TypeError, AttributeError):
         return None
 
@@ -168,7 +171,7 @@ def running_fleets() -> list[FleetEntry]:
             unregister(path)
             continue
         entries.append(entry)
-    return sorted(entries, key=lambda e: (e.path.stat().st_mtime if e.path else 0, e.fleet))
+    return sorted(entries, key=lambda e: (e.time, e.fleet))
 
 
 def find_fleet(fleet: str = "*", entries: Sequence[FleetEntry] | None = None) -> FleetEntry:
@@ -189,9 +192,10 @@ def find_fleet(fleet: str = "*", entries: Sequence[FleetEntry] | None = None) ->
         raise RegistryError(f"no fleet named {fleet!r} is running; running: "
                             + ", ".join(e.describe() for e in entries))
     names = ", ".join(e.describe() for e in matching)
-    if fleet == "*" and len({e.fleet for e in matching}) == len(matching):
+    if fleet == "*":
+        twice = len({e.fleet for e in matching}) < len(matching)
         raise RegistryError(f"{len(matching)} fleets are running: {names}; choose one with "
-                            "--fleet NAME")
+                            "--fleet NAME" + (" (or --connect EP)" if twice else ""))
     raise RegistryError(f"{len(matching)} fleets named {fleet!r} are running: {names}; choose "
                         "one with --connect EP")
 
