@@ -26,8 +26,8 @@ def child_env(runtime_dir: str | Path | None = None) -> dict[str, str]:
     inherited from the developer's shell (TWINFLEET_CONNECT / TWINFLEET_FLEET), and the
     session's private fleet registry (or `runtime_dir`'s) as the per-user runtime directory."""
     env = dict(os.environ)
-    env["XDGRUNTIME_DIR"] = str(runtime_dir or RUNTIME_DIR)
-    env.pop("TWINFLEETRUNTIME_DIR", None)
+    env["XDG_RUNTIME_DIR"] = str(runtime_dir or RUNTIME_DIR)
+    env.pop("TWINFLEET_RUNTIME_DIR", None)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)
     env["PYTHONUNBUFFERED"] = "1"
     env.pop("TWINFLEET_CONNECT", None)
