@@ -30,7 +30,7 @@ class ObstacleScan:
     cells: tuple[Cell, ...]
 
 
-@message("nav_msgs/GetPlan_Request")
+@message("twinfleet_msgs/PathRequest")
 class PathRequest:
     """Ask the map server for a path; `final` is False for a back-off detour."""
 
@@ -40,14 +40,14 @@ class PathRequest:
     final: bool = True
 
 
-@message("nav_msgs/Path")
+@message("twinfleet_msgs/Path")
 class Path:
     """Waypoints from the start (excluded) to the goal; empty when planning failed."""
 
     cells: tuple[Cell, ...]
 
 
-@message("nav_msgs/OccupancyGrid")
+@message("twinfleet_msgs/OccupancyGrid")
 class OccupancyGrid:
     """The static map: row-major bytes, 100 = occupied, 0 = free (latched on /map)."""
 

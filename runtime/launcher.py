@@ -49,6 +49,8 @@ from typing import Any, TextIO, final
 
 import msgpack
 
+from twinfleet.runtime import registry
+from twinfleet.runtime.introspect import param_arguments
 from twinfleet.runtime.messages import DecodeError, decode
 from twinfleet.runtime.names import key_expr
 from twinfleet.runtime.node import QOS_DEFAULT
@@ -355,7 +357,7 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     connect: str | None = None, listen: str | None = None,
                     out: TextIO = sys.stdout, handle_signals: bool = True,
                     run_record: str | None = None, record_events: str | None = None,
-                    node_args: Sequence[str] = (),
+                    node_args: Sequence[str] = (), params: Sequence[str] = (),
                     driver: Callable[[Fleet], Awaitable[str]] | None = None) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
@@ -372,6 +374,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         run_record: write the run as JSON lines to this file (`runtime.run_record`).
         record_events: write every dispatched event to this file (module docstring).
         node_args: extra arguments for every node process (`runtime.node_main`).
+        params: parameter overrides ``[NODE.]NAME=VALUE`` (`runtime.introspect`); the
+            scenario must already be loaded with them (`introspect.load_with_params`).
         driver: a coroutine function run with the fleet once its nodes started; the run
             ends with the reason it returns (an exception it raises is re-raised).
     """
@@ -382,9 +386,10 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     record = RunRecord(run_record) if run_record else None
     events_dir = _fresh_parts_dir(record_events) if record_events else None
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
-                  out=out, record=record, node_args=node_args, events_dir=events_dir,
-                  keep_scenario_beside=record_events or run_record)
+                  out=out, record=record, node_args=[*node_args, *param_arguments(params)],
+                  events_dir=events_dir, keep_scenario_beside=record_events or run_record)
     scenario = fleet.scenario  # loaded from a file node processes can read
+    entry: Path | None = None
     driving: asyncio.Task[str] | None = None
     started = time.monotonic()
     loop = asyncio.get_running_loop()
@@ -399,9 +404,11 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                          nodes=[{"name": c.name, "class": c.class_path, "respawn": c.respawn}
                                 for c in scenario.nodes])
         await fleet.open()
+        entry = _register(fleet, params)
         fleet.log(f"fleet {scenario.fleet!r} on {fleet.endpoint} "
-                  f"(time scale {time_scale:g}, seed {seed}); monitor with: "
-                  f"twinfleet node list --connect {fleet.endpoint} --fleet {scenario.fleet}")
+                  f"(time scale {time_scale:g}, seed {seed}); monitor with: twinfleet node list --fleet "
+                  f"{scenario.fleet}"
+                  + ("" if entry else f" --connect {fleet.endpoint}"))
         tasks = await fleet.start_nodes()
         assert fleet.ended is not None
         if driver is not None:
@@ -419,6 +426,7 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         if driving is not None and not driving.done():
             driving.cancel()
             await asyncio.wait([driving], timeout=5.0)
+        registry.unregister(entry)
         await fleet.shutdown()
         for task in tasks:
             task.cancel()
@@ -446,6 +454,17 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     if driving is not None and not driving.cancelled() and driving.exception() is not None:
         raise driving.exception()  # type: ignore[misc]
     return result
+
+
+def _register(fleet: Fleet, params: Sequence[str]) -> Path | None:
+    """Enter the fleet in the per-user registry (`runtime.registry`) so that monitors find it;
+    None (and a line saying why) when the registry cannot be written."""
+    try:
+        return registry.register(fleet.scenario.fleet, fleet.endpoint,
+                                 scenario=str(fleet.scenario.path), params={"overrides": list(params)})
+    except (OSError, registry.RegistryError) as exc:
+        fleet.log(f"not registered for discovery ({exc}); monitors need --connect")
+        return None
 
 
 def _driver_reason(task: asyncio.Task[str]) -> str:

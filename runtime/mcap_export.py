@@ -1,4 +1,4 @@
-"""`twinfleet export`: a JSON-encoded copy of an MCAP recording, for Foxglove and friends.
+"""`twinfleet export`: a copy of an MCAP recording that Foxglove opens and draws as it is.
 
 `twinfleet record` keeps the raw msgpack envelopes, so that `twinfleet play`
 puts the very bytes back on Zenoh; but viewers such as Foxglove Studio only
@@ -8,10 +8,19 @@ JSON object (``{type, stamp_ms, seq, sender, data}``), ``bytes`` values become
 base64 strings, and every schema says so with ``contentEncoding: base64``
 (the JSON Schema keyword Foxglove reads). Channels keep their topic and
 metadata; messages keep their log and publish times and sequence numbers.
+
+Beside those JSON copies the export writes Foxglove's well-known messages
+(`runtime.foxglove_scene`, protobuf-encoded, schema names ``foxglove.Grid``,
+``foxglove.SceneUpdate``, ``foxglove.PointCloud``) on ``/foxglove/...``
+channels, logged at the time of the sample they come from: the same channels
+the live bridge (`twinfleet foxglove`) serves, so Foxglove's 3D panel draws a
+recording as it draws a live fleet. ``twinfleet record`` keeps only the raw
+envelopes (what `play` needs); the Foxglove view is derived, and so exported.
 """
 
 from __future__ import annotations
 
+import base64
 import json
 from pathlib import Path
 from typing import Any
@@ -21,6 +30,8 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from twinfleet.runtime.viewstate import jsonable
+
+FOXGLOVE_CHANNELS_KEY = "foxglove"  # metadata of a derived channel: what it was made from
 
 
 def json_schema(schema: Any) -> Any:
@@ -47,11 +58,12 @@ def message_json(payload: bytes) -> bytes:
     return json.dumps(jsonable(value), separators=(",", ":"), allow_nan=True).encode()
 
 
-def export_json(source: str | Path, target: str | Path) -> int:
-    """Write `target`, a JSON-encoded copy of the msgpack MCAP `source`.
+def export_json(source: str | Path, target: str | Path, *, foxglove: bool = True) -> int:
+    """Write `target`: a JSON-encoded copy of the msgpack MCAP `source` and (with `foxglove`)
+    its Foxglove channels (module docstring).
 
     Returns:
-        The number of messages written.
+        The number of copied messages (the Foxglove ones are not counted).
 
     Raises:
         ValueError: `source` and `target` are the same file, or `source` holds a
@@ -68,6 +80,7 @@ def export_json(source: str | Path, target: str | Path) -> int:
             writer.add_metadata(name, values)
         schemas: dict[int, int] = {}
         channels: dict[int, int] = {}
+        derived = _FoxgloveChannels(writer) if foxglove else None
         count = 0
         for schema, channel, message in reader.iter_messages(log_time_order=True):
             if channel.id not in channels:
@@ -76,8 +89,59 @@ def export_json(source: str | Path, target: str | Path) -> int:
             writer.add_message(channels[channel.id], log_time=message.log_time, data=data,
                                publish_time=message.publish_time, sequence=message.sequence)
             count += 1
+            if derived is not None:
+                derived.add(channel.topic, _envelope(channel.message_encoding, message.data),
+                            message.log_time)
         writer.finish()
     return count
+
+
+def _envelope(encoding: str, data: bytes) -> Any:
+    """A recorded message as the decoded envelope (a JSON copy's grid bytes decoded again)."""
+    try:
+        if encoding == "msgpack":
+            return msgpack.unpackb(data, raw=False, strict_map_key=False)
+        env = json.loads(data)
+    except Exception:  # msgpack and json raise several unrelated types
+        return None
+    inner = env.get("data") if isinstance(env, dict) else None
+    if isinstance(inner, dict) and isinstance(inner.get("data"), str) \
+            and env.get("type") == "twinfleet_msgs/OccupancyGrid":
+        env["data"] = {**inner, "data": base64.b64decode(inner["data"])}
+    return env
+
+
+class _FoxgloveChannels:
+    """The ``/foxglove/...`` channels of an export, written with the recording's writer."""
+
+    def __init__(self, writer: Writer) -> None:
+        from twinfleet.runtime.foxglove_scene import FoxgloveScene
+
+        self.writer, self.scene = writer, FoxgloveScene()
+        self.schemas: dict[str, int] = {}
+        self.channels: dict[str, int] = {}
+        self.written = 0
+
+    def add(self, topic: str, env: Any, log_time: int) -> None:
+        if not isinstance(env, dict):
+            return
+        for fox_topic, msg in self.scene.feed(topic, env, log_time):
+            self.writer.add_message(self._channel(fox_topic, msg, topic), log_time=log_time,
+                                    publish_time=log_time, data=msg.encode(),
+                                    sequence=self.written)
+            self.written += 1
+
+    def _channel(self, topic: str, msg: Any, source: str) -> int:
+        channel = self.channels.get(topic)
+        if channel is None:
+            schema = type(msg).get_schema()
+            if schema.name not in self.schemas:
+                self.schemas[schema.name] = self.writer.register_schema(
+                    schema.name, schema.encoding, schema.data)
+            channel = self.writer.register_channel(topic, "protobuf", self.schemas[schema.name],
+                                                   {FOXGLOVE_CHANNELS_KEY: source})
+            self.channels[topic] = channel
+        return channel
 
 
 def _metadata(reader: Any) -> list[tuple[str, dict[str, str]]]:

@@ -1,271 +1,339 @@
-"""Logic of the monitoring commands: `topic list|echo|hz|pub`, `service list|call`, `node list`.
+"""Logic of the monitoring commands, with ROS 2's verbs: `node list|info`, `topic
+list|info|type|echo|hz|pub`, `service list|call`, `param list|get`, `interface list|show`.
 
-Each command is a plain function taking a Zenoh config and the fleet name and
-returning an exit code; `runtime.cli` only parses arguments. The monitors read
-the wire format directly (msgpack envelopes, liveliness graph keys, see
-`runtime.transport`), so they work on any fleet without importing its node
-code. Subscriber callbacks only append to a deque (no wake-up per sample);
-the main thread polls it.
+Each command is a plain function taking a `Connection` (endpoint and fleet,
+from --connect or the fleet registry) and returning an exit code (0 ok, 2 bad
+input or no answer); `runtime.commands` only parses arguments. What a monitor
+knows comes from the fleet itself (`runtime.graph`): liveliness tokens, the
+nodes' ``@info`` and ``@types`` queryables, and the samples; no node code is
+imported. A fleet or a topic that is not there is an error after the discovery
+timeout, never a silent wait. Subscriber callbacks only append to a deque (no
+wake-up per sample); the main thread polls it.
 
-`fleet` may be ``*`` for read-only commands (every fleet on the router).
+`fleet` may be ``*`` for read-only commands behind --connect (every fleet on
+the router); names are then shown as ``fleet:/name``.
 """
 
 from __future__ import annotations
 
-import time
-from collections import deque
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from typing import Any, TextIO
 
-import msgpack
 import yaml
 import zenoh
 
-from twinfleet.runtime.messages import (
-    DecodeError,
-    from_plain,
-    message_class,
-    to_plain,
-    type_name_of,
-)
-from twinfleet.runtime.names import KEY_PREFIX
-from twinfleet.runtime.transport import graph_key, parse_graph_key
+from twinfleet.runtime import graph as g
+from twinfleet.runtime.cliargs import CommandError, Connection, zenoh_conf, zenoh_error_text
+from twinfleet.runtime.messages import registered_types
+from twinfleet.runtime.payload import PayloadError, normalise_type
+from twinfleet.runtime.schemas import dataclass_schema
 
-_POLL_S = 0.02
-CLI_SENDER = "twinfleet-cli"
+POLL_S = 0.02
 
 
-def data_key(fleet: str, name: str) -> str:
-    """Key expression of topic or service `name` (fully qualified) in `fleet` (may be `*`)."""
-    if not name.startswith("/"):
-        name = "/" + name
-    return f"{KEY_PREFIX}/{fleet}{name}"
+@contextmanager
+def open_session(conn: Connection) -> Iterator[zenoh.Session]:
+    """A client session to the fleet's router; a dead endpoint is a `CommandError`."""
+    try:
+        session = zenoh.open(zenoh_conf(conn.endpoint))
+    except zenoh.ZError as exc:
+        how = ("the fleet registry names it, but its launcher does not answer"
+               if conn.found == "registry" else "is a fleet running there?")
+        raise CommandError(f"cannot reach the Zenoh router at {conn.endpoint} ({how}): "
+                           f"{zenoh_error_text(exc)}") from None
+    try:
+        yield session
+    finally:
+        session.close()
 
 
-def _liveliness(session: zenoh.Session, key_expr: str, timeout_s: float) -> list[str]:
-    keys = []
-    for reply in session.liveliness().get(key_expr, timeout=timeout_s):
-        if reply.ok is not None:
-            keys.append(str(reply.ok.key_expr))
-    return sorted(set(keys))
+def graph_of(session: zenoh.Session, conn: Connection, timeout_s: float,
+             warn: TextIO | None = None) -> g.Graph:
+    """The fleet's graph; a fleet with no node is an error naming the fleets that are there
+    (with `warn`, a warning line there instead)."""
+    graph = g.read_graph(session, conn.fleet, timeout_s)
+    if conn.fleet != "*" and not graph.nodes:
+        there = g.read_graph(session, "*", timeout_s).fleets()
+        text = (f"no node of fleet {conn.fleet!r} answers at {conn.endpoint} within "
+                f"{timeout_s:g} s" + (f"; fleets there: {', '.join(there)}" if there
+                                      else "; no fleet runs there"))
+        if warn is None:
+            raise CommandError(text)
+        print(f"warning: {text}; waiting", file=warn, flush=True)
+    return graph
 
 
-def _graph(session: zenoh.Session, fleet: str, kind: str, timeout_s: float
-           ) -> list[tuple[str, str, str, str]]:
-    pattern = graph_key(fleet, kind, "*") + ("/**" if kind != "node" else "")
-    return [parse_graph_key(k) for k in _liveliness(session, pattern, timeout_s)]
+def _shown(conn: Connection, fleet: str, name: str) -> str:
+    return name if conn.fleet != "*" else f"{fleet}:{name}"
 
 
-def node_list(conf: zenoh.Config, fleet: str, *, out: TextIO, stats: bool = False,
+def pick(conn: Connection, graph: g.Graph, name: str, table: str) -> tuple[str, str]:
+    """(fleet, name) of a topic/service the user named (``fleet:/name`` behind '*')."""
+    fleet, _, bare = name.rpartition(":") if conn.fleet == "*" else (conn.fleet, "", name)
+    bare = bare if bare.startswith("/") else "/" + bare
+    if conn.fleet == "*" and not fleet:
+        fleets = graph.fleets()
+        if len(fleets) != 1:
+            raise CommandError(f"{name}: several fleets run at {conn.endpoint} "
+                               f"({', '.join(fleets)}); give --fleet NAME")
+        fleet = fleets[0]
+    return fleet, bare
+
+
+def node_list(conn: Connection, *, out: TextIO, stats: bool = False,
               timeout_s: float = 1.0) -> int:
     """Print the running nodes (one liveliness token each); with `stats`, their counters."""
-    with zenoh.open(conf) as session:
-        nodes = _graph(session, fleet, "node", timeout_s)
-        counters = _stats(session, fleet, timeout_s) if stats else {}
-    for node_fleet, _, name, _ in nodes:
-        line = f"{name}" if fleet != "*" else f"{node_fleet}/{name}"
-        extra = counters.get((node_fleet, name))
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s)
+        counters = g.node_stats(session, conn.fleet, timeout_s) if stats else {}
+    for fleet, name in sorted(graph.nodes):
+        line = _shown(conn, fleet, "/" + name)
+        extra = counters.get((fleet, name))
         if extra:
             line += "  " + " ".join(f"{k}={v}" for k, v in extra.items())
-        print(line, file=out, flush=True)
+        print(line, file=out)
+    out.flush()
     return 0
 
 
-def _stats(session: zenoh.Session, fleet: str, timeout_s: float) -> dict[tuple[str, str], Any]:
-    result = {}
-    for reply in session.get(f"{KEY_PREFIX}/{fleet}/@stats/*", timeout=timeout_s):
-        if reply.ok is not None:
-            parts = str(reply.ok.key_expr).split("/")
-            result[(parts[1], parts[3])] = msgpack.unpackb(reply.ok.payload.to_bytes())
-    return result
+def node_info(conn: Connection, node: str, *, out: TextIO, timeout_s: float = 1.0) -> int:
+    """`ros2 node info`: a node's topics with types, services, timers and parameters."""
+    name = node.lstrip("/")
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s)
+        fleet = _node_fleet(conn, graph, name)
+        infos = g.node_infos(session, fleet, timeout_s, name)
+        mine = graph.entities_of(fleet, name)
+        topics = [(fleet, t) for t in mine["publishers"] + mine["subscribers"]]
+        types = g.topic_types(session, fleet, topics, timeout_s, g.node_infos(session, fleet,
+                                                                               timeout_s))
+    info = infos.get((fleet, name), {})
+    print(f"/{name}" + (f"  ({info['class']}, pid {info.get('pid')})" if info else ""), file=out)
+    for label, key in (("Subscribers", "subscribers"), ("Publishers", "publishers"),
+                       ("Service Servers", "servers")):
+        print(f"  {label}:", file=out)
+        for topic in mine[key]:
+            kind = types.get((fleet, topic))
+            print(f"    {topic}" + (f": {kind}" if kind else ""), file=out)
+    if info:
+        print("  Timers:", file=out)
+        for timer in info.get("timers", []):
+            print(f"    {timer['handler']}: every {timer['period_ms']} ms", file=out)
+        print("  Parameters:", file=out)
+        for key, value in info.get("params", {}).items():
+            print(f"    {key}: {inline(value)}", file=out)
+    out.flush()
+    return 0
 
 
-def topic_list(conf: zenoh.Config, fleet: str, *, out: TextIO, verbose: bool = False,
+def _node_fleet(conn: Connection, graph: g.Graph, name: str) -> str:
+    fleets = sorted({f for f, n in graph.nodes if n == name})
+    if not fleets:
+        names = ", ".join(sorted(n for _, n in graph.nodes))
+        raise CommandError(f"no node named {name!r} runs in fleet {conn.fleet!r} at "
+                           f"{conn.endpoint}; nodes: {names}")
+    if len(fleets) > 1:
+        raise CommandError(f"node {name!r} runs in several fleets ({', '.join(fleets)}); "
+                           "give --fleet NAME")
+    return fleets[0]
+
+
+def inline(value: Any) -> str:
+    return yaml.safe_dump(value, default_flow_style=True, width=10_000).strip().removesuffix(
+        "\n...").removesuffix(" ...").strip()
+
+
+def topic_list(conn: Connection, *, out: TextIO, verbose: bool = False, types: bool = False,
                timeout_s: float = 1.0) -> int:
-    """Print the topics that running nodes publish or subscribe to."""
-    with zenoh.open(conf) as session:
-        pubs = _graph(session, fleet, "pub", timeout_s)
-        subs = _graph(session, fleet, "sub", timeout_s)
-    _print_graph(out, fleet, {"publishers": pubs, "subscribers": subs}, verbose)
+    """Print the topics that running nodes publish or subscribe to (`-t`: with their types)."""
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s)
+        found = {}
+        if types:
+            found = g.topic_types(session, conn.fleet, list(graph.publishers), timeout_s)
+    for fleet, topic in graph.topics():
+        line = _shown(conn, fleet, topic)
+        if types:
+            line += f" [{found.get((fleet, topic), 'unknown: no message yet')}]"
+        if verbose:
+            roles = [f"{label}: {', '.join(table.get((fleet, topic), []))}"
+                     for label, table in (("publishers", graph.publishers),
+                                          ("subscribers", graph.subscribers))
+                     if table.get((fleet, topic))]
+            line += f"  [{'; '.join(roles)}]"
+        print(line, file=out)
+    out.flush()
     return 0
 
 
-def service_list(conf: zenoh.Config, fleet: str, *, out: TextIO, verbose: bool = False,
+def topic_info(conn: Connection, topic: str, *, out: TextIO, verbose: bool = False,
+               timeout_s: float = 1.0) -> int:
+    """`ros2 topic info`: type, publisher and subscription counts (`-v`: nodes and QoS)."""
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s)
+        where = pick(conn, graph, topic, "topic")
+        known_topic(conn, graph, where)
+        infos = g.node_infos(session, where[0], timeout_s)
+        kind = g.topic_types(session, where[0], [where], timeout_s, infos).get(where)
+    pubs, subs = graph.publishers.get(where, []), graph.subscribers.get(where, [])
+    print(f"Type: {kind or f'unknown (no message within {timeout_s:g} s)'}", file=out)
+    print(f"Publisher count: {len(pubs)}", file=out)
+    if verbose:
+        _endpoints(out, where, pubs, infos, "PUBLISHER", "publication_qos")
+    print(f"Subscription count: {len(subs)}", file=out)
+    if verbose:
+        _endpoints(out, where, subs, infos, "SUBSCRIPTION", "subscriptions")
+    out.flush()
+    return 0
+
+
+def _endpoints(out: TextIO, where: tuple[str, str], nodes: Sequence[str],
+               infos: dict[tuple[str, str], dict[str, Any]], kind: str, table: str) -> None:
+    for node in nodes:
+        info = infos.get((where[0], node), {})
+        qos = (info.get(table) or {}).get(where[1]) or {"reliability": "reliable",
+                                                        "durability": "volatile", "depth": 10}
+        print(f"  Node name: {node}\n  Endpoint type: {kind}\n  QoS profile:\n"
+              f"    Reliability: {qos['reliability'].upper()}\n"
+              f"    History (Depth): KEEP_LAST ({qos['depth']})\n"
+              f"    Durability: {qos['durability'].upper()}", file=out)
+
+
+def known_topic(conn: Connection, graph: g.Graph, where: tuple[str, str]) -> None:
+    if where not in graph.publishers and where not in graph.subscribers:
+        topics = ", ".join(t for f, t in graph.topics() if f == where[0])
+        raise CommandError(f"no node publishes or subscribes {where[1]} in fleet {where[0]!r}; "
+                           f"topics: {topics}")
+
+
+def topic_type(conn: Connection, topic: str, *, out: TextIO, timeout_s: float = 1.0) -> int:
+    """`ros2 topic type`: the message type seen on a topic."""
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s)
+        where = pick(conn, graph, topic, "topic")
+        known_topic(conn, graph, where)
+        kind = g.topic_types(session, where[0], [where], timeout_s).get(where)
+    if kind is None:
+        raise CommandError(f"{where[1]}: no message within {timeout_s:g} s, so its type is not "
+                           "known yet (twinfleet types travel with the messages)")
+    print(kind, file=out, flush=True)
+    return 0
+
+
+def service_list(conn: Connection, *, out: TextIO, verbose: bool = False, types: bool = False,
                  timeout_s: float = 1.0) -> int:
     """Print the services that running nodes serve."""
-    with zenoh.open(conf) as session:
-        srvs = _graph(session, fleet, "srv", timeout_s)
-    _print_graph(out, fleet, {"servers": srvs}, verbose)
-    return 0
-
-
-def _print_graph(out: TextIO, fleet: str, groups: dict[str, list[tuple[str, str, str, str]]],
-                 verbose: bool) -> None:
-    names: dict[str, dict[str, list[str]]] = {}
-    for label, entries in groups.items():
-        for entry_fleet, _, node, name in entries:
-            shown = name if fleet != "*" else f"{entry_fleet}:{name}"
-            names.setdefault(shown, {}).setdefault(label, []).append(node)
-    for name in sorted(names):
-        if not verbose:
-            print(name, file=out)
-            continue
-        roles = "; ".join(f"{label}: {', '.join(sorted(nodes))}"
-                          for label, nodes in sorted(names[name].items()))
-        print(f"{name}  [{roles}]", file=out)
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s)
+    for (fleet, name), servers in sorted(graph.servers.items()):
+        line = _shown(conn, fleet, name)
+        if verbose:
+            line += f"  [servers: {', '.join(servers)}]"
+        print(line, file=out)
     out.flush()
-
-
-def render_envelope(payload: bytes) -> str:
-    """A YAML rendering of a raw envelope (no message classes needed)."""
-    try:
-        env = msgpack.unpackb(payload, raw=False, strict_map_key=False)
-    except Exception as exc:  # msgpack raises several unrelated types
-        return f"<undecodable payload of {len(payload)} bytes: {exc}>\n"
-    return yaml.safe_dump(env, sort_keys=False, default_flow_style=None, width=100)
-
-
-def _collect(session: zenoh.Session, key: str) -> tuple[Any, deque[tuple[float, bytes]]]:
-    samples: deque[tuple[float, bytes]] = deque()
-
-    def on_sample(sample: zenoh.Sample) -> None:
-        samples.append((time.monotonic(), sample.payload.to_bytes()))
-
-    return session.declare_subscriber(key, on_sample), samples
-
-
-def topic_echo(conf: zenoh.Config, fleet: str, topic: str, *, out: TextIO,
-               count: int | None = None, duration_s: float | None = None) -> int:
-    """Print each sample on `topic` as YAML, `---` between samples.
-
-    Returns 0, or 1 when `count` samples did not arrive within `duration_s`.
-    """
-    seen = 0
-    deadline = None if duration_s is None else time.monotonic() + duration_s
-    with zenoh.open(conf) as session:
-        sub, samples = _collect(session, data_key(fleet, topic))
-        try:
-            while (count is None or seen < count) and (deadline is None or time.monotonic() < deadline):
-                while samples and (count is None or seen < count):
-                    _, payload = samples.popleft()
-                    out.write(render_envelope(payload) + "---\n")
-                    seen += 1
-                out.flush()
-                time.sleep(_POLL_S)
-        except KeyboardInterrupt:
-            pass
-        finally:
-            sub.undeclare()
-    return 0 if count is None or seen >= count else 1
-
-
-def rate_report(stamps: Sequence[float]) -> str | None:
-    """`ros2 topic hz`-style line for arrival times `stamps` (seconds), or None if < 2."""
-    if len(stamps) < 2:
-        return None
-    gaps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
-    mean = sum(gaps) / len(gaps)
-    std = (sum((g - mean) ** 2 for g in gaps) / len(gaps)) ** 0.5
-    rate = 1.0 / mean if mean > 0 else float("inf")
-    return (f"average rate: {rate:.3f} Hz  min: {min(gaps):.4f} s  max: {max(gaps):.4f} s  "
-            f"std dev: {std:.5f} s  window: {len(stamps)}")
-
-
-def topic_hz(conf: zenoh.Config, fleet: str, topic: str, *, out: TextIO, window: int = 100,
-             duration_s: float | None = None, every_s: float = 1.0) -> int:
-    """Print the publishing rate of `topic` every `every_s` over the last `window` samples."""
-    stamps: deque[float] = deque(maxlen=max(2, window))
-    deadline = None if duration_s is None else time.monotonic() + duration_s
-    got_any = False
-    with zenoh.open(conf) as session:
-        sub, samples = _collect(session, data_key(fleet, topic))
-        next_report = time.monotonic() + every_s
-        try:
-            while deadline is None or time.monotonic() < deadline:
-                time.sleep(_POLL_S)
-                while samples:
-                    stamps.append(samples.popleft()[0])
-                    got_any = True
-                if time.monotonic() >= next_report:
-                    next_report += every_s
-                    print(rate_report(list(stamps)) or "no new messages", file=out, flush=True)
-        except KeyboardInterrupt:
-            pass
-        finally:
-            sub.undeclare()
-    return 0 if got_any else 1
-
-
-def build_payload(type_name: str, data: Any, *, seq: int = 0, stamp_ms: int = 0) -> bytes:
-    """An envelope for `data` (a mapping from YAML); validated when the type is registered."""
-    fields = data if isinstance(data, dict) else {}
-    if data is not None and not isinstance(data, dict):
-        raise ValueError(f"message data must be a mapping of fields, got {data!r}")
-    try:
-        cls = message_class(type_name)
-    except DecodeError:
-        plain = fields  # unknown here: send as given, receivers validate
-    else:
-        msg = from_plain({**fields, "_type": type_name})
-        if type(msg) is not cls:
-            raise ValueError(f"could not build {type_name} from {data!r}")
-        plain = to_plain(msg)
-        plain.pop("_type")
-        type_name = type_name_of(msg)
-    envelope = {"type": type_name, "stamp_ms": stamp_ms, "seq": seq, "sender": CLI_SENDER,
-                "data": plain}
-    return msgpack.packb(envelope, use_bin_type=True)
-
-
-def topic_pub(conf: zenoh.Config, fleet: str, topic: str, type_name: str, data: Any, *,
-              out: TextIO, rate_hz: float = 1.0, count: int | None = 1,
-              wait_matched_s: float = 2.0) -> int:
-    """Publish `data` as `type_name` on `topic` `count` times (None: until Ctrl-C) at `rate_hz`."""
-    sent = 0
-    with zenoh.open(conf) as session:
-        pub = session.declare_publisher(data_key(fleet, topic),
-                                        congestion_control=zenoh.CongestionControl.BLOCK)
-        deadline = time.monotonic() + wait_matched_s
-        while not pub.matching_status and time.monotonic() < deadline:
-            time.sleep(_POLL_S)
-        if not pub.matching_status:
-            print(f"warning: no subscriber matches {topic} yet", file=out, flush=True)
-        try:
-            while count is None or sent < count:
-                pub.put(build_payload(type_name, data, seq=sent + 1))
-                sent += 1
-                print(f"published #{sent} on {topic}", file=out, flush=True)
-                if count is None or sent < count:
-                    time.sleep(1.0 / rate_hz)
-        except KeyboardInterrupt:
-            pass
-        finally:
-            pub.undeclare()
     return 0
 
 
-def service_call(conf: zenoh.Config, fleet: str, service: str, type_name: str, data: Any, *,
-                 out: TextIO, timeout_s: float = 2.0) -> int:
-    """Call `service` once and print the reply envelope; 1 on error, timeout or no server."""
-    payload = build_payload(type_name, data)
-    with zenoh.open(conf) as session:
-        replies = list(session.get(data_key(fleet, service), payload=payload, timeout=timeout_s))
-    for reply in replies:
-        if reply.ok is not None:
-            out.write(render_envelope(reply.ok.payload.to_bytes()))
-            out.flush()
-            return 0
-        if reply.err is not None:
-            text = reply.err.payload.to_string()
-            print(f"error: {service}: {'timeout' if text == 'Timeout' else text}", file=out, flush=True)
-            return 1
-    print(f"error: {service}: no server", file=out, flush=True)
-    return 1
+def checked_type(type_name: str, *, service: bool = False) -> str:
+    """`normalise_type`, a bad name being a `CommandError`."""
+    try:
+        return normalise_type(type_name, service=service)
+    except PayloadError as exc:
+        raise CommandError(str(exc)) from None
 
 
-def parse_data(text: str | None) -> Any:
-    """YAML text of message fields (`"{a: 1, b: 2}"`) → mapping; empty → {}."""
-    if not text:
-        return {}
-    return yaml.safe_load(text)
+def param_list(conn: Connection, node: str | None, *, out: TextIO, timeout_s: float = 1.0) -> int:
+    """`ros2 param list`: every node's parameters (or one node's), as served in ``@info``."""
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s)
+        if node is not None:
+            _node_fleet(conn, graph, node.lstrip("/"))
+        infos = g.node_infos(session, conn.fleet, timeout_s, (node or "*").lstrip("/"))
+    for (fleet, name), info in sorted(infos.items()):
+        print(_shown(conn, fleet, f"/{name}") + ":", file=out)
+        for key in info.get("params", {}):
+            print(f"  {key}", file=out)
+    out.flush()
+    return 0
 
+
+def param_get(conn: Connection, node: str, name: str, *, out: TextIO,
+              timeout_s: float = 1.0) -> int:
+    """`ros2 param get NODE NAME`: one parameter's value."""
+    bare = node.lstrip("/")
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s)
+        fleet = _node_fleet(conn, graph, bare)
+        info = g.node_infos(session, fleet, timeout_s, bare).get((fleet, bare))
+    if info is None:
+        raise CommandError(f"node {bare!r} does not describe itself (an older twinfleet?)")
+    params = info.get("params", {})
+    if name not in params:
+        raise CommandError(f"node {bare!r} has no parameter {name!r}; parameters: "
+                           + (", ".join(params) or "none"))
+    value = params[name]
+    kind = {bool: "Boolean", int: "Integer", float: "Double", str: "String"}.get(type(value),
+                                                                                "List")
+    print(f"{kind} value is: {inline(value)}", file=out, flush=True)
+    return 0
+
+
+def interface_list(conn: Connection | None, *, out: TextIO, timeout_s: float = 1.0) -> int:
+    """`ros2 interface list`: the message types this process and the fleet's nodes know."""
+    names = set(registered_types())
+    if conn is not None:
+        with open_session(conn) as session:
+            names |= set(g.served_schemas(session, conn.fleet, timeout_s))
+    print("Messages:", file=out)
+    for name in sorted(names):
+        print(f"    {name}", file=out)
+    out.flush()
+    return 0
+
+
+def interface_show(conn: Connection | None, type_name: str, *, out: TextIO,
+                   timeout_s: float = 1.0) -> int:
+    """`ros2 interface show`: the fields of a message type, from the fleet's ``@types``."""
+    name = checked_type(type_name, service=True)
+    served: dict[str, tuple[dict[str, Any], list[str]]] = {}
+    if conn is not None:
+        with open_session(conn) as session:
+            served = g.served_schemas(session, conn.fleet, timeout_s)
+    cls = registered_types().get(name)
+    if name in served:
+        schema, nodes = served[name]
+        source = f"served by {', '.join(sorted(nodes))}"
+    elif cls is not None:
+        schema, source = dataclass_schema(cls), f"{cls.__module__}.{cls.__qualname__}"
+    else:
+        known = sorted({*served, *registered_types()})
+        raise CommandError(f"unknown message type {name!r}; known: {', '.join(known)}")
+    print(f"# {name} ({source})", file=out)
+    required = set(schema.get("required") or [])
+    for field, sub in (schema.get("properties") or {}).items():
+        optional = "" if field in required else "  # optional"
+        print(f"{field_type(sub)} {field}{optional}", file=out)
+    out.flush()
+    return 0
+
+
+def field_type(schema: dict[str, Any]) -> str:
+    """A JSON Schema of one field in .msg-like notation: ``int64[2]``, ``string``, ``uint8[]``."""
+    if "anyOf" in schema:
+        return " | ".join(field_type(s) for s in schema["anyOf"])
+    kind = schema.get("type")
+    if kind == "string" and schema.get("contentMediaType"):
+        return "uint8[]"
+    if kind == "array":
+        items = schema.get("prefixItems")
+        if items:
+            inner = {field_type(i) for i in items}
+            return f"{inner.pop()}[{len(items)}]" if len(inner) == 1 else \
+                "(" + ", ".join(field_type(i) for i in items) + ")"
+        return f"{field_type(schema.get('items') or {})}[]"
+    if kind == "object":
+        const = ((schema.get("properties") or {}).get("_type") or {}).get("const")
+        return const or "map"
+    return {"string": "string", "integer": "int64", "number": "float64", "boolean": "bool",
+            "null": "none"}.get(kind, "any")

@@ -35,9 +35,10 @@ import msgpack
 from twinfleet.runtime.clock import Clock, FleetClock
 from twinfleet.runtime.eventlog import EventLog
 from twinfleet.runtime.host import NodeHost
+from twinfleet.runtime.introspect import PARAM_FLAG, load_with_params, serve_info
 from twinfleet.runtime.names import KEY_PREFIX
 from twinfleet.runtime.replay_gate import LogicalClock
-from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario
+from twinfleet.runtime.scenario import Scenario, ScenarioError
 from twinfleet.runtime.schemas import registered_schemas, types_key
 from twinfleet.runtime.transport import Respond
 from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
@@ -85,6 +86,8 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                    help="append every dispatched event to FILE as JSON lines, flushed per line")
     p.add_argument("--profile", default=None,
                    help="override the scenario's behaviour profile, as `check --profile` does")
+    p.add_argument(PARAM_FLAG, action="append", default=[], metavar="[NODE.]NAME=VALUE",
+                   help="parameter override, as `twinfleet launch --param` (repeatable)")
     p.add_argument("--gate", action="store_true",
                    help="replay mode: logical time, and run only the events a replay "
                         "coordinator grants (twinfleet replay --live)")
@@ -139,6 +142,7 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
         respond(json.dumps(registered_schemas()).encode(), "")
 
     transport.serve(types_key(scenario.fleet, node.name), serve_types)
+    serve_info(transport, scenario.fleet, node, cfg.class_path)
     try:
         await host.run()
     finally:
@@ -160,8 +164,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     die_with_parent()
     args = parse_args(argv)
     try:
-        scenario = load_scenario(args.scenario,
-                                 {"profile": args.profile} if args.profile else None)
+        scenario = load_with_params(args.scenario, args.param,
+                                    {"profile": args.profile} if args.profile else None)
         scenario.node(args.node)
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)

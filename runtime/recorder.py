@@ -41,7 +41,7 @@ from mcap.writer import Writer
 
 from twinfleet.runtime.names import KEY_PREFIX
 from twinfleet.runtime.schemas import message_schema, types_key
-from twinfleet.runtime.tap import LATCHED_TOPICS, FleetTap
+from twinfleet.runtime.tap import LATCHED_TOPICS, FleetTap, tap_config
 from twinfleet.runtime.zenoh_transport import zenoh_config
 
 DRAIN_S = 0.3
@@ -159,7 +159,7 @@ async def record_live(connect: str, fleet: str, path: str | Path, *,
             asyncio.get_running_loop().add_signal_handler(sig, stop.set)
     recorder = McapRecorder(open(path, "wb"))  # noqa: SIM115 - closed by recorder.close()
     recorder.metadata({"fleet": fleet, "connect": connect})
-    tap = FleetTap(lambda: zenoh_config(connect=[connect], mode="client"), fleet, recorder.write,
+    tap = FleetTap(lambda: tap_config(connect), fleet, recorder.write,
                    retry=False)
     try:
         await tap.open()

@@ -1,7 +1,10 @@
-"""`twinfleet record`, `play` and `export`: fleet topics to MCAP files and back.
+"""`twinfleet record`, `play`, `export` and `bag info`: fleet topics to MCAP files and back.
 
-The engines live in `runtime.recorder` (record, play) and `runtime.mcap_export`
-(the JSON copy for Foxglove); this module is their argparse layer.
+The engines live in `runtime.recorder` (record, play), `runtime.mcap_export`
+(the JSON and Foxglove copies) and `runtime.bag` (summaries); this module is
+their argparse layer. Without --connect, `record` joins the fleet found in the
+fleet registry, and `play` is its own router on a free port and registers the
+recorded fleet there, so `twinfleet topic echo` finds it without options.
 """
 
 from __future__ import annotations
@@ -11,7 +14,12 @@ import asyncio
 import os
 import sys
 
-from twinfleet.runtime.cliargs import add_connection_arguments, import_modules
+from twinfleet.runtime.cliargs import (
+    CommandError,
+    add_connection_arguments,
+    connection,
+    import_modules,
+)
 
 
 def cmd_record(args: argparse.Namespace) -> int:
@@ -27,15 +35,12 @@ def cmd_record(args: argparse.Namespace) -> int:
         print("error: give a SCENARIO to launch or --connect EP of a running fleet, not both "
               "(with a SCENARIO the recorder is the fleet's router: see --listen)", file=sys.stderr)
         return 2
-    connect = args.connect or os.environ.get("TWINFLEET_CONNECT")
     try:
         if args.scenario is None:
-            if not connect:
-                print("error: record needs a SCENARIO to launch or --connect EP of a running "
-                      "fleet", file=sys.stderr)
-                return 2
+            conn = _joined(args)
             result, rec = None, asyncio.run(recorder.record_live(
-                connect, args.fleet, args.output, duration_s=args.duration, handle_signals=True))
+                conn.endpoint, conn.fleet, args.output, duration_s=args.duration,
+                handle_signals=True))
         else:
             result, rec = asyncio.run(recorder.record_scenario(
                 load_scenario(args.scenario), args.output, time_scale=args.time_scale,
@@ -49,39 +54,81 @@ def cmd_record(args: argparse.Namespace) -> int:
     return 0 if result is None or result.passed else 1
 
 
+def _joined(args: argparse.Namespace):  # noqa: ANN202 - a cliargs.Connection
+    """The running fleet `record` joins: --connect, else the one in the fleet registry."""
+    if not args.connect:
+        args.connect = os.environ.get("TWINFLEET_CONNECT")
+    try:
+        return connection(args)
+    except CommandError as exc:
+        raise CommandError(f"record needs a SCENARIO to launch, or a running fleet: {exc}") from None
+
+
 def cmd_play(args: argparse.Namespace) -> int:
-    """`twinfleet play`: re-publish a recording onto Zenoh."""
+    """`twinfleet play`: re-publish a recording onto Zenoh (module docstring)."""
+    import zenoh
+
+    from twinfleet.runtime import registry
+    from twinfleet.runtime.bag import RecordingError, check_readable, read_summary
+    from twinfleet.runtime.cliargs import zenoh_error_text
+    from twinfleet.runtime.launcher import free_port
     from twinfleet.runtime.recorder import play
     from twinfleet.runtime.zenoh_transport import zenoh_config
 
-    if args.listen:
+    try:
+        summary = read_summary(args.file)
+        check_readable(args.file)
+    except RecordingError as exc:
+        raise CommandError(str(exc)) from None
+    listen = args.listen or (None if args.connect else f"tcp/127.0.0.1:{free_port()}")
+    if listen:
         def make_config():  # noqa: ANN202 - zenoh imported lazily
-            return zenoh_config(listen=[args.listen], mode="router")
+            return zenoh_config(listen=[listen], mode="router")
     else:
         def make_config():  # noqa: ANN202 - zenoh imported lazily
             return zenoh_config(connect=[args.connect], mode="client")
-    import zenoh
+    fleet = None if args.fleet == "*" else args.fleet
+    name = fleet or summary.metadata.get("twinfleet", {}).get("fleet")
+    entry = None
+    if listen and name and name != "*":
+        print(f"[play] fleet {name!r} on {listen}; monitor with: twinfleet topic list", flush=True)
+        entry = registry.register(name, listen, scenario=str(args.file), kind="play")
+    try:
+        return play(make_config, args.file, rate=args.rate, fleet=fleet, wait_s=args.wait)
+    except zenoh.ZError as exc:
+        where = f"--listen {listen}" if listen else f"--connect {args.connect}"
+        raise CommandError(f"play: cannot open {where}: {zenoh_error_text(exc)}") from None
+    finally:
+        registry.unregister(entry)
+
+
+def cmd_bag(args: argparse.Namespace) -> int:
+    """`twinfleet bag info FILE`."""
+    from twinfleet.runtime.bag import RecordingError, print_info, read_summary
 
     try:
-        return play(make_config, args.file, rate=args.rate,
-                    fleet=None if args.fleet == "*" else args.fleet, wait_s=args.wait)
-    except (ValueError, OSError, zenoh.ZError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
+        print_info(read_summary(args.file), sys.stdout)
+    except RecordingError as exc:
+        raise CommandError(str(exc)) from None
+    return 0
 
 
 def cmd_export(args: argparse.Namespace) -> int:
     """`twinfleet export`: a JSON-encoded copy of a recording."""
     from mcap.exceptions import McapError
 
+    from twinfleet.runtime.bag import RecordingError, check_readable
     from twinfleet.runtime.mcap_export import export_json
 
     try:
+        check_readable(args.file)
         count = export_json(args.file, args.output)
-    except (ValueError, OSError, McapError) as exc:
+    except (ValueError, OSError, McapError, RecordingError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {args.output}: {count} messages, JSON-encoded", flush=True)
+    print(f"wrote {args.output}: {count} messages, JSON-encoded, and their Foxglove view "
+          "(/foxglove/map, /foxglove/robots, /foxglove/<robot>/scan, /foxglove/collisions)",
+          flush=True)
     return 0
 
 
@@ -97,8 +144,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="stop after S wall seconds (default: with a SCENARIO, when the run ends; "
                         "with --connect, at Ctrl-C)")
     r.add_argument("--connect", default=None, metavar="EP",
-                   help="record the running fleet behind this Zenoh router "
-                        "(default without SCENARIO: $TWINFLEET_CONNECT)")
+                   help="record the running fleet behind this Zenoh router (default without "
+                        "SCENARIO: $TWINFLEET_CONNECT, else the fleet running on this machine)")
     r.add_argument("--fleet", default=os.environ.get("TWINFLEET_FLEET", "*"),
                    help="with --connect: the fleet to record, '*' for every fleet "
                         "(default: $TWINFLEET_FLEET or %(default)s)")
@@ -123,14 +170,26 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--wait", type=float, default=2.0, metavar="S",
                    help="wait up to S seconds for a subscriber to match before playing "
                         "(default: %(default)s)")
-    add_connection_arguments(p, fleet_help="publish into this fleet; '*' keeps the recorded fleet",
-                             discovery=False)
+    add_connection_arguments(p, fleet_help="publish into this fleet; '*' keeps the recorded fleet")
     p.set_defaults(func=cmd_play)
-    e = sub.add_parser("export", help="write a JSON-encoded copy of a recording (for Foxglove)",
+    p.description = ("Re-publish a recording at its recorded pace. Without --connect, play is "
+                     "its own Zenoh router on a free port and registers the recorded fleet, so "
+                     "`twinfleet topic echo /poses` (or view, foxglove) finds it.")
+    bag = sub.add_parser("bag", help="inspect recordings (ros2 bag style)")
+    bs = bag.add_subparsers(dest="action", required=True, metavar="ACTION")
+    bi = bs.add_parser("info", help="summarise a recording: duration, messages per topic, schemas",
+                       description="Summarise an MCAP recording: duration, start and end, "
+                                   "message count per topic and type, schemas.")
+    bi.add_argument("file", help="MCAP file, e.g. run.mcap")
+    bi.set_defaults(func=cmd_bag)
+    e = sub.add_parser("export", help="write a copy of a recording that Foxglove draws as it is",
                        description="Copy an MCAP file written by `twinfleet record` with every "
-                                   "message as JSON (bytes as base64) and schemas to match, so "
-                                   "that viewers like Foxglove Studio decode it. `twinfleet play` "
-                                   "needs the original (msgpack) recording.")
+                                   "message as JSON (bytes as base64) and schemas to match, plus "
+                                   "Foxglove's well-known messages on /foxglove/... channels "
+                                   "(foxglove.Grid map, foxglove.SceneUpdate robots and "
+                                   "collisions, foxglove.PointCloud scans), so Foxglove's 3D "
+                                   "panel draws it with no configuration. `twinfleet play` needs "
+                                   "the original (msgpack) recording.")
     e.add_argument("file", help="MCAP file written by `twinfleet record`")
     e.add_argument("-o", "--output", required=True, metavar="FILE",
                    help="JSON-encoded MCAP file to write, e.g. run.json.mcap")

@@ -10,8 +10,10 @@ through `Handoff` (one wake-up per burst) and reach `deliver(key, payload)` on
 the loop, in arrival order.
 
 Opening retries every 0.25 s when asked to (a viewer may start before the
-fleet's router); the retried `zenoh.open` runs in a worker thread and is never
-abandoned half-way, so no session is left open behind the loop's back.
+fleet's router, or before any fleet is registered: `make_config` may raise
+`LookupError` for "no endpoint yet"); the retried `zenoh.open` runs in a worker
+thread and is never abandoned half-way, so no session is left open behind the
+loop's back.
 """
 
 from __future__ import annotations
@@ -28,14 +30,24 @@ import zenoh
 from zenoh import ext
 
 from twinfleet.runtime.names import KEY_PREFIX
-from twinfleet.runtime.zenoh_transport import Handoff
+from twinfleet.runtime.zenoh_transport import Handoff, zenoh_config
 
 LATCHED_TOPICS = ("/map",)
+RECONNECT = "{period_init_ms: 100, period_max_ms: 500, period_increase_factor: 1.5}"
 RETRY_S = 0.25
 DUPLICATE_WINDOW_S = 10.0  # history and live copies of one latched sample arrive well within
 _SEEN_PER_KEY = 16
 
 Deliver = Callable[[str, bytes], None]
+
+
+def tap_config(endpoint: str) -> zenoh.Config:
+    """A client config for a tap on `endpoint` that reconnects within half a second when the
+    router comes back (a fleet launched again on the same endpoint); zenoh's default back-off
+    grows to seconds, and a viewer then missed the new run's first poses."""
+    conf = zenoh_config(connect=[endpoint], mode="client")
+    conf.insert_json5("connect/retry", RECONNECT)
+    return conf
 
 
 @final
@@ -68,7 +80,7 @@ class FleetTap:
             try:
                 self.session = await asyncio.to_thread(zenoh.open, self.make_config())
                 break
-            except zenoh.ZError:
+            except (zenoh.ZError, LookupError):
                 if not self.retry:
                     raise
                 await asyncio.sleep(RETRY_S)

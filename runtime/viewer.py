@@ -14,6 +14,9 @@ hears every topic of the fleet, the latched ``/map`` with history, so a viewer
 that joins late still gets the map. Samples are folded into a `LiveState` on
 the loop; a flush task sends the changes to every page every 50 ms.
 
+Without --connect, the viewer takes the fleet from the fleet registry
+(`runtime.registry`), and if none runs yet it waits for one to be launched.
+
 Trace mode (``--trace FILE``) serves `trace_document(FILE)`; the page steps
 through it. No Zenoh session is opened.
 """
@@ -164,15 +167,13 @@ async def serve(*, connect: str | None, fleet: str = "*", port: int = 0,
     if trace_path is not None:
         app = make_app(trace=trace_document(trace_path), info={"trace": trace_path})
     else:
-        if connect is None:
-            raise ValueError("live mode needs a Zenoh endpoint (--connect)")
-        from twinfleet.runtime.tap import FleetTap
-        from twinfleet.runtime.zenoh_transport import zenoh_config
+        from twinfleet.runtime.tap import FleetTap, tap_config
 
         state = LiveState(fleet)
-        tap = FleetTap(lambda: zenoh_config(connect=[connect], mode="client"), fleet,
-                       state.on_sample)
-        app = make_app(state=state, tap=tap, info={"fleet": fleet, "connect": connect})
+        make_config = (lambda: tap_config(connect)) if connect else _registry_config(fleet)
+        tap = FleetTap(make_config, fleet, state.on_sample)
+        app = make_app(state=state, tap=tap, info={
+            "fleet": fleet, "connect": connect or "the fleet registry (waiting for a launch)"})
     runner = web.AppRunner(app, access_log=None, handle_signals=False)
     await runner.setup()
     try:
@@ -180,13 +181,27 @@ async def serve(*, connect: str | None, fleet: str = "*", port: int = 0,
         await site.start()
         host, bound = runner.addresses[0][:2]
         url = f"http://{host}:{bound}/"
-        what = f"trace {trace_path}" if trace_path else f"fleet {fleet!r} via {connect}"
+        what = (f"trace {trace_path}" if trace_path else
+                f"fleet {fleet!r} via {connect or 'the fleet registry (waiting for a launch)'}")
         print(f"[viewer] {what}: open {url}", file=out, flush=True)
         if ready is not None:
             ready(url)
         await (stop.wait() if stop is not None else asyncio.Event().wait())
     finally:
         await runner.cleanup()
+
+
+def _registry_config(fleet: str) -> Callable[[], Any]:
+    """A tap config for the fleet the registry names; `LookupError` (retried) until one runs."""
+    from twinfleet.runtime.registry import RegistryError, find_fleet
+    from twinfleet.runtime.tap import tap_config
+
+    def make() -> Any:
+        try:
+            return tap_config(find_fleet(fleet).endpoint)
+        except RegistryError as exc:
+            raise LookupError(str(exc)) from None
+    return make
 
 
 def run_viewer(*, connect: str | None, fleet: str = "*", port: int = 0,

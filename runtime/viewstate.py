@@ -13,7 +13,9 @@ at start), the robots' starts and goals, the initial node states and each
 step's changed states.
 
 Message kinds are recognised by envelope type name, the ones of `nodes.msgs`
-and `runtime.messages`; other types are only counted.
+and `runtime.messages`, and drawn; every topic of any fleet, whatever its
+type, is listed with its type, count and latest message (`topics`), which the
+page's topic list and message inspector show.
 """
 
 from __future__ import annotations
@@ -69,6 +71,12 @@ def split_key(key: str) -> tuple[str, str] | None:
     return parts[1], "/" + parts[2]
 
 
+def in_fleet(wanted: str, key: str) -> tuple[str, str] | None:
+    """`split_key` of a key of fleet `wanted` (``*``: of any fleet), else None."""
+    where = split_key(key)
+    return where if where is not None and wanted in ("*", where[0]) else None
+
+
 @final
 class _Log:
     """An append-only list with a cursor of what was already sent."""
@@ -119,6 +127,8 @@ class LiveState:
         self.ended: str | None = None
         self.link = {"session": False, "router": False}
         self.counts: dict[str, int] = {}
+        self.latest: dict[str, dict[str, Any]] = {}  # topic → its last envelope (JSON values)
+        self._dirty_topics: set[str] = set()
         self.messages = 0
         self._stamps: dict[str, int] = {}
         self._dirty: dict[str, set[str]] = {}
@@ -126,18 +136,21 @@ class LiveState:
 
     def on_sample(self, key: str, payload: bytes) -> None:
         """Fold one sample of key `twinfleet/<fleet>/<topic>` into the state."""
-        where = split_key(key)
+        where = in_fleet(self.fleet, key)
         if where is None:
             return
         fleet, topic = where
-        if self.fleet == "*":
+        if self.fleet == "*":  # the first fleet whose data arrives is the one shown
             self.fleet = fleet
             self._dirty_top.add("fleet")
-        if fleet != self.fleet:
-            return
         self.messages += 1
         self.counts[topic] = self.counts.get(topic, 0) + 1
         env = read_envelope(payload)
+        shown = env if env is not None else {"type": "(undecodable)",
+                                             "data": {"bytes": len(payload)}}
+        if shown != self.latest.get(topic):  # the same envelope again is a latched copy
+            self.latest[topic] = shown
+            self._dirty_topics.add(topic)
         if env is not None:
             self._apply(topic, env)
 
@@ -147,9 +160,9 @@ class LiveState:
         if field is not None and isinstance(data.get("robot"), str):
             self._new_run_check(data["robot"], env.get("stamp_ms"))
             self._robot(data["robot"], field, data)
-        elif kind == "nav_msgs/Path" and topic.count("/") == 2 and topic.endswith("/path"):
+        elif kind == "twinfleet_msgs/Path" and topic.count("/") == 2 and topic.endswith("/path"):
             self._robot(topic.split("/")[1], "path", data)  # /<robot>/path: its latest plan
-        elif kind == "nav_msgs/OccupancyGrid":
+        elif kind == "twinfleet_msgs/OccupancyGrid":
             ident = (env.get("sender"), env.get("seq"), env.get("stamp_ms"), data.get("data"))
             if ident != self.map_id:  # the latched copy from history repeats the live one
                 self.map, self.map_id = data, ident
@@ -209,7 +222,13 @@ class LiveState:
         return {"kind": "snapshot", "fleet": self.fleet, "map": self.map, "robots": robots,
                 "order": self.order, "collisions": self.collisions.all(),
                 "violations": self.violations.all(), "fleet_status": self.fleet_status,
-                "ended": self.ended, "link": self.link, "stats": self._stats()}
+                "ended": self.ended, "link": self.link, "stats": self._stats(),
+                "topics": {t: self._topic(t) for t in sorted(self.latest)}}
+
+    def _topic(self, topic: str) -> dict[str, Any]:
+        """What the topic list and the inspector show of one topic."""
+        last = self.latest[topic]
+        return {"type": last.get("type"), "count": self.counts.get(topic, 0), "last": last}
 
     def take_update(self) -> dict[str, Any] | None:
         """The changes since the last call (None if nothing changed)."""
@@ -227,9 +246,12 @@ class LiveState:
             new = log.new()
             if new:
                 update[name] = new
+        if self._dirty_topics:
+            update["topics"] = {t: self._topic(t) for t in sorted(self._dirty_topics)}
         changed = bool(robots) or len(update) > 2
         self._dirty.clear()
         self._dirty_top.clear()
+        self._dirty_topics.clear()
         if not changed:
             return None
         update["stats"] = self._stats()

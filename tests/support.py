@@ -4,9 +4,14 @@ from __future__ import annotations
 
 import os
 import socket
+import tempfile
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+# The fleet registry of every process a test starts (runtime/registry.py): one private
+# directory per test session, so test fleets never mix with a developer's own fleets or with
+# another test session's, and a test that finds "the running fleet" finds its own.
+RUNTIME_DIR = tempfile.mkdtemp(prefix="twinfleet-test-runtime-")
 
 
 def pick_free_port() -> int:
@@ -16,10 +21,13 @@ def pick_free_port() -> int:
         return s.getsockname()[1]
 
 
-def child_env() -> dict[str, str]:
-    """Environment for subprocesses: the project on PYTHONPATH, unbuffered output, and no
-    fleet inherited from the developer's shell (TWINFLEET_CONNECT / TWINFLEET_FLEET)."""
+def child_env(runtime_dir: str | Path | None = None) -> dict[str, str]:
+    """Environment for subprocesses: the project on PYTHONPATH, unbuffered output, no fleet
+    inherited from the developer's shell (TWINFLEET_CONNECT / TWINFLEET_FLEET), and the
+    session's private fleet registry (or `runtime_dir`'s) as the per-user runtime directory."""
     env = dict(os.environ)
+    env["XDG_RUNTIME_DIR"] = str(runtime_dir or RUNTIME_DIR)
+    env.pop("TWINFLEET_RUNTIME_DIR", None)
     env["PYTHONPATH"] = os.pathsep.join(p for p in (str(ROOT), env.get("PYTHONPATH", "")) if p)
     env["PYTHONUNBUFFERED"] = "1"
     env.pop("TWINFLEET_CONNECT", None)

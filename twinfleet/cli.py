@@ -1,32 +1,70 @@
 """The `twinfleet` command line, assembled from the commands each layer registers.
 
-    twinfleet launch|topic|service|node|view|record|play|export   (twinfleet.runtime.commands)
+    twinfleet launch|node|topic|service|param|interface|view|foxglove|record|play|export|bag
+                                                                  (twinfleet.runtime.commands)
     twinfleet render                                              (twinfleet.nodes.commands)
     twinfleet check                                               (twinfleet.checker.commands)
     twinfleet replay|validate|experiment                          (twinfleet.agreement.commands)
 
 This module sits above every layer; each layer's `register(subparsers)` adds
 its own commands and imports its engines only when a command runs.
+
+Errors are one line. A command reports bad input or no answer by raising
+`CommandError` (its text, exit 2); `main` also turns the errors every
+command can meet (a file that cannot be read, a corrupt recording, a Zenoh
+endpoint that does not answer) into one line and exit 2, and, as a last
+resort, any other exception, naming its type. ``--debug`` shows the traceback
+instead. Exit codes: 0 ok (every property holds), 1 a property is violated
+(FAILED), 2 bad input or no answer, 3 inconclusive, 130 interrupted.
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
+import traceback
 from collections.abc import Sequence
 
 from twinfleet.agreement import commands as agreement_commands
 from twinfleet.checker import commands as checker_commands
 from twinfleet.nodes import commands as nodes_commands
 from twinfleet.runtime import commands as runtime_commands
+from twinfleet.runtime.cliargs import EXIT_BAD_INPUT, EXIT_INTERRUPTED, CommandError
 
-DESCRIPTION = ("twinfleet: run a robot fleet as separate processes over Zenoh, and check the same "
-               "node code exhaustively. Every command has --help.")
+DESCRIPTION = """\
+twinfleet runs a fleet of robot nodes (or any nodes you write in Python) as separate
+processes talking over Eclipse Zenoh, with ROS 2-style topics, services, parameters and
+tools (node, topic, service, param, interface, bag), and checks the very same node code
+exhaustively: the checker explores every interleaving of messages, timers and choices
+and proves a property or returns the trace that breaks it.
+
+  twinfleet launch launch/demo.yaml   run a scenario live (monitor it from another shell:
+  twinfleet node list                 the running fleet is found without --connect)
+  twinfleet check launch/c1a.yaml     explore every interleaving
+  twinfleet view                      watch it in a browser (`twinfleet foxglove`: in Foxglove)
+
+Every command has --help."""
+
+EPILOG = ("exit codes: 0 ok / every property holds, 1 a property is violated (FAILED), "
+          "2 bad input or no answer, 3 inconclusive, 130 interrupted")
+
+
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
+
+    try:
+        return f"twinfleet {version('twinfleet')}"
+    except PackageNotFoundError:
+        return "twinfleet (source checkout, not installed)"
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The full argument parser."""
-    parser = argparse.ArgumentParser(prog="twinfleet", description=DESCRIPTION)
+    parser = argparse.ArgumentParser(prog="twinfleet", description=DESCRIPTION, epilog=EPILOG,
+                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--version", action="version", version=_version())
+    parser.add_argument("--debug", action="store_true",
+                        help="show the traceback of an error instead of one line")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     runtime_commands.register(sub)
     nodes_commands.register(sub)
@@ -36,12 +74,34 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Console script `twinfleet`."""
+    """Console script `twinfleet`: run the command; every error is one line (module docstring)."""
     args = build_parser().parse_args(argv)
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
-        return 130
+        return EXIT_INTERRUPTED
+    except Exception as exc:  # the last resort: one line, unless --debug
+        if args.debug:
+            traceback.print_exc()
+        print(f"error: {error_line(exc)}", file=sys.stderr, flush=True)
+        return exc.code if isinstance(exc, CommandError) else EXIT_BAD_INPUT
+
+
+def error_line(exc: BaseException) -> str:
+    """One line for an error that reached `main`, naming what and where."""
+    from twinfleet.runtime.cliargs import zenoh_error_text
+
+    if isinstance(exc, CommandError):
+        return str(exc)
+    if isinstance(exc, OSError) and exc.filename is not None:
+        return f"{exc.filename}: {exc.strerror or exc}"
+    kind = type(exc)
+    if kind.__module__.startswith("zenoh"):
+        return f"Zenoh: {zenoh_error_text(exc)}"
+    if kind.__module__.startswith("mcap"):
+        return f"not a readable MCAP recording: {' '.join(str(exc).split())}"
+    text = " ".join(str(exc).split()) or "no details"
+    return f"unexpected {kind.__name__}: {text} (run with --debug for the traceback)"
 
 
 if __name__ == "__main__":

@@ -1,6 +1,8 @@
 // twinfleet view: draws a live fleet (websocket /ws) or steps through a checker trace
-// (/api/trace) on one canvas. No build step, no dependencies. Everything the page knows
-// is in window.twinfleetView (tests and the console read it; view.probe() samples pixels).
+// (/api/trace) on one canvas, which pans (drag) and zooms (wheel); lists every topic of the
+// fleet with an inspector of its latest message, whatever the nodes are. No build step, no
+// dependencies. Everything the page knows is in window.twinfleetView (tests and the console
+// read it; view.probe() samples pixels).
 "use strict";
 (() => {
   const PALETTE = [[220, 40, 40], [40, 90, 220], [30, 160, 60], [240, 140, 20], [150, 60, 190],
@@ -17,6 +19,7 @@
     collisions: emptyLog(), violations: emptyLog(), fleetStatus: null, ended: null,
     stats: null, selected: null, frames: 0, firstFrameMs: null, drawnRobots: [],
     positions: {}, messages: 0, trace: null, step: 0, playing: false,
+    zoom: 1, pan: [0, 0], topics: {}, inspected: null,
   };
   let mapCanvas = null, drawPending = false, traceStates = [], traceTrails = [], timer = null;
 
@@ -72,15 +75,26 @@
 
   function robotCell(r) { return r.pose ? r.pose.cell : r.status ? r.status.cell : null; }
 
+  function noMapText() {
+    if (view.mode === "trace") {
+      return view.trace ? "this trace has no map: its steps and node states are on the right"
+        : "loading trace…";
+    }
+    const n = Object.keys(view.topics).length;
+    return n ? `no /map on fleet ${view.fleet}: its ${n} topic${n > 1 ? "s are" : " is"} listed on the right`
+      : "waiting for the fleet's messages…";
+  }
+
   function draw() {
     drawPending = false;
     g.setTransform(1, 0, 0, 1, 0, 0);
     g.fillStyle = "#fff"; g.fillRect(0, 0, canvas.width, canvas.height);
     if (!mapCanvas) {
       g.fillStyle = "#555"; g.font = "16px sans-serif";
-      g.fillText(view.mode === "trace" ? "loading trace…" : "waiting for the fleet's /map…", 20, 30);
+      g.fillText(noMapText(), 20, 30);
       return finishFrame([]);
     }
+    g.setTransform(view.zoom, 0, 0, view.zoom, view.pan[0], view.pan[1]);
     g.imageSmoothingEnabled = false;
     g.drawImage(mapCanvas, 0, 0, canvas.width, canvas.height);
     view.mapDrawn = true;
@@ -157,7 +171,8 @@
 
   view.draw = draw;
   view.probe = () => {  // canvas pixels where the map and each robot are drawn (for tests)
-    const px = (x, y) => Array.from(g.getImageData(Math.round(x), Math.round(y), 1, 1).data.slice(0, 3));
+    const px = (x, y) => Array.from(g.getImageData(Math.round(x * view.zoom + view.pan[0]),
+      Math.round(y * view.zoom + view.pan[1]), 1, 1).data.slice(0, 3));
     const out = { map: null, robots: {} };
     if (view.map) {
       const { width: w, height: h } = view.map;
@@ -173,6 +188,26 @@
     }
     return out;
   };
+
+  const escape = (t) => String(t).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" })[c]);
+
+  function shortJson(value) {  // long strings (a map's base64 bytes) shortened for reading
+    return JSON.stringify(value, (k, v) => (typeof v === "string" && v.length > 300
+      ? `${v.slice(0, 300)}… (${v.length} chars)` : v), 1);
+  }
+
+  function renderTopics() {
+    const names = Object.keys(view.topics).sort();
+    $("topics").innerHTML = names.map((t) => {
+      const e = view.topics[t];
+      return `<tr class="topic${t === view.inspected ? " selected" : ""}" data-topic="${escape(t)}">` +
+        `<td>${escape(t)}</td><td>${escape(e.type)}</td><td>${e.count}</td></tr>`;
+    }).join("");
+    const e = view.inspected && view.topics[view.inspected];
+    $("inspector-title").textContent = e ? `message inspector: ${view.inspected} (${e.type}, #${e.count})` : "message inspector";
+    $("inspector").textContent = e ? shortJson(e.last) : "no topic selected";
+    $("inspector").className = e ? "" : "muted";
+  }
 
   function renderPanel() {
     const rows = view.order.filter((n) => view.robots[n]).map((name) => {
@@ -196,8 +231,47 @@
       const st = view.stats;
       $("stats").textContent = st ? `${st.messages} messages on ${Object.keys(st.topics).length} topics` : "";
       $("ended").textContent = view.ended ? `fleet ended: ${view.ended}` : "";
+      renderTopics();
     }
+    $("zoom-label").textContent = view.zoom === 1 ? "" : `(×${view.zoom.toFixed(2)})`;
   }
+
+  $("topics").addEventListener("click", (ev) => {
+    const row = ev.target.closest("tr.topic");
+    if (!row) return;
+    view.inspected = view.inspected === row.dataset.topic ? null : row.dataset.topic;
+    renderTopics();
+  });
+
+  // ---- pan and zoom: the canvas transform is (zoom, pan); probe() and clicks follow it ----
+  function canvasPoint(ev) {
+    const r = canvas.getBoundingClientRect();
+    return [(ev.clientX - r.left) * (canvas.width / r.width), (ev.clientY - r.top) * (canvas.height / r.height)];
+  }
+  function zoomAt(point, factor) {
+    const z = Math.max(0.5, Math.min(16, view.zoom * factor)), k = z / view.zoom;
+    view.pan = [point[0] - (point[0] - view.pan[0]) * k, point[1] - (point[1] - view.pan[1]) * k];
+    view.zoom = z;
+    scheduleDraw();
+  }
+  view.zoomAt = zoomAt;
+  view.resetView = () => { view.zoom = 1; view.pan = [0, 0]; scheduleDraw(); };
+  canvas.addEventListener("wheel", (ev) => { ev.preventDefault(); zoomAt(canvasPoint(ev), Math.pow(1.1, -ev.deltaY / 100)); }, { passive: false });
+  let drag = null;
+  canvas.addEventListener("mousedown", (ev) => { drag = canvasPoint(ev); canvas.classList.add("dragging"); });
+  window.addEventListener("mouseup", () => { drag = null; canvas.classList.remove("dragging"); });
+  window.addEventListener("mousemove", (ev) => {
+    if (!drag) return;
+    const p = canvasPoint(ev);
+    view.pan = [view.pan[0] + p[0] - drag[0], view.pan[1] + p[1] - drag[1]];
+    drag = p;
+    scheduleDraw();
+  });
+  canvas.addEventListener("dblclick", () => view.resetView());
+  const middle = () => [canvas.width / 2, canvas.height / 2];
+  $("zoom-in").addEventListener("click", () => zoomAt(middle(), 1.25));
+  $("zoom-out").addEventListener("click", () => zoomAt(middle(), 0.8));
+  $("zoom-reset").addEventListener("click", () => view.resetView());
 
   $("robots").addEventListener("click", (ev) => {
     const row = ev.target.closest("tr.robot");
@@ -216,8 +290,12 @@
 
   function applyLive(msg) {
     const fresh = msg.kind === "snapshot";
-    if (fresh) { view.robots = {}; view.collisions = emptyLog(); view.violations = emptyLog(); }
-    if ("fleet" in msg) view.fleet = msg.fleet;
+    if (fresh) { view.robots = {}; view.collisions = emptyLog(); view.violations = emptyLog(); view.topics = {}; }
+    for (const [t, e] of Object.entries(msg.topics || {})) view.topics[t] = e;
+    if ("fleet" in msg) {
+      view.fleet = msg.fleet;
+      $("mode").textContent = `live: fleet ${view.fleet} via ${view.connect}`;
+    }
     if ("map" in msg) setMap(msg.map);
     if (msg.order) view.order = msg.order;
     for (const [name, e] of Object.entries(msg.robots || {})) {
@@ -287,6 +365,7 @@
     $("step-range").value = String(view.step);
     $("step-label").textContent = `step ${view.step}/${doc.steps.length}`;
     $("step-info").textContent = stepText(view.step);
+    $("states").textContent = statesText(view.step);
     draw();  // at once: the canvas, the panel and the step text always show the same step
   }
 
@@ -304,6 +383,12 @@
     if (s.failure) lines.push(`  FAILURE ${JSON.stringify(s.failure)}`);
     if (k === view.trace.steps.length && view.trace.message) lines.push(`→ ${view.trace.message}`);
     return lines.join("\n");
+  }
+
+  function statesText(k) {
+    const changed = k > 0 ? view.trace.steps[k - 1].changed || {} : {};
+    return Object.entries(traceStates[k] || {}).map(([node, st]) =>
+      `${node in changed ? "*" : " "} ${node}: ${JSON.stringify(st)}`).join("\n");
   }
 
   function play(on) {
@@ -333,6 +418,7 @@
     if (info.mode === "trace") {
       $("link").textContent = ""; loadTrace(await (await fetch("/api/trace")).json());
     } else {
+      view.connect = info.connect;
       $("mode").textContent = `live: fleet ${info.fleet} via ${info.connect}`;
       connect();
     }

@@ -56,6 +56,35 @@ def run_cli(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess[st
                           text=True, timeout=timeout, env=child_env(), cwd=ROOT, check=False)
 
 
+def run_cli_in(runtime_dir: Path, *args: str, timeout: float = 30.0
+               ) -> subprocess.CompletedProcess[str]:
+    """`python -m twinfleet ARGS` with the fleet registry of `runtime_dir` (its
+    XDG_RUNTIME_DIR) and no connection options or variables."""
+    return subprocess.run([sys.executable, "-m", "twinfleet", *args], capture_output=True,
+                          text=True, timeout=timeout, env=child_env(runtime_dir), cwd=ROOT,
+                          check=False)
+
+
+def launch_in(runtime_dir: Path, log: Path, *args: str) -> subprocess.Popen:
+    """Start `twinfleet launch ARGS` with the fleet registry of `runtime_dir`, output to `log`."""
+    with log.open("w") as sink:
+        return subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", *args],
+                                stdout=sink, stderr=subprocess.STDOUT, env=child_env(runtime_dir),
+                                cwd=ROOT, start_new_session=True)
+
+
+def stop_launch(proc: subprocess.Popen, scenario: str) -> None:
+    """SIGINT a launcher, SIGKILL it after 15 s, then kill node processes it left behind."""
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGINT)
+        try:
+            proc.wait(timeout=15)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait(timeout=5)
+    kill_all([p for p in processes_mentioning(scenario) if p != proc.pid])
+
+
 def node_pid(scenario: Path | str, node: str) -> int | None:
     """PID of the live node process running `node` of `scenario` (a /proc scan)."""
     for pid in processes_mentioning(str(scenario)):

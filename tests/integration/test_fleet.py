@@ -116,7 +116,7 @@ def test_pubsub_service_and_periodic_timer_across_processes(demo: RunningFleet) 
 def test_node_list_from_liveliness(demo: RunningFleet) -> None:
     result = cli(demo, "node", "list")
     assert result.returncode == 0, result.stderr
-    assert result.stdout.split() == ["adder", "caller", "listener", "talker"]
+    assert result.stdout.split() == ["/adder", "/caller", "/listener", "/talker"]
 
 
 def test_topic_and_service_list(demo: RunningFleet) -> None:
@@ -147,7 +147,7 @@ def test_service_call_and_topic_pub_from_the_cli(demo: RunningFleet) -> None:
     assert call.returncode == 0, call.stdout + call.stderr
     assert "data: {sum: 42}" in call.stdout
     missing = cli(demo, "service", "call", "/nothing_here", "std_msgs/Empty")
-    assert missing.returncode == 1 and "no server" in missing.stdout
+    assert missing.returncode == 2 and "no server" in missing.stderr
     pub = cli(demo, "topic", "pub", "/chatter", "std_msgs/String", "{data: from-test}")
     assert pub.returncode == 0, pub.stdout + pub.stderr
     assert poll(lambda: "heard data='from-test'" in demo.output(), 10), demo.output()
@@ -189,7 +189,7 @@ def test_plain_zenoh_script_decodes_traffic_and_garbage_is_counted(demo: Running
     assert poll(lambda: "dropped undecodable sample on twinfleet/itest/chatter" in demo.output(),
                 10), demo.output()
     stats = cli(demo, "node", "list", "--stats")
-    assert re.search(r"^listener .*dropped_undecodable=1 .*gaps=0", stats.stdout, re.M), stats.stdout
+    assert re.search(r"^/listener .*dropped_undecodable=1 .*gaps=0", stats.stdout, re.M), stats.stdout
     assert "handler_errors=0" in stats.stdout
 
 

@@ -99,7 +99,7 @@ def test_play_republishes_what_topic_echo_and_a_subscriber_saw(recording, cli):
     seen: list[tuple[str, bytes]] = []
     with zenoh.open(zenoh_config(listen=[endpoint], mode="router")) as router:
         echo = cli("topic", "echo", "/poses", "--connect", endpoint, "--fleet", "c1a",
-                   "--count", str(len(poses)), "--duration", "40", log="echo.log")
+                   "--count", str(len(poses)), "--duration", "40", "--wait", log="echo.log")
         _wait_matched(router, "twinfleet/c1a/poses")
         sub = router.declare_subscriber(
             "twinfleet/c1a/**", lambda s: seen.append((str(s.key_expr), s.payload.to_bytes())))
@@ -115,7 +115,9 @@ def test_play_republishes_what_topic_echo_and_a_subscriber_saw(recording, cli):
         finally:
             sub.undeclare()
     assert seen == [(key, payload) for _, key, payload in recorded]
-    echoed = [doc for doc in yaml.safe_load_all(echo.log.read_text()) if doc]
+    text = "".join(line for line in echo.log.read_text().splitlines(keepends=True)
+                   if not line.startswith("warning: "))  # --wait says it waits, on stderr
+    echoed = [doc for doc in yaml.safe_load_all(text) if doc]
     assert len(echoed) == len(poses)
     for got, want in zip(echoed, poses, strict=True):
         assert got == want
@@ -128,9 +130,11 @@ def test_export_writes_json_that_foxglove_can_decode(recording, tmp_path):
                           cwd=ROOT, check=False)
     assert done.returncode == 0, done.stdout + done.stderr
     original = list(_rows(recording))
-    exported = list(_rows(out))
+    everything = list(_rows(out))
+    exported = [row for row in everything if not row[1].topic.startswith("/foxglove/")]
     assert f"wrote {out}: {len(original)} messages, JSON-encoded" in done.stdout
     assert len(exported) == len(original)
+    _assert_foxglove_channels([row for row in everything if row[1].topic.startswith("/foxglove/")])
     for (_, ch_a, msg_a), (schema, ch_b, msg_b) in zip(original, exported, strict=True):
         assert (ch_b.topic, ch_b.metadata, ch_b.message_encoding) == (ch_a.topic, ch_a.metadata, "json")
         assert (msg_b.log_time, msg_b.sequence) == (msg_a.log_time, msg_a.sequence)
@@ -150,6 +154,29 @@ def test_export_writes_json_that_foxglove_can_decode(recording, tmp_path):
                             str(out)], capture_output=True, text=True, timeout=30, env=child_env(),
                            cwd=ROOT, check=False)
     assert again.returncode == 2 and "needs a new file" in again.stderr
+
+
+def _assert_foxglove_channels(rows: list[tuple]) -> None:
+    """Issue 14, acceptance 4: an export opened with the `mcap` reader has Foxglove's
+    well-known schemas on its derived channels, and the messages decode with them."""
+    from foxglove_support import decode_protobuf
+
+    by_topic: dict[str, list] = defaultdict(list)
+    for schema, channel, message in rows:
+        assert channel.message_encoding == "protobuf" and schema.encoding == "protobuf"
+        by_topic[channel.topic].append((schema, message))
+    names = {topic: items[0][0].name for topic, items in by_topic.items()}
+    assert names["/foxglove/map"] == "foxglove.Grid"
+    assert names["/foxglove/robots"] == "foxglove.SceneUpdate"
+    assert {names[f"/foxglove/{r}/scan"] for r in ROBOTS} == {"foxglove.PointCloud"}
+    schema, message = by_topic["/foxglove/map"][0]
+    grid = decode_protobuf(schema.name, schema.data, message.data)
+    assert grid.column_count == 50 and len(grid.data) == 2500 and grid.frame_id == "map"
+    ids = set()
+    for schema, message in by_topic["/foxglove/robots"]:
+        update = decode_protobuf(schema.name, schema.data, message.data)
+        ids |= {e.id for e in update.entities if e.cubes and e.arrows}
+    assert ids == {f"robot/{r}" for r in ROBOTS}
 
 
 def _rows(path: Path) -> list[tuple]:

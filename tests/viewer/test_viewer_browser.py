@@ -22,6 +22,7 @@ CHROMIUM = Path("/usr/bin/chromium")
 CHROMIUM_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
                  "--disable-component-update", "--disable-sync", "--no-first-run"]
 ROBOTS = ["r1", "r2", "r3", "r4", "r5"]
+SCENARIO_STARTS = {"r1": (5, 5), "r2": (5, 15), "r3": (5, 25), "r4": (5, 35), "r5": (5, 45)}
 
 
 @pytest.fixture
@@ -77,6 +78,18 @@ def test_viewer_shows_the_live_c1a_fleet_moving(cli, browser_page):
     assert page.get_attribute("#world", "data-robots") == "5"
     first = _assert_drawn(page, ROBOTS)
     start_cells = {name: seen["cell"] for name, seen in first["robots"].items()}
+    # A viewer opened before the launch has every trail from the robot's start cell on.
+    trails = page.evaluate("() => Object.fromEntries(Object.entries(twinfleetView.robots).map("
+                           "([n, r]) => [n, [r.trail.start, r.trail.items[0]]]))")
+    assert trails == {n: [0, list(c)] for n, c in SCENARIO_STARTS.items()}, trails
+    # Zoom (out, so that the whole map stays on the canvas) and pan: the map and the robots
+    # are drawn where the page's transform puts them.
+    page.evaluate("() => { twinfleetView.zoomAt([0, 0], 0.8); twinfleetView.pan[0] += 40; "
+                  "twinfleetView.draw(); }")
+    assert page.evaluate("() => [twinfleetView.zoom, twinfleetView.pan]") == [0.8, [40, 0]]
+    _assert_drawn(page, ROBOTS)
+    page.click("#zoom-reset")
+    assert page.evaluate("() => [twinfleetView.zoom, twinfleetView.pan]") == [1, [0, 0]]
 
     page.wait_for_function(
         """(start) => Object.entries(start).every(([n, c]) => {
@@ -131,3 +144,60 @@ def test_viewer_steps_through_a_checker_trace(cli, browser_page, tmp_path):
     page.click("#last")
     ARTIFACTS.mkdir(parents=True, exist_ok=True)
     page.screenshot(path=str(ARTIFACTS / "viewer-trace.png"))
+
+
+def test_viewer_lists_and_inspects_the_topics_of_a_non_robot_fleet(cli, browser_page):
+    # Issue 14, acceptance 5: the demo fleet (talker, listener, adder, caller) has no map and
+    # no robot; the viewer starts before it, without --connect, and finds it in the registry.
+    url = _start_viewer(cli)
+    page = browser_page
+    page.goto(url)
+    page.wait_for_function("() => window.twinfleetView && twinfleetView.wsOpen")
+    cli("launch", str(ROOT / "launch" / "demo.yaml"), "--timeout", "30", log="fleet.log")
+    page.wait_for_selector("tr.topic[data-topic='/chatter']")
+    row = page.eval_on_selector("tr.topic[data-topic='/chatter']",
+                                "r => Array.from(r.cells).map(c => c.textContent)")
+    assert row[:2] == ["/chatter", "std_msgs/String"] and int(row[2]) >= 1
+    page.click("tr.topic[data-topic='/chatter']")
+    page.wait_for_function("() => document.getElementById('inspector').textContent.includes('hello')")
+    inspected = json.loads(page.text_content("#inspector"))
+    assert inspected["type"] == "std_msgs/String" and inspected["sender"] == "talker"
+    assert inspected["data"]["data"].startswith("hello ")
+    assert "/chatter" in page.text_content("#inspector-title")
+    page.evaluate("() => twinfleetView.draw()")
+    assert page.evaluate("() => twinfleetView.mapDrawn") is False
+    ARTIFACTS.mkdir(parents=True, exist_ok=True)
+    page.screenshot(path=str(ARTIFACTS / "viewer-demo.png"))
+
+
+USER_TRACE_SCENARIO = """\
+name: mine
+nodes:
+  - {name: talker, class: "twinfleet.nodes.demo:Talker", params: {period_ms: 100}}
+  - {name: listener, class: "twinfleet.nodes.demo:Listener"}
+properties:
+  - {name: talks_little, kind: invariant, expr: "talker.count < 3"}
+"""
+
+
+def test_viewer_steps_through_a_trace_of_a_users_fleet(cli, browser_page, tmp_path):
+    from twinfleet.checker.check import CheckOptions, check
+
+    scenario = tmp_path / "mine.yaml"
+    scenario.write_text(USER_TRACE_SCENARIO)
+    trace = tmp_path / "mine.trace.json"
+    assert check(scenario, CheckOptions(trace_out=str(trace))).status == "violated"
+    steps = len(json.loads(trace.read_text())["steps"])
+    url = _start_viewer(cli, "--trace", str(trace))
+    page = browser_page
+    page.goto(url)
+    page.wait_for_function("() => twinfleetView.trace !== null")
+    assert page.evaluate("() => twinfleetView.step") == steps
+    states = page.text_content("#states")
+    assert "talker:" in states and '"count":3' in states.replace(" ", ""), states
+    assert "→" in page.text_content("#step-info")  # the violation's message
+    page.click("#first")
+    assert "talker:" in page.text_content("#states") and page.evaluate("() => twinfleetView.step") == 0
+    page.keyboard.press("ArrowRight")
+    assert "talker" in page.text_content("#step-info") or "listener" in page.text_content("#step-info")
+    page.screenshot(path=str(ARTIFACTS / "viewer-user-trace.png"))

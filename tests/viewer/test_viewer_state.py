@@ -64,6 +64,12 @@ def test_live_state_folds_messages_and_hands_out_changes_once():
     snap = state.snapshot()
     assert snap["robots"]["r1"]["trail"]["items"] == [[0, 0], [0, 1]]
     assert snap["stats"]["topics"]["/poses"] == 3 and "r9" not in snap["robots"]
+    # every topic, whatever its type, with its latest message: the page's topic list
+    assert snap["topics"]["/poses"]["type"] == "twinfleet_msgs/RobotPose"
+    assert snap["topics"]["/poses"]["count"] == 3
+    assert snap["topics"]["/poses"]["last"]["data"]["cell"] == [0, 1]
+    assert second["topics"].keys() == {"/poses", "/fleet_status", "/collisions",
+                                       "/twinfleet/shutdown"}
 
 
 def test_live_state_restarts_a_robot_when_the_fleet_is_launched_again():
@@ -134,7 +140,7 @@ def test_schema_of_a_registered_type_and_of_an_unknown_one():
     assert set(data["properties"]) == {"robot", "cell", "direction", "velocity", "done"}
     assert data["properties"]["cell"]["prefixItems"] == [{"type": "integer"}] * 2
     assert data["required"] == ["robot", "cell", "direction", "velocity"]
-    grid = message_schema("nav_msgs/OccupancyGrid")["properties"]["data"]["properties"]
+    grid = message_schema("twinfleet_msgs/OccupancyGrid")["properties"]["data"]["properties"]
     assert grid["data"]["contentMediaType"] == "application/octet-stream"
     other = message_schema("x_msgs/Unknown", {"a": 1, "b": [1.5], "c": {"d": "e"}})["properties"]["data"]
     assert other["properties"]["b"] == {"type": "array", "items": {"type": "number"}}
@@ -157,7 +163,7 @@ def test_recorder_writes_channels_schemas_and_increasing_log_times(tmp_path):
     assert times == sorted(set(times))
     kinds = {ch.topic: (s.name, ch.metadata["durability"]) for s, ch, _ in rows}
     assert kinds == {"/poses": ("twinfleet_msgs/RobotPose", "volatile"),
-                     "/map": ("nav_msgs/OccupancyGrid", "transient_local"),
+                     "/map": ("twinfleet_msgs/OccupancyGrid", "transient_local"),
                      "/junk": ("twinfleet/Undecodable", "volatile")}
     assert rec.undecodable == 1 and rec.messages == 52
 

@@ -1,0 +1,196 @@
+"""Issue 14, acceptance 1 and 3: the ROS 2 verbs against live fleets, found without --connect.
+
+Each test module run has its own fleet registry (a private XDG_RUNTIME_DIR,
+as a desktop session gives every user); the launcher registers its fleet
+there and every monitor command below runs with *no* --connect and no
+TWINFLEET_* variable. One C1a fleet (time scale 1, so it lives long enough)
+serves the verbs; a demo fleet launched with parameter overrides joins it for
+the launch-override, pub and call tests, which also check that two running
+fleets make a bare `node list` ask for --fleet.
+"""
+
+from __future__ import annotations
+
+import re
+import subprocess
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+import yaml
+from itest_support import ROOT, launch_in, poll, run_cli_in, stop_launch
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
+
+C1A = ROOT / "launch" / "c1a.yaml"
+ROBOTS = ["r1", "r2", "r3", "r4", "r5"]
+
+
+@pytest.fixture(scope="module")
+def runtime_dir(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    return tmp_path_factory.mktemp("xdg-runtime")
+
+
+tf = run_cli_in
+
+
+@pytest.fixture(scope="module")
+def c1a(runtime_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    log = tmp_path_factory.mktemp("c1a") / "fleet.log"
+    proc = launch_in(runtime_dir, log, str(C1A), "--time-scale", "1", "--timeout", "110")
+    try:
+        assert poll(lambda: log.read_text().count("] t=") >= 6 or proc.poll() is not None, 40)
+        assert proc.poll() is None, log.read_text()
+        yield log
+    finally:
+        stop_launch(proc, str(C1A))
+
+
+@pytest.fixture(scope="module")
+def demo(runtime_dir: Path, c1a: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
+    log = tmp_path_factory.mktemp("demo") / "fleet.log"
+    scenario = str(ROOT / "launch" / "demo.yaml")
+    proc = launch_in(runtime_dir, log, scenario, "talker.period_ms:=250", "--param",
+                   "caller.period_ms=300", "--timeout", "100")
+    try:
+        assert poll(lambda: log.read_text().count("started") >= 4 or proc.poll() is not None, 40)
+        assert proc.poll() is None, log.read_text()
+        yield log
+    finally:
+        stop_launch(proc, scenario)
+
+
+def ok(result: subprocess.CompletedProcess[str]) -> str:
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert "Traceback" not in result.stderr
+    return result.stdout
+
+
+def test_node_list_and_echo_poses_without_connect(runtime_dir, c1a):
+    # Acceptance 1: one fleet running, no --connect, no TWINFLEET_* variable.
+    assert ok(tf(runtime_dir, "node", "list")).split() == ["/map_server", *(f"/{r}" for r in ROBOTS)]
+    [pose] = [d for d in yaml.safe_load_all(ok(tf(runtime_dir, "topic", "echo", "/poses", "--once"))) if d]
+    assert pose["type"] == "twinfleet_msgs/RobotPose" and pose["data"]["robot"] in ROBOTS
+
+
+def test_echo_map_once_for_a_late_joiner(runtime_dir, c1a):
+    # The map server publishes /map once, at its start; the robots are already moving
+    # (the fixture waited for every node's start line), so this echo joins late.
+    ok(tf(runtime_dir, "topic", "echo", "/poses", "--once"))
+    [doc] = [d for d in yaml.safe_load_all(ok(tf(runtime_dir, "topic", "echo", "/map", "--once"))) if d]
+    assert doc["type"] == "twinfleet_msgs/OccupancyGrid"
+    assert (doc["data"]["width"], doc["data"]["height"]) == (50, 50)
+
+
+def test_echo_field(runtime_dir, c1a):
+    out = ok(tf(runtime_dir, "topic", "echo", "/poses", "--once", "--field", "cell"))
+    cell = yaml.safe_load(out.split("---")[0])
+    assert isinstance(cell, list) and len(cell) == 2 and all(isinstance(v, int) for v in cell)
+    bad = tf(runtime_dir, "topic", "echo", "/poses", "--once", "--field", "nope")
+    assert bad.returncode == 2 and "no field 'nope'" in bad.stderr
+
+
+def test_topic_list_with_types_matches_the_readme(runtime_dir, c1a):
+    out = ok(tf(runtime_dir, "topic", "list", "-t"))
+    listed = dict(re.findall(r"^(\S+) \[(\S+)\]$", out, re.M))
+    assert listed["/map"] == "twinfleet_msgs/OccupancyGrid"
+    assert listed["/poses"] == "twinfleet_msgs/RobotPose"
+    assert listed["/r1/scan"] == "twinfleet_msgs/ObstacleScan"
+    readme = (ROOT / "README.md").read_text()
+    block = readme.split("<!-- topics:c1a -->")[1].split("<!-- /topics -->")[0]
+    documented = dict(re.findall(r"^\| `(\S+)` \| `(\S+)` \|", block, re.M))
+    expanded = {t.replace("<robot>", r): k for t, k in documented.items() for r in ROBOTS}
+    for topic, kind in listed.items():
+        assert expanded.get(topic) == kind, f"{topic} [{kind}] is not in the README's topic list"
+    missing = set(expanded) - set(listed)
+    assert missing <= {"/collisions", "/twinfleet/shutdown", "/violations"}, missing
+
+
+def test_topic_info_and_type(runtime_dir, c1a):
+    out = ok(tf(runtime_dir, "topic", "info", "/poses", "-v"))
+    assert "Type: twinfleet_msgs/RobotPose" in out
+    assert "Publisher count: 5" in out and "Subscription count: 1" in out
+    assert "Node name: map_server" in out and "History (Depth): KEEP_LAST (10000)" in out
+    latched = ok(tf(runtime_dir, "topic", "info", "/map", "-v"))
+    assert "Durability: TRANSIENT_LOCAL" in latched
+    assert ok(tf(runtime_dir, "topic", "type", "/map")).strip() == "twinfleet_msgs/OccupancyGrid"
+
+
+def test_node_info(runtime_dir, c1a):
+    out = ok(tf(runtime_dir, "node", "info", "r1"))
+    assert out.startswith("/r1  (twinfleet.nodes.robot:Robot")
+    subs = out.split("Subscribers:")[1].split("Publishers:")[0]
+    assert "/r1/scan: twinfleet_msgs/ObstacleScan" in subs
+    assert "/poses: twinfleet_msgs/RobotPose" in out.split("Publishers:")[1]
+    assert "speed: 0.5" in out.split("Parameters:")[1]
+    assert "/generate_path" in ok(tf(runtime_dir, "node", "info", "map_server"))
+
+
+def test_param_list_and_get(runtime_dir, c1a):
+    out = ok(tf(runtime_dir, "param", "list", "r2"))
+    assert out.startswith("/r2:") and "  speed" in out and "  max_wait_ms" in out
+    assert ok(tf(runtime_dir, "param", "get", "r2", "speed")).strip() == "Double value is: 0.7"
+    assert ok(tf(runtime_dir, "param", "get", "r2", "goal")).strip() == "List value is: [45, 35]"
+    bad = tf(runtime_dir, "param", "get", "r2", "sped")
+    assert bad.returncode == 2 and "no parameter 'sped'" in bad.stderr
+
+
+def test_interface_show_reads_the_fleets_schemas(runtime_dir, c1a):
+    out = ok(tf(runtime_dir, "interface", "show", "twinfleet_msgs/msg/RobotPose"))
+    assert out.splitlines()[0].startswith("# twinfleet_msgs/RobotPose (served by ")
+    assert "int64[2] cell" in out and "bool done  # optional" in out
+    assert "twinfleet_msgs/Collision" in ok(tf(runtime_dir, "interface", "list"))
+
+
+def test_bag_info_of_a_recording_of_the_running_fleet(runtime_dir, c1a, tmp_path):
+    bag = tmp_path / "joined.mcap"
+    ok(tf(runtime_dir, "record", "--duration", "2", "-o", str(bag)))
+    out = ok(tf(runtime_dir, "bag", "info", str(bag)))
+    counts = {t: int(n) for t, n in re.findall(r"^  (\S+)\s+type: \S+\s+count:\s+(\d+)", out, re.M)}
+    assert counts.get("/poses", 0) >= 5 and "Duration:" in out and "Fleet:             c1a" in out
+    assert "twinfleet_msgs/RobotPose (jsonschema)" in out
+
+
+def test_launch_overrides_and_two_fleets(runtime_dir, demo):
+    several = tf(runtime_dir, "node", "list")
+    assert several.returncode == 2 and len(several.stderr.strip().splitlines()) == 1
+    assert "2 fleets are running" in several.stderr and "--fleet NAME" in several.stderr
+    assert ok(tf(runtime_dir, "param", "get", "talker", "period_ms", "--fleet", "demo")).strip() \
+        == "Integer value is: 250"
+    assert ok(tf(runtime_dir, "param", "get", "caller", "period_ms", "--fleet", "demo")).strip() \
+        == "Integer value is: 300"
+
+
+def test_pub_takes_a_ros_type_name_and_warns_without_subscriber(runtime_dir, demo):
+    heard = ok(tf(runtime_dir, "topic", "pub", "/chatter", "std_msgs/msg/String",
+                  "{data: ros-style}", "--fleet", "demo"))
+    assert "published #1 on /chatter: std_msgs/String" in heard
+    assert poll(lambda: "heard data='ros-style'" in demo.read_text(), 10), demo.read_text()[-2000:]
+    lonely = tf(runtime_dir, "topic", "pub", "/nobody_listens", "std_msgs/String", "{data: x}",
+                "--fleet", "demo")
+    assert lonely.returncode == 0 and "warning: no subscriber on /nobody_listens" in lonely.stderr
+    quiet = tf(runtime_dir, "topic", "pub", "/chatter", "std_msgs/String", "{data: y}",
+               "--fleet", "demo")
+    assert "warning" not in quiet.stderr
+
+
+def test_service_call_with_a_ros_service_type(runtime_dir, demo):
+    out = ok(tf(runtime_dir, "service", "call", "/add_two_ints",
+                "example_interfaces/srv/AddTwoInts", "{a: 2, b: 40}", "--fleet", "demo"))
+    assert "data: {sum: 42}" in out
+
+
+def test_mistyped_topic_and_fleet_are_reported(runtime_dir, c1a):
+    echo = tf(runtime_dir, "topic", "echo", "/posse", "--once", "--fleet", "c1a")
+    assert echo.returncode == 2 and "no node publishes or subscribes /posse" in echo.stderr
+    fleet = tf(runtime_dir, "topic", "echo", "/poses", "--once", "--fleet", "c1b")
+    assert fleet.returncode == 2 and "no fleet named 'c1b' is running" in fleet.stderr
+
+
+def test_every_verb_has_help(runtime_dir):
+    for verb in (["node", "info"], ["topic", "info"], ["topic", "type"], ["topic", "echo"],
+                 ["param", "list"], ["param", "get"], ["interface", "show"], ["bag", "info"]):
+        text = ok(tf(runtime_dir, *verb, "--help"))
+        assert "usage: twinfleet " + " ".join(verb) in text
+    assert ok(tf(runtime_dir, "--version")).startswith("twinfleet ")
+    assert "--query-timeout" not in ok(tf(runtime_dir, "view", "--help"))
