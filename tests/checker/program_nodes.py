@@ -14,6 +14,9 @@ load) from handler name (`HANDLERS`) to a list of actions; every action is a
 JSON list:
 
     ["pub", topic]              publish Token(ttl - 1, regs[0]) on topic (if ttl > 0)
+    ["echo", topic]             publish Token(ttl, regs[0]): the ttl is NOT spent, so two
+                                echoing handlers make a zero-time cycle (Rule 1 never lets
+                                time pass), what a reduction's cycle proviso must handle
     ["after", delay_ms, slot]   ctx.after(delay_ms, t<slot>, ttl - 1)     (if ttl > 0)
     ["call", service, timeout]  ctx.call(service, Token(ttl - 1, regs[0]), on_reply)
                                 with timeout_ms=timeout                   (if ttl > 0)
@@ -23,7 +26,7 @@ JSON list:
     ["choose", [a, b, ...]]     run one of the action lists, picked by ctx.choose
     ["fail", reg, v]            ctx.fail(...) if regs[reg] == v
 
-`ttl` is what bounds every system: the start handler and the periodic tick
+`ttl` is what bounds every system but echoes: the start handler and the periodic tick
 run with `params.ttl`, every other handler with the ttl its input carries,
 and nothing is sent on with ttl 0, so every chain of events ends and node
 states (two registers mod `MOD`) are finite. A service replies
@@ -102,7 +105,7 @@ def _check_action(act: Any, where: str) -> None:
     if not isinstance(act, Sequence) or isinstance(act, str) or not act:
         raise ProgramError(f"{where}: expected an action list such as ['add', 0, 1], got {act!r}")
     op, args = act[0], list(act[1:])
-    shapes = {"pub": (str,), "after": (int, int), "call": (str, int), "add": (int, int),
+    shapes = {"pub": (str,), "echo": (str,), "after": (int, int), "call": (str, int), "add": (int, int),
               "take": (int,), "fail": (int, int)}
     if op in shapes:
         if len(args) != len(shapes[op]) or not all(isinstance(a, t) for a, t in
@@ -163,6 +166,8 @@ class ProgramNode(Node):
         regs = list(self.state.regs)
         if op == "pub" and ttl > 0:
             ctx.publish(act[1], Token(ttl - 1, regs[0]))
+        elif op == "echo" and ttl > 0:
+            ctx.publish(act[1], Token(ttl, regs[0]))
         elif op == "after" and ttl > 0:
             ctx.after(act[1], self.t1 if act[2] else self.t0, ttl - 1)
         elif op == "call" and ttl > 0:

@@ -3,7 +3,8 @@
 `systems()` draws a whole scenario as plain data: 2-4 `ProgramNode`s (some
 periodic) whose handlers publish to random topics of random priority, set
 timers, call services (with timeouts; sometimes a service nobody serves),
-and branch with `ctx.choose`; optional `latency`, `faults` (drop, duplicate,
+branch with `ctx.choose`, and sometimes echo a message on without spending its
+time-to-live (zero-time cycles, when echoes meet); optional `latency`, `faults` (drop, duplicate,
 crash), `deadline_ms` and `queue_bound`; either semantics, with node
 priorities and `global_priority` under `rebeca`; and 1-3 random properties of
 every kind (invariant, eventually, within, deadlock with or without a goal,
@@ -64,6 +65,13 @@ def _send(names: list[str]) -> st.SearchStrategy[list[Any]]:
     ).map(list)
 
 
+def _echo(name: str, names: list[str], handler: str) -> st.SearchStrategy[list[Any]]:
+    """A publish that keeps its ttl, to the same input of some node (itself included): echoes
+    on one input name chain up and often close a zero-time cycle. One subscriber only (on
+    /bus echoes would multiply)."""
+    return st.builds(lambda n: ["echo", f"/{n}/{handler}"], st.sampled_from([name, *names]))
+
+
 def _leaf(names: list[str]) -> st.SearchStrategy[list[Any]]:
     reg = st.integers(0, REGISTERS - 1)
     local = st.one_of(
@@ -96,6 +104,10 @@ def _node(draw: st.DrawFn, name: str, names: list[str], semantics: str) -> dict[
     for h in draw(st.lists(st.sampled_from(HANDLERS_OF[kind]), min_size=2, max_size=6,
                            unique=True)):
         program.setdefault(h, draw(st.lists(action, min_size=1, max_size=2)))
+    inputs = [h for h in program if h in INPUT_TOPICS]
+    if inputs and _sometimes(draw, 3):  # one input handler only echoes
+        echoing = draw(st.sampled_from(inputs))
+        program[echoing] = [draw(_echo(name, names, echoing))]
     params: dict[str, Any] = {"program": json.dumps(program, separators=(",", ":")),
                               "ttl": draw(st.sampled_from(TTLS))}
     if kind == "periodic":
