@@ -328,20 +328,27 @@ def _cell(res: Result) -> str:
 
 
 def _ratio(a: Result, b: Result) -> str:
-    """`a` against `b` (unreduced over reduced) in states and in time, '-' without both answers."""
-    if not (a.states and b.states) or a.limited or b.limited:
+    """`a` against `b` (unreduced over reduced) in states and time; '>' when only `b` answered."""
+    if not (a.states and b.states) or b.limited or b.verdict in ("skipped", "killed", "error"):
         return f"{'-':>8}{'-':>8}"
-    return f"{a.states / b.states:>8.1f}{a.seconds / max(b.seconds, 1e-3):>8.1f}"
+    more = ">" if a.limited else ""
+    states = f"{more}{a.states / b.states:.1f}"
+    seconds = f"{more}{a.seconds / max(b.seconds, 1e-3):.1f}"
+    return f"{states:>8}{seconds:>8}"
 
 
 def print_table(results: list[Result], modes: Sequence[str]) -> None:
     """The human-readable table: one line per scenario, one column group per mode."""
+    width = 46
+    groups = f"{'':<32}"
     head = f"{'scenario':<22}{'sem':<7}{'N':>3}"
     for mode in modes:
-        label = "unreduced" if mode in ("none", "default") else mode
-        head += f" | {label + ': verdict':>9} {'states':>11} {'transitions':>12} {'s':>7} {'MB':>6}"
+        groups += " | " + f"{'unreduced' if mode in ('none', 'default') else mode:<{width}}"
+        head += f" | {'verdict':>9} {'states':>11} {'transitions':>12} {'s':>7} {'MB':>6}"
     if len(modes) == 2:
+        groups += f" | {'none / por':>16}"
         head += f" | {'x states':>8}{'x time':>8}"
+    print(groups)
     print(head)
     print("-" * len(head))
     rows: dict[tuple[str, str], dict[str, Result]] = {}
@@ -351,12 +358,13 @@ def print_table(results: list[Result], modes: Sequence[str]) -> None:
         first = next(iter(by_mode.values()))
         line = f"{name:<22}{sem:<7}{first.run.robots:>3}"
         for mode in modes:
-            line += " | " + (_cell(by_mode[mode]) if mode in by_mode else f"{'':>46}")
+            line += " | " + (_cell(by_mode[mode]) if mode in by_mode else f"{'':>{width}}")
         if len(modes) == 2 and all(m in by_mode for m in modes):
             line += " | " + _ratio(by_mode["none"], by_mode["por"])
         print(line)
-    print("\n'>' marks a run stopped by --max-time (its counts are lower bounds); MB is the "
-          "child process's peak RSS (interpreter, numpy and the node code included).")
+    print("\n'>' marks a run stopped by --max-time (its counts, and ratios against it, are "
+          "lower bounds); MB is the child process's peak RSS (interpreter, numpy and the node "
+          "code included).")
     for res in results:
         if res.reduction is not None and res.mode == "por" and "por" not in res.reduction:
             print(f"note: {res.run.name} ({res.run.semantics}): --reduction por ran as "
