@@ -78,6 +78,41 @@ def corridor_map() -> np.ndarray:
     return img
 
 
+def lanes_map(lanes: int, length: int, width: int = 3, wall: int = 1) -> np.ndarray:
+    """``lanes`` parallel corridors that never meet: one per robot, walls between them.
+
+    Lane ``k`` holds rows ``wall + k·(width + wall)`` .. ``+ width − 1`` and runs
+    along the columns (+y, the direction robots face at start); walls of
+    ``wall`` rows separate the lanes and enclose the map, and columns 0 and
+    ``length − 1`` close the lanes' ends, so no planner path, scan beam or
+    robot shadow crosses from one lane into another.
+
+    Args:
+        lanes: number of corridors (>= 1).
+        length: columns of the map, end walls included (>= 5).
+        width: free rows per lane; 3 leaves one planning row after the one-cell
+            inflation, with the side walls outside a robot's stop band.
+        wall: rows of wall between and around lanes (>= 1).
+
+    Returns:
+        uint8 gray image: 0 = obstacle, 255 = free.
+    """
+    if lanes < 1 or length < 5 or width < 1 or wall < 1:
+        raise ValueError(f"lanes_map needs lanes >= 1, length >= 5, width >= 1, wall >= 1; "
+                         f"got {lanes}, {length}, {width}, {wall}")
+    rows = wall + lanes * (width + wall)
+    img = np.full((rows, length), OCCUPIED, dtype=np.uint8)
+    for k in range(lanes):
+        top = lane_row(k, width, wall) - width // 2
+        img[top : top + width, 1 : length - 1] = FREE
+    return img
+
+
+def lane_row(lane: int, width: int = 3, wall: int = 1) -> int:
+    """The middle row of lane ``lane`` in :func:`lanes_map` (where its robot drives)."""
+    return wall + lane * (width + wall) + width // 2
+
+
 def write_builtin_maps(directory: str | Path) -> list[Path]:
     """Write ``corridor12`` and ``random100`` (PGM + YAML) into ``directory``.
 

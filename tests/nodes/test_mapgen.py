@@ -7,7 +7,7 @@ import pytest
 
 from twinfleet.nodes.grid import inflate
 from twinfleet.nodes.mapfile import load_map
-from twinfleet.nodes.mapgen import corridor_map, random_map, write_builtin_maps
+from twinfleet.nodes.mapgen import corridor_map, lane_row, lanes_map, random_map, write_builtin_maps
 from twinfleet.nodes.planning import generate_path
 from twinfleet.nodes.profile import FIXED, REBECA
 
@@ -56,3 +56,35 @@ def test_random100_loads_and_connects():
     assert m.shape == (100, 100)
     inf = inflate(m.occupied(FIXED))
     assert generate_path(inf, (1, 1), (98, 98), FIXED) is not None
+
+
+def test_lanes_are_walled_off_from_each_other():
+    img = lanes_map(3, 20)
+    assert img.shape == (13, 20)
+    occ = img == 0
+    for k in range(3):
+        row = lane_row(k)
+        assert not occ[row - 1 : row + 2, 1:19].any()  # the lane's three free rows
+        assert occ[row - 2].all() and occ[row + 2].all()  # walls on both sides
+    assert occ[:, 0].all() and occ[:, -1].all()  # closed ends: lanes never meet
+
+
+@pytest.mark.parametrize("profile", [FIXED, REBECA])
+def test_each_lane_is_plannable_only_within_itself(profile):
+    lanes = 4
+    occ = lanes_map(lanes, 16) == 0
+    inf = inflate(occ)
+    for k in range(lanes):
+        row = lane_row(k)
+        assert not inf[row, 2:14].any()  # one planning row survives the inflation
+        path = generate_path(inf, (row, 2), (row, 13), profile)
+        assert path is not None and {c[0] for c in path} == {row}
+        if k:
+            assert generate_path(inf, (row, 2), (lane_row(k - 1), 13), profile) is None
+
+
+def test_lanes_map_rejects_degenerate_sizes():
+    with pytest.raises(ValueError, match="lanes >= 1"):
+        lanes_map(0, 10)
+    with pytest.raises(ValueError, match="length >= 5"):
+        lanes_map(2, 4)
