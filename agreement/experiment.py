@@ -30,7 +30,7 @@ from pathlib import Path
 from typing import Any, TextIO, final
 
 from twinfleet.agreement import DEFAULT_TIME_SCALE
-from twinfleet.agreement.live import RunRecord, live_run, private_copy
+from twinfleet.agreement.live import LiveRunResult, live_run, private_copy
 from twinfleet.agreement.paper import paper_row
 from twinfleet.agreement.table import CheckCell, LiveSummary, Row, csv_record, to_csv, to_markdown
 from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, robot_names, summarise
@@ -85,7 +85,7 @@ class Experiment:
     options: ExperimentOptions
     command: str = ""
     rows: list[Row] = field(default_factory=list)
-    runs: dict[str, list[RunRecord]] = field(default_factory=dict)
+    runs: dict[str, list[LiveRunResult]] = field(default_factory=dict)
     predictions: dict[str, dict[str, int | None]] = field(default_factory=dict)
     retried: list[tuple[str, int, str]] = field(default_factory=list)
     interrupted: bool = False
@@ -273,7 +273,7 @@ def failed_runs(exp: Experiment) -> list[str]:
     """One line per case and kind of failure: seeds, and the time range of collisions."""
     lines = []
     for case, records in exp.runs.items():
-        groups: dict[str, list[RunRecord]] = {}
+        groups: dict[str, list[LiveRunResult]] = {}
         for r in records:
             if not r.passed:
                 key = (f"collision {r.collisions[0][0]}-{r.collisions[0][1]}" if r.collisions

@@ -22,8 +22,9 @@ from typing import Any, final
 
 from twinfleet.checker import checkpoint as ckpt
 from twinfleet.checker.checkpoint import CheckpointError
-from twinfleet.checker.properties import PropertySet, Violation
-from twinfleet.checker.search import HOLDS, VIOLATED, Limits, Search, SearchStatistics
+from twinfleet.checker.outcome import HOLDS, VIOLATED, Limits, SearchStatistics
+from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
 from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario
@@ -66,7 +67,7 @@ class CheckResult:
     reason: str
     properties: list[str]
     statistics: SearchStatistics
-    violation: Violation | None = None
+    violation: PropertyViolation | None = None
     trace: dict[str, Any] | None = None
     trace_path: str | None = None
     checkpoint: str | None = None
@@ -196,7 +197,7 @@ def check(path: str | Path | None, options: CheckOptions = CheckOptions()) -> Ch
     if strategy not in ("bfs", "dfs", "random"):
         raise ScenarioError(f"{path}: check.search: expected bfs, dfs or random, got {strategy!r}")
     meta = {"scenario": str(Path(path).resolve()), "sha256": ckpt.file_sha256(path),
-            "semantics": system.semantics.name, "profile": scenario.profile,
+            "semantics": system.semantics.value, "profile": scenario.profile,
             "strategy": strategy, **flags}
     search = Search(system, props, limits_for(options, scenario.check), progress=options.progress,
                     checkpoint=options.checkpoint or options.resume,
@@ -208,11 +209,11 @@ def check(path: str | Path | None, options: CheckOptions = CheckOptions()) -> Ch
     names = props.names()
     if system.check_determinism:
         names.append("determinism (every transition run twice and compared)")
-    result = CheckResult(str(path), system.semantics.name, strategy, outcome.status,
+    result = CheckResult(str(path), system.semantics.value, strategy, outcome.status,
                          outcome.reason, names, outcome.statistics, outcome.violation,
                          checkpoint=outcome.checkpoint, resumed_from=options.resume)
-    if outcome.violation is not None and outcome.path is not None:
-        result.trace = build_trace(system, outcome.violation, outcome.path,
+    if outcome.violation is not None and outcome.counterexample is not None:
+        result.trace = build_trace(system, outcome.violation, outcome.counterexample,
                                    scenario_path=str(Path(path).resolve()), search=strategy)
         if options.trace_out:
             write_trace(result.trace, options.trace_out)

@@ -14,7 +14,8 @@ finite counterexample.
 from __future__ import annotations
 
 from twinfleet.checker.store import StateStore
-from twinfleet.checker.system import Step, System, Transition
+from twinfleet.checker.system import System
+from twinfleet.checker.transition import Step, Transition
 from twinfleet.checker.world import World
 
 _GREY, _BLACK = 1, 2
