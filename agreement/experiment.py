@@ -35,10 +35,11 @@ from twinfleet.agreement.paper import paper_row
 from twinfleet.agreement.table import CheckCell, LiveSummary, Row, csv_record, to_csv, to_markdown
 from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, robot_names, summarise
 from twinfleet.checker.check import CheckOptions, check
-from twinfleet.checker.search import SearchStatistics
+from twinfleet.checker.outcome import SearchStatistics
+from twinfleet.checker.semantics import Semantics
 from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario
 
-SEMANTICS = ("ros", "rebeca")
+SEMANTICS = (Semantics.ROS, Semantics.REBECA)
 _CHECK_PROGRESS_S = 5.0
 _RETRIES = 2  # re-runs of a run whose node was killed by a signal from outside the fleet
 
@@ -190,7 +191,7 @@ def _live(exp: Experiment, row: Row, path: str | Path, scenario: Scenario,
         return
     row.live = summary = LiveSummary(opts.runs, opts.time_scale)
     records = exp.runs.setdefault(row.case, [])
-    sem = "ros" if "ros" in opts.semantics else (opts.semantics[0] if opts.semantics else None)
+    sem = Semantics.ROS if Semantics.ROS in opts.semantics else (opts.semantics[0] if opts.semantics else None)
     prediction = predicted_arrivals(path, semantics=sem)
     exp.predictions[row.case] = dict(prediction.arrival_ms)
     base = opts.seed if opts.seed is not None else scenario.seed

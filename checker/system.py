@@ -100,7 +100,7 @@ class System:
         transition_cache: reuse handler outcomes (see the module docstring).
     """
 
-    def __init__(self, scenario: Scenario, *, semantics: str | None = None,
+    def __init__(self, scenario: Scenario, *, semantics: Semantics | str | None = None,
                  latency: tuple[int, int] | None = None, global_priority: bool | None = None,
                  debug_state: bool = False, monitors: PropertySet | None = None,
                  exact_states: bool = False, check_determinism: bool = False,
