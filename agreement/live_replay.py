@@ -61,6 +61,7 @@ from twinfleet.agreement.events import (
 from twinfleet.checker.check import load, system_for_trace
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import NondeterminismError, recorded_step, replay_step
+from twinfleet.checker.world import World
 from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.launcher import Fleet, format_result, run_fleet
 from twinfleet.runtime.messages import DecodeError, decode
@@ -218,20 +219,32 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
         records += records[trace["cycle_start"]:] * cycles
     else:
         cycles = 0
-    steps, world = [], init.world
+    steps, world = _step_grants(system, init.world, records, str(trace_path))
+    final = {name: state_digest(world.states[i]) for i, name in enumerate(system.names)}
+    collisions = [(str(rec["index"]), str(log.get("robots")), str(log.get("cells")))
+                  for rec in trace["steps"] for log in rec.get("logs", ())
+                  if log.get("event") == "collision"]
+    return Plan(str(trace_path), trace, scenario, starts, steps, final, collisions,
+                load(trace["scenario"]).profile, cycles)
+
+
+def _step_grants(system: System, world: World, records: Sequence[Mapping[str, Any]],
+                 where: str) -> tuple[list[Grant], World]:
+    """The grants of a trace's step records, taken from `world`, and the world at the end."""
+    steps = []
     for n, rec in enumerate(records, start=1):
         if rec.get("kind") == EventKind.CRASH:
-            raise ValueError(f"{trace_path}: step {rec['index']} is a crash fault; a live "
+            raise ValueError(f"{where}: step {rec['index']} is a crash fault; a live "
                              "replay cannot crash a node on cue")
         try:
             t = replay_step(system, world, recorded_step(system, world, rec))
         except NondeterminismError as exc:
-            raise TraceError(f"{trace_path}: {exc}") from None
-        ev = t.event
+            raise TraceError(f"{where}: {exc}") from None
         if t.world.digest.hex() != rec["digest"]:
-            raise TraceError(f"{trace_path}: step {rec['index']} no longer gives the recorded "
+            raise TraceError(f"{where}: step {rec['index']} no longer gives the recorded "
                              "world (run `twinfleet replay` for details)"
                              + (f" (round of the cycle, step {n})" if n > rec["index"] else ""))
+        ev = t.event
         sender = system.names[ev.sender] if ev.sender >= 0 else ""
         # the node answers its own ctx.choose; latency and drop branches are the grants' timing
         steps.append(Grant(n, system.names[ev.target], ev.method, ev.kind,
@@ -240,12 +253,7 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
                            _handler_part(t.step.options, t.branches),
                            state_digest(t.world.states[ev.target])))
         world = t.world
-    final = {name: state_digest(world.states[i]) for i, name in enumerate(system.names)}
-    collisions = [(str(rec["index"]), str(log.get("robots")), str(log.get("cells")))
-                  for rec in trace["steps"] for log in rec.get("logs", ())
-                  if log.get("event") == "collision"]
-    return Plan(str(trace_path), trace, scenario, starts, steps, final, collisions,
-                load(trace["scenario"]).profile, cycles)
+    return steps, world
 
 
 def _handler_part(values: Sequence[int], branches: Sequence[int]) -> tuple[int, ...]:

@@ -140,12 +140,11 @@ class Runner:
         before = fingerprint(node) if self.debug_state else None
         ctx = Context(node, ev.due, chooser)
         self._current[i] = None  # the state object is about to change
-        try:
-            outcome = run_handler(node, ev.method, ctx, ev.args,
-                                  expects_reply=ev.kind is EventKind.REQUEST)
-        except ChoiceMismatch as exc:
+        outcome = run_handler(node, ev.method, ctx, ev.args,
+                              expects_reply=ev.kind is EventKind.REQUEST)
+        if chooser.mismatch is not None:  # even if the handler caught the exception
             return _failed(chooser, data, FailureKind.CHOICE_MISMATCH, node.name, ev.method,
-                           str(exc))
+                           str(chooser.mismatch))
         if outcome.error is not None:
             return _failed(chooser, data, FailureKind.HANDLER, node.name, ev.method,
                            outcome.error.message, outcome.error.traceback)
@@ -163,7 +162,12 @@ class Runner:
         new = data if new == data else self._intern(new)
         self._current[i] = new
         handler_end = len(chooser.indices)
-        events, failure, logs, faults = self._effects(ev, outcome.effects, outcome.reply, chooser)
+        try:
+            events, failure, logs, faults = self._effects(ev, outcome.effects, outcome.reply,
+                                                          chooser)
+        except ChoiceMismatch as exc:  # a forced latency or fault branch that does not exist
+            return _failed(chooser, data, FailureKind.CHOICE_MISMATCH, node.name, ev.method,
+                           str(exc))
         indices = tuple(chooser.indices)
         return Variant(indices, tuple(chooser.options), new, tuple(events), failure,
                        tuple(logs), tuple(faults), tuple(range(handler_end, len(indices))))

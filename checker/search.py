@@ -32,7 +32,7 @@ from collections.abc import Callable, Mapping
 from typing import Any, final
 
 from twinfleet.checker import checkpoint
-from twinfleet.checker.graph import find_lasso, steps_along
+from twinfleet.checker.graph import lasso_counterexample, steps_along
 from twinfleet.checker.outcome import (
     HOLDS,
     INTERRUPTED,
@@ -296,20 +296,9 @@ class Search:
         return prop.expr.holds(self.system, world.states, world.now)
 
     def _lasso(self, prop: Property) -> None:
-        found = find_lasso(self.store, prop.name)
-        if found is None:
-            return
-        ids, start = found
-        initial, steps = steps_along(self.system, self.store, ids)
-        path = Counterexample(initial, tuple(steps), start)
-        assert prop.expr is not None
-        if start is None:
-            message = (f"{prop.expr.source!r} never holds on a path that ends with nothing "
-                       f"pending ({len(steps)} steps)")
-            raise Found(PropertyViolation(prop.name, prop.kind, message, "terminal"), path)
-        message = (f"{prop.expr.source!r} never holds on a reachable cycle "
-                   f"(steps {start + 1}..{len(steps)} repeat for ever)")
-        raise Found(PropertyViolation(prop.name, prop.kind, message, "lasso"), path)
+        found = lasso_counterexample(self.system, self.store, prop)
+        if found is not None:
+            raise Found(*found)
 
     # ---------------------------------------------------------- random walks
 

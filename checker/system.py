@@ -28,7 +28,8 @@ t* (`forget_before`), which no world left to expand can use; and whatever
 the search order it keeps at most two generations of 1,024 outcomes
 (`checker.cache.GenerationCache`): a breadth-first frontier can span a wide
 range of times, and outcomes not used for a generation are rarely used again.
-Equal node states are interned to one bytes object, hashed once (`World.key`).
+Equal node states are interned to one bytes object, hashed once (`World.key`,
+`checker.builder`).
 The cache is off under `debug_state` and `check_determinism`, which must
 really run every transition; `transition_cache=False` turns it off for
 comparison.
@@ -40,10 +41,10 @@ world.
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any, final
 
+from twinfleet.checker.builder import WorldBuilder
 from twinfleet.checker.cache import GenerationCache
 from twinfleet.checker.choices import Chooser, PrefixChooser
 from twinfleet.checker.faults import parse_settings
@@ -59,7 +60,7 @@ from twinfleet.checker.transition import (
     Transition,
     Variant,
 )
-from twinfleet.checker.world import ENVIRONMENT, Event, World, fast_key, sort_events, world_digest
+from twinfleet.checker.world import ENVIRONMENT, Event, World
 from twinfleet.runtime.kinds import EventKind, FailureKind
 from twinfleet.runtime.scenario import Scenario, ScenarioError
 from twinfleet.runtime.snapshot import restore
@@ -69,7 +70,6 @@ if TYPE_CHECKING:
 
 __all__ = ["Action", "Crash", "Failure", "RunEvent", "Step", "System", "Transition"]
 
-_HASH_LIMIT = 100_000  # node-state content hashes kept before starting afresh
 _MEMO_LIMIT = 1_024  # handler outcomes per cache generation (two kept; ~0.55 KB each on C1b)
 _DECODED_LIMIT = 64  # decoded states kept for property expressions (~2.5 KB each on C1a)
 
@@ -130,9 +130,8 @@ class System:
         self._memo: GenerationCache[list[Variant]] | None = (
             GenerationCache(_MEMO_LIMIT)
             if transition_cache and not debug_state and not check_determinism else None)
+        self._worlds = WorldBuilder(self, monitors, exact=exact_states)
         self._decoded: dict[bytes, Any] = {}
-        self._hashes: dict[bytes, bytes] = {}
-        self._state_hashes = 0
 
     @property
     def semantics(self) -> Semantics:
@@ -142,7 +141,7 @@ class System:
     @property
     def hashed(self) -> int:
         """Content hashes computed (node states, events): for the collision bound."""
-        return self._state_hashes + self.runner.hashed
+        return self._worlds.hashed + self.runner.hashed
 
     # ----------------------------------------------------------------- model
 
@@ -186,7 +185,7 @@ class System:
             if failure is not None:
                 break
         step = Step(None, tuple(chooser.indices), tuple(chooser.options))
-        world = self.make_world(0, tuple(states), pending, None)
+        world = self._worlds.world(0, tuple(states), pending, None)
         return Transition(step, world, event, failure, tuple(logs), tuple(faults), tuple(branches))
 
     def _recheck_start(self, t: Transition) -> Transition:
@@ -284,7 +283,7 @@ class System:
         i = ev.target
         if v.state is not states[i]:
             states, changed = (*states[:i], v.state, *states[i + 1:]), (i,)
-        new = self.make_world(ev.due, states, pending, world, world.crashes)
+        new = self._worlds.world(ev.due, states, pending, world, world.crashes)
         return Transition(Step(action, v.choices, v.options), new, ev, v.failure, v.logs,
                           v.faults, v.branches, v.events, changed)
 
@@ -294,7 +293,7 @@ class System:
         for e in v.events:
             self.rules.add(pending, e)
         states = (*world.states[:j], v.state, *world.states[j + 1:])
-        new = self.make_world(now, states, pending, world, world.crashes + 1)
+        new = self._worlds.world(now, states, pending, world, world.crashes + 1)
         crash = self.settings.crash
         kept = "state kept (durable)" if crash and j in crash.durable else "state reset"
         note = f"{self.names[j]} crashed and restarted: pending events lost, {kept}"
@@ -303,37 +302,7 @@ class System:
         return Transition(Step(Crash(j), v.choices, v.options), new, label, v.failure, v.logs,
                           (note, *v.faults), (), v.events, changed)
 
-    def make_world(self, now: int, states: tuple[bytes, ...], pending: list[Event],
-                   parent: World | None, crashes: int = 0) -> World:
-        """Build a world, updating the property monitors it carries."""
-        events = sort_events(pending)
-        monitors: tuple[str, ...] = ()
-        if self.monitors is not None:
-            monitors = self.monitors.update(self, parent, now, states, events)
-        if self.exact_states:
-            digest = world_digest(states, events, monitors, crashes)
-            return World(now, states, events, monitors, crashes=crashes, key=digest,
-                         digest=digest)
-        hashes = self._hashes
-        parts = []
-        for s in states:
-            h = hashes.get(s)
-            parts.append(h if h is not None else self._hash_state(s))
-        return World(now, states, events, monitors, crashes=crashes,
-                     key=fast_key(parts, events, monitors, crashes))
-
-    def _hash_state(self, data: bytes) -> bytes:
-        if len(self._hashes) >= _HASH_LIMIT:
-            self._hashes.clear()
-        h = self._hashes[data] = hashlib.blake2b(data, digest_size=8).digest()
-        self._state_hashes += 1
-        return h
-
     # -------------------------------------------------------------- reading
-
-    def priority(self, node: int, method: str) -> int:
-        """Handler priority of `method` on node index `node` (0 if undeclared)."""
-        return self.topology.priority(node, method)
 
     def decode(self, i: int, data: bytes) -> Any:
         """The state object of node `i` encoded as `data` (cached; treat it as read-only)."""
@@ -364,4 +333,4 @@ class System:
         return {"handler_runs": self.runner.handler_runs,
                 "cached_outcomes": len(self._memo or {}),
                 "interned_states": self.runner.interned(),
-                "state_hashes": len(self._hashes), "decoded": len(self._decoded)}
+                "state_hashes": len(self._worlds), "decoded": len(self._decoded)}
