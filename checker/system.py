@@ -73,7 +73,6 @@ __all__ = ["Action", "Crash", "Failure", "RunEvent", "Step", "System", "Transiti
 _MEMO_LIMIT = 1_024  # handler outcomes per cache generation (two kept; ~0.55 KB each on C1b)
 _DECODED_LIMIT = 64  # decoded states kept for property expressions (~2.5 KB each on C1a)
 
-
 _RUN_EVENTS: list[RunEvent] = []
 
 
