@@ -178,15 +178,17 @@ class Rules:
         if not self.fifo:
             pending.append(ev)
             return
-        chan = ev.channel
+        sender, target, msg = ev.sender, ev.target, ev.message
         due = ev.due
-        if self.has_latency and chan[2]:
+        if self.has_latency and msg:
             for other in pending:
-                if other.due > due and other.channel == chan:
+                if (other.due > due and other.target == target and other.sender == sender
+                        and other.message == msg):
                     due = other.due
         rank = 0
         for other in pending:
-            if other.due == due and other.channel == chan:
+            if (other.due == due and other.target == target and other.sender == sender
+                    and other.message == msg):
                 rank += 1
         if due != ev.due or rank:
             ev = ev.moved(due, rank)
@@ -201,14 +203,15 @@ class Rules:
         # Only events with gone's due time can share its rank numbering; events are
         # sorted by due, so they sit next to each other.
         due, rank = gone.due, gone.rank
-        chan = gone.channel
+        sender, target, msg = gone.sender, gone.target, gone.message
         for i in range(len(rest)):
             ev = rest[i]
             if ev.due != due:
                 if ev.due > due:
                     break
                 continue
-            if ev.rank > rank and ev.channel == chan:
+            if (ev.rank > rank and ev.sender == sender and ev.target == target
+                    and ev.message == msg):
                 rest[i] = ev.with_rank(ev.rank - 1)
         return rest
 
@@ -265,7 +268,7 @@ class Rules:
                     first[key] = j
         heads = set(first.values())
         return {j for j, ev in enumerate(events) if (limit is None or ev.due <= limit)
-                and (j in heads or not fifo or not ev.channel[2])}
+                and (j in heads or not fifo or not ev.message)}
 
     def stream_head(self, events: Sequence[Event], ev: Event) -> Event:
         """The earliest-sent pending message of `ev`'s stream (`ev` itself for timers)."""
@@ -277,15 +280,16 @@ class Rules:
 
 def stream(ev: Event) -> tuple[int, int, str, str] | None:
     """The live FIFO stream of a message (module docstring); None for timers."""
-    return (ev.sender, ev.target, ev.kind, ev.method) if ev.channel[2] else None
+    return (ev.sender, ev.target, ev.kind, ev.method) if ev.message else None
 
 
 def _earliest_sent(events: Sequence[Event], picked: list[int]) -> list[int]:
     """Per channel, keep only the lowest-ranked of the picked events."""
     first: dict[tuple[int, int, bool], int] = {}
     for i in picked:
-        chan = events[i].channel
+        ev = events[i]
+        chan = (ev.sender, ev.target, ev.message)  # Event.channel, without a property call
         j = first.get(chan)
-        if j is None or events[i].rank < events[j].rank:
+        if j is None or ev.rank < events[j].rank:
             first[chan] = i
     return sorted(first.values())

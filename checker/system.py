@@ -73,14 +73,8 @@ __all__ = ["Action", "Crash", "Failure", "RunEvent", "Step", "System", "Transiti
 _MEMO_LIMIT = 1_024  # handler outcomes per cache generation (two kept; ~0.55 KB each on C1b)
 _DECODED_LIMIT = 64  # decoded states kept for property expressions (~2.5 KB each on C1a)
 
-_RUN_EVENTS: list[RunEvent] = []
-
-
-def _run_event(index: int) -> RunEvent:
-    """`RunEvent(index)`, one shared instance per index (actions are listed per world)."""
-    while len(_RUN_EVENTS) <= index:
-        _RUN_EVENTS.append(RunEvent(len(_RUN_EVENTS)))
-    return _RUN_EVENTS[index]
+# Actions are listed for every world the search expands: share one RunEvent per index.
+_RUN_EVENTS = tuple(RunEvent(i) for i in range(256))
 
 
 @final
@@ -130,6 +124,7 @@ class System:
             GenerationCache(_MEMO_LIMIT)
             if transition_cache and not debug_state and not check_determinism else None)
         self._worlds = WorldBuilder(self, monitors, exact=exact_states)
+        self._world = self._worlds.world
         self._decoded: dict[bytes, Any] = {}
 
     @property
@@ -184,7 +179,7 @@ class System:
             if failure is not None:
                 break
         step = Step(None, tuple(chooser.indices), tuple(chooser.options))
-        world = self._worlds.world(0, tuple(states), pending, None)
+        world = self._world(0, tuple(states), pending, None)
         return Transition(step, world, event, failure, tuple(logs), tuple(faults), tuple(branches))
 
     def _recheck_start(self, t: Transition) -> Transition:
@@ -198,7 +193,10 @@ class System:
 
     def actions(self, world: World) -> list[Action]:
         """What may happen next: each enabled event (`RunEvent`), then each crash fault."""
-        acts: list[Action] = [_run_event(i) for i in self.rules.enabled(world.events)]
+        enabled = self.rules.enabled(world.events)  # ascending indices
+        acts: list[Action] = (list(map(_RUN_EVENTS.__getitem__, enabled))
+                              if not enabled or enabled[-1] < len(_RUN_EVENTS)
+                              else [RunEvent(i) for i in enabled])
         if self.settings.crash is not None:
             acts += [Crash(j) for j in self.rules.crashable(world)]
         return acts
@@ -212,11 +210,25 @@ class System:
         return [self._apply(world, action, v) for v in self._variants(world, action)]
 
     def successors(self, world: World) -> Iterator[Transition]:
-        """Every outcome of every action of `world`, in `actions` order."""
-        apply, variants = self._apply, self._variants  # the search's inner loop
-        for action in self.actions(world):
-            for v in variants(world, action):
+        """Every outcome of every action of `world`, in `actions` order (the same
+        transitions as `outcomes` of each of `actions`)."""
+        # The search's inner loop, so `actions` and `outcomes` are spelled out here: a hit
+        # of the outcome cache (the key of `_variants`) costs one lookup (C1a: 96 % hits).
+        events, states = world.events, world.states
+        apply, memo = self._apply, self._memo
+        for index in self.rules.enabled(events):
+            action = _RUN_EVENTS[index] if index < len(_RUN_EVENTS) else RunEvent(index)
+            ev = events[index]
+            found = None
+            if memo is not None and not ev.sk[3]:
+                found = memo.get((states[ev.target], ev.key, ev.due))
+            for v in found if found is not None else self._variants(world, action):
                 yield apply(world, action, v)
+        if self.settings.crash is not None:
+            for j in self.rules.crashable(world):
+                action = Crash(j)
+                for v in self._variants(world, action):
+                    yield apply(world, action, v)
 
     # ------------------------------------------------------------ variants
 
@@ -282,7 +294,7 @@ class System:
         i = ev.target
         if v.state is not states[i]:
             states, changed = (*states[:i], v.state, *states[i + 1:]), (i,)
-        new = self._worlds.world(ev.due, states, pending, world, world.crashes)
+        new = self._world(ev.due, states, pending, world, world.crashes)
         return Transition(Step(action, v.choices, v.options), new, ev, v.failure, v.logs,
                           v.faults, v.branches, v.events, changed)
 
@@ -292,7 +304,7 @@ class System:
         for e in v.events:
             self.rules.add(pending, e)
         states = (*world.states[:j], v.state, *world.states[j + 1:])
-        new = self._worlds.world(now, states, pending, world, world.crashes + 1)
+        new = self._world(now, states, pending, world, world.crashes + 1)
         crash = self.settings.crash
         kept = "state kept (durable)" if crash and j in crash.durable else "state reset"
         note = f"{self.names[j]} crashed and restarted: pending events lost, {kept}"

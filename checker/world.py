@@ -40,6 +40,10 @@ from twinfleet.runtime.snapshot import snapshot
 
 ENVIRONMENT: Final = -1  # sender index of events nobody sent
 
+# `EventKind.is_message` as a tuple: `in` finds a member by identity, with no Python-level
+# enum hash (Events are built in the search's inner loop).
+_MESSAGE_KINDS: Final = tuple(k for k in EventKind if k.is_message)
+
 
 @final
 class Event:
@@ -65,10 +69,10 @@ class Event:
         key: canonical encoding of everything above except `due` and `rank`.
         deadline: absolute time by which a message must be handled, or None.
         sk: the canonical sort key (due, key, rank, late).
-        channel: (sender, target, is_message): the FIFO channel of this event under `ros`.
+        message: `kind.is_message`, kept (the enabling rules read it in their inner loops).
     """
 
-    __slots__ = ("_ident", "args", "channel", "deadline", "due", "key", "kind", "method",
+    __slots__ = ("_ident", "args", "deadline", "due", "key", "kind", "message", "method",
                  "priority", "rank", "reply_to", "sender", "sk", "target")
 
     def __init__(self, due: int, kind: EventKind, target: int, method: str, sender: int,
@@ -87,8 +91,13 @@ class Event:
                                                          reply_to, args)
         self.deadline = deadline
         self.sk = (due, self.key, rank, deadline is not None and due > deadline)
-        self.channel = (sender, target, kind.is_message)
+        self.message = kind in _MESSAGE_KINDS
         self._ident: bytes | None = None
+
+    @property
+    def channel(self) -> tuple[int, int, bool]:
+        """(sender, target, is_message): the FIFO channel of this event under `ros`."""
+        return (self.sender, self.target, self.message)
 
     @property
     def late(self) -> bool:
