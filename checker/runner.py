@@ -31,7 +31,7 @@ from twinfleet.checker.transition import (
     difference,
     fingerprint,
 )
-from twinfleet.checker.world import Event
+from twinfleet.checker.world import ENVIRONMENT, Event
 from twinfleet.runtime.context import After, Call, Context, Fail, Log, Publish
 from twinfleet.runtime.dispatch import run_handler
 from twinfleet.runtime.kinds import EventKind, FailureKind
@@ -80,11 +80,11 @@ class Runner:
 
     # ---------------------------------------------------------------- runs
 
-    def run(self, ev: Event, data: bytes, chooser: Chooser, *, recheck: bool = True) -> Variant:
-        """Run `ev`'s handler on node state `data`; with `check_determinism` (and
-        `recheck`) run it again with the same choices and report a difference."""
+    def run(self, ev: Event, data: bytes, chooser: Chooser) -> Variant:
+        """Run `ev`'s handler on node state `data`; with `check_determinism` run it again
+        with the same choices and report a difference."""
         v = self._exec(ev, data, chooser)
-        if not (recheck and self.check_determinism):
+        if not self.check_determinism:
             return v
         self._current[ev.target] = None  # restore the node state from the bytes again
         diff = difference(v, self._exec(ev, data, PrefixChooser(v.choices)))
@@ -95,34 +95,46 @@ class Runner:
                           + CAUSES)
         return Variant(v.choices, v.options, data, (), failure, v.logs, v.faults)
 
+    def deadline_miss(self, ev: Event, data: bytes) -> Variant:
+        """Taking `ev` after its deadline (Rule 5): nothing runs, the step fails."""
+        names = self.names
+        sender = "environment" if ev.sender == ENVIRONMENT else names[ev.sender]
+        message = (f"{ev.kind} from {sender} to {names[ev.target]}.{ev.method} is handled "
+                   f"at t={ev.due} ms, {ev.due - (ev.deadline or 0)} ms after its deadline "
+                   f"t={ev.deadline} ms")
+        failure = Failure(FailureKind.DEADLINE, names[ev.target], ev.method, message)
+        return Variant((), (), data, (), failure)
+
     def restart(self, j: int, data: bytes, now: int, chooser: Chooser) -> Variant:
-        """Node `j` restarted at `now` from state `data`: periodic timers re-armed, every
-        `@on_start` run (a crash fault, Rule 5); checked twice with `check_determinism`."""
-        v = self._restart(j, data, now, chooser)
+        """`start` after a crash fault (Rule 5); checked twice with `check_determinism`."""
+        v = self.start(j, data, now, chooser)
         if not self.check_determinism:
             return v
         self._current[j] = None
-        diff = difference(v, self._restart(j, data, now, PrefixChooser(v.choices)))
+        diff = difference(v, self.start(j, data, now, PrefixChooser(v.choices)))
         if diff is None:
             return v
         failure = Failure(FailureKind.NONDETERMINISM, self.names[j], "on_start",
                           f"restarting it twice gave different results: {diff}" + CAUSES)
         return Variant(v.choices, v.options, v.state, (), failure, v.logs, v.faults)
 
-    def _restart(self, j: int, data: bytes, now: int, chooser: Chooser) -> Variant:
+    def start(self, j: int, data: bytes, now: int, chooser: Chooser) -> Variant:
+        """Node `j` started at `now` from state `data`: the first firing of each periodic
+        timer, then every `@on_start` run in declaration order (until one fails)."""
         topology = self.topology
         events = list(topology.periodic(j, now))
-        failure, logs, faults = None, [], []
+        failure, logs, faults, branches = None, [], [], []
         for spec in topology.starts(j):
             v = self._exec(topology.start_event(j, spec, now), data, chooser)
             data, failure = v.state, v.failure
             events += v.events
             logs += v.logs
             faults += v.faults
+            branches += v.branches  # positions in the chooser, which the handlers share
             if failure is not None:
                 break
         return Variant(tuple(chooser.indices), tuple(chooser.options), data, tuple(events),
-                       failure, tuple(logs), tuple(faults))
+                       failure, tuple(logs), tuple(faults), tuple(branches))
 
     def _load(self, i: int, data: bytes) -> Node:
         node = self.nodes[i]

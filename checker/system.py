@@ -73,8 +73,13 @@ __all__ = ["Action", "Crash", "Failure", "RunEvent", "Step", "System", "Transiti
 _MEMO_LIMIT = 1_024  # handler outcomes per cache generation (two kept; ~0.55 KB each on C1b)
 _DECODED_LIMIT = 64  # decoded states kept for property expressions (~2.5 KB each on C1a)
 
-# Actions are listed for every world the search expands: share one RunEvent per index.
-_RUN_EVENTS = tuple(RunEvent(i) for i in range(256))
+# Actions are listed for every world a search expands: share one RunEvent per index.
+_SHARED = 256
+_RUN_EVENTS = tuple(RunEvent(i) for i in range(_SHARED))
+
+
+def _run_event(index: int) -> RunEvent:
+    return _RUN_EVENTS[index] if index < _SHARED else RunEvent(index)
 
 
 @final
@@ -158,29 +163,23 @@ class System:
         chooser = chooser if chooser is not None else PrefixChooser(choices)
         states = list(self.topology.initial_states)
         pending: list[Event] = []
-        for i in range(len(self.nodes)):
-            for ev in self.topology.periodic(i, 0):
-                self.rules.add(pending, ev)
         failure, logs, faults, branches = None, [], [], []
-        event = Event(0, EventKind.START, 0, "", -1, (), 0)
+        i = 0
         for i in range(len(self.nodes)):
-            for spec in self.topology.starts(i):
-                event = self.topology.start_event(i, spec, 0)
-                v = self.runner.run(event, states[i], chooser, recheck=False)
-                states[i] = v.state
-                logs += v.logs
-                faults += v.faults
-                branches += v.branches  # positions in the shared chooser
-                for ev in v.events:
-                    self.rules.add(pending, ev)
-                failure = v.failure
-                if failure is not None:
-                    break
+            v = self.runner.start(i, states[i], 0, chooser)
+            states[i] = v.state
+            logs += v.logs
+            faults += v.faults
+            branches += v.branches
+            for ev in v.events:
+                self.rules.add(pending, ev)
+            failure = v.failure
             if failure is not None:
                 break
         step = Step(None, tuple(chooser.indices), tuple(chooser.options))
         world = self._world(0, tuple(states), pending, None)
-        return Transition(step, world, event, failure, tuple(logs), tuple(faults), tuple(branches))
+        label = Event(0, EventKind.START, i, "", ENVIRONMENT, (), 0)
+        return Transition(step, world, label, failure, tuple(logs), tuple(faults), tuple(branches))
 
     def _recheck_start(self, t: Transition) -> Transition:
         self.runner.forget_loaded()
@@ -193,10 +192,7 @@ class System:
 
     def actions(self, world: World) -> list[Action]:
         """What may happen next: each enabled event (`RunEvent`), then each crash fault."""
-        enabled = self.rules.enabled(world.events)  # ascending indices
-        acts: list[Action] = (list(map(_RUN_EVENTS.__getitem__, enabled))
-                              if not enabled or enabled[-1] < len(_RUN_EVENTS)
-                              else [RunEvent(i) for i in enabled])
+        acts: list[Action] = [_run_event(i) for i in self.rules.enabled(world.events)]
         if self.settings.crash is not None:
             acts += [Crash(j) for j in self.rules.crashable(world)]
         return acts
@@ -217,7 +213,7 @@ class System:
         events, states = world.events, world.states
         apply, memo = self._apply, self._memo
         for index in self.rules.enabled(events):
-            action = _RUN_EVENTS[index] if index < len(_RUN_EVENTS) else RunEvent(index)
+            action = _RUN_EVENTS[index] if index < _SHARED else RunEvent(index)
             ev = events[index]
             found = None
             if memo is not None and not ev.sk[3]:
@@ -240,7 +236,7 @@ class System:
         ev = world.events[action.index]
         data = world.states[ev.target]
         if ev.sk[3]:  # late: a deadline miss (Rule 5)
-            return Variant((), (), data, (), self._deadline_miss(ev))
+            return self.runner.deadline_miss(ev, data)
         return self.runner.run(ev, data, chooser)
 
     def _variants(self, world: World, action: Action) -> list[Variant]:
@@ -271,13 +267,6 @@ class System:
         crash = self.settings.crash
         durable = crash is not None and j in crash.durable
         return world.states[j] if durable else self.topology.initial_states[j]
-
-    def _deadline_miss(self, ev: Event) -> Failure:
-        sender = "environment" if ev.sender == ENVIRONMENT else self.names[ev.sender]
-        message = (f"{ev.kind} from {sender} to {self.names[ev.target]}.{ev.method} is handled "
-                   f"at t={ev.due} ms, {ev.due - (ev.deadline or 0)} ms after its deadline "
-                   f"t={ev.deadline} ms")
-        return Failure(FailureKind.DEADLINE, self.names[ev.target], ev.method, message)
 
     # ------------------------------------------------------------ next worlds
 
@@ -311,7 +300,7 @@ class System:
         label = Event(now, EventKind.CRASH, j, "", ENVIRONMENT, (), 0)
         changed = (j,) if v.state is not world.states[j] else ()
         return Transition(Step(Crash(j), v.choices, v.options), new, label, v.failure, v.logs,
-                          (note, *v.faults), (), v.events, changed)
+                          (note, *v.faults), v.branches, v.events, changed)
 
     # -------------------------------------------------------------- reading
 
@@ -331,12 +320,8 @@ class System:
         return {name: restore(data) for name, data in zip(self.names, world.states, strict=True)}
 
     def forget_before(self, time_ms: int) -> int:
-        """Drop cached handler outcomes of events due before `time_ms`; return how many.
-
-        A search calls this with the smallest t* of its frontier: every world it will
-        still expand runs events at or after that time, so nothing dropped could be
-        used again.
-        """
+        """Drop cached handler outcomes of events due before `time_ms`; return how many
+        (a search passes its frontier's smallest t*: no world left to expand uses them)."""
         return 0 if self._memo is None else self._memo.forget_before(time_ms)
 
     def cache_sizes(self) -> dict[str, int]:
