@@ -26,8 +26,9 @@ from typing import Any
 from twinfleet.agreement import DEFAULT_TIME_SCALE
 from twinfleet.agreement.table import to_markdown
 from twinfleet.checker.commands import add_replay_parser, replay_command
+from twinfleet.checker.semantics import Semantics
 
-_SEMANTICS = {"both": ("ros", "rebeca"), "ros": ("ros",), "rebeca": ("rebeca",)}
+_SEMANTICS = {"both": (Semantics.ROS, Semantics.REBECA), **{s.value: (s,) for s in Semantics}}
 
 
 def register(subparsers: Any) -> None:
@@ -143,7 +144,7 @@ def _validate_parser(sub: Any) -> None:
     p.add_argument("--window-ms", type=int, default=5, metavar="W",
                    help="live events of different nodes dispatched within W ms of each other "
                         "may be taken in either order (default: %(default)s)")
-    p.add_argument("--semantics", choices=("ros", "rebeca"), default=None,
+    p.add_argument("--semantics", choices=[s.value for s in Semantics], default=None,
                    help="checker message rules (default: the scenario's)")
     p.add_argument("--json", action="store_true", help="print the result as JSON")
     p.set_defaults(func=cmd_validate)

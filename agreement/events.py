@@ -1,7 +1,8 @@
-"""Live event logs and how their events correspond to the checker's.
+"""Live event logs (format ``twinfleet-events/2``) and how their events correspond to
+the checker's.
 
 `twinfleet launch SCENARIO --record-events FILE` makes every node process log
-each event it dispatches (`runtime.replay_gate.EventLog`); the launcher merges the
+each event it dispatches (the runtime's event log); the launcher merges the
 per-node logs into FILE: a ``fleet`` header line, one ``header`` line per
 node, then one line per event in dispatch-time order::
 
@@ -15,10 +16,12 @@ node, then one line per event in dispatch-time order::
 the handler's arguments, ``digest`` the `runtime.replay_gate.state_digest` of the
 node's state after the handler; ``error`` is present when the handler raised.
 
-Live kinds and checker kinds: ``start`` ↔ START, ``delivery`` ↔ DELIVERY,
-``request`` ↔ REQUEST, ``reply`` ↔ REPLY (and the checker's TIMER carrying a
-`CallError`: a failed call), ``after`` ↔ TIMER (`ctx.after`), ``timer`` ↔
-PERIODIC (`@every`). ``liveliness`` events have no checker counterpart.
+``kind`` is an `EventKind` value, the same vocabulary as the checker's events:
+``start`` (`@on_start`), ``delivery``, ``request``, ``reply``, ``timeout`` (a
+call got no answer in time: its reply handler gets a `CallError`), ``timer``
+(`ctx.after`), ``periodic`` (`@every`) and ``liveliness`` (which has no
+checker counterpart). A live event and a checker event correspond when node,
+handler, kind, sender and argument digest agree (`Signatures`, `live_signature`).
 """
 
 from __future__ import annotations
@@ -30,18 +33,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any, final
 
 from twinfleet.checker.choices import PrefixChooser
-from twinfleet.checker.world import DELIVERY, PERIODIC, REPLY, REQUEST, START, TIMER, Event
+from twinfleet.checker.world import Event
 from twinfleet.runtime.context import Context
 from twinfleet.runtime.dispatch import run_handler
-from twinfleet.runtime.messages import CallError
-from twinfleet.runtime.replay_gate import EVENTS_FORMAT, payload_digest
+from twinfleet.runtime.eventlog import EVENTS_FORMAT, payload_digest
+from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.scenario import Scenario
 
 if TYPE_CHECKING:
     from twinfleet.checker.system import System
 
-LIVE_KINDS = {START: "start", DELIVERY: "delivery", REQUEST: "request", REPLY: "reply",
-              TIMER: "after", PERIODIC: "timer"}
+#: The event-log format this reader understands (the runtime's event log writes it).
+
+Signature = tuple[str, str, EventKind, str, str]  # node, handler, kind, sender, args digest
 
 
 class EventLogError(ValueError):
@@ -56,7 +60,7 @@ class LiveEvent:
     node: str
     index: int  # position in the node's own log, from 0
     t: int  # fleet ms when it was dispatched
-    kind: str
+    kind: EventKind
     handler: str
     sender: str
     args: str  # payload digest of the handler's arguments
@@ -74,7 +78,8 @@ class LiveEvent:
     @classmethod
     def from_record(cls, rec: dict[str, Any], line: int = 0) -> LiveEvent:
         """Build from one parsed JSON line."""
-        return cls(node=rec["node"], index=int(rec["i"]), t=int(rec["t"]), kind=rec["kind"],
+        return cls(node=rec["node"], index=int(rec["i"]), t=int(rec["t"]),
+                   kind=EventKind(rec["kind"]),
                    handler=rec["handler"], sender=rec.get("sender", ""), args=rec["args"],
                    digest=rec["digest"], choices=tuple(rec.get("choices", ())),
                    options=tuple(rec.get("options", ())), topic=rec.get("topic", ""),
@@ -82,7 +87,7 @@ class LiveEvent:
                    summary=rec.get("summary", ""), error=rec.get("error"), line=line)
 
     def label(self) -> str:
-        """``r1.update_moving_status(True) (after)``, arguments cut at 40 characters."""
+        """``r1.update_moving_status(True) (timer)``, arguments cut at 40 characters."""
         source = "" if self.sender in ("", self.node) else f" from {self.sender}"
         args = self.summary if len(self.summary) <= 40 else self.summary[:37] + "..."
         return f"{self.node}.{self.handler}({args}) ({self.kind}{source})"
@@ -178,33 +183,26 @@ def _add(log: EventLogFile, rec: dict[str, Any], n: int) -> None:
 # ------------------------------------------------------------ checker side
 
 
-def live_kind(ev: Event) -> str:
-    """The live kind of a checker event (a TIMER carrying a CallError is a failed call)."""
-    if ev.kind == TIMER and len(ev.args) == 1 and isinstance(ev.args[0], CallError):
-        return "reply"
-    return LIVE_KINDS.get(ev.kind, ev.kind)
-
-
 @final
 class Signatures:
-    """The live identity (node, handler, kind, sender, args digest) of checker events, cached."""
+    """The identity (node, handler, kind, sender, args digest) of checker events, cached."""
 
     def __init__(self, system: System) -> None:
         self.system = system
-        self._cache: dict[bytes, tuple[str, str, str, str, str]] = {}
+        self._cache: dict[bytes, Signature] = {}
 
-    def of(self, ev: Event) -> tuple[str, str, str, str, str]:
-        """(node, handler, live kind, sender, args digest) of `ev`."""
+    def of(self, ev: Event) -> Signature:
+        """(node, handler, kind, sender, args digest) of `ev`."""
         sig = self._cache.get(ev.key)
         if sig is None:
             names = self.system.names
             sender = names[ev.sender] if 0 <= ev.sender < len(names) else ""
-            sig = (names[ev.target], ev.method, live_kind(ev), sender, payload_digest(ev.args))
+            sig = (names[ev.target], ev.method, ev.kind, sender, payload_digest(ev.args))
             self._cache[ev.key] = sig
         return sig
 
 
-def live_signature(ev: LiveEvent) -> tuple[str, str, str, str, str]:
+def live_signature(ev: LiveEvent) -> Signature:
     """(node, handler, kind, sender, args digest) of a live event."""
     return (ev.node, ev.handler, ev.kind, ev.sender, ev.args)
 

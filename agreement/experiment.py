@@ -30,15 +30,16 @@ from pathlib import Path
 from typing import Any, TextIO, final
 
 from twinfleet.agreement import DEFAULT_TIME_SCALE
-from twinfleet.agreement.live import RunRecord, live_run, private_copy
+from twinfleet.agreement.live import LiveRunResult, live_run, private_copy
 from twinfleet.agreement.paper import paper_row
 from twinfleet.agreement.table import CheckCell, LiveSummary, Row, csv_record, to_csv, to_markdown
 from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, robot_names, summarise
 from twinfleet.checker.check import CheckOptions, check
-from twinfleet.checker.search import SearchStatistics
+from twinfleet.checker.outcome import SearchStatistics
+from twinfleet.checker.semantics import Semantics
 from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario
 
-SEMANTICS = ("ros", "rebeca")
+SEMANTICS = (Semantics.ROS, Semantics.REBECA)
 _CHECK_PROGRESS_S = 5.0
 _RETRIES = 2  # re-runs of a run whose node was killed by a signal from outside the fleet
 
@@ -85,7 +86,7 @@ class Experiment:
     options: ExperimentOptions
     command: str = ""
     rows: list[Row] = field(default_factory=list)
-    runs: dict[str, list[RunRecord]] = field(default_factory=dict)
+    runs: dict[str, list[LiveRunResult]] = field(default_factory=dict)
     predictions: dict[str, dict[str, int | None]] = field(default_factory=dict)
     retried: list[tuple[str, int, str]] = field(default_factory=list)
     interrupted: bool = False
@@ -190,7 +191,7 @@ def _live(exp: Experiment, row: Row, path: str | Path, scenario: Scenario,
         return
     row.live = summary = LiveSummary(opts.runs, opts.time_scale)
     records = exp.runs.setdefault(row.case, [])
-    sem = "ros" if "ros" in opts.semantics else (opts.semantics[0] if opts.semantics else None)
+    sem = Semantics.ROS if Semantics.ROS in opts.semantics else (opts.semantics[0] if opts.semantics else None)
     prediction = predicted_arrivals(path, semantics=sem)
     exp.predictions[row.case] = dict(prediction.arrival_ms)
     base = opts.seed if opts.seed is not None else scenario.seed
@@ -273,7 +274,7 @@ def failed_runs(exp: Experiment) -> list[str]:
     """One line per case and kind of failure: seeds, and the time range of collisions."""
     lines = []
     for case, records in exp.runs.items():
-        groups: dict[str, list[RunRecord]] = {}
+        groups: dict[str, list[LiveRunResult]] = {}
         for r in records:
             if not r.passed:
                 key = (f"collision {r.collisions[0][0]}-{r.collisions[0][1]}" if r.collisions

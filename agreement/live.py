@@ -105,7 +105,7 @@ def timed_report_for(scenario: Any) -> TimedReport | None:
 
 @final
 @dataclass(slots=True)
-class RunRecord:
+class LiveRunResult:
     """What one live run did.
 
     Times are fleet ms since the launcher's epoch; `durations_ms` are per robot
@@ -203,7 +203,7 @@ def with_timed_report(scenario: Scenario) -> Scenario:
 
 async def live_run(scenario: Scenario, *, time_scale: float, seed: int, timeout_s: float,
                    out: TextIO, stop_on_collision: bool = True,
-                   handle_signals: bool = True) -> RunRecord:
+                   handle_signals: bool = True) -> LiveRunResult:
     """Run the fleet once; stop it as soon as its outcome is decided.
 
     Args:
@@ -242,7 +242,7 @@ async def live_run(scenario: Scenario, *, time_scale: float, seed: int, timeout_
     finally:
         _HOOK.reset(token)
     report = reports[0] if reports else result.report
-    record = RunRecord(seed=seed, time_scale=time_scale, reason=result.reason,
+    record = LiveRunResult(seed=seed, time_scale=time_scale, reason=result.reason,
                        wall_s=time.monotonic() - started, failed_nodes=tuple(result.failed),
                        interrupted=result.reason.startswith(("SIGINT", "SIGTERM")),
                        exit_codes=dict(result.exit_codes))

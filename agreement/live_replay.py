@@ -7,8 +7,8 @@ ready event — deliveries, requests, replies, timers, its `@on_start` — in a
 the launcher process, on its router session, as the fleet's driver
 (`runtime.launcher.run_fleet(driver=...)`):
 
-1. It re-executes the trace in-process with the checker (`System.execute`,
-   digests checked against the file), which gives, for every step, the exact
+1. It re-executes the trace in-process with the checker (`System.step` on
+   each recorded step, digests checked against the file), which gives, for every step, the exact
    event (node, handler, kind, sender, argument digest), its logical time,
    the `ctx.choose` answers and the node's state digest after it.
 2. Once every node's liveliness token is up, it grants each node's start
@@ -53,20 +53,22 @@ from typing import Any, TextIO, final
 import msgpack
 
 from twinfleet.agreement.events import (
-    live_kind,
     live_signature,
     load_events,
     refuse_unreplayable,
     split_start_choices,
 )
 from twinfleet.checker.check import load, system_for_trace
-from twinfleet.checker.system import Step, System
-from twinfleet.checker.world import CRASH
+from twinfleet.checker.system import System
+from twinfleet.checker.trace import NondeterminismError, recorded_step, replay_step
+from twinfleet.checker.world import World
+from twinfleet.runtime.eventlog import payload_digest, state_digest, summarise
+from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.launcher import Fleet, format_result, run_fleet
 from twinfleet.runtime.messages import DecodeError, decode
 from twinfleet.runtime.names import key_expr
 from twinfleet.runtime.node import QOS_DEFAULT
-from twinfleet.runtime.replay_gate import gate_key, payload_digest, state_digest, summarise
+from twinfleet.runtime.replay_gate import gate_key
 from twinfleet.runtime.scenario import Scenario
 from twinfleet.runtime.tracefile import TraceError, load_trace
 from twinfleet.runtime.transport import Transport, graph_key, parse_graph_key
@@ -86,7 +88,7 @@ class Grant:
     step: int  # trace step (0: a start handler)
     node: str
     handler: str
-    kind: str
+    kind: EventKind
     sender: str
     args: str
     summary: str
@@ -96,7 +98,7 @@ class Grant:
     digest: str | None
 
     def payload(self) -> bytes:
-        return msgpack.packb({"step": self.step, "kind": self.kind, "handler": self.handler,
+        return msgpack.packb({"step": self.step, "kind": self.kind.value, "handler": self.handler,
                               "sender": self.sender, "args": self.args, "t": self.t,
                               "choices": list(self.choices)})
 
@@ -218,32 +220,41 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
         records += records[trace["cycle_start"]:] * cycles
     else:
         cycles = 0
-    steps, world = [], init.world
-    for n, rec in enumerate(records, start=1):
-        if rec.get("kind") == CRASH:
-            raise ValueError(f"{trace_path}: step {rec['index']} is a crash fault; a live "
-                             "replay cannot crash a node on cue")
-        k = rec["event"]
-        ev = world.events[k]
-        t = system.execute(world, Step(k, tuple(rec["choices"]), tuple(rec["options"])))
-        if t.world.digest.hex() != rec["digest"]:
-            raise TraceError(f"{trace_path}: step {rec['index']} no longer gives the recorded "
-                             "world (run `twinfleet replay` for details)"
-                             + (f" (round of the cycle, step {n})" if n > rec["index"] else ""))
-        sender = system.names[ev.sender] if ev.sender >= 0 else ""
-        # the node answers its own ctx.choose; latency and drop branches are the grants' timing
-        steps.append(Grant(n, system.names[ev.target], ev.method, live_kind(ev),
-                           sender, payload_digest(ev.args), summarise(ev.args), ev.due,
-                           _handler_part(t.step.choices, t.branches),
-                           _handler_part(t.step.options, t.branches),
-                           state_digest(t.world.states[ev.target])))
-        world = t.world
+    steps, world = _step_grants(system, init.world, records, str(trace_path))
     final = {name: state_digest(world.states[i]) for i, name in enumerate(system.names)}
     collisions = [(str(rec["index"]), str(log.get("robots")), str(log.get("cells")))
                   for rec in trace["steps"] for log in rec.get("logs", ())
                   if log.get("event") == "collision"]
     return Plan(str(trace_path), trace, scenario, starts, steps, final, collisions,
                 load(trace["scenario"]).profile, cycles)
+
+
+def _step_grants(system: System, world: World, records: Sequence[Mapping[str, Any]],
+                 where: str) -> tuple[list[Grant], World]:
+    """The grants of a trace's step records, taken from `world`, and the world at the end."""
+    steps = []
+    for n, rec in enumerate(records, start=1):
+        if rec.get("kind") == EventKind.CRASH:
+            raise ValueError(f"{where}: step {rec['index']} is a crash fault; a live "
+                             "replay cannot crash a node on cue")
+        try:
+            t = replay_step(system, world, recorded_step(system, world, rec))
+        except NondeterminismError as exc:
+            raise TraceError(f"{where}: {exc}") from None
+        if t.world.digest.hex() != rec["digest"]:
+            raise TraceError(f"{where}: step {rec['index']} no longer gives the recorded "
+                             "world (run `twinfleet replay` for details)"
+                             + (f" (round of the cycle, step {n})" if n > rec["index"] else ""))
+        ev = t.event
+        sender = system.names[ev.sender] if ev.sender >= 0 else ""
+        # the node answers its own ctx.choose; latency and drop branches are the grants' timing
+        steps.append(Grant(n, system.names[ev.target], ev.method, ev.kind,
+                           sender, payload_digest(ev.args), summarise(ev.args), ev.due,
+                           _handler_part(t.step.choices, t.branches),
+                           _handler_part(t.step.options, t.branches),
+                           state_digest(t.world.states[ev.target])))
+        world = t.world
+    return steps, world
 
 
 def _handler_part(values: Sequence[int], branches: Sequence[int]) -> tuple[int, ...]:
@@ -259,7 +270,8 @@ def _start_grants(system: System, states: Sequence[bytes],
         specs = node.spec().of_kind("start")
         for n, spec in enumerate(specs):
             last = n == len(specs) - 1
-            grants.append(Grant(0, node.name, spec.method, "start", node.name, payload_digest(()),
+            grants.append(Grant(0, node.name, spec.method, EventKind.START, node.name,
+                                payload_digest(()),
                                 "", 0, choices.get((node.name, spec.method), ()), None,
                                 state_digest(states[i]) if last else None))
     return grants

@@ -26,7 +26,7 @@ class CheckCell:
     """One checker run of a scenario under one semantics.
 
     Attributes:
-        semantics: "ros" or "rebeca".
+        semantics: the checker semantics (a `checker.semantics.Semantics` value).
         status: "holds", "violated" or "unknown".
         detail: the violated property, or why there is no answer.
         states: distinct states.

@@ -5,7 +5,7 @@ choices among the enabled events and `ctx.choose` options, exactly what
 `checker.search`'s random walks do) until every robot's state says `done`,
 and returns each robot's logical arrival time. In the checker every node
 starts at t = 0; live, each robot starts when its process has seen every peer,
-so a live run is compared per robot from its own start (`RunRecord.durations_ms`).
+so a live run is compared per robot from its own start (`LiveRunResult.durations_ms`).
 """
 
 from __future__ import annotations
@@ -62,8 +62,7 @@ def predicted_arrivals(path: str | Path, *, seed: int = 0, semantics: str | None
     steps = 0
     while (world.events and steps < max_steps and world.now <= horizon_ms
            and None in arrival.values()):
-        enabled = system.semantics.enabled(world.events)
-        t = system.run(world, rng.choice(enabled), RandomChooser(rng))
+        t = system.step(world, rng.choice(system.actions(world)), RandomChooser(rng))
         world, steps = t.world, steps + 1
         i = t.event.target
         name = robots.get(i)

@@ -7,7 +7,8 @@ The live run is given as one event log per node (`agreement.events`): what
 each node dispatched, in its own order, with its dispatch time, arguments,
 `ctx.choose` answers and resulting state digest. The validator looks for an
 interleaving of those per-node sequences that the checker's transition
-relation (`checker.system.System`, the scenario's message rules) can run:
+relation (`checker.system.System`: its actions and its one step function,
+under the scenario's message rules) can run:
 
 1. Start. Every node's log must begin with its `@on_start` events; their
    choices, concatenated in scenario order, select the checker's initial
@@ -33,16 +34,13 @@ logical, so the validator compares order and state, never absolute times.
 ``0`` (strict): the candidate must be enabled by the checker's own rules
 (`checker.semantics`: earliest time t*, per-node handler priority, per-sender
 FIFO under ``ros``, a node's equal-time timers in the order they were set).
-``T > 0``: any pending event due at most T ms after t* may run, provided it is
-the earliest-sent pending message of its *stream* under ``ros``: messages of
-one kind from one sender to one handler of one node. Live, that order holds
-at any timing (Zenoh keeps each publisher's order and a subscription's queue
-is FIFO), while the checker's wider channel order (all messages of a sender
-to a node) only holds among events of equal time and priority: the host
-runs same-millisecond arrivals by handler priority. Events whose model
-times differ by at most T ms may thus run in either order. ``None``
-(untimed): the same with T infinite, a check of causality, per-channel order
-and state, blind to the model's timing. Whatever the rule, the report gives
+``T > 0``: the relaxed rule of `checker.semantics` (`Rules.enabled_within`):
+any pending event due at most T ms after t* may run, provided it is the
+earliest-sent pending message of its *stream* under ``ros`` (messages of one
+kind from one sender to one handler of one node), so events whose model
+times differ by at most T ms may run in either order. ``None`` (untimed): the
+same with T infinite, a check of causality, per-stream order and state,
+blind to the model's timing. Whatever the rule, the report gives
 how far ahead of the model's clock the path had to run events (``ahead``:
 the event's logical due time minus t*): the timing gap between run and model.
 
@@ -69,140 +67,47 @@ from __future__ import annotations
 import json
 import sys
 import time
-from collections.abc import Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, final
 
 from twinfleet.agreement.events import (
     EventLogError,
     EventLogFile,
-    LiveEvent,
     Signatures,
     live_signature,
     load_events,
     refuse_unreplayable,
+)
+from twinfleet.agreement.validation import (
+    CHOICES,
+    ERROR,
+    NO_EVENT,
+    ORDER,
+    OUTSIDE,
+    PAYLOAD,
+    START,
+    STATE,
+    TIMING,
+    Explainer,
+    Unexplained,
+    Validation,
+    earliest,
+    strict_line,
+    timing_name,
 )
 from twinfleet.checker.check import load
 from twinfleet.checker.choices import SplitChooser
 from twinfleet.checker.commands import BAD_INPUT
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.system import System
-from twinfleet.checker.world import MESSAGE_KINDS, Event, World
-from twinfleet.runtime.replay_gate import state_digest, summarise
+from twinfleet.checker.transition import RunEvent
+from twinfleet.checker.world import World
+from twinfleet.runtime.eventlog import state_digest
+from twinfleet.runtime.kinds import EventKind, FailureKind
 
-START = "startup"
-NO_EVENT = "model drift: no such pending event"
-PAYLOAD = "model drift: different message"
-CHOICES = "model drift: ctx.choose differs"
-STATE = "model drift: node state differs"
-ERROR = "model drift: handler failure differs"
-ORDER = "order: an earlier message of the same stream is pending"
-TIMING = "timing outside the model"
-OUTSIDE = "outside the model"
-
-
-@final
-@dataclass(frozen=True)
-class Unexplained:
-    """The first step of a live run that the checker cannot explain.
-
-    Attributes:
-        step: the event's 1-based position among the log's events after the starts
-            (0: a start event, or the start as a whole).
-        event: the live event.
-        reason: one of the reason constants of this module.
-        expected: what the checker has or does at this point.
-        seen: what the live node did.
-        notes: other candidates considered at this point and why they failed.
-    """
-
-    step: int
-    event: LiveEvent | None
-    reason: str
-    expected: str
-    seen: str
-    notes: tuple[str, ...] = ()
-
-    def describe(self) -> str:
-        """Several lines for a terminal."""
-        what = f"{self.event.label()} [{self.event.where()}]" if self.event else "the start"
-        lines = [f"step {self.step}: {what}: {self.reason}",
-                 f"  expected: {self.expected}", f"  seen:     {self.seen}"]
-        lines += [f"  also: {note}" for note in self.notes]
-        return "\n".join(lines)
-
-
-@final
-@dataclass
-class Validation:
-    """What `validate` found."""
-
-    events_path: str
-    scenario: str
-    semantics: str
-    timing: str
-    events: int
-    explained: int
-    failure: Unexplained | None = None
-    ahead_steps: int = 0
-    max_ahead_ms: int = 0
-    max_ahead_at: str = ""
-    violations: list[tuple[int, str, str]] = field(default_factory=list)
-    backtracks: int = 0
-    elapsed_s: float = 0.0
-
-    @property
-    def ok(self) -> bool:
-        """True when every live event is explained."""
-        return self.failure is None
-
-    def summary(self) -> str:
-        """A human-readable report."""
-        head = (f"twinfleet validate {self.events_path} {self.scenario} "
-                f"(semantics {self.semantics}, timing {self.timing})")
-        if self.ok:
-            verdict = (f"VALID: the live run is a path of the checker's transition relation: "
-                       f"all {self.events} events explained")
-        else:
-            verdict = (f"NOT EXPLAINED: {self.explained} of {self.events} events explained; "
-                       "first unexplained step:")
-        lines = [head, verdict]
-        if self.failure is not None:
-            lines.append(self.failure.describe())
-        if self.max_ahead_ms:
-            lines.append(f"timing: {self.ahead_steps} steps ran ahead of the model's clock t*, "
-                         f"by up to {self.max_ahead_ms} ms ({self.max_ahead_at}); this path "
-                         f"fits --tolerance-ms {self.max_ahead_ms}")
-        else:
-            lines.append("timing: every explained step was due at the model's t*")
-        for step, prop, message in self.violations:
-            lines.append(f"property {prop} violated on this path at step {step}: {message}")
-        lines.append(f"time {self.elapsed_s:.2f} s, {self.backtracks} backtracks")
-        return "\n".join(lines)
-
-    def to_json(self) -> dict[str, Any]:
-        """A JSON-ready record."""
-        f = self.failure
-        return {"events_path": self.events_path, "scenario": self.scenario,
-                "semantics": self.semantics, "timing": self.timing, "ok": self.ok,
-                "events": self.events, "explained": self.explained,
-                "failure": None if f is None else {
-                    "step": f.step, "reason": f.reason, "expected": f.expected, "seen": f.seen,
-                    "notes": list(f.notes),
-                    "event": None if f.event is None else {
-                        "node": f.event.node, "index": f.event.index, "t": f.event.t,
-                        "line": f.event.line, "label": f.event.label()}},
-                "ahead_steps": self.ahead_steps, "max_ahead_ms": self.max_ahead_ms,
-                "violations": [list(v) for v in self.violations],
-                "backtracks": self.backtracks, "elapsed_s": round(self.elapsed_s, 3)}
-
-
-def timing_name(tolerance_ms: int | None) -> str:
-    """How a timing rule is shown in reports."""
-    if tolerance_ms is None:
-        return "untimed (order and state only)"
-    return "strict" if tolerance_ms == 0 else f"tolerance {tolerance_ms} ms"
+__all__ = ["CHOICES", "ERROR", "NO_EVENT", "ORDER", "OUTSIDE", "PAYLOAD", "START", "STATE",
+           "TIMING", "Unexplained", "Validation", "timing_name", "validate", "validate_command"]
 
 
 def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
@@ -228,12 +133,15 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
     system = System(scenario)
     refuse_unreplayable(system, gated=False)
     search = _Search(system, log, tolerance_ms, window_ms, max_backtracks)
-    events_count = sum(1 for e in log.events if e.kind != "start")
-    result = Validation(log.path, str(scenario_path), system.semantics.name,
+    events_count = sum(1 for e in log.events if e.kind is not EventKind.START)
+    result = Validation(log.path, str(scenario_path), system.semantics.value,
                         timing_name(tolerance_ms), events_count, 0)
     search.run(result)
     result.elapsed_s = time.monotonic() - started
     return result
+
+
+Option = tuple[int, int, tuple[int, ...]]  # (node, pending event, branch prefix)
 
 
 @final
@@ -241,7 +149,7 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
 class _Frame:
     world: World
     pos: tuple[int, ...]
-    options: list[tuple[int, int, tuple[int, ...]]]  # (node, event, branch prefix)
+    options: list[Option]
     why: list[Unexplained]
     ahead: int = 0  # how far ahead of t* the step that made this world ran
     label: str = ""  # that step's live event
@@ -260,9 +168,10 @@ class _Search:
         by_node = log.by_node()
         self.queues = [by_node.get(name, []) for name in system.names]
         self.props = PropertySet.from_scenario(system.scenario)
-        later = [e for e in log.events if e.kind != "start"]
-        self.ordinal = {(e.node, e.index): n for n, e in enumerate(later, start=1)}
-        self.ordinal.update({(e.node, e.index): 0 for e in log.events if e.kind == "start"})
+        later = [e for e in log.events if e.kind is not EventKind.START]
+        ordinal = {(e.node, e.index): n for n, e in enumerate(later, start=1)}
+        ordinal.update({(e.node, e.index): 0 for e in log.events if e.kind is EventKind.START})
+        self.explain = Explainer(system, self.sigs, ordinal, strict=tolerance_ms == 0)
         self._best: tuple[int, Unexplained | None] = (-1, None)  # deepest dead end, and why
         self._deepest: list[_Frame] = []  # the path to it
 
@@ -309,16 +218,12 @@ class _Search:
                 return list(stack)
             if frame.next >= len(frame.options):
                 if depth > self._best[0] or self._best[1] is None:
-                    self._best = (depth, _earliest(frame.why))
+                    self._best = (depth, earliest(frame.why))
                     self._deepest = list(stack)
                 stack.pop()
                 result.backtracks += 1
                 if result.backtracks > self.max_backtracks:
-                    gave_up = (f"the search gave up after {self.max_backtracks} dead ends; "
-                               "a path may still exist",)
-                    best = self._best
-                    if best[1] is not None:
-                        self._best = (best[0], replace(best[1], notes=best[1].notes + gave_up))
+                    self._give_up()
                     break
                 continue
             i, k, branches = frame.options[frame.next]
@@ -332,6 +237,13 @@ class _Search:
                 visited.add(key)
                 stack.append(child)
         return None
+
+    def _give_up(self) -> None:
+        gave_up = (f"the search gave up after {self.max_backtracks} dead ends; "
+                   "a path may still exist",)
+        depth, why = self._best
+        if why is not None:
+            self._best = (depth, replace(why, notes=why.notes + gave_up))
 
     def _finish(self, result: Validation, path: list[_Frame], failure: Unexplained | None) -> None:
         result.failure = failure
@@ -362,7 +274,7 @@ class _Search:
             if ev.node not in known:
                 return Unexplained(0, ev, OUTSIDE, f"nodes {sorted(known)}",
                                    f"events of node {ev.node}")
-            if ev.kind == "liveliness":
+            if ev.kind is EventKind.LIVELINESS:
                 return Unexplained(0, ev, OUTSIDE, "no liveliness events (the checker has "
                                    "no liveliness changes)", ev.summary)
         return None
@@ -376,7 +288,7 @@ class _Search:
         for i, node in enumerate(self.system.nodes):
             n = len(node.spec().of_kind("start"))
             head = self.queues[i][:n]
-            early = next((e for e in head if e.kind != "start"), None)
+            early = next((e for e in head if e.kind is not EventKind.START), None)
             if early is not None:
                 return Unexplained(0, early, START, f"{node.name} runs its @on_start first "
                                    "(the checker starts every node at t=0 before any event)",
@@ -396,7 +308,8 @@ class _Search:
             digest = state_digest(init.world.states[i])
             if digest != last.digest:
                 return Unexplained(0, last, STATE, f"{name}'s initial state, digest {digest}: "
-                                   f"{self._state(i, init.world)}", f"digest {last.digest}"), None
+                                   f"{self.explain.state(i, init.world)}",
+                                   f"digest {last.digest}"), None
         if init.failure is not None:
             return Unexplained(0, None, ERROR, "start handlers without failure",
                                str(init.failure)), None
@@ -414,21 +327,22 @@ class _Search:
         # The live node made the handler's choices; the checker's own branches on the
         # effects (latency, drop, duplicate) are searched: first the first, then the others.
         chooser = SplitChooser(live.choices, branches)
-        t = self.system.run(world, k, chooser)
+        t = self.system.step(world, RunEvent(k), chooser)
         made = (tuple(chooser.handler_indices), tuple(chooser.handler_options))
+        failure = t.failure
         if made != (live.choices, live.options) or (
-                t.failure is not None and "nondeterministic choices" in t.failure.message):
-            return Unexplained(self.ordinal[live.node, live.index], live, CHOICES,
-                               f"choices {list(made[0])} of options {list(made[1])}",
-                               f"choices {list(live.choices)} of options {list(live.options)}")
-        if (t.failure is None) != (live.error is None):
-            return Unexplained(self.ordinal[live.node, live.index], live, ERROR, str(t.failure) if t.failure else "no failure",
-                               live.error or "no failure")
+                failure is not None and failure.kind is FailureKind.CHOICE_MISMATCH):
+            return self.explain.unexplained(
+                live, CHOICES, f"choices {list(made[0])} of options {list(made[1])}",
+                f"choices {list(live.choices)} of options {list(live.options)}")
+        if (failure is None) != (live.error is None):
+            return self.explain.unexplained(live, ERROR, str(failure) if failure else
+                                            "no failure", live.error or "no failure")
         digest = state_digest(t.world.states[i])
         if digest != live.digest and live.error is None:
-            return Unexplained(self.ordinal[live.node, live.index], live, STATE,
-                               f"digest {digest}: {self._state(i, t.world)}",
-                               f"digest {live.digest}")
+            return self.explain.unexplained(live, STATE, f"digest {digest}: "
+                                            f"{self.explain.state(i, t.world)}",
+                                            f"digest {live.digest}")
         sibling = chooser.next_branch_prefix()  # tried if this branch dead-ends
         if sibling is not None:
             frame.options.insert(frame.next, (i, k, sibling))
@@ -439,14 +353,15 @@ class _Search:
         return _Frame(t.world, pos, options, why, ahead, f"{live.label()} [{live.where()}]")
 
     def _options(self, world: World, pos: tuple[int, ...]
-                 ) -> tuple[list[tuple[int, int]], list[Unexplained]]:
+                 ) -> tuple[list[Option], list[Unexplained]]:
         heads = [(q[p].t, i, q[p]) for i, (q, p) in enumerate(zip(self.queues, pos, strict=True))
                  if p < len(q)]
         if not heads:
             return [], []
         first = min(h[0] for h in heads)
-        allowed = self._enabled(world.events)
-        options, why = [], []
+        allowed = self._enabled(world)
+        options: list[Option] = []
+        why = []
         for _, i, live in sorted(h for h in heads if h[0] <= first + self.window):
             sig = live_signature(live)
             matches = [k for k, ev in enumerate(world.events) if self.sigs.of(ev) == sig]
@@ -454,96 +369,14 @@ class _Search:
             if ok:
                 options.append((i, ok[0], ()))
             else:
-                why.append(self._why_not(world, live, matches, allowed))
+                why.append(self.explain.why_not(world, live, matches, allowed))
         return options, why
 
-    def _enabled(self, events: Sequence[Event]) -> set[int]:
-        if not events:
-            return set()
+    def _enabled(self, world: World) -> set[int]:
+        """The pending events the timing rule lets run: strictly, the model's own actions."""
         if self.tolerance == 0:
-            return set(self.system.semantics.enabled(events))
-        limit = None if self.tolerance is None else events[0].due + self.tolerance
-        return _enabled_within(events, limit, self.system.semantics.fifo)
-
-    # ------------------------------------------------------------ explanations
-
-    def _why_not(self, world: World, live: LiveEvent, matches: list[int],
-                 allowed: set[int]) -> Unexplained:
-        if live.kind == "start":
-            return Unexplained(self.ordinal[live.node, live.index], live, OUTSIDE, "one @on_start per node, at t=0",
-                               f"{live.label()} again (a restart?)")
-        events = world.events
-        if matches:
-            ev = events[matches[0]]
-            first = _channel_head(events, ev)
-            if first is not ev and self.tolerance != 0:
-                return Unexplained(self.ordinal[live.node, live.index], live, ORDER, f"{self._label(first)} first (same stream)",
-                                   f"{live.label()} at live t={live.t} ms")
-            now = world.next_time
-            runnable = ", ".join(self._label(events[j]) for j in sorted(allowed)[:4])
-            return Unexplained(self.ordinal[live.node, live.index], live, TIMING,
-                               f"the model runs {runnable} now (t*={now} ms); this event is "
-                               f"pending, due at t={ev.due} ms",
-                               f"{live.label()} ran at live t={live.t} ms")
-        similar = [ev for ev in events if self.sigs.of(ev)[:4] == live_signature(live)[:4]]
-        if similar:
-            return Unexplained(self.ordinal[live.node, live.index], live, PAYLOAD,
-                               f"{self._label(similar[0])}: {summarise(similar[0].args)}",
-                               f"{live.summary} (args digest {live.args})")
-        mine = [self._label(ev) for ev in events if self.system.names[ev.target] == live.node]
-        return Unexplained(self.ordinal[live.node, live.index], live, NO_EVENT,
-                           "pending for " + live.node + ": " + (", ".join(mine[:6]) or "nothing"),
-                           f"{live.label()}: {live.summary}")
-
-    def _label(self, ev: Event) -> str:
-        node, handler, kind, sender, _ = self.sigs.of(ev)
-        source = "" if sender in ("", node) else f" from {sender}"
-        args = summarise(ev.args, 40)
-        return f"{node}.{handler}({args}) ({kind}{source}) due t={ev.due}"
-
-    def _state(self, i: int, world: World) -> str:
-        text = repr(self.system.decode(i, world.states[i]))
-        return text if len(text) <= 300 else text[:297] + "..."
-
-
-def _stream(ev: Event) -> tuple[int, int, str, str] | None:
-    """The live FIFO stream of a message (module docstring); None for timers."""
-    return (ev.sender, ev.target, ev.kind, ev.method) if ev.kind in MESSAGE_KINDS else None
-
-
-def _earliest(why: Sequence[Unexplained]) -> Unexplained | None:
-    """Of the reasons a dead end has, the one about the earliest live event; the others
-    (one per other event, at most three) become its notes."""
-    ordered = sorted(why, key=lambda u: u.event.line if u.event is not None else 0)
-    if not ordered:
-        return None
-    first, others = ordered[0], []
-    for u in ordered[1:]:
-        if u.event is not None and u.event != first.event and len(others) < 3:
-            others.append(f"{u.event.label()} [{u.event.where()}]: {u.reason}")
-    return replace(first, notes=tuple(others))
-
-
-def _channel_head(events: Sequence[Event], ev: Event) -> Event:
-    """The earliest-sent pending message of `ev`'s stream (`ev` itself for timers)."""
-    stream = _stream(ev)
-    if stream is None:
-        return ev
-    return min((e for e in events if _stream(e) == stream), key=lambda e: (e.due, e.rank))
-
-
-def _enabled_within(events: Sequence[Event], limit: int | None, fifo: bool) -> set[int]:
-    """Events due by `limit` (None: any) that are the earliest-sent message of their stream."""
-    first: dict[tuple[int, int, str, str], int] = {}
-    for j, ev in enumerate(events):
-        stream = _stream(ev) if fifo else None
-        if stream is not None:
-            k = first.get(stream)
-            if k is None or (ev.due, ev.rank) < (events[k].due, events[k].rank):
-                first[stream] = j
-    heads = set(first.values())
-    return {j for j, ev in enumerate(events) if (limit is None or ev.due <= limit)
-            and (j in heads or not fifo or _stream(ev) is None)}
+            return {a.index for a in self.system.actions(world) if isinstance(a, RunEvent)}
+        return self.system.rules.enabled_within(world.events, self.tolerance)
 
 
 def validate_command(args: Any) -> int:
@@ -570,15 +403,5 @@ def validate_command(args: Any) -> int:
     else:
         print(result.summary())
         if strict is not None:
-            print(_strict_line(strict))
+            print(strict_line(strict))
     return 0 if result.ok else 1
-
-
-def _strict_line(strict: Validation) -> str:
-    if strict.ok:
-        return "strict timing (the checker's exact rules): every step enabled at its time"
-    f = strict.failure
-    assert f is not None
-    what = f.event.label() if f.event is not None else "the start"
-    return (f"strict timing (the checker's exact rules): {strict.explained} steps, then step "
-            f"{f.step}: {what}: {f.reason}; expected {f.expected}")

@@ -23,8 +23,9 @@ from typing import Any, final
 
 from twinfleet.checker import checkpoint as ckpt
 from twinfleet.checker.checkpoint import CheckpointError
-from twinfleet.checker.properties import PropertySet, Violation
-from twinfleet.checker.search import HOLDS, VIOLATED, Limits, Search, SearchStatistics
+from twinfleet.checker.outcome import HOLDS, VIOLATED, Limits, SearchStatistics
+from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
 from twinfleet.runtime.config import SEARCHES, CheckConfig
@@ -68,7 +69,7 @@ class CheckResult:
     reason: str
     properties: list[str]
     statistics: SearchStatistics
-    violation: Violation | None = None
+    violation: PropertyViolation | None = None
     trace: dict[str, Any] | None = None
     trace_path: str | None = None
     checkpoint: str | None = None
@@ -205,7 +206,7 @@ def check(scenario: str | Path | Scenario | None,
         raise ScenarioError(f"search: expected {', '.join(SEARCHES)}, got {strategy!r}")
     meta = {"scenario": None if path is None else str(path.resolve()),
             "sha256": None if path is None else ckpt.file_sha256(path),
-            "semantics": system.semantics.name, "profile": scenario.profile,
+            "semantics": system.semantics.value, "profile": scenario.profile,
             "strategy": strategy, **flags}
     search = Search(system, props, limits_for(options, scenario.check), progress=options.progress,
                     checkpoint=options.checkpoint or options.resume,
@@ -217,7 +218,7 @@ def check(scenario: str | Path | Scenario | None,
     names = props.names()
     if system.check_determinism:
         names.append("determinism (every transition run twice and compared)")
-    result = CheckResult(scenario.source, system.semantics.name, strategy, outcome.status,
+    result = CheckResult(scenario.source, system.semantics.value, strategy, outcome.status,
                          outcome.reason, names, outcome.statistics, outcome.violation,
                          checkpoint=outcome.checkpoint, resumed_from=options.resume)
     if outcome.violation is not None and outcome.path is not None:

@@ -1,6 +1,7 @@
 """Checkpoint files: a long search saved to disk and resumed later.
 
-A checkpoint is a pickle (``"format": "twinfleet-checkpoint/1"``) of the
+A checkpoint is a pickle (``"format": "twinfleet-checkpoint/2"``; /2: event kinds
+are `EventKind` values) of the
 visited-state store, the frontier (worlds waiting to be expanded, with their
 ids and depths), the counters and `meta`: what the search was run on (the
 scenario file, its SHA-256, semantics, profile, search order, state mode...).
@@ -21,7 +22,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-FORMAT = "twinfleet-checkpoint/1"
+FORMAT = "twinfleet-checkpoint/2"
 
 
 class CheckpointError(ValueError):

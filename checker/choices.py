@@ -17,11 +17,14 @@ from typing import Protocol, final
 
 class Chooser(Protocol):
     """What the checker's choosers offer: `choose` for a handler's `ctx.choose`, `branch`
-    for the checker's own branches on its effects (latency, drop, duplicate), and the
-    answers given so far in call order."""
+    for the checker's own branches on its effects (latency, drop, duplicate), the
+    answers given so far in call order, and `mismatch`: the `ChoiceMismatch` raised when
+    a forced answer did not exist (a handler may catch the exception; the chooser keeps
+    it, so the checker still knows)."""
 
     indices: list[int]
     options: list[int]
+    mismatch: ChoiceMismatch | None
 
     def choose(self, n: int) -> int:
         """An index in range(n) for a handler's choice point."""
@@ -41,19 +44,21 @@ class PrefixChooser:
         options: the number of options each of those choice points had.
     """
 
-    __slots__ = ("_prefix", "indices", "options")
+    __slots__ = ("_prefix", "indices", "mismatch", "options")
 
     def __init__(self, prefix: Sequence[int] = ()) -> None:
         self._prefix = tuple(prefix)
         self.indices: list[int] = []
         self.options: list[int] = []
+        self.mismatch: ChoiceMismatch | None = None
 
     def choose(self, n: int) -> int:
         """Return the forced index of this choice point, or 0 past the prefix."""
         k = len(self.indices)
         index = self._prefix[k] if k < len(self._prefix) else 0
         if not 0 <= index < n:
-            raise ChoiceMismatch(f"choice point {k} has {n} options, cannot force index {index}")
+            self.mismatch = ChoiceMismatch(k, n, index)
+            raise self.mismatch
         self.indices.append(index)
         self.options.append(n)
         return index
@@ -85,7 +90,7 @@ class SplitChooser:
     """
 
     __slots__ = ("_answers", "_prefix", "branch_indices", "branch_options", "handler_indices",
-                 "handler_options", "indices", "options")
+                 "handler_options", "indices", "mismatch", "options")
 
     def __init__(self, answers: Sequence[int], branch_prefix: Sequence[int] = ()) -> None:
         self._answers, self._prefix = tuple(answers), tuple(branch_prefix)
@@ -95,6 +100,7 @@ class SplitChooser:
         self.handler_options: list[int] = []
         self.branch_indices: list[int] = []
         self.branch_options: list[int] = []
+        self.mismatch: ChoiceMismatch | None = None
 
     def choose(self, n: int) -> int:
         """The recorded answer of this handler choice point (0 past the record)."""
@@ -109,7 +115,8 @@ class SplitChooser:
         k = len(indices)
         index = forced[k] if k < len(forced) else 0
         if not 0 <= index < n:
-            raise ChoiceMismatch(f"choice point {k} has {n} options, cannot force index {index}")
+            self.mismatch = ChoiceMismatch(k, n, index)
+            raise self.mismatch
         indices.append(index)
         options.append(n)
         self.indices.append(index)
@@ -125,12 +132,13 @@ class SplitChooser:
 class RandomChooser:
     """Answers `choose(n)` uniformly from a seeded RNG, recording like PrefixChooser."""
 
-    __slots__ = ("_rng", "indices", "options")
+    __slots__ = ("_rng", "indices", "mismatch", "options")
 
     def __init__(self, rng: random.Random) -> None:
         self._rng = rng
         self.indices: list[int] = []
         self.options: list[int] = []
+        self.mismatch: ChoiceMismatch | None = None  # never: every answer exists
 
     def choose(self, n: int) -> int:
         """Return a random index in range(n)."""
@@ -143,4 +151,15 @@ class RandomChooser:
 
 
 class ChoiceMismatch(ValueError):
-    """A forced choice does not exist in this run (the handler chose differently)."""
+    """A forced choice does not exist in this run (the handler chose differently).
+
+    Attributes:
+        point: the choice point (0-based, in call order).
+        options: how many options it had.
+        index: the index that was forced.
+    """
+
+    def __init__(self, point: int, options: int, index: int) -> None:
+        super().__init__(f"choice point {point} has {options} options, cannot force "
+                         f"index {index}")
+        self.point, self.options, self.index = point, options, index

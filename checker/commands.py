@@ -18,8 +18,9 @@ from typing import Any
 
 from twinfleet.checker.check import CheckOptions, CheckResult, check, system_for_trace
 from twinfleet.checker.checkpoint import CheckpointError
+from twinfleet.checker.outcome import SearchStatistics
 from twinfleet.checker.properties import PropertyError
-from twinfleet.checker.search import SearchStatistics
+from twinfleet.checker.semantics import Semantics
 from twinfleet.checker.trace import NondeterminismError, replay
 from twinfleet.runtime.node import NodeDefinitionError
 from twinfleet.runtime.scenario import ScenarioError
@@ -46,7 +47,7 @@ def register(subparsers: Any) -> None:
                    help="stop after this many seconds (default: check.max_time_s)")
     p.add_argument("--max-depth", type=int, default=None,
                    help="do not expand worlds deeper than this many steps (random: walk length)")
-    p.add_argument("--semantics", choices=("ros", "rebeca"), default=None,
+    p.add_argument("--semantics", choices=[s.value for s in Semantics], default=None,
                    help="message rules: ros (per-sender FIFO) or rebeca (RMC); default: scenario")
     p.add_argument("--profile", choices=("fixed", "rebeca"), default=None,
                    help="robot behaviour profile passed to the nodes; default: scenario")

@@ -24,8 +24,8 @@ as nodes resolve them, e.g. ``/r1/scan``, ``/poses``, ``/generate_path``)::
           max: 1                           # crash faults per path (default 1)
           durable: [map_server]            # these keep their state across a crash
 
-What each does (the rules themselves live in `checker.system` and
-`checker.semantics`, Rule 5):
+What each does (the rules themselves are Rule 5 of `checker.semantics`; the
+crash itself is `checker.system`'s `Crash` action):
 
 - `latency`: a message (delivery, service request or reply) is due `min..max`
   ms after it is sent, each value a separate branch. A topic mapped to
@@ -43,8 +43,8 @@ What each does (the rules themselves live in `checker.system` and
 - `faults.drop`: for a topic, each delivery to each subscriber is two
   branches, delivered or lost. For a service, each request is delivered or
   lost; a lost request makes the caller's reply handler get
-  ``CallError(service, "timeout")`` after the call's timeout, as live mode
-  does. Replies are never lost.
+  ``CallError(service, "timeout")`` after the call's timeout (an event of kind
+  TIMEOUT), as live mode does. Replies are never lost.
 - `faults.duplicate` (topics only): each delivery is delivered once or twice
   (the copy is a separate message with its own latency branch). A topic in
   both lists has three branches: delivered, dropped, duplicated.

@@ -8,13 +8,17 @@ the store maps to the next id.
 restricted to states where the property's expression is false, colouring
 states on the stack grey, so a back edge closes a reachable cycle on which the
 expression never holds (a lasso) and a state with nothing pending ends a
-finite counterexample.
+finite counterexample; `lasso_counterexample` turns what it finds into the
+violation and the `Counterexample` a search reports.
 """
 
 from __future__ import annotations
 
+from twinfleet.checker.outcome import Counterexample
+from twinfleet.checker.properties import Property, PropertyViolation
 from twinfleet.checker.store import StateStore
-from twinfleet.checker.system import Step, System, Transition
+from twinfleet.checker.system import System
+from twinfleet.checker.transition import Step, Transition
 from twinfleet.checker.world import World
 
 _GREY, _BLACK = 1, 2
@@ -39,6 +43,26 @@ def _successor_to(system: System, store: StateStore, world: World, sid: int) -> 
             return t
     raise RuntimeError("a recorded edge cannot be re-executed: the model is nondeterministic "
                        "(rerun with --check-determinism or --debug-state)")
+
+
+def lasso_counterexample(system: System, store: StateStore, prop: Property
+                         ) -> tuple[PropertyViolation, Counterexample] | None:
+    """The violation of `eventually` property `prop` on the recorded graph, and the path
+    that shows it (a lasso, or a path to a world with nothing pending); None if it holds."""
+    found = find_lasso(store, prop.name)
+    if found is None:
+        return None
+    ids, start = found
+    initial, steps = steps_along(system, store, ids)
+    path = Counterexample(initial, tuple(steps), start)
+    assert prop.expr is not None
+    if start is None:
+        message = (f"{prop.expr.source!r} never holds on a path that ends with nothing "
+                   f"pending ({len(steps)} steps)")
+        return PropertyViolation(prop.name, prop.kind, message, "terminal"), path
+    message = (f"{prop.expr.source!r} never holds on a reachable cycle "
+               f"(steps {start + 1}..{len(steps)} repeat for ever)")
+    return PropertyViolation(prop.name, prop.kind, message, "lasso"), path
 
 
 def find_lasso(store: StateStore, prop: str) -> tuple[list[int], int | None] | None:

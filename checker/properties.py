@@ -42,13 +42,14 @@ import builtins
 from collections.abc import Sequence
 from dataclasses import dataclass
 from types import CodeType
-from typing import TYPE_CHECKING, Any, final
+from typing import TYPE_CHECKING, Any, Protocol, final
 
 from twinfleet.checker.faults import parse_deadlines, parse_queue_bounds
+from twinfleet.runtime.kinds import FailureKind
 from twinfleet.runtime.scenario import Scenario
 
 if TYPE_CHECKING:
-    from twinfleet.checker.system import Failure, System
+    from twinfleet.checker.transition import Failure
     from twinfleet.checker.world import Event, World
 
 _CACHE_LIMIT = 2_048  # entries per expression cache (see the module docstring)
@@ -57,8 +58,30 @@ QUEUE_BOUND = "queue_bound"
 QUEUE_OVERFLOW = "queue overflow"
 
 
+#: The property a failed transition violates, by failure kind (HANDLER: the scenario's
+#: `no_failure` property, whatever its name; a choice that the run does not offer is
+#: reported like a handler failure).
+FAILURE_PROPERTIES: dict[FailureKind, str] = {
+    FailureKind.HANDLER: "no_failure",
+    FailureKind.CHOICE_MISMATCH: "no_failure",
+    FailureKind.STATE_OUTSIDE: "debug_state",
+    FailureKind.DEADLINE: "deadline",
+    FailureKind.NONDETERMINISM: "determinism",
+}
+
+
 class PropertyError(ValueError):
     """A property expression could not be evaluated (a name error, a type error...)."""
+
+
+class States(Protocol):
+    """What expressions read node states through (a `checker.system.System`)."""
+
+    names: tuple[str, ...]
+
+    def decode(self, i: int, data: bytes) -> Any:
+        """The state object of node `i` encoded as `data` (read-only)."""
+        ...
 
 
 def _names_used(code: CodeType) -> set[str]:
@@ -74,7 +97,7 @@ def _names_used(code: CodeType) -> set[str]:
 class Expr:
     """A compiled property expression over node states."""
 
-    __slots__ = ("_cache", "_reads", "code", "needed", "source", "uses_all", "uses_now", "where")
+    __slots__ = ("_cache", "code", "needed", "reads", "source", "uses_all", "uses_now", "where")
 
     def __init__(self, source: str, names: Sequence[str], where: str) -> None:
         self.source = source
@@ -84,12 +107,13 @@ class Expr:
         self.uses_all = "nodes" in used
         self.uses_now = "now" in used
         self.needed = tuple((i, n) for i, n in enumerate(names) if n in used)
-        self._reads = tuple(range(len(names))) if self.uses_all else tuple(i for i, _ in self.needed)
+        #: indices of the nodes whose state the expression reads
+        self.reads = tuple(range(len(names))) if self.uses_all else tuple(i for i, _ in self.needed)
         self._cache: dict[tuple[Any, ...], bool] = {}
 
-    def holds(self, system: System, states: Sequence[bytes], now: int) -> bool:
+    def holds(self, system: States, states: Sequence[bytes], now: int) -> bool:
         """Evaluate on node states (snapshot bytes, in scenario order) at time `now`."""
-        key = tuple([states[i] for i in self._reads])
+        key = tuple([states[i] for i in self.reads])
         if self.uses_now:
             key = (*key, now)
         cache = self._cache
@@ -100,7 +124,7 @@ class Expr:
             found = cache[key] = self._evaluate(system, states, now)
         return found
 
-    def _evaluate(self, system: System, states: Sequence[bytes], now: int) -> bool:
+    def _evaluate(self, system: States, states: Sequence[bytes], now: int) -> bool:
         # Node names go into the globals so nested scopes (generator expressions,
         # comprehensions, lambdas) see them too; locals would hide them there.
         env: dict[str, Any] = {"__builtins__": builtins, "now": now}
@@ -137,7 +161,7 @@ class Property:
 
 @final
 @dataclass(frozen=True, slots=True)
-class Violation:
+class PropertyViolation:
     """A property found violated; `shape` says what kind of trace shows it."""
 
     property: str
@@ -198,7 +222,7 @@ class PropertySet:
             named.append("no_failure (implicit: ctx.fail and handler exceptions)")
         return named
 
-    def update(self, system: System, parent: World | None, now: int,
+    def update(self, system: States, parent: World | None, now: int,
                states: tuple[bytes, ...], events: tuple[Event, ...]) -> tuple[str, ...]:
         """The `within` monitors still pending in a new world (those whose expr is still false)."""
         pending = parent.monitors if parent is not None else tuple(p.name for p in self.within)
@@ -212,7 +236,7 @@ class PropertySet:
                 keep.append(name)
         return tuple(keep)
 
-    def check_world(self, system: System, world: World) -> Violation | None:
+    def check_world(self, system: States, world: World) -> PropertyViolation | None:
         """The first safety property violated in `world`, or None."""
         if self.queue_bounds:
             violation = self._check_queues(world)
@@ -221,13 +245,13 @@ class PropertySet:
         for prop in self.invariants:
             assert prop.expr is not None
             if not prop.expr.holds(system, world.states, world.now):
-                return Violation(prop.name, prop.kind,
+                return PropertyViolation(prop.name, prop.kind,
                                  f"invariant {prop.expr.source!r} is false at t={world.now} ms")
         for name in world.monitors:
             prop = self._within_by_name[name]
             nxt = world.next_time
             if nxt is None or prop.within_ms is None or nxt > prop.within_ms:
-                return Violation(prop.name, prop.kind,
+                return PropertyViolation(prop.name, prop.kind,
                                  f"{prop.expr.source if prop.expr else ''!r} did not hold within "
                                  f"{prop.within_ms} ms (false at t={world.now} ms, next event "
                                  f"{'never' if nxt is None else f'at {nxt} ms'})")
@@ -235,32 +259,39 @@ class PropertySet:
             return self._check_terminal(system, world)
         return None
 
-    def _check_queues(self, world: World) -> Violation | None:
+    def _check_queues(self, world: World) -> PropertyViolation | None:
         counts = [0] * len(self.queue_bounds)
         for ev in world.events:
             counts[ev.target] += 1
         for i, (n, bound) in enumerate(zip(counts, self.queue_bounds, strict=True)):
             if bound is not None and n > bound:
-                return Violation(QUEUE_BOUND, QUEUE_OVERFLOW,
+                return PropertyViolation(QUEUE_BOUND, QUEUE_OVERFLOW,
                                  f"queue overflow: {self.node_names[i]} has {n} pending events "
                                  f"at t={world.now} ms (bound {bound})")
         return None
 
-    def _check_terminal(self, system: System, world: World) -> Violation | None:
+    def _check_terminal(self, system: States, world: World) -> PropertyViolation | None:
         for prop in self.terminal:
             if prop.kind == "quiescence":
-                return Violation(prop.name, prop.kind,
+                return PropertyViolation(prop.name, prop.kind,
                                  f"quiescent: no event pending at t={world.now} ms", "terminal")
             if prop.expr is None or not prop.expr.holds(system, world.states, world.now):
                 goal = f" while {prop.expr.source!r} is false" if prop.expr else ""
-                return Violation(prop.name, prop.kind,
+                return PropertyViolation(prop.name, prop.kind,
                                  f"deadlock: no event pending at t={world.now} ms{goal}",
                                  "terminal")
         return None
 
-    def check_failure(self, failure: Failure) -> Violation:
-        """The violation a handler failure stands for."""
-        names = {"handler failure": self._failure_name, "state outside self.state": "debug_state",
-                 "deadline miss": "deadline", "nondeterminism": "determinism"}
-        return Violation(names.get(failure.kind, failure.kind), failure.kind, str(failure), "path",
-                         failure)
+    def check_failure(self, failure: Failure) -> PropertyViolation:
+        """The violation a failed transition stands for (`FAILURE_PROPERTIES`)."""
+        name = FAILURE_PROPERTIES[failure.kind]
+        if name == "no_failure":
+            name = self._failure_name
+        return PropertyViolation(name, failure.kind, str(failure), "path", failure)
+
+    def reads(self) -> tuple[frozenset[int], bool]:
+        """(indices of the nodes whose state some property expression reads, whether some
+        reads `now`): what a step must change to be visible to the properties."""
+        exprs = [p.expr for p in self.all if p.expr is not None]
+        nodes = frozenset(i for e in exprs for i in e.reads)
+        return nodes, any(e.uses_now for e in exprs)

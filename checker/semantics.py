@@ -4,9 +4,11 @@ Theory of operation
 ===================
 
 A world holds pending events; each is "run handler `method` of node
-`target` with `args` at time `due`". A transition takes one *enabled* event
-and runs its handler to completion (one transition per `ctx.choose` variant,
-see `checker.choices`). Which events are enabled is decided here, by rules
+`target` with `args` at time `due`", of an `EventKind`. What may happen next
+in a world are its *actions* (`checker.transition.Action`): run one *enabled*
+event (`RunEvent`), or crash a node (`Crash`, Rule 5). Taking an action runs
+the handler to completion (one transition per `ctx.choose` variant, see
+`checker.choices`). Which events are enabled is decided here, by rules
 applied in this order:
 
 Rule 1 (time). Only events due at the smallest pending due time t* can run.
@@ -19,20 +21,20 @@ Rule 2 (handler priority). Per node, only its events at t* with the lowest
     priority (except under `rebeca` with `global_priority`, Rule 4).
 
 Rule 3 (send order) -- `ros` only. Events form channels: messages
-    (deliveries, requests, replies) from one sender to one receiver, and the
-    timers (`ctx.after`, `@every`, call timeouts) a node sets for itself. Among
-    a channel's events with the same due time and priority, only the
-    earliest-sent is enabled, as Zenoh keeps per-publisher order and asyncio
-    fires equal-deadline timers in the order they were set. The send order is
-    kept as `Event.rank`: the position among pending events of the same
-    channel *and due time* (events with different due times can never be
-    simultaneously enabled, so a coarser rank would only split states). With
-    a `latency` range a later-sent message is never due before an earlier one
-    of its channel (its due time is clamped), so FIFO holds across times too.
-    Under `rebeca` every rank is 0: RMC's queue is a timed bag in canonical
-    order, so all same-time same-priority messages of a node are alternatives
-    whoever sent them (R2/R5), and identical duplicates are separate
-    alternatives that RMC counts as separate transitions (R10).
+    (`EventKind.is_message`: deliveries, requests, replies) from one sender to
+    one receiver, and the timers (`ctx.after`, `@every`, call timeouts) a node
+    sets for itself. Among a channel's events with the same due time and
+    priority, only the earliest-sent is enabled, as Zenoh keeps per-publisher
+    order and asyncio fires equal-deadline timers in the order they were set.
+    The send order is kept as `Event.rank`: the position among pending events
+    of the same channel *and due time* (events with different due times can
+    never be simultaneously enabled, so a coarser rank would only split
+    states). With a `latency` range a later-sent message is never due before
+    an earlier one of its channel (its due time is clamped), so FIFO holds
+    across times too. Under `rebeca` every rank is 0: RMC's queue is a timed
+    bag in canonical order, so all same-time same-priority messages of a node
+    are alternatives whoever sent them (R2/R5), and identical duplicates are
+    separate alternatives that RMC counts as separate transitions (R10).
 
 Rule 4 (node-instance priority) -- `rebeca` only. Among the nodes that have an
     enabled event, only those with the minimal `NodeConfig.priority` run (R4).
@@ -44,74 +46,102 @@ search explores exhaustively.
 
 Rule 5 (latency and faults, all off by default; see `checker.faults` for the
     scenario keys). `check.latency` gives a message a delivery delay in a
-    range, globally or per topic/service, each value a separate branch; with
-    `faults.drop` / `faults.duplicate` each delivery on a listed topic is
-    also delivered, lost or delivered twice, each a branch. These branches
-    are enumerated like `ctx.choose` options after the handler's own choices
-    (per delivery: the fault, then the delay of each copy). A crash fault is
-    not an event: it is one more alternative in every world with something
-    pending (`checker.system.System.successors`), taken at t*. A message due
-    after its deadline is a deadline miss when it is taken; because of Rule 1
-    it is taken exactly at its due time, so only latency or FIFO clamping can
-    make it late.
+    range, globally or per topic/service, each value a separate branch
+    (`Rules.delivery`); with `faults.drop` / `faults.duplicate` each delivery
+    on a listed topic is also delivered, lost or delivered twice, each a
+    branch (`Rules.copies`). These branches are enumerated like `ctx.choose`
+    options after the handler's own choices (per delivery: the fault, then
+    the delay of each copy). A crash fault is not an event: it is one more
+    action in every world with something pending while the path has fewer
+    than `faults.crash.max` crashes (`Rules.crashable`), taken at t*. A
+    message due after its deadline (`Rules.delivery` sets it) is a deadline
+    miss when it is taken; because of Rule 1 it is taken exactly at its due
+    time, so only latency or FIFO clamping can make it late.
+
+Relaxed timing (`Rules.enabled_within`), used only to compare a live run with
+the model (`agreement.validate`). A live clock is continuous, so events the
+model runs at different times may run live in another order. With a
+tolerance T, any pending event due at most T ms after t* (any at all when T is
+None) is enabled, provided under `ros` it is the earliest-sent pending
+message of its *stream* (`stream`: messages of one kind from one sender to one
+handler of one node). Live, that order holds at any timing (Zenoh keeps each
+publisher's order and a subscription's queue is FIFO), while Rule 3's wider
+channel order only holds among events of equal time and priority.
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Final, final
+from enum import StrEnum, unique
+from typing import TYPE_CHECKING, final
 
-from twinfleet.checker.world import MESSAGE_KINDS, Event
+from twinfleet.checker.choices import Chooser
+from twinfleet.checker.faults import DROP, DUPLICATE, CheckSettings
+from twinfleet.checker.world import Event
 
-ROS: Final = "ros"
-REBECA: Final = "rebeca"
+if TYPE_CHECKING:
+    from twinfleet.checker.world import World
+
+
+@unique
+class Semantics(StrEnum):
+    """The checker's message semantics, named in a scenario's `semantics:` key.
+
+    Not to be confused with a robot *profile* (`profile: fixed|rebeca`, the nodes'
+    behaviour): `Semantics.REBECA` is RMC's message rules, whatever the nodes do.
+    """
+
+    ROS = "ros"  # per-sender FIFO, as Zenoh delivers
+    REBECA = "rebeca"  # the Timed Rebeca model checker's rules (Rules 3 and 4)
 
 
 @final
 @dataclass(frozen=True, slots=True)
-class Semantics:
-    """The message rules a `System` applies.
+class Rules:
+    """The enabling rules a `System` applies (module docstring).
 
     Attributes:
-        name: "ros" (per-sender FIFO) or "rebeca" (RMC's rules).
+        semantics: `Semantics.ROS` (per-sender FIFO) or `Semantics.REBECA` (RMC's rules);
+            a plain string is accepted and converted.
         node_priorities: per node index, its instance priority (used by `rebeca`).
         global_priority: `rebeca` only: compare handler priorities across nodes.
-        latency: (min, max) extra delivery delay of messages in ms, or None.
-        topic_latency: per topic/service name, a range overriding `latency`
-            (None: no delay on that name).
+        settings: the optional `check:` settings of Rule 5 (latency, deadlines, faults).
     """
 
-    name: str = ROS
+    semantics: Semantics = Semantics.ROS
     node_priorities: tuple[int, ...] = ()
     global_priority: bool = False
-    latency: tuple[int, int] | None = None
-    topic_latency: tuple[tuple[str, tuple[int, int] | None], ...] = ()
+    settings: CheckSettings = field(default_factory=CheckSettings)
     fifo: bool = field(init=False)
     has_latency: bool = field(init=False)
     _ranges: dict[str, tuple[int, int] | None] = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        if self.name not in (ROS, REBECA):
-            raise ValueError(f"unknown semantics {self.name!r}; expected ros or rebeca")
-        if self.latency is not None and not 0 <= self.latency[0] <= self.latency[1]:
-            raise ValueError(f"latency must be [min, max] with 0 <= min <= max, got {self.latency}")
-        object.__setattr__(self, "fifo", self.name == ROS)
-        ranges = dict(self.topic_latency)
+        try:
+            object.__setattr__(self, "semantics", Semantics(self.semantics))
+        except ValueError:
+            raise ValueError(f"unknown semantics {self.semantics!r}; expected ros or "
+                             "rebeca") from None
+        latency = self.settings.latency
+        if latency is not None and not 0 <= latency[0] <= latency[1]:
+            raise ValueError(f"latency must be [min, max] with 0 <= min <= max, got {latency}")
+        object.__setattr__(self, "fifo", self.semantics is Semantics.ROS)
+        ranges = dict(self.settings.topic_latency)
         object.__setattr__(self, "_ranges", ranges)
-        object.__setattr__(self, "has_latency", self.latency is not None
+        object.__setattr__(self, "has_latency", latency is not None
                            or any(r is not None for r in ranges.values()))
 
     @property
-    def latency_options(self) -> int:
-        """How many delivery delays each message may take (1 without latency)."""
-        if self.latency is None:
-            return 1
-        return self.latency[1] - self.latency[0] + 1
+    def latency(self) -> tuple[int, int] | None:
+        """The global (min, max) delivery delay of messages in ms, or None."""
+        return self.settings.latency
 
     def latency_range(self, name: str) -> tuple[int, int] | None:
         """The delivery-delay range of messages on topic/service `name` (None: no delay)."""
-        return self._ranges.get(name, self.latency)
+        return self._ranges.get(name, self.settings.latency)
+
+    # ------------------------------------------------------------ Rules 1-4
 
     def enabled(self, events: Sequence[Event]) -> list[int]:
         """Indices (into the canonically sorted `events`) of the events that may run next."""
@@ -143,29 +173,22 @@ class Semantics:
         top = min(prios[events[i].target] for i in picked)
         return [i for i in picked if prios[events[i].target] == top]
 
-    def message_due(self, now: int, delay_index: int) -> int:
-        """Due time of a message sent at `now` taking latency option `delay_index`."""
-        if self.latency is None:
-            return now
-        return now + self.latency[0] + delay_index
-
     def add(self, pending: list[Event], ev: Event) -> None:
         """Append `ev` to `pending`, giving it its rank (and FIFO clamping) under `ros`."""
         if not self.fifo:
             pending.append(ev)
             return
-        sender, target, kind = ev.sender, ev.target, ev.kind
-        is_msg = kind in MESSAGE_KINDS
+        sender, target, msg = ev.sender, ev.target, ev.message
         due = ev.due
-        if self.has_latency and is_msg:
+        if self.has_latency and msg:
             for other in pending:
                 if (other.due > due and other.target == target and other.sender == sender
-                        and (other.kind in MESSAGE_KINDS) == is_msg):
+                        and other.message == msg):
                     due = other.due
         rank = 0
         for other in pending:
             if (other.due == due and other.target == target and other.sender == sender
-                    and (other.kind in MESSAGE_KINDS) == is_msg):
+                    and other.message == msg):
                 rank += 1
         if due != ev.due or rank:
             ev = ev.moved(due, rank)
@@ -180,24 +203,93 @@ class Semantics:
         # Only events with gone's due time can share its rank numbering; events are
         # sorted by due, so they sit next to each other.
         due, rank = gone.due, gone.rank
-        chan = gone.channel
+        sender, target, msg = gone.sender, gone.target, gone.message
         for i in range(len(rest)):
             ev = rest[i]
             if ev.due != due:
                 if ev.due > due:
                     break
                 continue
-            if ev.rank > rank and ev.channel == chan:
+            if (ev.rank > rank and ev.sender == sender and ev.target == target
+                    and ev.message == msg):
                 rest[i] = ev.with_rank(ev.rank - 1)
         return rest
+
+    # ------------------------------------------------------------ Rule 5
+
+    def delivery(self, now: int, name: str, chooser: Chooser) -> tuple[int, int | None]:
+        """(due time, deadline or None) of a message on `name` sent at `now`; a latency
+        range makes the due time a branch of `chooser`."""
+        due = now
+        span = self._ranges.get(name, self.settings.latency)
+        if span is not None:
+            low, high = span
+            due = now + low + (chooser.branch(high - low + 1) if high > low else 0)
+        settings = self.settings
+        limit = settings.deadline_for(name) if settings.has_deadlines else None
+        return due, None if limit is None else now + limit
+
+    def copies(self, name: str, chooser: Chooser) -> tuple[int, str]:
+        """How many copies of one message on `name` arrive (a branch of `chooser` when
+        `name` may be dropped or duplicated), and the fault taken ("" for none)."""
+        options = self.settings.delivery_options(name)
+        if len(options) == 1:
+            return 1, ""
+        pick = options[chooser.branch(len(options))]
+        if pick == DROP:
+            return 0, "dropped"
+        if pick == DUPLICATE:
+            return 2, "duplicated"
+        return 1, ""
+
+    def crashable(self, world: World) -> tuple[int, ...]:
+        """The nodes that may crash in `world`: none with nothing pending or once the path
+        has had `faults.crash.max` crashes."""
+        crash = self.settings.crash
+        if crash is None or not world.events or world.crashes >= crash.max:
+            return ()
+        return crash.nodes
+
+    # ------------------------------------------------------------ relaxed timing
+
+    def enabled_within(self, events: Sequence[Event], tolerance_ms: int | None) -> set[int]:
+        """Events due by t* + `tolerance_ms` (None: any) that are, under `ros`, the
+        earliest-sent pending message of their stream (module docstring)."""
+        if not events:
+            return set()
+        limit = None if tolerance_ms is None else events[0].due + tolerance_ms
+        fifo = self.fifo
+        first: dict[tuple[int, int, str, str], int] = {}
+        for j, ev in enumerate(events):
+            key = stream(ev) if fifo else None
+            if key is not None:
+                k = first.get(key)
+                if k is None or (ev.due, ev.rank) < (events[k].due, events[k].rank):
+                    first[key] = j
+        heads = set(first.values())
+        return {j for j, ev in enumerate(events) if (limit is None or ev.due <= limit)
+                and (j in heads or not fifo or not ev.message)}
+
+    def stream_head(self, events: Sequence[Event], ev: Event) -> Event:
+        """The earliest-sent pending message of `ev`'s stream (`ev` itself for timers)."""
+        key = stream(ev)
+        if key is None:
+            return ev
+        return min((e for e in events if stream(e) == key), key=lambda e: (e.due, e.rank))
+
+
+def stream(ev: Event) -> tuple[int, int, str, str] | None:
+    """The live FIFO stream of a message (module docstring); None for timers."""
+    return (ev.sender, ev.target, ev.kind, ev.method) if ev.message else None
 
 
 def _earliest_sent(events: Sequence[Event], picked: list[int]) -> list[int]:
     """Per channel, keep only the lowest-ranked of the picked events."""
     first: dict[tuple[int, int, bool], int] = {}
     for i in picked:
-        chan = events[i].channel
+        ev = events[i]
+        chan = (ev.sender, ev.target, ev.message)  # Event.channel, without a property call
         j = first.get(chan)
-        if j is None or events[i].rank < events[j].rank:
+        if j is None or ev.rank < events[j].rank:
             first[chan] = i
     return sorted(first.values())

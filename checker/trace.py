@@ -10,7 +10,12 @@ kind "crash" whose `event` is the crashed node's index. A lasso trace also
 has `cycle_start`: the index of the world (0 = initial) that the last step
 returns to.
 
-`replay(system, trace)` re-runs the steps from the recorded choices, checks
+Kinds are `EventKind` values ("delivery", "request", "reply", "timeout",
+"timer", "periodic", "crash"); a step of kind "crash" is a `Crash` action,
+any other a `RunEvent` of pending event `event`.
+
+`replay(system, trace)` re-runs the steps from the recorded choices (with
+`System.step`, the one step function), checks
 every world's digest against the file and confirms that the recorded property
 is violated at the end, raising `NondeterminismError` at the first divergence.
 """
@@ -24,10 +29,13 @@ from typing import Any, final
 
 import numpy as np
 
-from twinfleet.checker.properties import PropertySet, Violation
-from twinfleet.checker.search import Path
-from twinfleet.checker.system import Step, System, Transition
-from twinfleet.checker.world import CRASH, ENVIRONMENT, World
+from twinfleet.checker.choices import PrefixChooser
+from twinfleet.checker.outcome import Counterexample
+from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.system import System
+from twinfleet.checker.transition import Action, Crash, RunEvent, Step, Transition
+from twinfleet.checker.world import ENVIRONMENT, World
+from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.tracefile import TRACE_FORMAT
 
 
@@ -78,18 +86,18 @@ def _summary(args: Sequence[Any]) -> str:
     return text if len(text) <= 200 else text[:197] + "..."
 
 
-def build_trace(system: System, violation: Violation, path: Path, *,
+def build_trace(system: System, violation: PropertyViolation, path: Counterexample, *,
                 scenario_path: str, search: str = "bfs") -> dict[str, Any]:
-    """Re-execute `path` and describe every step as a JSON-ready trace."""
+    """Re-execute the counterexample `path` and describe every step as a JSON-ready trace."""
     init = system.initial_world(path.initial)
     world = init.world
     trace: dict[str, Any] = {
         "format": TRACE_FORMAT,
         "scenario": scenario_path,
-        "semantics": system.semantics.name,
+        "semantics": system.semantics.value,
         "profile": system.scenario.profile,
-        "latency": list(system.semantics.latency) if system.semantics.latency else None,
-        "global_priority": system.semantics.global_priority,
+        "latency": list(system.rules.latency) if system.rules.latency else None,
+        "global_priority": system.rules.global_priority,
         "debug_state": system.debug_state,
         "check_determinism": system.check_determinism,
         "search": search,
@@ -104,10 +112,26 @@ def build_trace(system: System, violation: Violation, path: Path, *,
         "steps": [],
     }
     for k, step in enumerate(path.steps, start=1):
-        t = system.execute(world, step)
+        t = replay_step(system, world, step)
         trace["steps"].append(_describe(system, k, world, t))
         world = t.world
     return trace
+
+
+def replay_step(system: System, world: World, step: Step) -> Transition:
+    """Take a recorded step again: its action with its recorded choices."""
+    assert step.action is not None, "an initial world is rebuilt with System.initial_world"
+    return system.step(world, step.action, PrefixChooser(step.choices))
+
+
+def _action_index(action: Action | None) -> int:
+    """What a trace step records as `event`: the event index, or the crashed node."""
+    match action:
+        case RunEvent(index=index):
+            return index
+        case Crash(node=node):
+            return node
+    raise ValueError(f"not a step's action: {action!r}")
 
 
 def _describe(system: System, k: int, before: World, t: Transition) -> dict[str, Any]:
@@ -117,9 +141,9 @@ def _describe(system: System, k: int, before: World, t: Transition) -> dict[str,
                for i in range(len(system.names)) if after.states[i] is not before.states[i]}
     return {
         "index": k, "time": ev.due, "node": system.names[ev.target], "handler": ev.method,
-        "kind": ev.kind,
+        "kind": ev.kind.value,
         "sender": "environment" if ev.sender == ENVIRONMENT else system.names[ev.sender],
-        "event": t.step.event, "args": _summary(ev.args),
+        "event": _action_index(t.step.action), "args": _summary(ev.args),
         "choices": list(t.step.choices), "options": list(t.step.options),
         "digest": after.digest.hex(), "next_time": after.next_time,
         "pending": len(after.events), "changed": changed, "faults": list(t.faults),
@@ -133,7 +157,7 @@ def _failure(t: Transition) -> dict[str, str] | None:
     f = t.failure
     if f is None:
         return None
-    return {"kind": f.kind, "node": f.node, "handler": f.handler, "message": f.message,
+    return {"kind": f.kind.value, "node": f.node, "handler": f.handler, "message": f.message,
             "traceback": f.traceback}
 
 
@@ -168,14 +192,20 @@ def replay(system: System, trace: Mapping[str, Any],
     return ReplayResult(confirmed, trace["property"]["name"], message, len(trace["steps"]))
 
 
-def _replay_step(system: System, world: World, rec: Mapping[str, Any]) -> Transition:
+def recorded_step(system: System, world: World, rec: Mapping[str, Any]) -> Step:
+    """The step a trace's step record names in `world`, checked to fit it.
+
+    Raises:
+        NondeterminismError: no such pending event (or crash) in `world`.
+    """
     k, index = rec["index"], rec["event"]
-    if rec.get("kind") == CRASH:
-        if system.crash is None or index not in system.crash.nodes:
+    choices, options = tuple(rec["choices"]), tuple(rec["options"])
+    crash = system.settings.crash
+    if rec.get("kind") == EventKind.CRASH:
+        if crash is None or index not in crash.nodes:
             raise NondeterminismError(k, rec["node"], "crash", "the scenario does not let this "
                                       "node crash (check.faults.crash)")
-        t = system.execute(world, Step(index, tuple(rec["choices"]), tuple(rec["options"]), True))
-        return _check_digest(t, k, rec)
+        return Step(Crash(index), choices, options)
     if not 0 <= index < len(world.events):
         raise NondeterminismError(k, rec["node"], rec["handler"],
                                   f"event {index} does not exist ({len(world.events)} pending)")
@@ -183,8 +213,12 @@ def _replay_step(system: System, world: World, rec: Mapping[str, Any]) -> Transi
     if system.names[ev.target] != rec["node"] or ev.method != rec["handler"]:
         raise NondeterminismError(k, rec["node"], rec["handler"],
                                   f"pending event {index} is {system.names[ev.target]}.{ev.method}")
-    t = system.execute(world, Step(index, tuple(rec["choices"]), tuple(rec["options"])))
-    return _check_digest(t, k, rec)
+    return Step(RunEvent(index), choices, options)
+
+
+def _replay_step(system: System, world: World, rec: Mapping[str, Any]) -> Transition:
+    t = replay_step(system, world, recorded_step(system, world, rec))
+    return _check_digest(t, rec["index"], rec)
 
 
 def _check_digest(t: Transition, k: int, rec: Mapping[str, Any]) -> Transition:

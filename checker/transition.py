@@ -1,30 +1,50 @@
-"""What a transition is and what it did: steps, outcomes, failures, and their comparison.
+"""Actions, steps and transitions: what may happen in a world and what it did.
 
-A `Step` identifies a transition within its parent world (event index and
-`ctx.choose` answers); a `Variant` is what one run of a handler did,
-independent of the world it ran in (new node state, new events, failure), so
-the system can cache it; a `Transition` is a step applied to a world. The
-helpers compare two runs of the same step (`--check-determinism`) and a
-node's attributes before and after a handler (`--debug-state`).
+An `Action` is what may happen next in a world (`System.actions`): run one of
+its enabled pending events (`RunEvent`, by index into the world's canonically
+sorted events) or crash a node (`Crash`). A `Step` is an action with the
+answers its choice points got (`ctx.choose` and the checker's own latency and
+fault branches); a trace is a list of steps. A `Variant` is what one run of a
+handler did, independent of the world it ran in (new node state, new events,
+failure), so the system can cache it; a `Transition` is a step applied to a
+world: the next world, and what the step did (which node ran, what it sent,
+which node states changed). The helpers compare two runs of the same step
+(`--check-determinism`) and a node's attributes before and after a handler
+(`--debug-state`).
 """
 
 from __future__ import annotations
 
 import pickle
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final, final
+from typing import TYPE_CHECKING, final
 
 from twinfleet.runtime.context import Log
+from twinfleet.runtime.kinds import FailureKind
 from twinfleet.runtime.snapshot import SnapshotError, snapshot
 
 if TYPE_CHECKING:
     from twinfleet.checker.world import Event, World
     from twinfleet.runtime.node import Node
 
-FAILURE: Final = "handler failure"
-DEBUG_STATE: Final = "state outside self.state"
-DEADLINE: Final = "deadline miss"
-NONDETERMINISM: Final = "nondeterminism"
+
+@final
+@dataclass(frozen=True, slots=True)
+class RunEvent:
+    """Run the pending event `index` of a world (into its canonically sorted events)."""
+
+    index: int
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class Crash:
+    """Crash node `node` at t* and restart it (a fault of `check.faults.crash`)."""
+
+    node: int
+
+
+Action = RunEvent | Crash
 
 
 @final
@@ -32,7 +52,7 @@ NONDETERMINISM: Final = "nondeterminism"
 class Failure:
     """A failed transition: `ctx.fail`, an exception, a deadline miss, nondeterminism..."""
 
-    kind: str  # FAILURE, DEBUG_STATE, DEADLINE or NONDETERMINISM
+    kind: FailureKind
     node: str
     handler: str
     message: str
@@ -45,21 +65,36 @@ class Failure:
 @final
 @dataclass(frozen=True, slots=True)
 class Step:
-    """One transition's identity: the event index in the parent world and its choices.
+    """One transition's identity: its action in the parent world and its choices.
 
-    For a crash fault (`crash=True`) `event` is the index of the crashing node.
+    `action` is None for an initial world (the start handlers' run, not a transition);
+    `choices` are the indices every choice point answered, in call order, and
+    `options` how many options each had.
     """
 
-    event: int
+    action: Action | None
     choices: tuple[int, ...] = ()
     options: tuple[int, ...] = ()
-    crash: bool = False
 
 
 @final
 @dataclass(slots=True)
 class Transition:
-    """The result of running one event variant (or the start handlers, for initial worlds)."""
+    """The result of taking one step (or of running the start handlers, for initial worlds).
+
+    Attributes:
+        step: the action and its choices.
+        world: the next world.
+        event: the event that ran (for a crash, a CRASH label whose target is the node).
+        failure: why the step failed (then `world` is not to be expanded), or None.
+        logs: the handler's `ctx.log` records.
+        faults: what the checker's fault branches did, one line each.
+        branches: positions in `step.choices` of the checker's own branches (latency,
+            drop, duplicate); the others are the handlers' `ctx.choose` answers.
+        sent: the events the step added (before FIFO ranks and clamping), each with
+            its target, priority and due time; for a crash, the restart's events.
+        changed: indices of the nodes whose state the step changed.
+    """
 
     step: Step
     world: World
@@ -67,7 +102,9 @@ class Transition:
     failure: Failure | None = None
     logs: tuple[Log, ...] = ()
     faults: tuple[str, ...] = ()
-    branches: tuple[int, ...] = ()  # positions in step.choices of the checker's own branches
+    branches: tuple[int, ...] = ()
+    sent: tuple[Event, ...] = ()
+    changed: tuple[int, ...] = ()
 
 
 @final

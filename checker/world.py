@@ -35,30 +35,29 @@ from typing import Any, Final, final
 
 import msgpack
 
+from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.snapshot import snapshot
 
-# Event kinds. Deliveries, requests and replies are *messages* (one FIFO
-# channel per sender/receiver pair under `ros`); the rest are *timers*.
-DELIVERY: Final = "delivery"
-REQUEST: Final = "request"
-REPLY: Final = "reply"
-TIMER: Final = "timer"  # ctx.after, and the "no server" / "timeout" CallError of ctx.call
-PERIODIC: Final = "periodic"
-START: Final = "start"  # on_start handlers; only ever run while building initial worlds
-CRASH: Final = "crash"  # a crash-and-restart fault (never pending; labels crash transitions)
-
-MESSAGE_KINDS: Final = frozenset({DELIVERY, REQUEST, REPLY})
-
 ENVIRONMENT: Final = -1  # sender index of events nobody sent
+
+# `EventKind.is_message` as a tuple: `in` finds a member by identity, with no Python-level
+# enum hash (Events are built in the search's inner loop).
+_MESSAGE_KINDS: Final = tuple(k for k in EventKind if k.is_message)
 
 
 @final
 class Event:
     """One pending handler run: `target.method(ctx, *args)` at time `due`.
 
+    Deliveries, requests and replies are *messages* (`EventKind.is_message`: one
+    FIFO channel per sender/receiver pair under `ros`); timers, periodic timers
+    and call timeouts are a node's own. START events only run while building
+    initial worlds (and restarts); CRASH only labels crash transitions, it is
+    never pending.
+
     Attributes:
         due: absolute logical time (ms) at which the event is due.
-        kind: one of DELIVERY, REQUEST, REPLY, TIMER, PERIODIC, START, CRASH.
+        kind: what made the handler run (a call's timeout is TIMEOUT).
         target: index of the node that runs the handler.
         method: the handler's method name.
         sender: index of the node that caused the event (ENVIRONMENT if none).
@@ -70,12 +69,13 @@ class Event:
         key: canonical encoding of everything above except `due` and `rank`.
         deadline: absolute time by which a message must be handled, or None.
         sk: the canonical sort key (due, key, rank, late).
+        message: `kind.is_message`, kept (the enabling rules read it in their inner loops).
     """
 
-    __slots__ = ("_ident", "args", "deadline", "due", "key", "kind", "method", "priority",
-                 "rank", "reply_to", "sender", "sk", "target")
+    __slots__ = ("_ident", "args", "deadline", "due", "key", "kind", "message", "method",
+                 "priority", "rank", "reply_to", "sender", "sk", "target")
 
-    def __init__(self, due: int, kind: str, target: int, method: str, sender: int,
+    def __init__(self, due: int, kind: EventKind, target: int, method: str, sender: int,
                  args: tuple[Any, ...], priority: int, reply_to: str = "", rank: int = 0,
                  key: bytes | None = None, deadline: int | None = None) -> None:
         self.due = due
@@ -91,7 +91,13 @@ class Event:
                                                          reply_to, args)
         self.deadline = deadline
         self.sk = (due, self.key, rank, deadline is not None and due > deadline)
+        self.message = kind in _MESSAGE_KINDS
         self._ident: bytes | None = None
+
+    @property
+    def channel(self) -> tuple[int, int, bool]:
+        """(sender, target, is_message): the FIFO channel of this event under `ros`."""
+        return (self.sender, self.target, self.message)
 
     @property
     def late(self) -> bool:
@@ -102,11 +108,6 @@ class Event:
         the only part of the deadline that can change what happens next.
         """
         return self.sk[3]
-
-    @property
-    def channel(self) -> tuple[int, int, bool]:
-        """(sender, target, is_message): the FIFO channel of this event under `ros`."""
-        return (self.sender, self.target, self.kind in MESSAGE_KINDS)
 
     def moved(self, due: int, rank: int) -> Event:
         """The same event with another due time and rank (FIFO clamping, renumbering)."""
@@ -206,20 +207,21 @@ class World:
         self._digest = None
 
 
-_HEADERS: dict[tuple[str, int, str, int, str], bytes] = {}
+_HEADERS: dict[tuple[EventKind, int, str, int, str], bytes] = {}
 _NO_ARGS = snapshot(())
 
 
-def event_key(kind: str, target: int, method: str, sender: int, reply_to: str,
+def event_key(kind: EventKind, target: int, method: str, sender: int, reply_to: str,
               args: tuple[Any, ...]) -> bytes:
     """Canonical untimed encoding of an event: a cached header, then the encoded args.
 
-    msgpack values are self-delimiting, so the concatenation is unambiguous.
+    msgpack values are self-delimiting, so the concatenation is unambiguous. The kind
+    is encoded as its string value (what traces and logs show).
     """
     head = (kind, target, method, sender, reply_to)
     header = _HEADERS.get(head)
     if header is None:
-        header = _HEADERS[head] = snapshot(head)
+        header = _HEADERS[head] = snapshot((kind.value, target, method, sender, reply_to))
     return header + (snapshot(args) if args else _NO_ARGS)
 
 

@@ -42,3 +42,4 @@ class FailureKind(StrEnum):
     STATE_OUTSIDE = "state outside self.state"  # a handler changed another attribute
     DEADLINE = "deadline miss"  # a message handled after its deadline
     NONDETERMINISM = "nondeterminism"  # the same handler run twice did different things
+    CHOICE_MISMATCH = "choice mismatch"  # a forced ctx.choose answer this run does not offer

@@ -50,12 +50,12 @@ from typing import Any, TextIO, final
 import msgpack
 
 from twinfleet.runtime import registry
+from twinfleet.runtime.eventlog import EVENTS_FORMAT
 from twinfleet.runtime.introspect import param_arguments
 from twinfleet.runtime.messages import DecodeError, decode
 from twinfleet.runtime.names import key_expr
 from twinfleet.runtime.node import QOS_DEFAULT
 from twinfleet.runtime.node_main import PARENT_ENV, stats_key
-from twinfleet.runtime.replay_gate import EVENTS_FORMAT
 from twinfleet.runtime.run_record import RunRecord, versions
 from twinfleet.runtime.scenario import NodeConfig, Scenario
 from twinfleet.runtime.scenario_file import write_scenario

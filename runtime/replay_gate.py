@@ -32,21 +32,11 @@ from twinfleet.runtime.clock import TimerHandle
 from twinfleet.runtime.context import Publish
 from twinfleet.runtime.core import Handled, NodeCore
 from twinfleet.runtime.entries import Entry
-from twinfleet.runtime.eventlog import (  # the event log's names, imported from here by agreement/
-    EVENTS_FORMAT,
-    EventLog,
-    node_state_digest,
-    payload_digest,
-    state_digest,
-    summarise,
-)
+from twinfleet.runtime.eventlog import node_state_digest, payload_digest, summarise
 from twinfleet.runtime.messages import type_name_of
 from twinfleet.runtime.names import KEY_PREFIX
 from twinfleet.runtime.outbox import Output
 from twinfleet.runtime.transport import Respond
-
-__all__ = ["EVENTS_FORMAT", "GATED_CALL_WALL_S", "EventLog", "LogicalClock", "ReplayGate",
-           "gate_key", "payload_digest", "state_digest", "summarise"]
 
 GATED_CALL_WALL_S = 600.0  # a gated call waits for its grant, not for a timeout
 _GRANT_KEYS = ("kind", "handler", "sender", "args", "t")

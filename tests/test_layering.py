@@ -122,13 +122,11 @@ def test_layer_imports_only_what_lies_below_it(layer):
     assert bad == []
 
 
-# TEMPORARY while the sans-IO node core and the checker's step API are built (issue 11).
-_BEING_REMOVED = [["twinfleet.checker.properties", "twinfleet.checker.system"]]
 
 
 def test_no_import_circles():
     graph = {m: {n for n in _imported(p) if n in SOURCES and n != m} for m, p in SOURCES.items()}
-    circles = [c for c in _strongly_connected(graph) if c not in _BEING_REMOVED]
+    circles = _strongly_connected(graph)
     assert circles == [], "import circles: " + "; ".join(" -> ".join(c) for c in circles)
 
 

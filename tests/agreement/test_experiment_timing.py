@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from twinfleet.agreement.live import RunRecord, TimedReport
+from twinfleet.agreement.live import LiveRunResult, TimedReport
 from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, summarise
 from twinfleet.nodes.msgs import Collision, RobotStatus
 
@@ -29,7 +29,7 @@ def test_a_walk_gives_up_at_the_horizon():
 
 
 def test_errors_are_per_robot_from_its_own_start():
-    rec = RunRecord(seed=1, time_scale=5, reason="x", wall_s=1.0, failed_nodes=(),
+    rec = LiveRunResult(seed=1, time_scale=5, reason="x", wall_s=1.0, failed_nodes=(),
                     arrived={"r1": True, "r2": False}, start_ms={"r1": 1000, "r2": 1010},
                     arrival_ms={"r1": 6100, "r2": None})
     assert rec.durations_ms == {"r1": 5100, "r2": None}

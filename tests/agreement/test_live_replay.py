@@ -28,8 +28,9 @@ from twinfleet.agreement.live_replay import (
     replay_live,
 )
 from twinfleet.checker.check import CheckOptions, check
+from twinfleet.runtime.eventlog import EventLog
 from twinfleet.runtime.host import NodeHost
-from twinfleet.runtime.replay_gate import EventLog, LogicalClock
+from twinfleet.runtime.replay_gate import LogicalClock
 from twinfleet.runtime.transport import LoopbackBus, LoopbackTransport
 
 ROOT = Path(__file__).resolve().parents[2]

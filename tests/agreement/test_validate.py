@@ -24,14 +24,14 @@ import yaml
 
 from twinfleet import Context, Node, String, handler, on_start, subscribe
 from twinfleet.agreement import validate as v
-from twinfleet.agreement.events import EventLogFile, LiveEvent, load_events
+from twinfleet.agreement.events import EVENTS_FORMAT, EventLogFile, LiveEvent, load_events
 from twinfleet.agreement.live_replay import plan
 from twinfleet.checker.check import CheckOptions, check, load
 from twinfleet.checker.choices import PrefixChooser
 from twinfleet.checker.system import System
 from twinfleet.runtime.clock import ManualClock
+from twinfleet.runtime.eventlog import EventLog, payload_digest, state_digest
 from twinfleet.runtime.host import NodeHost
-from twinfleet.runtime.replay_gate import EVENTS_FORMAT, EventLog, payload_digest, state_digest
 from twinfleet.runtime.snapshot import snapshot
 from twinfleet.runtime.transport import LoopbackBus, LoopbackTransport
 
@@ -229,10 +229,9 @@ def walk_records(scenario: Path, steps: int) -> tuple[list[dict[str, Any]], list
         emit(i, 0, "start", "start", state_digest(t.world.states[i]))
     world = t.world
     for _ in range(steps):
-        k = system.semantics.enabled(world.events)[0]
-        ev = world.events[k]
-        world = system.run(world, k, PrefixChooser()).world
-        emit(ev.target, ev.due, "after", ev.method, state_digest(world.states[ev.target]))
+        t = system.step(world, system.actions(world)[0], PrefixChooser())
+        ev, world = t.event, t.world
+        emit(ev.target, ev.due, "timer", ev.method, state_digest(world.states[ev.target]))
     return records, list(system.names)
 
 
@@ -261,7 +260,7 @@ def test_running_ahead_of_a_model_clock_at_zero_is_measured(tmp_path):
     # 50 ms ahead (t* = 0 is a time like any other)
     scenario = tickers(tmp_path, first_a=0)
     records, nodes = walk_records(scenario, 3)
-    records[index_of(records, node="a", t=0, kind="after")]["t"] = 1
+    records[index_of(records, node="a", t=0, kind="timer")]["t"] = 1
     records[index_of(records, node="b", t=50)]["t"] = 0
     records.sort(key=lambda r: r["t"])
     log = write_log(tmp_path / "e.jsonl", records, nodes)

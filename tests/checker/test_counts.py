@@ -179,7 +179,7 @@ def test_latency_branches(tmp_path):
     # each = 10 transitions; the last on_pong sends nothing: 1. Transitions 11, RMC 11 + 2.
     path = scenario(tmp_path, [node("ping", "Ping", rounds=3), node("pong", "Pong")],
                     latency=[0, 1])
-    system_latency = System(load(path)).semantics.latency
+    system_latency = System(load(path)).rules.latency
     assert system_latency == (0, 1)
     result = run(path)
     assert counts(result) == (7, 11, 13)

@@ -155,9 +155,9 @@ def test_per_topic_latency_branches(tmp_path):
     # 3 on_ping + 2 x 2 on_pong + 1 last on_pong = 8; RMC 8 + 2.
     path = scenario(tmp_path, PING_PONG, name="lat", latency={"/ping": [0, 1]})
     system = System(load(path))
-    assert system.semantics.latency is None
-    assert system.semantics.latency_range("/ping") == (0, 1)
-    assert system.semantics.latency_range("/pong") is None
+    assert system.rules.latency is None
+    assert system.rules.latency_range("/ping") == (0, 1)
+    assert system.rules.latency_range("/pong") is None
     assert counts(run(path)) == (7, 8, 10)
     # A default with a per-topic exemption is the same model the other way round.
     other = scenario(tmp_path, PING_PONG, name="lat2",

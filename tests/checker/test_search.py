@@ -7,8 +7,10 @@ import pytest
 from tests.checker.helpers import node, scenario
 from twinfleet.checker import Limits, PropertySet, Search, System, bfs, dfs
 from twinfleet.checker.check import load
-from twinfleet.checker.semantics import Semantics
-from twinfleet.checker.world import DELIVERY, TIMER, Event
+from twinfleet.checker.faults import CheckSettings
+from twinfleet.checker.semantics import Rules, Semantics
+from twinfleet.checker.world import Event
+from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.scenario import ScenarioError
 
 pytestmark = pytest.mark.timeout(30)
@@ -69,7 +71,8 @@ def test_random_walks_are_reproducible(tmp_path):
 
 
 def test_fifo_ranks_and_latency_clamp():
-    ros = Semantics("ros", latency=(0, 5))
+    DELIVERY, TIMER = EventKind.DELIVERY, EventKind.TIMER
+    ros = Rules(Semantics.ROS, settings=CheckSettings(latency=(0, 5)))
     pending: list[Event] = []
     ros.add(pending, Event(3, DELIVERY, 1, "m", 0, (), 0))
     ros.add(pending, Event(1, DELIVERY, 1, "m", 0, (), 0))  # clamped behind the first
@@ -81,7 +84,7 @@ def test_fifo_ranks_and_latency_clamp():
         (DELIVERY, 0), (TIMER, 0)]
     first = next(i for i in enabled if events[i].kind == DELIVERY)
     assert [e.rank for e in ros.remove(events, first)] == [0, 0]
-    rebeca = Semantics("rebeca")
+    rebeca = Rules(Semantics.REBECA)
     assert len(rebeca.enabled(events)) == 3
 
 

@@ -1,0 +1,68 @@
+"""Building worlds: canonical event order, property monitors, and the search key.
+
+A `System` builds every world through one `WorldBuilder`. Node states arrive
+interned (`checker.runner`), so the builder hashes each distinct node state
+once and keys a world by its parts' 64-bit content hashes (`World.key`,
+`checker.world.fast_key`); with `exact` it keys worlds by their 128-bit digest
+instead. Worlds carry the `within` monitors still pending on their path
+(`checker.properties.PropertySet.update`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from typing import TYPE_CHECKING, final
+
+from twinfleet.checker.world import Event, World, fast_key, sort_events, world_digest
+
+if TYPE_CHECKING:
+    from twinfleet.checker.properties import PropertySet, States
+
+_HASH_LIMIT = 100_000  # node-state content hashes kept before starting afresh
+
+
+@final
+class WorldBuilder:
+    """Builds the worlds of one system.
+
+    Args:
+        reader: what property expressions read node states through (the system).
+        monitors: the property monitors worlds carry, or None.
+        exact: key worlds by their 128-bit digest (`World.digest`).
+    """
+
+    def __init__(self, reader: States, monitors: PropertySet | None, *, exact: bool) -> None:
+        self.reader = reader
+        self.monitors = monitors
+        self.exact = exact
+        self._hashes: dict[bytes, bytes] = {}
+        self.hashed = 0  # node-state content hashes computed: for the collision bound
+
+    def __len__(self) -> int:
+        return len(self._hashes)
+
+    def world(self, now: int, states: tuple[bytes, ...], pending: list[Event],
+              parent: World | None, crashes: int = 0) -> World:
+        """The world with node `states` and `pending` events at `now`, after `parent`."""
+        events = sort_events(pending)
+        monitors: tuple[str, ...] = ()
+        if self.monitors is not None:
+            monitors = self.monitors.update(self.reader, parent, now, states, events)
+        if self.exact:
+            digest = world_digest(states, events, monitors, crashes)
+            return World(now, states, events, monitors, crashes=crashes, key=digest,
+                         digest=digest)
+        hashes = self._hashes
+        parts = []
+        for s in states:
+            h = hashes.get(s)
+            parts.append(h if h is not None else self._hash_state(s))
+        return World(now, states, events, monitors, crashes=crashes,
+                     key=fast_key(parts, events, monitors, crashes))
+
+    def _hash_state(self, data: bytes) -> bytes:
+        if len(self._hashes) >= _HASH_LIMIT:
+            self._hashes.clear()
+        h = self._hashes[data] = hashlib.blake2b(data, digest_size=8).digest()
+        self.hashed += 1
+        return h

@@ -1,0 +1,80 @@
+"""The node graph of a scenario, read once from the nodes' declared handlers.
+
+Who subscribes to which topic, who serves which service, each handler's
+priority and each periodic timer's period, and every node's initial state
+(as snapshot bytes): what a `System` needs to turn a handler's effects into
+pending events, without running any node code.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterator, Sequence
+from typing import final
+
+from twinfleet.checker.world import Event
+from twinfleet.runtime.kinds import EventKind
+from twinfleet.runtime.node import HandlerSpec, Node
+from twinfleet.runtime.scenario import ScenarioError
+from twinfleet.runtime.snapshot import snapshot
+
+Target = tuple[int, str, int]  # (node index, handler method, handler priority)
+
+
+@final
+class Topology:
+    """Subscribers, servers, priorities and periods of a scenario's nodes.
+
+    Args:
+        nodes: the node objects, in scenario order.
+        where: the scenario file, for error messages.
+
+    Raises:
+        ScenarioError: two nodes serve the same service.
+    """
+
+    def __init__(self, nodes: Sequence[Node], where: object) -> None:
+        self.nodes = tuple(nodes)
+        self.subscribers: dict[str, list[Target]] = {}
+        self.servers: dict[str, Target] = {}
+        self.service_of: dict[tuple[int, str], str] = {}
+        self._priorities: list[dict[str, int]] = []
+        self._periods: dict[tuple[int, str], int] = {}
+        self.initial_states = tuple(snapshot(node.initial_state()) for node in self.nodes)
+        for i, node in enumerate(self.nodes):
+            spec = node.spec()
+            self._priorities.append({h.method: h.priority for h in spec.handlers})
+            for h in spec.of_kind("subscribe"):
+                topic = node.resolve(h.name or "")
+                self.subscribers.setdefault(topic, []).append((i, h.method, h.priority))
+            for h in spec.of_kind("service"):
+                name = node.resolve(h.name or "")
+                if name in self.servers:
+                    other = self.nodes[self.servers[name][0]].name
+                    raise ScenarioError(f"{where}: nodes: service {name} is served by both "
+                                        f"{other} and {node.name}")
+                self.servers[name] = (i, h.method, h.priority)
+                self.service_of[(i, h.method)] = name
+            for h in spec.of_kind("every"):
+                self._periods[(i, h.method)] = node.period_ms(h)
+
+    def priority(self, node: int, method: str) -> int:
+        """Handler priority of `method` on node index `node` (0 if undeclared)."""
+        return self._priorities[node].get(method, 0)
+
+    def period(self, node: int, method: str) -> int:
+        """The period in ms of the `@every` handler `method` of node `node`."""
+        return self._periods[(node, method)]
+
+    def periodic(self, node: int, now: int) -> Iterator[Event]:
+        """The first firing after `now` of each `@every` timer of node `node`."""
+        for h in self.nodes[node].spec().of_kind("every"):
+            yield Event(now + h.phase_ms + self._periods[(node, h.method)], EventKind.PERIODIC,
+                        node, h.method, node, (), h.priority)
+
+    def starts(self, node: int) -> tuple[HandlerSpec, ...]:
+        """The `@on_start` handlers of node `node`, in declaration order."""
+        return self.nodes[node].spec().of_kind("start")
+
+    def start_event(self, node: int, spec: HandlerSpec, now: int) -> Event:
+        """The event that runs start handler `spec` of node `node` at `now`."""
+        return Event(now, EventKind.START, node, spec.method, node, (), spec.priority)
