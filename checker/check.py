@@ -221,8 +221,8 @@ def check(scenario: str | Path | Scenario | None,
     result = CheckResult(scenario.source, system.semantics.value, strategy, outcome.status,
                          outcome.reason, names, outcome.statistics, outcome.violation,
                          checkpoint=outcome.checkpoint, resumed_from=options.resume)
-    if outcome.violation is not None and outcome.path is not None:
-        result.trace = build_trace(system, outcome.violation, outcome.path,
+    if outcome.violation is not None and outcome.counterexample is not None:
+        result.trace = build_trace(system, outcome.violation, outcome.counterexample,
                                    scenario_path=meta["scenario"], search=strategy)
         if options.trace_out:
             write_trace(result.trace, options.trace_out)
