@@ -1,4 +1,4 @@
-"""`python -m agreement experiment SCENARIO... [options]` (a bare SCENARIO means `experiment`)."""
+"""`python -m twinfleet.agreement experiment SCENARIO... [options]` (a bare SCENARIO means `experiment`)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""`python -m checker SCENARIO [options]` (or `check ...` / `replay TRACE`)."""
+"""`python -m twinfleet.checker SCENARIO [options]` (or `check ...` / `replay TRACE`)."""
 
 from __future__ import annotations
 

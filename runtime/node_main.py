@@ -1,4 +1,4 @@
-"""Entry point of one node process: ``python -m runtime.node_main --scenario F --node NAME ...``.
+"""Entry point of one node process: ``python -m twinfleet.runtime.node_main --scenario F --node NAME ...``.
 
 Loads the scenario, builds the node, opens one Zenoh session (client of the
 launcher's router, or of any router given with ``--connect``), runs a
@@ -66,7 +66,7 @@ def stats_key(fleet: str, node: str) -> str:
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     """Parse the node process's command line."""
-    p = argparse.ArgumentParser(prog="python -m runtime.node_main",
+    p = argparse.ArgumentParser(prog="python -m twinfleet.runtime.node_main",
                                 description="Run one twinfleet node (normally started by the launcher).")
     p.add_argument("--scenario", required=True, help="scenario YAML file")
     p.add_argument("--node", required=True, help="name of the node entry to run")

@@ -1,4 +1,4 @@
-"""`python -m agreement experiment` end to end on the tiny head-on scenario (real processes)."""
+"""`python -m twinfleet.agreement experiment` end to end on the tiny head-on scenario (real processes)."""
 
 from __future__ import annotations
 
