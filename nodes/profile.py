@@ -23,6 +23,8 @@ class Profile:
         planner_neighbours: 7 (the model's A*, no SE) or 8.
         planner_relax: False = first discovery wins (model); True = standard A*
             with decrease-key.
+        inflation: ``"one_pass"`` (the model's in-place dilation, which keeps only
+            marks towards lower rows and columns) or ``"full"`` (8-neighbour dilation).
         occupancy: ``"gray204"`` (occupied iff gray < 204) or ``"ros_trinary"``
             (ROS map_server thresholds from the YAML, unknown counts as occupied).
         scan_mode: ``"model"`` (§5.1 exactly) or ``"exact"`` (centre origin,
@@ -41,6 +43,7 @@ class Profile:
     round_model: bool
     planner_neighbours: Literal[7, 8]
     planner_relax: bool
+    inflation: Literal["one_pass", "full"]
     occupancy: Literal["gray204", "ros_trinary"]
     scan_mode: Literal["model", "exact"]
     collision: Literal["corner_box", "sat"]
@@ -77,6 +80,7 @@ REBECA = Profile(
     round_model=True,
     planner_neighbours=7,
     planner_relax=False,
+    inflation="one_pass",
     occupancy="gray204",
     scan_mode="model",
     collision="corner_box",
@@ -90,6 +94,7 @@ FIXED = Profile(
     round_model=False,
     planner_neighbours=8,
     planner_relax=True,
+    inflation="full",
     occupancy="ros_trinary",
     scan_mode="exact",
     collision="sat",

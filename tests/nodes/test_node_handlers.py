@@ -139,7 +139,7 @@ def test_initial_plan_of_r1_is_the_golden_path():
     out = run(ms, "generate_path", PathRequest("r1", (5, 5), (45, 45)), reply=True)
     cells = out.reply.cells
     assert cells[:3] == ((6, 6), (7, 7), (8, 8))
-    assert cells[-1] == (45, 45) and len(cells) == 40
+    assert cells[-1] == (45, 45) and len(cells) == 41  # RMC's plan (REFERENCE §4.5, corrected)
 
 
 @pytest.mark.parametrize(("profile", "offset"), [("rebeca", (1, 1)), ("fixed", (1, 0))])
