@@ -33,6 +33,10 @@ class Profile:
             (exact oriented rectangles with margin).
         rotation: ``"model"`` (125·|Δ|+1, no wrap) or ``"shortest"``.
         validate_backoff: drop back-off candidates whose target is off-map or blocked.
+        track_front_obstacle: keep the model's informational ``front_obstacle`` (free hops
+            ahead, set on every scan and every hop-or-wait decision) in the robot state.
+            Nothing reads it, but it is a state variable of the model, so RMC tells
+            apart states that differ only in it; the fixed profile leaves it at 0.
         robot_aware_stop: the stop check widens its lateral band for scanned cells
             that are not static obstacles (other robots) to a whole robot width, so
             robots in the neighbouring lane stop instead of brushing past (the
@@ -49,6 +53,7 @@ class Profile:
     collision: Literal["corner_box", "sat"]
     rotation: Literal["model", "shortest"]
     validate_backoff: bool
+    track_front_obstacle: bool
     robot_aware_stop: bool
 
     def round(self, x: float) -> int:
@@ -86,6 +91,7 @@ REBECA = Profile(
     collision="corner_box",
     rotation="model",
     validate_backoff=False,
+    track_front_obstacle=True,
     robot_aware_stop=False,
 )
 
@@ -100,6 +106,7 @@ FIXED = Profile(
     collision="sat",
     rotation="shortest",
     validate_backoff=True,
+    track_front_obstacle=False,
     robot_aware_stop=True,
 )
 

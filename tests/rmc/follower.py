@@ -14,8 +14,8 @@ RMC's message servers map to our nodes' handlers:
 At each RMC step the follower tries every enabled step of ours with that node
 and handler (and every `ctx.choose` variant of it) and takes the one whose
 result equals RMC's next state: every robot's cell, heading, velocity, waiting
-flag, waits, failures, waypoint index, waypoints, targets, distance to the goal
-and scan, the map server's tracked poses and collision count, and every
+flag, waits, failures, waypoint index, waypoints, targets, distance to the goal,
+scan and `front_obstacle` (fields our state lacks are not compared), the map server's tracked poses and collision count, and every
 pending message (due time, handler, arguments). RMC leaves open which of
 several equal-time alternatives it took (five scans, five path requests); the
 state after the step says it. When no candidate matches, the candidate with
