@@ -228,8 +228,13 @@ def describe(step: adapter.Step) -> str:
 
 
 def follow(system: Any, world: Any, trace: RmcTrace,
-           progress: Callable[[int, RmcStep], None] | None = None) -> FollowResult:
-    """Drive `system` from `world` along `trace`; stop at the first difference."""
+           progress: Callable[[int, RmcStep], None] | None = None,
+           violated: Callable[[Any, Any], bool] | None = None) -> FollowResult:
+    """Drive `system` from `world` along `trace`; stop at the first difference.
+
+    A violating trace's last step has no state after it; one of our candidates must
+    then satisfy `violated(system, world)` (default: the map server counted a collision).
+    """
     first = compare(system, world, trace.states[0])
     if first:
         step = trace.steps[0]
@@ -246,7 +251,7 @@ def follow(system: Any, world: Any, trace: RmcTrace,
             return FollowResult(i, Divergence(i, step, before, "no such step is enabled in ours",
                                               candidates=[describe(s) for s in enabled]), world, 0)
         if step.target == VIOLATION:
-            return _last(system, world, i, step, before, candidates)
+            return _last(system, world, i, step, before, candidates, violated or collided)
         after = trace.states[i + 1]
         best: tuple[int, list[Difference], adapter.Step] | None = None
         for cand in candidates:
@@ -269,15 +274,19 @@ def _collisions(system: Any, world: Any) -> int:
     return adapter.node_states(system, world)[MAP_NODE].collisions
 
 
+def collided(system: Any, world: Any) -> bool:
+    """The model's `collisionFree` is broken: the map server counted a collision."""
+    return _collisions(system, world) > 0
+
+
 def _last(system: Any, world: Any, i: int, step: RmcStep, before: RmcState,
-          candidates: list[adapter.Step]) -> FollowResult:
-    """RMC's last step broke `collisionFree`: one of ours must count a collision."""
+          candidates: list[adapter.Step], violated: Callable[[Any, Any], bool]) -> FollowResult:
+    """RMC's last step broke its assertion: one of our candidates must break it too."""
     for cand in candidates:
         after = adapter.take(cand)
-        hits = _collisions(system, after)
-        if hits > 0:
-            return FollowResult(i + 1, None, after, hits)
-    div = Divergence(i, step, before, "RMC's last step counts a collision; no candidate of ours does",
+        if violated(system, after):
+            return FollowResult(i + 1, None, after, _collisions(system, after))
+    div = Divergence(i, step, before, "RMC's last step breaks its assertion; no candidate of ours does",
                      candidates=[describe(c) for c in candidates])
     return FollowResult(i, div, world, 0)
 
