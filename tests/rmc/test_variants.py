@@ -16,6 +16,8 @@ import pytest
 import yaml
 
 from tests.rmc import adapter, rmc_order
+from tests.rmc.follower import DATA, follow
+from tests.rmc.rmc_trace import read_trace
 from twinfleet.checker.check import CheckOptions, check
 
 pytestmark = pytest.mark.timeout(300)
@@ -65,5 +67,43 @@ def test_violating_variants_at_scan_100_have_rmcs_counts_in_rmcs_order(tmp_path,
                                                                        transitions):
     system, world = adapter.build(variant(tmp_path, base, 100))
     counts = rmc_order.search(system, world, rmc_order.collision_or_livelock)
+    assert counts.violated
+    assert (counts.states, counts.transitions) == (states, transitions)
+
+
+#: Detour cases (tests/data/rmc/README.md): trace file, base case, scan, robots, RMC's counts.
+DETOURS = {
+    "c2c-scan100-wait100-detour": (
+        "c2c", 100, [(0.9, 100, 3), (0.8, 100, 6), (0.7, 100, 5), (0.6, 100, 4), (1.0, 100, 2)],
+        545, 6_292, 13_936),
+    "fast-scan140-wait100-detour": (
+        "c2c", 140, [(1.0, 100, 2), (1.0, 100, 3), (1.0, 100, 4), (1.0, 100, 5), (1.0, 100, 6)],
+        1_198, 18_383, 41_021),
+}
+
+
+def detour_progress(system, world) -> bool:
+    """The assertion of the detour traces: a robot is two waypoints along a back-off plan."""
+    states = adapter.node_states(system, world)
+    return any(len(s.targets) > 1 and s.move_idx >= 2 for n, s in states.items() if n != "map_server")
+
+
+@pytest.mark.parametrize("name", sorted(DETOURS))
+def test_follower_reproduces_rmcs_waits_and_back_offs(tmp_path, name):
+    base, scan, robots, steps, _, _ = DETOURS[name]
+    trace = read_trace(DATA / f"{name}.rmc-trace.jsonl.gz")
+    assert len(trace.steps) == steps
+    assert max(r.failures for s in trace.states for r in s.robots.values()) >= 1  # backed off
+    system, world = adapter.build(variant(tmp_path, base, scan, robots))
+    result = follow(system, world, trace, violated=detour_progress)
+    assert result.ok, str(result.divergence)
+    assert result.steps == steps
+
+
+@pytest.mark.parametrize("name", sorted(DETOURS))
+def test_detour_counts_are_rmcs_in_rmcs_order(tmp_path, name):
+    base, scan, robots, _, states, transitions = DETOURS[name]
+    system, world = adapter.build(variant(tmp_path, base, scan, robots))
+    counts = rmc_order.search(system, world, detour_progress)
     assert counts.violated
     assert (counts.states, counts.transitions) == (states, transitions)
