@@ -1,4 +1,4 @@
-"""Why C2a and C2b hold in the paper's profile: how close do robots ever get?
+"""How close do robots ever get in the paper's cases, next to the model's collision test?
 
 For each paper case in the `rebeca` profile and `rebeca` semantics
 (`launch/cX_rebeca.yaml`) this script checks, besides the model's collision
@@ -6,6 +6,9 @@ property, a *separation* invariant on the map server's tracked cells:
 "no two robots within Chebyshev distance k", for k = 0, 1, 2. The smallest k
 that is violated is the closest approach over every reachable state (robots are
 0.4 m on 0.255 m cells, so distance ≤ 1 means physical overlap, REFERENCE §7.2).
+C2a's collision, which RMC and the paper report too, comes at a closest approach
+of two cells: the model's shadow box of a diagonal heading is a 0.62 m segment
+that reaches into a robot two cells away.
 
 It then re-checks C2a and C2b with every instance-priority order the model
 files use, with both max-wait settings and both scan rates: if the state count

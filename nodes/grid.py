@@ -128,6 +128,31 @@ def inflate(occ: np.ndarray, cells: int = 1) -> np.ndarray:
     return out
 
 
+def inflate_one_pass(occ: np.ndarray) -> np.ndarray:
+    """The model's ``expandObstacles``: one dilation written in place, row by row.
+
+    The model copies each cell into the output when its row-major scan reaches
+    it, so a mark that an obstacle visited *earlier* made on that cell is
+    overwritten again; only marks from obstacles visited later survive. A free
+    cell (i, j) therefore ends up blocked iff one of (i, j+1), (i+1, j−1),
+    (i+1, j), (i+1, j+1) is occupied: obstacles grow towards lower rows and
+    columns only (REBECA's initial plans of r1 and r5 depend on it, REFERENCE
+    §4.5 as corrected).
+
+    Args:
+        occ: bool grid (rows, cols).
+
+    Returns:
+        A new bool grid.
+    """
+    src = np.asarray(occ, dtype=bool)
+    out = src.copy()
+    out[:, :-1] |= src[:, 1:]  # (i, j+1)
+    out[:-1, 1:] |= src[1:, :-1]  # (i+1, j-1)
+    out[:-1, :] |= src[1:, :]  # (i+1, j)
+    out[:-1, :-1] |= src[1:, 1:]  # (i+1, j+1)
+    return out
+
 
 @dataclass(frozen=True, slots=True)
 class Dims:

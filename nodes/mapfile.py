@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from twinfleet.nodes.grid import inflate
+from twinfleet.nodes.grid import inflate, inflate_one_pass
 from twinfleet.nodes.profile import Profile, profile_named
 
 #: Model threshold: occupied iff gray < 204 (= 0.8 · 255), REFERENCE §3.1.
@@ -269,14 +269,16 @@ def save_map(
 
 @cache
 def static_grids(map_path: str, profile_name: str) -> tuple[OccupancyMap, np.ndarray, np.ndarray]:
-    """A map, its occupancy by the profile's rule and its one-cell inflation, read-only.
+    """A map, its occupancy by the profile's rule and its one-cell inflation (by the
+    profile's `inflation` rule), read-only.
 
     Loaded once per (map, profile) in a process: the map server and every robot of a
     checker run share them.
     """
     occ_map = load_map(map_path)
-    static = occ_map.occupied(profile_named(profile_name))
-    inflated = inflate(static, 1)
+    profile = profile_named(profile_name)
+    static = occ_map.occupied(profile)
+    inflated = inflate_one_pass(static) if profile.inflation == "one_pass" else inflate(static, 1)
     static.setflags(write=False)
     inflated.setflags(write=False)
     return occ_map, static, inflated

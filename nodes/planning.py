@@ -72,7 +72,8 @@ def planning_grid(
     """Grid for one path request (§3.4).
 
     Args:
-        static_inflated: static occupancy dilated once (precomputed by the caller).
+        static_inflated: static occupancy dilated once by the profile's rule (precomputed by
+            the caller, `mapfile.static_grids`).
         omap: un-inflated static occupancy.
         others: every robot except the requester.
         requester_cell: the start of the request; its in-map neighbours that are

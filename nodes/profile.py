@@ -23,6 +23,8 @@ class Profile:
         planner_neighbours: 7 (the model's A*, no SE) or 8.
         planner_relax: False = first discovery wins (model); True = standard A*
             with decrease-key.
+        inflation: ``"one_pass"`` (the model's in-place dilation, which keeps only
+            marks towards lower rows and columns) or ``"full"`` (8-neighbour dilation).
         occupancy: ``"gray204"`` (occupied iff gray < 204) or ``"ros_trinary"``
             (ROS map_server thresholds from the YAML, unknown counts as occupied).
         scan_mode: ``"model"`` (§5.1 exactly) or ``"exact"`` (centre origin,
@@ -31,6 +33,10 @@ class Profile:
             (exact oriented rectangles with margin).
         rotation: ``"model"`` (125·|Δ|+1, no wrap) or ``"shortest"``.
         validate_backoff: drop back-off candidates whose target is off-map or blocked.
+        track_front_obstacle: keep the model's informational ``front_obstacle`` (free hops
+            ahead, set on every scan and every hop-or-wait decision) in the robot state.
+            Nothing reads it, but it is a state variable of the model, so RMC tells
+            apart states that differ only in it; the fixed profile leaves it at 0.
         robot_aware_stop: the stop check widens its lateral band for scanned cells
             that are not static obstacles (other robots) to a whole robot width, so
             robots in the neighbouring lane stop instead of brushing past (the
@@ -41,11 +47,13 @@ class Profile:
     round_model: bool
     planner_neighbours: Literal[7, 8]
     planner_relax: bool
+    inflation: Literal["one_pass", "full"]
     occupancy: Literal["gray204", "ros_trinary"]
     scan_mode: Literal["model", "exact"]
     collision: Literal["corner_box", "sat"]
     rotation: Literal["model", "shortest"]
     validate_backoff: bool
+    track_front_obstacle: bool
     robot_aware_stop: bool
 
     def round(self, x: float) -> int:
@@ -77,11 +85,13 @@ REBECA = Profile(
     round_model=True,
     planner_neighbours=7,
     planner_relax=False,
+    inflation="one_pass",
     occupancy="gray204",
     scan_mode="model",
     collision="corner_box",
     rotation="model",
     validate_backoff=False,
+    track_front_obstacle=True,
     robot_aware_stop=False,
 )
 
@@ -90,11 +100,13 @@ FIXED = Profile(
     round_model=False,
     planner_neighbours=8,
     planner_relax=True,
+    inflation="full",
     occupancy="ros_trinary",
     scan_mode="exact",
     collision="sat",
     rotation="shortest",
     validate_backoff=True,
+    track_front_obstacle=False,
     robot_aware_stop=True,
 )
 

@@ -34,7 +34,7 @@ from twinfleet.nodes.motion import (
 )
 from twinfleet.nodes.msgs import ObstacleScan, Path, PathRequest, RobotPose, RobotStatus
 from twinfleet.nodes.profile import profile_named
-from twinfleet.nodes.scan import can_hop
+from twinfleet.nodes.scan import can_hop, stepwise_free
 
 MAX_FAILURES = 2  # a third failed plan leaves the robot stuck (the model's livelock bound)
 
@@ -79,6 +79,7 @@ class RobotState:
     failures: int = 0
     done: bool = False
     stuck: bool = False
+    front_obstacle: int = 0  # the model's informational free hops ahead (profile switch)
 
 
 class Robot(Node):
@@ -130,6 +131,7 @@ class Robot(Node):
     def on_scan(self, ctx: Context, msg: ObstacleScan) -> None:
         """Keep the latest scan; while waiting, re-evaluate at once (the waiting loop)."""
         self.state.obstacles = tuple(tuple(c) for c in msg.cells)
+        self._note_front_obstacle()
         if self.state.waiting:
             ctx.after(0, self.update_moving_status, True)
 
@@ -164,12 +166,20 @@ class Robot(Node):
         heading = direction_between(st.cell, st.moves[st.move_idx])
         if heading != st.dir:
             self._rotate(ctx, heading, move_next)
-        elif self._can_hop():
+            return
+        self._note_front_obstacle()
+        if self._can_hop():
             self._hop(ctx, move_next)
         else:
             self._wait(ctx)
 
     # -- steps ------------------------------------------------------------------
+
+    def _note_front_obstacle(self) -> None:
+        if self.profile.track_front_obstacle:
+            st, d = self.state, self.dims
+            st.front_obstacle = stepwise_free(st.cell, st.dir, st.obstacles, d.res, d.width,
+                                              d.safe_margin)
 
     def _can_hop(self) -> bool:
         st = self.state

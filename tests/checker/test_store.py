@@ -85,7 +85,7 @@ def test_optimisations_match_the_unoptimised_search(tmp_path, model, semantics, 
 def test_c1a_rebeca_counts_are_the_same_in_every_mode():
     path = ROOT / "launch" / "c1a_rebeca.yaml"
     fast = run(path, trace_out=None)
-    assert (fast.statistics.states, fast.rmc_transitions) == (19_559, 45_481)
+    assert (fast.statistics.states, fast.rmc_transitions) == (18_527, 43_077)  # = RMC's
     for options in VARIANTS[:2]:
         other = run(path, trace_out=None, **options)
         assert _summary(other) == _summary(fast), options

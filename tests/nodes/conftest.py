@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pytest
 
-from twinfleet.nodes.grid import inflate
+from twinfleet.nodes.grid import inflate_one_pass
 from twinfleet.nodes.mapfile import OccupancyMap, load_map
 from twinfleet.nodes.profile import REBECA
 
@@ -25,4 +25,5 @@ def occ50(map50):
 
 @pytest.fixture(scope="session")
 def inflated50(occ50):
-    return inflate(occ50)
+    """The model's planning inflation of the paper's map (what the `rebeca` map server uses)."""
+    return inflate_one_pass(occ50)

@@ -14,6 +14,7 @@ from twinfleet.nodes.grid import (
     heading_to_dir,
     in_bounds,
     inflate,
+    inflate_one_pass,
     is_diagonal,
     octile,
     step,
@@ -114,3 +115,38 @@ def test_dims():
     assert d.steplen(1) == pytest.approx(0.360621)
     with pytest.raises(ValueError, match="res"):
         Dims(res=0)
+
+
+def _expand_in_place_like_the_model(occ):
+    # expandObstacles of the model, statement by statement: each cell is copied into the
+    # output when the row-major scan reaches it, then its obstacle marks its free neighbours.
+    rows, cols = occ.shape
+    out = np.zeros_like(occ)
+    for x in range(rows):
+        for y in range(cols):
+            out[x, y] = occ[x, y]
+            if occ[x, y]:
+                for dx, dy in NB:
+                    nx, ny = x + dx, y + dy
+                    if 0 <= nx < rows and 0 <= ny < cols and not occ[nx, ny]:
+                        out[nx, ny] = True
+    return out
+
+
+def test_one_pass_inflation_is_the_models_in_place_expansion():
+    rng = np.random.default_rng(2)
+    for _ in range(200):
+        occ = rng.random((int(rng.integers(1, 10)), int(rng.integers(1, 10)))) < 0.2
+        assert (inflate_one_pass(occ) == _expand_in_place_like_the_model(occ)).all()
+
+
+def test_one_pass_inflation_grows_towards_lower_rows_and_columns_only():
+    occ = np.zeros((5, 5), dtype=bool)
+    occ[2, 2] = True
+    out = inflate_one_pass(occ)
+    assert sorted(zip(*np.nonzero(out), strict=True)) == [(1, 1), (1, 2), (1, 3), (2, 1), (2, 2)]
+
+
+def test_one_pass_inflation_of_map50(occ50):
+    assert inflate_one_pass(occ50).sum() == 315  # full dilation: 357
+    assert inflate(occ50).sum() == 357

@@ -86,6 +86,25 @@ def test_hop_when_the_way_is_clear_and_wait_when_blocked():
     assert r.state.waiting and r.state.waits == 1
 
 
+@pytest.mark.parametrize(("profile", "expected"), [("rebeca", [2, 9999, 2]), ("fixed", [0, 0, 0])])
+def test_front_obstacle_is_the_models_free_hops_ahead_at_each_scan_and_decision(profile, expected):
+    r = robot(profile)
+    run(r, "on_path", Path(((6, 5), (7, 5))))
+    r.state.dir = 0
+    seen = []
+    # Three cells ahead: 0.7649999999999999 m / 0.255 m truncates to 2, as in the model.
+    run(r, "on_scan", ObstacleScan("r1", ((8, 5),)))
+    seen.append(r.state.front_obstacle)
+    run(r, "on_scan", ObstacleScan("r1", ((5, 8),)))  # beside the robot, not ahead: 9999
+    seen.append(r.state.front_obstacle)
+    run(r, "on_scan", ObstacleScan("r1", ((7, 5),)))  # two cells ahead: 0.51 / 0.255 = 2
+    r.state.front_obstacle = 0 if profile == "fixed" else -1
+    run(r, "update_moving_status", True)  # blocked: recomputed at the decision
+    seen.append(r.state.front_obstacle)
+    assert seen == expected
+    assert r.state.waiting
+
+
 def test_waiting_robot_backs_off_with_twenty_alternatives_in_the_rebeca_profile():
     r = robot()
     run(r, "start")
@@ -139,7 +158,7 @@ def test_initial_plan_of_r1_is_the_golden_path():
     out = run(ms, "generate_path", PathRequest("r1", (5, 5), (45, 45)), reply=True)
     cells = out.reply.cells
     assert cells[:3] == ((6, 6), (7, 7), (8, 8))
-    assert cells[-1] == (45, 45) and len(cells) == 40
+    assert cells[-1] == (45, 45) and len(cells) == 41  # RMC's plan (REFERENCE §4.5, corrected)
 
 
 @pytest.mark.parametrize(("profile", "offset"), [("rebeca", (1, 1)), ("fixed", (1, 0))])

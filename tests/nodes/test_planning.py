@@ -19,11 +19,26 @@ from twinfleet.nodes.planning import (
 )
 from twinfleet.nodes.profile import FIXED, REBECA
 
-R1 = (
-    "6,6 7,7 8,8 9,9 10,10 11,11 12,12 13,13 14,14 15,15 16,16 18,16 20,16 22,16 24,16 26,16 "
-    "27,17 28,18 28,20 29,21 30,22 31,23 32,24 33,25 34,26 35,27 36,28 36,30 36,32 36,34 36,36 "
-    "37,37 38,38 39,39 40,40 41,41 42,42 43,43 44,44 45,45"
-)
+#: The initial plans RMC computes on the model (its robots' `moves` after the first
+#: `onNewPath` at t = 0; REFERENCE.md §4.5 as corrected): waypoints, start excluded.
+RMC_PLANS = {
+    "r1": ((5, 5), (45, 45), "6,6 7,7 8,8 9,9 10,10 11,11 12,12 13,13 14,14 15,15 16,16 18,16 "
+           "20,16 22,16 24,16 25,16 26,17 27,18 28,19 29,20 30,21 30,23 30,25 30,27 31,28 32,29 "
+           "33,30 34,31 35,32 36,33 37,34 38,35 39,36 40,37 41,38 42,39 42,41 42,42 43,43 44,44 "
+           "45,45"),
+    "r2": ((5, 15), (45, 35), "6,15 8,15 10,15 12,15 14,15 16,15 18,15 20,15 22,15 24,15 25,15 "
+           "26,16 27,17 28,18 29,19 30,20 31,21 32,22 33,23 34,24 35,25 36,26 37,27 38,28 39,29 "
+           "40,30 41,31 42,32 43,33 44,34 45,35"),
+    "r3": ((5, 25), (45, 25), "6,25 8,25 10,25 12,25 14,25 16,25 18,25 20,25 22,25 24,25 26,25 "
+           "28,25 30,25 32,25 34,25 35,25 36,26 37,27 38,28 40,28 42,28 43,27 44,26 45,25"),
+    "r4": ((5, 35), (45, 15), "6,35 8,35 10,35 12,35 14,35 16,35 18,35 20,35 22,35 24,35 26,35 "
+           "27,34 28,33 28,31 30,31 31,30 32,29 33,28 34,27 35,26 35,24 35,22 36,21 37,20 38,19 "
+           "40,19 42,19 43,18 44,17 45,16 45,15"),
+    "r5": ((5, 45), (45, 5), "6,45 7,44 8,43 9,42 10,41 11,40 12,39 13,38 14,37 15,36 16,35 "
+           "17,34 18,33 19,32 20,31 21,30 22,29 23,28 24,27 25,26 26,25 27,24 28,23 29,22 30,21 "
+           "31,20 32,19 33,18 34,17 35,16 36,15 37,14 38,13 39,12 40,11 41,10 42,9 43,8 44,7 "
+           "45,6 45,5"),
+}
 
 
 def cells(text):
@@ -36,45 +51,21 @@ def initial_plan(occ50, inflated50, start, goal):
     return res, remove_zigzags(res.path)
 
 
-def test_golden_r1(occ50, inflated50):
-    res, wps = initial_plan(occ50, inflated50, (5, 5), (45, 45))
-    assert wps == cells(R1)
-    assert len(res.path) == 51
-    assert res.max_open == 124
+@pytest.mark.parametrize("robot", sorted(RMC_PLANS))
+def test_initial_plans_are_rmcs(occ50, inflated50, robot):
+    start, goal, plan = RMC_PLANS[robot]
+    _, wps = initial_plan(occ50, inflated50, start, goal)
+    assert wps == cells(plan)
 
 
-def test_golden_r2(occ50, inflated50):
-    res, wps = initial_plan(occ50, inflated50, (5, 15), (45, 35))
-    assert len(res.path) == 41
-    assert res.max_open == 78
-    assert wps[:11] == [(r, 15) for r in range(6, 25, 2)] + [(25, 15)]
-    assert wps[11:] == [(26 + k, 16 + k) for k in range(20)]
-
-
-def test_golden_r3(occ50, inflated50):
-    res, wps = initial_plan(occ50, inflated50, (5, 25), (45, 25))
-    assert len(res.path) == 44
-    assert res.max_open == 80
-    assert wps == [(6, 25)] + [(r, 25) for r in range(8, 35, 2)] + cells(
-        "35,25 36,26 37,27 38,28 40,28 42,28 43,27 44,26 45,25"
-    )
-
-
-def test_golden_r4(occ50, inflated50):
-    res, wps = initial_plan(occ50, inflated50, (5, 35), (45, 15))
-    assert len(res.path) == 61
-    assert res.max_open == 137
-    assert wps == [(6, 35)] + [(r, 35) for r in range(8, 27, 2)] + cells(
-        "27,34 28,33 28,31 30,31 31,30 32,29 33,28 34,27 35,26 35,24 35,22 36,21 37,20 38,19 "
-        "40,19 42,19 43,18 44,17 45,16 45,15"
-    )
-
-
-def test_golden_r5(occ50, inflated50):
-    res, wps = initial_plan(occ50, inflated50, (5, 45), (45, 5))
-    assert len(res.path) == 81
-    assert res.max_open == 123
-    assert wps == [(6 + k, 45 - k) for k in range(33)] + cells("40,13 40,11 41,10 42,9 43,8 44,7 45,6 45,5")
+def test_full_inflation_gives_other_plans_for_r1_and_r5(occ50):
+    # Why the hand-derived plans of the first REFERENCE §4.5 were wrong: they used an
+    # ordinary 8-neighbour dilation, the model's expandObstacles keeps only one side.
+    full = inflate(occ50)
+    for robot in RMC_PLANS:
+        start, goal, plan = RMC_PLANS[robot]
+        _, wps = initial_plan(occ50, full, start, goal)
+        assert (wps == cells(plan)) == (robot in ("r2", "r3", "r4")), robot
 
 
 def test_model_astar_never_steps_se(occ50, inflated50):
