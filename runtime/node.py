@@ -130,9 +130,15 @@ def on_start(fn: H | None = None, *, priority: int = 0) -> Any:
     return _declare(fn, spec)
 
 
-def handler(*, priority: int = 0) -> Callable[[H], H]:
-    """Declare `fn(self, ctx, *args)` as a target of `ctx.after` or of `ctx.call` replies."""
-    return lambda fn: _declare(fn, HandlerSpec("handler", "", priority=priority))
+def handler(fn: H | None = None, *, priority: int = 0) -> Any:
+    """Declare `fn(self, ctx, *args)` as a target of `ctx.after` or of `ctx.call` replies.
+
+    Used bare (`@handler`) or with options (`@handler(priority=1)`), as `@on_start`.
+    """
+    spec = HandlerSpec("handler", "", priority=priority)
+    if fn is None:
+        return lambda f: _declare(f, spec)
+    return _declare(fn, spec)
 
 
 @dataclass(frozen=True, slots=True)

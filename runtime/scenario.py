@@ -51,6 +51,8 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import os
+import sys
 import typing
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -230,7 +232,18 @@ def load_scenario(path: str | Path, overrides: Mapping[str, Any] | None = None) 
     if not isinstance(doc, dict):
         raise ScenarioError(f"{path}: expected a mapping at the top level")
     doc = {**doc, **(overrides or {})}
+    user_import_path(path.parent)
     return parse_scenario(doc, path)
+
+
+def user_import_path(scenario_dir: Path) -> None:
+    """Let "module:Class" names find a user's own modules beside the scenario file and in
+    the working directory (a console script has neither on `sys.path`). They go last, so
+    they never shadow the standard library or installed packages (our nodes are
+    `twinfleet.nodes`, so a user package called `nodes` is simply the user's)."""
+    for folder in (str(scenario_dir.resolve()), os.getcwd()):
+        if folder not in sys.path:
+            sys.path.append(folder)
 
 
 def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:

@@ -115,3 +115,34 @@ def test_demo_scenario_checks_with_a_limit(tmp_path, capsys):
     assert code == 2
     assert out["semantics"] == "rebeca"
     assert "max-depth 40" in out["reason"]
+
+
+def test_a_user_package_beside_the_scenario_is_found_from_any_directory(tmp_path):
+    # A user's own `nodes` package next to the scenario file: found by the console script
+    # (whose sys.path has neither the scenario's folder nor the working directory), and
+    # `@handler` works bare, like `@on_start`.
+    project = tmp_path / "project"
+    (project / "nodes").mkdir(parents=True)
+    (project / "nodes" / "__init__.py").write_text("")
+    (project / "nodes" / "pair.py").write_text(
+        "from dataclasses import dataclass\n"
+        "from twinfleet import Context, Node, handler, on_start\n\n"
+        "@dataclass\nclass S:\n    fired: int = 0\n\n"
+        "class Once(Node):\n"
+        "    def initial_state(self):\n        return S()\n\n"
+        "    @on_start\n    def start(self, ctx: Context) -> None:\n"
+        "        ctx.after(10, self.fire)\n\n"
+        "    @handler\n    def fire(self, ctx: Context) -> None:\n"
+        "        self.state.fired += 1\n")
+    (project / "once.yaml").write_text(
+        "name: once\nnodes:\n  - {name: a, class: 'nodes.pair:Once'}\n"
+        "properties:\n  - {name: fires_once, kind: invariant, expr: 'a.fired <= 1'}\n")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    code = ("import sys; sys.path = [p for p in sys.path if p not in ('', '.')]; "
+            "from twinfleet.cli import main; sys.exit(main(sys.argv[1:]))")
+    proc = subprocess.run([sys.executable, "-c", code, "check", str(project / "once.yaml"),
+                           "--json"], capture_output=True, text=True, cwd=elsewhere, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    result = json.loads(proc.stdout)
+    assert (result["verdict"], result["states"]) == ("holds", 2)
