@@ -20,7 +20,9 @@ import re
 from collections.abc import Sequence
 from dataclasses import dataclass
 
+# One table of exit codes for every command (README and `twinfleet --help` list it).
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INCONCLUSIVE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
+EXIT_CONTRACT_BREACH = 4  # a user's node broke the node contract (nondeterminism, state outside self.state)
 DISCOVERY_S = 1.0
 
 

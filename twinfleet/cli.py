@@ -47,7 +47,8 @@ and proves a property or returns the trace that breaks it.
 Every command has --help."""
 
 EPILOG = ("exit codes: 0 ok / every property holds, 1 a property is violated (FAILED), "
-          "2 bad input or no answer, 3 inconclusive, 130 interrupted")
+          "2 bad input or no answer, 3 inconclusive, 4 a node breaks the node contract, "
+          "130 interrupted")
 
 
 def _version() -> str:
