@@ -5,7 +5,7 @@
                               [--timeout S] [--seed S] [--runs N] [--connect EP] [--listen EP]
     twinfleet examples [--copy NAME [DIR]]
     twinfleet node list|info     twinfleet topic list|info|type|echo|hz|pub
-    twinfleet service list|call  twinfleet param list|get     twinfleet interface list|show
+    twinfleet service list|type|call   twinfleet param list|get   twinfleet interface list|show
     twinfleet view [--port P] [--trace FILE]      twinfleet foxglove [--port P]
 
 SCENARIO is a scenario file or the name of a shipped example (`twinfleet examples`
@@ -189,6 +189,9 @@ def cmd_service(args: argparse.Namespace) -> int:
     conn = connection(args)
     if args.action == "list":
         return monitor.service_list(conn, out=sys.stdout, verbose=args.verbose,
+                                    types=args.show_types, timeout_s=args.query_timeout)
+    if args.action == "type":
+        return monitor.service_type(conn, args.service, out=sys.stdout,
                                     timeout_s=args.query_timeout)
     import_modules(args.module)
     need_fleet(args, conn)
@@ -367,16 +370,21 @@ def _topic_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _service_parser(sub: argparse._SubParsersAction) -> None:
-    service = sub.add_parser("service", help="list or call services")
+    service = sub.add_parser("service", help="list, inspect or call services")
     ss = service.add_subparsers(dest="action", required=True, metavar="ACTION")
     sl = _sub(ss, "list", "list served services")
+    sl.add_argument("-t", "--show-types", action="store_true",
+                    help="also show each service's request and reply types (from the serving "
+                         "handler's annotations; ? where it has none)")
     sl.add_argument("-v", "--verbose", action="store_true", help="show which nodes serve them")
+    st = _sub(ss, "type", "print a service's request and reply types as REQUEST -> REPLY")
+    st.add_argument("service", help="fully qualified service name, e.g. /generate_path")
     sc = _sub(ss, "call", "call a service once and print the reply")
     sc.add_argument("service", help="fully qualified service name, e.g. /add_two_ints")
     add_message_arguments(sc)
     sc.add_argument("--timeout", type=float, default=2.0, metavar="S",
                     help="seconds to wait for the reply (default: 2)")
-    for p in (sl, sc):
+    for p in (sl, st, sc):
         add_connection_arguments(p, discovery=True)
         p.set_defaults(func=cmd_service)
 

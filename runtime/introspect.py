@@ -7,11 +7,14 @@ handlers (`node_description`)::
     {"name", "namespace", "class", "pid",
      "params":        {name: value},            # the node's Params, overrides applied
      "subscriptions": {"/r1/scan": qos}, "services": ["/generate_path"],
+     "service_types": {"/generate_path": ["twinfleet_msgs/PathRequest", "twinfleet_msgs/Path"]},
      "timers": [{"handler", "period_ms"}], "publication_qos": {"/map": qos},
      "publications":  {"/poses": "twinfleet_msgs/RobotPose"}}   # published so far
 
 with ``qos = {"reliability", "durability", "depth"}``. `twinfleet node info`,
-`topic info` and `param list|get` read it; what a node *publishes* is only
+`topic info`, `service list -t|type` and `param list|get` read it (a
+service's request and reply types come from its handler's annotations, "?"
+where it has none); what a node *publishes* is only
 known once it publishes (its ``@pub`` liveliness token and ``publications``,
 which records the envelope type of each topic's first message), and its QoS
 is ``publication_qos`` or the default.
@@ -28,14 +31,16 @@ from __future__ import annotations
 
 import dataclasses
 import os
+import typing
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import yaml
 
+from twinfleet.runtime.messages import type_name_of
 from twinfleet.runtime.names import KEY_PREFIX
-from twinfleet.runtime.node import NodeSpec, QoS
+from twinfleet.runtime.node import HandlerSpec, NodeSpec, QoS
 
 PARAM_FLAG = "--param"
 
@@ -64,6 +69,25 @@ def plain_value(value: Any) -> Any:
     return str(value)
 
 
+def _annotated_type(hints: Mapping[str, Any], name: str) -> str:
+    try:
+        return type_name_of(hints[name])
+    except (KeyError, TypeError):  # no annotation, or not a registered message class
+        return "?"
+
+
+def service_types(node: Any, spec: HandlerSpec) -> list[str]:
+    """[request type, reply type] of a service handler, from its annotations ("?" if unknown)."""
+    fn = getattr(type(node), spec.method)
+    try:
+        hints = typing.get_type_hints(fn)
+    except Exception:  # an unresolvable forward reference: say what is known, nothing
+        hints = {}
+    params = [n for n in fn.__code__.co_varnames[:fn.__code__.co_argcount] if n not in ("self",)]
+    request = _annotated_type(hints, params[-1]) if len(params) >= 2 else "?"
+    return [request, _annotated_type(hints, "return")]
+
+
 def node_description(node: Any, class_path: str) -> dict[str, Any]:
     """What `info_key` serves for a built node object (module docstring)."""
     spec = NodeSpec.of(type(node))
@@ -82,6 +106,8 @@ def node_description(node: Any, class_path: str) -> dict[str, Any]:
             "subscriptions": {node.resolve(s.name or ""): qos_dict(s.qos)
                               for s in spec.of_kind("subscribe")},
             "services": [node.resolve(s.name or "") for s in spec.of_kind("service")],
+            "service_types": {node.resolve(s.name or ""): service_types(node, s)
+                              for s in spec.of_kind("service")},
             "timers": timers,
             "publication_qos": {node.resolve(t): qos_dict(q)
                                 for t, q in spec.publications.items()}}

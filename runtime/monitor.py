@@ -221,17 +221,40 @@ def topic_type(conn: Connection, topic: str, *, out: TextIO, timeout_s: float = 
     return 0
 
 
+def _service_types(session: Any, conn: Connection, timeout_s: float
+                   ) -> dict[tuple[str, str], list[str]]:
+    """(fleet, service) → [request type, reply type], as the serving nodes describe them."""
+    infos = g.node_infos(session, conn.fleet, timeout_s)
+    return {(f, name): kinds for (f, _), info in infos.items()
+            for name, kinds in (info.get("service_types") or {}).items()}
+
+
 def service_list(conn: Connection, *, out: TextIO, verbose: bool = False, types: bool = False,
                  timeout_s: float = 1.0) -> int:
-    """Print the services that running nodes serve."""
+    """Print the services that running nodes serve (`types`: with request and reply types)."""
     with open_session(conn) as session:
         graph = graph_of(session, conn, timeout_s)
+        kinds = _service_types(session, conn, timeout_s) if types else {}
     for (fleet, name), servers in sorted(graph.servers.items()):
         line = _shown(conn, fleet, name)
+        if types:
+            line += " [{} -> {}]".format(*kinds.get((fleet, name), ["?", "?"]))
         if verbose:
             line += f"  [servers: {', '.join(servers)}]"
         print(line, file=out)
     out.flush()
+    return 0
+
+
+def service_type(conn: Connection, service: str, *, out: TextIO, timeout_s: float = 1.0) -> int:
+    """`ros2 service type`: a service's request type and reply type, as `REQUEST -> REPLY`."""
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s)
+        where = pick(conn, graph, service, "service")
+        if where not in graph.servers:
+            raise CommandError(f"{where[1]}: no running node serves it (`twinfleet service list`)")
+        kinds = _service_types(session, conn, timeout_s).get(where, ["?", "?"])
+    print(f"{kinds[0]} -> {kinds[1]}", file=out, flush=True)
     return 0
 
 

@@ -180,6 +180,16 @@ def test_service_call_with_a_ros_service_type(runtime_dir, demo):
     assert "data: {sum: 42}" in out
 
 
+def test_service_list_with_types_and_service_type(runtime_dir, demo):
+    listed = ok(tf(runtime_dir, "service", "list", "-t", "--fleet", "demo"))
+    kinds = "[example_interfaces/AddTwoInts_Request -> example_interfaces/AddTwoInts_Response]"
+    assert f"/add_two_ints {kinds}" in listed
+    one = ok(tf(runtime_dir, "service", "type", "/add_two_ints", "--fleet", "demo"))
+    assert one.strip() == kinds.strip("[]")
+    missing = tf(runtime_dir, "service", "type", "/add_three_ints", "--fleet", "demo")
+    assert missing.returncode == 2 and "no running node serves it" in missing.stderr
+
+
 def test_mistyped_topic_and_fleet_are_reported(runtime_dir, c1a):
     echo = tf(runtime_dir, "topic", "echo", "/posse", "--once", "--fleet", "c1a")
     assert echo.returncode == 2 and "no node publishes or subscribes /posse" in echo.stderr
@@ -189,6 +199,7 @@ def test_mistyped_topic_and_fleet_are_reported(runtime_dir, c1a):
 
 def test_every_verb_has_help(runtime_dir):
     for verb in (["node", "info"], ["topic", "info"], ["topic", "type"], ["topic", "echo"],
+                 ["service", "type"],
                  ["param", "list"], ["param", "get"], ["interface", "show"], ["bag", "info"]):
         text = ok(tf(runtime_dir, *verb, "--help"))
         assert "usage: twinfleet " + " ".join(verb) in text
