@@ -82,7 +82,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
             raise CommandError(router_error(args, exc)) from None
         for line in format_result(result):
             print(f"[launcher] {line}", flush=True)
-        worst = max(worst, 0 if result.passed else 1)
+        worst = _worse(worst, result.exit_code)
         passed += result.passed
         if result.reason.startswith(("SIGINT", "SIGTERM")):
             break
@@ -90,6 +90,15 @@ def cmd_launch(args: argparse.Namespace) -> int:
         print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "
               f"{args.runs - passed}/{args.runs} failed", flush=True)
     return worst
+
+
+_SEVERITY = (0, 3, 2, 1, 130)  # ok < inconclusive < bad input < failed < interrupted
+
+
+def _worse(a: int, b: int) -> int:
+    """The more severe of two runs' exit codes (an unknown code counts as failed)."""
+    rank = {code: i for i, code in enumerate(_SEVERITY)}
+    return max(a, b, key=lambda c: rank.get(c, rank[1]))
 
 
 def cmd_examples(args: argparse.Namespace) -> int:
