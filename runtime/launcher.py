@@ -208,7 +208,7 @@ class Fleet:
         self.shutting_down = False
         self.failed: list[str] = []
         self.report = load_report(scenario)
-        self.monitor = LiveMonitor(scenario) if monitor else None
+        self.monitor = LiveMonitor(scenario, time_scale=time_scale) if monitor else None
         self.statistics: dict[str, Any] = {}
         self._finishing = False
         self.scenario, self._private_dir = launchable(scenario, keep_scenario_beside)

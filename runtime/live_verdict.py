@@ -34,10 +34,11 @@ transport hand-off overflow, sequence gaps on reliable topics, KEEP_LAST drops
 on a RELIABLE (lossless) subscription, any ``rejected_*`` counter above zero,
 or timers released later than the stall threshold (`stall_threshold_ms`:
 twice the fleet's shortest `@every` period: a node that late has missed a
-tick, e.g. a robot that moved without a scan); or when state reports were
+tick, e.g. a robot that moved without a scan; never below 25 ms of wall time); or when state reports were
 lost, a running node did not answer for its statistics, or a property took
-longer than its evaluation budget. A violation seen on the states the nodes
-reported stays a violation: the run did violate the property.
+longer than its evaluation budget. Such a run is inconclusive even when a
+property was seen violated (listed in the details): a robot that teleported
+after a stall collides because of the stall, not of its code.
 
 Result (`Verdict.status` and exit code, `runtime.cliargs`): ``holds`` 0,
 ``violated`` 1 (the property named), ``error`` 2 (a property raised: a
@@ -46,6 +47,7 @@ scenario mistake, as `check` says), ``inconclusive`` 3, ``interrupted`` 130.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final, final
@@ -69,6 +71,7 @@ EXIT_CODES: Final = {HOLDS: EXIT_OK, VIOLATED: EXIT_FAILED, ERROR: EXIT_BAD_INPU
                      INCONCLUSIVE: EXIT_INCONCLUSIVE, INTERRUPTED: EXIT_INTERRUPTED}
 EVAL_BUDGET_S: Final = 1.0  # wall seconds one evaluation may take in the launcher
 DEFAULT_STALL_MS: Final = 1_000  # fleet ms, for a fleet without @every timers
+STALL_FLOOR_WALL_MS: Final = 25  # a stall threshold is never below this much wall time
 _STATE_CHARS: Final = 300  # of each node's state in a violation's description
 
 
@@ -118,11 +121,14 @@ class RunEnd:
     dropped_reports: int = 0  # state reports the launcher's own hand-off dropped
 
 
-def stall_threshold_ms(nodes: Iterable[Node]) -> int:
+def stall_threshold_ms(nodes: Iterable[Node], time_scale: float = 1.0) -> int:
     """Twice the shortest `@every` period of the fleet (a timer later than that has let a
-    whole tick pass: the robots' scan period in the case study), else `DEFAULT_STALL_MS`."""
+    whole tick pass: the robots' scan period in the case study), else `DEFAULT_STALL_MS`;
+    at least `STALL_FLOOR_WALL_MS` of wall time (scheduling jitter of a loaded machine,
+    which a high ``--time-scale`` multiplies)."""
     periods = [node.period_ms(spec) for node in nodes for spec in node.spec().of_kind("every")]
-    return 2 * min(periods) if periods else DEFAULT_STALL_MS
+    threshold = 2 * min(periods) if periods else DEFAULT_STALL_MS
+    return max(threshold, math.ceil(STALL_FLOOR_WALL_MS * time_scale))
 
 
 def statistics_reasons(node: str, stats: Mapping[str, Any], stall_ms: int) -> list[str]:
@@ -156,15 +162,17 @@ class LiveMonitor:
 
     Args:
         scenario: the scenario run (its properties and nodes).
+        time_scale: the run's time scale (for the stall threshold).
         budget_s: wall seconds one evaluation may take (None: unlimited).
     """
 
-    def __init__(self, scenario: Scenario, *, budget_s: float | None = EVAL_BUDGET_S) -> None:
+    def __init__(self, scenario: Scenario, *, time_scale: float = 1.0,
+                 budget_s: float | None = EVAL_BUDGET_S) -> None:
         self.budget_s = budget_s
         self.nodes = [cfg.instantiate() for cfg in scenario.nodes]
         self.names = [n.name for n in self.nodes]
         self.states: dict[str, Any] = {n.name: n.state for n in self.nodes}
-        self.stall_ms = stall_threshold_ms(self.nodes)
+        self.stall_ms = stall_threshold_ms(self.nodes, time_scale)
         self.failure_name = next((p.name for p in scenario.properties if p.kind == "no_failure"),
                                  "no_failure")
         self.watches = [self._watch(p, scenario.source) for p in scenario.properties
@@ -268,10 +276,15 @@ class LiveMonitor:
     # ------------------------------------------------------------------ the verdict
 
     def verdict(self, end: RunEnd) -> Verdict:
-        """The run's result (module docstring: violations, failed nodes, interruption,
-        inconclusive reasons, then what never held)."""
+        """The run's result: a property that raised; inconclusive reasons (which also void
+        a violation: it may come from the lost samples or the stall, not from the code);
+        violations; failed nodes; an interruption; what never held; else it holds."""
         if self.errors:
             return Verdict(ERROR, self.errors[0], tuple(self.errors[1:]))
+        reasons = self.inconclusive_reasons(end)
+        seen = tuple(f"seen, but not conclusive: {v[1]}" for v in self.violations)
+        if reasons and (self.violations or not end.interrupted):
+            return Verdict(INCONCLUSIVE, reasons[0], tuple(reasons[1:]) + seen + self._unjudged())
         if self.violations:
             name, summary, details = self.violations[0]
             more = tuple(f"also violated: {v[0]}" for v in self.violations[1:])
@@ -281,9 +294,6 @@ class LiveMonitor:
             return Verdict(VIOLATED, f"node failed: {nodes}")
         if end.interrupted:
             return Verdict(INTERRUPTED, end.reason)
-        reasons = self.inconclusive_reasons(end)
-        if reasons:
-            return Verdict(INCONCLUSIVE, reasons[0], tuple(reasons[1:]) + self._unjudged())
         unmet = [w for w in self.watches if w.cfg.kind in ("eventually", "within") and not w.held]
         if unmet:
             w = unmet[0]
