@@ -63,7 +63,7 @@ class Flooder(Node):
 
     @on_start
     def start(self, ctx: Context) -> None:
-        ctx.after(300, "burst")
+        ctx.after(300, self.burst)
 
     @handler
     def burst(self, ctx: Context) -> None:
@@ -71,7 +71,7 @@ class Flooder(Node):
             self.state.count += 1
             ctx.publish("/flood", Blip(self.state.count))
         if self.state.count < self.params.burst * self.params.bursts:
-            ctx.after(100, "burst")
+            ctx.after(100, self.burst)
 
 
 class Sink(Node):
