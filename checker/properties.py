@@ -192,7 +192,7 @@ class PropertySet:
         names = [n.name for n in scenario.nodes]
         props = []
         for i, cfg in enumerate(scenario.properties):
-            where = f"{scenario.path}:properties[{i}]"
+            where = f"{scenario.path}:properties[{i}] ({cfg.name})"
             expr = Expr(cfg.expr, names, where) if cfg.expr is not None else None
             props.append(Property(cfg.name, cfg.kind, expr, cfg.within_ms))
         default, per = parse_deadlines(scenario, None)

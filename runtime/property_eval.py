@@ -132,11 +132,20 @@ def parse_expression(source: str, node_names: Sequence[str], where: str) -> Expr
     states = {*node_names, "nodes", "now"}  # a node's name shadows a function's
     readable = {*states, *SAFE_FUNCTIONS, *bound}
     free: set[str] = set()
-    for node in ast.walk(tree):
+    nodes = list(ast.walk(tree))
+    # Foreign constructs first, then names and attributes, then calls: the more telling
+    # reason wins (`__import__('os').system(...)` is refused for its `__import__`).
+    for node in sorted(nodes, key=_check_order):
         _check_node(node, readable, node_names)
         if isinstance(node, ast.Name) and node.id in states and node.id not in bound:
             free.add(node.id)
     return Expression(source, compile(tree, where, "eval"), frozenset(free), where)
+
+
+def _check_order(node: ast.AST) -> int:
+    if not isinstance(node, _ALLOWED_NODES):
+        return 0
+    return 1 if isinstance(node, ast.Name | ast.Attribute) else 2
 
 
 def _check_node(node: ast.AST, readable: set[str], node_names: Sequence[str]) -> None:
