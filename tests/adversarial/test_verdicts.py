@@ -10,8 +10,13 @@ import time
 
 import pytest
 
-from tests.adversarial.fleets import launched, robot_scenario, run_launch, wait_for_line, \
-    write_scenario
+from tests.adversarial.fleets import (
+    launched,
+    robot_scenario,
+    run_launch,
+    wait_for_line,
+    write_scenario,
+)
 from tests.integration.itest_support import poll, processes_mentioning
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
