@@ -86,6 +86,9 @@ class FleetResult:
         restarts: respawn count per node.
         last_messages: last message seen on each `live.summary_topics` topic.
         duration_s: wall time of the run.
+        report: the scenario's run report (`live.report`), if any.
+        verdict: the live verdict on the scenario's properties (None: not monitored).
+        handler_failures: handler failures per node, from the state reports.
     """
 
     fleet: str
@@ -99,6 +102,7 @@ class FleetResult:
     report: Any = None
     verdict: Verdict | None = None
     handler_failures: Mapping[str, int] = field(default_factory=dict)
+    state_reports: int = 0  # state reports the monitor received
 
     @property
     def ok(self) -> bool:
@@ -496,7 +500,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                          last_messages=dict(fleet.last_messages),
                          duration_s=time.monotonic() - started, report=fleet.report,
                          verdict=_verdict(fleet, reason, running, codes),
-                         handler_failures=dict(fleet.monitor.failures) if fleet.monitor else {})
+                         handler_failures=dict(fleet.monitor.failures) if fleet.monitor else {},
+                         state_reports=fleet.monitor.reports if fleet.monitor else 0)
     if record is not None:
         _record_summary(record, result)
         record.close()

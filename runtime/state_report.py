@@ -29,6 +29,9 @@ from twinfleet.runtime.names import KEY_PREFIX
 from twinfleet.runtime.snapshot import snapshot
 
 
+_PACK = msgpack.Packer(use_bin_type=True).pack  # one packer: `packb` builds one per call
+
+
 def state_key(fleet: str, node: str) -> str:
     """The key a node's state reports go to (``*`` for every node)."""
     return f"{KEY_PREFIX}/{fleet}/@state/{node}"
@@ -59,8 +62,7 @@ class StateReport:
 def encode_report(seq: int, record: Handled, failure: str | None, state: bytes | None) -> bytes:
     """The wire form of a report on `record` (module docstring)."""
     e = record.entry
-    return msgpack.packb([seq, record.now, e.kind.value, e.handler, e.sender, e.topic, failure,
-                          state], use_bin_type=True)
+    return _PACK([seq, record.now, e.kind.value, e.handler, e.sender, e.topic, failure, state])
 
 
 def decode_report(node: str, payload: bytes) -> StateReport:
