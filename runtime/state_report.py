@@ -28,7 +28,6 @@ from twinfleet.runtime.core import Handled
 from twinfleet.runtime.names import KEY_PREFIX
 from twinfleet.runtime.snapshot import snapshot
 
-
 _PACK = msgpack.Packer(use_bin_type=True).pack  # one packer: `packb` builds one per call
 
 
