@@ -33,7 +33,8 @@ and never touches a socket:
    matters) also counts as ``dropped_lossless``, which makes a live verdict
    inconclusive (`runtime.live_verdict`); a BEST_EFFORT one is a drop by design.
    Stalls: `release_due` notes how late each timed entry is released
-   (``max_lateness_ms``) and counts those later than ``stall_ms`` (``stalls``).
+   (``max_lateness_ms``) and counts those later than `stall_threshold` —
+   twice the node's shortest timer period, at least ``stall_ms`` (``stalls``).
 5. Running. `run_next(now)` runs the first inbox entry's handler through
    `runtime.dispatch.invoke`; `run(entry, now, chooser)` runs any pending
    entry out of order (the replay gate's way in). Both return the handler's
@@ -83,7 +84,7 @@ _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
 _TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOUT})
 _COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "published",
                     "handled", "keep_last", "best_effort", "seq_jumps", "lossless", "stalls",
-                    "max_late")
+                    "max_late", "period")
 _NOTHING: Final[tuple[()]] = ()
 
 
@@ -131,10 +132,11 @@ class HostStatistics:
     dropped_lossless: int = 0  # KEEP_LAST drops on RELIABLE subscriptions (part of dropped_keep_last)
     stalls: int = 0  # timed entries released later than the stall threshold after their due time
     max_lateness_ms: int = 0  # the latest a timed entry was released after its due time
+    stall_threshold_ms: int = 0  # the threshold: twice the shortest timer period, or the floor
 
     @classmethod
     def of(cls, n: dict[str, int], inbox_depth: int, timers_pending: int,
-           dropped_overflow: int) -> HostStatistics:
+           dropped_overflow: int, stall_threshold_ms: int = 0) -> HostStatistics:
         """The record of a core's counters `n`."""
         return cls(received=n["received"], dropped_undecodable=n["undecodable"],
                    handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
@@ -143,7 +145,7 @@ class HostStatistics:
                    dropped_keep_last=n["keep_last"], dropped_overflow=dropped_overflow,
                    dropped_best_effort=n["best_effort"], sequence_jumps=n["seq_jumps"],
                    dropped_lossless=n["lossless"], stalls=n["stalls"],
-                   max_lateness_ms=n["max_late"])
+                   max_lateness_ms=n["max_late"], stall_threshold_ms=stall_threshold_ms)
 
 
 # A received sample as `decode_fields` returns it: (msg, stamp_ms, seq, sender).
@@ -190,7 +192,8 @@ class NodeCore:
         stop_on_error: add a `Stop` output after the first handler failure.
         keep_last: bound each subscription's waiting messages by its QoS depth
             (the replay gate holds every message until it is granted: False).
-        stall_ms: a timed entry released more than this many ms after its due time
+        stall_ms: the floor of the stall threshold: a timed entry released later than
+            ``max(stall_ms, 2 × the node's shortest timer period)`` after its due time
             counts as a stall (``stalls``; None: never).
     """
 
@@ -232,7 +235,11 @@ class NodeCore:
         for spec in self.spec.of_kind("start"):
             self._push(_BEFORE_ALL, spec.priority, Entry(EventKind.START, spec.method, (), name,
                                                          due=now_ms))
-        self.due.start(self.spec.of_kind("every"), now_ms)
+        every = self.spec.of_kind("every")
+        self.due.start(every, now_ms)
+        periods = [self.node.period_ms(spec) for spec in every]
+        if periods:
+            self._n["period"] = min(periods)
 
     def receiver(self, method: str) -> Receive:
         """The function that takes the samples of subscription `method`.
@@ -335,10 +342,16 @@ class NodeCore:
             late = now_ms - due  # a loop that fell behind its timers (a stall) runs them late
             if late > n["max_late"]:
                 n["max_late"] = late
-            if self.stall_ms is not None and late > self.stall_ms:
+            if self.stall_ms is not None and late > self.stall_threshold():
                 n["stalls"] += 1
             self._push(due, priority, entry)
         return len(released)
+
+    def stall_threshold(self) -> int:
+        """How late a timed entry may be released before it counts as a stall: twice the
+        node's shortest timer period (`@every`, or a positive `ctx.after` delay: a whole
+        tick missed), at least the floor ``stall_ms`` (0 when stalls are not counted)."""
+        return max(self.stall_ms or 0, 2 * self._n["period"])
 
     def next_due(self) -> int | None:
         """When the earliest due entry is due (fleet ms), or None."""
@@ -442,4 +455,5 @@ class NodeCore:
 
     def statistics(self, dropped_overflow: int = 0) -> HostStatistics:
         """Counters since start, as a frozen record (`dropped_overflow`: the transport's)."""
-        return HostStatistics.of(self._n, len(self._inbox), self.due.timers(), dropped_overflow)
+        return HostStatistics.of(self._n, len(self._inbox), self.due.timers(), dropped_overflow,
+                                 self.stall_threshold() if self.stall_ms is not None else 0)

@@ -32,9 +32,11 @@ Honest verdicts. A run whose nodes lost samples a verdict depends on says so:
 `Verdict` is INCONCLUSIVE (exit 3) when a node's final statistics show a
 transport hand-off overflow, sequence gaps on reliable topics, KEEP_LAST drops
 on a RELIABLE (lossless) subscription, any ``rejected_*`` counter above zero,
-or timers released later than the stall threshold (`stall_threshold_ms`:
-twice the fleet's shortest `@every` period: a node that late has missed a
-tick, e.g. a robot that moved without a scan; never below 25 ms of wall time); or when state reports were
+or timers released later than the node's stall threshold (`runtime.core`:
+twice its shortest timer period — `@every` or a positive `ctx.after` delay,
+the scan period for the map server — so a node that late has missed a whole
+tick, e.g. a robot that moved without a scan; never below `stall_floor_ms`,
+25 ms of wall time); or when state reports were
 lost, a running node did not answer for its statistics, or a property took
 longer than its evaluation budget. Such a run is inconclusive even when a
 property was seen violated (listed in the details): a robot that teleported
@@ -48,7 +50,7 @@ scenario mistake, as `check` says), ``inconclusive`` 3, ``interrupted`` 130.
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final, final
 
@@ -59,7 +61,6 @@ from twinfleet.runtime.cliargs import (
     EXIT_INTERRUPTED,
     EXIT_OK,
 )
-from twinfleet.runtime.node import Node
 from twinfleet.runtime.property_eval import Expression, Overtime, parse_expression, time_limit
 from twinfleet.runtime.scenario import PropertyConfig, Scenario
 from twinfleet.runtime.snapshot import restore
@@ -70,7 +71,6 @@ HOLDS, VIOLATED, ERROR, INCONCLUSIVE, INTERRUPTED = (
 EXIT_CODES: Final = {HOLDS: EXIT_OK, VIOLATED: EXIT_FAILED, ERROR: EXIT_BAD_INPUT,
                      INCONCLUSIVE: EXIT_INCONCLUSIVE, INTERRUPTED: EXIT_INTERRUPTED}
 EVAL_BUDGET_S: Final = 1.0  # wall seconds one evaluation may take in the launcher
-DEFAULT_STALL_MS: Final = 1_000  # fleet ms, for a fleet without @every timers
 STALL_FLOOR_WALL_MS: Final = 25  # a stall threshold is never below this much wall time
 _STATE_CHARS: Final = 300  # of each node's state in a violation's description
 
@@ -121,17 +121,14 @@ class RunEnd:
     dropped_reports: int = 0  # state reports the launcher's own hand-off dropped
 
 
-def stall_threshold_ms(nodes: Iterable[Node], time_scale: float = 1.0) -> int:
-    """Twice the shortest `@every` period of the fleet (a timer later than that has let a
-    whole tick pass: the robots' scan period in the case study), else `DEFAULT_STALL_MS`;
-    at least `STALL_FLOOR_WALL_MS` of wall time (scheduling jitter of a loaded machine,
-    which a high ``--time-scale`` multiplies)."""
-    periods = [node.period_ms(spec) for node in nodes for spec in node.spec().of_kind("every")]
-    threshold = 2 * min(periods) if periods else DEFAULT_STALL_MS
-    return max(threshold, math.ceil(STALL_FLOOR_WALL_MS * time_scale))
+def stall_floor_ms(time_scale: float = 1.0) -> int:
+    """The floor of every node's stall threshold, in fleet ms: `STALL_FLOOR_WALL_MS` of wall
+    time (scheduling jitter of a loaded machine, which a high ``--time-scale`` multiplies).
+    Above it, a node's threshold is twice its shortest timer period (`runtime.core`)."""
+    return math.ceil(STALL_FLOOR_WALL_MS * time_scale)
 
 
-def statistics_reasons(node: str, stats: Mapping[str, Any], stall_ms: int) -> list[str]:
+def statistics_reasons(node: str, stats: Mapping[str, Any]) -> list[str]:
     """Why `node`'s final statistics make a verdict inconclusive (empty: they do not).
 
     Any ``rejected_*`` counter counts (input the node refused: forged, invalid,
@@ -151,8 +148,8 @@ def statistics_reasons(node: str, stats: Mapping[str, Any], stall_ms: int) -> li
             reasons.append(f"{node} rejected {stats[key]} samples ({key})")
     if stats.get("stalls", 0):
         reasons.append(f"{node} fell behind its timers by up to {stats.get('max_lateness_ms')} ms "
-                       f"({stats['stalls']} timers later than the stall threshold of "
-                       f"{stall_ms} ms: it stalled)")
+                       f"({stats['stalls']} timers later than its stall threshold of "
+                       f"{stats.get('stall_threshold_ms')} ms: it stalled)")
     return reasons
 
 
@@ -172,7 +169,7 @@ class LiveMonitor:
         self.nodes = [cfg.instantiate() for cfg in scenario.nodes]
         self.names = [n.name for n in self.nodes]
         self.states: dict[str, Any] = {n.name: n.state for n in self.nodes}
-        self.stall_ms = stall_threshold_ms(self.nodes, time_scale)
+        self.stall_ms = stall_floor_ms(time_scale)
         self.failure_name = next((p.name for p in scenario.properties if p.kind == "no_failure"),
                                  "no_failure")
         self.watches = [self._watch(p, scenario.source) for p in scenario.properties
@@ -314,10 +311,11 @@ class LiveMonitor:
                 if node in end.running:
                     reasons.append(f"{node} did not answer for its statistics")
                 continue
-            reasons += statistics_reasons(node, stats, self.stall_ms)
+            reasons += statistics_reasons(node, stats)
         reasons += [f"{n} lost {k} state reports" for n, k in sorted(self.lost.items())]
         if end.dropped_reports:
-            reasons.append(f"the launcher dropped {end.dropped_reports} state reports")
+            reasons.append(f"the launcher dropped {end.dropped_reports} samples at its hand-off "
+                           "(state reports and report topics)")
         return [r for r in reasons if r is not None]
 
     def _unjudged(self) -> tuple[str, ...]:

@@ -88,3 +88,13 @@ def run_launch(scenario: Path, *args: str, timeout: float = 60.0) -> subprocess.
                               env=child_env(), cwd=ROOT, check=False)
     finally:
         kill_all(processes_mentioning(str(scenario)))
+
+
+def expect(run: subprocess.CompletedProcess[str], code: int, *texts: str) -> str:
+    """Assert that a launch ended with exit `code` and printed every one of `texts`;
+    return its output."""
+    out = run.stdout
+    assert run.returncode == code, out[-3000:]
+    for text in texts:
+        assert text in out, (text, out[-3000:])
+    return out

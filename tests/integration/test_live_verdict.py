@@ -7,7 +7,7 @@ import signal
 
 import pytest
 
-from tests.adversarial.fleets import launched, run_launch, wait_for_line, write_scenario
+from tests.adversarial.fleets import expect, launched, run_launch, wait_for_line, write_scenario
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
 
@@ -17,24 +17,19 @@ COUNTER = [{"name": "counter", "class": "Counter"}]
 def test_an_invariant_that_fails_live_exits_1_naming_it_with_time_states_and_event(tmp_path):
     path = write_scenario(tmp_path, "overflow", COUNTER, [
         {"name": "stays_small", "kind": "invariant", "expr": "counter.count < 5"}])
-    run = run_launch(path, "--timeout", "2")
-    out = run.stdout
-    assert run.returncode == 1, out[-2000:]
-    assert "result: FAILED (stays_small violated: invariant 'counter.count < 5' is false" in out
-    assert "after periodic → counter.tick" in out  # the causing event
-    assert "counter: CountState(count=5)" in out  # the states it read
+    expect(run_launch(path, "--timeout", "2"), 1,
+           "result: FAILED (stays_small violated: invariant 'counter.count < 5' is false",
+           "after periodic → counter.tick",  # the causing event
+           "counter: CountState(count=5)")  # the states it read
 
 
 def test_a_handler_that_raises_fails_the_run(tmp_path):
     nodes = [{"name": "counter", "class": "Counter", "params": {"fail_at": 3}}]
     path = write_scenario(tmp_path, "raises", nodes, [
         {"name": "non_negative", "kind": "invariant", "expr": "counter.count >= 0"}])
-    run = run_launch(path, "--timeout", "2")
-    out = run.stdout
-    assert run.returncode == 1, out[-2000:]
-    assert "result: FAILED (no_failure violated: a handler failed: counter.tick:" in out
-    assert "count reached 3" in out
-    assert "counter: exit code 0 (FAILED: 1 handler failures)" in out
+    expect(run_launch(path, "--timeout", "2"), 1,
+           "result: FAILED (no_failure violated: a handler failed: counter.tick:",
+           "count reached 3", "counter: exit code 0 (FAILED: 1 handler failures)")
 
 
 def test_everything_holds_exits_0_and_says_which_properties(tmp_path):
@@ -42,18 +37,15 @@ def test_everything_holds_exits_0_and_says_which_properties(tmp_path):
         {"name": "non_negative", "kind": "invariant", "expr": "counter.count >= 0"},
         {"name": "counts", "kind": "eventually", "expr": "counter.count >= 3"},
         {"name": "quickly", "kind": "within", "expr": "counter.count >= 2", "within_ms": 1000}])
-    run = run_launch(path, "--timeout", "2")
-    assert run.returncode == 0, run.stdout[-2000:]
-    assert "result: PASSED (non_negative, counts, quickly, no_failure hold)" in run.stdout
+    expect(run_launch(path, "--timeout", "2"), 0,
+           "result: PASSED (non_negative, counts, quickly, no_failure hold)")
 
 
 def test_an_eventually_that_never_holds_fails_the_run_at_its_end(tmp_path):
     path = write_scenario(tmp_path, "never", COUNTER, [
         {"name": "reaches_a_million", "kind": "eventually", "expr": "counter.count >= 10**6"}])
-    run = run_launch(path, "--timeout", "1.5")
-    assert run.returncode == 1, run.stdout[-2000:]
-    assert "result: FAILED (reaches_a_million violated: 'counter.count >= 10**6' never held" \
-        in run.stdout
+    expect(run_launch(path, "--timeout", "1.5"), 1,
+           "result: FAILED (reaches_a_million violated: 'counter.count >= 10**6' never held")
 
 
 def test_ctrl_c_reports_interrupted_with_exit_130(tmp_path):

@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from tests.adversarial.verdict_nodes import Counter
+from tests.adversarial.verdict_nodes import Counter, Flooder
 from tests.runtime.hosts import Num, Shallow
 from twinfleet.runtime.core import NodeCore
 from twinfleet.runtime.live_verdict import (
@@ -18,7 +18,7 @@ from twinfleet.runtime.live_verdict import (
     VIOLATED,
     LiveMonitor,
     RunEnd,
-    stall_threshold_ms,
+    stall_floor_ms,
 )
 from twinfleet.runtime.messages import encode
 from twinfleet.runtime.scenario import NodeEntry, Scenario
@@ -118,7 +118,8 @@ def test_a_lost_state_report_makes_the_verdict_inconclusive():
     ({"dropped_overflow": 30101}, "dropped 30101 samples at the transport hand-off"),
     ({"dropped_lossless": 48}, "RELIABLE (lossless) subscription"),
     ({"gaps": 2}, "lost 2 samples on reliable topics"),
-    ({"stalls": 3, "max_lateness_ms": 5012}, "fell behind its timers by up to 5012 ms"),
+    ({"stalls": 3, "max_lateness_ms": 5012, "stall_threshold_ms": 200},
+     "fell behind its timers by up to 5012 ms (3 timers later than its stall threshold of 200"),
 ])
 def test_final_statistics_that_show_lost_input_make_it_inconclusive(stats, said):
     fleet = Fleet(scenario({"name": "small", "kind": "invariant", "expr": "counter.count < 3"}))
@@ -175,16 +176,25 @@ def test_the_core_counts_lossless_drops_apart_and_stalls_against_its_threshold()
         best_effort(encode(Num(seq), stamp_ms=0, seq=seq, sender="a"), 0)
     stats = core.statistics()
     assert (stats.dropped_keep_last, stats.dropped_lossless) == (2 + 4, 2)
-    counter = NodeCore(Counter("c"), seed=1, stall_ms=100)
+    counter = NodeCore(Counter("c"), seed=1, stall_ms=25)
     counter.start(0)
     counter.release_due(60)  # the tick due at 50: 10 ms late
     counter.release_due(5_000)  # the next, due at 100: 4.9 s late (a stopped process)
     stats = counter.statistics()
-    assert (stats.stalls, stats.max_lateness_ms) == (1, 4_900)
+    assert (stats.stalls, stats.max_lateness_ms, stats.stall_threshold_ms) == (1, 4_900, 100)
 
 
-def test_the_stall_threshold_is_twice_the_shortest_period_and_a_wall_floor():
-    nodes = [Counter("a")]
-    assert stall_threshold_ms(nodes) == 100
-    assert stall_threshold_ms(nodes, time_scale=10) == 250
-    assert stall_threshold_ms([Shallow("s")]) == 1_000
+def test_the_stall_threshold_is_twice_the_shortest_timer_period_above_a_wall_floor():
+    assert (stall_floor_ms(), stall_floor_ms(time_scale=10)) == (25, 250)
+    every = NodeCore(Counter("c"), seed=1, stall_ms=25)  # @every(50)
+    every.start(0)
+    assert every.stall_threshold() == 100
+    chained = NodeCore(Flooder("f"), seed=1, stall_ms=25)  # ctx.after(300), then 100
+    chained.start(0)
+    assert chained.stall_threshold() == 25  # no timer armed yet: the floor
+    chained.run_next(0)
+    assert chained.stall_threshold() == 600
+    chained.release_due(300)
+    chained.run_next(300)
+    assert chained.stall_threshold() == 200
+    assert NodeCore(Counter("c"), seed=1, stall_ms=500).stall_threshold() == 500
