@@ -288,7 +288,13 @@ def _foxglove_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _launch_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("launch", help="run a scenario live: a router plus one process per node")
+    p = sub.add_parser("launch", help="run a scenario live: a router plus one process per node",
+                       description="Run a scenario live: an embedded Zenoh router plus one process "
+                       "per node. The scenario's properties are judged on the running fleet "
+                       "(runtime verification over the states the nodes report); the run ends "
+                       "with `result: PASSED` (exit 0), `FAILED` and the property violated (1), "
+                       "`INCONCLUSIVE` and why (3: a node dropped samples or stalled), or "
+                       "`interrupted` (130, Ctrl-C).")
     p.add_argument("scenario", help="scenario YAML file, or the name of a shipped example "
                                     "(twinfleet examples lists them)")
     p.add_argument("overrides", nargs="*", metavar="[NODE.]NAME:=VALUE",
