@@ -36,7 +36,7 @@ or timers released later than the node's stall threshold (`runtime.core`:
 twice its shortest timer period — `@every` or a positive `ctx.after` delay,
 the scan period for the map server — so a node that late has missed a whole
 tick, e.g. a robot that moved without a scan; never below `stall_floor_ms`,
-25 ms of wall time); or when state reports were
+100 ms of wall time); or when state reports were
 lost, a running node did not answer for its statistics, or a property took
 longer than its evaluation budget. Such a run is inconclusive even when a
 property was seen violated (listed in the details): a robot that teleported
@@ -71,7 +71,7 @@ HOLDS, VIOLATED, ERROR, INCONCLUSIVE, INTERRUPTED = (
 EXIT_CODES: Final = {HOLDS: EXIT_OK, VIOLATED: EXIT_FAILED, ERROR: EXIT_BAD_INPUT,
                      INCONCLUSIVE: EXIT_INCONCLUSIVE, INTERRUPTED: EXIT_INTERRUPTED}
 EVAL_BUDGET_S: Final = 1.0  # wall seconds one evaluation may take in the launcher
-STALL_FLOOR_WALL_MS: Final = 25  # a stall threshold is never below this much wall time
+STALL_FLOOR_WALL_MS: Final = 100  # a stall threshold is never below this much wall time
 _STATE_CHARS: Final = 300  # of each node's state in a violation's description
 
 

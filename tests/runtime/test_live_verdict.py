@@ -185,7 +185,7 @@ def test_the_core_counts_lossless_drops_apart_and_stalls_against_its_threshold()
 
 
 def test_the_stall_threshold_is_twice_the_shortest_timer_period_above_a_wall_floor():
-    assert (stall_floor_ms(), stall_floor_ms(time_scale=10)) == (25, 250)
+    assert (stall_floor_ms(), stall_floor_ms(time_scale=10)) == (100, 1000)
     every = NodeCore(Counter("c"), seed=1, stall_ms=25)  # @every(50)
     every.start(0)
     assert every.stall_threshold() == 100
