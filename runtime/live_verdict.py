@@ -292,6 +292,11 @@ class LiveMonitor:
         if end.interrupted:
             return Verdict(INTERRUPTED, end.reason)
         unmet = [w for w in self.watches if w.cfg.kind in ("eventually", "within") and not w.held]
+        early = [w for w in unmet if w.cfg.kind == "within" and self.now <= (w.cfg.within_ms or 0)]
+        if early:  # neither held nor past its deadline: the run was too short to judge it
+            w = early[0]
+            return Verdict(INCONCLUSIVE, f"the run ended at t={self.now} ms, before {w.cfg.name}'s "
+                           f"within_ms {w.cfg.within_ms} had passed", self._unjudged())
         if unmet:
             w = unmet[0]
             assert w.expr is not None

@@ -102,6 +102,11 @@ def test_eventually_and_within_hold_or_fail_at_the_end():
     never = Fleet(scenario({"name": "e", "kind": "eventually", "expr": "other.count > 99"}))
     never.run(300)
     assert never.verdict().status == VIOLATED
+    short = Fleet(scenario({"name": "w", "kind": "within", "expr": "counter.count > 99",
+                            "within_ms": 10_000}))
+    short.run(300)
+    v = short.verdict()
+    assert v.status == INCONCLUSIVE and "before w's within_ms 10000 had passed" in v.summary
 
 
 def test_a_lost_state_report_makes_the_verdict_inconclusive():
