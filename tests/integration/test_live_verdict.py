@@ -8,6 +8,7 @@ import signal
 import pytest
 
 from tests.adversarial.fleets import expect, launched, run_launch, wait_for_line, write_scenario
+from tests.support import ROOT
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
 
@@ -60,3 +61,14 @@ def test_ctrl_c_reports_interrupted_with_exit_130(tmp_path):
     assert proc.returncode == 130, out[-2000:]
     assert "result: interrupted (SIGINT received)" in out
     assert "FAILED" not in out
+
+
+def test_a_robot_collision_is_the_no_collision_invariant_violated(tmp_path):
+    # headon: two robots swap ends of a narrow corridor and collide within seconds
+    text = (ROOT / "launch" / "headon.yaml").read_text()
+    path = tmp_path / "headon.yaml"
+    path.write_text(text.replace("../maps/", f"{ROOT / 'maps'}/"))
+    out = expect(run_launch(path, "--time-scale", "4", "--timeout", "8"), 1,
+                 "result: FAILED (no_collision violated: invariant 'map_server.collisions == 0'",
+                 "after delivery on /poses from r")
+    assert "map_server: MapServerState(" in out and "collisions=1" in out
