@@ -12,12 +12,13 @@ language:
 - constants, tuples, lists, sets and dicts, arithmetic, comparisons, ``and``/
   ``or``/``not``, ``x if c else y``, list/set/dict comprehensions and generator
   expressions;
-- calls of `SAFE_FUNCTIONS` only, with the keywords ``key`` (itself one of them),
-  ``default``, ``start`` and ``reverse``.
+- calls of `SAFE_FUNCTIONS` and of the container methods of `SAFE_METHODS`
+  (``nodes.items()``, ``r1.targets.count(c)``) only, with the keywords ``key``
+  (itself one of the functions), ``default``, ``start`` and ``reverse``.
 
 Refused: attributes and names that start with ``_`` (``__class__``,
 ``__import__``), the frame and code attributes of generators, imports, lambdas,
-``:=``, f-strings, and calls of anything else (methods included). The
+``:=``, f-strings, and calls of anything else (other methods included). The
 expression is evaluated with `SAFE_FUNCTIONS` as its only builtins.
 
 Time. A property that runs too long must not outlast the checker's
@@ -63,6 +64,8 @@ SAFE_FUNCTIONS: Final[Mapping[str, Any]] = {
     "sorted": sorted, "str": str, "sum": sum, "tuple": tuple, "zip": zip,
 }
 _KEYWORDS: Final = frozenset({"key", "default", "start", "reverse"})
+#: Methods an expression may call: the pure readers of dicts, tuples, lists and strings.
+SAFE_METHODS: Final = frozenset({"keys", "values", "items", "get", "count", "index"})
 #: Attributes that lead from a generator to frames, code and other modules' globals.
 _INTROSPECTION: Final = frozenset({"gi_frame", "gi_code", "gi_yieldfrom", "cr_frame", "cr_code",
                                    "ag_frame", "ag_code", "tb_frame", "tb_next", "f_back",
@@ -76,7 +79,8 @@ _ALLOWED_NODES: Final = (
 )
 _HELP: Final = ("a property reads node states: node names and their fields, nodes, now, "
                 "arithmetic, comparisons, and/or/not, comprehensions and calls of "
-                + ", ".join(sorted(SAFE_FUNCTIONS)))
+                + ", ".join(sorted(SAFE_FUNCTIONS)) + " and of the methods "
+                + ", ".join(sorted(SAFE_METHODS)))
 
 
 @final
@@ -168,16 +172,20 @@ def _check_node(node: ast.AST, readable: set[str], node_names: Sequence[str]) ->
 
 def _check_call(call: ast.Call) -> None:
     func = call.func
-    if not (isinstance(func, ast.Name) and func.id in SAFE_FUNCTIONS):
+    if isinstance(func, ast.Attribute) and func.attr in SAFE_METHODS:
+        name = func.attr
+    elif isinstance(func, ast.Name) and func.id in SAFE_FUNCTIONS:
+        name = func.id
+    else:
         what = ast.unparse(func)
         raise ExpressionError(f"calling {what!r} is not allowed ({_HELP})")
     for kw in call.keywords:
         if kw.arg is None or kw.arg not in _KEYWORDS:
-            raise ExpressionError(f"the keyword {kw.arg or '**'!r} of {func.id}() is not allowed "
+            raise ExpressionError(f"the keyword {kw.arg or '**'!r} of {name}() is not allowed "
                                   f"(allowed: {', '.join(sorted(_KEYWORDS))})")
         if kw.arg == "key" and not (isinstance(kw.value, ast.Name)
                                     and kw.value.id in SAFE_FUNCTIONS):
-            raise ExpressionError(f"{func.id}(key=...) must name one of the allowed functions, "
+            raise ExpressionError(f"{name}(key=...) must name one of the allowed functions, "
                                   f"got {ast.unparse(kw.value)!r}")
 
 

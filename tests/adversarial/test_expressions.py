@@ -49,6 +49,7 @@ def test_the_import_probe_is_refused_at_load_and_never_runs(tmp_path, command):
     ("().__class__.__bases__[0].__subclasses__()", "is not allowed (attributes starting"),
     ("open('/etc/passwd') is None", "'open'"),
     ("eval('1') == 1", "'eval'"),
+    ("'{0.__class__}'.format(counter) != ''", ".format\" is not allowed"),
     ("(lambda: 1)() == 1", "lambda"),
     ("counter.count.bit_length() < 3", "'counter.count.bit_length'"),
     ("len([x for x in (y for y in ()).gi_frame]) > 0", "'gi_frame'"),
@@ -73,6 +74,8 @@ def test_outside_the_language_is_refused_naming_the_property(tmp_path, expr, sai
     "sum([c for c in range(3)]) == 3 and max(1, 2) == 2 and min([3, 4]) == 3",
     "len(nodes) == 1 and len({k: 1 for k in nodes}) == 1",
     "nodes['counter'].count == counter.count",
+    "all(s.count >= 0 for s in nodes.values()) and nodes.get('x', 1) == 1",
+    "(1, 2, 2).count(2) == 2 and len(list(nodes.items())) == 1",
     "sorted((3, 1), key=abs, reverse=True)[0] == 3",
     "now >= 0 and (counter.count if counter.count else 0) >= 0",
 ])
