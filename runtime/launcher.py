@@ -582,7 +582,13 @@ def _record_summary(record: RunRecord, result: FleetResult) -> None:
     if result.report is not None:
         report = {"passed": result.report.passed(), "text": result.report.render(),
                   "data": result.report}
-    record.write("summary", ok=result.ok, passed=result.passed, reason=result.reason,
+    verdict = None
+    if result.verdict is not None:
+        v = result.verdict
+        verdict = {"status": v.status, "summary": v.summary, "details": list(v.details),
+                   "property": v.property_name, "exit_code": v.exit_code}
+    record.write("summary", ok=result.ok, passed=result.passed, verdict=verdict,
+                 reason=result.reason,
                  exit_codes=result.exit_codes, failed=result.failed, restarts=result.restarts,
                  duration_s=round(result.duration_s, 3), last_messages=result.last_messages,
                  report=report)
