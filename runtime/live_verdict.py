@@ -179,6 +179,8 @@ class LiveMonitor:
         self.errors: list[str] = []
         self.lost: dict[str, int] = {}
         self.reports = 0
+        self.strangers = 0  # reports from names that are not nodes of the scenario
+        self.undecodable: list[str] = []
         self.t0: int | None = None
         self.now = 0
         self._seq: dict[str, int] = {}
@@ -200,7 +202,11 @@ class LiveMonitor:
     # ------------------------------------------------------------------ reports
 
     def on_report(self, report: StateReport) -> None:
-        """Account for one state report: update the view, evaluate what it may change."""
+        """Account for one state report: update the view, evaluate what it may change.
+        A report from a name that is not a node of the scenario is ignored (counted)."""
+        if report.node not in self.states:
+            self.strangers += 1
+            return
         self.reports += 1
         last = self._seq.get(report.node, 0)
         if report.seq > last + 1:
@@ -215,7 +221,11 @@ class LiveMonitor:
                 self._violated(self.failure_name, f"a handler failed: {report.failure}",
                                report, self.names)
         if report.state is not None:
-            self.states[report.node] = restore(report.state)
+            try:
+                self.states[report.node] = restore(report.state)
+            except Exception as exc:  # not a snapshot: the view of this node is lost
+                self.undecodable.append(f"{report.node} sent an undecodable state ({exc})")
+                return
         for watch in self.watches:
             self._judge(watch, report)
 
@@ -318,6 +328,7 @@ class LiveMonitor:
                 continue
             reasons += statistics_reasons(node, stats)
         reasons += [f"{n} lost {k} state reports" for n, k in sorted(self.lost.items())]
+        reasons += self.undecodable[:1]
         if end.dropped_reports:
             reasons.append(f"the launcher dropped {end.dropped_reports} samples at its hand-off "
                            "(state reports and report topics)")

@@ -22,7 +22,7 @@ from twinfleet.runtime.live_verdict import (
 )
 from twinfleet.runtime.messages import encode
 from twinfleet.runtime.scenario import NodeEntry, Scenario
-from twinfleet.runtime.state_report import StateReporter, decode_report
+from twinfleet.runtime.state_report import StateReport, StateReporter, decode_report
 
 pytestmark = pytest.mark.timeout(30)
 
@@ -203,3 +203,15 @@ def test_the_stall_threshold_is_twice_the_shortest_timer_period_above_a_wall_flo
     chained.run_next(300)
     assert chained.stall_threshold() == 200
     assert NodeCore(Counter("c"), seed=1, stall_ms=500).stall_threshold() == 500
+
+
+def test_reports_of_strangers_are_ignored_and_a_broken_state_is_inconclusive():
+    fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
+    fleet.run(100)
+    stranger = StateReport("intruder", 1, 0, "start", "x", "", "", "boom", None)
+    fleet.monitor.on_report(stranger)
+    assert fleet.monitor.strangers == 1 and fleet.verdict().status == HOLDS
+    broken = StateReport("other", 99, 200, "periodic", "tick", "other", "", None, b"\xc1")
+    fleet.monitor.on_report(broken)
+    v = fleet.verdict()
+    assert v.status == INCONCLUSIVE and "undecodable state" in " ".join([v.summary, *v.details])
