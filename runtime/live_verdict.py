@@ -153,6 +153,10 @@ def statistics_reasons(node: str, stats: Mapping[str, Any]) -> list[str]:
     return reasons
 
 
+def _after(report: StateReport | None) -> str:
+    return "in the initial states" if report is None else f"after {report.event()}"
+
+
 @final
 class LiveMonitor:
     """Judges a scenario's properties on state reports (module docstring).
@@ -184,6 +188,10 @@ class LiveMonitor:
         self.t0: int | None = None
         self.now = 0
         self._seq: dict[str, int] = {}
+        for w in self.watches:  # as the checker checks the initial world
+            if w.cfg.kind == "invariant" and self._evaluate(w, None) is False:
+                self._violated(w.cfg.name, f"invariant {w.expr.source!r} is false in the "  # type: ignore[union-attr]
+                               "initial states", None, self._read_by(w))
 
     def _watch(self, p: PropertyConfig, source: str) -> _Watch:
         expr = None if p.expr is None else parse_expression(p.expr, self.names, f"{source}:{p.name}")
@@ -255,7 +263,7 @@ class LiveMonitor:
         elif kind != "invariant" and value:
             w.held = True
 
-    def _evaluate(self, w: _Watch, report: StateReport) -> bool | None:
+    def _evaluate(self, w: _Watch, report: StateReport | None) -> bool | None:
         assert w.expr is not None
         env: dict[str, Any] = {"now": self.now, "nodes": dict(self.states)}
         env.update(self.states)
@@ -268,15 +276,15 @@ class LiveMonitor:
         except Exception as exc:
             w.broken = "error"
             self.errors.append(f"property {w.cfg.name!r}: {w.expr.source!r} raised "
-                               f"{type(exc).__name__}: {exc} (after {report.event()})")
+                               f"{type(exc).__name__}: {exc} ({_after(report)})")
         return None
 
     def _read_by(self, w: _Watch) -> Sequence[str]:
         return self.names if w.reads is None else [n for n in self.names if n in w.reads]
 
-    def _violated(self, name: str, summary: str, report: StateReport,
+    def _violated(self, name: str, summary: str, report: StateReport | None,
                   nodes: Sequence[str]) -> None:
-        details = [f"at t={self.now} ms, after {report.event()}"]
+        details = [f"at t={self.now} ms, {_after(report)}"]
         details += [f"{n}: {repr(self.states[n])[:_STATE_CHARS]}" for n in nodes]
         self.violations.append((name, f"{name} violated: {summary}", tuple(details)))
 

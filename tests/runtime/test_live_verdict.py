@@ -215,3 +215,11 @@ def test_reports_of_strangers_are_ignored_and_a_broken_state_is_inconclusive():
     fleet.monitor.on_report(broken)
     v = fleet.verdict()
     assert v.status == INCONCLUSIVE and "undecodable state" in " ".join([v.summary, *v.details])
+
+
+def test_an_invariant_false_in_the_initial_states_is_violated_at_once():
+    monitor = LiveMonitor(scenario({"name": "started", "kind": "invariant",
+                                    "expr": "counter.count > 0"}))
+    v = monitor.verdict(RunEnd("timeout", statistics={"counter": {}, "other": {}}))
+    assert (v.status, v.property_name) == (VIOLATED, "started")
+    assert "false in the initial states" in v.summary and "in the initial states" in v.details[0]
