@@ -87,26 +87,27 @@ def test_a_handler_failure_violates_the_scenarios_no_failure_property():
     assert fleet.monitor.failures == {"counter": 1}
 
 
-def test_eventually_and_within_hold_or_fail_at_the_end():
-    holds = Fleet(scenario({"name": "e", "kind": "eventually", "expr": "other.count >= 2"},
-                           {"name": "w", "kind": "within", "expr": "counter.count >= 2",
-                            "within_ms": 200}))
-    holds.run(300)
-    assert holds.verdict().status == HOLDS
-    late = Fleet(scenario({"name": "w", "kind": "within", "expr": "counter.count >= 5",
-                           "within_ms": 100}))
-    late.run(300)
-    v = late.verdict()
-    assert (v.status, v.property_name) == (VIOLATED, "w")
-    assert "did not hold within 100 ms" in v.summary
-    never = Fleet(scenario({"name": "e", "kind": "eventually", "expr": "other.count > 99"}))
-    never.run(300)
-    assert never.verdict().status == VIOLATED
-    short = Fleet(scenario({"name": "w", "kind": "within", "expr": "counter.count > 99",
-                            "within_ms": 10_000}))
-    short.run(300)
-    v = short.verdict()
-    assert v.status == INCONCLUSIVE and "before w's within_ms 10000 had passed" in v.summary
+def judged(*props: dict[str, Any], until_ms: int = 300):
+    """The verdict on `props` of a fleet ticked up to `until_ms`."""
+    fleet = Fleet(scenario(*props))
+    fleet.run(until_ms)
+    return fleet.verdict()
+
+
+@pytest.mark.parametrize(("props", "status", "said"), [
+    ([{"name": "e", "kind": "eventually", "expr": "other.count >= 2"},
+      {"name": "w", "kind": "within", "expr": "counter.count >= 2", "within_ms": 200}],
+     HOLDS, "e, w, no_failure hold"),
+    ([{"name": "w", "kind": "within", "expr": "counter.count >= 5", "within_ms": 100}],
+     VIOLATED, "w violated: 'counter.count >= 5' did not hold within 100 ms"),
+    ([{"name": "e", "kind": "eventually", "expr": "other.count > 99"}],
+     VIOLATED, "e violated: 'other.count > 99' never held before the run ended"),
+    ([{"name": "w", "kind": "within", "expr": "counter.count > 99", "within_ms": 10_000}],
+     INCONCLUSIVE, "before w's within_ms 10000 had passed"),
+])
+def test_eventually_and_within_hold_or_fail_at_the_end(props, status, said):
+    v = judged(*props)
+    assert v.status == status and said in v.summary, v
 
 
 def test_a_lost_state_report_makes_the_verdict_inconclusive():
