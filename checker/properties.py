@@ -1,9 +1,11 @@
 """Properties named in a scenario, and how each is checked on worlds.
 
-Expressions are Python, evaluated with every node name bound to that node's
+Expressions are in the small, safe language of `runtime.property_eval` (the
+live driver evaluates the same), with every node name bound to that node's
 decoded state object, `nodes` bound to a dict name → state and `now` to the
-world's logical time (e.g. ``map_server.collisions == 0``). They must not
-change what they read. Kinds (`runtime.scenario.PROPERTY_KINDS`):
+world's logical time (e.g. ``map_server.collisions == 0``). Under a time
+limit an evaluation still running when it expires raises
+`runtime.property_eval.Overtime`, which the search reports as its stop. Kinds (`runtime.scenario.PROPERTY_KINDS`):
 
 - `invariant`: `expr` holds in every reachable world.
 - `no_failure`: no handler calls `ctx.fail` or raises. Always checked; naming
@@ -38,14 +40,13 @@ nothing and keeps the cache from growing with the number of worlds.
 
 from __future__ import annotations
 
-import builtins
 from collections.abc import Sequence
 from dataclasses import dataclass
-from types import CodeType
 from typing import TYPE_CHECKING, Any, Protocol, final
 
 from twinfleet.checker.faults import parse_deadlines, parse_queue_bounds
 from twinfleet.runtime.kinds import FailureKind
+from twinfleet.runtime.property_eval import ExpressionError, Overtime, parse_expression
 from twinfleet.runtime.scenario import Scenario
 
 if TYPE_CHECKING:
@@ -84,26 +85,21 @@ class States(Protocol):
         ...
 
 
-def _names_used(code: CodeType) -> set[str]:
-    """Global names read by `code` and by every code object nested in it."""
-    used = set(code.co_names)
-    for const in code.co_consts:
-        if isinstance(const, CodeType):
-            used |= _names_used(const)
-    return used
-
-
 @final
 class Expr:
     """A compiled property expression over node states."""
 
-    __slots__ = ("_cache", "code", "needed", "reads", "source", "uses_all", "uses_now", "where")
+    __slots__ = ("_cache", "expression", "needed", "reads", "source", "uses_all", "uses_now",
+                 "where")
 
     def __init__(self, source: str, names: Sequence[str], where: str) -> None:
         self.source = source
         self.where = where
-        self.code = compile(source, where, "eval")
-        used = _names_used(self.code)
+        try:  # checked against the safe language (runtime.property_eval)
+            self.expression = parse_expression(source, names, where)
+        except ExpressionError as exc:
+            raise PropertyError(f"{where}: {exc}") from None
+        used = self.expression.names
         self.uses_all = "nodes" in used
         self.uses_now = "now" in used
         self.needed = tuple((i, n) for i, n in enumerate(names) if n in used)
@@ -125,15 +121,15 @@ class Expr:
         return found
 
     def _evaluate(self, system: States, states: Sequence[bytes], now: int) -> bool:
-        # Node names go into the globals so nested scopes (generator expressions,
-        # comprehensions, lambdas) see them too; locals would hide them there.
-        env: dict[str, Any] = {"__builtins__": builtins, "now": now}
+        env: dict[str, Any] = {"now": now}
         for i, name in self.needed:
             env[name] = system.decode(i, states[i])
         if self.uses_all:
             env["nodes"] = {n: system.decode(i, states[i]) for i, n in enumerate(system.names)}
         try:
-            return bool(eval(self.code, env))
+            return self.expression.evaluate(env)
+        except Overtime:
+            raise
         except Exception as exc:
             raise PropertyError(f"{self.where}: {self.source!r} raised "
                                 f"{type(exc).__name__}: {exc}") from None
@@ -196,7 +192,7 @@ class PropertySet:
         names = [n.name for n in scenario.nodes]
         props = []
         for i, cfg in enumerate(scenario.properties):
-            where = f"{scenario.path}:properties[{i}]"
+            where = f"{scenario.path}:properties[{i}] ({cfg.name})"
             expr = Expr(cfg.expr, names, where) if cfg.expr is not None else None
             props.append(Property(cfg.name, cfg.kind, expr, cfg.within_ms))
         default, per = parse_deadlines(scenario, None)

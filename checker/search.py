@@ -56,10 +56,12 @@ from twinfleet.checker.system import System
 from twinfleet.checker.transition import Transition
 from twinfleet.checker.walks import RandomWalks
 from twinfleet.checker.world import World
+from twinfleet.runtime.property_eval import Overtime, time_limit
 
 __all__ = ["HOLDS", "UNKNOWN", "VIOLATED", "Counterexample", "Limits", "Outcome", "Search",
            "SearchStatistics", "bfs", "dfs", "peak_rss_mb", "random_walk"]
 
+_GRACE_S = 0.25  # after max-time, before a property still running is interrupted
 _FORGET_EVERY = 512  # expansions between two `System.forget_before` calls (at least)
 
 
@@ -132,7 +134,10 @@ class Search:
         self.guard.restart_clock()
         self._last_checkpoint = self.guard.started
         self._strategy = strategy
-        with self.guard.sigint_handler():
+        limit = self.limits.max_time_s
+        # A backstop for a property that runs past the limit (runtime.property_eval); the
+        # grace lets the search's own check stop cleanly between expansions first.
+        with self.guard.sigint_handler(), time_limit(None if limit is None else limit + _GRACE_S):
             try:
                 if strategy == "random":
                     return self._random(walks, seed)
@@ -153,6 +158,9 @@ class Search:
                 return self._stopped(stop.reason, clean=True)
             except KeyboardInterrupt:  # a second Ctrl-C: anywhere, maybe inside the store
                 return self._stopped(INTERRUPTED, clean=False)
+            except Overtime as exc:  # inside an expression: the expansion is half done
+                return self._stopped(f"max-time {limit:g} s reached while evaluating the "
+                                     f"property {exc}", clean=False)
 
     def _stopped(self, reason: str, *, clean: bool) -> Outcome:
         """An early stop: put back a half-expanded world, then save a checkpoint if asked.

@@ -4,7 +4,11 @@ The robots keep no statistics in their state (it would split checker states),
 so the report counts from what it hears: hops and distance from `/poses`,
 waits, back-offs and arrival from each robot's `status`, and collisions from
 `/collisions`. The launcher feeds it every message of `topics()` and prints
-`render()` at the end; `passed()` is False on any collision or unarrived robot.
+`render()` at the end. The run's result is not the report's: it is the live
+verdict on the scenario's properties (`runtime.live_verdict`), where a
+collision is the `no_collision` invariant (``map_server.collisions == 0``) and
+an unarrived robot the `all_arrive` eventually property; `passed()` (no
+collision, every robot arrived) is kept for the run record.
 """
 
 from __future__ import annotations
@@ -108,7 +112,6 @@ class FleetReport:
                 lines.append(f"  ... {len(self.collisions) - 20} more")
         else:
             lines.append("collisions: none")
-        lines.append("result: " + ("PASSED" if self.passed() else "FAILED"))
         return "\n".join(lines)
 
 

@@ -82,7 +82,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
             raise CommandError(router_error(args, exc)) from None
         for line in format_result(result):
             print(f"[launcher] {line}", flush=True)
-        worst = max(worst, 0 if result.passed else 1)
+        worst = _worse(worst, result.exit_code)
         passed += result.passed
         if result.reason.startswith(("SIGINT", "SIGTERM")):
             break
@@ -90,6 +90,15 @@ def cmd_launch(args: argparse.Namespace) -> int:
         print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "
               f"{args.runs - passed}/{args.runs} failed", flush=True)
     return worst
+
+
+_SEVERITY = (0, 3, 2, 1, 130)  # ok < inconclusive < bad input < failed < interrupted
+
+
+def _worse(a: int, b: int) -> int:
+    """The more severe of two runs' exit codes (an unknown code counts as failed)."""
+    rank = {code: i for i, code in enumerate(_SEVERITY)}
+    return max(a, b, key=lambda c: rank.get(c, rank[1]))
 
 
 def cmd_examples(args: argparse.Namespace) -> int:
@@ -282,7 +291,13 @@ def _foxglove_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _launch_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("launch", help="run a scenario live: a router plus one process per node")
+    p = sub.add_parser("launch", help="run a scenario live: a router plus one process per node",
+                       description="Run a scenario live: an embedded Zenoh router plus one process "
+                       "per node. The scenario's properties are judged on the running fleet "
+                       "(runtime verification over the states the nodes report); the run ends "
+                       "with `result: PASSED` (exit 0), `FAILED` and the property violated (1), "
+                       "`INCONCLUSIVE` and why (3: a node dropped samples or stalled), or "
+                       "`interrupted` (130, Ctrl-C).")
     p.add_argument("scenario", help="scenario YAML file, or the name of a shipped example "
                                     "(twinfleet examples lists them)")
     p.add_argument("overrides", nargs="*", metavar="[NODE.]NAME:=VALUE",

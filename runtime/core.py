@@ -29,6 +29,12 @@ and never touches a socket:
    ``dropped_best_effort``; a leap of more than `MAX_GAP` is not believed to
    be a loss (a forged or corrupt number) and counts once as ``sequence_jumps``.
    Gaps are counted before KEEP_LAST, so they measure losses below the core.
+   A KEEP_LAST drop on a RELIABLE subscription (declared lossless: every message
+   matters) also counts as ``dropped_lossless``, which makes a live verdict
+   inconclusive (`runtime.live_verdict`); a BEST_EFFORT one is a drop by design.
+   Stalls: `release_due` notes how late each timed entry is released
+   (``max_lateness_ms``) and counts those later than `stall_threshold` —
+   twice the node's shortest timer period, at least ``stall_ms`` (``stalls``).
 5. Running. `run_next(now)` runs the first inbox entry's handler through
    `runtime.dispatch.invoke`; `run(entry, now, chooser)` runs any pending
    entry out of order (the replay gate's way in). Both return the handler's
@@ -77,7 +83,8 @@ MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is no
 _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
 _TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOUT})
 _COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "published",
-                    "handled", "keep_last", "best_effort", "seq_jumps")
+                    "handled", "keep_last", "best_effort", "seq_jumps", "lossless", "stalls",
+                    "max_late", "period")
 _NOTHING: Final[tuple[()]] = ()
 
 
@@ -122,17 +129,23 @@ class HostStatistics:
     dropped_overflow: int = 0
     dropped_best_effort: int = 0
     sequence_jumps: int = 0  # sequence numbers that leapt by more than MAX_GAP (not counted as gaps)
+    dropped_lossless: int = 0  # KEEP_LAST drops on RELIABLE subscriptions (part of dropped_keep_last)
+    stalls: int = 0  # timed entries released later than the stall threshold after their due time
+    max_lateness_ms: int = 0  # the latest a timed entry was released after its due time
+    stall_threshold_ms: int = 0  # the threshold: twice the shortest timer period, or the floor
 
     @classmethod
     def of(cls, n: dict[str, int], inbox_depth: int, timers_pending: int,
-           dropped_overflow: int) -> HostStatistics:
+           dropped_overflow: int, stall_threshold_ms: int = 0) -> HostStatistics:
         """The record of a core's counters `n`."""
         return cls(received=n["received"], dropped_undecodable=n["undecodable"],
                    handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
                    inbox_depth=inbox_depth, timers_pending=timers_pending,
                    published=n["published"], handled=n["handled"],
                    dropped_keep_last=n["keep_last"], dropped_overflow=dropped_overflow,
-                   dropped_best_effort=n["best_effort"], sequence_jumps=n["seq_jumps"])
+                   dropped_best_effort=n["best_effort"], sequence_jumps=n["seq_jumps"],
+                   dropped_lossless=n["lossless"], stalls=n["stalls"],
+                   max_lateness_ms=n["max_late"], stall_threshold_ms=stall_threshold_ms)
 
 
 # A received sample as `decode_fields` returns it: (msg, stamp_ms, seq, sender).
@@ -144,12 +157,13 @@ Receive = Callable[[bytes, int], bool]
 class _Subscription:
     """One declared subscription: its handler and its KEEP_LAST queue of waiting samples."""
 
-    __slots__ = ("gap_counter", "method", "priority", "topic", "waiting")
+    __slots__ = ("gap_counter", "lossless", "method", "priority", "topic", "waiting")
 
     def __init__(self, spec: HandlerSpec, topic: str, keep_last: bool) -> None:
         self.method, self.priority, self.topic = spec.method, spec.priority, topic
         reliable = spec.qos.reliability is Reliability.RELIABLE
         self.gap_counter = "gaps" if reliable else "best_effort"  # a bug vs. drops by design
+        self.lossless = reliable  # RELIABLE declares that every message matters
         self.waiting: deque[_Sample] = deque(maxlen=max(1, spec.qos.depth) if keep_last else None)
 
     def entry(self, sample: _Sample) -> Entry:
@@ -178,11 +192,15 @@ class NodeCore:
         stop_on_error: add a `Stop` output after the first handler failure.
         keep_last: bound each subscription's waiting messages by its QoS depth
             (the replay gate holds every message until it is granted: False).
+        stall_ms: the floor of the stall threshold: a timed entry released later than
+            ``max(stall_ms, 2 × the node's shortest timer period)`` after its due time
+            counts as a stall (``stalls``; None: never).
     """
 
     def __init__(self, node: Node, *, seed: int, stop_on_error: bool = False,
-                 keep_last: bool = True) -> None:
+                 keep_last: bool = True, stall_ms: int | None = None) -> None:
         self.node, self.spec = node, node.spec()
+        self.stall_ms = stall_ms
         self.due = DueEntries(node)
         self._random = SeededChooser(derive_seed(seed, node.name))
         self._inbox: list[tuple[int, int, int, Entry | _Subscription]] = []
@@ -217,7 +235,11 @@ class NodeCore:
         for spec in self.spec.of_kind("start"):
             self._push(_BEFORE_ALL, spec.priority, Entry(EventKind.START, spec.method, (), name,
                                                          due=now_ms))
-        self.due.start(self.spec.of_kind("every"), now_ms)
+        every = self.spec.of_kind("every")
+        self.due.start(every, now_ms)
+        periods = [self.node.period_ms(spec) for spec in every]
+        if periods:
+            self._n["period"] = min(periods)
 
     def receiver(self, method: str) -> Receive:
         """The function that takes the samples of subscription `method`.
@@ -230,7 +252,7 @@ class NodeCore:
         # Everything is bound once here: one sample costs a decode, a gap check, a deque
         # append and a heap push, with no attribute chains.
         n, counter, push, inbox = self._n, self._counter, heapq.heappush, self._inbox
-        waiting, priority, gap_counter = sub.waiting, sub.priority, sub.gap_counter
+        waiting, priority, gap_counter, lossless = sub.waiting, sub.priority, sub.gap_counter, sub.lossless
         last_seq = self._last_seq.setdefault(sub.topic, {})  # shared by one topic's subscriptions
 
         def receive(payload: bytes, arrival_ms: int) -> bool:
@@ -251,6 +273,7 @@ class NodeCore:
             if len(waiting) == waiting.maxlen:  # KEEP_LAST: the oldest waiting sample goes
                 waiting.append(sample)
                 n["keep_last"] += 1
+                n["lossless"] += lossless
                 return False
             waiting.append(sample)
             push(inbox, (arrival_ms, priority, next(counter), sub))
@@ -314,9 +337,21 @@ class NodeCore:
     def release_due(self, now_ms: int) -> int:
         """Move the due entries due by `now_ms` into the inbox; return how many moved."""
         released = self.due.pop_due(now_ms)
+        n = self._n
         for due, priority, entry in released:
+            late = now_ms - due  # a loop that fell behind its timers (a stall) runs them late
+            if late > n["max_late"]:
+                n["max_late"] = late
+            if self.stall_ms is not None and late > self.stall_threshold():
+                n["stalls"] += 1
             self._push(due, priority, entry)
         return len(released)
+
+    def stall_threshold(self) -> int:
+        """How late a timed entry may be released before it counts as a stall: twice the
+        node's shortest timer period (`@every`, or a positive `ctx.after` delay: a whole
+        tick missed), at least the floor ``stall_ms`` (0 when stalls are not counted)."""
+        return max(self.stall_ms or 0, 2 * self._n["period"])
 
     def next_due(self) -> int | None:
         """When the earliest due entry is due (fleet ms), or None."""
@@ -420,4 +455,5 @@ class NodeCore:
 
     def statistics(self, dropped_overflow: int = 0) -> HostStatistics:
         """Counters since start, as a frozen record (`dropped_overflow`: the transport's)."""
-        return HostStatistics.of(self._n, len(self._inbox), self.due.timers(), dropped_overflow)
+        return HostStatistics.of(self._n, len(self._inbox), self.due.timers(), dropped_overflow,
+                                 self.stall_threshold() if self.stall_ms is not None else 0)

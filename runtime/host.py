@@ -69,16 +69,19 @@ class NodeHost:
         out: where log lines go.
         events: log every handler run there (an observer of the core).
         gated: run only events granted by a replay coordinator (needs a `LogicalClock`).
+        stall_ms: timers released later than this after their due time count as stalls.
     """
 
     def __init__(self, node: Node, transport: Transport, clock: Clock, *, seed: int,
                  fleet: str, stop_on_error: bool = False, wait_for: Sequence[str] = (),
                  ready_timeout_s: float = 10.0, out: TextIO | None = None,
-                 events: EventLog | None = None, gated: bool = False) -> None:
+                 events: EventLog | None = None, gated: bool = False,
+                 stall_ms: int | None = None) -> None:
         self.node, self.transport, self.clock, self.fleet = node, transport, clock, fleet
         self.wait_for, self.ready_timeout_s = tuple(wait_for), ready_timeout_s
         self.out = out if out is not None else sys.stdout
-        self.core = NodeCore(node, seed=seed, stop_on_error=stop_on_error, keep_last=not gated)
+        self.core = NodeCore(node, seed=seed, stop_on_error=stop_on_error, keep_last=not gated,
+                             stall_ms=stall_ms)
         self.publications = {node.resolve(k): v for k, v in node.spec().publications.items()}
         self.failed = False
         self.alive: set[str] = set()

@@ -50,8 +50,10 @@ from typing import Any, TextIO, final
 import msgpack
 
 from twinfleet.runtime import registry
+from twinfleet.runtime.cliargs import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from twinfleet.runtime.eventlog import EVENTS_FORMAT
 from twinfleet.runtime.introspect import param_arguments
+from twinfleet.runtime.live_verdict import HOLDS, LiveMonitor, RunEnd, Verdict
 from twinfleet.runtime.messages import DecodeError, decode
 from twinfleet.runtime.names import key_expr
 from twinfleet.runtime.node import QOS_DEFAULT
@@ -59,6 +61,7 @@ from twinfleet.runtime.node_main import PARENT_ENV, stats_key
 from twinfleet.runtime.run_record import RunRecord, versions
 from twinfleet.runtime.scenario import NodeConfig, Scenario
 from twinfleet.runtime.scenario_file import write_scenario
+from twinfleet.runtime.state_report import decode_report, state_key
 from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
 
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"
@@ -67,6 +70,7 @@ _LAST_LINES = 15
 _GRACE_S = (3.0, 2.0)  # after SIGINT, after SIGTERM; then SIGKILL
 _RESPAWN_DELAY_S = 0.5
 _REPORT_GRACE_S = 0.5  # wall seconds between the report's "finished" and the end of the run
+_STATS_TIMEOUT_S = 2.0  # for the nodes' final statistics (the live verdict reads them)
 
 
 @dataclass(frozen=True)
@@ -82,6 +86,9 @@ class FleetResult:
         restarts: respawn count per node.
         last_messages: last message seen on each `live.summary_topics` topic.
         duration_s: wall time of the run.
+        report: the scenario's run report (`live.report`), if any.
+        verdict: the live verdict on the scenario's properties (None: not monitored).
+        handler_failures: handler failures per node, from the state reports.
     """
 
     fleet: str
@@ -93,6 +100,9 @@ class FleetResult:
     last_messages: Mapping[str, Any] = field(default_factory=dict)
     duration_s: float = 0.0
     report: Any = None
+    verdict: Verdict | None = None
+    handler_failures: Mapping[str, int] = field(default_factory=dict)
+    state_reports: int = 0  # state reports the monitor received
 
     @property
     def ok(self) -> bool:
@@ -101,8 +111,21 @@ class FleetResult:
 
     @property
     def passed(self) -> bool:
-        """True when no node failed and the scenario's report (if any) says the run passed."""
+        """True when no node failed and the live verdict (`runtime.live_verdict`) holds;
+        without one (``monitor=False``), when the scenario's report (if any) says so."""
+        if self.verdict is not None:
+            return self.ok and self.verdict.status == HOLDS
         return self.ok and (self.report is None or self.report.passed())
+
+    @property
+    def exit_code(self) -> int:
+        """0 passed, 1 violated or a node failed, 2 a property raised, 3 inconclusive,
+        130 interrupted (`runtime.cliargs`)."""
+        if self.verdict is not None:
+            return self.verdict.exit_code
+        if self.reason.startswith(("SIGINT", "SIGTERM")):
+            return EXIT_INTERRUPTED
+        return EXIT_OK if self.passed else EXIT_FAILED
 
 
 def free_port() -> int:
@@ -174,7 +197,8 @@ class Fleet:
     def __init__(self, scenario: Scenario, *, time_scale: float, seed: int,
                  connect: str | None, listen: str | None, out: TextIO,
                  record: RunRecord | None = None, node_args: Sequence[str] = (),
-                 events_dir: Path | None = None, keep_scenario_beside: str | None = None) -> None:
+                 events_dir: Path | None = None, keep_scenario_beside: str | None = None,
+                 monitor: bool = True) -> None:
         self.time_scale, self.seed, self.out = time_scale, seed, out
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
@@ -188,6 +212,8 @@ class Fleet:
         self.shutting_down = False
         self.failed: list[str] = []
         self.report = load_report(scenario)
+        self.monitor = LiveMonitor(scenario, time_scale=time_scale) if monitor else None
+        self.statistics: dict[str, Any] = {}
         self._finishing = False
         self.scenario, self._private_dir = launchable(scenario, keep_scenario_beside)
 
@@ -215,6 +241,18 @@ class Fleet:
             self.transport.subscribe(key_expr(fleet, topic), self._summary(topic), QOS_DEFAULT)
         for topic in self.report.topics() if self.report is not None else ():
             self.transport.subscribe(key_expr(fleet, topic), self._reported(topic), QOS_DEFAULT)
+        if self.monitor is not None:
+            self.transport.subscribe(state_key(fleet, "*"), self._on_state, QOS_DEFAULT)
+
+    def _on_state(self, key: str, payload: bytes) -> None:
+        assert self.monitor is not None
+        node = key.rsplit("/", 1)[-1]
+        try:
+            report = decode_report(node, payload)
+        except ValueError as exc:
+            self.log(f"ignored a malformed state report on {key}: {exc}")
+            return
+        self.monitor.on_report(report)
 
     def _on_shutdown(self, _key: str, payload: bytes) -> None:
         try:
@@ -251,6 +289,10 @@ class Fleet:
                 "--node", cfg.name, "--connect", self.endpoint, "--epoch-ns", str(self.epoch_ns),
                 "--time-scale", repr(self.time_scale), "--seed", str(self.seed),
                 *self.node_args]
+        if self.monitor is not None:
+            states = cfg.name in self.monitor.reads()
+            argv += ["--monitor", "states" if states else "failures",
+                     "--stall-ms", str(self.monitor.stall_ms)]
         if self.events_dir is not None:
             argv += ["--record-events", str(self.events_dir / f"{cfg.name}.jsonl")]
         return argv
@@ -358,7 +400,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     out: TextIO = sys.stdout, handle_signals: bool = True,
                     run_record: str | None = None, record_events: str | None = None,
                     node_args: Sequence[str] = (), params: Sequence[str] = (),
-                    driver: Callable[[Fleet], Awaitable[str]] | None = None) -> FleetResult:
+                    driver: Callable[[Fleet], Awaitable[str]] | None = None,
+                    monitor: bool = True) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
@@ -378,6 +421,9 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             scenario must already be loaded with them (`introspect.load_with_params`).
         driver: a coroutine function run with the fleet once its nodes started; the run
             ends with the reason it returns (an exception it raises is re-raised).
+        monitor: judge the scenario's properties live (`runtime.live_verdict`; the
+            result's `verdict`); False: no state reports (the result follows exits and
+            the report only).
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
@@ -387,7 +433,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     events_dir = _fresh_parts_dir(record_events) if record_events else None
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
                   out=out, record=record, node_args=[*node_args, *param_arguments(params)],
-                  events_dir=events_dir, keep_scenario_beside=record_events or run_record)
+                  events_dir=events_dir, keep_scenario_beside=record_events or run_record,
+                  monitor=monitor)
     scenario = fleet.scenario  # loaded from a file node processes can read
     entry: Path | None = None
     driving: asyncio.Task[str] | None = None
@@ -396,6 +443,7 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     signals = _install_signals(loop, fleet) if handle_signals else []
     tasks: list[asyncio.Task[None]] = []
     reason = "launcher error"
+    running: list[str] = []
     try:
         if record is not None:
             record.write("start", scenario=str(scenario.path), name=scenario.name,
@@ -419,9 +467,12 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         except TimeoutError:
             reason = f"timeout after {timeout_s:g} s"
         fleet.log(f"run ended: {reason}")
+        running = [name for name, p in fleet.processes.items() if p.running()]
+        if record is not None or fleet.monitor is not None:
+            fleet.statistics = await fleet.node_statistics(_STATS_TIMEOUT_S)
         if record is not None:
             record.write("end", reason=reason)
-            record.write("node_stats", stats=await fleet.node_statistics())
+            record.write("node_stats", stats=fleet.statistics)
     finally:
         if driving is not None and not driving.done():
             driving.cancel()
@@ -447,13 +498,28 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                          exit_codes=codes, failed=tuple(fleet.failed),
                          restarts={n: p.restarts for n, p in fleet.processes.items()},
                          last_messages=dict(fleet.last_messages),
-                         duration_s=time.monotonic() - started, report=fleet.report)
+                         duration_s=time.monotonic() - started, report=fleet.report,
+                         verdict=_verdict(fleet, reason, running, codes),
+                         handler_failures=dict(fleet.monitor.failures) if fleet.monitor else {},
+                         state_reports=fleet.monitor.reports if fleet.monitor else 0)
     if record is not None:
         _record_summary(record, result)
         record.close()
     if driving is not None and not driving.cancelled() and driving.exception() is not None:
         raise driving.exception()  # type: ignore[misc]
     return result
+
+
+def _verdict(fleet: Fleet, reason: str, running: Sequence[str],
+             codes: Mapping[str, int | None]) -> Verdict | None:
+    """The live verdict of the run (None without a monitor)."""
+    if fleet.monitor is None:
+        return None
+    stats = fleet.transport.statistics() if fleet.transport is not None else {}
+    end = RunEnd(reason, interrupted=reason.startswith(("SIGINT", "SIGTERM")),
+                 failed={n: codes.get(n) for n in fleet.failed}, statistics=fleet.statistics,
+                 running=tuple(running), dropped_reports=stats.get("overflow", 0))
+    return fleet.monitor.verdict(end)
 
 
 def _register(fleet: Fleet, params: Sequence[str]) -> Path | None:
@@ -516,7 +582,13 @@ def _record_summary(record: RunRecord, result: FleetResult) -> None:
     if result.report is not None:
         report = {"passed": result.report.passed(), "text": result.report.render(),
                   "data": result.report}
-    record.write("summary", ok=result.ok, passed=result.passed, reason=result.reason,
+    verdict = None
+    if result.verdict is not None:
+        v = result.verdict
+        verdict = {"status": v.status, "summary": v.summary, "details": list(v.details),
+                   "property": v.property_name, "exit_code": v.exit_code}
+    record.write("summary", ok=result.ok, passed=result.passed, verdict=verdict,
+                 reason=result.reason,
                  exit_codes=result.exit_codes, failed=result.failed, restarts=result.restarts,
                  duration_s=round(result.duration_s, 3), last_messages=result.last_messages,
                  report=report)
@@ -550,12 +622,18 @@ def format_result(result: FleetResult) -> list[str]:
     """Human-readable summary lines of a run."""
     lines = [f"run ended after {result.duration_s:.1f} s: {result.reason}"]
     for name, code in result.exit_codes.items():
-        status = "FAILED" if name in result.failed else "ok"
+        failures = result.handler_failures.get(name, 0)
+        status = "FAILED" if name in result.failed else (
+            f"FAILED: {failures} handler failures" if failures else "ok")
         extra = f", restarts {result.restarts[name]}" if result.restarts.get(name) else ""
         lines.append(f"  {name}: exit code {code} ({status}{extra})")
     for topic, msg in result.last_messages.items():
         lines.append(f"  last on {topic}: {msg}")
     if result.report is not None:
         lines += result.report.render().splitlines()
+        if result.verdict is None:
+            lines.append("result: " + ("PASSED" if result.passed else "FAILED"))
+    if result.verdict is not None:
+        lines += result.verdict.lines()
     return lines
 

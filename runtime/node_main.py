@@ -37,9 +37,11 @@ from twinfleet.runtime.eventlog import EventLog
 from twinfleet.runtime.host import NodeHost
 from twinfleet.runtime.introspect import PARAM_FLAG, load_with_params, serve_info
 from twinfleet.runtime.names import KEY_PREFIX
+from twinfleet.runtime.node import QOS_DEFAULT
 from twinfleet.runtime.replay_gate import LogicalClock
 from twinfleet.runtime.scenario import Scenario, ScenarioError
 from twinfleet.runtime.schemas import registered_schemas, types_key
+from twinfleet.runtime.state_report import StateReporter, state_key
 from twinfleet.runtime.transport import Respond
 from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
 
@@ -88,6 +90,12 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                    help="override the scenario's behaviour profile, as `check --profile` does")
     p.add_argument(PARAM_FLAG, action="append", default=[], metavar="[NODE.]NAME=VALUE",
                    help="parameter override, as `twinfleet launch --param` (repeatable)")
+    p.add_argument("--monitor", choices=("states", "failures"), default=None,
+                   help="publish a state report after each handler that changed the state or "
+                        "failed (states), or only after failures (failures), for the launcher's "
+                        "live verdict (runtime.state_report)")
+    p.add_argument("--stall-ms", type=int, default=None, metavar="MS",
+                   help="count a timer released more than MS fleet ms late as a stall")
     p.add_argument("--gate", action="store_true",
                    help="replay mode: logical time, and run only the events a replay "
                         "coordinator grants (twinfleet replay --live)")
@@ -118,7 +126,7 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
                           gated=bool(args.gate))
     host = NodeHost(node, transport, clock, seed=seed, fleet=scenario.fleet,
                     stop_on_error=stop_on_error, wait_for=peers, events=events,
-                    gated=bool(args.gate))
+                    gated=bool(args.gate), stall_ms=args.stall_ms)
     stopping = asyncio.Event()
 
     def on_signal() -> None:
@@ -137,6 +145,9 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
         respond(msgpack.packb(dataclasses.asdict(host.statistics())), "")
 
     transport.serve(stats_key(scenario.fleet, node.name), serve_stats)
+    if args.monitor is not None:
+        put = transport.publisher(state_key(scenario.fleet, node.name), QOS_DEFAULT)
+        host.core.observe(StateReporter(node, put, states=args.monitor == "states"))
 
     def serve_types(_payload: bytes, respond: Respond) -> None:
         respond(json.dumps(registered_schemas()).encode(), "")

@@ -120,6 +120,8 @@ class Outbox:
                         out.append(self._query(effect, now))
                     case After(delay_ms=delay, handler=handler, args=args):
                         self.due.arm(Entry(EventKind.TIMER, handler, args, name, due=now + delay))
+                        if 0 < delay < (n["period"] or delay + 1):  # the stall threshold's base
+                            n["period"] = delay
                     case Fail(reason=reason):
                         n["failures"] += 1
                         out.append(Line(f"t={now} FAIL {reason}", err=True))

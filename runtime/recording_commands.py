@@ -51,7 +51,7 @@ def cmd_record(args: argparse.Namespace) -> int:
     for line in format_result(result) if result is not None else ():
         print(f"[launcher] {line}", flush=True)
     print(f"wrote {args.output}: {rec.messages} messages on {rec.topics} topics", flush=True)
-    return 0 if result is None or result.passed else 1
+    return 0 if result is None else result.exit_code
 
 
 def _joined(args: argparse.Namespace):  # noqa: ANN202 - a cliargs.Connection

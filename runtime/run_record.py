@@ -9,7 +9,9 @@
     {"event": "respawn", "t": 2.9, "node": "r1", "restart": 1}
     {"event": "end", "t": 6.0, "reason": "timeout after 6 s"}
     {"event": "node_stats", "t": 6.0, "stats": {"r1": {"received": 12, ...}, ...}}
-    {"event": "summary", "t": 6.3, "ok": true, "passed": true, "exit_codes": {...},
+    {"event": "summary", "t": 6.3, "ok": true, "passed": true,
+     "verdict": {"status": "holds", "summary": "...", "details": [], "property": null,
+                 "exit_code": 0}, "exit_codes": {...},
      "failed": [], "restarts": {"r1": 1}, "duration_s": 6.3, "last_messages": {...},
      "report": {"passed": true, "text": "...", "data": {...}}}
 

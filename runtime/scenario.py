@@ -72,6 +72,7 @@ from twinfleet.runtime.examples import shipped_scenarios
 from twinfleet.runtime.names import InvalidName, normalise_namespace, validate_token
 from twinfleet.runtime.node import Node
 from twinfleet.runtime.params import build_params
+from twinfleet.runtime.property_eval import ExpressionError, parse_expression
 
 PROFILES = ("fixed", "rebeca")
 SEMANTICS = ("ros", "rebeca")
@@ -278,7 +279,7 @@ def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
     raw_props = doc.get("properties") or []
     if not isinstance(raw_props, list):
         err.fail("properties", f"expected a list of properties, got {raw_props!r:.60}")
-    props = tuple(_property(i, p, err) for i, p in enumerate(raw_props))
+    props = tuple(_property(i, p, names, err) for i, p in enumerate(raw_props))
     check = _checked(check_config, err, doc.get("check"))
     _check_node_names(check, names, err)
     live = _checked(live_config, err, doc.get("live"))
@@ -404,7 +405,7 @@ def _node_class(value: Any, err: _Errors, key: str) -> tuple[type[Node], str]:
     return cls, path
 
 
-def _property(i: int, raw: Any, err: _Errors) -> PropertyConfig:
+def _property(i: int, raw: Any, names: Sequence[str], err: _Errors) -> PropertyConfig:
     where = f"properties[{i}]."
     if isinstance(raw, PropertyConfig):
         raw = {k: v for k, v in dataclasses.asdict(raw).items() if v is not None}
@@ -414,16 +415,16 @@ def _property(i: int, raw: Any, err: _Errors) -> PropertyConfig:
     kind = _get(raw, "kind", str, err, where=where)
     if kind not in PROPERTY_KINDS:
         err.fail(where + "kind", f"expected one of {', '.join(PROPERTY_KINDS)}, got {kind!r}")
+    name = _get(raw, "name", str, err, default=f"{kind}_{i}", where=where)
     expr = _get(raw, "expr", str, err, default=None, where=where)
     if kind in ("invariant", "eventually", "within") and expr is None:
         err.fail(where + "expr", f"a {kind} property needs an expression over node states")
     if expr is not None:
-        try:
-            compile(expr, f"{err.source}:{where}expr", "eval")
-        except SyntaxError as exc:
-            err.fail(where + "expr", f"not a Python expression: {exc.msg}")
+        try:  # the safe language of property expressions, checked before anything runs
+            parse_expression(expr, names, f"{err.source}:{where}expr")
+        except ExpressionError as exc:
+            err.fail(where + "expr", f"property {name!r}: {exc}")
     within = _get(raw, "within_ms", int, err, default=None, where=where)
     if kind == "within" and (within is None or within <= 0):
         err.fail(where + "within_ms", "a within property needs within_ms > 0")
-    return PropertyConfig(name=_get(raw, "name", str, err, default=f"{kind}_{i}", where=where),
-                          kind=kind, expr=expr, within_ms=within)
+    return PropertyConfig(name=name, kind=kind, expr=expr, within_ms=within)

@@ -30,7 +30,7 @@ ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = {"runtime": "runtime", "checker": "checker", "nodes": "nodes", "agreement": "agreement"}
 #: runtime/ modules that import neither Zenoh nor asyncio: the checker and the nodes may use them.
 CONTRACT = {"config", "context", "dispatch", "examples", "kinds", "messages", "names", "node",
-            "params", "scenario", "snapshot", "tracefile"}
+            "params", "property_eval", "scenario", "snapshot", "tracefile"}
 ALLOWED = {
     "api": {"api", "runtime-contract"},
     "runtime-contract": {"runtime-contract"},

@@ -249,8 +249,9 @@ def test_signals_to_the_launcher_leave_no_process(tmp_path: Path, sig: signal.Si
         assert poll(lambda: not processes_mentioning(str(fleet.scenario)), 10), \
             processes_mentioning(str(fleet.scenario))
         if sig != signal.SIGKILL:  # the launcher ends the run and stops its nodes itself
-            assert fleet.proc.returncode == 0, fleet.output()
+            assert fleet.proc.returncode == 130, fleet.output()  # interrupted, not failed
             assert f"run ended: {sig.name} received" in fleet.output()
+            assert f"result: interrupted ({sig.name} received)" in fleet.output()
             assert re.search(r"\[listener\] stopped: .*gaps=0", fleet.output())
     finally:
         stop_fleet(fleet)

@@ -1,0 +1,67 @@
+"""Honest verdicts (issue 15, failures 3 and 5): a run whose nodes dropped samples a verdict
+depends on, or whose node stalled behind its timers, is INCONCLUSIVE (exit 3) with the reason,
+never PASSED. Each test starts its own fleet on loopback with bounded traffic."""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+
+import pytest
+
+from tests.adversarial.fleets import (
+    expect,
+    launched,
+    robot_scenario,
+    run_launch,
+    wait_for_line,
+    write_scenario,
+)
+from tests.integration.itest_support import poll, processes_mentioning
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
+
+
+def test_a_bounded_flood_that_makes_a_node_drop_samples_is_inconclusive(tmp_path):
+    # 3 bursts of 3000 messages, 100 ms apart, at a subscriber that needs every one
+    # (RELIABLE) but lets only 5 wait: it must drop some, and the run must say so.
+    nodes = [{"name": "flooder", "class": "Flooder", "params": {"burst": 3000, "bursts": 3}},
+             {"name": "sink", "class": "Sink"}]
+    path = write_scenario(tmp_path, "flood", nodes, [
+        {"name": "counts", "kind": "invariant", "expr": "sink.count >= 0"}])
+    out = expect(run_launch(path, "--timeout", "3"), 3, "result: INCONCLUSIVE (sink dropped")
+    assert "PASSED" not in out
+
+
+def test_the_same_fleet_without_the_flood_passes(tmp_path):
+    nodes = [{"name": "flooder", "class": "Flooder", "params": {"burst": 1, "bursts": 3}},
+             {"name": "sink", "class": "Sink"}]
+    path = write_scenario(tmp_path, "trickle", nodes, [
+        {"name": "counts", "kind": "invariant", "expr": "sink.count >= 0"}])
+    expect(run_launch(path, "--timeout", "2"), 0, "result: PASSED")
+
+
+ROBOTS = {"r2": {"start": [5, 15], "goal": [45, 35], "speed": 0.7, "max_wait_ms": 2000},
+          "r3": {"start": [5, 25], "goal": [45, 25], "speed": 0.8, "max_wait_ms": 2500}}
+
+
+def test_a_robot_stopped_and_continued_stalls_and_the_run_is_inconclusive(tmp_path):
+    path = robot_scenario(tmp_path, ROBOTS)
+    seen: list[str] = []
+    with launched(path, "--time-scale", "4", "--timeout", "40") as proc:
+        assert wait_for_line(proc, "[r2] t=", seen), "".join(seen)  # r2 started
+        pids = processes_mentioning(f"{path} --node r2")
+        assert len(pids) == 1
+        time.sleep(0.5)  # r2 is on its way
+        os.kill(pids[0], signal.SIGSTOP)
+        try:
+            time.sleep(1.5)  # 6 s of fleet time: dozens of scan periods
+        finally:
+            os.kill(pids[0], signal.SIGCONT)
+        rest, _ = proc.communicate(timeout=60)
+    out = "".join(seen) + rest
+    assert proc.returncode == 3, out[-3000:]
+    assert "result: INCONCLUSIVE (r2 fell behind its timers by up to" in out
+    assert "it stalled" in out
+    assert poll(lambda: not processes_mentioning(str(path)), 10)

@@ -1,0 +1,226 @@
+"""The live verdict without a fleet: state reports from real node cores, judged by a
+`LiveMonitor`; the core's lossless-drop and stall counters; the verdict's precedence."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from tests.adversarial.verdict_nodes import Counter, Flooder
+from tests.runtime.hosts import Num, Shallow
+from twinfleet.runtime.core import NodeCore
+from twinfleet.runtime.live_verdict import (
+    ERROR,
+    HOLDS,
+    INCONCLUSIVE,
+    INTERRUPTED,
+    VIOLATED,
+    LiveMonitor,
+    RunEnd,
+    stall_floor_ms,
+)
+from twinfleet.runtime.messages import encode
+from twinfleet.runtime.scenario import NodeEntry, Scenario
+from twinfleet.runtime.state_report import StateReport, StateReporter, decode_report
+
+pytestmark = pytest.mark.timeout(30)
+
+
+def scenario(*props: dict[str, Any], fail_at: int = 0) -> Scenario:
+    return Scenario.build("counting", [NodeEntry("counter", Counter, {"fail_at": fail_at}),
+                                       NodeEntry("other", Counter)], properties=list(props))
+
+
+class Fleet:
+    """Node cores whose state reports go straight to a monitor (as the launcher's do)."""
+
+    def __init__(self, sc: Scenario, **monitor: Any) -> None:
+        self.monitor = LiveMonitor(sc, **monitor)
+        self.cores = {}
+        for cfg in sc.nodes:
+            node = cfg.instantiate()
+            core = NodeCore(node, seed=1, stall_ms=self.monitor.stall_ms)
+            core.observe(StateReporter(node, self._put(node.name)))
+            self.cores[node.name] = core
+        self.wire: list[tuple[str, bytes]] = []
+
+    def _put(self, name: str):
+        def put(payload: bytes) -> None:
+            self.wire.append((name, payload))
+        return put
+
+    def run(self, until_ms: int, *, drop: int | None = None) -> None:
+        """Tick every core up to `until_ms`, delivering reports (but the `drop`-th)."""
+        for core in self.cores.values():
+            core.start(0)
+        for now in range(0, until_ms + 1, 50):
+            for core in self.cores.values():
+                core.release_due(now)
+                while core.run_next(now) is not None:
+                    pass
+        for i, (name, payload) in enumerate(self.wire):
+            if i != drop:
+                self.monitor.on_report(decode_report(name, payload))
+
+    def verdict(self, **end: Any):
+        stats: dict[str, dict[str, int]] = {n: {} for n in self.cores}  # nothing lost
+        return self.monitor.verdict(RunEnd(end.pop("reason", "timeout"), statistics=stats, **end))
+
+
+def test_an_invariant_violated_names_the_property_the_event_and_the_states():
+    fleet = Fleet(scenario({"name": "small", "kind": "invariant", "expr": "counter.count < 3"}))
+    fleet.run(300)
+    v = fleet.verdict()
+    assert (v.status, v.property_name, v.exit_code) == (VIOLATED, "small", 1)
+    assert "invariant 'counter.count < 3' is false at t=100 ms" in v.summary  # since the first report (t=50)
+    assert "after periodic → counter.tick" in v.details[0]
+    assert v.details[1] == "counter: CountState(count=3)"
+
+
+def test_a_handler_failure_violates_the_scenarios_no_failure_property():
+    fleet = Fleet(scenario({"name": "clean", "kind": "no_failure"}, fail_at=2))
+    fleet.run(200)
+    v = fleet.verdict()
+    assert (v.status, v.property_name) == (VIOLATED, "clean")
+    assert "counter.tick: ValueError: count reached 2" in v.summary
+    assert fleet.monitor.failures == {"counter": 1}
+
+
+def judged(*props: dict[str, Any], until_ms: int = 300):
+    """The verdict on `props` of a fleet ticked up to `until_ms`."""
+    fleet = Fleet(scenario(*props))
+    fleet.run(until_ms)
+    return fleet.verdict()
+
+
+@pytest.mark.parametrize(("props", "status", "said"), [
+    ([{"name": "e", "kind": "eventually", "expr": "other.count >= 2"},
+      {"name": "w", "kind": "within", "expr": "counter.count >= 2", "within_ms": 200}],
+     HOLDS, "e, w, no_failure hold"),
+    ([{"name": "w", "kind": "within", "expr": "counter.count >= 5", "within_ms": 100}],
+     VIOLATED, "w violated: 'counter.count >= 5' did not hold within 100 ms"),
+    ([{"name": "e", "kind": "eventually", "expr": "other.count > 99"}],
+     VIOLATED, "e violated: 'other.count > 99' never held before the run ended"),
+    ([{"name": "w", "kind": "within", "expr": "counter.count > 99", "within_ms": 10_000}],
+     INCONCLUSIVE, "before w's within_ms 10000 had passed"),
+])
+def test_eventually_and_within_hold_or_fail_at_the_end(props, status, said):
+    v = judged(*props)
+    assert v.status == status and said in v.summary, v
+
+
+def test_a_lost_state_report_makes_the_verdict_inconclusive():
+    fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
+    fleet.run(300, drop=3)
+    v = fleet.verdict()
+    assert (v.status, v.exit_code) == (INCONCLUSIVE, 3)
+    assert "lost 1 state reports" in v.summary
+
+
+@pytest.mark.parametrize(("stats", "said"), [
+    ({"rejected_forged": 10}, "counter rejected 10 samples (rejected_forged)"),
+    ({"rejected_some_future_reason": 1}, "(rejected_some_future_reason)"),
+    ({"dropped_overflow": 30101}, "dropped 30101 samples at the transport hand-off"),
+    ({"dropped_lossless": 48}, "RELIABLE (lossless) subscription"),
+    ({"gaps": 2}, "lost 2 samples on reliable topics"),
+    ({"stalls": 3, "max_lateness_ms": 5012, "stall_threshold_ms": 200},
+     "fell behind its timers by up to 5012 ms (3 timers later than its stall threshold of 200"),
+])
+def test_final_statistics_that_show_lost_input_make_it_inconclusive(stats, said):
+    fleet = Fleet(scenario({"name": "small", "kind": "invariant", "expr": "counter.count < 3"}))
+    fleet.run(300)
+    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"counter": stats, "other": {}}))
+    assert v.status == INCONCLUSIVE and said in v.summary, v
+    assert any("seen, but not conclusive: small violated" in d for d in v.details)
+
+
+def test_a_running_node_that_does_not_answer_for_its_statistics_is_inconclusive():
+    fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
+    fleet.run(100)
+    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"other": {}},
+                                     running=("counter", "other")))
+    assert v.status == INCONCLUSIVE and "counter did not answer" in v.summary
+
+
+def test_interrupted_unless_something_was_violated_first():
+    ok = Fleet(scenario({"name": "e", "kind": "eventually", "expr": "counter.count > 99"}))
+    ok.run(100)
+    assert ok.verdict(reason="SIGINT received", interrupted=True).status == INTERRUPTED
+    bad = Fleet(scenario({"name": "small", "kind": "invariant", "expr": "counter.count < 1"}))
+    bad.run(100)
+    assert bad.verdict(reason="SIGINT received", interrupted=True).status == VIOLATED
+
+
+def test_a_property_that_raises_is_a_scenario_error_and_a_slow_one_is_not_judged():
+    raises = Fleet(scenario({"name": "bad", "kind": "invariant", "expr": "counter.nope > 0"}))
+    raises.run(100)
+    v = raises.verdict()
+    assert (v.status, v.exit_code) == (ERROR, 2) and "'counter.nope > 0' raised" in v.summary
+    slow = Fleet(scenario({"name": "slow", "kind": "invariant",
+                           "expr": "counter.count + sum(range(10**12)) > 0"}), budget_s=0.05)
+    slow.run(50)
+    v = slow.verdict()
+    assert v.status == INCONCLUSIVE and "took longer than 0.05 s" in v.summary
+
+
+def test_reports_only_when_the_state_changed_or_a_handler_failed():
+    fleet = Fleet(scenario({"name": "e", "kind": "eventually", "expr": "counter.count > 0"}))
+    fleet.run(200)
+    # ticks at 50..200 change each counter: 4 reports per node, none for unchanged states
+    assert [n for n, _ in fleet.wire].count("counter") == 4
+    assert fleet.monitor.reads() == {"counter"}
+
+
+def test_the_core_counts_lossless_drops_apart_and_stalls_against_its_threshold():
+    node = Shallow("s")
+    core = NodeCore(node, seed=1, stall_ms=100)
+    core.start(0)
+    reliable, best_effort = core.receiver("on_num"), core.receiver("on_other")
+    for seq in range(1, 6):
+        reliable(encode(Num(seq), stamp_ms=0, seq=seq, sender="a"), 0)
+        best_effort(encode(Num(seq), stamp_ms=0, seq=seq, sender="a"), 0)
+    stats = core.statistics()
+    assert (stats.dropped_keep_last, stats.dropped_lossless) == (2 + 4, 2)
+    counter = NodeCore(Counter("c"), seed=1, stall_ms=25)
+    counter.start(0)
+    counter.release_due(60)  # the tick due at 50: 10 ms late
+    counter.release_due(5_000)  # the next, due at 100: 4.9 s late (a stopped process)
+    stats = counter.statistics()
+    assert (stats.stalls, stats.max_lateness_ms, stats.stall_threshold_ms) == (1, 4_900, 100)
+
+
+def test_the_stall_threshold_is_twice_the_shortest_timer_period_above_a_wall_floor():
+    assert (stall_floor_ms(), stall_floor_ms(time_scale=10)) == (100, 1000)
+    every = NodeCore(Counter("c"), seed=1, stall_ms=25)  # @every(50)
+    every.start(0)
+    assert every.stall_threshold() == 100
+    chained = NodeCore(Flooder("f"), seed=1, stall_ms=25)  # ctx.after(300), then 100
+    chained.start(0)
+    assert chained.stall_threshold() == 25  # no timer armed yet: the floor
+    chained.run_next(0)
+    assert chained.stall_threshold() == 600
+    chained.release_due(300)
+    chained.run_next(300)
+    assert chained.stall_threshold() == 200
+    assert NodeCore(Counter("c"), seed=1, stall_ms=500).stall_threshold() == 500
+
+
+def test_reports_of_strangers_are_ignored_and_a_broken_state_is_inconclusive():
+    fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
+    fleet.run(100)
+    stranger = StateReport("intruder", 1, 0, "start", "x", "", "", "boom", None)
+    fleet.monitor.on_report(stranger)
+    assert fleet.monitor.strangers == 1 and fleet.verdict().status == HOLDS
+    broken = StateReport("other", 99, 200, "periodic", "tick", "other", "", None, b"\xc1")
+    fleet.monitor.on_report(broken)
+    v = fleet.verdict()
+    assert v.status == INCONCLUSIVE and "undecodable state" in " ".join([v.summary, *v.details])
+
+
+def test_an_invariant_false_in_the_initial_states_is_violated_at_once():
+    monitor = LiveMonitor(scenario({"name": "started", "kind": "invariant",
+                                    "expr": "counter.count > 0"}))
+    v = monitor.verdict(RunEnd("timeout", statistics={"counter": {}, "other": {}}))
+    assert (v.status, v.property_name) == (VIOLATED, "started")
+    assert "false in the initial states" in v.summary and "in the initial states" in v.details[0]
