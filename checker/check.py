@@ -2,7 +2,9 @@
 
 Exit codes of a `CheckResult`: 0 every property holds, 1 a property is
 violated, 2 no answer (a limit was reached, the search was interrupted, or
-random walks found nothing, which proves nothing). Bad input raises before
+random walks found nothing, which proves nothing), 4 a node breaks the node
+contract (`checker.diagnosis`: no verdict, one line naming node, handler,
+what differed and the fix, in `CheckResult.breach`). Bad input raises before
 a result exists (`ScenarioError`, `PropertyError`, `NodeDefinitionError`).
 The search always stops at the first violation (RMC does the same, R11), so
 the scenario key `check.stop_at_first` is accepted but has no other value.
@@ -23,12 +25,14 @@ from typing import Any, final
 
 from twinfleet.checker import checkpoint as ckpt
 from twinfleet.checker.checkpoint import CheckpointError
-from twinfleet.checker.outcome import HOLDS, VIOLATED, Limits, SearchStatistics
+from twinfleet.checker.diagnosis import CONTRACT_KINDS, ContractBreachError, breach_line
+from twinfleet.checker.outcome import BREACH, HOLDS, VIOLATED, Limits, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
 from twinfleet.runtime.config import SEARCHES, CheckConfig
+from twinfleet.runtime.node import NodeSpec
 from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario
 from twinfleet.runtime.tracefile import write_trace
 
@@ -51,6 +55,7 @@ class CheckOptions:
     exact_states: bool = False
     check_determinism: bool = False
     transition_cache: bool = True
+    verify: bool = True
     checkpoint: str | None = None
     checkpoint_every_s: float = 300.0
     resume: str | None = None
@@ -74,6 +79,7 @@ class CheckResult:
     trace_path: str | None = None
     checkpoint: str | None = None
     resumed_from: str | None = None
+    breach: str | None = None  # the one-line diagnosis of a contract breach
 
     @property
     def rmc_transitions(self) -> int:
@@ -82,15 +88,15 @@ class CheckResult:
 
     @property
     def exit_code(self) -> int:
-        """0 holds, 1 violated, 2 no answer."""
-        return {HOLDS: 0, VIOLATED: 1}.get(self.status, 2)
+        """0 holds, 1 violated, 2 no answer, 4 a node breaks the node contract."""
+        return {HOLDS: 0, VIOLATED: 1, BREACH: 4}.get(self.status, 2)
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready record of the result."""
         s = self.statistics
         return {
             "scenario": self.scenario, "semantics": self.semantics, "search": self.search,
-            "verdict": self.status, "reason": self.reason,
+            "verdict": self.status, "reason": self.reason, "breach": self.breach,
             "violation": None if self.violation is None else {
                 "property": self.violation.property, "kind": self.violation.kind,
                 "message": self.violation.message, "shape": self.violation.shape},
@@ -111,6 +117,8 @@ class CheckResult:
         s = self.statistics
         if self.status == HOLDS:
             verdict = "HOLDS: every property holds"
+        elif self.status == BREACH:
+            verdict = f"CONTRACT BREACH (no verdict): {self.breach}"
         elif self.status == VIOLATED and self.violation is not None:
             verdict = f"VIOLATED {self.violation.property}: {self.violation.message}"
         else:
@@ -214,13 +222,16 @@ def check(scenario: str | Path | Scenario | None,
     if data is not None:
         search.restore(data)
     seed = options.seed if options.seed is not None else scenario.seed
-    outcome = search.run(strategy, walks=options.walks, seed=seed)
-    names = props.names()
-    if system.check_determinism:
-        names.append("determinism (every transition run twice and compared)")
+    try:
+        outcome = search.run(strategy, walks=options.walks, seed=seed)
+    except ContractBreachError as exc:  # found while rebuilding a path (checker.graph)
+        return _breach_result(scenario, system, strategy, props, str(exc), search)
+    if outcome.violation is not None and (breach := _breach_of(system, outcome.violation)):
+        return _breach_result(scenario, system, strategy, props, breach, search)
     result = CheckResult(scenario.source, system.semantics.value, strategy, outcome.status,
-                         outcome.reason, names, outcome.statistics, outcome.violation,
-                         checkpoint=outcome.checkpoint, resumed_from=options.resume)
+                         outcome.reason, _property_names(system, props), outcome.statistics,
+                         outcome.violation, checkpoint=outcome.checkpoint,
+                         resumed_from=options.resume)
     if outcome.violation is not None and outcome.counterexample is not None:
         result.trace = build_trace(system, outcome.violation, outcome.counterexample,
                                    scenario_path=meta["scenario"], search=strategy)
@@ -230,7 +241,43 @@ def check(scenario: str | Path | Scenario | None,
     return result
 
 
-_SEARCH_FLAGS = ("debug_state", "exact_states", "check_determinism", "transition_cache")
+def _property_names(system: System, props: PropertySet) -> list[str]:
+    names = props.names()
+    if system.runner.verify:
+        names.append("node contract (new handler runs probed and run twice)" if not
+                     system.check_determinism else
+                     "node contract (every transition probed and run twice)")
+    return names
+
+
+_DECORATORS = {"start": "on_start"}  # HandlerSpec.kind -> the decorator's name
+
+
+def _breach_of(system: System, violation: PropertyViolation) -> str | None:
+    """The one-line diagnosis of a violation that is a contract breach, or None."""
+    failure = violation.failure
+    if failure is None or failure.kind not in CONTRACT_KINDS:
+        return None
+    handler = failure.handler
+    if failure.node in system.index:  # name the decorator too: "go (@on_start)"
+        node = system.nodes[system.index[failure.node]]
+        spec = NodeSpec.of(type(node)).by_method(handler)
+        if spec is not None:
+            handler = f"{handler} (@{_DECORATORS.get(spec.kind, spec.kind)})"
+    return breach_line(failure.kind, failure.node, handler, failure.message)
+
+
+def _breach_result(scenario: Scenario, system: System, strategy: str, props: PropertySet,
+                   breach: str, search: Search) -> CheckResult:
+    """The result of a search stopped by a node that breaks the contract (exit 4): no
+    verdict, and no trace, since a breach is not a path the nodes would take again."""
+    return CheckResult(scenario.source, system.semantics.value, strategy, BREACH,
+                       "a node breaks the node contract", _property_names(system, props),
+                       search.statistics(), breach=breach)
+
+
+_SEARCH_FLAGS = ("debug_state", "exact_states", "check_determinism", "transition_cache",
+                 "verify")
 
 
 def _scenario_file(scenario: str | Path | Scenario | None) -> Path | None:

@@ -130,6 +130,9 @@ def _report(result: CheckResult, *, as_json: bool) -> None:
     if as_json:
         print(json.dumps(result.to_json(), indent=1))
         return
+    if result.breach is not None:  # no verdict to summarise: one line, exit 4
+        print(f"twinfleet check: {result.breach}", file=sys.stderr)
+        return
     print(result.summary())
     if result.exit_code == 2:
         print(f"exit 2: no answer ({result.reason})")
