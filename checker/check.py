@@ -32,6 +32,7 @@ from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
 from twinfleet.runtime.config import SEARCHES, CheckConfig
+from twinfleet.runtime.lint import lint_scenario
 from twinfleet.runtime.node import NodeSpec
 from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario
 from twinfleet.runtime.tracefile import write_trace
@@ -80,6 +81,7 @@ class CheckResult:
     checkpoint: str | None = None
     resumed_from: str | None = None
     breach: str | None = None  # the one-line diagnosis of a contract breach
+    warnings: list[str] = field(default_factory=list)  # load-time lint (runtime.lint)
 
     @property
     def rmc_transitions(self) -> int:
@@ -97,6 +99,7 @@ class CheckResult:
         return {
             "scenario": self.scenario, "semantics": self.semantics, "search": self.search,
             "verdict": self.status, "reason": self.reason, "breach": self.breach,
+            "warnings": self.warnings,
             "violation": None if self.violation is None else {
                 "property": self.violation.property, "kind": self.violation.kind,
                 "message": self.violation.message, "shape": self.violation.shape},
@@ -207,6 +210,7 @@ def check(scenario: str | Path | Scenario | None,
     if path is None and options.checkpoint is not None:
         raise ScenarioError(f"{scenario.source}: a checkpoint needs a scenario file")
     props = PropertySet.from_scenario(scenario)
+    warnings = [str(w) for w in lint_scenario(scenario)]
     flags = {key: meta.get(key, getattr(options, key)) for key in _SEARCH_FLAGS}
     system = System(scenario, monitors=props, **flags)
     strategy = meta.get("strategy") or options.search or scenario.check.search
@@ -225,13 +229,13 @@ def check(scenario: str | Path | Scenario | None,
     try:
         outcome = search.run(strategy, walks=options.walks, seed=seed)
     except ContractBreachError as exc:  # found while rebuilding a path (checker.graph)
-        return _breach_result(scenario, system, strategy, props, str(exc), search)
+        return _breach_result(scenario, system, strategy, props, str(exc), search, warnings)
     if outcome.violation is not None and (breach := _breach_of(system, outcome.violation)):
-        return _breach_result(scenario, system, strategy, props, breach, search)
+        return _breach_result(scenario, system, strategy, props, breach, search, warnings)
     result = CheckResult(scenario.source, system.semantics.value, strategy, outcome.status,
                          outcome.reason, _property_names(system, props), outcome.statistics,
                          outcome.violation, checkpoint=outcome.checkpoint,
-                         resumed_from=options.resume)
+                         resumed_from=options.resume, warnings=warnings)
     if outcome.violation is not None and outcome.counterexample is not None:
         result.trace = build_trace(system, outcome.violation, outcome.counterexample,
                                    scenario_path=meta["scenario"], search=strategy)
@@ -268,12 +272,12 @@ def _breach_of(system: System, violation: PropertyViolation) -> str | None:
 
 
 def _breach_result(scenario: Scenario, system: System, strategy: str, props: PropertySet,
-                   breach: str, search: Search) -> CheckResult:
+                   breach: str, search: Search, warnings: list[str]) -> CheckResult:
     """The result of a search stopped by a node that breaks the contract (exit 4): no
     verdict, and no trace, since a breach is not a path the nodes would take again."""
     return CheckResult(scenario.source, system.semantics.value, strategy, BREACH,
                        "a node breaks the node contract", _property_names(system, props),
-                       search.statistics(), breach=breach)
+                       search.statistics(), breach=breach, warnings=warnings)
 
 
 _SEARCH_FLAGS = ("debug_state", "exact_states", "check_determinism", "transition_cache",

@@ -29,7 +29,7 @@ pytestmark = pytest.mark.timeout(60)
 ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = {"runtime": "runtime", "checker": "checker", "nodes": "nodes", "agreement": "agreement"}
 #: runtime/ modules that import neither Zenoh nor asyncio: the checker and the nodes may use them.
-CONTRACT = {"config", "context", "dispatch", "examples", "kinds", "messages", "names", "node",
+CONTRACT = {"config", "context", "dispatch", "examples", "kinds", "lint", "messages", "names", "node",
             "params", "scenario", "snapshot", "tracefile"}
 ALLOWED = {
     "api": {"api", "runtime-contract"},
