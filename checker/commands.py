@@ -19,6 +19,7 @@ from typing import Any
 
 from twinfleet.checker.check import CheckOptions, CheckResult, check, system_for_trace
 from twinfleet.checker.checkpoint import CheckpointError
+from twinfleet.checker.diagnosis import ContractBreachError
 from twinfleet.checker.outcome import SearchStatistics
 from twinfleet.checker.properties import PropertyError
 from twinfleet.checker.semantics import Semantics
@@ -133,6 +134,9 @@ def check_command(args: argparse.Namespace) -> int:
     except BAD_INPUT as exc:
         print(f"twinfleet check: {exc}", file=sys.stderr)
         return 2
+    except ContractBreachError as exc:  # before any search: an initial state (checker.topology)
+        print(f"twinfleet check: {exc}", file=sys.stderr)
+        return 4
     if options.progress is not None and sys.stderr.isatty():
         print(file=sys.stderr)
     if not args.json:
