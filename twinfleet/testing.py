@@ -48,6 +48,7 @@ from twinfleet.runtime.node import QOS_DEFAULT, Node
 from twinfleet.runtime.scenario import NodeEntry, PropertyConfig, Scenario
 from twinfleet.runtime.scenario_file import write_scenario
 from twinfleet.runtime.tracefile import write_trace
+from twinfleet.runtime.transport import graph_key, parse_graph_key
 
 __all__ = ["CheckReport", "LiveFleet", "check", "eventually", "invariant", "live_fleet",
            "no_failure", "run_live", "system", "within"]
@@ -220,6 +221,12 @@ class LiveFleet:
         self._heard: dict[str, list[Any]] = {}
         self._waiters: dict[str, list[tuple[Callable[[Any], bool], asyncio.Future[Any]]]] = {}
 
+    @property
+    def pids(self) -> dict[str, int]:
+        """The process id of every running node, by node name."""
+        return {name: p.proc.pid for name, p in self._fleet.processes.items()
+                if p.proc is not None}
+
     def watch(self, topic: str) -> list[Any]:
         """Start collecting the messages published on `topic` (absolute name); the list
         fills as they arrive."""
@@ -294,6 +301,7 @@ async def live_fleet(scenario: Scenario | str | Path, *, time_scale: float = 1.0
     finished = asyncio.Event()
 
     async def driver(fleet: Any) -> str:
+        await _every_node_alive(fleet, timeout_s)
         ready.set_result(LiveFleet(fleet))
         await finished.wait()
         return "the test finished"
@@ -312,6 +320,27 @@ async def live_fleet(scenario: Scenario | str | Path, *, time_scale: float = 1.0
     finally:
         finished.set()
         handle.result = await runner
+
+
+async def _every_node_alive(fleet: Any, timeout_s: float) -> None:
+    """Wait until every node's liveliness token is up (its handlers are declared), so
+    that a test starts with the whole fleet running; RuntimeError naming the missing."""
+    names = {cfg.name for cfg in fleet.scenario.nodes}
+    alive: set[str] = set()
+    up = asyncio.Event()
+
+    def on_change(key: str, is_alive: bool) -> None:
+        node = parse_graph_key(key)[2]
+        (alive.add if is_alive else alive.discard)(node)
+        if names <= alive:
+            up.set()
+
+    fleet.transport.watch(graph_key(fleet.scenario.fleet, "node", "*"), on_change)
+    try:
+        await asyncio.wait_for(up.wait(), timeout_s)
+    except TimeoutError:
+        raise RuntimeError(f"nodes {', '.join(sorted(names - alive))} did not start within "
+                           f"{timeout_s:g} s") from None
 
 
 def run_live(scenario: Scenario | str | Path,
