@@ -25,13 +25,19 @@ from typing import Any, final
 
 from twinfleet.checker import checkpoint as ckpt
 from twinfleet.checker.checkpoint import CheckpointError
-from twinfleet.checker.diagnosis import CONTRACT_KINDS, ContractBreachError, breach_line
+from twinfleet.checker.diagnosis import (
+    CONTRACT_KINDS,
+    FIX_HIDDEN,
+    ContractBreachError,
+    breach_line,
+)
 from twinfleet.checker.outcome import BREACH, HOLDS, VIOLATED, Limits, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
 from twinfleet.runtime.config import SEARCHES, CheckConfig
+from twinfleet.runtime.kinds import FailureKind
 from twinfleet.runtime.lint import lint_scenario
 from twinfleet.runtime.node import NodeSpec
 from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario
@@ -237,8 +243,16 @@ def check(scenario: str | Path | Scenario | None,
                          outcome.violation, checkpoint=outcome.checkpoint,
                          resumed_from=options.resume, warnings=warnings)
     if outcome.violation is not None and outcome.counterexample is not None:
-        result.trace = build_trace(system, outcome.violation, outcome.counterexample,
-                                   scenario_path=meta["scenario"], search=strategy)
+        try:
+            result.trace = build_trace(system, outcome.violation, outcome.counterexample,
+                                       scenario_path=meta["scenario"], search=strategy)
+        except IndexError:  # the path's events are not there when it runs again
+            return _breach_result(scenario, system, strategy, props, breach_line(
+                FailureKind.NONDETERMINISM, "", "(unknown)", "the counterexample does not run "
+                "again from its initial world: some handler depends on something outside "
+                "self.state" + ("" if system.runner.verify else " (the contract checks were "
+                                "off: rerun without --no-contract-checks to name it)") +
+                f"; fix: {FIX_HIDDEN}"), search, warnings)
         if options.trace_out:
             write_trace(result.trace, options.trace_out)
             result.trace_path = options.trace_out

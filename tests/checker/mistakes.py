@@ -217,3 +217,21 @@ class Pinger(_Base):
     @on_start
     def begin(self, ctx: Context) -> None:
         ctx.publish("/hello", String("hi"))
+
+
+TICKS = [0]  # LeakyTicker's module-level counter (tests reset it)
+
+
+class LeakyTicker(_Base):
+    """Ticks three times, counting in a module-level list: a rebuilt path goes elsewhere."""
+
+    @on_start
+    def begin(self, ctx: Context) -> None:
+        ctx.after(10, self.tick)
+
+    @handler
+    def tick(self, ctx: Context) -> None:
+        TICKS[0] += 1
+        if TICKS[0] < 4:
+            ctx.after(10, self.tick)
+        self.state.value = TICKS[0]

@@ -90,3 +90,21 @@ def test_the_lint_names_the_risky_imports_with_file_and_line(tmp_path, capsys):
             where = hit.split(": ")[1]
             assert where.startswith(f"{source}:")
             assert module.split(".")[-1] in lines[int(where.rsplit(":", 1)[1]) - 1]
+
+
+def test_with_the_checks_off_a_path_that_does_not_run_again_is_a_breach_not_a_traceback(
+        tmp_path, capsys):
+    from tests.checker import mistakes
+
+    mistakes.TICKS[0] = 0
+    path = tmp_path / "leaky.yaml"
+    path.write_text(yaml.safe_dump({
+        "name": "leaky", "nodes": [{"name": "n1", "class": f"{M}:LeakyTicker"}],
+        "properties": [{"name": "small", "kind": "invariant", "expr": "n1.value < 3"}]}))
+    assert main(["check", str(path), "--quiet", "--no-contract-checks"]) == 4
+    err = capsys.readouterr().err
+    assert "does not run again" in err and "--no-contract-checks" in err
+    assert "Traceback" not in err
+    mistakes.TICKS[0] = 0
+    assert main(["check", str(path), "--quiet"]) == 4  # checked: named at once
+    assert "node n1, handler tick (@handler)" in capsys.readouterr().err
