@@ -23,6 +23,7 @@ restores nothing.
 
 from __future__ import annotations
 
+import contextlib
 import re
 from collections.abc import Sequence
 from typing import Any, final
@@ -59,6 +60,7 @@ CONTRACT_ERROR = f"{ContractError.__name__}:"  # how runtime.dispatch words a Co
 # failures not to verify by a second run: breaches already, or a forced answer that the
 # run does not offer (a trace that does not fit)
 _UNVERIFIED = CONTRACT_KINDS | {FailureKind.CHOICE_MISMATCH}
+_NO_PROBE = contextlib.nullcontext()
 _ADDRESS = re.compile(r" at 0x[0-9a-f]+")  # object addresses differ between two runs
 
 
@@ -171,16 +173,12 @@ class Runner:
         ctx = Context(node, ev.due, chooser)
         self._current[i] = None  # the state object is about to change
         probe = self._probe
-        if probe is None:
+        with probe or _NO_PROBE:
             outcome = run_handler(node, ev.method, ctx, ev.args,
                                   expects_reply=ev.kind is EventKind.REQUEST)
-        else:
-            with probe:
-                outcome = run_handler(node, ev.method, ctx, ev.args,
-                                      expects_reply=ev.kind is EventKind.REQUEST)
-            if probe.calls:
-                return _failed(chooser, data, FailureKind.CONTRACT, node.name, ev.method,
-                               environment_message(probe.calls))
+        if probe is not None and probe.calls:
+            return _failed(chooser, data, FailureKind.CONTRACT, node.name, ev.method,
+                           environment_message(probe.calls))
         breach = self._breach(node, ev, attributes, before, outcome)
         if breach is not None:
             return _failed(chooser, data, *breach)
