@@ -108,3 +108,23 @@ def test_with_the_checks_off_a_path_that_does_not_run_again_is_a_breach_not_a_tr
     mistakes.TICKS[0] = 0
     assert main(["check", str(path), "--quiet"]) == 4  # checked: named at once
     assert "node n1, handler tick (@handler)" in capsys.readouterr().err
+
+
+def test_the_probe_sees_only_the_handlers_thread_and_puts_everything_back():
+    import random
+    import threading
+    import time
+
+    from twinfleet.checker.diagnosis import EnvironmentProbe
+
+    originals = (time.time, time.monotonic, random.random, random.choice)
+    probe = EnvironmentProbe()
+    with probe:
+        other = threading.Thread(target=time.monotonic)
+        other.start()
+        other.join()
+        time.time()
+        random.choice([1, 2])
+        time.time()
+    assert probe.calls == ["time.time", "random.choice"]  # in order, once each
+    assert (time.time, time.monotonic, random.random, random.choice) == originals
