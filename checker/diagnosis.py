@@ -22,6 +22,10 @@ replay). Two cheap checks run in every search, by default:
   compared by identity before and after. This catches what the probe cannot
   see: a bound `random`/`time` function, `datetime.now()`, a counter in a module
   or class variable or in another attribute of the node.
+- **Scope watch.** The module and class variables of the node's own code (the
+  modules defining its class and bases, and those classes) are compared before
+  and after each run (`ScopeWatch`): a counter a handler bumps but only another
+  handler reads changes nothing in a re-execution, yet it is state.
 
 Both report a `Failure` of a contract kind (`CONTRACT_KINDS`); `checker.check`
 turns it into the verdict "contract breach" (exit code 4), never a property
@@ -33,9 +37,11 @@ the fix.
 from __future__ import annotations
 
 import dataclasses
+import operator
 import os
 import random
 import secrets
+import sys
 import threading
 import time
 import uuid
@@ -117,6 +123,68 @@ class EnvironmentProbe:
 def _sources() -> list[tuple[ModuleType, str, Sequence[str]]]:
     return [(time, "time", _CLOCKS), (random, "random", _RANDOM), (os, "os", ("urandom",)),
             (uuid, "uuid", ("uuid1", "uuid4")), (secrets, "secrets", _SECRETS)]
+
+
+_SMALL = 64  # mutable module/class containers up to this size are compared by content
+
+
+@final
+class ScopeWatch:
+    """The module and class variables a node class's code could keep state in.
+
+    The data (not functions, classes or modules) in the modules that define the
+    class and its bases, and in those classes' own namespaces, below `Node`: `take`
+    records them (identity, and the contents of small lists, dicts, sets and
+    bytearrays) and `changed` names those a handler rebound or changed in place.
+    """
+
+    def __init__(self, cls: type) -> None:
+        spaces: dict[int, tuple[str, Any]] = {}
+        for klass in cls.__mro__:
+            if klass is object or klass.__module__.startswith("twinfleet.runtime"):
+                continue
+            module = sys.modules.get(klass.__module__)
+            if module is not None:
+                spaces.setdefault(id(module), (module.__name__, vars(module)))
+            spaces.setdefault(id(klass), (klass.__qualname__, klass.__dict__))
+        self._spaces = list(spaces.values())
+        self._keys = [(label, space, key) for label, space in self._spaces
+                      for key, value in list(space.items()) if _is_data(key, value)]
+        self._small = [(label, space, key) for label, space, key in self._keys
+                       if type(space[key]) in _MUTABLE and len(space[key]) <= _SMALL]
+
+    def take(self) -> tuple[list[int], list[Any], list[Any]]:
+        """What the variables hold now (cheap: identities, and copies of small containers)."""
+        return ([len(space) for _, space in self._spaces],
+                [space.get(key) for _, space, key in self._keys],
+                [_copy(space.get(key)) for _, space, key in self._small])
+
+    def changed(self, before: tuple[list[int], list[Any], list[Any]]) -> list[str]:
+        """The variables (``module.NAME``, ``Class.NAME``) that differ from `before`."""
+        sizes, held, contents = before
+        now_sizes, now_held, now_contents = self.take()
+        if sizes == now_sizes and all(map(operator.is_, held, now_held)) and \
+                contents == now_contents:
+            return []
+        out = [f"{label}.{key}" for (label, _, key), a, b in
+               zip(self._keys, held, now_held, strict=True) if a is not b]
+        out += [f"{label}.{key}" for (label, _, key), a, b in
+                zip(self._small, contents, now_contents, strict=True) if a != b]
+        out += [f"a new variable in {label}" for (label, _), a, b in
+                zip(self._spaces, sizes, now_sizes, strict=True) if a != b]
+        return list(dict.fromkeys(out))
+
+
+_MUTABLE = (list, dict, set, bytearray)
+
+
+def _is_data(key: str, value: Any) -> bool:
+    return not (key.startswith("__") or callable(value) or
+                isinstance(value, ModuleType | property | staticmethod | classmethod))
+
+
+def _copy(value: Any) -> Any:
+    return value.copy() if type(value) in _MUTABLE else value
 
 
 def environment_message(calls: Sequence[str]) -> str:

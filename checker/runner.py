@@ -36,6 +36,7 @@ from twinfleet.checker.diagnosis import (
     FIX_HIDDEN,
     FIX_STATE,
     EnvironmentProbe,
+    ScopeWatch,
     describe_difference,
     environment_message,
 )
@@ -86,6 +87,7 @@ class Runner:
         self.debug_state = debug_state
         self.verify = verify
         self._probe = EnvironmentProbe() if verify else None
+        self._scopes = [ScopeWatch(type(node)) for node in self.nodes] if verify else None
         self._current: list[bytes | None] = [None] * len(self.nodes)
         self._canon: dict[bytes, bytes] = {}
         self.hashed = 0  # events created: content hashes for the collision bound
@@ -170,6 +172,8 @@ class Runner:
         self.handler_runs += 1
         before = fingerprint(node) if self.debug_state else None
         attributes = dict(vars(node)) if self.verify else None
+        scope = None if self._scopes is None else self._scopes[i]
+        held = None if scope is None else scope.take()
         ctx = Context(node, ev.due, chooser)
         self._current[i] = None  # the state object is about to change
         probe = self._probe
@@ -179,6 +183,10 @@ class Runner:
         if probe is not None and probe.calls:
             return _failed(chooser, data, FailureKind.CONTRACT, node.name, ev.method,
                            environment_message(probe.calls))
+        if scope is not None and (stray := scope.changed(held)):
+            return _failed(chooser, data, FailureKind.STATE_OUTSIDE, node.name, ev.method,
+                           f"it changed {', '.join(stray)}, outside self.state; fix: "
+                           f"{FIX_STATE}")
         breach = self._breach(node, ev, attributes, before, outcome)
         if breach is not None:
             return _failed(chooser, data, *breach)

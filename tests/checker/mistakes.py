@@ -80,6 +80,26 @@ class ClassCounter(_Base):
         self.state.value = ClassCounter.seen
 
 
+class HiddenTally(_Base):
+    """One handler bumps a class-level tally, another reads it: re-running either alone
+    changes nothing, yet the tally is state."""
+
+    tally = 0
+
+    @on_start
+    def begin(self, ctx: Context) -> None:
+        ctx.after(10, self.bump)
+
+    @handler
+    def bump(self, ctx: Context) -> None:
+        HiddenTally.tally += 1
+        ctx.after(10, self.read)
+
+    @handler
+    def read(self, ctx: Context) -> None:
+        self.state.value = HiddenTally.tally > 1
+
+
 class WallClock(_Base):
     """Stores time.time() in its state."""
 

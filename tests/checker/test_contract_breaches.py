@@ -22,8 +22,9 @@ M = "tests.checker.mistakes"
 # (class, companion class or None, node named, handler named, words of the diagnosis)
 CASES = [
     ("RandomInStart", "Hello", "n1", "begin (@on_start)", "random.random()"),
-    ("GlobalCounter", None, "n1", "tick (@handler)", "self.state.value = 1 then 2"),
-    ("ClassCounter", None, "n1", "tick (@handler)", "running it twice"),
+    ("GlobalCounter", None, "n1", "tick (@handler)", "it changed tests.checker.mistakes.COUNTER"),
+    ("ClassCounter", None, "n1", "tick (@handler)", "it changed ClassCounter.seen"),
+    ("HiddenTally", None, "n1", "bump (@handler)", "it changed HiddenTally.tally"),
     ("WallClock", None, "n1", "stamp (@handler)", "time.time()"),
     ("BoundRandom", None, "n1", "roll (@handler)", "the new node state differs"),
     ("DateNow", None, "n1", "begin (@on_start)", "the new node state differs"),
