@@ -12,8 +12,8 @@ The result is a `checker.transition.Variant`, independent of the world, so
 the system can cache it.
 
 Every run is verified (`checker.diagnosis`): clocks and random sources are
-probed, the node's other attributes compared by identity, and the handler is
-run a second time from the same state with the same answers; a difference is
+probed, the node's other attributes compared by identity, the module and class
+variables of its code watched, and the handler is run a second time from the same state with the same answers; a difference is
 a contract breach. The system caches outcomes, so only new runs are verified.
 
 Equal node states are interned to one bytes object; the node object keeps
@@ -74,8 +74,9 @@ class Runner:
         rules: the enabling rules (latency, deadlines and faults of Rule 5).
         debug_state: detect handlers that change node attributes other than `state`, by
             value (slow: every attribute is encoded before and after each handler).
-        verify: probe clocks and random sources, compare attributes by identity, and run
-            every handler twice and compare (checker.diagnosis; on by default).
+        verify: probe clocks and random sources, compare attributes by identity, watch
+            module and class variables, and run every handler twice and compare
+            (checker.diagnosis; on by default).
     """
 
     def __init__(self, topology: Topology, rules: Rules, *, debug_state: bool = False,
