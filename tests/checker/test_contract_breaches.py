@@ -129,3 +129,17 @@ def test_the_probe_sees_only_the_handlers_thread_and_puts_everything_back():
         time.time()
     assert probe.calls == ["time.time", "random.choice"]  # in order, once each
     assert (time.time, time.monotonic, random.random, random.choice) == originals
+
+
+def test_the_console_script_reports_it_in_its_own_process(tmp_path):
+    import subprocess
+    import sys
+
+    from tests.support import ROOT, child_env
+
+    path = scenario_file(tmp_path, "RandomInStart", "Hello")
+    run = subprocess.run([sys.executable, "-m", "twinfleet", "check", str(path), "--quiet"],
+                         cwd=ROOT, env=child_env(), capture_output=True, text=True, timeout=50)
+    assert run.returncode == 4, run.stderr
+    assert "node n1, handler begin (@on_start): it called random.random()" in run.stderr
+    assert "Traceback" not in run.stderr and run.stdout == ""
