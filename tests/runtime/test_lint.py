@@ -82,3 +82,24 @@ def test_matching_names_give_no_topic_warnings():
 @pytest.mark.parametrize("name", sorted(shipped_scenarios()))
 def test_shipped_scenarios_are_silent(name):
     assert lint_scenario(load_scenario(name)) == []
+
+
+@pytest.mark.slow
+def test_launch_prints_the_warnings_before_the_fleet_starts(tmp_path):
+    import subprocess
+    import sys
+
+    import yaml
+
+    from tests.support import ROOT, child_env
+
+    path = tmp_path / "mistake.yaml"
+    path.write_text(yaml.safe_dump({"name": "mistake", "nodes": [
+        {"name": "n1", "class": "tests.checker.mistakes:Pinger"},
+        {"name": "n2", "class": "tests.checker.mistakes:Hello"}]}))
+    run = subprocess.run([sys.executable, "-m", "twinfleet", "launch", str(path), "--timeout",
+                          "0.5"], cwd=ROOT, env=child_env(), capture_output=True, text=True,
+                         timeout=60)
+    warnings = [line for line in run.stderr.splitlines() if line.startswith("warning:")]
+    assert any("mistakes.py:" in w and "imports random" in w for w in warnings), run.stderr
+    assert "Traceback" not in run.stderr
