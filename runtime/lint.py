@@ -105,16 +105,6 @@ def _module_warnings(tree: ast.Module, path: str) -> Iterator[LintWarning]:
 # ------------------------------------------------------------------ topics
 
 
-@final
-@dataclass(frozen=True, slots=True)
-class _Uses:
-    """The names one node class uses in its source: (pattern, line) per kind."""
-
-    published: tuple[tuple[str, int], ...]
-    called: tuple[tuple[str, int], ...]
-    file: str
-
-
 def lint_topics(nodes: Sequence[tuple[str, str, type[Node]]]) -> list[LintWarning]:
     """Topic and service warnings for nodes given as (name, namespace, class)."""
     subscribed: dict[str, str] = {}
@@ -130,14 +120,12 @@ def lint_topics(nodes: Sequence[tuple[str, str, type[Node]]]) -> list[LintWarnin
                 subscribed.setdefault(full, name)
             elif full:
                 served.add(full)
-        uses = _uses(cls)
         for topic in [*spec.publications, *getattr(cls, "tool_topics", ())]:
             published.append((_resolved(topic, namespace, name) or topic, name, "declared"))
-        for kind, found in (("publish", uses.published), ("call", uses.called)):
-            for pattern, line in found:
-                full = pattern if "*" in pattern else _resolved(pattern, namespace, name)
-                target = published if kind == "publish" else called
-                target.append((full or pattern, name, f"{uses.file}:{line}"))
+        for kind, pattern, where in _uses(cls):
+            full = pattern if "*" in pattern else _resolved(pattern, namespace, name)
+            target = published if kind == "publish" else called
+            target.append((full or pattern, name, where))
     tools = {_resolved(t, ns, n) for n, ns, cls in nodes for t in getattr(cls, "tool_topics", ())}
     out = _once_per_line([w for topic, node, where in published
                           if where != "declared" and topic not in tools
@@ -193,28 +181,25 @@ def _resolved(name: str | None, namespace: str, node: str) -> str | None:
         return None
 
 
-def _uses(cls: type[Node]) -> _Uses:
-    """The literal (or f-string pattern) names of `ctx.publish`/`ctx.call` in a class's
-    own source and its base classes' (up to `Node`)."""
-    published: list[tuple[str, int]] = []
-    called: list[tuple[str, int]] = []
-    file = "?"
-    for klass in cls.__mro__:
-        if klass is Node or not issubclass(klass, Node):
+def _uses(cls: type[Node]) -> list[tuple[str, str, str]]:
+    """(kind, name, file:line) of each `ctx.publish`/`ctx.call` in the methods `cls` has
+    (its own or inherited, overridden ones left out), with literal or f-string names."""
+    found: list[tuple[str, str, str]] = []
+    for _, fn in inspect.getmembers(cls, inspect.isfunction):
+        if fn.__module__.startswith("twinfleet.runtime"):
             continue
         try:
-            source = textwrap.dedent(inspect.getsource(klass))
-            _, first = inspect.getsourcelines(klass)
-            file = inspect.getsourcefile(klass) or file
-        except (OSError, TypeError):
+            lines, first = inspect.getsourcelines(fn)
+            file = inspect.getsourcefile(fn) or "?"
+            tree = ast.parse(textwrap.dedent("".join(lines)))
+        except (OSError, TypeError, SyntaxError):
             continue
-        for item in ast.walk(ast.parse(source)):
+        for item in ast.walk(tree):
             if isinstance(item, ast.Call) and isinstance(item.func, ast.Attribute) and \
                     item.func.attr in ("publish", "call") and item.args:
-                pattern = _pattern(item.args[0])
-                where = published if item.func.attr == "publish" else called
-                where.append((pattern, first + item.lineno - 1))
-    return _Uses(tuple(published), tuple(called), file)
+                found.append((item.func.attr, _pattern(item.args[0]),
+                              f"{file}:{first + item.lineno - 1}"))
+    return found
 
 
 def _pattern(arg: ast.expr) -> str:

@@ -74,6 +74,19 @@ class Right(Node):
         ctx.publish("/enter", String("r1"))
 
 
+class Corrected(Typist):
+    """Typist with the typo fixed in an override: the base's publish is not used."""
+
+    @on_start
+    def begin(self, ctx: Context) -> None:
+        ctx.publish("/enter", String("r1"))
+
+
+def test_an_overridden_method_is_not_read():
+    warnings = _warnings(NodeEntry("fixed", Corrected), NodeEntry("door", Door))
+    assert not [w for w in warnings if "/entr " in w or "/is_fre " in w]
+
+
 def test_matching_names_give_no_topic_warnings():
     warnings = _warnings(NodeEntry("right", Right), NodeEntry("door", Door))
     assert not [w for w in warnings if "/enter" in w]
