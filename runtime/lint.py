@@ -25,6 +25,7 @@ from __future__ import annotations
 import ast
 import difflib
 import fnmatch
+import functools
 import inspect
 import sys
 import textwrap
@@ -70,12 +71,18 @@ def lint_nodes(classes: Sequence[type[Node]]) -> list[LintWarning]:
         if path is None or path in seen or not path.endswith(".py"):
             continue
         seen.add(path)
-        try:
-            tree = ast.parse(Path(path).read_text(), filename=path)
-        except (OSError, SyntaxError, UnicodeDecodeError):
-            continue
-        out += _module_warnings(tree, path)
+        out += _module_lint(path)
     return out
+
+
+@functools.cache
+def _module_lint(path: str) -> list[LintWarning]:
+    """The import and `global` warnings of one source file (read once per process)."""
+    try:
+        tree = ast.parse(Path(path).read_text(), filename=path)
+    except (OSError, SyntaxError, UnicodeDecodeError, SystemError, RecursionError):
+        return []
+    return list(_module_warnings(tree, path))
 
 
 def _module_warnings(tree: ast.Module, path: str) -> Iterator[LintWarning]:
@@ -181,6 +188,7 @@ def _resolved(name: str | None, namespace: str, node: str) -> str | None:
         return None
 
 
+@functools.cache
 def _uses(cls: type[Node]) -> list[tuple[str, str, str]]:
     """(kind, name, file:line) of each `ctx.publish`/`ctx.call` in the methods `cls` has
     (its own or inherited, overridden ones left out), with literal or f-string names."""
@@ -192,8 +200,9 @@ def _uses(cls: type[Node]) -> list[tuple[str, str, str]]:
             lines, first = inspect.getsourcelines(fn)
             file = inspect.getsourcefile(fn) or "?"
             tree = ast.parse(textwrap.dedent("".join(lines)))
-        except (OSError, TypeError, SyntaxError):
-            continue
+        except (OSError, TypeError, SyntaxError, SystemError, RecursionError):
+            continue  # SystemError: CPython 3.11's parser, called deep in a stack (a lint
+            # that cannot read a method says nothing about it)
         for item in ast.walk(tree):
             if isinstance(item, ast.Call) and isinstance(item.func, ast.Attribute) and \
                     item.func.attr in ("publish", "call") and item.args:
