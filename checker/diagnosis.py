@@ -10,7 +10,7 @@ replay). Two cheap checks run in every search, by default:
 - **Environment probe.** While a handler runs, the clocks and random sources
   of the standard library (`time.time`, `time.monotonic`, `time.sleep`,
   `random.random` and every other function of the module's shared generator,
-  `os.urandom`, `uuid.uuid1`/`uuid4`, `secrets`) are wrapped so that a call
+  `os.urandom`, `uuid.uuid1`/`uuid4`, `secrets`, `numpy.random`) are wrapped so that a call
   from the handler's thread is recorded (the real function still answers).
   Installed only around the handler call, so nothing else sees the wrappers.
   It names the function, so the fix is exact; it cannot see a name bound
@@ -49,6 +49,8 @@ from collections.abc import Callable, Sequence
 from types import ModuleType
 from typing import Any, final
 
+import numpy as np
+
 from twinfleet.runtime.kinds import FailureKind
 from twinfleet.runtime.snapshot import SnapshotError, restore
 
@@ -61,6 +63,8 @@ _CLOCKS = ("time", "time_ns", "monotonic", "monotonic_ns", "perf_counter", "perf
            "gmtime", "ctime", "asctime", "sleep")
 _RANDOM = tuple(name for name in random.__all__
                 if getattr(getattr(random, name, None), "__self__", None) is random._inst)
+_NUMPY_RANDOM = ("random", "rand", "randn", "randint", "random_sample", "choice", "shuffle",
+                 "permutation", "uniform", "normal", "default_rng")
 _SECRETS = ("token_bytes", "token_hex", "token_urlsafe", "randbelow", "randbits", "choice")
 
 FIX_RANDOM = ("take random decisions with ctx.choose(options): live it picks one, the checker "
@@ -122,7 +126,8 @@ class EnvironmentProbe:
 
 def _sources() -> list[tuple[ModuleType, str, Sequence[str]]]:
     return [(time, "time", _CLOCKS), (random, "random", _RANDOM), (os, "os", ("urandom",)),
-            (uuid, "uuid", ("uuid1", "uuid4")), (secrets, "secrets", _SECRETS)]
+            (uuid, "uuid", ("uuid1", "uuid4")), (secrets, "secrets", _SECRETS),
+            (np.random, "numpy.random", _NUMPY_RANDOM)]
 
 
 _SMALL = 64  # mutable module/class containers up to this size are compared by content

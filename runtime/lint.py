@@ -6,7 +6,7 @@ errors (the checker's contract checks, `checker.diagnosis`, are what decide):
 
 - **Imports.** A node module that imports `random`, `time`, `datetime`,
   `threading`, `secrets`, `uuid`, `asyncio`, `socket`, `multiprocessing`, or
-  `os.urandom`, or a node method with a `global` statement, is named with file
+  uses `os.urandom` or `numpy.random`, or a node method with a `global` statement, is named with file
   and line: a handler that uses them breaks the node contract (DESIGN.md §2).
 - **Topics and services.** Topics a node publishes (literal names of
   ``ctx.publish``; an f-string is a pattern, ``f"/{robot}/scan"`` matches
@@ -46,6 +46,9 @@ RISKY_MODULES = {
     "asyncio": "an event loop (handlers are synchronous)", "socket": "I/O",
     "multiprocessing": "processes",
 }
+_RISKY_ATTRIBUTES = {("os", "urandom"): "os.urandom", ("np", "random"): "numpy.random",
+                     ("numpy", "random"): "numpy.random"}
+_RISKY_NAMES = frozenset(_RISKY_ATTRIBUTES.values())
 _FLEET_TOPICS = ("/twinfleet/*", "/violations", "/_*")
 
 
@@ -92,16 +95,16 @@ def _module_warnings(tree: ast.Module, path: str) -> Iterator[LintWarning]:
             names = [alias.name for alias in item.names]
         elif isinstance(item, ast.ImportFrom) and item.module and item.level == 0:
             names = [item.module] + [f"{item.module}.{a.name}" for a in item.names]
-        elif isinstance(item, ast.Attribute) and item.attr == "urandom" and \
-                isinstance(item.value, ast.Name) and item.value.id == "os":
-            names = ["os.urandom"]
+        elif isinstance(item, ast.Attribute) and isinstance(item.value, ast.Name) and \
+                (item.value.id, item.attr) in _RISKY_ATTRIBUTES:
+            names = [_RISKY_ATTRIBUTES[item.value.id, item.attr]]
         elif isinstance(item, ast.Global):
             yield LintWarning(f"{path}:{item.lineno}", f"`global {', '.join(item.names)}`: "
                               "a node that keeps state in module variables breaks the node "
                               "contract (keep it in self.state)")
         for name in names:
             top = name.split(".")[0]
-            if name == "os.urandom" or (top in RISKY_MODULES and name == top):
+            if name in _RISKY_NAMES or (top in RISKY_MODULES and name == top):
                 what = RISKY_MODULES.get(top, "randomness (use ctx.choose)")
                 yield LintWarning(f"{path}:{item.lineno}",
                                   f"imports {name}: {what}; a handler that uses it breaks the "

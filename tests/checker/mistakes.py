@@ -16,6 +16,8 @@ from dataclasses import dataclass
 from random import random as bound_random
 from typing import Any
 
+import numpy as np
+
 from twinfleet import Context, Node, String, handler, on_start, service, subscribe
 
 COUNTER = [0]  # a module-level counter: state outside self.state
@@ -166,6 +168,14 @@ class Urandom(_Base):
     @on_start
     def begin(self, ctx: Context) -> None:
         self.state.value = os.urandom(4)
+
+
+class NumpyRandom(_Base):
+    """Draws from numpy's global generator."""
+
+    @on_start
+    def begin(self, ctx: Context) -> None:
+        self.state.value = float(np.random.random())
 
 
 class LambdaTimer(_Base):

@@ -31,6 +31,7 @@ CASES = [
     ("Sleeper", None, "n1", "begin (@on_start)", "time.sleep()"),
     ("UuidCaller", "UuidServer", "server", "ident (@service)", "uuid.uuid4()"),
     ("Urandom", None, "n1", "begin (@on_start)", "os.urandom()"),
+    ("NumpyRandom", None, "n1", "begin (@on_start)", "numpy.random.random()"),
     ("LambdaTimer", None, "n1", "begin (@on_start)", "never a lambda"),
     ("UnhashableArgs", None, "n1", "begin (@on_start)", "must be hashable"),
     ("ObjectInState", None, "n1", "begin (@on_start)", "cannot be encoded"),
@@ -84,7 +85,7 @@ def test_the_lint_names_the_risky_imports_with_file_and_line(tmp_path, capsys):
     warnings = [x for x in capsys.readouterr().err.splitlines() if x.startswith("warning:")]
     source = Path(__file__).with_name("mistakes.py")
     lines = source.read_text().splitlines()
-    for module in ("random", "time", "datetime", "uuid", "os.urandom"):
+    for module in ("random", "time", "datetime", "uuid", "os.urandom", "numpy.random"):
         hits = [w for w in warnings if f"imports {module}:" in w]
         assert hits, module
         for hit in hits:
