@@ -70,7 +70,7 @@ def register(subparsers: Any) -> None:
     p.add_argument("--no-contract-checks", dest="verify", action="store_false",
                    help="skip the node-contract checks that run by default (clocks and "
                    "random sources probed, attributes outside self.state compared, every "
-                   "new handler run run twice and compared; about 20%% of the search time "
+                   "new handler run run twice and compared; 20-40%% of the search time "
                    "on c1a). A breach ends the check with one line naming node, handler, "
                    "what differed and the fix, exit 4")
     p.add_argument("--exact-states", action="store_true",
