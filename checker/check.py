@@ -2,7 +2,9 @@
 
 Exit codes of a `CheckResult`: 0 every property holds, 1 a property is
 violated, 2 no answer (a limit was reached, the search was interrupted, or
-random walks found nothing, which proves nothing). Bad input raises before
+random walks found nothing, which proves nothing), 4 a node breaks the node
+contract (`checker.diagnosis`: no verdict, one line naming node, handler,
+what differed and the fix, in `CheckResult.breach`). Bad input raises before
 a result exists (`ScenarioError`, `PropertyError`, `NodeDefinitionError`).
 The search always stops at the first violation (RMC does the same, R11), so
 the scenario key `check.stop_at_first` is accepted but has no other value.
@@ -23,12 +25,21 @@ from typing import Any, final
 
 from twinfleet.checker import checkpoint as ckpt
 from twinfleet.checker.checkpoint import CheckpointError
-from twinfleet.checker.outcome import HOLDS, VIOLATED, Limits, SearchStatistics
+from twinfleet.checker.diagnosis import (
+    CONTRACT_KINDS,
+    FIX_HIDDEN,
+    ContractBreachError,
+    breach_line,
+)
+from twinfleet.checker.outcome import BREACH, HOLDS, VIOLATED, Limits, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
 from twinfleet.runtime.config import SEARCHES, CheckConfig
+from twinfleet.runtime.kinds import FailureKind
+from twinfleet.runtime.lint import lint_scenario
+from twinfleet.runtime.node import NodeSpec
 from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario
 from twinfleet.runtime.tracefile import write_trace
 
@@ -51,6 +62,7 @@ class CheckOptions:
     exact_states: bool = False
     check_determinism: bool = False
     transition_cache: bool = True
+    verify: bool = True
     checkpoint: str | None = None
     checkpoint_every_s: float = 300.0
     resume: str | None = None
@@ -74,6 +86,8 @@ class CheckResult:
     trace_path: str | None = None
     checkpoint: str | None = None
     resumed_from: str | None = None
+    breach: str | None = None  # the one-line diagnosis of a contract breach
+    warnings: list[str] = field(default_factory=list)  # load-time lint (runtime.lint)
 
     @property
     def rmc_transitions(self) -> int:
@@ -82,15 +96,16 @@ class CheckResult:
 
     @property
     def exit_code(self) -> int:
-        """0 holds, 1 violated, 2 no answer."""
-        return {HOLDS: 0, VIOLATED: 1}.get(self.status, 2)
+        """0 holds, 1 violated, 2 no answer, 4 a node breaks the node contract."""
+        return {HOLDS: 0, VIOLATED: 1, BREACH: 4}.get(self.status, 2)
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready record of the result."""
         s = self.statistics
         return {
             "scenario": self.scenario, "semantics": self.semantics, "search": self.search,
-            "verdict": self.status, "reason": self.reason,
+            "verdict": self.status, "reason": self.reason, "breach": self.breach,
+            "warnings": self.warnings,
             "violation": None if self.violation is None else {
                 "property": self.violation.property, "kind": self.violation.kind,
                 "message": self.violation.message, "shape": self.violation.shape},
@@ -111,6 +126,8 @@ class CheckResult:
         s = self.statistics
         if self.status == HOLDS:
             verdict = "HOLDS: every property holds"
+        elif self.status == BREACH:
+            verdict = f"CONTRACT BREACH (no verdict): {self.breach}"
         elif self.status == VIOLATED and self.violation is not None:
             verdict = f"VIOLATED {self.violation.property}: {self.violation.message}"
         else:
@@ -199,6 +216,7 @@ def check(scenario: str | Path | Scenario | None,
     if path is None and options.checkpoint is not None:
         raise ScenarioError(f"{scenario.source}: a checkpoint needs a scenario file")
     props = PropertySet.from_scenario(scenario)
+    warnings = [str(w) for w in lint_scenario(scenario)]
     flags = {key: meta.get(key, getattr(options, key)) for key in _SEARCH_FLAGS}
     system = System(scenario, monitors=props, **flags)
     strategy = meta.get("strategy") or options.search or scenario.check.search
@@ -214,23 +232,70 @@ def check(scenario: str | Path | Scenario | None,
     if data is not None:
         search.restore(data)
     seed = options.seed if options.seed is not None else scenario.seed
-    outcome = search.run(strategy, walks=options.walks, seed=seed)
-    names = props.names()
-    if system.check_determinism:
-        names.append("determinism (every transition run twice and compared)")
+    try:
+        outcome = search.run(strategy, walks=options.walks, seed=seed)
+    except ContractBreachError as exc:  # found while rebuilding a path (checker.graph)
+        return _breach_result(scenario, system, strategy, props, str(exc), search, warnings)
+    if outcome.violation is not None and (breach := _breach_of(system, outcome.violation)):
+        return _breach_result(scenario, system, strategy, props, breach, search, warnings)
     result = CheckResult(scenario.source, system.semantics.value, strategy, outcome.status,
-                         outcome.reason, names, outcome.statistics, outcome.violation,
-                         checkpoint=outcome.checkpoint, resumed_from=options.resume)
+                         outcome.reason, _property_names(system, props), outcome.statistics,
+                         outcome.violation, checkpoint=outcome.checkpoint,
+                         resumed_from=options.resume, warnings=warnings)
     if outcome.violation is not None and outcome.counterexample is not None:
-        result.trace = build_trace(system, outcome.violation, outcome.counterexample,
-                                   scenario_path=meta["scenario"], search=strategy)
+        try:
+            result.trace = build_trace(system, outcome.violation, outcome.counterexample,
+                                       scenario_path=meta["scenario"], search=strategy)
+        except IndexError:  # the path's events are not there when it runs again
+            return _breach_result(scenario, system, strategy, props, breach_line(
+                FailureKind.NONDETERMINISM, "", "(unknown)", "the counterexample does not run "
+                "again from its initial world: some handler depends on something outside "
+                "self.state" + ("" if system.runner.verify else " (the contract checks were "
+                                "off: rerun without --no-contract-checks to name it)") +
+                f"; fix: {FIX_HIDDEN}"), search, warnings)
         if options.trace_out:
             write_trace(result.trace, options.trace_out)
             result.trace_path = options.trace_out
     return result
 
 
-_SEARCH_FLAGS = ("debug_state", "exact_states", "check_determinism", "transition_cache")
+def _property_names(system: System, props: PropertySet) -> list[str]:
+    names = props.names()
+    if system.runner.verify:
+        names.append("node contract (new handler runs probed and run twice)" if not
+                     system.check_determinism else
+                     "node contract (every transition probed and run twice)")
+    return names
+
+
+_DECORATORS = {"start": "on_start"}  # HandlerSpec.kind -> the decorator's name
+
+
+def _breach_of(system: System, violation: PropertyViolation) -> str | None:
+    """The one-line diagnosis of a violation that is a contract breach, or None."""
+    failure = violation.failure
+    if failure is None or failure.kind not in CONTRACT_KINDS:
+        return None
+    handler = failure.handler
+    if failure.node in system.index:  # name the decorator too: "go (@on_start)"
+        node = system.nodes[system.index[failure.node]]
+        spec = NodeSpec.of(type(node)).by_method(handler)
+        if spec is not None:
+            handler = f"{handler} (@{_DECORATORS.get(spec.kind, spec.kind)})"
+    return breach_line(failure.kind, failure.node, handler, failure.message)
+
+
+def _breach_result(scenario: Scenario, system: System, strategy: str, props: PropertySet,
+                   breach: str, search: Search, warnings: list[str]) -> CheckResult:
+    """The result of a search stopped by a node that breaks the contract (exit 4): no
+    verdict, and no trace, since a breach is not a path the nodes would take again."""
+    return CheckResult(scenario.source, system.semantics.value, strategy, BREACH,
+                       "a node breaks the node contract", _property_names(system, props),
+                       search.statistics(), breach=breach, warnings=warnings)
+
+
+_SEARCH_FLAGS = ("debug_state", "exact_states", "check_determinism", "transition_cache",
+                 "verify")
 
 
 def _scenario_file(scenario: str | Path | Scenario | None) -> Path | None:

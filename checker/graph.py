@@ -14,12 +14,14 @@ violation and the `Counterexample` a search reports.
 
 from __future__ import annotations
 
+from twinfleet.checker.diagnosis import FIX_HIDDEN, ContractBreachError, breach_line
 from twinfleet.checker.outcome import Counterexample
 from twinfleet.checker.properties import Property, PropertyViolation
 from twinfleet.checker.store import StateStore
 from twinfleet.checker.system import System
 from twinfleet.checker.transition import Step, Transition
 from twinfleet.checker.world import World
+from twinfleet.runtime.kinds import FailureKind
 
 _GREY, _BLACK = 1, 2
 
@@ -41,8 +43,11 @@ def _successor_to(system: System, store: StateStore, world: World, sid: int) -> 
     for t in system.successors(world):
         if t.failure is None and store.find(t.world.key) == sid:
             return t
-    raise RuntimeError("a recorded edge cannot be re-executed: the model is nondeterministic "
-                       "(rerun with --check-determinism or --debug-state)")
+    raise ContractBreachError(breach_line(
+        FailureKind.NONDETERMINISM, "", "(unknown)", "a path the search recorded does not "
+        "run again from its initial world: some handler depends on something outside "
+        f"self.state that the checks of single runs did not catch; rerun with "
+        f"--check-determinism (every transition verified) to name it; fix: {FIX_HIDDEN}"))
 
 
 def lasso_counterexample(system: System, store: StateStore, prop: Property

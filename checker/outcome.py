@@ -23,6 +23,7 @@ from twinfleet.checker.properties import PropertyViolation
 from twinfleet.checker.transition import Step
 
 HOLDS, VIOLATED, UNKNOWN = "holds", "violated", "unknown"
+BREACH = "contract breach"  # a node breaks the node contract: no verdict (checker.diagnosis)
 INTERRUPTED = "interrupted (Ctrl-C)"
 
 

@@ -68,6 +68,7 @@ FAILURE_PROPERTIES: dict[FailureKind, str] = {
     FailureKind.STATE_OUTSIDE: "debug_state",
     FailureKind.DEADLINE: "deadline",
     FailureKind.NONDETERMINISM: "determinism",
+    FailureKind.CONTRACT: "node_contract",
 }
 
 

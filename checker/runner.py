@@ -11,6 +11,11 @@ branches of `checker.semantics` (Rule 5). Node code is never special-cased.
 The result is a `checker.transition.Variant`, independent of the world, so
 the system can cache it.
 
+Every run is verified (`checker.diagnosis`): clocks and random sources are
+probed, the node's other attributes compared by identity, the module and class
+variables of its code watched, and the handler is run a second time from the same state with the same answers; a difference is
+a contract breach. The system caches outcomes, so only new runs are verified.
+
 Equal node states are interned to one bytes object; the node object keeps
 the last state it was given, so running several events of one node in a row
 restores nothing.
@@ -18,32 +23,46 @@ restores nothing.
 
 from __future__ import annotations
 
+import contextlib
+import re
 from collections.abc import Sequence
 from typing import Any, final
 
 from twinfleet.checker.choices import ChoiceMismatch, Chooser, PrefixChooser
+from twinfleet.checker.diagnosis import (
+    CONTRACT_KINDS,
+    FIX_CONTEXT,
+    FIX_ENCODABLE,
+    FIX_HIDDEN,
+    FIX_STATE,
+    EnvironmentProbe,
+    ScopeWatch,
+    describe_difference,
+    environment_message,
+)
 from twinfleet.checker.semantics import Rules
 from twinfleet.checker.topology import Topology
 from twinfleet.checker.transition import (
     Failure,
     Variant,
     changed_attributes,
-    difference,
     fingerprint,
 )
 from twinfleet.checker.world import ENVIRONMENT, Event
-from twinfleet.runtime.context import After, Call, Context, Fail, Log, Publish
-from twinfleet.runtime.dispatch import run_handler
+from twinfleet.runtime.context import After, Call, Context, ContractError, Fail, Log, Publish
+from twinfleet.runtime.dispatch import HandlerOutcome, run_handler
 from twinfleet.runtime.kinds import EventKind, FailureKind
 from twinfleet.runtime.messages import CallError
 from twinfleet.runtime.node import Node
 from twinfleet.runtime.snapshot import SnapshotError, restore, snapshot
 
 _INTERN_LIMIT = 100_000  # interned node states kept before starting afresh
-
-CAUSES = (". Likely causes: the handler reads the wall clock or `time`, uses `random`, "
-          "iterates a set of strings (order depends on PYTHONHASHSEED), or keeps state outside "
-          "self.state (rerun with --debug-state)")
+CONTRACT_ERROR = f"{ContractError.__name__}:"  # how runtime.dispatch words a ContractError
+# failures not to verify by a second run: breaches already, or a forced answer that the
+# run does not offer (a trace that does not fit)
+_UNVERIFIED = CONTRACT_KINDS | {FailureKind.CHOICE_MISMATCH}
+_NO_PROBE = contextlib.nullcontext()
+_ADDRESS = re.compile(r" at 0x[0-9a-f]+")  # object addresses differ between two runs
 
 
 @final
@@ -53,22 +72,28 @@ class Runner:
     Args:
         topology: the scenario's node graph.
         rules: the enabling rules (latency, deadlines and faults of Rule 5).
-        debug_state: detect handlers that change node attributes other than `state`.
-        check_determinism: run every handler twice and report a difference.
+        debug_state: detect handlers that change node attributes other than `state`, by
+            value (slow: every attribute is encoded before and after each handler).
+        verify: probe clocks and random sources, compare attributes by identity, watch
+            module and class variables, and run every handler twice and compare
+            (checker.diagnosis; on by default).
     """
 
     def __init__(self, topology: Topology, rules: Rules, *, debug_state: bool = False,
-                 check_determinism: bool = False) -> None:
+                 verify: bool = True) -> None:
         self.topology = topology
         self.rules = rules
         self.nodes: tuple[Node, ...] = topology.nodes
         self.names = tuple(node.name for node in self.nodes)
         self.debug_state = debug_state
-        self.check_determinism = check_determinism
+        self.verify = verify
+        self._probe = EnvironmentProbe() if verify else None
+        self._scopes = [ScopeWatch(type(node)) for node in self.nodes] if verify else None
         self._current: list[bytes | None] = [None] * len(self.nodes)
         self._canon: dict[bytes, bytes] = {}
         self.hashed = 0  # events created: content hashes for the collision bound
-        self.handler_runs = 0  # handlers actually run
+        self.handler_runs = 0  # handlers actually run (re-executions included)
+        self.reruns = 0  # re-executions that verified a run (checker.diagnosis)
 
     def interned(self) -> int:
         """How many node-state encodings are interned."""
@@ -81,19 +106,8 @@ class Runner:
     # ---------------------------------------------------------------- runs
 
     def run(self, ev: Event, data: bytes, chooser: Chooser) -> Variant:
-        """Run `ev`'s handler on node state `data`; with `check_determinism` run it again
-        with the same choices and report a difference."""
-        v = self._exec(ev, data, chooser)
-        if not self.check_determinism:
-            return v
-        self._current[ev.target] = None  # restore the node state from the bytes again
-        diff = difference(v, self._exec(ev, data, PrefixChooser(v.choices)))
-        if diff is None:
-            return v
-        failure = Failure(FailureKind.NONDETERMINISM, self.names[ev.target], ev.method,
-                          f"running it twice from the same state gave different results: {diff}"
-                          + CAUSES)
-        return Variant(v.choices, v.options, data, (), failure, v.logs, v.faults)
+        """Run `ev`'s handler on node state `data` (verified unless `verify` is off)."""
+        return self._checked(ev, data, chooser)
 
     def deadline_miss(self, ev: Event, data: bytes) -> Variant:
         """Taking `ev` after its deadline (Rule 5): nothing runs, the step fails."""
@@ -105,27 +119,15 @@ class Runner:
         failure = Failure(FailureKind.DEADLINE, names[ev.target], ev.method, message)
         return Variant((), (), data, (), failure)
 
-    def restart(self, j: int, data: bytes, now: int, chooser: Chooser) -> Variant:
-        """`start` after a crash fault (Rule 5); checked twice with `check_determinism`."""
-        v = self.start(j, data, now, chooser)
-        if not self.check_determinism:
-            return v
-        self._current[j] = None
-        diff = difference(v, self.start(j, data, now, PrefixChooser(v.choices)))
-        if diff is None:
-            return v
-        failure = Failure(FailureKind.NONDETERMINISM, self.names[j], "on_start",
-                          f"restarting it twice gave different results: {diff}" + CAUSES)
-        return Variant(v.choices, v.options, v.state, (), failure, v.logs, v.faults)
-
     def start(self, j: int, data: bytes, now: int, chooser: Chooser) -> Variant:
-        """Node `j` started at `now` from state `data`: the first firing of each periodic
-        timer, then every `@on_start` run in declaration order (until one fails)."""
+        """Node `j` started at `now` from state `data` (also its restart after a crash
+        fault): the first firing of each periodic timer, then every `@on_start` run in
+        declaration order (until one fails)."""
         topology = self.topology
         events = list(topology.periodic(j, now))
         failure, logs, faults, branches = None, [], [], []
         for spec in topology.starts(j):
-            v = self._exec(topology.start_event(j, spec, now), data, chooser)
+            v = self._checked(topology.start_event(j, spec, now), data, chooser)
             data, failure = v.state, v.failure
             events += v.events
             logs += v.logs
@@ -135,6 +137,26 @@ class Runner:
                 break
         return Variant(tuple(chooser.indices), tuple(chooser.options), data, tuple(events),
                        failure, tuple(logs), tuple(faults), tuple(branches))
+
+    def _checked(self, ev: Event, data: bytes, chooser: Chooser) -> Variant:
+        """`_exec`, then (with `verify`) once more from the same state with the same
+        answers: a difference is a contract breach (checker.diagnosis)."""
+        first = len(chooser.indices)  # start handlers share one chooser
+        v = self._exec(ev, data, chooser)
+        if not self.verify or (v.failure is not None and v.failure.kind in _UNVERIFIED):
+            return v
+        self.reruns += 1
+        self._current[ev.target] = None  # restore the node state from the bytes again
+        again = self._exec(ev, data, PrefixChooser(v.choices[first:]))
+        a, b = _comparable(v, first), _comparable(again, 0)
+        if a == b and v.logs == again.logs:
+            return v
+        diff = (describe_difference((v.state, v.events, a[2], a[3]),
+                                    (again.state, again.events, b[2], b[3]))
+                if a != b else "the ctx.log records differ")
+        return _failed(chooser, data, FailureKind.NONDETERMINISM, self.names[ev.target],
+                       ev.method, f"running it twice from the same state gave different "
+                       f"results: {diff}; fix: {FIX_HIDDEN}")
 
     def _load(self, i: int, data: bytes) -> Node:
         node = self.nodes[i]
@@ -150,27 +172,36 @@ class Runner:
         node = self._load(i, data)
         self.handler_runs += 1
         before = fingerprint(node) if self.debug_state else None
+        attributes = dict(vars(node)) if self.verify else None
+        scope = None if self._scopes is None else self._scopes[i]
+        held = None if scope is None else scope.take()
         ctx = Context(node, ev.due, chooser)
         self._current[i] = None  # the state object is about to change
-        outcome = run_handler(node, ev.method, ctx, ev.args,
-                              expects_reply=ev.kind is EventKind.REQUEST)
+        probe = self._probe
+        with probe or _NO_PROBE:
+            outcome = run_handler(node, ev.method, ctx, ev.args,
+                                  expects_reply=ev.kind is EventKind.REQUEST)
+        if probe is not None and probe.calls:
+            return _failed(chooser, data, FailureKind.CONTRACT, node.name, ev.method,
+                           environment_message(probe.calls))
+        if scope is not None and (stray := scope.changed(held)):
+            return _failed(chooser, data, FailureKind.STATE_OUTSIDE, node.name, ev.method,
+                           f"it changed {', '.join(stray)}, outside self.state; fix: "
+                           f"{FIX_STATE}")
+        breach = self._breach(node, ev, attributes, before, outcome)
+        if breach is not None:
+            return _failed(chooser, data, *breach)
         if chooser.mismatch is not None:  # even if the handler caught the exception
             return _failed(chooser, data, FailureKind.CHOICE_MISMATCH, node.name, ev.method,
                            str(chooser.mismatch))
         if outcome.error is not None:
             return _failed(chooser, data, FailureKind.HANDLER, node.name, ev.method,
                            outcome.error.message, outcome.error.traceback)
-        if before is not None:
-            stray = changed_attributes(before, fingerprint(node))
-            if stray:
-                return _failed(chooser, data, FailureKind.STATE_OUTSIDE, node.name, ev.method,
-                               f"handler changed attribute(s) {', '.join(stray)} outside "
-                               "self.state")
         try:
             new = snapshot(node.state)
         except SnapshotError as exc:
-            return _failed(chooser, data, FailureKind.HANDLER, node.name, ev.method,
-                           f"state cannot be snapshot: {exc}")
+            return _failed(chooser, data, FailureKind.CONTRACT, node.name, ev.method,
+                           f"its new state cannot be encoded ({exc}); fix: {FIX_ENCODABLE}")
         new = data if new == data else self._intern(new)
         self._current[i] = new
         handler_end = len(chooser.indices)
@@ -183,6 +214,31 @@ class Runner:
         indices = tuple(chooser.indices)
         return Variant(indices, tuple(chooser.options), new, tuple(events), failure,
                        tuple(logs), tuple(faults), tuple(range(handler_end, len(indices))))
+
+    def _breach(self, node: Node, ev: Event, attributes: dict[str, Any] | None,
+                before: dict[str, bytes] | None, outcome: HandlerOutcome
+                ) -> tuple[FailureKind, str, str, str] | None:
+        """A contract breach of one handler run: a misused ctx, or attributes other than
+        `state` that changed (by identity; with `debug_state`, by value)."""
+        error = outcome.error
+        if error is not None and error.message.startswith(CONTRACT_ERROR):
+            return (FailureKind.CONTRACT, node.name, ev.method,
+                    f"{error.message}; fix: {FIX_CONTEXT}")
+        if attributes is not None:
+            now = vars(node)
+            stray = sorted(k for k in attributes.keys() | now.keys()
+                           if k != "state" and attributes.get(k) is not now.get(k))
+            if stray:
+                return (FailureKind.STATE_OUTSIDE, node.name, ev.method,
+                        f"it changed {', '.join('self.' + k for k in stray)}, outside "
+                        f"self.state; fix: {FIX_STATE}")
+        if before is not None:
+            stray = changed_attributes(before, fingerprint(node))
+            if stray:
+                return (FailureKind.STATE_OUTSIDE, node.name, ev.method,
+                        f"handler changed attribute(s) {', '.join(stray)} outside "
+                        f"self.state; fix: {FIX_STATE}")
+        return None
 
     def _intern(self, data: bytes) -> bytes:
         """The one bytes object kept for this node-state encoding."""
@@ -255,6 +311,13 @@ class Runner:
         due, deadline = self.rules.delivery(now, name, chooser)
         return Event(due, kind, target, method, sender, args, priority, reply_to,
                      deadline=deadline)
+
+
+def _comparable(v: Variant, first: int) -> tuple[Any, ...]:
+    """What two runs of one handler must agree on (choices from position `first`)."""
+    failure = None if v.failure is None else (
+        v.failure.kind, _ADDRESS.sub("", v.failure.message))
+    return v.state, [(e.sk, e.deadline) for e in v.events], failure, v.choices[first:]
 
 
 def _failed(chooser: Chooser, data: bytes, kind: FailureKind, node: str, method: str,

@@ -30,9 +30,12 @@ the search order it keeps at most two generations of 1,024 outcomes
 range of times, and outcomes not used for a generation are rarely used again.
 Equal node states are interned to one bytes object, hashed once (`World.key`,
 `checker.builder`).
-The cache is off under `debug_state` and `check_determinism`, which must
-really run every transition; `transition_cache=False` turns it off for
-comparison.
+Every handler run that is not a cache hit is verified (`checker.diagnosis`:
+clocks and random sources probed, run twice and compared), so a node that
+breaks the contract is found in every search at the cost of one extra run per
+distinct (node state, event, time). The cache is off under `debug_state` and
+`check_determinism`, which must really run (and verify) every transition;
+`transition_cache=False` turns it off for comparison.
 
 Faults, deadlines and latency follow `checker.faults` and Rule 5 of
 `checker.semantics`; crash actions are listed after the event actions of a
@@ -47,8 +50,9 @@ from typing import TYPE_CHECKING, Any, final
 from twinfleet.checker.builder import WorldBuilder
 from twinfleet.checker.cache import GenerationCache
 from twinfleet.checker.choices import Chooser, PrefixChooser
+from twinfleet.checker.diagnosis import FIX_HIDDEN
 from twinfleet.checker.faults import parse_settings
-from twinfleet.checker.runner import CAUSES, Runner
+from twinfleet.checker.runner import Runner
 from twinfleet.checker.semantics import Rules, Semantics
 from twinfleet.checker.topology import Topology
 from twinfleet.checker.transition import (
@@ -94,15 +98,18 @@ class System:
         debug_state: detect handlers that change node attributes other than `state`.
         monitors: property monitors (`checker.properties.PropertySet`) kept in worlds.
         exact_states: key worlds by their 128-bit digest (`World.digest`).
-        check_determinism: run every transition twice and report a difference.
+        check_determinism: verify every transition, not only new handler runs (turns the
+            transition cache off).
         transition_cache: reuse handler outcomes (see the module docstring).
+        verify: verify every new handler run (`checker.diagnosis`; implied by
+            `check_determinism`).
     """
 
     def __init__(self, scenario: Scenario, *, semantics: Semantics | str | None = None,
                  latency: tuple[int, int] | None = None, global_priority: bool | None = None,
                  debug_state: bool = False, monitors: PropertySet | None = None,
                  exact_states: bool = False, check_determinism: bool = False,
-                 transition_cache: bool = True) -> None:
+                 transition_cache: bool = True, verify: bool = True) -> None:
         self.scenario = scenario
         self.topology = Topology([cfg.instantiate() for cfg in scenario.nodes], scenario.path)
         self.nodes = self.topology.nodes
@@ -124,7 +131,7 @@ class System:
         self.exact_states = exact_states
         self.monitors = monitors
         self.runner = Runner(self.topology, self.rules, debug_state=debug_state,
-                             check_determinism=check_determinism)
+                             verify=verify or check_determinism)
         self._memo: GenerationCache[list[Variant]] | None = (
             GenerationCache(_MEMO_LIMIT)
             if transition_cache and not debug_state and not check_determinism else None)
@@ -151,7 +158,7 @@ class System:
         while prefix is not None:
             chooser = PrefixChooser(prefix)
             t = self.initial_world(chooser=chooser)
-            if self.check_determinism and t.failure is None:
+            if self.runner.verify and t.failure is None:
                 t = self._recheck_start(t)
             result.append(t)
             prefix = chooser.next_prefix()
@@ -186,8 +193,12 @@ class System:
         again = self.initial_world(t.step.choices)
         if again.world.digest == t.world.digest and again.step == t.step:
             return t
-        failure = Failure(FailureKind.NONDETERMINISM, "", "on_start", "running the start "
-                          "handlers twice gave different initial worlds" + CAUSES)
+        differ = [name for name, a, b in zip(self.names, t.world.states, again.world.states,
+                                             strict=True) if a != b] or list(self.names)
+        failure = Failure(FailureKind.NONDETERMINISM, ", ".join(differ), "on_start",
+                          "running every node's start handlers twice gave different initial "
+                          f"worlds (a start handler depends on another's hidden state); fix: "
+                          f"{FIX_HIDDEN}")
         return Transition(t.step, t.world, t.event, failure, t.logs, t.faults)
 
     def actions(self, world: World) -> list[Action]:
@@ -232,7 +243,7 @@ class System:
         """What taking `action` in `world` with `chooser` does, independent of the world."""
         if isinstance(action, Crash):
             j, now = action.node, world.events[0].due
-            return self.runner.restart(j, self._crash_state(world, j), now, chooser)
+            return self.runner.start(j, self._crash_state(world, j), now, chooser)
         ev = world.events[action.index]
         data = world.states[ev.target]
         if ev.sk[3]:  # late: a deadline miss (Rule 5)

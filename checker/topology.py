@@ -11,11 +11,12 @@ from __future__ import annotations
 from collections.abc import Iterator, Sequence
 from typing import final
 
+from twinfleet.checker.diagnosis import FIX_ENCODABLE, ContractBreachError, breach_line
 from twinfleet.checker.world import Event
-from twinfleet.runtime.kinds import EventKind
+from twinfleet.runtime.kinds import EventKind, FailureKind
 from twinfleet.runtime.node import HandlerSpec, Node
 from twinfleet.runtime.scenario import ScenarioError
-from twinfleet.runtime.snapshot import snapshot
+from twinfleet.runtime.snapshot import SnapshotError, snapshot
 
 Target = tuple[int, str, int]  # (node index, handler method, handler priority)
 
@@ -39,7 +40,7 @@ class Topology:
         self.service_of: dict[tuple[int, str], str] = {}
         self._priorities: list[dict[str, int]] = []
         self._periods: dict[tuple[int, str], int] = {}
-        self.initial_states = tuple(snapshot(node.initial_state()) for node in self.nodes)
+        self.initial_states = tuple(_initial(node) for node in self.nodes)
         for i, node in enumerate(self.nodes):
             spec = node.spec()
             self._priorities.append({h.method: h.priority for h in spec.handlers})
@@ -78,3 +79,13 @@ class Topology:
     def start_event(self, node: int, spec: HandlerSpec, now: int) -> Event:
         """The event that runs start handler `spec` of node `node` at `now`."""
         return Event(now, EventKind.START, node, spec.method, node, (), spec.priority)
+
+
+def _initial(node: Node) -> bytes:
+    """The encoded initial state of `node`; one that cannot be encoded is a breach."""
+    try:
+        return snapshot(node.initial_state())
+    except SnapshotError as exc:
+        raise ContractBreachError(breach_line(
+            FailureKind.CONTRACT, node.name, "initial_state", f"its initial state cannot be "
+            f"encoded ({exc}); fix: {FIX_ENCODABLE}")) from None

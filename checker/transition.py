@@ -8,9 +8,8 @@ fault branches); a trace is a list of steps. A `Variant` is what one run of a
 handler did, independent of the world it ran in (new node state, new events,
 failure), so the system can cache it; a `Transition` is a step applied to a
 world: the next world, and what the step did (which node ran, what it sent,
-which node states changed). The helpers compare two runs of the same step
-(`--check-determinism`) and a node's attributes before and after a handler
-(`--debug-state`).
+which node states changed). The helpers compare a node's attributes before
+and after a handler (`--debug-state`); `checker.diagnosis` compares two runs.
 """
 
 from __future__ import annotations
@@ -122,32 +121,6 @@ class Variant:
     # positions in `choices` of the checker's own branches on the effects (latency, drop,
     # duplicate); the others are the handler's ctx.choose answers
     branches: tuple[int, ...] = ()
-
-
-CAUSES = (". Likely causes: the handler reads the wall clock or `time`, uses `random`, "
-          "iterates a set of strings (order depends on PYTHONHASHSEED), or keeps state outside "
-          "self.state (rerun with --debug-state)")
-
-
-def difference(a: Variant, b: Variant) -> str | None:
-    """What differs between two runs of the same handler variant, or None."""
-    if (a.choices, a.options) != (b.choices, b.options):
-        return (f"choices {list(a.choices)} of {list(a.options)} then {list(b.choices)} of "
-                f"{list(b.options)}")
-    fa = None if a.failure is None else (a.failure.kind, a.failure.message)
-    fb = None if b.failure is None else (b.failure.kind, b.failure.message)
-    if fa != fb:
-        return f"outcome {fa or 'ok'} then {fb or 'ok'}"
-    if a.state != b.state:
-        return "the new node state differs"
-    ea = [(e.sk, e.deadline) for e in a.events]
-    eb = [(e.sk, e.deadline) for e in b.events]
-    if ea != eb:
-        return (f"effects differ: {[(e.kind, e.method, e.args) for e in a.events]} then "
-                f"{[(e.kind, e.method, e.args) for e in b.events]}")
-    if a.logs != b.logs:
-        return "logs differ"
-    return None
 
 
 def fingerprint(node: Node) -> dict[str, bytes]:

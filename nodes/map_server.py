@@ -68,6 +68,7 @@ class MapServer(Node):
     """Serves the map and paths, scans for every robot, and watches for collisions."""
 
     Params = MapServerParams
+    tool_topics = ("/map", "/fleet_status", "/collisions")  # for viewers and the run report
     publications = {"/map": QOS_LATCHED}
 
     def configure(self) -> None:

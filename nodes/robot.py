@@ -86,6 +86,7 @@ class Robot(Node):
     """A robot that plans through the map server, senses by scans, stops, waits and backs off."""
 
     Params = RobotParams
+    tool_topics = ("status", "path")  # for viewers and the run report (runtime.lint)
 
     def configure(self) -> None:
         p = self.params

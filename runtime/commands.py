@@ -59,6 +59,10 @@ def cmd_launch(args: argparse.Namespace) -> int:
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
+    from twinfleet.runtime.lint import lint_scenario
+
+    for warning in lint_scenario(scenario):  # nondeterminism sources, names nothing answers
+        print(warning, file=sys.stderr)
     import zenoh
 
     from twinfleet.runtime.launcher import format_result, run_fleet

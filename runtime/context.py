@@ -143,7 +143,12 @@ class Context:
         if not isinstance(delay_ms, int) or delay_ms < 0:
             raise ContractError(f"{self.node.name}: after() needs an integer delay >= 0, got {delay_ms!r}")
         for arg in args:
-            hash(arg)  # pending timers are hashed into checker states
+            try:
+                hash(arg)  # pending timers are hashed into checker states
+            except TypeError:
+                raise ContractError(f"{self.node.name}: after() arguments must be hashable, got "
+                                    f"{arg!r:.60} ({type(arg).__name__}); pass a tuple instead "
+                                    "of a list") from None
         method = self._own_method(handler, "after")
         self.effects.append(After(delay_ms, method, tuple(args)))
 

@@ -10,7 +10,8 @@ only the layers listed under it in `ALLOWED`, with no exemptions:
 - `nodes/` (the case study) imports the node API and the runtime's contract modules, and
   no source of nondeterminism (random, time, asyncio, threading, socket, zenoh);
 - `agreement/` (the layer over both drivers) imports runtime, checker and nodes;
-- the command line (`twinfleet/cli.py`, `twinfleet/__main__.py`) sits on top.
+- the command line (`twinfleet/cli.py`, `twinfleet/__main__.py`) and the testing API
+  (`twinfleet/testing.py`) sit on top, side by side.
 
 No two source files import each other, directly or through others.
 """
@@ -29,7 +30,7 @@ pytestmark = pytest.mark.timeout(60)
 ROOT = Path(__file__).resolve().parents[1]
 FOLDERS = {"runtime": "runtime", "checker": "checker", "nodes": "nodes", "agreement": "agreement"}
 #: runtime/ modules that import neither Zenoh nor asyncio: the checker and the nodes may use them.
-CONTRACT = {"config", "context", "dispatch", "examples", "kinds", "messages", "names", "node",
+CONTRACT = {"config", "context", "dispatch", "examples", "kinds", "lint", "messages", "names", "node",
             "params", "property_eval", "scenario", "snapshot", "tracefile"}
 ALLOWED = {
     "api": {"api", "runtime-contract"},
@@ -39,6 +40,7 @@ ALLOWED = {
     "nodes": {"nodes", "runtime-contract", "api"},
     "agreement": {"agreement", "checker", "nodes", "runtime", "runtime-contract", "api"},
     "cli": {"cli", "agreement", "checker", "nodes", "runtime", "runtime-contract", "api"},
+    "testing": {"testing", "agreement", "checker", "nodes", "runtime", "runtime-contract", "api"},
 }
 BANNED_THIRD_PARTY = {
     "checker": {"zenoh", "asyncio"},
@@ -70,6 +72,8 @@ def _layer(module: str) -> str:
         return "api"
     if parts[1] in ("cli", "__main__"):
         return "cli"
+    if parts[1] == "testing":  # twinfleet.testing: checks and fleets in pytest, on top too
+        return "testing"
     if parts[1] == "runtime" and len(parts) > 2 and parts[2] in CONTRACT:
         return "runtime-contract"
     return parts[1]
