@@ -53,7 +53,7 @@ from __future__ import annotations
 
 import heapq
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final, Protocol, final
 
@@ -62,6 +62,7 @@ from twinfleet.runtime.context import Chooser, Context, Effect
 from twinfleet.runtime.dispatch import HandlerError, invoke
 from twinfleet.runtime.due import DueEntries
 from twinfleet.runtime.entries import Entry
+from twinfleet.runtime.guard import Admission, Rejected, check_message, expected_type
 from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.messages import (
     CallError,
@@ -77,7 +78,8 @@ MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is no
 _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
 _TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOUT})
 _COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "published",
-                    "handled", "keep_last", "best_effort", "seq_jumps")
+                    "handled", "keep_last", "best_effort", "seq_jumps", "rejected_invalid",
+                    "rejected_wrong_type")
 _NOTHING: Final[tuple[()]] = ()
 
 
@@ -122,17 +124,28 @@ class HostStatistics:
     dropped_overflow: int = 0
     dropped_best_effort: int = 0
     sequence_jumps: int = 0  # sequence numbers that leapt by more than MAX_GAP (not counted as gaps)
+    # Samples refused before any handler (runtime.guard): unsigned or wrongly signed,
+    # larger than the topic's limit, fields that do not fit the type, a type the handler
+    # does not take. Any of them > 0 makes a verdict INCONCLUSIVE (the prefix is the rule).
+    rejected_forged: int = 0
+    rejected_invalid: int = 0
+    rejected_oversize: int = 0
+    rejected_wrong_type: int = 0
 
     @classmethod
     def of(cls, n: dict[str, int], inbox_depth: int, timers_pending: int,
-           dropped_overflow: int) -> HostStatistics:
-        """The record of a core's counters `n`."""
+           dropped_overflow: int, transport: Mapping[str, int] | None = None) -> HostStatistics:
+        """The record of a core's counters `n` (`transport`: what the transport refused)."""
+        below = transport or {}
         return cls(received=n["received"], dropped_undecodable=n["undecodable"],
                    handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
                    inbox_depth=inbox_depth, timers_pending=timers_pending,
                    published=n["published"], handled=n["handled"],
                    dropped_keep_last=n["keep_last"], dropped_overflow=dropped_overflow,
-                   dropped_best_effort=n["best_effort"], sequence_jumps=n["seq_jumps"])
+                   dropped_best_effort=n["best_effort"], sequence_jumps=n["seq_jumps"],
+                   rejected_forged=below.get("forged", 0), rejected_oversize=below.get("oversize", 0),
+                   rejected_invalid=n["rejected_invalid"],
+                   rejected_wrong_type=n["rejected_wrong_type"])
 
 
 # A received sample as `decode_fields` returns it: (msg, stamp_ms, seq, sender).
@@ -144,10 +157,10 @@ Receive = Callable[[bytes, int], bool]
 class _Subscription:
     """One declared subscription: its handler and its KEEP_LAST queue of waiting samples."""
 
-    __slots__ = ("gap_counter", "method", "priority", "topic", "waiting")
+    __slots__ = ("admit", "gap_counter", "method", "priority", "topic", "waiting")
 
-    def __init__(self, spec: HandlerSpec, topic: str, keep_last: bool) -> None:
-        self.method, self.priority, self.topic = spec.method, spec.priority, topic
+    def __init__(self, spec: HandlerSpec, topic: str, keep_last: bool, admit: Admission) -> None:
+        self.method, self.priority, self.topic, self.admit = spec.method, spec.priority, topic, admit
         reliable = spec.qos.reliability is Reliability.RELIABLE
         self.gap_counter = "gaps" if reliable else "best_effort"  # a bug vs. drops by design
         self.waiting: deque[_Sample] = deque(maxlen=max(1, spec.qos.depth) if keep_last else None)
@@ -196,7 +209,8 @@ class NodeCore:
         for spec in self.spec.of_kind("subscribe"):
             topic = node.resolve(spec.name or "")
             if topic != LIVELINESS_TOPIC:
-                self._subs[spec.method] = _Subscription(spec, topic, keep_last)
+                self._subs[spec.method] = _Subscription(
+                    spec, topic, keep_last, Admission(expected_type(node, spec.method)))
             elif self._liveliness is None:
                 self._liveliness = spec
         self.services = {s.method: node.resolve(s.name or "") for s in self.spec.of_kind("service")}
@@ -230,7 +244,7 @@ class NodeCore:
         # Everything is bound once here: one sample costs a decode, a gap check, a deque
         # append and a heap push, with no attribute chains.
         n, counter, push, inbox = self._n, self._counter, heapq.heappush, self._inbox
-        waiting, priority, gap_counter = sub.waiting, sub.priority, sub.gap_counter
+        waiting, priority, gap_counter, admit = sub.waiting, sub.priority, sub.gap_counter, sub.admit
         last_seq = self._last_seq.setdefault(sub.topic, {})  # shared by one topic's subscriptions
 
         def receive(payload: bytes, arrival_ms: int) -> bool:
@@ -240,6 +254,11 @@ class NodeCore:
             except Exception as exc:  # DecodeError (anything else would be a codec bug)
                 n["undecodable"] += 1
                 raise DecodeError(str(exc)) from None
+            try:  # before the gap check: a refused sample leaves no trace in the core
+                admit(sample[0])
+            except Rejected as exc:
+                n[exc.counter] += 1
+                raise
             seq, sender = sample[2], sample[3]
             last = last_seq.get(sender)
             if last is not None and seq > last + 1:
@@ -267,6 +286,11 @@ class NodeCore:
         self._n["received"] += 1
         try:
             msg, stamp, seq, sender = decode_fields(payload)
+            check_message(msg)
+        except Rejected as exc:
+            self._n[exc.counter] += 1
+            return (Line(f"rejected request for {self.services[method]}: {exc}", err=True),
+                    Answer(responder, None, f"server error: rejected request ({exc})"))
         except Exception as exc:  # DecodeError (anything else would be a codec bug)
             self._n["undecodable"] += 1
             return (Line(f"undecodable request for {self.services[method]}: {exc}", err=True),
@@ -418,6 +442,9 @@ class NodeCore:
         error = self._outbox.finish(method, args, reply, error, responder, now, out)
         return out, effects, error
 
-    def statistics(self, dropped_overflow: int = 0) -> HostStatistics:
-        """Counters since start, as a frozen record (`dropped_overflow`: the transport's)."""
-        return HostStatistics.of(self._n, len(self._inbox), self.due.timers(), dropped_overflow)
+    def statistics(self, dropped_overflow: int = 0,
+                   transport: Mapping[str, int] | None = None) -> HostStatistics:
+        """Counters since start, as a frozen record (`dropped_overflow`, `transport`: the
+        transport's drops and refusals)."""
+        return HostStatistics.of(self._n, len(self._inbox), self.due.timers(), dropped_overflow,
+                                 transport)

@@ -48,14 +48,16 @@ from pathlib import Path
 from typing import Any, TextIO, final
 
 import msgpack
+import yaml
 
-from twinfleet.runtime import registry
+from twinfleet.runtime import fleetauth, registry
 from twinfleet.runtime.eventlog import EVENTS_FORMAT
+from twinfleet.runtime.guard import payload_limit
 from twinfleet.runtime.introspect import param_arguments
 from twinfleet.runtime.messages import DecodeError, decode
 from twinfleet.runtime.names import key_expr
 from twinfleet.runtime.node import QOS_DEFAULT
-from twinfleet.runtime.node_main import PARENT_ENV, stats_key
+from twinfleet.runtime.node_main import LIMIT_ENV, PARENT_ENV, stats_key
 from twinfleet.runtime.run_record import RunRecord, versions
 from twinfleet.runtime.scenario import NodeConfig, Scenario
 from twinfleet.runtime.scenario_file import write_scenario
@@ -116,8 +118,10 @@ def free_port() -> int:
 class _NodeProcess:
     """One supervised node process and its output pump."""
 
-    def __init__(self, cfg: NodeConfig, argv: list[str], out: TextIO) -> None:
+    def __init__(self, cfg: NodeConfig, argv: list[str], out: TextIO,
+                 secrets: Mapping[str, str] | None = None) -> None:
         self.cfg, self.argv, self.out = cfg, argv, out
+        self.secrets = dict(secrets or {})
         self.proc: asyncio.subprocess.Process | None = None
         self.last_lines: deque[str] = deque(maxlen=_LAST_LINES)
         self.restarts = 0
@@ -130,6 +134,7 @@ class _NodeProcess:
         env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
         env["PYTHONUNBUFFERED"] = "1"
         env[PARENT_ENV] = str(os.getpid())
+        env.update(self.secrets)  # the environment: other users cannot read it, unlike argv
         self.exit_code = None
         self.proc = await asyncio.create_subprocess_exec(
             *self.argv, stdin=asyncio.subprocess.DEVNULL, stdout=asyncio.subprocess.PIPE,
@@ -180,6 +185,9 @@ class Fleet:
         self.node_args, self.events_dir = tuple(node_args), events_dir
         self.connect = connect
         self.endpoint = connect or listen or f"tcp/127.0.0.1:{free_port()}"
+        self.creds = fleetauth.FleetCredentials.fresh()
+        self.limit = scenario_payload_limit(scenario)
+        self._auth_dir: Path | None = None
         self.transport: ZenohTransport | None = None
         self.epoch_ns = time.time_ns()
         self.processes: dict[str, _NodeProcess] = {}
@@ -203,11 +211,14 @@ class Fleet:
     async def open(self) -> None:
         """Open the router (or client) session and the launcher's subscriptions."""
         self.ended = asyncio.get_running_loop().create_future()
-        if self.connect:
+        if self.connect:  # someone else's router: its access control is theirs
             conf = zenoh_config(connect=[self.connect], mode="client")
         else:
-            conf = zenoh_config(listen=[self.endpoint], mode="router")
-        self.transport = ZenohTransport(conf)
+            self._auth_dir = fleetauth.private_dir()
+            settings = fleetauth.router_settings(self.creds, self._auth_dir)
+            settings["transport/link/rx/max_message_size"] = self.limit + 1024
+            conf = zenoh_config(listen=[self.endpoint], mode="router", settings=settings)
+        self.transport = ZenohTransport(conf, key=self.creds.key, limit=self.limit)
         await self.transport.open()
         fleet = self.scenario.fleet
         self.transport.subscribe(key_expr(fleet, SHUTDOWN_TOPIC), self._on_shutdown, QOS_DEFAULT)
@@ -215,6 +226,14 @@ class Fleet:
             self.transport.subscribe(key_expr(fleet, topic), self._summary(topic), QOS_DEFAULT)
         for topic in self.report.topics() if self.report is not None else ():
             self.transport.subscribe(key_expr(fleet, topic), self._reported(topic), QOS_DEFAULT)
+
+    def node_secrets(self) -> dict[str, str]:
+        """The environment a node process gets: fleet key, login (embedded router), limit."""
+        env = self.creds.node_env()
+        if self.connect:  # no login on a router we did not start
+            env.pop(fleetauth.ENV_USER)
+            env.pop(fleetauth.ENV_PASSWORD)
+        return {**env, LIMIT_ENV: str(self.limit)}
 
     def _on_shutdown(self, _key: str, payload: bytes) -> None:
         try:
@@ -259,7 +278,7 @@ class Fleet:
         """Start every node process and one supervisor task per node."""
         tasks = []
         for cfg in self.scenario.nodes:
-            proc = _NodeProcess(cfg, self._argv(cfg), self.out)
+            proc = _NodeProcess(cfg, self._argv(cfg), self.out, self.node_secrets())
             self.processes[cfg.name] = proc
             await proc.start()
             tasks.append(asyncio.create_task(self._supervise(proc)))
@@ -334,6 +353,21 @@ class Fleet:
             await self.transport.close()
         if self._private_dir is not None:
             shutil.rmtree(self._private_dir, ignore_errors=True)
+        fleetauth.remove_dir(self._auth_dir)
+
+
+def scenario_payload_limit(scenario: Scenario) -> int:
+    """The per-topic payload limit of a fleet: `live.max_payload_bytes`, else sized to the
+    scenario's map (the occupancy grid is the largest message: `guard.payload_limit`)."""
+    configured = scenario.live.max_payload_bytes
+    if configured is not None or scenario.map_path is None:
+        return payload_limit(0, 0, configured)
+    cells = 0
+    with contextlib.suppress(OSError, ValueError, TypeError, AttributeError):
+        doc = yaml.safe_load(scenario.map_path.read_text())
+        image = scenario.map_path.parent / str(doc["image"])
+        cells = image.stat().st_size  # a binary PGM: one byte per cell, plus its header
+    return payload_limit(cells, 1)
 
 
 def launchable(scenario: Scenario, beside: str | None) -> tuple[Scenario, Path | None]:
@@ -461,7 +495,8 @@ def _register(fleet: Fleet, params: Sequence[str]) -> Path | None:
     None (and a line saying why) when the registry cannot be written."""
     try:
         return registry.register(fleet.scenario.fleet, fleet.endpoint,
-                                 scenario=str(fleet.scenario.path), params={"overrides": list(params)})
+                                 scenario=str(fleet.scenario.path), params={"overrides": list(params)},
+                                 extra=fleet.creds.registry_extra())
     except (OSError, registry.RegistryError) as exc:
         fleet.log(f"not registered for discovery ({exc}); monitors need --connect")
         return None
