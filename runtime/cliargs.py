@@ -26,6 +26,7 @@ from twinfleet.runtime.fleetauth import (
     MonitorAuth,
     monitor_auth,
     read_credentials,
+    registry_auth,
 )
 
 # One table of exit codes for every command (README and `twinfleet --help` list it).
@@ -89,15 +90,14 @@ def connection(args: argparse.Namespace) -> Connection:
     Raises:
         CommandError: no --connect and the registry has no single matching fleet.
     """
-    from twinfleet.runtime.registry import RegistryError, find_fleet, running_fleets
+    from twinfleet.runtime.registry import RegistryError, find_fleet
 
     try:
         given = getattr(args, "credentials", None)
         endpoint, auth = read_credentials(given) if given else (None, None)
         if args.connect:
             if auth is None:  # a fleet of this machine behind that endpoint: its secrets
-                entries = [e for e in running_fleets() if e.endpoint == args.connect]
-                auth = monitor_auth(entries[0].extra) if len(entries) == 1 else MonitorAuth()
+                auth = registry_auth(args.connect)
             return Connection(args.connect, args.fleet, "--connect", auth)
         if endpoint and auth is not None:
             return Connection(endpoint, args.fleet, "--credentials", auth)

@@ -207,3 +207,24 @@ def listen_problem(endpoint: str, *, insecure: bool) -> str | None:
             "every message in clear text to anyone on the path: use a tls/ (or quic/) "
             "endpoint with certificates set through TWINFLEET_ZENOH_CONFIG_OVERRIDE "
             "(transport/link/tls/...), or pass --insecure-listen to accept that risk")
+
+
+def registry_auth(endpoint: str) -> MonitorAuth:
+    """The secrets of the fleet this machine's registry lists at `endpoint` (none: empty).
+
+    A command given ``--connect`` to a fleet launched here by the same user needs
+    no ``--credentials``.
+    """
+    from twinfleet.runtime.registry import RegistryError, running_fleets
+
+    try:
+        entries = [e for e in running_fleets() if e.endpoint == endpoint]
+        return monitor_auth(entries[-1].extra) if entries else MonitorAuth()
+    except (OSError, RegistryError, CredentialsError):
+        return MonitorAuth()
+
+
+def login_settings(auth: MonitorAuth, *, write: bool = False) -> dict[str, Any]:
+    """The client config keys of `auth`'s login for reading (or writing), or none."""
+    login = auth.login(write=write)
+    return login.settings() if login else {}

@@ -71,6 +71,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     from twinfleet.runtime import registry
     from twinfleet.runtime.bag import RecordingError, check_readable, read_summary
     from twinfleet.runtime.cliargs import zenoh_error_text
+    from twinfleet.runtime.fleetauth import login_settings, registry_auth
     from twinfleet.runtime.launcher import free_port
     from twinfleet.runtime.recorder import play
     from twinfleet.runtime.zenoh_transport import zenoh_config
@@ -86,7 +87,8 @@ def cmd_play(args: argparse.Namespace) -> int:
             return zenoh_config(listen=[listen], mode="router")
     else:
         def make_config():  # noqa: ANN202 - zenoh imported lazily
-            return zenoh_config(connect=[args.connect], mode="client")
+            return zenoh_config(connect=[args.connect], mode="client",
+                                settings=login_settings(registry_auth(args.connect), write=True))
     fleet = None if args.fleet == "*" else args.fleet
     name = fleet or summary.metadata.get("twinfleet", {}).get("fleet")
     entry = None

@@ -29,6 +29,7 @@ from typing import Any, final
 import zenoh
 from zenoh import ext
 
+from twinfleet.runtime.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.names import KEY_PREFIX
 from twinfleet.runtime.zenoh_transport import Handoff, zenoh_config
 
@@ -45,7 +46,8 @@ def tap_config(endpoint: str) -> zenoh.Config:
     """A client config for a tap on `endpoint` that reconnects within half a second when the
     router comes back (a fleet launched again on the same endpoint); zenoh's default back-off
     grows to seconds, and a viewer then missed the new run's first poses."""
-    conf = zenoh_config(connect=[endpoint], mode="client")
+    settings = login_settings(registry_auth(endpoint))  # a fleet launched here: read-only login
+    conf = zenoh_config(connect=[endpoint], mode="client", settings=settings)
     conf.insert_json5("connect/retry", RECONNECT)
     return conf
 
