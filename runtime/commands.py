@@ -50,10 +50,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def cmd_launch(args: argparse.Namespace) -> int:
     """`twinfleet launch`: validate, run the fleet `--runs` times, print summaries."""
+    from twinfleet.runtime.fleetauth import listen_problem
     from twinfleet.runtime.introspect import load_with_params
     from twinfleet.runtime.scenario import ScenarioError
 
     params = launch_params(args)
+    problem = listen_problem(args.listen, insecure=args.insecure_listen) if args.listen else None
+    if problem:
+        raise CommandError(problem)
     try:
         scenario = load_with_params(args.scenario, params)
     except ScenarioError as exc:
@@ -61,7 +65,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         return 2
     import zenoh
 
-    from twinfleet.runtime.launcher import format_result, run_fleet
+    from twinfleet.runtime.launcher import FleetConflict, format_result, run_fleet
 
     worst, passed = 0, 0
     for run in range(args.runs):
@@ -75,6 +79,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                            run_record=args.record_run,
                                            record_events=_events_path(args, run),
                                            params=params))
+        except FleetConflict as exc:
+            raise CommandError(str(exc)) from None
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
             print(f"error: {exc}", file=sys.stderr)
             return 2
@@ -298,7 +304,12 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--connect", default=None, metavar="EP",
                    help="join the Zenoh router at EP (e.g. tcp/10.0.0.2:7447) instead of embedding one")
     p.add_argument("--listen", default=None, metavar="EP",
-                   help="endpoint of the embedded router (default: tcp/127.0.0.1:<free port>)")
+                   help="endpoint of the embedded router (default: tcp/127.0.0.1:<free port>); "
+                        "an endpoint other machines can reach must be tls/ or quic/ (README "
+                        "\"Trust model\")")
+    p.add_argument("--insecure-listen", action="store_true",
+                   help="allow --listen on a plain tcp/udp endpoint reachable from other "
+                        "machines: the fleet's traffic then crosses the network unencrypted")
     p.add_argument("--record-run", default=None, metavar="FILE",
                    help="append a run record to FILE as JSON lines, flushed per line (scenario, "
                         "seed, versions, node exits and respawns, end reason, statistics, summary)")

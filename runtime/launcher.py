@@ -52,7 +52,7 @@ import yaml
 
 from twinfleet.runtime import fleetauth, registry
 from twinfleet.runtime.eventlog import EVENTS_FORMAT
-from twinfleet.runtime.guard import payload_limit
+from twinfleet.runtime.guard import Rejected, check_message, payload_limit
 from twinfleet.runtime.introspect import param_arguments
 from twinfleet.runtime.messages import DecodeError, decode
 from twinfleet.runtime.names import key_expr
@@ -61,6 +61,7 @@ from twinfleet.runtime.node_main import LIMIT_ENV, PARENT_ENV, stats_key
 from twinfleet.runtime.run_record import RunRecord, versions
 from twinfleet.runtime.scenario import NodeConfig, Scenario
 from twinfleet.runtime.scenario_file import write_scenario
+from twinfleet.runtime.transport import graph_key, parse_graph_key
 from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
 
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"
@@ -69,6 +70,10 @@ _LAST_LINES = 15
 _GRACE_S = (3.0, 2.0)  # after SIGINT, after SIGTERM; then SIGKILL
 _RESPAWN_DELAY_S = 0.5
 _REPORT_GRACE_S = 0.5  # wall seconds between the report's "finished" and the end of the run
+
+
+class FleetConflict(ValueError):
+    """Nodes of the fleet are already alive on the router; the text names them."""
 
 
 @dataclass(frozen=True)
@@ -188,6 +193,8 @@ class Fleet:
         self.creds = fleetauth.FleetCredentials.fresh()
         self.limit = scenario_payload_limit(scenario)
         self._auth_dir: Path | None = None
+        # on a router a fleet of this machine embeds, that fleet's operator login
+        self._login = fleetauth.registry_auth(connect).login(write=True) if connect else None
         self.transport: ZenohTransport | None = None
         self.epoch_ns = time.time_ns()
         self.processes: dict[str, _NodeProcess] = {}
@@ -196,6 +203,7 @@ class Fleet:
         self.shutting_down = False
         self.failed: list[str] = []
         self.report = load_report(scenario)
+        self.invalid = 0  # report samples refused by `guard.check_message`
         self._finishing = False
         self.scenario, self._private_dir = launchable(scenario, keep_scenario_beside)
 
@@ -212,7 +220,8 @@ class Fleet:
         """Open the router (or client) session and the launcher's subscriptions."""
         self.ended = asyncio.get_running_loop().create_future()
         if self.connect:  # someone else's router: its access control is theirs
-            conf = zenoh_config(connect=[self.connect], mode="client")
+            conf = zenoh_config(connect=[self.connect], mode="client",
+                                settings=self._login.settings() if self._login else None)
         else:
             self._auth_dir = fleetauth.private_dir()
             settings = fleetauth.router_settings(self.creds, self._auth_dir)
@@ -227,12 +236,21 @@ class Fleet:
         for topic in self.report.topics() if self.report is not None else ():
             self.transport.subscribe(key_expr(fleet, topic), self._reported(topic), QOS_DEFAULT)
 
+    def refusals(self) -> dict[str, int]:
+        """What the launcher's own subscriptions (report, shutdown) refused, by reason."""
+        below = self.transport.statistics() if self.transport is not None else {}
+        return {"forged": below.get("forged", 0), "oversize": below.get("oversize", 0),
+                "invalid": self.invalid}
+
     def node_secrets(self) -> dict[str, str]:
         """The environment a node process gets: fleet key, login (embedded router), limit."""
         env = self.creds.node_env()
-        if self.connect:  # no login on a router we did not start
+        if self.connect:  # a router we did not start: its login, if this machine knows it
             env.pop(fleetauth.ENV_USER)
             env.pop(fleetauth.ENV_PASSWORD)
+            if self._login is not None:
+                env.update({fleetauth.ENV_USER: self._login.user,
+                            fleetauth.ENV_PASSWORD: self._login.password})
         return {**env, LIMIT_ENV: str(self.limit)}
 
     def _on_shutdown(self, _key: str, payload: bytes) -> None:
@@ -254,8 +272,15 @@ class Fleet:
 
     def _reported(self, topic: str) -> Any:
         def deliver(_key: str, payload: bytes) -> None:
-            with contextlib.suppress(DecodeError):
-                self.report.on_message(topic, decode(payload).msg)
+            try:
+                msg = decode(payload).msg
+                check_message(msg)  # NaN cells or a string arrival time never reach the verdict
+            except Rejected:
+                self.invalid += 1
+            except DecodeError:
+                pass
+            else:
+                self.report.on_message(topic, msg)
             finished = getattr(self.report, "finished", None)
             if finished is not None and finished() and not self._finishing:
                 # A grace period: messages already in flight from other nodes (a collision
@@ -273,6 +298,30 @@ class Fleet:
         if self.events_dir is not None:
             argv += ["--record-events", str(self.events_dir / f"{cfg.name}.jsonl")]
         return argv
+
+    async def alive_names(self, timeout_s: float = 1.0) -> list[str]:
+        """Names of this fleet's nodes whose liveliness tokens the router holds now."""
+        if self.transport is None or self.transport.session is None:
+            return []
+        key = graph_key(self.scenario.fleet, "node", "*")
+        session = self.transport.session
+
+        def query() -> list[str]:
+            return [parse_graph_key(str(r.ok.key_expr))[2]
+                    for r in session.liveliness().get(key, timeout=timeout_s) if r.ok is not None]
+
+        return sorted(set(await asyncio.to_thread(query)))
+
+    async def refuse_twins(self) -> None:
+        """Raise `FleetConflict` when nodes of this scenario already run in the fleet (a
+        second launch on the same router would merge both runs' traffic silently)."""
+        wanted = {cfg.name for cfg in self.scenario.nodes}
+        twins = [name for name in await self.alive_names() if name in wanted]
+        if twins:
+            raise FleetConflict(
+                f"fleet {self.scenario.fleet!r} at {self.endpoint} already runs "
+                f"{', '.join(twins)}: a second launch would merge with it; stop that run, or "
+                "give this one another fleet name (the scenario's `fleet:`)")
 
     async def start_nodes(self) -> list[asyncio.Task[None]]:
         """Start every node process and one supervisor task per node."""
@@ -438,6 +487,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                          nodes=[{"name": c.name, "class": c.class_path, "respawn": c.respawn}
                                 for c in scenario.nodes])
         await fleet.open()
+        if connect:  # an embedded router is new: only a shared one can hold a twin fleet
+            await fleet.refuse_twins()
         entry = _register(fleet, params)
         fleet.log(f"fleet {scenario.fleet!r} on {fleet.endpoint} "
                   f"(time scale {time_scale:g}, seed {seed}); monitor with: twinfleet node list --fleet "
@@ -453,6 +504,10 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         except TimeoutError:
             reason = f"timeout after {timeout_s:g} s"
         fleet.log(f"run ended: {reason}")
+        refused = {k: v for k, v in fleet.refusals().items() if v}
+        if refused:
+            fleet.log("refused samples on the report and shutdown topics: "
+                      + ", ".join(f"{k} {v}" for k, v in refused.items()))
         if record is not None:
             record.write("end", reason=reason)
             record.write("node_stats", stats=await fleet.node_statistics())
