@@ -35,7 +35,7 @@ def forgeries(fleet: str) -> list[tuple[str, bytes]]:
 
 
 def test_outsiders_cannot_join_and_unsigned_samples_never_reach_a_verdict(tmp_path) -> None:
-    with running_fleet(tmp_path, "forge", goal=15, scale=2.0) as fleet:
+    with running_fleet(tmp_path, "forge", goal=25, scale=2.0) as fleet:
         for login in (None, ("node", "guessed"), ("monitor", "guessed")):
             with pytest.raises(zenoh.ZError):
                 client(fleet.endpoint, login).close()
