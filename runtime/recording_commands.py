@@ -50,6 +50,8 @@ def cmd_record(args: argparse.Namespace) -> int:
         return 2
     for line in format_result(result) if result is not None else ():
         print(f"[launcher] {line}", flush=True)
+    if rec.failed is not None:
+        raise CommandError(rec.failed)
     print(f"wrote {args.output}: {rec.messages} messages on {rec.topics} topics", flush=True)
     return 0 if result is None or result.passed else 1
 
@@ -105,13 +107,19 @@ def cmd_play(args: argparse.Namespace) -> int:
 
 
 def cmd_bag(args: argparse.Namespace) -> int:
-    """`twinfleet bag info FILE`."""
-    from twinfleet.runtime.bag import RecordingError, print_info, read_summary
+    """`twinfleet bag info FILE` and `twinfleet bag repair FILE [-o OUT]`."""
+    from twinfleet.runtime.bag import RecordingError, print_info, read_summary, repair
 
     try:
+        if args.action == "repair":
+            count, out = repair(args.file, getattr(args, "output", None))
+            print(f"repaired {args.file}: {count} messages written to {out}", flush=True)
+            return 0
         print_info(read_summary(args.file), sys.stdout)
     except RecordingError as exc:
         raise CommandError(str(exc)) from None
+    except OSError as exc:
+        raise CommandError(f"{args.file}: {exc.strerror or exc}") from None
     return 0
 
 
@@ -184,6 +192,17 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "message count per topic and type, schemas.")
     bi.add_argument("file", help="MCAP file, e.g. run.mcap")
     bi.set_defaults(func=cmd_bag)
+    br = bs.add_parser("repair", help="make a recording cut short (recorder killed, disk full) "
+                                      "complete again",
+                       description="Read every complete chunk of an MCAP recording whose "
+                                   "recorder died (kill -9) or ran out of disk, and write them "
+                                   "as a complete recording (summary and index included), in "
+                                   "place or to -o FILE. The recorder flushes a chunk at least "
+                                   "twice a second, so at most the last half second is lost.")
+    br.add_argument("file", help="MCAP file, e.g. run.mcap")
+    br.add_argument("-o", "--output", default=None, metavar="FILE",
+                    help="write the repaired copy here (default: replace FILE)")
+    br.set_defaults(func=cmd_bag)
     e = sub.add_parser("export", help="write a copy of a recording that Foxglove draws as it is",
                        description="Copy an MCAP file written by `twinfleet record` with every "
                                    "message as JSON (bytes as base64) and schemas to match, plus "
