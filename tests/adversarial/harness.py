@@ -27,7 +27,7 @@ from typing import Any
 import msgpack
 import zenoh
 
-from tests.support import RUNTIME_DIR, ROOT, child_env, pick_free_port
+from tests.support import ROOT, RUNTIME_DIR, child_env, pick_free_port
 from twinfleet.runtime.guard import sign
 from twinfleet.runtime.zenoh_transport import zenoh_config
 

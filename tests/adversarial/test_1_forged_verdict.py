@@ -13,7 +13,15 @@ from __future__ import annotations
 import pytest
 import zenoh
 
-from tests.adversarial.harness import client, envelope, poll, put, running_fleet, stats, wait_matched
+from tests.adversarial.harness import (
+    client,
+    envelope,
+    poll,
+    put,
+    running_fleet,
+    stats,
+    wait_matched,
+)
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
