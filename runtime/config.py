@@ -138,6 +138,7 @@ class LiveConfig:
     report: str | None = None
     summary_topics: tuple[str, ...] = ()
     max_payload_bytes: int | None = None  # per sample; default sized to the map (runtime.guard)
+    max_nodes: int = 100  # nodes a scenario may have (checked first by runtime.scenario)
 
     def __post_init__(self) -> None:
         _optional(self, "live", "timeout_s", _positive)
