@@ -231,7 +231,7 @@ def load_scenario(path: str | Path, overrides: Mapping[str, Any] | None = None) 
     except UnicodeDecodeError as exc:
         raise ScenarioError(f"{path}: not a text file ({exc.reason} at byte {exc.start})") from None
     except yaml.YAMLError as exc:
-        raise ScenarioError(f"{path}: not valid YAML: {exc}") from None
+        raise ScenarioError(f"{path}: not valid YAML: {_yaml_problem(exc)}") from None
     except RecursionError:
         raise ScenarioError(f"{path}: YAML nested too deeply to read (a scenario needs a few "
                             "levels)") from None
@@ -240,6 +240,15 @@ def load_scenario(path: str | Path, overrides: Mapping[str, Any] | None = None) 
     doc = {**doc, **(overrides or {})}
     user_import_path(path.parent)
     return parse_scenario(doc, path)
+
+
+def _yaml_problem(exc: yaml.YAMLError) -> str:
+    """A YAML error in one line: what and where (PyYAML's own text spans several lines)."""
+    mark = getattr(exc, "problem_mark", None)
+    where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    what = getattr(exc, "problem", None) or " ".join(str(exc).split())
+    context = getattr(exc, "context", None)
+    return f"{what}{where}" + (f" ({context})" if context else "")
 
 
 def user_import_path(scenario_dir: Path) -> None:
