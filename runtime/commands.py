@@ -50,7 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def cmd_launch(args: argparse.Namespace) -> int:
     """`twinfleet launch`: validate, run the fleet `--runs` times, print summaries."""
-    from twinfleet.runtime.fleetauth import listen_problem
+    from twinfleet.runtime.fleetauth import CredentialsError, listen_problem, read_credentials
     from twinfleet.runtime.introspect import load_with_params
     from twinfleet.runtime.scenario import ScenarioError
 
@@ -58,6 +58,10 @@ def cmd_launch(args: argparse.Namespace) -> int:
     problem = listen_problem(args.listen, insecure=args.insecure_listen) if args.listen else None
     if problem:
         raise CommandError(problem)
+    try:
+        auth = read_credentials(args.credentials)[1] if args.credentials else None
+    except CredentialsError as exc:
+        raise CommandError(str(exc)) from None
     try:
         scenario = load_with_params(args.scenario, params)
     except ScenarioError as exc:
@@ -78,7 +82,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                            connect=args.connect, listen=args.listen,
                                            run_record=args.record_run,
                                            record_events=_events_path(args, run),
-                                           params=params))
+                                           params=params, auth=auth))
         except FleetConflict as exc:
             raise CommandError(str(exc)) from None
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
@@ -307,6 +311,10 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                    help="endpoint of the embedded router (default: tcp/127.0.0.1:<free port>); "
                         "an endpoint other machines can reach must be tls/ or quic/ (README "
                         "\"Trust model\")")
+    p.add_argument("--credentials", default=None, metavar="FILE",
+                   help="with --connect: join the fleet whose registry entry FILE is (copied "
+                        "from the machine that launched it, owner-only): its key signs this "
+                        "launch's nodes (default: this machine's registry entry for EP)")
     p.add_argument("--insecure-listen", action="store_true",
                    help="allow --listen on a plain tcp/udp endpoint reachable from other "
                         "machines: the fleet's traffic then crosses the network unencrypted")

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import heapq
 import importlib
 import json
@@ -184,17 +185,23 @@ class Fleet:
     def __init__(self, scenario: Scenario, *, time_scale: float, seed: int,
                  connect: str | None, listen: str | None, out: TextIO,
                  record: RunRecord | None = None, node_args: Sequence[str] = (),
-                 events_dir: Path | None = None, keep_scenario_beside: str | None = None) -> None:
+                 events_dir: Path | None = None, keep_scenario_beside: str | None = None,
+                 auth: fleetauth.MonitorAuth | None = None) -> None:
         self.time_scale, self.seed, self.out = time_scale, seed, out
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
         self.connect = connect
         self.endpoint = connect or listen or f"tcp/127.0.0.1:{free_port()}"
         self.creds = fleetauth.FleetCredentials.fresh()
+        # Joining a router (--connect): the fleet there may span machines; its key and
+        # operator login (this machine's registry, or --credentials FILE) make us a member.
+        joined = (auth if auth is not None else fleetauth.registry_auth(connect)) if connect \
+            else None
+        if joined is not None and joined.key is not None:
+            self.creds = dataclasses.replace(self.creds, key=joined.key)
         self.limit = scenario_payload_limit(scenario)
         self._auth_dir: Path | None = None
-        # on a router a fleet of this machine embeds, that fleet's operator login
-        self._login = fleetauth.registry_auth(connect).login(write=True) if connect else None
+        self._login = joined.login(write=True) if joined is not None else None
         self.transport: ZenohTransport | None = None
         self.epoch_ns = time.time_ns()
         self.processes: dict[str, _NodeProcess] = {}
@@ -441,7 +448,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     out: TextIO = sys.stdout, handle_signals: bool = True,
                     run_record: str | None = None, record_events: str | None = None,
                     node_args: Sequence[str] = (), params: Sequence[str] = (),
-                    driver: Callable[[Fleet], Awaitable[str]] | None = None) -> FleetResult:
+                    driver: Callable[[Fleet], Awaitable[str]] | None = None,
+                    auth: fleetauth.MonitorAuth | None = None) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
@@ -461,6 +469,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             scenario must already be loaded with them (`introspect.load_with_params`).
         driver: a coroutine function run with the fleet once its nodes started; the run
             ends with the reason it returns (an exception it raises is re-raised).
+        auth: with `connect`, the joined fleet's key and logins (default: this machine's
+            fleet registry entry for that endpoint, if any).
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
@@ -470,7 +480,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     events_dir = _fresh_parts_dir(record_events) if record_events else None
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
                   out=out, record=record, node_args=[*node_args, *param_arguments(params)],
-                  events_dir=events_dir, keep_scenario_beside=record_events or run_record)
+                  events_dir=events_dir, keep_scenario_beside=record_events or run_record,
+                  auth=auth)
     scenario = fleet.scenario  # loaded from a file node processes can read
     entry: Path | None = None
     driving: asyncio.Task[str] | None = None
