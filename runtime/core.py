@@ -29,6 +29,9 @@ and never touches a socket:
    ``dropped_best_effort``; a leap of more than `MAX_GAP` is not believed to
    be a loss (a forged or corrupt number) and counts once as ``sequence_jumps``.
    Gaps are counted before KEEP_LAST, so they measure losses below the core.
+   Before that, a decoded sample must be of the type its handler declares and
+   have fields that fit it (`runtime.guard.Admission`); otherwise it is counted
+   (``rejected_wrong_type``, ``rejected_invalid``) and never queued.
 5. Running. `run_next(now)` runs the first inbox entry's handler through
    `runtime.dispatch.invoke`; `run(entry, now, chooser)` runs any pending
    entry out of order (the replay gate's way in). Both return the handler's

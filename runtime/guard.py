@@ -225,8 +225,9 @@ def _any_of(options: list[Check], value: Any, hint: Any) -> None:
 
 
 def expected_type(node: Any, method: str) -> type | None:
-    """The message class a handler ``fn(self, ctx, msg: Cls)`` declares, or None."""
-    fn = getattr(type(node), method, None)
+    """The message class a handler ``fn(self, ctx, msg: Cls)`` of `node` (an instance or
+    its class) declares, or None."""
+    fn = getattr(node if isinstance(node, type) else type(node), method, None)
     if fn is None:
         return None
     try:

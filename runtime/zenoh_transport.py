@@ -23,6 +23,13 @@ for every session of a fleet (the launcher's environment reaches its nodes),
 e.g. ``transport/link/tx/lease=1000`` to notice a cut link within a second;
 keys under ``scouting/multicast`` and ``transport/shared_memory`` are refused.
 
+Guard (`runtime.guard`, README "Trust model"). With a fleet key, every put
+and query carries a signature as its attachment, and a sample (or a service
+request) without a valid one is dropped on Zenoh's thread before it is copied
+and counted (``statistics()["forged"]``); a sample above the payload limit is
+dropped first (``"oversize"``). Both tests are cheaper than the hand-off they
+spare a flood.
+
 QoS mapping. Reliable topics publish with congestion control BLOCK,
 best-effort ones with DROP. Transient-local ("latched") topics use
 `zenoh.ext` advanced publishers (cache of `depth` samples, publisher
