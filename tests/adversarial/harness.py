@@ -20,14 +20,13 @@ import subprocess
 import sys
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import msgpack
 import zenoh
 
-from tests.support import ROOT, RUNTIME_DIR, child_env, pick_free_port
+from tests.support import ROOT, RUNTIME_DIR, RunningFleet, child_env, pick_free_port
 from twinfleet.runtime.guard import sign
 from twinfleet.runtime.zenoh_transport import zenoh_config
 
@@ -60,18 +59,8 @@ def poll(predicate: Any, timeout: float, interval: float = 0.05) -> Any:
         time.sleep(interval)
 
 
-@dataclass
-class LiveFleet:
-    """A running `twinfleet launch` of `SCENARIO`."""
-
-    proc: subprocess.Popen
-    log: Path
-    scenario: Path
-    endpoint: str
-    fleet: str
-
-    def output(self) -> str:
-        return self.log.read_text(errors="replace")
+class LiveFleet(RunningFleet):
+    """A running `twinfleet launch` of `SCENARIO`, with its registry entry."""
 
     def entry(self) -> dict[str, Any]:
         """The fleet's registry entry (its credentials are in ``extra.auth``)."""

@@ -18,29 +18,21 @@ import time
 
 import pytest
 
-from tests.adversarial.harness import (
-    client,
-    envelope,
-    poll,
-    put,
-    running_fleet,
-    stats,
-    wait_matched,
-)
+from tests.adversarial import harness as h
 from twinfleet.runtime.guard import DEFAULT_LIMIT, sign
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
 
 def pose(cell: list, seq: int) -> bytes:
-    return envelope("twinfleet_msgs/RobotPose", {"robot": "r1", "cell": cell, "direction": 0,
+    return h.envelope("twinfleet_msgs/RobotPose", {"robot": "r1", "cell": cell, "direction": 0,
                                                  "velocity": 1}, sender="r1", seq=seq)
 
 
 def answer_s(session, fleet: str) -> float:
     """Seconds the map server takes to answer a path request (signed, as a robot's is)."""
     key = f"twinfleet/{fleet}/generate_path"
-    payload = envelope("twinfleet_msgs/PathRequest", {"robot": "r9", "start": [40, 40],
+    payload = h.envelope("twinfleet_msgs/PathRequest", {"robot": "r9", "start": [40, 40],
                                                       "goal": [40, 45], "final": True},
                        sender="r9")
     started = time.monotonic()
@@ -55,25 +47,25 @@ KEY: list[bytes] = []
 
 def test_oversize_invalid_and_mistyped_samples_are_refused_and_the_server_stays_responsive(
         tmp_path) -> None:
-    with running_fleet(tmp_path, "bounded", goal=30, scale=2.0) as fleet:
+    with h.running_fleet(tmp_path, "bounded", goal=30, scale=2.0) as fleet:
         KEY[:] = [fleet.key]
-        s = client(fleet.endpoint, fleet.login("operator"))
+        s = h.client(fleet.endpoint, fleet.login("operator"))
         try:
-            wait_matched(s, fleet.fleet, "/poses")
-            put(s, fleet.fleet, "/poses", b"\x00" * (10 << 20), KEY[0])  # 10 MB: the router drops it
+            h.wait_matched(s, fleet.fleet, "/poses")
+            h.put(s, fleet.fleet, "/poses", b"\x00" * (10 << 20), KEY[0])  # 10 MB: the router drops it
             assert answer_s(s, fleet.fleet) < 1.0
-            assert stats(s, fleet.fleet, "map_server", timeout=1.0) is not None
+            assert h.stats(s, fleet.fleet, "map_server", timeout=1.0) is not None
             # over the topic's limit, under the router's frame limit: the node's check drops it
-            padded = envelope("twinfleet_msgs/RobotPose", {
+            padded = h.envelope("twinfleet_msgs/RobotPose", {
                 "robot": "r1" + "x" * DEFAULT_LIMIT, "cell": [25, 6], "direction": 0,
                 "velocity": 1}, sender="r1", seq=2)
             assert DEFAULT_LIMIT < len(padded) < DEFAULT_LIMIT + 1024
-            put(s, fleet.fleet, "/poses", padded, KEY[0])
+            h.put(s, fleet.fleet, "/poses", padded, KEY[0])
             for seq, cell in enumerate(([float("nan"), float("inf")], ["a", "b"], [1, 2, 3],
                                         [True, 4]), start=3):
-                put(s, fleet.fleet, "/poses", pose(cell, seq), KEY[0])
-            put(s, fleet.fleet, "/r1/scan", pose([5, 6], 9), KEY[0])  # a pose where scans go
-            seen = poll(lambda: _refusals(s, fleet.fleet), 10)
+                h.put(s, fleet.fleet, "/poses", pose(cell, seq), KEY[0])
+            h.put(s, fleet.fleet, "/r1/scan", pose([5, 6], 9), KEY[0])  # a pose where scans go
+            seen = h.poll(lambda: _refusals(s, fleet.fleet), 10)
             assert seen == {"map_server": (1, 4), "r1": 1}, seen
             assert answer_s(s, fleet.fleet) < 1.0
         finally:
@@ -86,7 +78,7 @@ def test_oversize_invalid_and_mistyped_samples_are_refused_and_the_server_stays_
 
 
 def _refusals(session, fleet: str) -> dict | None:
-    server, robot = stats(session, fleet, "map_server"), stats(session, fleet, "r1")
+    server, robot = h.stats(session, fleet, "map_server"), h.stats(session, fleet, "r1")
     if not server or not robot:
         return None
     found = {"map_server": (server["rejected_oversize"], server["rejected_invalid"]),

@@ -14,7 +14,6 @@ import subprocess
 import sys
 import textwrap
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -28,6 +27,8 @@ from itest_support import (
     run_cli,
 )
 
+from tests.support import RunningFleet
+
 pytestmark = pytest.mark.slow
 
 DEMO = """\
@@ -40,23 +41,6 @@ nodes:
   - {name: caller, class: "twinfleet.nodes.demo:Caller", params: {period_ms: 200}}
 live: {timeout_s: 90}
 """
-
-
-@dataclass
-class RunningFleet:
-    """A launcher process and where to find it."""
-
-    proc: subprocess.Popen
-    log: Path
-    scenario: Path
-    endpoint: str
-    fleet: str
-
-    def output(self) -> str:
-        return self.log.read_text(errors="replace")
-
-    def count(self, pattern: str) -> int:
-        return len(re.findall(pattern, self.output()))
 
 
 def start_fleet(tmp: Path, text: str, name: str = "itest", *extra: str) -> RunningFleet:
