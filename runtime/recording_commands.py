@@ -13,6 +13,7 @@ import argparse
 import asyncio
 import os
 import sys
+from typing import Any
 
 from twinfleet.runtime.cliargs import (
     CommandError,
@@ -192,26 +193,30 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "message count per topic and type, schemas.")
     bi.add_argument("file", help="MCAP file, e.g. run.mcap")
     bi.set_defaults(func=cmd_bag)
-    br = bs.add_parser("repair", help="make a recording cut short (recorder killed, disk full) "
-                                      "complete again",
-                       description="Read every complete chunk of an MCAP recording whose "
-                                   "recorder died (kill -9) or ran out of disk, and write them "
-                                   "as a complete recording (summary and index included), in "
-                                   "place or to -o FILE. The recorder flushes a chunk at least "
-                                   "twice a second, so at most the last half second is lost.")
-    br.add_argument("file", help="MCAP file, e.g. run.mcap")
-    br.add_argument("-o", "--output", default=None, metavar="FILE",
-                    help="write the repaired copy here (default: replace FILE)")
-    br.set_defaults(func=cmd_bag)
-    e = sub.add_parser("export", help="write a copy of a recording that Foxglove draws as it is",
-                       description="Copy an MCAP file written by `twinfleet record` with every "
-                                   "message as JSON (bytes as base64) and schemas to match, plus "
-                                   "Foxglove's well-known messages on /foxglove/... channels "
-                                   "(foxglove.Grid map, foxglove.SceneUpdate robots and "
-                                   "collisions, foxglove.PointCloud scans), so Foxglove's 3D "
-                                   "panel draws it with no configuration. `twinfleet play` needs "
-                                   "the original (msgpack) recording.")
-    e.add_argument("file", help="MCAP file written by `twinfleet record`")
-    e.add_argument("-o", "--output", required=True, metavar="FILE",
-                   help="JSON-encoded MCAP file to write, e.g. run.json.mcap")
-    e.set_defaults(func=cmd_export)
+    _file_command(bs, "repair", cmd_bag,
+                  "make a recording cut short (recorder killed, disk full) complete again",
+                  "Read every complete chunk of an MCAP recording whose recorder died (kill -9) "
+                  "or ran out of disk, and write them as a complete recording (summary and index "
+                  "included), in place or to -o FILE. The recorder flushes a chunk at least twice "
+                  "a second, so at most the last half second is lost.",
+                  ("MCAP file, e.g. run.mcap", "write the repaired copy here (default: replace "
+                   "FILE)"), required=False)
+    _file_command(sub, "export", cmd_export,
+                  "write a copy of a recording that Foxglove draws as it is",
+                  "Copy an MCAP file written by `twinfleet record` with every message as JSON "
+                  "(bytes as base64) and schemas to match, plus Foxglove's well-known messages on "
+                  "/foxglove/... channels (foxglove.Grid map, foxglove.SceneUpdate robots and "
+                  "collisions, foxglove.PointCloud scans), so Foxglove's 3D panel draws it with "
+                  "no configuration. `twinfleet play` needs the original (msgpack) recording.",
+                  ("MCAP file written by `twinfleet record`",
+                   "JSON-encoded MCAP file to write, e.g. run.json.mcap"), required=True)
+
+
+def _file_command(parent: argparse._SubParsersAction, name: str, func: Any, text: str,
+                  description: str, helps: tuple[str, str], *, required: bool) -> None:
+    """A command taking FILE and -o/--output FILE (`helps`: their help texts)."""
+    p = parent.add_parser(name, help=text, description=description)
+    p.add_argument("file", help=helps[0])
+    p.add_argument("-o", "--output", required=required, default=None, metavar="FILE",
+                   help=helps[1])
+    p.set_defaults(func=func)
