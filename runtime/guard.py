@@ -204,6 +204,14 @@ def _tuple_check(args: tuple[Any, ...]) -> Check:
             for v in value:
                 item(v)
         return check_all
+    if args and all(a is int for a in args):  # cells and the like: the hot case, in one pass
+        size = len(args)
+
+        def check_ints(value: Any) -> None:
+            if type(value) is not tuple or len(value) != size or not all(
+                    type(v) is int for v in value):
+                raise _bad(value, f"{size} integers")
+        return check_ints
     items = [_check_for(a) for a in args]
 
     def check_fixed(value: Any) -> None:

@@ -107,8 +107,11 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
     clock: Clock = LogicalClock() if args.gate else FleetClock(args.epoch_ns, time_scale)
     try:
         login, key = node_secrets()
-        config = zenoh_config(connect=[args.connect], settings=login.settings() if login else None)
         limit = int(os.environ[LIMIT_ENV]) if os.environ.get(LIMIT_ENV) else None
+        settings = login.settings() if login else {}
+        if limit is not None:  # Zenoh itself refuses larger frames (the router does too)
+            settings["transport/link/rx/max_message_size"] = limit + 1024
+        config = zenoh_config(connect=[args.connect], settings=settings)
     except ValueError as exc:  # a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE or secret
         print(f"error: {exc}", file=sys.stderr)
         return 2
