@@ -166,3 +166,11 @@ def wait_matched(session: zenoh.Session, fleet: str, topic: str, timeout: float 
         poll(lambda: pub.matching_status.matching, timeout)
     finally:
         pub.undeclare()
+
+
+def honest_result(out: str, code: int) -> bool:
+    """The run's own verdict, not one an attacker chose: PASSED (exit 0), or INCONCLUSIVE
+    (exit 3) where the verdict rules count refused samples (`rejected_*`) as a reason."""
+    if "result: PASSED" in out:
+        return code == 0
+    return "INCONCLUSIVE" in out and "rejected_" in out and code == 3
