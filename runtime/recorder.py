@@ -220,9 +220,10 @@ async def _flush_until(recorder: McapRecorder, failed: asyncio.Event) -> None:
 
 async def record_live(connect: str, fleet: str, path: str | Path, *,
                       duration_s: float | None = None, stop: asyncio.Event | None = None,
-                      handle_signals: bool = False) -> McapRecorder:
+                      handle_signals: bool = False, auth: Any = None) -> McapRecorder:
     """Record a running fleet reached at `connect` for `duration_s` or until `stop` is set
-    (with `handle_signals`, also until SIGINT/SIGTERM)."""
+    (with `handle_signals`, also until SIGINT/SIGTERM); `auth`: the fleet's logins
+    (`runtime.fleetauth.MonitorAuth`; default: this machine's registry)."""
     import signal
 
     stop = stop or asyncio.Event()
@@ -232,7 +233,7 @@ async def record_live(connect: str, fleet: str, path: str | Path, *,
     recorder = McapRecorder(open(path, "wb"),  # noqa: SIM115 - closed by recorder.close()
                             on_failure=lambda _why: stop.set())
     recorder.metadata({"fleet": fleet, "connect": connect})
-    tap = FleetTap(lambda: tap_config(connect), fleet, recorder.write,
+    tap = FleetTap(lambda: tap_config(connect, auth), fleet, recorder.write,
                    retry=False)
     try:
         await tap.open()

@@ -41,7 +41,7 @@ def cmd_record(args: argparse.Namespace) -> int:
             conn = _joined(args)
             result, rec = None, asyncio.run(recorder.record_live(
                 conn.endpoint, conn.fleet, args.output, duration_s=args.duration,
-                handle_signals=True))
+                handle_signals=True, auth=conn.auth))
         else:
             result, rec = asyncio.run(recorder.record_scenario(
                 load_scenario(args.scenario), args.output, time_scale=args.time_scale,
