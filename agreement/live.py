@@ -33,6 +33,7 @@ from twinfleet import QOS_DEFAULT, String
 from twinfleet.nodes.mapfile import load_map
 from twinfleet.nodes.msgs import Collision, RobotStatus
 from twinfleet.nodes.report import FleetReport
+from twinfleet.runtime.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.launcher import SHUTDOWN_TOPIC, free_port, run_fleet
 from twinfleet.runtime.messages import encode
 from twinfleet.runtime.names import key_expr
@@ -264,7 +265,10 @@ async def _stop_when_decided(decided: asyncio.Event, fleet: asyncio.Task[Any], e
     await asyncio.wait([fleet], timeout=0.3)
     if fleet.done():
         return
-    transport = ZenohTransport(zenoh_config(connect=[endpoint]))
+    auth = registry_auth(endpoint)  # the launcher registered its fleet: its key and login
+    transport = ZenohTransport(zenoh_config(connect=[endpoint],
+                                            settings=login_settings(auth, write=True)),
+                               key=auth.key)
     await transport.open()
     try:
         payload = encode(String(f"outcome decided: {why[0]}"), sender="experiment")

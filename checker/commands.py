@@ -81,12 +81,15 @@ def register(subparsers: Any) -> None:
                    "(node state, event, time) (for comparison; same results, slower)")
     p.add_argument("--checkpoint", default=None, metavar="FILE",
                    help="save the search to FILE periodically and when it stops early "
-                   "(a limit or Ctrl-C); continue it with --resume FILE")
+                   "(a limit or Ctrl-C); continue it with --resume FILE. A checkpoint is a "
+                   "Python pickle of the search (visited states, queue, node states): loading "
+                   "one runs code, so it is trusted like code; resume only your own files")
     p.add_argument("--checkpoint-every", type=float, default=300.0, metavar="SECONDS",
                    help="seconds between periodic checkpoints (default 300)")
     p.add_argument("--resume", default=None, metavar="FILE",
                    help="continue the search saved in checkpoint FILE (and keep saving to it "
-                   "unless --checkpoint names another file)")
+                   "unless --checkpoint names another file); FILE is a pickle, trusted like "
+                   "code (see --checkpoint)")
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
     p.set_defaults(func=check_command)
 

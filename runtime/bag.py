@@ -50,7 +50,68 @@ class Summary:
 
 def _fail(path: Path, exc: BaseException) -> RecordingError:
     text = " ".join(str(exc).split()) or type(exc).__name__
-    return RecordingError(f"{path}: not a readable MCAP recording, corrupt or truncated ({text})")
+    return RecordingError(f"{path}: not a readable MCAP recording, corrupt or truncated ({text}); "
+                          f"if its recorder was killed or the disk filled up, `twinfleet bag "
+                          f"repair {path}` recovers every complete chunk")
+
+
+def repair(path: str | Path, output: str | Path | None = None) -> tuple[int, Path]:
+    """Rewrite the readable prefix of a recording cut short as a complete MCAP file.
+
+    Reads records in file order until the first incomplete one (a chunk half
+    written when the recorder died), then writes the schemas, channels,
+    metadata and messages read so far, with a summary, to `output` (default:
+    `path`, replaced atomically). Returns (messages written, output path).
+
+    Raises:
+        RecordingError: not an MCAP file at all (no header), or nothing readable.
+        OSError: the output cannot be written.
+    """
+    from mcap.reader import NonSeekingReader
+    from mcap.writer import Writer
+
+    path = Path(path)
+    target = Path(output) if output is not None else path
+    records = _readable_prefix(path, NonSeekingReader)
+    tmp = target.with_name(f".{target.name}.repair")
+    with tmp.open("wb") as stream:
+        writer = Writer(stream)
+        writer.start(profile="", library="twinfleet bag repair")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in records:
+            if schema is not None and schema.id not in schemas:
+                schemas[schema.id] = writer.register_schema(schema.name, schema.encoding,
+                                                            schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = writer.register_channel(
+                    channel.topic, channel.message_encoding,
+                    schemas.get(schema.id, 0) if schema is not None else 0, dict(channel.metadata))
+            writer.add_message(channels[channel.id], log_time=message.log_time,
+                               data=message.data, publish_time=message.publish_time,
+                               sequence=message.sequence)
+        writer.finish()
+    tmp.replace(target)
+    return len(records), target
+
+
+def _readable_prefix(path: Path, reader_class: Any) -> list[tuple[Any, Any, Any]]:
+    """(schema, channel, message) of every message before the first unreadable record."""
+    found: list[tuple[Any, Any, Any]] = []
+    with path.open("rb") as stream:
+        try:
+            for item in reader_class(stream).iter_messages(log_time_order=False):
+                found.append(item)
+        except READ_ERRORS:  # EndOfFile or a torn record: the cut, everything before it is kept
+            pass
+    if not found and not _has_magic(path):
+        raise RecordingError(f"{path}: not an MCAP recording (no MCAP header)")
+    return found
+
+
+def _has_magic(path: Path) -> bool:
+    with path.open("rb") as stream:
+        return stream.read(8) == b"\x89MCAP0\r\n"
 
 
 def read_summary(path: str | Path) -> Summary:

@@ -18,7 +18,16 @@ import argparse
 import os
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
+
+from twinfleet.runtime.fleetauth import (
+    CredentialsError,
+    MonitorAuth,
+    monitor_auth,
+    read_credentials,
+    registry_auth,
+)
 
 # One table of exit codes for every command (README and `twinfleet --help` list it).
 EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INCONCLUSIVE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
@@ -50,6 +59,7 @@ class Connection:
     endpoint: str
     fleet: str
     found: str  # "--connect" | "registry"
+    auth: MonitorAuth = field(default_factory=MonitorAuth)  # logins and fleet key, if any
 
 
 def add_connection_arguments(parser: argparse.ArgumentParser, *,
@@ -64,6 +74,11 @@ def add_connection_arguments(parser: argparse.ArgumentParser, *,
                             "found in the fleet registry)")
     group.add_argument("--fleet", default=os.environ.get("TWINFLEET_FLEET", "*"),
                        help=fleet_help + " (default: $TWINFLEET_FLEET or %(default)s)")
+    group.add_argument("--credentials", metavar="FILE",
+                       default=os.environ.get("TWINFLEET_CREDENTIALS"),
+                       help="the fleet's credentials: a copy of its fleet registry entry (owner-"
+                            "only JSON; default: $TWINFLEET_CREDENTIALS, else the registry's "
+                            "entry for the fleet or endpoint)")
     if discovery:
         group.add_argument("--query-timeout", type=float, default=DISCOVERY_S, metavar="S",
                            help="seconds to wait for discovery answers (default: %(default)s)")
@@ -75,23 +90,33 @@ def connection(args: argparse.Namespace) -> Connection:
     Raises:
         CommandError: no --connect and the registry has no single matching fleet.
     """
-    if args.connect:
-        return Connection(args.connect, args.fleet, "--connect")
     from twinfleet.runtime.registry import RegistryError, find_fleet
 
     try:
+        given = getattr(args, "credentials", None)
+        endpoint, auth = read_credentials(given) if given else (None, None)
+        if args.connect:
+            if auth is None:  # a fleet of this machine behind that endpoint: its secrets
+                auth = registry_auth(args.connect)
+            return Connection(args.connect, args.fleet, "--connect", auth)
+        if endpoint and auth is not None:
+            return Connection(endpoint, args.fleet, "--credentials", auth)
         entry = find_fleet(args.fleet)
-    except RegistryError as exc:
+        return Connection(entry.endpoint, entry.fleet, "registry", monitor_auth(entry.extra))
+    except (RegistryError, CredentialsError) as exc:
         raise CommandError(str(exc)) from None
-    return Connection(entry.endpoint, entry.fleet, "registry")
 
 
-def zenoh_conf(endpoint: str):  # noqa: ANN201 - zenoh imported lazily
-    """The client Zenoh config of a monitor command connecting to `endpoint`."""
+def zenoh_conf(endpoint: str, auth: MonitorAuth | None = None, *,
+               write: bool = False) -> Any:
+    """The client Zenoh config of a monitor command connecting to `endpoint` (with the
+    operator login when it publishes or calls, `write`, else the read-only one)."""
     from twinfleet.runtime.zenoh_transport import zenoh_config
 
+    login = auth.login(write=write) if auth is not None else None
     try:
-        return zenoh_config(connect=[endpoint], mode="client")
+        return zenoh_config(connect=[endpoint], mode="client",
+                            settings=login.settings() if login else None)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
 

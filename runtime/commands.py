@@ -50,10 +50,18 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def cmd_launch(args: argparse.Namespace) -> int:
     """`twinfleet launch`: validate, run the fleet `--runs` times, print summaries."""
+    from twinfleet.runtime.fleetauth import CredentialsError, listen_problem, read_credentials
     from twinfleet.runtime.introspect import load_with_params
     from twinfleet.runtime.scenario import ScenarioError
 
     params = launch_params(args)
+    problem = listen_problem(args.listen, insecure=args.insecure_listen) if args.listen else None
+    if problem:
+        raise CommandError(problem)
+    try:
+        auth = read_credentials(args.credentials)[1] if args.credentials else None
+    except CredentialsError as exc:
+        raise CommandError(str(exc)) from None
     try:
         scenario = load_with_params(args.scenario, params)
     except ScenarioError as exc:
@@ -65,7 +73,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         print(warning, file=sys.stderr)
     import zenoh
 
-    from twinfleet.runtime.launcher import format_result, run_fleet
+    from twinfleet.runtime.launcher import FleetConflict, format_result, run_fleet
 
     worst, passed = 0, 0
     for run in range(args.runs):
@@ -78,7 +86,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                            connect=args.connect, listen=args.listen,
                                            run_record=args.record_run,
                                            record_events=_events_path(args, run),
-                                           params=params))
+                                           params=params, auth=auth))
+        except FleetConflict as exc:
+            raise CommandError(str(exc)) from None
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
             print(f"error: {exc}", file=sys.stderr)
             return 2
@@ -320,7 +330,16 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--connect", default=None, metavar="EP",
                    help="join the Zenoh router at EP (e.g. tcp/10.0.0.2:7447) instead of embedding one")
     p.add_argument("--listen", default=None, metavar="EP",
-                   help="endpoint of the embedded router (default: tcp/127.0.0.1:<free port>)")
+                   help="endpoint of the embedded router (default: tcp/127.0.0.1:<free port>); "
+                        "an endpoint other machines can reach must be tls/ or quic/ (README "
+                        "\"Trust model\")")
+    p.add_argument("--credentials", default=None, metavar="FILE",
+                   help="with --connect: join the fleet whose registry entry FILE is (copied "
+                        "from the machine that launched it, owner-only): its key signs this "
+                        "launch's nodes (default: this machine's registry entry for EP)")
+    p.add_argument("--insecure-listen", action="store_true",
+                   help="allow --listen on a plain tcp/udp endpoint reachable from other "
+                        "machines: the fleet's traffic then crosses the network unencrypted")
     p.add_argument("--record-run", default=None, metavar="FILE",
                    help="append a run record to FILE as JSON lines, flushed per line (scenario, "
                         "seed, versions, node exits and respawns, end reason, statistics, summary)")

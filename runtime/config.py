@@ -137,9 +137,15 @@ class LiveConfig:
     time_scale: float = 1.0
     report: str | None = None
     summary_topics: tuple[str, ...] = ()
+    max_payload_bytes: int | None = None  # per sample; default sized to the map (runtime.guard)
+    max_nodes: int = 100  # nodes a scenario may have (checked first by runtime.scenario)
 
     def __post_init__(self) -> None:
         _optional(self, "live", "timeout_s", _positive)
+        if self.max_payload_bytes is not None and (
+                type(self.max_payload_bytes) is not int or self.max_payload_bytes < 1024):
+            raise ConfigError("live.max_payload_bytes",
+                              f"expected an integer >= 1024, got {self.max_payload_bytes!r}")
         _set(self, "time_scale", _positive("live.time_scale", self.time_scale))
         _bool("live.stop_on_error", self.stop_on_error)
         if self.report is not None and (not isinstance(self.report, str)

@@ -35,6 +35,9 @@ and never touches a socket:
    Stalls: `release_due` notes how late each timed entry is released
    (``max_lateness_ms``) and counts those later than `stall_threshold` —
    twice the node's shortest timer period, at least ``stall_ms`` (``stalls``).
+   Before that, a decoded sample must be of the type its handler declares and
+   have fields that fit it (`runtime.guard.Admission`); otherwise it is counted
+   (``rejected_wrong_type``, ``rejected_invalid``) and never queued.
 5. Running. `run_next(now)` runs the first inbox entry's handler through
    `runtime.dispatch.invoke`; `run(entry, now, chooser)` runs any pending
    entry out of order (the replay gate's way in). Both return the handler's
@@ -59,7 +62,7 @@ from __future__ import annotations
 
 import heapq
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final, Protocol, final
 
@@ -68,6 +71,7 @@ from twinfleet.runtime.context import Chooser, Context, Effect
 from twinfleet.runtime.dispatch import HandlerError, invoke
 from twinfleet.runtime.due import DueEntries
 from twinfleet.runtime.entries import Entry
+from twinfleet.runtime.guard import Admission, Rejected, check_message, expected_type
 from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.messages import (
     CallError,
@@ -84,7 +88,7 @@ _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
 _TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOUT})
 _COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "published",
                     "handled", "keep_last", "best_effort", "seq_jumps", "lossless", "stalls",
-                    "max_late", "period")
+                    "max_late", "period", "rejected_invalid", "rejected_wrong_type")
 _NOTHING: Final[tuple[()]] = ()
 
 
@@ -133,11 +137,20 @@ class HostStatistics:
     stalls: int = 0  # timed entries released later than the stall threshold after their due time
     max_lateness_ms: int = 0  # the latest a timed entry was released after its due time
     stall_threshold_ms: int = 0  # the threshold: twice the shortest timer period, or the floor
+    # Samples refused before any handler (runtime.guard): unsigned or wrongly signed,
+    # larger than the topic's limit, fields that do not fit the type, a type the handler
+    # does not take. Any of them > 0 makes a verdict INCONCLUSIVE (the prefix is the rule).
+    rejected_forged: int = 0
+    rejected_invalid: int = 0
+    rejected_oversize: int = 0
+    rejected_wrong_type: int = 0
 
     @classmethod
     def of(cls, n: dict[str, int], inbox_depth: int, timers_pending: int,
-           dropped_overflow: int, stall_threshold_ms: int = 0) -> HostStatistics:
-        """The record of a core's counters `n`."""
+           dropped_overflow: int, stall_threshold_ms: int = 0,
+           transport: Mapping[str, int] | None = None) -> HostStatistics:
+        """The record of a core's counters `n` (`transport`: what the transport refused)."""
+        below = transport or {}
         return cls(received=n["received"], dropped_undecodable=n["undecodable"],
                    handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
                    inbox_depth=inbox_depth, timers_pending=timers_pending,
@@ -145,7 +158,10 @@ class HostStatistics:
                    dropped_keep_last=n["keep_last"], dropped_overflow=dropped_overflow,
                    dropped_best_effort=n["best_effort"], sequence_jumps=n["seq_jumps"],
                    dropped_lossless=n["lossless"], stalls=n["stalls"],
-                   max_lateness_ms=n["max_late"], stall_threshold_ms=stall_threshold_ms)
+                   max_lateness_ms=n["max_late"], stall_threshold_ms=stall_threshold_ms,
+                   rejected_forged=below.get("forged", 0), rejected_oversize=below.get("oversize", 0),
+                   rejected_invalid=n["rejected_invalid"],
+                   rejected_wrong_type=n["rejected_wrong_type"])
 
 
 # A received sample as `decode_fields` returns it: (msg, stamp_ms, seq, sender).
@@ -157,10 +173,10 @@ Receive = Callable[[bytes, int], bool]
 class _Subscription:
     """One declared subscription: its handler and its KEEP_LAST queue of waiting samples."""
 
-    __slots__ = ("gap_counter", "lossless", "method", "priority", "topic", "waiting")
+    __slots__ = ("admit", "gap_counter", "lossless", "method", "priority", "topic", "waiting")
 
-    def __init__(self, spec: HandlerSpec, topic: str, keep_last: bool) -> None:
-        self.method, self.priority, self.topic = spec.method, spec.priority, topic
+    def __init__(self, spec: HandlerSpec, topic: str, keep_last: bool, admit: Admission) -> None:
+        self.method, self.priority, self.topic, self.admit = spec.method, spec.priority, topic, admit
         reliable = spec.qos.reliability is Reliability.RELIABLE
         self.gap_counter = "gaps" if reliable else "best_effort"  # a bug vs. drops by design
         self.lossless = reliable  # RELIABLE declares that every message matters
@@ -214,7 +230,8 @@ class NodeCore:
         for spec in self.spec.of_kind("subscribe"):
             topic = node.resolve(spec.name or "")
             if topic != LIVELINESS_TOPIC:
-                self._subs[spec.method] = _Subscription(spec, topic, keep_last)
+                self._subs[spec.method] = _Subscription(
+                    spec, topic, keep_last, Admission(expected_type(node, spec.method)))
             elif self._liveliness is None:
                 self._liveliness = spec
         self.services = {s.method: node.resolve(s.name or "") for s in self.spec.of_kind("service")}
@@ -252,7 +269,8 @@ class NodeCore:
         # Everything is bound once here: one sample costs a decode, a gap check, a deque
         # append and a heap push, with no attribute chains.
         n, counter, push, inbox = self._n, self._counter, heapq.heappush, self._inbox
-        waiting, priority, gap_counter, lossless = sub.waiting, sub.priority, sub.gap_counter, sub.lossless
+        waiting, priority, gap_counter = sub.waiting, sub.priority, sub.gap_counter
+        lossless, admit = sub.lossless, sub.admit
         last_seq = self._last_seq.setdefault(sub.topic, {})  # shared by one topic's subscriptions
 
         def receive(payload: bytes, arrival_ms: int) -> bool:
@@ -262,6 +280,11 @@ class NodeCore:
             except Exception as exc:  # DecodeError (anything else would be a codec bug)
                 n["undecodable"] += 1
                 raise DecodeError(str(exc)) from None
+            try:  # before the gap check: a refused sample leaves no trace in the core
+                admit(sample[0])
+            except Rejected as exc:
+                n[exc.counter] += 1
+                raise
             seq, sender = sample[2], sample[3]
             last = last_seq.get(sender)
             if last is not None and seq > last + 1:
@@ -290,6 +313,11 @@ class NodeCore:
         self._n["received"] += 1
         try:
             msg, stamp, seq, sender = decode_fields(payload)
+            check_message(msg)
+        except Rejected as exc:
+            self._n[exc.counter] += 1
+            return (Line(f"rejected request for {self.services[method]}: {exc}", err=True),
+                    Answer(responder, None, f"server error: rejected request ({exc})"))
         except Exception as exc:  # DecodeError (anything else would be a codec bug)
             self._n["undecodable"] += 1
             return (Line(f"undecodable request for {self.services[method]}: {exc}", err=True),
@@ -453,7 +481,10 @@ class NodeCore:
         error = self._outbox.finish(method, args, reply, error, responder, now, out)
         return out, effects, error
 
-    def statistics(self, dropped_overflow: int = 0) -> HostStatistics:
-        """Counters since start, as a frozen record (`dropped_overflow`: the transport's)."""
+    def statistics(self, dropped_overflow: int = 0,
+                   transport: Mapping[str, int] | None = None) -> HostStatistics:
+        """Counters since start, as a frozen record (`dropped_overflow`, `transport`: the
+        transport's drops and refusals)."""
         return HostStatistics.of(self._n, len(self._inbox), self.due.timers(), dropped_overflow,
-                                 self.stall_threshold() if self.stall_ms is not None else 0)
+                                 self.stall_threshold() if self.stall_ms is not None else 0,
+                                 transport)

@@ -43,6 +43,7 @@ from typing import TextIO, final
 from twinfleet.runtime.clock import Clock, TimerHandle
 from twinfleet.runtime.core import HostStatistics, NodeCore
 from twinfleet.runtime.eventlog import EventLog
+from twinfleet.runtime.guard import Rejected
 from twinfleet.runtime.messages import DecodeError
 from twinfleet.runtime.names import key_expr
 from twinfleet.runtime.node import QOS_DEFAULT, Node
@@ -51,6 +52,7 @@ from twinfleet.runtime.replay_gate import LogicalClock, ReplayGate, gate_key
 from twinfleet.runtime.transport import Respond, Transport, graph_key, parse_graph_key
 
 _DRAIN_BATCH = 256  # handlers per loop callback before yielding to I/O
+_DROP_LINES = 20  # log lines about dropped samples before they are only counted
 
 
 @final
@@ -84,6 +86,7 @@ class NodeHost:
                              stall_ms=stall_ms)
         self.publications = {node.resolve(k): v for k, v in node.spec().publications.items()}
         self.failed = False
+        self._dropped = 0
         self.alive: set[str] = set()
         if events is not None:
             self.core.observe(events)
@@ -142,8 +145,8 @@ class NodeHost:
     def statistics(self) -> HostStatistics:
         """Counters since start, as a frozen record."""
         transport_stats = getattr(self.transport, "statistics", None)
-        overflow = transport_stats().get("overflow", 0) if callable(transport_stats) else 0
-        return self.core.statistics(overflow)
+        below = transport_stats() if callable(transport_stats) else {}
+        return self.core.statistics(below.get("overflow", 0), below)
 
     def idle(self) -> bool:
         """True when nothing can run now: no handler is ready and no drain is scheduled (a
@@ -196,7 +199,11 @@ class NodeHost:
                 if receive(payload, now_ms()) and not self._scheduled:
                     wake()
             except DecodeError as exc:  # counted by the core
-                self._line(f"dropped undecodable sample on {key}: {exc}", err=True)
+                self._dropped += 1
+                if self._dropped <= _DROP_LINES:  # a flood of bad samples is counted, not logged
+                    what = "rejected" if isinstance(exc, Rejected) else "dropped undecodable"
+                    more = "; further ones are only counted" if self._dropped == _DROP_LINES else ""
+                    self._line(f"{what} sample on {key}: {exc}{more}", err=True)
 
         return deliver
 

@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import dataclasses
 import heapq
 import importlib
 import json
@@ -48,20 +49,23 @@ from pathlib import Path
 from typing import Any, TextIO, final
 
 import msgpack
+import yaml
 
-from twinfleet.runtime import registry
+from twinfleet.runtime import fleetauth, registry
 from twinfleet.runtime.cliargs import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from twinfleet.runtime.eventlog import EVENTS_FORMAT
+from twinfleet.runtime.guard import Rejected, check_message, payload_limit
 from twinfleet.runtime.introspect import param_arguments
 from twinfleet.runtime.live_verdict import HOLDS, LiveMonitor, RunEnd, Verdict
 from twinfleet.runtime.messages import DecodeError, decode
 from twinfleet.runtime.names import key_expr
 from twinfleet.runtime.node import QOS_DEFAULT
-from twinfleet.runtime.node_main import PARENT_ENV, stats_key
+from twinfleet.runtime.node_main import LIMIT_ENV, PARENT_ENV, stats_key
 from twinfleet.runtime.run_record import RunRecord, versions
 from twinfleet.runtime.scenario import NodeConfig, Scenario
 from twinfleet.runtime.scenario_file import write_scenario
 from twinfleet.runtime.state_report import decode_report, state_key
+from twinfleet.runtime.transport import graph_key, parse_graph_key
 from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
 
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"
@@ -71,6 +75,10 @@ _GRACE_S = (3.0, 2.0)  # after SIGINT, after SIGTERM; then SIGKILL
 _RESPAWN_DELAY_S = 0.5
 _REPORT_GRACE_S = 0.5  # wall seconds between the report's "finished" and the end of the run
 _STATS_TIMEOUT_S = 2.0  # for the nodes' final statistics (the live verdict reads them)
+
+
+class FleetConflict(ValueError):
+    """Nodes of the fleet are already alive on the router; the text names them."""
 
 
 @dataclass(frozen=True)
@@ -139,8 +147,10 @@ def free_port() -> int:
 class _NodeProcess:
     """One supervised node process and its output pump."""
 
-    def __init__(self, cfg: NodeConfig, argv: list[str], out: TextIO) -> None:
+    def __init__(self, cfg: NodeConfig, argv: list[str], out: TextIO,
+                 secrets: Mapping[str, str] | None = None) -> None:
         self.cfg, self.argv, self.out = cfg, argv, out
+        self.secrets = dict(secrets or {})
         self.proc: asyncio.subprocess.Process | None = None
         self.last_lines: deque[str] = deque(maxlen=_LAST_LINES)
         self.restarts = 0
@@ -153,6 +163,7 @@ class _NodeProcess:
         env["PYTHONPATH"] = os.pathsep.join(p for p in paths if p)
         env["PYTHONUNBUFFERED"] = "1"
         env[PARENT_ENV] = str(os.getpid())
+        env.update(self.secrets)  # the environment: other users cannot read it, unlike argv
         self.exit_code = None
         self.proc = await asyncio.create_subprocess_exec(
             *self.argv, stdin=asyncio.subprocess.DEVNULL, stdout=asyncio.subprocess.PIPE,
@@ -198,12 +209,22 @@ class Fleet:
                  connect: str | None, listen: str | None, out: TextIO,
                  record: RunRecord | None = None, node_args: Sequence[str] = (),
                  events_dir: Path | None = None, keep_scenario_beside: str | None = None,
-                 monitor: bool = True) -> None:
+                 monitor: bool = True, auth: fleetauth.MonitorAuth | None = None) -> None:
         self.time_scale, self.seed, self.out = time_scale, seed, out
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
         self.connect = connect
         self.endpoint = connect or listen or f"tcp/127.0.0.1:{free_port()}"
+        self.creds = fleetauth.FleetCredentials.fresh()
+        # Joining a router (--connect): the fleet there may span machines; its key and
+        # operator login (this machine's registry, or --credentials FILE) make us a member.
+        joined = (auth if auth is not None else fleetauth.registry_auth(connect)) if connect \
+            else None
+        if joined is not None and joined.key is not None:
+            self.creds = dataclasses.replace(self.creds, key=joined.key)
+        self.limit = scenario_payload_limit(scenario)
+        self._auth_dir: Path | None = None
+        self._login = joined.login(write=True) if joined is not None else None
         self.transport: ZenohTransport | None = None
         self.epoch_ns = time.time_ns()
         self.processes: dict[str, _NodeProcess] = {}
@@ -214,6 +235,7 @@ class Fleet:
         self.report = load_report(scenario)
         self.monitor = LiveMonitor(scenario, time_scale=time_scale) if monitor else None
         self.statistics: dict[str, Any] = {}
+        self.invalid = 0  # report samples refused by `guard.check_message`
         self._finishing = False
         self.scenario, self._private_dir = launchable(scenario, keep_scenario_beside)
 
@@ -229,11 +251,15 @@ class Fleet:
     async def open(self) -> None:
         """Open the router (or client) session and the launcher's subscriptions."""
         self.ended = asyncio.get_running_loop().create_future()
-        if self.connect:
-            conf = zenoh_config(connect=[self.connect], mode="client")
+        if self.connect:  # someone else's router: its access control is theirs
+            conf = zenoh_config(connect=[self.connect], mode="client",
+                                settings=self._login.settings() if self._login else None)
         else:
-            conf = zenoh_config(listen=[self.endpoint], mode="router")
-        self.transport = ZenohTransport(conf)
+            self._auth_dir = fleetauth.private_dir()
+            settings = fleetauth.router_settings(self.creds, self._auth_dir)
+            settings["transport/link/rx/max_message_size"] = self.limit + 1024
+            conf = zenoh_config(listen=[self.endpoint], mode="router", settings=settings)
+        self.transport = ZenohTransport(conf, key=self.creds.key, limit=self.limit)
         await self.transport.open()
         fleet = self.scenario.fleet
         self.transport.subscribe(key_expr(fleet, SHUTDOWN_TOPIC), self._on_shutdown, QOS_DEFAULT)
@@ -254,6 +280,23 @@ class Fleet:
             return
         self.monitor.on_report(report)
 
+    def refusals(self) -> dict[str, int]:
+        """What the launcher's own subscriptions (report, shutdown) refused, by reason."""
+        below = self.transport.statistics() if self.transport is not None else {}
+        return {"forged": below.get("forged", 0), "oversize": below.get("oversize", 0),
+                "invalid": self.invalid}
+
+    def node_secrets(self) -> dict[str, str]:
+        """The environment a node process gets: fleet key, login (embedded router), limit."""
+        env = self.creds.node_env()
+        if self.connect:  # a router we did not start: its login, if this machine knows it
+            env.pop(fleetauth.ENV_USER)
+            env.pop(fleetauth.ENV_PASSWORD)
+            if self._login is not None:
+                env.update({fleetauth.ENV_USER: self._login.user,
+                            fleetauth.ENV_PASSWORD: self._login.password})
+        return {**env, LIMIT_ENV: str(self.limit)}
+
     def _on_shutdown(self, _key: str, payload: bytes) -> None:
         try:
             env = decode(payload)
@@ -273,8 +316,15 @@ class Fleet:
 
     def _reported(self, topic: str) -> Any:
         def deliver(_key: str, payload: bytes) -> None:
-            with contextlib.suppress(DecodeError):
-                self.report.on_message(topic, decode(payload).msg)
+            try:
+                msg = decode(payload).msg
+                check_message(msg)  # NaN cells or a string arrival time never reach the verdict
+            except Rejected:
+                self.invalid += 1
+            except DecodeError:
+                pass
+            else:
+                self.report.on_message(topic, msg)
             finished = getattr(self.report, "finished", None)
             if finished is not None and finished() and not self._finishing:
                 # A grace period: messages already in flight from other nodes (a collision
@@ -297,11 +347,35 @@ class Fleet:
             argv += ["--record-events", str(self.events_dir / f"{cfg.name}.jsonl")]
         return argv
 
+    async def alive_names(self, timeout_s: float = 1.0) -> list[str]:
+        """Names of this fleet's nodes whose liveliness tokens the router holds now."""
+        if self.transport is None or self.transport.session is None:
+            return []
+        key = graph_key(self.scenario.fleet, "node", "*")
+        session = self.transport.session
+
+        def query() -> list[str]:
+            return [parse_graph_key(str(r.ok.key_expr))[2]
+                    for r in session.liveliness().get(key, timeout=timeout_s) if r.ok is not None]
+
+        return sorted(set(await asyncio.to_thread(query)))
+
+    async def refuse_twins(self) -> None:
+        """Raise `FleetConflict` when nodes of this scenario already run in the fleet (a
+        second launch on the same router would merge both runs' traffic silently)."""
+        wanted = {cfg.name for cfg in self.scenario.nodes}
+        twins = [name for name in await self.alive_names() if name in wanted]
+        if twins:
+            raise FleetConflict(
+                f"fleet {self.scenario.fleet!r} at {self.endpoint} already runs "
+                f"{', '.join(twins)}: a second launch would merge with it; stop that run, or "
+                "give this one another fleet name (the scenario's `fleet:`)")
+
     async def start_nodes(self) -> list[asyncio.Task[None]]:
         """Start every node process and one supervisor task per node."""
         tasks = []
         for cfg in self.scenario.nodes:
-            proc = _NodeProcess(cfg, self._argv(cfg), self.out)
+            proc = _NodeProcess(cfg, self._argv(cfg), self.out, self.node_secrets())
             self.processes[cfg.name] = proc
             await proc.start()
             tasks.append(asyncio.create_task(self._supervise(proc)))
@@ -376,6 +450,21 @@ class Fleet:
             await self.transport.close()
         if self._private_dir is not None:
             shutil.rmtree(self._private_dir, ignore_errors=True)
+        fleetauth.remove_dir(self._auth_dir)
+
+
+def scenario_payload_limit(scenario: Scenario) -> int:
+    """The per-topic payload limit of a fleet: `live.max_payload_bytes`, else sized to the
+    scenario's map (the occupancy grid is the largest message: `guard.payload_limit`)."""
+    configured = scenario.live.max_payload_bytes
+    if configured is not None or scenario.map_path is None:
+        return payload_limit(0, 0, configured)
+    cells = 0
+    with contextlib.suppress(OSError, ValueError, TypeError, AttributeError):
+        doc = yaml.safe_load(scenario.map_path.read_text())
+        image = scenario.map_path.parent / str(doc["image"])
+        cells = image.stat().st_size  # a binary PGM: one byte per cell, plus its header
+    return payload_limit(cells, 1)
 
 
 def launchable(scenario: Scenario, beside: str | None) -> tuple[Scenario, Path | None]:
@@ -401,7 +490,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     run_record: str | None = None, record_events: str | None = None,
                     node_args: Sequence[str] = (), params: Sequence[str] = (),
                     driver: Callable[[Fleet], Awaitable[str]] | None = None,
-                    monitor: bool = True) -> FleetResult:
+                    monitor: bool = True,
+                    auth: fleetauth.MonitorAuth | None = None) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
@@ -424,6 +514,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         monitor: judge the scenario's properties live (`runtime.live_verdict`; the
             result's `verdict`); False: no state reports (the result follows exits and
             the report only).
+        auth: with `connect`, the joined fleet's key and logins (default: this machine's
+            fleet registry entry for that endpoint, if any).
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
@@ -434,7 +526,7 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
                   out=out, record=record, node_args=[*node_args, *param_arguments(params)],
                   events_dir=events_dir, keep_scenario_beside=record_events or run_record,
-                  monitor=monitor)
+                  monitor=monitor, auth=auth)
     scenario = fleet.scenario  # loaded from a file node processes can read
     entry: Path | None = None
     driving: asyncio.Task[str] | None = None
@@ -452,6 +544,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                          nodes=[{"name": c.name, "class": c.class_path, "respawn": c.respawn}
                                 for c in scenario.nodes])
         await fleet.open()
+        if connect:  # an embedded router is new: only a shared one can hold a twin fleet
+            await fleet.refuse_twins()
         entry = _register(fleet, params)
         fleet.log(f"fleet {scenario.fleet!r} on {fleet.endpoint} "
                   f"(time scale {time_scale:g}, seed {seed}); monitor with: twinfleet node list --fleet "
@@ -470,6 +564,10 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         running = [name for name, p in fleet.processes.items() if p.running()]
         if record is not None or fleet.monitor is not None:
             fleet.statistics = await fleet.node_statistics(_STATS_TIMEOUT_S)
+        refused = {k: v for k, v in fleet.refusals().items() if v}
+        if refused:
+            fleet.log("refused samples on the report and shutdown topics: "
+                      + ", ".join(f"{k} {v}" for k, v in refused.items()))
         if record is not None:
             record.write("end", reason=reason)
             record.write("node_stats", stats=fleet.statistics)
@@ -527,7 +625,8 @@ def _register(fleet: Fleet, params: Sequence[str]) -> Path | None:
     None (and a line saying why) when the registry cannot be written."""
     try:
         return registry.register(fleet.scenario.fleet, fleet.endpoint,
-                                 scenario=str(fleet.scenario.path), params={"overrides": list(params)})
+                                 scenario=str(fleet.scenario.path), params={"overrides": list(params)},
+                                 extra=fleet.creds.registry_extra())
     except (OSError, registry.RegistryError) as exc:
         fleet.log(f"not registered for discovery ({exc}); monitors need --connect")
         return None

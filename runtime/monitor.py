@@ -33,10 +33,11 @@ POLL_S = 0.02
 
 
 @contextmanager
-def open_session(conn: Connection) -> Iterator[zenoh.Session]:
-    """A client session to the fleet's router; a dead endpoint is a `CommandError`."""
+def open_session(conn: Connection, *, write: bool = False) -> Iterator[zenoh.Session]:
+    """A client session to the fleet's router (with the login `conn` holds: the operator's
+    for a command that publishes or calls, `write`); a dead endpoint is a `CommandError`."""
     try:
-        session = zenoh.open(zenoh_conf(conn.endpoint))
+        session = zenoh.open(zenoh_conf(conn.endpoint, conn.auth, write=write))
     except zenoh.ZError as exc:
         how = ("the fleet registry names it, but its launcher does not answer"
                if conn.found == "registry" else "is a fleet running there?")

@@ -23,6 +23,7 @@ import zenoh
 
 from twinfleet.runtime import graph as g
 from twinfleet.runtime.cliargs import CommandError, Connection
+from twinfleet.runtime.guard import signer
 from twinfleet.runtime.monitor import (
     POLL_S,
     checked_type,
@@ -201,10 +202,11 @@ def topic_pub(conn: Connection, topic: str, type_name: str, data: dict[str, Any]
     """
     sent = 0
     type_name = checked_type(type_name)
-    with open_session(conn) as session:
+    with open_session(conn, write=True) as session:
         fields = _payload_fields(type_name, data, _known_schemas(session, conn.fleet, timeout_s))
-        pub = session.declare_publisher(g.data_key(conn.fleet, topic),
-                                        congestion_control=zenoh.CongestionControl.BLOCK)
+        key = g.data_key(conn.fleet, topic)
+        tag = signer(conn.auth.key, key)  # the fleet's nodes take only signed samples
+        pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         deadline = time.monotonic() + wait_matched_s
         while not pub.matching_status.matching and time.monotonic() < deadline:
             time.sleep(POLL_S)
@@ -213,7 +215,8 @@ def topic_pub(conn: Connection, topic: str, type_name: str, data: dict[str, Any]
                   f"{wait_matched_s:g} s); publishing anyway", file=err, flush=True)
         try:
             while count is None or sent < count:
-                pub.put(envelope(type_name, fields, seq=sent + 1))
+                payload = envelope(type_name, fields, seq=sent + 1)
+                pub.put(payload, attachment=tag(payload))
                 sent += 1
                 print(f"published #{sent} on {topic}: {type_name} {inline(fields)}",
                       file=out, flush=True)
@@ -230,11 +233,12 @@ def service_call(conn: Connection, service: str, type_name: str, data: dict[str,
                  out: TextIO, timeout_s: float = 2.0, discovery_s: float = 1.0) -> int:
     """Call `service` once and print the reply envelope; 2 on error, timeout or no server."""
     type_name = checked_type(type_name, service=True)
-    with open_session(conn) as session:
+    with open_session(conn, write=True) as session:
         fields = _payload_fields(type_name, data, _known_schemas(session, conn.fleet,
                                                                  discovery_s))
-        replies = list(session.get(g.data_key(conn.fleet, service),
-                                   payload=envelope(type_name, fields), timeout=timeout_s))
+        key, payload = g.data_key(conn.fleet, service), envelope(type_name, fields)
+        replies = list(session.get(key, payload=payload, timeout=timeout_s,
+                                   attachment=signer(conn.auth.key, key)(payload)))
     for reply in replies:
         if reply.ok is not None:
             out.write(render_envelope(reply.ok.payload.to_bytes()))

@@ -34,6 +34,7 @@ import msgpack
 
 from twinfleet.runtime.clock import Clock, FleetClock
 from twinfleet.runtime.eventlog import EventLog
+from twinfleet.runtime.fleetauth import node_secrets
 from twinfleet.runtime.host import NodeHost
 from twinfleet.runtime.introspect import PARAM_FLAG, load_with_params, serve_info
 from twinfleet.runtime.names import KEY_PREFIX
@@ -47,6 +48,7 @@ from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
 
 _PR_SET_PDEATHSIG = 1
 PARENT_ENV = "TWINFLEET_LAUNCHER_PID"
+LIMIT_ENV = "TWINFLEET_MAX_PAYLOAD"  # bytes a sample may have (set by the launcher)
 
 
 def die_with_parent() -> None:
@@ -112,11 +114,16 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
                          else live.stop_on_error)
     clock: Clock = LogicalClock() if args.gate else FleetClock(args.epoch_ns, time_scale)
     try:
-        config = zenoh_config(connect=[args.connect])
-    except ValueError as exc:  # a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
+        login, key = node_secrets()
+        limit = int(os.environ[LIMIT_ENV]) if os.environ.get(LIMIT_ENV) else None
+        settings = login.settings() if login else {}
+        if limit is not None:  # Zenoh itself refuses larger frames (the router does too)
+            settings["transport/link/rx/max_message_size"] = limit + 1024
+        config = zenoh_config(connect=[args.connect], settings=settings)
+    except ValueError as exc:  # a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE or secret
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    transport = ZenohTransport(config)
+    transport = ZenohTransport(config, key=key, limit=limit)
     peers = () if args.no_wait else tuple(n.name for n in scenario.nodes)
     seed = args.seed if args.seed is not None else scenario.seed
     events = None

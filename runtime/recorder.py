@@ -16,6 +16,15 @@ File layout (MCAP, written with the `mcap` package, zstd chunks, full index):
   is arrival order), publish time = log time, sequence = arrival index.
 * one metadata record ``twinfleet`` (fleet, scenario, time scale, seed).
 
+Crash safety. Messages are written in chunks as they come: the chunk in
+progress is closed and flushed to the file at least every `FLUSH_S` seconds
+(and whenever it reaches `CHUNK_BYTES`), so after a kill -9 the file holds
+every chunk up to the last flush; it then has no summary, and `twinfleet bag
+repair FILE` (`runtime.bag.repair`) rewrites it as a complete recording. A
+write that fails (a full disk: ENOSPC) stops the recording at once: the file
+is cut back to its last complete chunk (readable after `bag repair`), and
+`failed` holds the one line that says so.
+
 `record_scenario` makes the recorder's session the fleet's router and then
 launches the fleet with `run_fleet(connect=...)`, so the recorder is subscribed
 before the first node starts. `record_live` joins a running fleet and asks its
@@ -46,6 +55,8 @@ from twinfleet.runtime.zenoh_transport import zenoh_config
 
 DRAIN_S = 0.3
 LINGER_S = 0.5
+FLUSH_S = 0.5  # the chunk in progress reaches the file at least this often (wall seconds)
+CHUNK_BYTES = 256 * 1024
 @final
 class McapRecorder:
     """Writes raw envelopes to an MCAP file: a schema per type, a channel per topic key.
@@ -55,11 +66,16 @@ class McapRecorder:
         latched: fully qualified names recorded with durability ``transient_local``.
     """
 
-    def __init__(self, stream: BinaryIO, *, latched: tuple[str, ...] = LATCHED_TOPICS) -> None:
+    def __init__(self, stream: BinaryIO, *, latched: tuple[str, ...] = LATCHED_TOPICS,
+                 on_failure: Callable[[str], None] | None = None) -> None:
         self.known_schemas: dict[str, dict[str, Any]] = {}  # data schemas the fleet served
         self._stream = stream
-        self._writer = Writer(stream)
-        self._writer.start(profile="", library="twinfleet")
+        self.failed: str | None = None  # why the recording stopped early (module docstring)
+        self.on_failure = on_failure
+        self._good = 0  # file offset after the last complete flush
+        self._flushed_at = time.monotonic()
+        self._writer = Writer(stream, chunk_size=CHUNK_BYTES)
+        self._guarded(lambda: self._writer.start(profile="", library="twinfleet"))
         self.latched = latched
         self._schemas: dict[str, int] = {}
         self._channels: dict[tuple[str, str], int] = {}
@@ -69,12 +85,43 @@ class McapRecorder:
 
     def metadata(self, values: Mapping[str, Any]) -> None:
         """Add the ``twinfleet`` metadata record (values become strings)."""
-        self._writer.add_metadata("twinfleet", {k: str(v) for k, v in values.items()})
+        self._guarded(lambda: self._writer.add_metadata(
+            "twinfleet", {k: str(v) for k, v in values.items()}))
+        self.flush()
+
+    def flush(self) -> None:
+        """Close the chunk in progress and write it to the file (now)."""
+        if self._guarded(self._writer.flush):
+            self._good = self._stream.tell()
+        self._flushed_at = time.monotonic()
+
+    def flush_due(self) -> None:
+        """`flush` if the last one is `FLUSH_S` old (a periodic task calls this)."""
+        if self.failed is None and time.monotonic() - self._flushed_at >= FLUSH_S:
+            self.flush()
+
+    def _guarded(self, write: Callable[[], Any]) -> bool:
+        """Run a write; on OSError stop the recording (module docstring). False if it failed."""
+        if self.failed is not None:
+            return False
+        try:
+            write()
+            return True
+        except OSError as exc:
+            name = getattr(self._stream, "name", "the recording")
+            self.failed = (f"recording stopped after {self.messages} messages: cannot write "
+                           f"{name} ({exc.strerror or exc}); the file keeps what was written "
+                           f"before: `twinfleet bag repair {name}` makes it a complete recording")
+            with contextlib.suppress(OSError, ValueError):
+                self._stream.truncate(self._good)  # cut a half-written chunk off
+            if self.on_failure is not None:
+                self.on_failure(self.failed)
+            return False
 
     def write(self, key: str, payload: bytes) -> None:
         """Record one sample of `key` received now."""
         parts = key.split("/", 2)
-        if len(parts) < 3 or parts[0] != KEY_PREFIX:
+        if self.failed is not None or len(parts) < 3 or parts[0] != KEY_PREFIX:
             return
         try:
             env = msgpack.unpackb(payload, raw=False, strict_map_key=False)
@@ -84,12 +131,17 @@ class McapRecorder:
         if type_name is None:
             self.undecodable += 1
             type_name = "twinfleet/Undecodable"
-        channel = self._channel(key, parts[1], "/" + parts[2], type_name, env)
         now = max(time.time_ns(), self._last_ns + 1)
         self._last_ns = now
-        self._writer.add_message(channel, log_time=now, data=payload, publish_time=now,
-                                 sequence=self.messages)
-        self.messages += 1
+
+        def add() -> None:
+            channel = self._channel(key, parts[1], "/" + parts[2], type_name, env)
+            self._writer.add_message(channel, log_time=now, data=payload, publish_time=now,
+                                     sequence=self.messages)
+
+        if self._guarded(add):
+            self.messages += 1
+        self.flush_due()
 
     def _channel(self, key: str, fleet: str, topic: str, type_name: str, env: Any) -> int:
         channel = self._channels.get((key, type_name))
@@ -109,9 +161,11 @@ class McapRecorder:
         return channel
 
     def close(self) -> None:
-        """Write the summary and close the file."""
-        self._writer.finish()
-        self._stream.close()
+        """Write the summary and close the file (a failed recording stays as it was cut)."""
+        if self.failed is None:
+            self._guarded(self._writer.finish)
+        with contextlib.suppress(OSError):
+            self._stream.close()
 
     @property
     def topics(self) -> int:
@@ -129,44 +183,66 @@ async def record_scenario(scenario: Any, path: str | Path, *, time_scale: float 
     from twinfleet.runtime.launcher import free_port, run_fleet
 
     endpoint = listen or f"tcp/127.0.0.1:{free_port()}"
-    recorder = McapRecorder(open(path, "wb"))  # noqa: SIM115 - closed by recorder.close()
+    failed = asyncio.Event()
+    recorder = McapRecorder(open(path, "wb"),  # noqa: SIM115 - closed by recorder.close()
+                            on_failure=lambda _why: failed.set())
     recorder.metadata({"fleet": scenario.fleet, "scenario": scenario.path,
                        "seed": scenario.seed if seed is None else seed,
                        "time_scale": time_scale or scenario.live.time_scale})
     tap = FleetTap(lambda: zenoh_config(listen=[endpoint], mode="router"), scenario.fleet,
                    recorder.write, retry=False)
+    flusher: asyncio.Task[None] | None = None
     try:
         await tap.open()
+        flusher = asyncio.create_task(_flush_until(recorder, failed))
+
+        async def until_failed(_fleet: Any) -> str:
+            await failed.wait()
+            return str(recorder.failed)
+
         result = await run_fleet(scenario, time_scale=time_scale, timeout_s=duration_s, seed=seed,
-                                 connect=endpoint, out=out)
+                                 connect=endpoint, out=out, driver=until_failed)
         await asyncio.sleep(DRAIN_S)  # the last samples may still be on their way
     finally:
+        if flusher is not None:
+            flusher.cancel()
         await tap.close()
         recorder.close()
     return result, recorder
 
 
+async def _flush_until(recorder: McapRecorder, failed: asyncio.Event) -> None:
+    """Flush the recorder every `FLUSH_S` / 2 (a quiet fleet sends nothing that would)."""
+    while not failed.is_set():
+        await asyncio.sleep(FLUSH_S / 2)
+        recorder.flush_due()
+
+
 async def record_live(connect: str, fleet: str, path: str | Path, *,
                       duration_s: float | None = None, stop: asyncio.Event | None = None,
-                      handle_signals: bool = False) -> McapRecorder:
+                      handle_signals: bool = False, auth: Any = None) -> McapRecorder:
     """Record a running fleet reached at `connect` for `duration_s` or until `stop` is set
-    (with `handle_signals`, also until SIGINT/SIGTERM)."""
+    (with `handle_signals`, also until SIGINT/SIGTERM); `auth`: the fleet's logins
+    (`runtime.fleetauth.MonitorAuth`; default: this machine's registry)."""
     import signal
 
     stop = stop or asyncio.Event()
     if handle_signals:
         for sig in (signal.SIGINT, signal.SIGTERM):
             asyncio.get_running_loop().add_signal_handler(sig, stop.set)
-    recorder = McapRecorder(open(path, "wb"))  # noqa: SIM115 - closed by recorder.close()
+    recorder = McapRecorder(open(path, "wb"),  # noqa: SIM115 - closed by recorder.close()
+                            on_failure=lambda _why: stop.set())
     recorder.metadata({"fleet": fleet, "connect": connect})
-    tap = FleetTap(lambda: tap_config(connect), fleet, recorder.write,
+    tap = FleetTap(lambda: tap_config(connect, auth), fleet, recorder.write,
                    retry=False)
     try:
         await tap.open()
         recorder.known_schemas.update(await asyncio.to_thread(fleet_schemas, tap.session, fleet))
         waiter = asyncio.ensure_future(stop.wait())
+        flusher = asyncio.create_task(_flush_until(recorder, stop))
         await asyncio.wait([waiter], timeout=duration_s)
         waiter.cancel()
+        flusher.cancel()
     finally:
         await tap.close()
         recorder.close()

@@ -13,6 +13,7 @@ import argparse
 import asyncio
 import os
 import sys
+from typing import Any
 
 from twinfleet.runtime.cliargs import (
     CommandError,
@@ -40,7 +41,7 @@ def cmd_record(args: argparse.Namespace) -> int:
             conn = _joined(args)
             result, rec = None, asyncio.run(recorder.record_live(
                 conn.endpoint, conn.fleet, args.output, duration_s=args.duration,
-                handle_signals=True))
+                handle_signals=True, auth=conn.auth))
         else:
             result, rec = asyncio.run(recorder.record_scenario(
                 load_scenario(args.scenario), args.output, time_scale=args.time_scale,
@@ -50,6 +51,8 @@ def cmd_record(args: argparse.Namespace) -> int:
         return 2
     for line in format_result(result) if result is not None else ():
         print(f"[launcher] {line}", flush=True)
+    if rec.failed is not None:
+        raise CommandError(rec.failed)
     print(f"wrote {args.output}: {rec.messages} messages on {rec.topics} topics", flush=True)
     return 0 if result is None else result.exit_code
 
@@ -71,6 +74,7 @@ def cmd_play(args: argparse.Namespace) -> int:
     from twinfleet.runtime import registry
     from twinfleet.runtime.bag import RecordingError, check_readable, read_summary
     from twinfleet.runtime.cliargs import zenoh_error_text
+    from twinfleet.runtime.fleetauth import login_settings, registry_auth
     from twinfleet.runtime.launcher import free_port
     from twinfleet.runtime.recorder import play
     from twinfleet.runtime.zenoh_transport import zenoh_config
@@ -86,7 +90,8 @@ def cmd_play(args: argparse.Namespace) -> int:
             return zenoh_config(listen=[listen], mode="router")
     else:
         def make_config():  # noqa: ANN202 - zenoh imported lazily
-            return zenoh_config(connect=[args.connect], mode="client")
+            return zenoh_config(connect=[args.connect], mode="client",
+                                settings=login_settings(registry_auth(args.connect), write=True))
     fleet = None if args.fleet == "*" else args.fleet
     name = fleet or summary.metadata.get("twinfleet", {}).get("fleet")
     entry = None
@@ -103,13 +108,19 @@ def cmd_play(args: argparse.Namespace) -> int:
 
 
 def cmd_bag(args: argparse.Namespace) -> int:
-    """`twinfleet bag info FILE`."""
-    from twinfleet.runtime.bag import RecordingError, print_info, read_summary
+    """`twinfleet bag info FILE` and `twinfleet bag repair FILE [-o OUT]`."""
+    from twinfleet.runtime.bag import RecordingError, print_info, read_summary, repair
 
     try:
+        if args.action == "repair":
+            count, out = repair(args.file, getattr(args, "output", None))
+            print(f"repaired {args.file}: {count} messages written to {out}", flush=True)
+            return 0
         print_info(read_summary(args.file), sys.stdout)
     except RecordingError as exc:
         raise CommandError(str(exc)) from None
+    except OSError as exc:
+        raise CommandError(f"{args.file}: {exc.strerror or exc}") from None
     return 0
 
 
@@ -182,15 +193,30 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "message count per topic and type, schemas.")
     bi.add_argument("file", help="MCAP file, e.g. run.mcap")
     bi.set_defaults(func=cmd_bag)
-    e = sub.add_parser("export", help="write a copy of a recording that Foxglove draws as it is",
-                       description="Copy an MCAP file written by `twinfleet record` with every "
-                                   "message as JSON (bytes as base64) and schemas to match, plus "
-                                   "Foxglove's well-known messages on /foxglove/... channels "
-                                   "(foxglove.Grid map, foxglove.SceneUpdate robots and "
-                                   "collisions, foxglove.PointCloud scans), so Foxglove's 3D "
-                                   "panel draws it with no configuration. `twinfleet play` needs "
-                                   "the original (msgpack) recording.")
-    e.add_argument("file", help="MCAP file written by `twinfleet record`")
-    e.add_argument("-o", "--output", required=True, metavar="FILE",
-                   help="JSON-encoded MCAP file to write, e.g. run.json.mcap")
-    e.set_defaults(func=cmd_export)
+    _file_command(bs, "repair", cmd_bag,
+                  "make a recording cut short (recorder killed, disk full) complete again",
+                  "Read every complete chunk of an MCAP recording whose recorder died (kill -9) "
+                  "or ran out of disk, and write them as a complete recording (summary and index "
+                  "included), in place or to -o FILE. The recorder flushes a chunk at least twice "
+                  "a second, so at most the last half second is lost.",
+                  ("MCAP file, e.g. run.mcap", "write the repaired copy here (default: replace "
+                   "FILE)"), required=False)
+    _file_command(sub, "export", cmd_export,
+                  "write a copy of a recording that Foxglove draws as it is",
+                  "Copy an MCAP file written by `twinfleet record` with every message as JSON "
+                  "(bytes as base64) and schemas to match, plus Foxglove's well-known messages on "
+                  "/foxglove/... channels (foxglove.Grid map, foxglove.SceneUpdate robots and "
+                  "collisions, foxglove.PointCloud scans), so Foxglove's 3D panel draws it with "
+                  "no configuration. `twinfleet play` needs the original (msgpack) recording.",
+                  ("MCAP file written by `twinfleet record`",
+                   "JSON-encoded MCAP file to write, e.g. run.json.mcap"), required=True)
+
+
+def _file_command(parent: argparse._SubParsersAction, name: str, func: Any, text: str,
+                  description: str, helps: tuple[str, str], *, required: bool) -> None:
+    """A command taking FILE and -o/--output FILE (`helps`: their help texts)."""
+    p = parent.add_parser(name, help=text, description=description)
+    p.add_argument("file", help=helps[0])
+    p.add_argument("-o", "--output", required=required, default=None, metavar="FILE",
+                   help=helps[1])
+    p.set_defaults(func=func)

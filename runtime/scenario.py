@@ -51,6 +51,8 @@ from __future__ import annotations
 
 import dataclasses
 import importlib
+import inspect
+import math
 import os
 import sys
 import typing
@@ -77,6 +79,7 @@ from twinfleet.runtime.property_eval import ExpressionError, parse_expression
 PROFILES = ("fixed", "rebeca")
 SEMANTICS = ("ros", "rebeca")
 PROPERTY_KINDS = ("invariant", "no_failure", "deadlock", "quiescence", "eventually", "within")
+MAX_NODES = 100  # default of live.max_nodes: each node is one OS process live
 _TOP_KEYS = {"name", "fleet", "description", "map", "profile", "semantics", "seed", "params",
              "nodes", "properties", "check", "live"}
 _NODE_KEYS = {"name", "class", "namespace", "priority", "respawn", "params"}
@@ -229,12 +232,24 @@ def load_scenario(path: str | Path, overrides: Mapping[str, Any] | None = None) 
     except UnicodeDecodeError as exc:
         raise ScenarioError(f"{path}: not a text file ({exc.reason} at byte {exc.start})") from None
     except yaml.YAMLError as exc:
-        raise ScenarioError(f"{path}: not valid YAML: {exc}") from None
+        raise ScenarioError(f"{path}: not valid YAML: {_yaml_problem(exc)}") from None
+    except RecursionError:
+        raise ScenarioError(f"{path}: YAML nested too deeply to read (a scenario needs a few "
+                            "levels)") from None
     if not isinstance(doc, dict):
         raise ScenarioError(f"{path}: expected a mapping at the top level")
     doc = {**doc, **(overrides or {})}
     user_import_path(path.parent)
     return parse_scenario(doc, path)
+
+
+def _yaml_problem(exc: yaml.YAMLError) -> str:
+    """A YAML error in one line: what and where (PyYAML's own text spans several lines)."""
+    mark = getattr(exc, "problem_mark", None)
+    where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark is not None else ""
+    what = getattr(exc, "problem", None) or " ".join(str(exc).split())
+    context = getattr(exc, "context", None)
+    return f"{what}{where}" + (f" ({context})" if context else "")
 
 
 def user_import_path(scenario_dir: Path) -> None:
@@ -269,12 +284,14 @@ def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
     raw_nodes = doc.get("nodes")
     if not isinstance(raw_nodes, list) or not raw_nodes:
         err.fail("nodes", "expected a non-empty list of nodes")
+    _check_node_count(len(raw_nodes), doc.get("live"), err)
     context = {"map": str(map_path) if map_path else None, "profile": profile}
     nodes = tuple(_node(i, n, common, context, err) for i, n in enumerate(raw_nodes))
     names = [n.name for n in nodes]
     for dup in sorted({n for n in names if names.count(n) > 1}):
         err.fail("nodes", f"node name {dup!r} is used twice")
     for i, cfg in enumerate(nodes):
+        _finite(cfg.raw_params, f"nodes[{i}] ({cfg.name}).params", err)
         _try_instantiate(i, cfg, err)
     raw_props = doc.get("properties") or []
     if not isinstance(raw_props, list):
@@ -284,7 +301,11 @@ def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
     _check_node_names(check, names, err)
     live = _checked(live_config, err, doc.get("live"))
     if live.report is not None:
-        _import_attr(live.report, err, "live.report", "report factory")
+        factory = _import_attr(live.report, err, "live.report", "report factory")
+        if not (inspect.isfunction(factory) or inspect.isclass(factory)):
+            err.fail("live.report", f"{live.report} is a {type(factory).__name__}, not a "
+                                    "report factory (a Python function or class taking the "
+                                    "scenario)")
     return Scenario(path=path, name=name, fleet=fleet,
                     description=_get(doc, "description", str, err, default=""),
                     map_path=map_path, profile=profile, semantics=semantics,
@@ -374,12 +395,36 @@ def _node(i: int, raw: Any, common: Mapping[str, Any], context: Mapping[str, Any
                       params=params, raw_params=dict(raw_params))
 
 
+def _finite(value: Any, key: str, err: _Errors) -> None:
+    """Refuse inf and NaN anywhere in a node's parameters (no node means them)."""
+    if isinstance(value, float) and not math.isfinite(value):
+        err.fail(key, f"expected a finite number, got {value}")
+    elif isinstance(value, Mapping):
+        for k, v in value.items():
+            _finite(v, f"{key}.{k}", err)
+    elif isinstance(value, list | tuple):
+        for j, v in enumerate(value):
+            _finite(v, f"{key}[{j}]", err)
+
+
+def _check_node_count(count: int, live: Any, err: _Errors) -> None:
+    """Refuse more nodes than `live.max_nodes` (each is an OS process live) before any is
+    validated: 10,000 entries fail at once instead of after a minute of checks."""
+    cap = live.get("max_nodes", MAX_NODES) if isinstance(live, Mapping) else MAX_NODES
+    if type(cap) is not int or cap < 1:
+        err.fail("live.max_nodes", f"expected a whole number >= 1, got {cap!r}")
+    if count > cap:
+        err.fail("nodes", f"{count} nodes, more than live.max_nodes = {cap} (each node is one "
+                          "process when launched); raise live.max_nodes if the machine can "
+                          "take them")
+
+
 def _try_instantiate(i: int, cfg: NodeConfig, err: _Errors) -> None:
     """Build the node once so that bad parameters fail before anything starts."""
     try:
         cfg.instantiate()
-    except (ValueError, TypeError, OSError) as exc:
-        err.fail(f"nodes[{i}] ({cfg.name})", str(exc))
+    except (ValueError, TypeError, OSError, ArithmeticError) as exc:
+        err.fail(f"nodes[{i}] ({cfg.name})", str(exc) or type(exc).__name__)
 
 
 def _import_attr(path: str, err: _Errors, key: str, what: str = "name") -> Any:
@@ -390,6 +435,11 @@ def _import_attr(path: str, err: _Errors, key: str, what: str = "name") -> Any:
         return getattr(importlib.import_module(module_name), attr)
     except (ImportError, AttributeError) as exc:
         err.fail(key, f"unknown {what} {path!r} ({exc})")
+    except RecursionError:
+        err.fail(key, f"importing {module_name!r} for {what} {path!r} recursed too deeply")
+    except Exception as exc:  # the module itself raised while it was imported
+        err.fail(key, f"importing {module_name!r} for {what} {path!r} raised "
+                      f"{type(exc).__name__}: {exc}")
 
 
 def _node_class(value: Any, err: _Errors, key: str) -> tuple[type[Node], str]:

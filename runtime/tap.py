@@ -29,6 +29,7 @@ from typing import Any, final
 import zenoh
 from zenoh import ext
 
+from twinfleet.runtime.fleetauth import MonitorAuth, login_settings, registry_auth
 from twinfleet.runtime.names import KEY_PREFIX
 from twinfleet.runtime.zenoh_transport import Handoff, zenoh_config
 
@@ -41,11 +42,13 @@ _SEEN_PER_KEY = 16
 Deliver = Callable[[str, bytes], None]
 
 
-def tap_config(endpoint: str) -> zenoh.Config:
+def tap_config(endpoint: str, auth: MonitorAuth | None = None) -> zenoh.Config:
     """A client config for a tap on `endpoint` that reconnects within half a second when the
     router comes back (a fleet launched again on the same endpoint); zenoh's default back-off
     grows to seconds, and a viewer then missed the new run's first poses."""
-    conf = zenoh_config(connect=[endpoint], mode="client")
+    # the fleet's read-only login: given (--credentials), or a fleet launched on this machine
+    settings = login_settings(auth if auth is not None else registry_auth(endpoint))
+    conf = zenoh_config(connect=[endpoint], mode="client", settings=settings)
     conf.insert_json5("connect/retry", RECONNECT)
     return conf
 

@@ -23,6 +23,13 @@ for every session of a fleet (the launcher's environment reaches its nodes),
 e.g. ``transport/link/tx/lease=1000`` to notice a cut link within a second;
 keys under ``scouting/multicast`` and ``transport/shared_memory`` are refused.
 
+Guard (`runtime.guard`, README "Trust model"). With a fleet key, every put
+and query carries a signature as its attachment, and a sample (or a service
+request) without a valid one is dropped on Zenoh's thread before it is copied
+and counted (``statistics()["forged"]``); a sample above the payload limit is
+dropped first (``"oversize"``). Both tests are cheaper than the hand-off they
+spare a flood.
+
 QoS mapping. Reliable topics publish with congestion control BLOCK,
 best-effort ones with DROP. Transient-local ("latched") topics use
 `zenoh.ext` advanced publishers (cache of `depth` samples, publisher
@@ -44,12 +51,13 @@ import os
 import time
 import traceback
 from collections import deque
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from typing import Any, final
 
 import zenoh
 from zenoh import ext
 
+from twinfleet.runtime.guard import authentic, sign, signer
 from twinfleet.runtime.node import Durability, QoS, Reliability
 from twinfleet.runtime.transport import Deliver, OnChange, OnDone, OnRequest
 
@@ -79,13 +87,16 @@ def config_overrides(text: str | None = None) -> list[tuple[str, str]]:
 
 
 def zenoh_config(*, connect: Sequence[str] = (), listen: Sequence[str] = (),
-                 mode: str = "client") -> zenoh.Config:
+                 mode: str = "client", settings: Mapping[str, Any] | None = None,
+                 ) -> zenoh.Config:
     """Build a Zenoh config: loopback/explicit endpoints only, no multicast, no shared memory.
 
     Args:
         connect: endpoints to connect to, e.g. ``["tcp/127.0.0.1:7447"]``.
         listen: endpoints to listen on (routers and peers).
         mode: "client", "peer" or "router".
+        settings: more keys (path → JSON value), e.g. a fleet's credentials and access
+            control (`runtime.fleetauth`); applied before the override variable.
 
     Raises:
         ValueError: on a bad mode, or a bad ``TWINFLEET_ZENOH_CONFIG_OVERRIDE`` entry.
@@ -100,6 +111,8 @@ def zenoh_config(*, connect: Sequence[str] = (), listen: Sequence[str] = (),
     conf.insert_json5("timestamping/enabled", "true")
     conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    for key, value in (settings or {}).items():
+        conf.insert_json5(key, json.dumps(value))
     for key, value in config_overrides():
         try:
             conf.insert_json5(key, value)
@@ -176,11 +189,19 @@ class ZenohTransport:
     Args:
         config: a config from `zenoh_config`.
         max_pending: samples allowed to wait for the loop before new ones are dropped.
+        key: the fleet key (`runtime.guard`): sign what is published and queried, drop
+            (and count as ``forged``) samples and requests without a valid tag.
+        limit: payload bytes a sample may have (larger: dropped, counted as ``oversize``);
+            `limits` sets it per key expression.
     """
 
-    def __init__(self, config: zenoh.Config, *, max_pending: int = DEFAULT_MAX_PENDING) -> None:
+    def __init__(self, config: zenoh.Config, *, max_pending: int = DEFAULT_MAX_PENDING,
+                 key: bytes | None = None, limit: int | None = None,
+                 limits: Mapping[str, int] | None = None) -> None:
         self.config = config
         self.max_pending = max_pending
+        self.key, self.limit, self.limits = key, limit, dict(limits or {})
+        self._refused = {"forged": 0, "oversize": 0}
         self.session: zenoh.Session | None = None
         self._handoff: Handoff | None = None
         self._publishers: dict[str, Any] = {}
@@ -213,7 +234,9 @@ class ZenohTransport:
     def subscribe(self, key: str, deliver: Deliver, qos: QoS) -> None:
         """Subscribe; latched QoS uses an advanced subscriber with history."""
         offer = self._h.offer
-        if "*" in key:
+        if self.key is not None or self.limits.get(key, self.limit) is not None:
+            on_sample = self._guarded(key, deliver)
+        elif "*" in key:
             def on_sample(sample: zenoh.Sample) -> None:
                 offer(deliver, str(sample.key_expr), sample.payload.to_bytes())
         else:  # a concrete key: every sample carries exactly this key
@@ -227,15 +250,56 @@ class ZenohTransport:
         else:
             self._entities.append(self._s.declare_subscriber(key, on_sample))
 
+    def _guarded(self, key: str, deliver: Deliver) -> Callable[[zenoh.Sample], None]:
+        """A sample callback that refuses oversize and unsigned samples before copying them.
+
+        It runs on Zenoh's thread, as the plain callbacks do: a length test and one
+        HMAC per sample, cheaper than the copy and hand-off it saves a forged flood.
+        """
+        offer, fleet_key, refused = self._h.offer, self.key, self._refused
+        limit = self.limits.get(key, self.limit) or (1 << 62)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            if len(sample.payload) > limit:
+                refused["oversize"] += 1
+                return
+            payload, where = sample.payload.to_bytes(), str(sample.key_expr)
+            if fleet_key is not None:
+                tag = sample.attachment
+                if not authentic(fleet_key, where, payload, tag and tag.to_bytes()):
+                    refused["forged"] += 1
+                    return
+            offer(deliver, where, payload)
+
+        return on_sample
+
     def serve(self, key: str, on_request: OnRequest) -> None:
-        """Declare a queryable; each query is answered on the loop and then finalised."""
-        push = self._h.push
+        """Declare a queryable; each query is answered on the loop and then finalised.
+
+        With a fleet key, a request to a service without a valid tag is answered
+        "server error: unauthenticated request" at once and counted as ``forged``.
+        """
+        push, refused = self._h.push, self._refused
+        # "@" queryables (statistics, types, info) are read-only views monitors may ask
+        fleet_key = self.key if "/@" not in key else None
 
         def on_query(query: zenoh.Query) -> None:
             payload = query.payload.to_bytes() if query.payload is not None else b""
+            tag = query.attachment
+            if fleet_key is not None and not authentic(fleet_key, key, payload,
+                                                       tag and tag.to_bytes()):
+                refused["forged"] += 1
+                push(self._refuse, query)
+                return
             push(self._answer, key, query, payload, on_request)
 
         self._entities.append(self._s.declare_queryable(key, on_query))
+
+    @staticmethod
+    def _refuse(query: zenoh.Query) -> None:
+        with query:
+            query.reply_err(b"server error: unauthenticated request (not signed with the "
+                            b"fleet key)")
 
     @staticmethod
     def _answer(key: str, query: zenoh.Query, payload: bytes, on_request: OnRequest) -> None:
@@ -268,7 +332,10 @@ class ZenohTransport:
         if pub is None:
             pub = self._declare_publisher(key, qos)
             self._publishers[key] = pub
-        return pub.put
+        if self.key is None:
+            return pub.put
+        put, tag = pub.put, signer(self.key, key)
+        return lambda payload: put(payload, attachment=tag(payload))
 
     def _declare_publisher(self, key: str, qos: QoS) -> Any:
         reliable = qos.reliability is Reliability.RELIABLE
@@ -304,8 +371,9 @@ class ZenohTransport:
             elapsed = time.monotonic() - started
             push(finish, None, "timeout" if elapsed >= 0.9 * timeout_s else "no server")
 
+        attachment = sign(self.key, key, payload) if self.key is not None else None
         self._s.get(key, zenoh.handlers.Callback(on_reply, on_final), payload=payload,
-                    timeout=timeout_s)
+                    timeout=timeout_s, attachment=attachment)
 
     def announce(self, token_key: str) -> None:
         """Declare a liveliness token."""
@@ -330,9 +398,11 @@ class ZenohTransport:
         self._h.after_drain.append(fn)
 
     def statistics(self) -> dict[str, int]:
-        """Loop wake-ups used so far (one per burst) and samples dropped by the bounded hand-off."""
+        """Loop wake-ups used so far (one per burst), samples dropped by the bounded hand-off,
+        and samples and requests refused as ``forged`` or ``oversize``."""
         h = self._handoff
-        return {"wakeups": h.wakeups if h else 0, "overflow": h.overflow if h else 0}
+        return {"wakeups": h.wakeups if h else 0, "overflow": h.overflow if h else 0,
+                **self._refused}
 
     async def close(self) -> None:
         """Undeclare (advanced entities first), then close the session, on the loop thread."""

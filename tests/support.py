@@ -3,8 +3,11 @@
 from __future__ import annotations
 
 import os
+import re
 import socket
+import subprocess
 import tempfile
+from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -33,3 +36,20 @@ def child_env(runtime_dir: str | Path | None = None) -> dict[str, str]:
     env.pop("TWINFLEET_CONNECT", None)
     env.pop("TWINFLEET_FLEET", None)
     return env
+
+
+@dataclass
+class RunningFleet:
+    """A launcher process and where to find it."""
+
+    proc: subprocess.Popen
+    log: Path
+    scenario: Path
+    endpoint: str
+    fleet: str
+
+    def output(self) -> str:
+        return self.log.read_text(errors="replace")
+
+    def count(self, pattern: str) -> int:
+        return len(re.findall(pattern, self.output()))

@@ -33,6 +33,7 @@ from hypothesis import strategies as st
 zenoh = pytest.importorskip("zenoh")
 
 from tests.integration.reliability_nodes import AddReply, AddRequest, Tick  # noqa: E402
+from twinfleet.runtime.guard import Admission, Rejected, check_message  # noqa: E402
 from twinfleet.runtime.launcher import free_port  # noqa: E402
 from twinfleet.runtime.messages import decode, encode  # noqa: E402
 from twinfleet.runtime.names import key_expr  # noqa: E402
@@ -80,11 +81,16 @@ payloads = st.one_of(st.binary(max_size=64), plain.map(msgpack.packb),
 
 
 def expect_sample(payload: bytes) -> str:
-    """What FuzzTarget.on_tick does with `payload`: undecodable, error or ok."""
+    """What FuzzTarget.on_tick does with `payload`: undecodable, rejected_* (runtime.guard:
+    not a Tick, or fields that do not fit it), error or ok."""
     try:
         msg = decode(payload).msg
     except Exception:
         return "undecodable"
+    try:
+        Admission(Tick)(msg)
+    except Rejected as exc:
+        return exc.counter
     try:
         msg.n - msg.n + 1  # the handler's body
         return "ok"
@@ -93,11 +99,15 @@ def expect_sample(payload: bytes) -> str:
 
 
 def expect_call(payload: bytes) -> tuple[str, Any]:
-    """What FuzzTarget.add answers to `payload`: (undecodable|error|ok, total)."""
+    """What FuzzTarget.add answers to `payload`: (undecodable|rejected_*|error|ok, total)."""
     try:
         req = decode(payload).msg
     except Exception:
         return "undecodable", None
+    try:
+        check_message(req)
+    except Rejected as exc:
+        return exc.counter, None
     try:
         total = req.a + req.b
         encode(AddReply(total))
@@ -202,6 +212,8 @@ def test_garbage_is_counted_and_the_node_keeps_serving(target: Target, samples: 
     assert stats["received"] == e["received"], (stats, e, target.output()[-2000:])
     assert stats["dropped_undecodable"] == e["sample_undecodable"] + e["call_undecodable"]
     assert stats["handler_errors"] == e["sample_error"] + e["call_error"]
+    for counter in ("rejected_invalid", "rejected_wrong_type"):
+        assert stats[counter] == e[f"sample_{counter}"] + e[f"call_{counter}"], (counter, stats, e)
     assert target.proc.poll() is None, target.output()[-2000:]
 
 

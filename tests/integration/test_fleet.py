@@ -14,7 +14,6 @@ import subprocess
 import sys
 import textwrap
 from collections.abc import Iterator
-from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
@@ -28,6 +27,8 @@ from itest_support import (
     run_cli,
 )
 
+from tests.support import RunningFleet
+
 pytestmark = pytest.mark.slow
 
 DEMO = """\
@@ -40,23 +41,6 @@ nodes:
   - {name: caller, class: "twinfleet.nodes.demo:Caller", params: {period_ms: 200}}
 live: {timeout_s: 90}
 """
-
-
-@dataclass
-class RunningFleet:
-    """A launcher process and where to find it."""
-
-    proc: subprocess.Popen
-    log: Path
-    scenario: Path
-    endpoint: str
-    fleet: str
-
-    def output(self) -> str:
-        return self.log.read_text(errors="replace")
-
-    def count(self, pattern: str) -> int:
-        return len(re.findall(pattern, self.output()))
 
 
 def start_fleet(tmp: Path, text: str, name: str = "itest", *extra: str) -> RunningFleet:
@@ -154,13 +138,20 @@ def test_service_call_and_topic_pub_from_the_cli(demo: RunningFleet) -> None:
 
 
 PLAIN_SCRIPT = """
-import json, sys, time, msgpack, zenoh
+import glob, hmac, json, os, sys, time, msgpack, zenoh
 endpoint, fleet = sys.argv[1], sys.argv[2]
+# the fleet's credentials, from its (owner-only) registry entry
+entry = next(json.load(open(p)) for p in glob.glob(os.environ["XDG_RUNTIME_DIR"] + "/twinfleet/*.json")
+             if json.load(open(p))["endpoint"] == endpoint)
+auth = entry["extra"]["auth"]
+user, password = auth["operator"]
 conf = zenoh.Config()
 conf.insert_json5("mode", '"client"')
 conf.insert_json5("scouting/multicast/enabled", "false")
 conf.insert_json5("transport/shared_memory/enabled", "false")
 conf.insert_json5("connect/endpoints", json.dumps([endpoint]))
+conf.insert_json5("transport/auth/usrpwd/user", json.dumps(user))
+conf.insert_json5("transport/auth/usrpwd/password", json.dumps(password))
 got = []
 with zenoh.open(conf) as session:
     sub = session.declare_subscriber(f"twinfleet/{fleet}/chatter",
@@ -170,7 +161,9 @@ with zenoh.open(conf) as session:
     deadline = time.monotonic() + 10
     while (len(got) < 3 or not pub.matching_status) and time.monotonic() < deadline:
         time.sleep(0.05)
-    pub.put(b"\\xc1 garbage from a raw client")
+    garbage, key = b"\\xc1 garbage from a raw client", f"twinfleet/{fleet}/chatter"
+    tag = hmac.digest(bytes.fromhex(auth["key"]), key.encode() + b"\\0" + garbage, "sha256")[:16]
+    pub.put(garbage, attachment=tag)  # signed: it passes the sender check, then fails to decode
     pub.undeclare()
     sub.undeclare()
 assert not any(m.split(".")[0] in ("runtime", "nodes", "checker") for m in sys.modules)

@@ -149,7 +149,7 @@ name: host_a
 fleet: xnet
 nodes:
   - {{name: talker, class: "{NODES}:Heartbeat", params: {{period_ms: 50}}}}
-""", "--listen", router)
+""", "--listen", router, "--insecure-listen")  # a test veth pair, not a network
     host_b: Launch | None = None
     try:
         host_a.wait_line(r"^\[talker\] t=-?\d+ started", 30)

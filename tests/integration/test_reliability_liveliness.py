@@ -32,6 +32,8 @@ from itest_support import (
     processes_mentioning,
 )
 
+from twinfleet.runtime.fleetauth import login_settings, registry_auth
+from twinfleet.runtime.guard import sign
 from twinfleet.runtime.launcher import SHUTDOWN_TOPIC, format_result, run_fleet
 from twinfleet.runtime.messages import String, encode
 from twinfleet.runtime.names import key_expr
@@ -83,14 +85,18 @@ class StampedLines(io.TextIOBase):
 
 
 def request_shutdown(endpoint: str, fleet: str) -> None:
-    """Publish on the launcher's shutdown topic from a plain session."""
-    with zenoh.open(zenoh_config(connect=[endpoint])) as session:
+    """Publish on the launcher's shutdown topic from a plain session, with the fleet's
+    operator login and key from its registry entry (an unsigned request is ignored)."""
+    auth = registry_auth(endpoint)
+    with zenoh.open(zenoh_config(connect=[endpoint],
+                                 settings=login_settings(auth, write=True))) as session:
         key = key_expr(fleet, SHUTDOWN_TOPIC)
         pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         deadline = time.monotonic() + 5
         while not pub.matching_status.matching and time.monotonic() < deadline:
             time.sleep(0.01)
-        pub.put(encode(String("test done"), sender="test"))
+        payload = encode(String("test done"), sender="test")
+        pub.put(payload, attachment=sign(auth.key, key, payload) if auth.key else None)
         time.sleep(0.2)
         pub.undeclare()
 

@@ -18,6 +18,7 @@ import pytest
 import zenoh
 from viewer_support import ROOT, free_port, get_json, poll
 
+from twinfleet.runtime.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.scenario import load_scenario
 from twinfleet.runtime.viewstate import start_map
 from twinfleet.runtime.zenoh_transport import zenoh_config
@@ -29,7 +30,9 @@ def _open_when_up(endpoint: str) -> zenoh.Session:
     deadline = time.monotonic() + 15
     while True:
         try:
-            return zenoh.open(zenoh_config(connect=[endpoint], mode="client"))
+            # the fleet's read-only login, from its registry entry (README "Trust model")
+            settings = login_settings(registry_auth(endpoint))
+            return zenoh.open(zenoh_config(connect=[endpoint], mode="client", settings=settings))
         except zenoh.ZError:
             if time.monotonic() > deadline:
                 raise
