@@ -291,11 +291,14 @@ class LiveMonitor:
     # ------------------------------------------------------------------ the verdict
 
     def verdict(self, end: RunEnd) -> Verdict:
-        """The run's result: a property that raised; inconclusive reasons (which also void
-        a violation: it may come from the lost samples or the stall, not from the code);
-        violations; failed nodes; an interruption; what never held; else it holds."""
+        """The run's result: a property that raised; a failed node process; inconclusive
+        reasons (which also void a violation: it may come from the lost samples or the
+        stall, not from the code); violations; an interruption; what never held; else holds."""
         if self.errors:
             return Verdict(ERROR, self.errors[0], tuple(self.errors[1:]))
+        if end.failed:  # a process that died is a fact of the run, lost samples or not
+            nodes = ", ".join(f"{n} (exit code {c})" for n, c in end.failed.items())
+            return Verdict(VIOLATED, f"node failed: {nodes}")
         reasons = self.inconclusive_reasons(end)
         seen = tuple(f"seen, but not conclusive: {v[1]}" for v in self.violations)
         if reasons and (self.violations or not end.interrupted):
@@ -304,9 +307,6 @@ class LiveMonitor:
             name, summary, details = self.violations[0]
             more = tuple(f"also violated: {v[0]}" for v in self.violations[1:])
             return Verdict(VIOLATED, summary, details + more + self._unjudged(), name)
-        if end.failed:
-            nodes = ", ".join(f"{n} (exit code {c})" for n, c in end.failed.items())
-            return Verdict(VIOLATED, f"node failed: {nodes}")
         if end.interrupted:
             return Verdict(INTERRUPTED, end.reason)
         unmet = [w for w in self.watches if w.cfg.kind in ("eventually", "within") and not w.held]
