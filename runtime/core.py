@@ -40,8 +40,13 @@ and never touches a socket:
    a failure). `After` and `Call` arm due entries inside the core.
 6. Failures. A handler exception, a service reply that is not a message, an
    effect that cannot be encoded: counted, reported as `Line`s, published as a
-   `Violation` on /violations, answered "server error: ..." to a caller. The
-   state the handler left stays as it is (rolling it back is issue 13).
+   `Violation` on /violations, answered "server error: ..." to a caller. A
+   handler that raises (or a service that returns a non-message) did not
+   complete: its effects are cleared and `self.state` is put back as it was
+   before it ran, as the checker does (it keeps the state's snapshot bytes).
+   So the core keeps the snapshot of the state after the last handler that
+   went well, one `snapshot` per handler; a state that cannot be snapshot is
+   that handler's failure, rolled back too, as in the checker.
 7. Observers. After each handler the core calls ``handled(record)`` on its
    observers, as trio calls its Instruments: the event log and the replay gate
    observe the core, they are not modes of it. Without observers a delivery
@@ -71,6 +76,7 @@ from twinfleet.runtime.messages import (
 )
 from twinfleet.runtime.node import HandlerSpec, Node, Reliability
 from twinfleet.runtime.outbox import Answer, Line, Outbox, Output
+from twinfleet.runtime.snapshot import SnapshotError, restore, snapshot
 
 LIVELINESS_TOPIC: Final = "/_liveliness"
 MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is not a loss
@@ -200,6 +206,7 @@ class NodeCore:
             elif self._liveliness is None:
                 self._liveliness = spec
         self.services = {s.method: node.resolve(s.name or "") for s in self.spec.of_kind("service")}
+        self._saved: bytes | None = None  # the state after the last handler that went well
 
     def observe(self, observer: Observer) -> None:
         """Tell `observer` about every handler run from now on."""
@@ -401,7 +408,10 @@ class NodeCore:
         """Run one handler; what it did, as outputs (and its effects and error, for observers)."""
         node = self.node
         ctx = Context(node, now, chooser)
+        if self._saved is None:
+            self._saved = snapshot(node.state)
         reply, error = invoke(node, method, ctx, args, responder is not None)
+        error = self._keep_or_roll_back(method, error, ctx)
         self._n["handled"] += 1
         effects = ctx.effects
         if error is None and responder is None:  # the common case: a handler that went well
@@ -417,6 +427,21 @@ class NodeCore:
                 error = error or self._outbox.translate(effects, now, method, out)
         error = self._outbox.finish(method, args, reply, error, responder, now, out)
         return out, effects, error
+
+    def _keep_or_roll_back(self, method: str, error: HandlerError | None,
+                           ctx: Context) -> HandlerError | None:
+        """Keep the state a handler left (its snapshot), or put back the one before it ran
+        when it failed or left a state that cannot be snapshot (module docstring, 6)."""
+        node = self.node
+        if error is None:
+            try:
+                self._saved = snapshot(node.state)
+                return None
+            except SnapshotError as exc:
+                error = HandlerError(node.name, method, f"state cannot be snapshot: {exc}")
+        ctx.effects.clear()  # a bad service reply too: the checker keeps none of its effects
+        node.state = restore(self._saved)  # type: ignore[arg-type]
+        return error
 
     def statistics(self, dropped_overflow: int = 0) -> HostStatistics:
         """Counters since start, as a frozen record (`dropped_overflow`: the transport's)."""

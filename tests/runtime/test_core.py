@@ -293,6 +293,38 @@ def test_a_handler_exception_is_reported_and_the_next_entries_still_run():
     assert core.statistics().handler_errors == 1
 
 
+def test_a_handler_that_raises_leaves_the_state_as_before_it_ran():
+    node = Faulty("busy")
+    core = started(node)
+    receive = core.receiver("on_high")
+    receive(sample(3, seq=1), 1)
+    receive(sample(-1, seq=2), 2)  # appends to the state, then raises
+    drain(core, 2)
+    assert node.state.seen == [(2, "high 3")]  # the partial change is rolled back
+    receive(sample(4, seq=3), 3)
+    drain(core, 3)
+    assert node.state.seen == [(2, "high 3"), (3, "high 4")]
+
+
+def test_a_state_that_cannot_be_snapshot_is_the_handlers_failure_and_rolled_back():
+    class Leaky(Node):
+        def initial_state(self) -> Log:
+            return Log()
+
+        @subscribe("/high")
+        def on_high(self, ctx: Context, msg: Num) -> None:
+            self.state.seen.append(lambda: msg)  # not a value: the checker refuses it too
+            ctx.publish("/out", Num(1))
+
+    node = Leaky("leaky")
+    core = started(node)
+    core.receiver("on_high")(sample(1), 1)
+    out = drain(core, 1)
+    assert node.state.seen == []
+    assert not any(isinstance(o, Put) and o.topic.endswith("/out") for o in out)
+    assert core.statistics().handler_errors == 1
+
+
 def test_stop_on_error_adds_a_stop_output():
     core = started(Faulty("busy"), stop_on_error=True)
     core.receiver("on_high")(sample(-1), 1)
