@@ -21,6 +21,7 @@ from typing import TYPE_CHECKING, final
 
 from twinfleet.runtime.context import Log
 from twinfleet.runtime.kinds import FailureKind
+from twinfleet.runtime.node import PureMemo
 from twinfleet.runtime.snapshot import SnapshotError, snapshot
 
 if TYPE_CHECKING:
@@ -153,8 +154,8 @@ def difference(a: Variant, b: Variant) -> str | None:
 def fingerprint(node: Node) -> dict[str, bytes]:
     out = {}
     for attr, value in vars(node).items():
-        if attr == "state" or getattr(value, "pure_memo", False):
-            continue  # a declared memo of a pure function may fill up: that is not state
+        if attr == "state" or isinstance(value, PureMemo):
+            continue  # a declared memo of pure functions may fill up: that is not state
         try:
             out[attr] = snapshot(value)
         except (SnapshotError, TypeError, ValueError):

@@ -218,6 +218,22 @@ def _check_signature(cls: type, fn: Callable[..., Any], spec: HandlerSpec) -> No
         )
 
 
+class PureMemo:
+    """Base class of a memo of pure functions that a node keeps outside `self.state`.
+
+    A node may keep attributes besides `state` only when they are configuration (set
+    in `configure`, never changed by a handler) or a *pure memo*: an object that
+    caches answers of functions of their arguments alone (a scan of a static map, a
+    plan), whose content may grow while its answers never change. Derive such a
+    cache from `PureMemo` to declare it: the checker then knows it is not state
+    (`--debug-state` does not report it filling up), both drivers keep it across
+    handlers and it is never rolled back. A memo whose answers depend on what it
+    saw before breaks the node contract, as any state outside `self.state` does.
+    """
+
+    __slots__ = ()
+
+
 @dataclass(frozen=True, slots=True)
 class NoParams:
     """Parameters of a node that takes none."""
