@@ -67,6 +67,7 @@ FAILURE_PROPERTIES: dict[FailureKind, str] = {
     FailureKind.STATE_OUTSIDE: "debug_state",
     FailureKind.DEADLINE: "deadline",
     FailureKind.NONDETERMINISM: "determinism",
+    FailureKind.KEEP_LAST: "keep_last",
 }
 
 

@@ -243,7 +243,7 @@ class Runner:
 
     def _copies(self, name: str, j: int, chooser: Chooser, faults: list[str]) -> int:
         """How many copies of one message on `name` to node `j` arrive (fault branches)."""
-        n, fault = self.rules.copies(name, chooser)
+        n, fault = self.rules.copies(name, chooser, j)
         if fault:
             faults.append(f"{name} to {self.names[j]}: {fault}")
         return n

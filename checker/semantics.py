@@ -58,6 +58,23 @@ Rule 5 (latency and faults, all off by default; see `checker.faults` for the
     miss when it is taken; because of Rule 1 it is taken exactly at its due
     time, so only latency or FIFO clamping can make it late.
 
+Rule 6 (QoS). A subscription declared `qos=QoS(depth=d)` (KEEP_LAST, default
+    10) holds at most d waiting messages live; the core drops the oldest when
+    one more arrives (`runtime.core`, counted as ``dropped_keep_last``). A
+    pending delivery is waiting or still in flight, so a world where more
+    than d deliveries to one subscription are pending is one where live *may*
+    have dropped some, depending on how the handler keeps up: the checker does
+    not branch on that, it refuses the run instead (`Rules.overflow`: the
+    step is a failure of kind `FailureKind.KEEP_LAST`, property `keep_last`,
+    naming the node, the handler and the depth to raise). Below the depth
+    nothing is ever dropped, in either driver. BEST_EFFORT (on the
+    subscription, or in the publishing node's `publications`) makes each
+    delivery to that subscription a branch: delivered or lost
+    (`Rules.copies`), as Zenoh's `CongestionControl.DROP` may lose it live.
+    TRANSIENT_LOCAL durability and `/_liveliness` subscriptions are refused at
+    load (`checker.topology`). Both parts of the rule read only the target
+    node's own pending deliveries: a node's enabling stays decidable per node.
+
 Relaxed timing (`Rules.enabled_within`), used only to compare a live run with
 the model (`agreement.validate`). A live clock is continuous, so events the
 model runs at different times may run live in another order. With a
@@ -71,7 +88,7 @@ channel order only holds among events of equal time and priority.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum, unique
 from typing import TYPE_CHECKING, final
@@ -79,6 +96,7 @@ from typing import TYPE_CHECKING, final
 from twinfleet.checker.choices import Chooser
 from twinfleet.checker.faults import DROP, DUPLICATE, CheckSettings
 from twinfleet.checker.world import Event
+from twinfleet.runtime.kinds import EventKind
 
 if TYPE_CHECKING:
     from twinfleet.checker.world import World
@@ -107,12 +125,16 @@ class Rules:
         node_priorities: per node index, its instance priority (used by `rebeca`).
         global_priority: `rebeca` only: compare handler priorities across nodes.
         settings: the optional `check:` settings of Rule 5 (latency, deadlines, faults).
+        depths: KEEP_LAST depth per (node index, subscription handler) (Rule 6).
+        lossy: (topic, node index) pairs whose deliveries may be lost (BEST_EFFORT, Rule 6).
     """
 
     semantics: Semantics = Semantics.ROS
     node_priorities: tuple[int, ...] = ()
     global_priority: bool = False
     settings: CheckSettings = field(default_factory=CheckSettings)
+    depths: Mapping[tuple[int, str], int] = field(default_factory=dict)
+    lossy: frozenset[tuple[str, int]] = frozenset()
     fifo: bool = field(init=False)
     has_latency: bool = field(init=False)
     _ranges: dict[str, tuple[int, int] | None] = field(init=False, repr=False, compare=False)
@@ -229,10 +251,13 @@ class Rules:
         limit = settings.deadline_for(name) if settings.has_deadlines else None
         return due, None if limit is None else now + limit
 
-    def copies(self, name: str, chooser: Chooser) -> tuple[int, str]:
-        """How many copies of one message on `name` arrive (a branch of `chooser` when
-        `name` may be dropped or duplicated), and the fault taken ("" for none)."""
+    def copies(self, name: str, chooser: Chooser, target: int = -1) -> tuple[int, str]:
+        """How many copies of one message on `name` to node `target` arrive (a branch of
+        `chooser` when `name` may be dropped or duplicated, or is BEST_EFFORT for `target`,
+        Rule 6), and the fault taken ("" for none)."""
         options = self.settings.delivery_options(name)
+        if (name, target) in self.lossy and DROP not in options:
+            options = (*options, DROP)
         if len(options) == 1:
             return 1, ""
         pick = options[chooser.branch(len(options))]
@@ -241,6 +266,19 @@ class Rules:
         if pick == DUPLICATE:
             return 2, "duplicated"
         return 1, ""
+
+    def overflow(self, pending: Sequence[Event], ev: Event) -> int | None:
+        """Rule 6: how many deliveries to `ev`'s subscription are pending once `ev` (just
+        added) is, when that is more than its KEEP_LAST depth; else None."""
+        if ev.kind is not EventKind.DELIVERY:
+            return None
+        target, method = ev.target, ev.method
+        depth = self.depths.get((target, method))
+        if depth is None:
+            return None
+        n = sum(1 for e in pending if e.target == target and e.method == method
+                and e.kind is EventKind.DELIVERY)
+        return n if n > depth else None
 
     def crashable(self, world: World) -> tuple[int, ...]:
         """The nodes that may crash in `world`: none with nothing pending or once the path

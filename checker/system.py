@@ -111,12 +111,15 @@ class System:
         self.settings = parse_settings(scenario, set(self.topology.subscribers),
                                        set(self.topology.servers),
                                        latency=() if latency is None else latency)
+        if self.settings.crash is not None:
+            self.topology.refuse_late_joiners(self.settings.crash.nodes, scenario.path)
         if global_priority is None:
             global_priority = scenario.check.global_priority
         try:
             self.rules = Rules(semantics or scenario.semantics,
                                tuple(cfg.priority for cfg in scenario.nodes),
-                               bool(global_priority), self.settings)
+                               bool(global_priority), self.settings, self.topology.depths,
+                               frozenset(self.topology.lossy))
         except ValueError as exc:
             raise ScenarioError(f"{scenario.source}: check: {exc}") from None
         self.debug_state = debug_state
@@ -277,15 +280,31 @@ class System:
         ev = world.events[action.index]
         rules = self.rules
         pending = rules.remove(world.events, action.index)
+        failure = v.failure
         for e in v.events:
             rules.add(pending, e)
+            if failure is None and rules.depths:
+                failure = self._overflow(pending, e)
         states, changed = world.states, ()
         i = ev.target
         if v.state is not states[i]:
             states, changed = (*states[:i], v.state, *states[i + 1:]), (i,)
         new = self._world(ev.due, states, pending, world, world.crashes)
-        return Transition(Step(action, v.choices, v.options), new, ev, v.failure, v.logs,
+        return Transition(Step(action, v.choices, v.options), new, ev, failure, v.logs,
                           v.faults, v.branches, v.events, changed)
+
+    def _overflow(self, pending: list[Event], ev: Event) -> Failure | None:
+        """Rule 6 of `checker.semantics`: more deliveries pending than the KEEP_LAST depth
+        of `ev`'s subscription, which live may drop and the checker does not model."""
+        n = self.rules.overflow(pending, ev)
+        if n is None:
+            return None
+        name, depth = self.names[ev.target], self.rules.depths[(ev.target, ev.method)]
+        return Failure(FailureKind.KEEP_LAST, name, ev.method,
+                       f"{n} messages pending for {name}.{ev.method}, more than its "
+                       f"qos depth {depth} (KEEP_LAST): live may drop the oldest, which the "
+                       f"checker does not model; raise @subscribe(qos=QoS(depth=...)) to at "
+                       f"least {n}")
 
     def _apply_crash(self, world: World, j: int, v: Variant) -> Transition:
         now = world.events[0].due

@@ -13,7 +13,7 @@ from typing import final
 
 from twinfleet.checker.world import Event
 from twinfleet.runtime.kinds import EventKind
-from twinfleet.runtime.node import HandlerSpec, Node
+from twinfleet.runtime.node import LIVELINESS_TOPIC, Durability, HandlerSpec, Node, Reliability
 from twinfleet.runtime.scenario import ScenarioError
 from twinfleet.runtime.snapshot import snapshot
 
@@ -29,7 +29,8 @@ class Topology:
         where: the scenario file, for error messages.
 
     Raises:
-        ScenarioError: two nodes serve the same service.
+        ScenarioError: two nodes serve the same service, or a node declares what the checker
+            does not model (a `/_liveliness` subscription).
     """
 
     def __init__(self, nodes: Sequence[Node], where: object) -> None:
@@ -39,6 +40,8 @@ class Topology:
         self.service_of: dict[tuple[int, str], str] = {}
         self._priorities: list[dict[str, int]] = []
         self._periods: dict[tuple[int, str], int] = {}
+        self.depths: dict[tuple[int, str], int] = {}  # KEEP_LAST depth per (node, handler)
+        self.lossy: set[tuple[str, int]] = set()  # (topic, subscriber) BEST_EFFORT on a side
         self.initial_states = tuple(snapshot(node.initial_state()) for node in self.nodes)
         for i, node in enumerate(self.nodes):
             spec = node.spec()
@@ -46,6 +49,7 @@ class Topology:
             for h in spec.of_kind("subscribe"):
                 topic = node.resolve(h.name or "")
                 self.subscribers.setdefault(topic, []).append((i, h.method, h.priority))
+                self.depths[(i, h.method)] = max(1, h.qos.depth)
             for h in spec.of_kind("service"):
                 name = node.resolve(h.name or "")
                 if name in self.servers:
@@ -56,6 +60,39 @@ class Topology:
                 self.service_of[(i, h.method)] = name
             for h in spec.of_kind("every"):
                 self._periods[(i, h.method)] = node.period_ms(h)
+        self._qos(where)
+
+    def _qos(self, where: object) -> None:
+        """Which deliveries may be lost (BEST_EFFORT on the subscription or on the publishing
+        node's declared `publications`); refuse `/_liveliness` subscriptions."""
+        best_effort = {node.resolve(topic) for node in self.nodes
+                       for topic, q in node.spec().publications.items()
+                       if q.reliability is Reliability.BEST_EFFORT}
+        for i, node in enumerate(self.nodes):
+            spec = node.spec()
+            for h in spec.of_kind("subscribe"):
+                topic = node.resolve(h.name or "")
+                if topic == LIVELINESS_TOPIC:
+                    raise ScenarioError(
+                        f"{where}: node {node.name}: {h.method} subscribes to {LIVELINESS_TOPIC}, "
+                        "whose events (nodes appearing and disappearing) the checker does not "
+                        "model; check the node without that handler")
+                if h.qos.reliability is Reliability.BEST_EFFORT or topic in best_effort:
+                    self.lossy.add((topic, i))
+
+    def refuse_late_joiners(self, crashing: Sequence[int], where: object) -> None:
+        """Refuse TRANSIENT_LOCAL subscriptions of nodes that may crash: restarted, such a
+        node gets the latched samples replayed live, which the checker does not model. (With
+        no restart every subscription exists before any `@on_start` runs, live too: nodes
+        wait for their peers, so durability changes nothing.)"""
+        for i in crashing:
+            node = self.nodes[i]
+            for h in node.spec().of_kind("subscribe"):
+                if h.qos.durability is Durability.TRANSIENT_LOCAL:
+                    raise ScenarioError(
+                        f"{where}: node {node.name}: {h.method} ({h.name}) has qos durability "
+                        "TRANSIENT_LOCAL and the node may crash: the replay to a restarted "
+                        "node is not modelled; use VOLATILE or no crash fault for it")
 
     def priority(self, node: int, method: str) -> int:
         """Handler priority of `method` on node index `node` (0 if undeclared)."""

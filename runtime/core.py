@@ -74,11 +74,10 @@ from twinfleet.runtime.messages import (
     NodeAlive,
     decode_fields,
 )
-from twinfleet.runtime.node import HandlerSpec, Node, Reliability
+from twinfleet.runtime.node import LIVELINESS_TOPIC, HandlerSpec, Node, Reliability
 from twinfleet.runtime.outbox import Answer, Line, Outbox, Output
 from twinfleet.runtime.snapshot import SnapshotError, restore, snapshot
 
-LIVELINESS_TOPIC: Final = "/_liveliness"
 MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is not a loss
 _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
 _TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOUT})

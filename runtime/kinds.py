@@ -43,3 +43,4 @@ class FailureKind(StrEnum):
     DEADLINE = "deadline miss"  # a message handled after its deadline
     NONDETERMINISM = "nondeterminism"  # the same handler run twice did different things
     CHOICE_MISMATCH = "choice mismatch"  # a forced ctx.choose answer this run does not offer
+    KEEP_LAST = "keep-last overflow"  # more messages pending than a subscription's QoS depth

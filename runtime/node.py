@@ -32,7 +32,7 @@ import inspect
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any, ClassVar, Literal, TypeVar
+from typing import Any, ClassVar, Final, Literal, TypeVar
 
 from twinfleet.runtime.names import normalise_namespace, resolve
 
@@ -67,6 +67,10 @@ class QoS:
     durability: Durability = Durability.VOLATILE
     depth: int = 10
 
+
+#: The topic of liveliness events: `@subscribe(LIVELINESS_TOPIC)` gets a `NodeAlive` when a
+#: node of the fleet appears or disappears (live only: the checker refuses it at load).
+LIVELINESS_TOPIC: Final = "/_liveliness"
 
 QOS_DEFAULT = QoS()
 QOS_SENSOR_DATA = QoS(Reliability.BEST_EFFORT, Durability.VOLATILE, 5)
