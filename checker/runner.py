@@ -218,7 +218,8 @@ class Runner:
                     lost = server is not None and self._copies(service, server[0], chooser,
                                                                faults) == 0
                     if server is None or lost:
-                        err = CallError(service, "timeout" if lost else "no server")
+                        err = CallError(service, "timeout" if lost else
+                                        self.rules.no_server(chooser))
                         out.append(Event(now + timeout, EventKind.TIMEOUT, i, reply_to, i,
                                          (err,), topology.priority(i, reply_to)))
                     else:

@@ -56,7 +56,10 @@ Rule 5 (latency and faults, all off by default; see `checker.faults` for the
     than `faults.crash.max` crashes (`Rules.crashable`), taken at t*. A
     message due after its deadline (`Rules.delivery` sets it) is a deadline
     miss when it is taken; because of Rule 1 it is taken exactly at its due
-    time, so only latency or FIFO clamping can make it late.
+    time, so only latency or FIFO clamping can make it late. A call to a
+    service nobody serves fails at its timeout with `CallError` reason "no
+    server" or "timeout", each a branch (`Rules.no_server`): live, which one
+    depends on how soon Zenoh gives up on the query.
 
 Rule 6 (QoS). A subscription declared `qos=QoS(depth=d)` (KEEP_LAST, default
     10) holds at most d waiting messages live; the core drops the oldest when
@@ -267,6 +270,12 @@ class Rules:
             return 2, "duplicated"
         return 1, ""
 
+    def no_server(self, chooser: Chooser) -> str:
+        """Rule 5: the reason a call to a service nobody serves fails with, a branch of
+        `chooser`: live, Zenoh finalises such a query early ("no server") or only at its
+        timeout ("timeout"), depending on timing; either way at the call's timeout here."""
+        return _NO_SERVER[chooser.branch(len(_NO_SERVER))]
+
     def overflow(self, pending: Sequence[Event], ev: Event) -> int | None:
         """Rule 6: how many deliveries to `ev`'s subscription are pending once `ev` (just
         added) is, when that is more than its KEEP_LAST depth; else None."""
@@ -314,6 +323,9 @@ class Rules:
         if key is None:
             return ev
         return min((e for e in events if stream(e) == key), key=lambda e: (e.due, e.rank))
+
+
+_NO_SERVER = ("no server", "timeout")
 
 
 def stream(ev: Event) -> tuple[int, int, str, str] | None:

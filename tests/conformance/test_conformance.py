@@ -1,0 +1,136 @@
+"""Conformance: one tiny system per contract feature, in the checker and live over Zenoh.
+
+Each case is a scenario of `tests/conformance/systems.py`. The fast test
+checks it exhaustively and asserts what the feature means there (its
+properties hold, or the one failure it must show); the slow one launches it as
+real processes over Zenoh (`twinfleet launch --record-events`, time scale 10)
+and asserts with `twinfleet validate` that the live event log is a path of the
+checker (untimed: order, choices, failures and every state digest), and that
+the live path violates no property the checker says holds.
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+
+from tests.support import ROOT, child_env
+from twinfleet.agreement.validate import validate
+from twinfleet.checker.check import CheckOptions, check
+
+M = "tests.conformance.systems:"
+
+
+@dataclass(frozen=True)
+class Case:
+    """One feature's system: its nodes, properties and what the checker must answer."""
+
+    nodes: list[dict[str, Any]]
+    properties: list[dict[str, Any]] = field(default_factory=list)
+    status: str = "holds"  # the checker's verdict
+    violated: str = ""  # with status "violated": the property (or failure kind) it names
+    message: tuple[str, ...] = ()  # words the violation's message must contain
+    check: dict[str, Any] = field(default_factory=dict)
+
+    def scenario(self, tmp_path: Path, name: str) -> Path:
+        doc = {"name": f"conf-{name.replace('_', '-')}", "semantics": "ros", "seed": 1,
+               "nodes": self.nodes, "properties": self.properties,
+               "live": {"timeout_s": 20, "time_scale": 10.0}}
+        if self.check:
+            doc["check"] = self.check
+        path = tmp_path / f"{name}.yaml"
+        path.write_text(yaml.safe_dump(doc, sort_keys=False))
+        return path
+
+
+def node(name: str, cls: str, **params: Any) -> dict[str, Any]:
+    entry: dict[str, Any] = {"name": name, "class": M + cls}
+    if params:
+        entry["params"] = params
+    return entry
+
+
+def prop(name: str, kind: str, expr: str | None = None) -> dict[str, Any]:
+    return {"name": name, "kind": kind, **({"expr": expr} if expr else {})}
+
+
+CASES: dict[str, Case] = {
+    "pubsub": Case(
+        [node("talker", "Talker"), node("listener", "Listener")],
+        [prop("in_order", "invariant", "listener.seen == tuple(range(1, listener.count + 1))"),
+         prop("all_heard", "eventually", "listener.count == 3")]),
+    "priorities": Case(
+        [node("sender", "TwoTopics"), node("receiver", "Prioritised")],
+        [prop("high_first", "invariant", "receiver.seen in ((), (2,), (2, 1))")]),
+    "services_and_timeouts": Case(
+        [node("client", "Client"), node("server", "Doubler")],
+        [prop("answered", "eventually", "client.answers == (42,) and client.errors == "
+                                        "('/absent',)")]),
+    "after": Case(
+        [node("chain", "Chain")],
+        [prop("seven_apart", "invariant", "chain.at == (7, 14, 21)[:len(chain.at)]"),
+         prop("args", "invariant", "chain.args == (1, 2, 3)[:len(chain.args)]")]),
+    "every": Case(
+        [node("ticker", "Ticker")],
+        [prop("on_the_period", "invariant", "ticker.at == (25, 45, 65)[:len(ticker.at)]"),
+         prop("three", "eventually", "len(ticker.at) == 3")]),
+    "qos_depth": Case(  # depth 2 holds a burst of 2: nothing is ever dropped, in either driver
+        [node("talker", "Talker", burst=2), node("listener", "Shallow")],
+        [prop("all_heard", "eventually", "listener.count == 6")]),
+    "qos_reliability": Case(  # BEST_EFFORT: every delivery may be lost, so `eventually` fails
+        [node("talker", "Talker"), node("listener", "Lossy")],
+        [prop("in_order", "invariant",
+              "listener.seen == tuple(sorted(set(listener.seen)))"),
+         prop("all_heard", "eventually", "listener.count == 3")],
+        status="violated", violated="all_heard"),
+    "on_start": Case(
+        [node("starter", "TwoStarts"), node("greeter", "Greeter")],
+        [prop("starts_first", "invariant",
+              "starter.order in (('first', 'second'), ('first', 'second', 'hello'))")]),
+    "exceptions": Case(
+        [node("talker", "Talker"), node("listener", "Fragile"), node("never", "NeverHeard")],
+        [prop("rolled_back", "invariant", "2 not in listener.seen and never.n == 0")],
+        status="violated", violated="no_failure", message=("listener.on_chat", "two is unlucky")),
+}
+
+
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_the_checker_answers_as_the_feature_means(name, tmp_path):
+    case = CASES[name]
+    result = check(case.scenario(tmp_path, name), CheckOptions())
+    assert result.status == case.status, result.summary()
+    if case.violated:
+        assert result.violation is not None and result.violation.property == case.violated
+        for word in case.message:
+            assert word in result.violation.message, result.violation.message
+
+
+def launch(scenario: Path, events: Path) -> str:
+    """Run `scenario` live (one process per node over Zenoh) with its event log."""
+    proc = subprocess.run([sys.executable, "-m", "twinfleet", "launch", str(scenario),
+                           "--record-events", str(events)], cwd=ROOT, env=child_env(),
+                          capture_output=True, text=True, timeout=60)
+    out = proc.stdout + proc.stderr
+    assert "shutdown requested by" in out, out[-3000:]
+    return out
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(90)
+@pytest.mark.parametrize("name", sorted(CASES))
+def test_every_live_event_log_is_a_path_of_the_checker(name, tmp_path):
+    case = CASES[name]
+    scenario = case.scenario(tmp_path, name)
+    events = tmp_path / f"{name}.events.jsonl"
+    launch(scenario, events)
+    result = validate(events, scenario, tolerance_ms=None)
+    assert result.ok, result.summary()
+    assert result.events > 0
+    held = {p["name"] for p in case.properties if p["kind"] == "invariant"}
+    assert not [v for v in result.violations if v[1] in held], result.violations
