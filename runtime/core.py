@@ -11,7 +11,9 @@ and never touches a socket:
 1. Ordering. Whatever can run is an inbox entry keyed by ``(arrival_ms,
    priority, n)``: events of one fleet millisecond run in handler-priority
    order, others in arrival order, ``n`` keeps arrival order among equals.
-   `start` queues the `@on_start` handlers ahead of everything that arrived.
+   `start(now)` queues the `@on_start` handlers ahead of everything that
+   arrived; they run at `now` (the host passes fleet time 0 on a fresh fleet)
+   whenever the loop gets to them.
 2. Timed entries. `ctx.after` timers (TIMER), `@every` ticks (PERIODIC) and
    call timeouts (TIMEOUT) are due entries of the core (`runtime.due`): the
    driver asks `next_due()` and calls `release_due(now)`, which moves the due
@@ -80,7 +82,10 @@ from twinfleet.runtime.snapshot import SnapshotError, restore, snapshot
 
 MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is not a loss
 _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
-_TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOUT})
+# Entries that run at their own time, not the clock's: timers at their due time, start
+# handlers at the start time (fleet time 0 on a fresh fleet, as in the checker).
+_TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOUT,
+                           EventKind.START})
 _COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "published",
                     "handled", "keep_last", "best_effort", "seq_jumps")
 _NOTHING: Final[tuple[()]] = ()

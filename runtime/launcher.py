@@ -59,6 +59,7 @@ from twinfleet.runtime.node_main import PARENT_ENV, stats_key
 from twinfleet.runtime.run_record import RunRecord, versions
 from twinfleet.runtime.scenario import NodeConfig, Scenario
 from twinfleet.runtime.scenario_file import write_scenario
+from twinfleet.runtime.transport import epoch_key, graph_key, parse_graph_key
 from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
 
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"
@@ -250,13 +251,15 @@ class Fleet:
         argv = [sys.executable, "-m", "twinfleet.runtime.node_main", "--scenario", str(self.scenario.path),
                 "--node", cfg.name, "--connect", self.endpoint, "--epoch-ns", str(self.epoch_ns),
                 "--time-scale", repr(self.time_scale), "--seed", str(self.seed),
-                *self.node_args]
+                "--fleet-epoch", *self.node_args]
         if self.events_dir is not None:
             argv += ["--record-events", str(self.events_dir / f"{cfg.name}.jsonl")]
         return argv
 
     async def start_nodes(self) -> list[asyncio.Task[None]]:
-        """Start every node process and one supervisor task per node."""
+        """Start every node process and one supervisor task per node; once every node is
+        alive, declare the fleet's epoch (time 0) for them (`epoch_key`)."""
+        self._watch_for_epoch()
         tasks = []
         for cfg in self.scenario.nodes:
             proc = _NodeProcess(cfg, self._argv(cfg), self.out)
@@ -264,6 +267,22 @@ class Fleet:
             await proc.start()
             tasks.append(asyncio.create_task(self._supervise(proc)))
         return tasks
+
+    def _watch_for_epoch(self) -> None:
+        """Declare the epoch token when the last node's token appears: the nodes wait for
+        it, so every `@on_start` runs at fleet time 0 on one shared clock."""
+        assert self.transport is not None
+        fleet, waiting = self.scenario.fleet, {cfg.name for cfg in self.scenario.nodes}
+        transport = self.transport
+
+        def on_node(key: str, alive: bool) -> None:
+            if alive and waiting:
+                waiting.discard(parse_graph_key(key)[2])
+                if not waiting:
+                    self.epoch_ns = time.time_ns()
+                    transport.announce(epoch_key(fleet, self.epoch_ns))
+
+        transport.watch(graph_key(fleet, "node", "*"), on_node)
 
     async def _supervise(self, proc: _NodeProcess) -> None:
         while True:
@@ -284,6 +303,8 @@ class Fleet:
                 await asyncio.sleep(_RESPAWN_DELAY_S)
                 if self.shutting_down:
                     return
+                if "--restarted" not in proc.argv:
+                    proc.argv.append("--restarted")
                 await proc.start()
                 continue
             if code != 0:

@@ -366,9 +366,9 @@ def test_observers_see_every_run_with_a_named_entry():
     drain(core, 100)
     seen = [(r.entry.kind, r.entry.handler, r.entry.sender, r.entry.due, r.now)
             for r in recorder.records]
-    assert seen[0] == (EventKind.START, "start", "busy", 0, 2)
+    assert seen[0] == (EventKind.START, "start", "busy", 0, 0)  # at its start time
     assert seen[1] == (EventKind.DELIVERY, "on_low", "r2", None, 2)
-    assert seen[2:] == [(EventKind.TIMER, "later", "busy", 52, 52),
+    assert seen[2:] == [(EventKind.TIMER, "later", "busy", 50, 50),
                         (EventKind.PERIODIC, "fast_tick", "busy", 100, 100),
                         (EventKind.PERIODIC, "slow_tick", "busy", 100, 100)]
     delivery = recorder.records[1].entry
