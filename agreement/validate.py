@@ -44,6 +44,11 @@ blind to the model's timing. Whatever the rule, the report gives
 how far ahead of the model's clock the path had to run events (``ahead``:
 the event's logical due time minus t*): the timing gap between run and model.
 
+KEEP_LAST. The live log does not say which messages a subscription's depth
+dropped (`checker.semantics` Rule 6): a pending delivery the checker may drop
+is one more option of every step, tried after the live events (under the
+timing rule's tolerance, as events may run ahead); it consumes no live event.
+
 Latency and faults. A scenario's ``check.latency`` and ``check.faults``
 (drop, duplicate) are branches of the checker that no live node records: the
 live log holds only each handler's own `ctx.choose` answers. Each step first
@@ -97,11 +102,11 @@ from twinfleet.agreement.validation import (
     timing_name,
 )
 from twinfleet.checker.check import load
-from twinfleet.checker.choices import SplitChooser
+from twinfleet.checker.choices import PrefixChooser, SplitChooser
 from twinfleet.checker.commands import BAD_INPUT
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.system import System
-from twinfleet.checker.transition import RunEvent
+from twinfleet.checker.transition import Drop, RunEvent
 from twinfleet.checker.world import World
 from twinfleet.runtime.eventlog import state_digest
 from twinfleet.runtime.kinds import EventKind, FailureKind
@@ -142,6 +147,7 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
 
 
 Option = tuple[int, int, tuple[int, ...]]  # (node, pending event, branch prefix)
+DROPPED = -1  # the `node` of an option that drops the pending event (KEEP_LAST)
 
 
 @final
@@ -322,6 +328,10 @@ class _Search:
     def _step(self, frame: _Frame, i: int, k: int, branches: tuple[int, ...]
               ) -> _Frame | Unexplained:
         world = frame.world
+        if i == DROPPED:  # KEEP_LAST drops: no live event, the node just never ran it
+            t = self.system.step(world, Drop(k), PrefixChooser())
+            options, why = self._options(t.world, frame.pos)
+            return _Frame(t.world, frame.pos, options, why, 0, f"drop of {t.event.method}")
         live = self.queues[i][frame.pos[i]]
         ev = world.events[k]
         # The live node made the handler's choices; the checker's own branches on the
@@ -370,6 +380,9 @@ class _Search:
                 options.append((i, ok[0], ()))
             else:
                 why.append(self.explain.why_not(world, live, matches, allowed))
+        # Tried after every live event: a message KEEP_LAST may have dropped (Rule 6).
+        drops = self.system.rules.droppable(world.events, self.tolerance)
+        options += [(DROPPED, k, ()) for k in drops]
         return options, why
 
     def _enabled(self, world: World) -> set[int]:

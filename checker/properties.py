@@ -67,7 +67,6 @@ FAILURE_PROPERTIES: dict[FailureKind, str] = {
     FailureKind.STATE_OUTSIDE: "debug_state",
     FailureKind.DEADLINE: "deadline",
     FailureKind.NONDETERMINISM: "determinism",
-    FailureKind.KEEP_LAST: "keep_last",
 }
 
 

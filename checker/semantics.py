@@ -6,7 +6,8 @@ Theory of operation
 A world holds pending events; each is "run handler `method` of node
 `target` with `args` at time `due`", of an `EventKind`. What may happen next
 in a world are its *actions* (`checker.transition.Action`): run one *enabled*
-event (`RunEvent`), or crash a node (`Crash`, Rule 5). Taking an action runs
+event (`RunEvent`), crash a node (`Crash`, Rule 5), or drop a waiting delivery
+(`Drop`, Rule 6). Taking an action runs
 the handler to completion (one transition per `ctx.choose` variant, see
 `checker.choices`). Which events are enabled is decided here, by rules
 applied in this order:
@@ -62,21 +63,26 @@ Rule 5 (latency and faults, all off by default; see `checker.faults` for the
     depends on how soon Zenoh gives up on the query.
 
 Rule 6 (QoS). A subscription declared `qos=QoS(depth=d)` (KEEP_LAST, default
-    10) holds at most d waiting messages live; the core drops the oldest when
-    one more arrives (`runtime.core`, counted as ``dropped_keep_last``). A
-    pending delivery is waiting or still in flight, so a world where more
-    than d deliveries to one subscription are pending is one where live *may*
-    have dropped some, depending on how the handler keeps up: the checker does
-    not branch on that, it refuses the run instead (`Rules.overflow`: the
-    step is a failure of kind `FailureKind.KEEP_LAST`, property `keep_last`,
-    naming the node, the handler and the depth to raise). Below the depth
-    nothing is ever dropped, in either driver. BEST_EFFORT (on the
-    subscription, or in the publishing node's `publications`) makes each
-    delivery to that subscription a branch: delivered or lost
-    (`Rules.copies`), as Zenoh's `CongestionControl.DROP` may lose it live.
-    TRANSIENT_LOCAL durability and `/_liveliness` subscriptions are refused at
-    load (`checker.topology`). Both parts of the rule read only the target
-    node's own pending deliveries: a node's enabling stays decidable per node.
+    10) holds at most d waiting messages live: when one more arrives the
+    core drops the oldest waiting one (`runtime.core`, ``dropped_keep_last``).
+    In a world, the deliveries due at t* to one subscription are the ones
+    waiting there (Rule 1: nothing pending is due earlier). Whether live
+    dropped one depends on whether the handler ran before the newer ones
+    arrived, so the drop is an action, not a forced step: a pending delivery
+    due at t* may be dropped (`Drop`, `Rules.droppable`) while d other
+    deliveries to the same subscription are due at t* and, under `ros`, it
+    is the earliest-sent of its stream (the oldest of its sender: Zenoh keeps
+    a publisher's order). With one sender per subscription this is exactly
+    the live rule; with several, which waiting message is oldest is an order
+    the world does not keep, so any sender's oldest may go (more behaviours,
+    never fewer). Below the depth nothing is ever dropped, in either driver.
+    BEST_EFFORT (on the subscription, or in the publishing node's
+    `publications`) makes each delivery to that subscription a branch:
+    delivered or lost (`Rules.copies`), as Zenoh's `CongestionControl.DROP`
+    may lose it live. `/_liveliness` subscriptions are refused at load, and
+    TRANSIENT_LOCAL ones of nodes that may crash (`checker.topology`). Both
+    parts of the rule read only the target node's own pending deliveries: a
+    node's enabling stays decidable per node.
 
 Relaxed timing (`Rules.enabled_within`), used only to compare a live run with
 the model (`agreement.validate`). A live clock is continuous, so events the
@@ -141,6 +147,7 @@ class Rules:
     fifo: bool = field(init=False)
     has_latency: bool = field(init=False)
     _ranges: dict[str, tuple[int, int] | None] = field(init=False, repr=False, compare=False)
+    _shallowest: int = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         try:
@@ -152,6 +159,7 @@ class Rules:
         if latency is not None and not 0 <= latency[0] <= latency[1]:
             raise ValueError(f"latency must be [min, max] with 0 <= min <= max, got {latency}")
         object.__setattr__(self, "fifo", self.semantics is Semantics.ROS)
+        object.__setattr__(self, "_shallowest", min(self.depths.values(), default=1 << 62))
         ranges = dict(self.settings.topic_latency)
         object.__setattr__(self, "_ranges", ranges)
         object.__setattr__(self, "has_latency", latency is not None
@@ -276,18 +284,25 @@ class Rules:
         timeout ("timeout"), depending on timing; either way at the call's timeout here."""
         return _NO_SERVER[chooser.branch(len(_NO_SERVER))]
 
-    def overflow(self, pending: Sequence[Event], ev: Event) -> int | None:
-        """Rule 6: how many deliveries to `ev`'s subscription are pending once `ev` (just
-        added) is, when that is more than its KEEP_LAST depth; else None."""
-        if ev.kind is not EventKind.DELIVERY:
-            return None
-        target, method = ev.target, ev.method
-        depth = self.depths.get((target, method))
-        if depth is None:
-            return None
-        n = sum(1 for e in pending if e.target == target and e.method == method
-                and e.kind is EventKind.DELIVERY)
-        return n if n > depth else None
+    def droppable(self, events: Sequence[Event], tolerance_ms: int | None = 0) -> list[int]:
+        """Rule 6: indices (into the sorted `events`) of the deliveries KEEP_LAST may drop
+        now: due at t*, with at least their subscription's depth of other deliveries to it
+        due at t*, and under `ros` the earliest-sent of their stream. Under relaxed timing
+        (`enabled_within`'s `tolerance_ms`, None: any) "at t*" is "by t* + tolerance"."""
+        if len(events) <= self._shallowest:
+            return []
+        limit = None if tolerance_ms is None else events[0].due + tolerance_ms
+        waiting: dict[tuple[int, str], list[int]] = {}
+        for i, ev in enumerate(events):
+            if limit is not None and ev.due > limit:
+                break
+            if ev.kind is EventKind.DELIVERY:
+                waiting.setdefault((ev.target, ev.method), []).append(i)
+        depths, out = self.depths, []
+        for sub, found in waiting.items():
+            if len(found) > depths.get(sub, len(found)):
+                out += _stream_heads(events, found) if self.fifo else found
+        return sorted(out)
 
     def crashable(self, world: World) -> tuple[int, ...]:
         """The nodes that may crash in `world`: none with nothing pending or once the path
@@ -331,6 +346,16 @@ _NO_SERVER = ("no server", "timeout")
 def stream(ev: Event) -> tuple[int, int, str, str] | None:
     """The live FIFO stream of a message (module docstring); None for timers."""
     return (ev.sender, ev.target, ev.kind, ev.method) if ev.message else None
+
+
+def _stream_heads(events: Sequence[Event], found: list[int]) -> list[int]:
+    """Of the deliveries `found` (indices into `events`), the earliest-sent of each sender."""
+    first: dict[int, int] = {}
+    for i in found:
+        j = first.get(events[i].sender)
+        if j is None or events[i].rank < events[j].rank:
+            first[events[i].sender] = i
+    return list(first.values())
 
 
 def _earliest_sent(events: Sequence[Event], picked: list[int]) -> list[int]:

@@ -2,7 +2,8 @@
 
 The system is a model in Stateright's sense: `initial()` gives the initial
 worlds, `actions(world)` what may happen next (`RunEvent` of an enabled
-event, `Crash` of a node; the rules are `checker.semantics`), and
+event, `Crash` of a node, `Drop` of a waiting delivery; the rules are
+`checker.semantics`), and
 `step(world, action, chooser)` the one function from a world, an action and
 the answers to its choice points to the next world (a `Transition`, which
 also says what the step did). `outcomes(world, action)` takes an action with
@@ -54,6 +55,7 @@ from twinfleet.checker.topology import Topology
 from twinfleet.checker.transition import (
     Action,
     Crash,
+    Drop,
     Failure,
     RunEvent,
     Step,
@@ -68,7 +70,7 @@ from twinfleet.runtime.snapshot import restore
 if TYPE_CHECKING:
     from twinfleet.checker.properties import PropertySet
 
-__all__ = ["Action", "Crash", "Failure", "RunEvent", "Step", "System", "Transition"]
+__all__ = ["Action", "Crash", "Drop", "Failure", "RunEvent", "Step", "System", "Transition"]
 
 _MEMO_LIMIT = 1_024  # handler outcomes per cache generation (two kept; ~0.55 KB each on C1b)
 _DECODED_LIMIT = 64  # decoded states kept for property expressions (~2.5 KB each on C1a)
@@ -194,10 +196,12 @@ class System:
         return Transition(t.step, t.world, t.event, failure, t.logs, t.faults)
 
     def actions(self, world: World) -> list[Action]:
-        """What may happen next: each enabled event (`RunEvent`), then each crash fault."""
+        """What may happen next: each enabled event (`RunEvent`), then each crash fault, then
+        each KEEP_LAST drop (`Drop`)."""
         acts: list[Action] = [_run_event(i) for i in self.rules.enabled(world.events)]
         if self.settings.crash is not None:
             acts += [Crash(j) for j in self.rules.crashable(world)]
+        acts += [Drop(i) for i in self.rules.droppable(world.events)]
         return acts
 
     def step(self, world: World, action: Action, chooser: Chooser) -> Transition:
@@ -228,11 +232,15 @@ class System:
                 action = Crash(j)
                 for v in self._variants(world, action):
                     yield apply(world, action, v)
+        for index in self.rules.droppable(events):
+            yield self._apply_drop(world, index)
 
     # ------------------------------------------------------------ variants
 
     def _variant(self, world: World, action: Action, chooser: Chooser) -> Variant:
         """What taking `action` in `world` with `chooser` does, independent of the world."""
+        if isinstance(action, Drop):  # nothing runs (`_apply_drop` does the dropping)
+            return Variant((), (), world.states[world.events[action.index].target])
         if isinstance(action, Crash):
             j, now = action.node, world.events[0].due
             return self.runner.restart(j, self._crash_state(world, j), now, chooser)
@@ -244,6 +252,8 @@ class System:
 
     def _variants(self, world: World, action: Action) -> list[Variant]:
         """Every choice variant of `action` in `world` (cached, see the module docstring)."""
+        if type(action) is Drop:
+            return [self._variant(world, action, PrefixChooser())]
         if type(action) is RunEvent:
             ev = world.events[action.index]
             if ev.sk[3]:  # late: a deadline miss, nothing runs
@@ -275,36 +285,34 @@ class System:
 
     def _apply(self, world: World, action: Action, v: Variant) -> Transition:
         """The transition of variant `v` of `action` in `world`."""
-        if type(action) is not RunEvent:
+        if type(action) is Crash:
             return self._apply_crash(world, action.node, v)
+        if type(action) is Drop:
+            return self._apply_drop(world, action.index)
         ev = world.events[action.index]
         rules = self.rules
         pending = rules.remove(world.events, action.index)
-        failure = v.failure
         for e in v.events:
             rules.add(pending, e)
-            if failure is None and rules.depths:
-                failure = self._overflow(pending, e)
         states, changed = world.states, ()
         i = ev.target
         if v.state is not states[i]:
             states, changed = (*states[:i], v.state, *states[i + 1:]), (i,)
         new = self._world(ev.due, states, pending, world, world.crashes)
-        return Transition(Step(action, v.choices, v.options), new, ev, failure, v.logs,
+        return Transition(Step(action, v.choices, v.options), new, ev, v.failure, v.logs,
                           v.faults, v.branches, v.events, changed)
 
-    def _overflow(self, pending: list[Event], ev: Event) -> Failure | None:
-        """Rule 6 of `checker.semantics`: more deliveries pending than the KEEP_LAST depth
-        of `ev`'s subscription, which live may drop and the checker does not model."""
-        n = self.rules.overflow(pending, ev)
-        if n is None:
-            return None
-        name, depth = self.names[ev.target], self.rules.depths[(ev.target, ev.method)]
-        return Failure(FailureKind.KEEP_LAST, name, ev.method,
-                       f"{n} messages pending for {name}.{ev.method}, more than its "
-                       f"qos depth {depth} (KEEP_LAST): live may drop the oldest, which the "
-                       f"checker does not model; raise @subscribe(qos=QoS(depth=...)) to at "
-                       f"least {n}")
+    def _apply_drop(self, world: World, index: int) -> Transition:
+        """KEEP_LAST drops pending delivery `index` (Rule 6): nothing runs, no state changes."""
+        ev = world.events[index]
+        pending = self.rules.remove(world.events, index)
+        new = self._world(ev.due, world.states, pending, world, world.crashes)
+        label = Event(ev.due, EventKind.DROP, ev.target, ev.method, ev.sender, ev.args,
+                      ev.priority)
+        depth = self.rules.depths[(ev.target, ev.method)]
+        note = (f"{self.names[ev.target]}.{ev.method}: a waiting message dropped "
+                f"(KEEP_LAST depth {depth})")
+        return Transition(Step(Drop(index)), new, label, faults=(note,))
 
     def _apply_crash(self, world: World, j: int, v: Variant) -> Transition:
         now = world.events[0].due

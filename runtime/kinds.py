@@ -24,6 +24,7 @@ class EventKind(StrEnum):
     PERIODIC = "periodic"  # an @every tick
     CRASH = "crash"  # a node crashing (a checker fault; live, the process dies)
     LIVELINESS = "liveliness"  # a node appearing or disappearing, to /_liveliness subscribers
+    DROP = "drop"  # a waiting delivery dropped by KEEP_LAST (a label of the checker, never run)
 
     @property
     def is_message(self) -> bool:
@@ -43,4 +44,3 @@ class FailureKind(StrEnum):
     DEADLINE = "deadline miss"  # a message handled after its deadline
     NONDETERMINISM = "nondeterminism"  # the same handler run twice did different things
     CHOICE_MISMATCH = "choice mismatch"  # a forced ctx.choose answer this run does not offer
-    KEEP_LAST = "keep-last overflow"  # more messages pending than a subscription's QoS depth

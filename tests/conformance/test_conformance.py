@@ -6,7 +6,8 @@ properties hold, or the one failure it must show); the slow one launches it as
 real processes over Zenoh (`twinfleet launch --record-events`, time scale 10)
 and asserts with `twinfleet validate` that the live event log is a path of the
 checker (untimed: order, choices, failures and every state digest), and that
-the live path violates no property the checker says holds.
+the live path violates no invariant the checker says holds (except those that
+hold only under the model's exact timing: handler priorities).
 """
 
 from __future__ import annotations
@@ -37,6 +38,7 @@ class Case:
     violated: str = ""  # with status "violated": the property (or failure kind) it names
     message: tuple[str, ...] = ()  # words the violation's message must contain
     check: dict[str, Any] = field(default_factory=dict)
+    timed: bool = False  # the invariants hold under the model's timing only (see below)
 
     def scenario(self, tmp_path: Path, name: str) -> Path:
         doc = {"name": f"conf-{name.replace('_', '-')}", "semantics": "ros", "seed": 1,
@@ -67,7 +69,8 @@ CASES: dict[str, Case] = {
          prop("all_heard", "eventually", "listener.count == 3")]),
     "priorities": Case(
         [node("sender", "TwoTopics"), node("receiver", "Prioritised")],
-        [prop("high_first", "invariant", "receiver.seen in ((), (2,), (2, 1))")]),
+        [prop("high_first", "invariant", "receiver.seen in ((), (2,), (2, 1))")],
+        timed=True),
     "services_and_timeouts": Case(
         [node("client", "Client"), node("server", "Doubler")],
         [prop("answered", "eventually", "client.answers == (42,) and client.errors == "
@@ -80,7 +83,13 @@ CASES: dict[str, Case] = {
         [node("ticker", "Ticker")],
         [prop("on_the_period", "invariant", "ticker.at == (25, 45, 65)[:len(ticker.at)]"),
          prop("three", "eventually", "len(ticker.at) == 3")]),
-    "qos_depth": Case(  # depth 2 holds a burst of 2: nothing is ever dropped, in either driver
+    "qos_depth": Case(  # a burst of 3 into depth 2: the oldest may be dropped, nothing else
+        [node("talker", "Talker", burst=3, rounds=1), node("listener", "Shallow")],
+        [prop("keeps_the_newest", "invariant",
+              "listener.seen in ((), (1,), (1, 2), (1, 2, 3), (2,), (2, 3))"),
+         prop("all_heard", "eventually", "listener.count == 3")],
+        status="violated", violated="all_heard"),
+    "qos_depth_enough": Case(  # depth 2 holds a burst of 2: nothing is ever dropped
         [node("talker", "Talker", burst=2), node("listener", "Shallow")],
         [prop("all_heard", "eventually", "listener.count == 6")]),
     "qos_reliability": Case(  # BEST_EFFORT: every delivery may be lost, so `eventually` fails
@@ -132,5 +141,7 @@ def test_every_live_event_log_is_a_path_of_the_checker(name, tmp_path):
     result = validate(events, scenario, tolerance_ms=None)
     assert result.ok, result.summary()
     assert result.events > 0
-    held = {p["name"] for p in case.properties if p["kind"] == "invariant"}
+    # Handler priority orders what waits at one fleet millisecond; live, /low may arrive
+    # and run a millisecond before /high does, a path of the untimed checker only.
+    held = {p["name"] for p in case.properties if p["kind"] == "invariant" and not case.timed}
     assert not [v for v in result.violations if v[1] in held], result.violations
