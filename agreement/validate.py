@@ -280,9 +280,6 @@ class _Search:
             if ev.node not in known:
                 return Unexplained(0, ev, OUTSIDE, f"nodes {sorted(known)}",
                                    f"events of node {ev.node}")
-            if ev.kind is EventKind.LIVELINESS:
-                return Unexplained(0, ev, OUTSIDE, "no liveliness events (the checker has "
-                                   "no liveliness changes)", ev.summary)
         return None
 
     def _start(self, branches: tuple[int, ...]

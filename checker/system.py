@@ -12,7 +12,8 @@ every combination of answers (the siblings a search explores), and
 replay, `agreement.validate` and the live replay use these; a handler runs
 in `checker.runner`.
 
-Initial worlds: every node's `initial_state()`, the first firing of each
+Initial worlds: every node's `initial_state()`, the liveliness events of every
+node appearing (to `/_liveliness` subscribers), the first firing of each
 `@every` timer at phase + period, then every `@on_start` handler run at t=0 in
 scenario order, like Rebeca constructors: they are not transitions (R10) and
 their effects are the initial pending events. If start handlers call
@@ -168,6 +169,8 @@ class System:
         chooser = chooser if chooser is not None else PrefixChooser(choices)
         states = list(self.topology.initial_states)
         pending: list[Event] = []
+        for ev in self.topology.started():  # before the start handlers' events: Zenoh
+            self.rules.add(pending, ev)     # announces a node before it runs anything
         failure, logs, faults, branches = None, [], [], []
         i = 0
         for i in range(len(self.nodes)):
@@ -317,7 +320,7 @@ class System:
     def _apply_crash(self, world: World, j: int, v: Variant) -> Transition:
         now = world.events[0].due
         pending = [e for e in world.events if e.target != j]
-        for e in v.events:
+        for e in (*self.topology.crashed(j, now), *v.events):
             self.rules.add(pending, e)
         states = (*world.states[:j], v.state, *world.states[j + 1:])
         new = self._world(now, states, pending, world, world.crashes + 1)

@@ -1,6 +1,7 @@
 """The node graph of a scenario, read once from the nodes' declared handlers.
 
-Who subscribes to which topic, who serves which service, each handler's
+Who subscribes to which topic (and to `/_liveliness`: the liveliness events of
+a start or a crash are made here), who serves which service, each handler's
 priority and each periodic timer's period, and every node's initial state
 (as snapshot bytes): what a `System` needs to turn a handler's effects into
 pending events, without running any node code.
@@ -13,6 +14,7 @@ from typing import final
 
 from twinfleet.checker.world import Event
 from twinfleet.runtime.kinds import EventKind
+from twinfleet.runtime.messages import NodeAlive
 from twinfleet.runtime.node import LIVELINESS_TOPIC, Durability, HandlerSpec, Node, Reliability
 from twinfleet.runtime.scenario import ScenarioError
 from twinfleet.runtime.snapshot import snapshot
@@ -30,7 +32,7 @@ class Topology:
 
     Raises:
         ScenarioError: two nodes serve the same service, or a node declares what the checker
-            does not model (a `/_liveliness` subscription).
+            does not model.
     """
 
     def __init__(self, nodes: Sequence[Node], where: object) -> None:
@@ -42,6 +44,7 @@ class Topology:
         self._periods: dict[tuple[int, str], int] = {}
         self.depths: dict[tuple[int, str], int] = {}  # KEEP_LAST depth per (node, handler)
         self.lossy: set[tuple[str, int]] = set()  # (topic, subscriber) BEST_EFFORT on a side
+        self.liveliness: list[Target] = []  # the `/_liveliness` subscribers
         self.initial_states = tuple(snapshot(node.initial_state()) for node in self.nodes)
         for i, node in enumerate(self.nodes):
             spec = node.spec()
@@ -64,7 +67,7 @@ class Topology:
 
     def _qos(self, where: object) -> None:
         """Which deliveries may be lost (BEST_EFFORT on the subscription or on the publishing
-        node's declared `publications`); refuse `/_liveliness` subscriptions."""
+        node's declared `publications`), and who subscribes to `/_liveliness`."""
         best_effort = {node.resolve(topic) for node in self.nodes
                        for topic, q in node.spec().publications.items()
                        if q.reliability is Reliability.BEST_EFFORT}
@@ -73,10 +76,8 @@ class Topology:
             for h in spec.of_kind("subscribe"):
                 topic = node.resolve(h.name or "")
                 if topic == LIVELINESS_TOPIC:
-                    raise ScenarioError(
-                        f"{where}: node {node.name}: {h.method} subscribes to {LIVELINESS_TOPIC}, "
-                        "whose events (nodes appearing and disappearing) the checker does not "
-                        "model; check the node without that handler")
+                    self.liveliness.append((i, h.method, h.priority))
+                    continue
                 if h.qos.reliability is Reliability.BEST_EFFORT or topic in best_effort:
                     self.lossy.add((topic, i))
 
@@ -93,6 +94,29 @@ class Topology:
                         f"{where}: node {node.name}: {h.method} ({h.name}) has qos durability "
                         "TRANSIENT_LOCAL and the node may crash: the replay to a restarted "
                         "node is not modelled; use VOLATILE or no crash fault for it")
+
+    def started(self) -> Iterator[Event]:
+        """The liveliness events of a fleet's start: every node appearing, at t=0, to every
+        `/_liveliness` subscriber (itself included, as a Zenoh liveliness subscriber sees
+        its own session's tokens)."""
+        for k, method, prio in self.liveliness:
+            for n, node in enumerate(self.nodes):
+                yield Event(0, EventKind.LIVELINESS, k, method, n, (NodeAlive(node.name, True),),
+                            prio)
+
+    def crashed(self, j: int, now: int) -> Iterator[Event]:
+        """The liveliness events of node `j` crashing and restarting at `now`: to every
+        other subscriber `j` gone then back; to `j` itself every node that is alive."""
+        name = self.nodes[j].name
+        for k, method, prio in self.liveliness:
+            if k == j:
+                for n, node in enumerate(self.nodes):
+                    yield Event(now, EventKind.LIVELINESS, k, method, n,
+                                (NodeAlive(node.name, True),), prio)
+                continue
+            for alive in (False, True):
+                yield Event(now, EventKind.LIVELINESS, k, method, j, (NodeAlive(name, alive),),
+                            prio)
 
     def priority(self, node: int, method: str) -> int:
         """Handler priority of `method` on node index `node` (0 if undeclared)."""

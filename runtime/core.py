@@ -314,13 +314,22 @@ class NodeCore:
         return True
 
     def receive_liveliness(self, node: str, alive: bool, arrival_ms: int) -> bool:
-        """Node `node` appeared or disappeared; True if a `/_liveliness` handler will run."""
+        """Node `node` appeared or disappeared; True if a `/_liveliness` handler will run
+        (its event's sender is `node`, as in the checker)."""
         spec = self._liveliness
         if spec is None:
             return False
         self._push(arrival_ms, spec.priority, Entry(EventKind.LIVELINESS, spec.method,
-                                                    (NodeAlive(node, alive),), "", LIVELINESS_TOPIC))
+                                                    (NodeAlive(node, alive),), node,
+                                                    LIVELINESS_TOPIC))
         return True
+
+    def shift_arrivals(self, delta_ms: int) -> None:
+        """Move every held arrival time `delta_ms` earlier: the clock's epoch moved (the
+        fleet's time 0 arrived after they did), and arrival order must survive it."""
+        self._inbox = [(a - delta_ms if a != _BEFORE_ALL else a, p, n, w)
+                       for a, p, n, w in self._inbox]
+        heapq.heapify(self._inbox)
 
     def release_due(self, now_ms: int) -> int:
         """Move the due entries due by `now_ms` into the inbox; return how many moved."""

@@ -141,7 +141,9 @@ class NodeHost:
         rebase = getattr(self.clock, "rebase", None)
         if self._epoch is None or rebase is None:
             return self.clock.now_ms()
+        before = self.clock.now_ms()
         rebase(self._epoch)
+        self.core.shift_arrivals(before - self.clock.now_ms())  # what came before time 0
         return self.clock.now_ms() if self.restarted else 0
 
     def _on_epoch(self, key: str, alive: bool) -> None:

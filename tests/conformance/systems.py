@@ -24,6 +24,8 @@ from twinfleet import (
     service,
     subscribe,
 )
+from twinfleet.runtime.messages import NodeAlive
+from twinfleet.runtime.node import LIVELINESS_TOPIC
 
 SHUTDOWN = "/twinfleet/shutdown"
 END_MS = 60  # fleet ms after its last action at which a system asks the run to end
@@ -300,3 +302,30 @@ class NeverHeard(Node):
     @subscribe("/never")
     def on_never(self, ctx: Context, msg: Num) -> None:
         self.state.n += 1
+
+
+# ------------------------------------------------------------------ liveliness
+
+
+@dataclass
+class Alive:
+    seen: tuple[tuple[str, bool], ...] = ()
+
+
+class Watcher(Ender):
+    """Records every liveliness change it is told about."""
+
+    def initial_state(self) -> Alive:
+        return Alive()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        stop_later(ctx, self)
+
+    @subscribe(LIVELINESS_TOPIC)
+    def on_alive(self, ctx: Context, msg: NodeAlive) -> None:
+        self.state.seen += ((msg.name, msg.alive),)
+
+
+class Quiet(Node):
+    """A node that only exists."""

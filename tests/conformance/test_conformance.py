@@ -106,6 +106,11 @@ CASES: dict[str, Case] = {
         [node("talker", "Talker"), node("listener", "Fragile"), node("never", "NeverHeard")],
         [prop("rolled_back", "invariant", "2 not in listener.seen and never.n == 0")],
         status="violated", violated="no_failure", message=("listener.on_chat", "two is unlucky")),
+    "liveliness": Case(  # every node appears at the start, the watcher included
+        [node("watcher", "Watcher"), node("quiet", "Quiet")],
+        [prop("alive", "invariant", "all(alive for _, alive in watcher.seen)"),
+         prop("both", "eventually",
+              "sorted(watcher.seen) == [('quiet', True), ('watcher', True)]")]),
 }
 
 
