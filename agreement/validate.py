@@ -56,7 +56,10 @@ takes the checker's first branch on its effects (no delay, delivered once)
 and leaves every other branch as a sibling to try on backtracking, so a live
 delivery that came late may be explained by a delayed one. Branches on the
 messages of the `@on_start` handlers give one initial world each, tried in
-turn. Crash faults are refused (a live run shows a crash as a restart).
+turn. A node that died and was respawned live has a ``crash`` record in its
+log, then its new process's start events: that is the checker's `Crash` action
+(allowed by ``check.faults.crash``), whose restart must make the same start
+choices and reach the same state.
 
 Reasons a step is unexplained: ``model drift`` (no such pending event, a
 different message, different choices, a different state, a failure on one
@@ -64,7 +67,7 @@ side only), ``order`` (an earlier message of the same channel is pending:
 a lost message), ``timing outside the model`` (the event is pending but the
 timing rule does not enable it yet), ``startup`` (a node handled something
 before its `@on_start`, which the model runs for every node at t=0 first)
-and ``outside the model`` (liveliness changes, node restarts).
+and ``outside the model`` (a restart the scenario's crash faults do not allow).
 """
 
 from __future__ import annotations
@@ -106,7 +109,7 @@ from twinfleet.checker.choices import PrefixChooser, SplitChooser
 from twinfleet.checker.commands import BAD_INPUT
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.system import System
-from twinfleet.checker.transition import Drop, RunEvent
+from twinfleet.checker.transition import Crash, Drop, RunEvent
 from twinfleet.checker.world import World
 from twinfleet.runtime.eventlog import state_digest
 from twinfleet.runtime.kinds import EventKind, FailureKind
@@ -148,6 +151,7 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
 
 Option = tuple[int, int, tuple[int, ...]]  # (node, pending event, branch prefix)
 DROPPED = -1  # the `node` of an option that drops the pending event (KEEP_LAST)
+RESTART = -1  # the `pending event` of an option that crashes and restarts the node
 
 
 @final
@@ -270,11 +274,6 @@ class _Search:
     # ------------------------------------------------------------ start
 
     def _outside(self) -> Unexplained | None:
-        restarts = self.log.header.get("restarts") or {}
-        if restarts:
-            node = sorted(restarts)[0]
-            return Unexplained(0, None, OUTSIDE, "no node restarts (crash faults are not "
-                               "validated)", f"{node} restarted {restarts[node]} time(s)")
         known = set(self.system.names)
         for ev in self.log.events:
             if ev.node not in known:
@@ -325,6 +324,8 @@ class _Search:
     def _step(self, frame: _Frame, i: int, k: int, branches: tuple[int, ...]
               ) -> _Frame | Unexplained:
         world = frame.world
+        if k == RESTART:
+            return self._restart(frame, i, branches)
         if i == DROPPED:  # KEEP_LAST drops: no live event, the node just never ran it
             t = self.system.step(world, Drop(k), PrefixChooser())
             options, why = self._options(t.world, frame.pos)
@@ -359,6 +360,33 @@ class _Search:
         ahead = ev.due - (ev.due if now is None else now)
         return _Frame(t.world, pos, options, why, ahead, f"{live.label()} [{live.where()}]")
 
+    def _restart(self, frame: _Frame, i: int, branches: tuple[int, ...]) -> _Frame | Unexplained:
+        """A live crash record and the new process's start events: the checker's `Crash`."""
+        world, queue, p = frame.world, self.queues[i], frame.pos[i]
+        n = len(self.system.nodes[i].spec().of_kind("start"))
+        starts = queue[p + 1:p + 1 + n]
+        crash = queue[p]
+        if len(starts) < n or any(e.kind is not EventKind.START for e in starts):
+            return self.explain.unexplained(crash, START, f"{n} @on_start event(s) after the "
+                                            "restart", "other events")
+        choices = [c for e in starts for c in e.choices]
+        chooser = SplitChooser(choices, branches)
+        t = self.system.step(world, Crash(i), chooser)
+        if t.failure is not None:
+            return self.explain.unexplained(crash, ERROR, str(t.failure), "a restart")
+        digest = state_digest(t.world.states[i])
+        if starts and digest != starts[-1].digest:
+            return self.explain.unexplained(starts[-1], STATE, f"digest {digest}: "
+                                            f"{self.explain.state(i, t.world)}",
+                                            f"digest {starts[-1].digest}")
+        sibling = chooser.next_branch_prefix()
+        if sibling is not None:
+            frame.options.insert(frame.next, (i, RESTART, sibling))
+        pos = (*frame.pos[:i], p + 1 + n, *frame.pos[i + 1:])
+        options, why = self._options(t.world, pos)
+        return _Frame(t.world, pos, options, why, 0, f"{crash.node} crashed and restarted "
+                      f"[{crash.where()}]")
+
     def _options(self, world: World, pos: tuple[int, ...]
                  ) -> tuple[list[Option], list[Unexplained]]:
         heads = [(q[p].t, i, q[p]) for i, (q, p) in enumerate(zip(self.queues, pos, strict=True))
@@ -370,6 +398,14 @@ class _Search:
         options: list[Option] = []
         why = []
         for _, i, live in sorted(h for h in heads if h[0] <= first + self.window):
+            if live.kind is EventKind.CRASH:
+                if Crash(i) in self.system.actions(world):
+                    options.append((i, RESTART, ()))
+                else:
+                    why.append(self.explain.unexplained(
+                        live, OUTSIDE, f"a crash of {live.node} the scenario allows now "
+                        "(check.faults.crash: its nodes and max)", f"{live.node} restarted"))
+                continue
             sig = live_signature(live)
             matches = [k for k, ev in enumerate(world.events) if self.sigs.of(ev) == sig]
             ok = [k for k in matches if k in allowed]

@@ -50,7 +50,7 @@ from typing import Any, TextIO, final
 import msgpack
 
 from twinfleet.runtime import registry
-from twinfleet.runtime.eventlog import EVENTS_FORMAT
+from twinfleet.runtime.eventlog import EVENTS_FORMAT, with_restarts
 from twinfleet.runtime.introspect import param_arguments
 from twinfleet.runtime.messages import DecodeError, decode
 from twinfleet.runtime.names import key_expr
@@ -514,11 +514,11 @@ def merge_events(parts: Path, path: str, fleet: Fleet) -> int:
         for line in lines:
             with contextlib.suppress(json.JSONDecodeError):  # a torn last line
                 records.append(json.loads(line))
-        heads = [r for r in records if r.get("kind") == "header"]
-        headers += heads[:1]
-        if len(heads) > 1:
-            restarts[cfg.name] = len(heads) - 1
-        streams.append([r for r in records if r.get("kind") != "header"])
+        headers += [r for r in records if r.get("kind") == "header"][:1]
+        events, restarted = with_restarts(records)
+        if restarted:
+            restarts[cfg.name] = restarted
+        streams.append(events)
     with open(path, "w", encoding="utf-8") as f:
         f.write(json.dumps({"format": EVENTS_FORMAT, "kind": "fleet",
                             "scenario": str(fleet.scenario.path), "fleet": fleet.scenario.fleet,
