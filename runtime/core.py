@@ -327,9 +327,9 @@ class NodeCore:
     def shift_arrivals(self, delta_ms: int) -> None:
         """Move every held arrival time `delta_ms` earlier: the clock's epoch moved (the
         fleet's time 0 arrived after they did), and arrival order must survive it."""
-        self._inbox = [(a - delta_ms if a != _BEFORE_ALL else a, p, n, w)
-                       for a, p, n, w in self._inbox]
-        heapq.heapify(self._inbox)
+        inbox = self._inbox  # in place: the receivers hold this list
+        inbox[:] = [(a - delta_ms if a != _BEFORE_ALL else a, p, n, w) for a, p, n, w in inbox]
+        heapq.heapify(inbox)
 
     def release_due(self, now_ms: int) -> int:
         """Move the due entries due by `now_ms` into the inbox; return how many moved."""

@@ -329,3 +329,43 @@ class Watcher(Ender):
 
 class Quiet(Node):
     """A node that only exists."""
+
+
+# ------------------------------------------------------------------ crash and restart
+
+
+class Counter(Node):
+    """Counts its ticks up to 5 and publishes each count on /count (its state is reset
+    when it crashes: it counts again from 1 after a restart)."""
+
+    def initial_state(self) -> int:
+        return 0
+
+    @every(200)
+    def tick(self, ctx: Context) -> None:
+        if self.state < 5:
+            self.state += 1
+            ctx.publish("/count", Num(self.state))
+
+
+@dataclass
+class Heard5:
+    last: int = 0
+    restarted: bool = False  # a count that did not go up: the counter started afresh
+    done: bool = False
+
+
+class Boss(Ender):
+    """Ends the run once the counter, restarted, has counted to 5."""
+
+    def initial_state(self) -> Heard5:
+        return Heard5()
+
+    @subscribe("/count")
+    def on_count(self, ctx: Context, msg: Num) -> None:
+        s = self.state
+        s.restarted = s.restarted or msg.value <= s.last
+        s.last = msg.value
+        if msg.value == 5 and s.restarted and not s.done:
+            s.done = True
+            stop_later(ctx, self)

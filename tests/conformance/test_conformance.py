@@ -12,8 +12,12 @@ hold only under the model's exact timing: handler priorities).
 
 from __future__ import annotations
 
+import contextlib
+import os
+import signal
 import subprocess
 import sys
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -39,6 +43,7 @@ class Case:
     message: tuple[str, ...] = ()  # words the violation's message must contain
     check: dict[str, Any] = field(default_factory=dict)
     timed: bool = False  # the invariants hold under the model's timing only (see below)
+    crash: str = ""  # live: kill this node's process once it has run 3 events
 
     def scenario(self, tmp_path: Path, name: str) -> Path:
         doc = {"name": f"conf-{name.replace('_', '-')}", "semantics": "ros", "seed": 1,
@@ -51,8 +56,9 @@ class Case:
         return path
 
 
-def node(name: str, cls: str, **params: Any) -> dict[str, Any]:
-    entry: dict[str, Any] = {"name": name, "class": M + cls}
+def node(name: str, cls: str, respawn: bool = False, **params: Any) -> dict[str, Any]:
+    entry: dict[str, Any] = {"name": name, "class": M + cls, **({"respawn": True}
+                                                                 if respawn else {})}
     if params:
         entry["params"] = params
     return entry
@@ -106,6 +112,11 @@ CASES: dict[str, Case] = {
         [node("talker", "Talker"), node("listener", "Fragile"), node("never", "NeverHeard")],
         [prop("rolled_back", "invariant", "2 not in listener.seen and never.n == 0")],
         status="violated", violated="no_failure", message=("listener.on_chat", "two is unlucky")),
+    "crash_and_restart": Case(  # the counter may crash once anywhere, and starts afresh
+        [node("counter", "Counter", respawn=True), node("boss", "Boss")],
+        [prop("counted", "invariant", "0 <= counter <= 5 and 0 <= boss.last <= 5"),
+         prop("restart_seen", "invariant", "not boss.done or boss.restarted")],
+        check={"faults": {"crash": {"nodes": ["counter"], "max": 1}}}, crash="counter"),
     "liveliness": Case(  # every node appears at the start, the watcher included
         [node("watcher", "Watcher"), node("quiet", "Quiet")],
         [prop("alive", "invariant", "all(alive for _, alive in watcher.seen)"),
@@ -125,14 +136,50 @@ def test_the_checker_answers_as_the_feature_means(name, tmp_path):
             assert word in result.violation.message, result.violation.message
 
 
-def launch(scenario: Path, events: Path) -> str:
-    """Run `scenario` live (one process per node over Zenoh) with its event log."""
-    proc = subprocess.run([sys.executable, "-m", "twinfleet", "launch", str(scenario),
-                           "--record-events", str(events)], cwd=ROOT, env=child_env(),
-                          capture_output=True, text=True, timeout=60)
-    out = proc.stdout + proc.stderr
+def launch(scenario: Path, events: Path, crash: str = "") -> str:
+    """Run `scenario` live (one process per node over Zenoh) with its event log; with
+    `crash`, SIGKILL that node's process once its log holds 3 events (the launcher
+    respawns it)."""
+    proc = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", str(scenario),
+                             "--record-events", str(events)], cwd=ROOT, env=child_env(),
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            start_new_session=True)
+    try:
+        if crash:
+            kill_when_logged(proc.pid, Path(f"{events}.parts") / f"{crash}.jsonl", crash)
+        out, _ = proc.communicate(timeout=60)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.wait()
     assert "shutdown requested by" in out, out[-3000:]
     return out
+
+
+def kill_when_logged(launcher: int, part: Path, name: str, events: int = 3) -> None:
+    """SIGKILL node `name`'s process (a child of `launcher`) once `part` logs `events`."""
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline:
+        lines = part.read_text().splitlines() if part.exists() else []
+        if sum('"kind":"header"' not in line for line in lines) >= events:
+            break
+        time.sleep(0.01)  # polling a file another process writes: nothing to wait on
+    else:
+        raise AssertionError(f"{name} logged fewer than {events} events in 30 s")
+    (pid,) = [p for p in children(launcher) if f"--node\0{name}\0".encode()
+              in Path(f"/proc/{p}/cmdline").read_bytes()]
+    os.kill(pid, signal.SIGKILL)
+
+
+def children(pid: int) -> list[int]:
+    """The live child processes of `pid`."""
+    found = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            with contextlib.suppress(OSError, IndexError, ValueError):
+                if int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1]) == pid:
+                    found.append(int(entry.name))
+    return found
 
 
 @pytest.mark.slow
@@ -142,7 +189,9 @@ def test_every_live_event_log_is_a_path_of_the_checker(name, tmp_path):
     case = CASES[name]
     scenario = case.scenario(tmp_path, name)
     events = tmp_path / f"{name}.events.jsonl"
-    launch(scenario, events)
+    out = launch(scenario, events, case.crash)
+    if case.crash:
+        assert f"respawning {case.crash}" in out, out[-3000:]
     result = validate(events, scenario, tolerance_ms=None)
     assert result.ok, result.summary()
     assert result.events > 0

@@ -325,6 +325,18 @@ def test_a_state_that_cannot_be_snapshot_is_the_handlers_failure_and_rolled_back
     assert core.statistics().handler_errors == 1
 
 
+def test_arrivals_before_a_new_epoch_keep_their_order_and_later_ones_still_arrive():
+    node = Faulty("busy")
+    core = NodeCore(node, seed=1)
+    receive = core.receiver("on_high")
+    receive(sample(1, seq=1), 9000)  # stamped on the launcher's clock, before time 0
+    core.shift_arrivals(9000 - 2)  # the fleet's epoch came: those arrived at t=-2
+    core.start(0)
+    receive(sample(2, seq=2), 1)
+    drain(core, 3)
+    assert node.state.seen == [(3, "high 1"), (3, "high 2")]
+
+
 def test_stop_on_error_adds_a_stop_output():
     core = started(Faulty("busy"), stop_on_error=True)
     core.receiver("on_high")(sample(-1), 1)
