@@ -27,7 +27,8 @@ import yaml
 
 from tests.support import ROOT, child_env
 from twinfleet.agreement.validate import validate
-from twinfleet.checker.check import CheckOptions, check
+from twinfleet.checker.check import CheckOptions, check, load
+from twinfleet.checker.system import System
 
 M = "tests.conformance.systems:"
 
@@ -199,3 +200,35 @@ def test_every_live_event_log_is_a_path_of_the_checker(name, tmp_path):
     # and run a millisecond before /high does, a path of the untimed checker only.
     held = {p["name"] for p in case.properties if p["kind"] == "invariant" and not case.timed}
     assert not [v for v in result.violations if v[1] in held], result.violations
+
+
+def final_states(path: Path, node_name: str) -> set[Any]:
+    """The states of `node_name` in every world with nothing left to run (BFS by hand)."""
+    system = System(load(path))
+    i = system.index[node_name]
+    seen, frontier, finals = set(), [t.world for t in system.initial()], set()
+    while frontier:
+        world = frontier.pop()
+        if world.key in seen:
+            continue
+        seen.add(world.key)
+        nxt = [t.world for t in system.successors(world)]
+        if not nxt:
+            finals.add(system.decode(i, world.states[i]).seen)
+        frontier += nxt
+    return finals
+
+
+def test_keep_last_drops_only_the_oldest_waiting_message(tmp_path):
+    # Three messages in one handler into depth 2: the listener keeps up (1, 2, 3), or the
+    # oldest is dropped while the other two wait (2, 3) -- never (1, 3) or fewer.
+    path = CASES["qos_depth"].scenario(tmp_path, "depth")
+    assert final_states(path, "listener") == {(1, 2, 3), (2, 3)}
+    enough = CASES["qos_depth_enough"].scenario(tmp_path, "enough")
+    assert final_states(enough, "listener") == {(1, 2, 3, 4, 5, 6)}
+
+
+def test_best_effort_may_lose_any_message(tmp_path):
+    path = CASES["qos_reliability"].scenario(tmp_path, "lossy")
+    finals = final_states(path, "listener")
+    assert (1, 2, 3) in finals and () in finals and (1, 3) in finals and len(finals) == 8
