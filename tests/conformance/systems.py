@@ -8,7 +8,7 @@ small dataclass, so the properties of `test_conformance` can read it.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 from twinfleet import (
     QOS_SENSOR_DATA,
@@ -56,6 +56,18 @@ class Ender(Node):
     @handler()
     def stop(self, ctx: Context) -> None:
         ctx.publish(SHUTDOWN, String(f"{self.name} done"))
+
+
+class Delayed(Ender):
+    """Acts once (`act`) at t=10."""
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.after(10, self.act)
+
+    @handler()
+    def act(self, ctx: Context) -> None:
+        raise NotImplementedError
 
 
 # ------------------------------------------------------------------ pub/sub, QoS
@@ -123,15 +135,11 @@ class Lossy(Listener):
 # ------------------------------------------------------------------ priorities
 
 
-class TwoTopics(Ender):
+class TwoTopics(Delayed):
     """Publishes /low then /high in one handler."""
 
-    @on_start
-    def start(self, ctx: Context) -> None:
-        ctx.after(10, self.send)
-
     @handler()
-    def send(self, ctx: Context) -> None:
+    def act(self, ctx: Context) -> None:
         ctx.publish("/low", Num(1))
         ctx.publish("/high", Num(2))
         stop_later(ctx, self)
@@ -169,18 +177,14 @@ class Doubler(Node):
         return Num(req.value * 2)
 
 
-class Client(Ender):
+class Client(Delayed):
     """Calls /double (served) and /absent (no server: its call times out)."""
 
     def initial_state(self) -> Replies:
         return Replies()
 
-    @on_start
-    def start(self, ctx: Context) -> None:
-        ctx.after(10, self.ask)
-
     @handler()
-    def ask(self, ctx: Context) -> None:
+    def act(self, ctx: Context) -> None:
         ctx.call("/double", Num(21), self.on_reply, timeout_ms=200)
         ctx.call("/absent", Num(1), self.on_reply, timeout_ms=30)
 
@@ -287,21 +291,12 @@ class Fragile(Listener):
             raise ValueError("two is unlucky")
 
 
-@dataclass
-class Count:
-    n: int = 0
-    values: tuple[int, ...] = field(default=())
-
-
-class NeverHeard(Node):
-    """Subscribes to /never, which only a failed handler published."""
-
-    def initial_state(self) -> Count:
-        return Count()
+class NeverHeard(Listener):
+    """Listens on /never, which only a failed handler published."""
 
     @subscribe("/never")
-    def on_never(self, ctx: Context, msg: Num) -> None:
-        self.state.n += 1
+    def on_chat(self, ctx: Context, msg: Num) -> None:
+        super().on_chat(ctx, msg)
 
 
 # ------------------------------------------------------------------ liveliness

@@ -111,7 +111,7 @@ CASES: dict[str, Case] = {
               "starter.order in (('first', 'second'), ('first', 'second', 'hello'))")]),
     "exceptions": Case(
         [node("talker", "Talker"), node("listener", "Fragile"), node("never", "NeverHeard")],
-        [prop("rolled_back", "invariant", "2 not in listener.seen and never.n == 0")],
+        [prop("rolled_back", "invariant", "2 not in listener.seen and never.count == 0")],
         status="violated", violated="no_failure", message=("listener.on_chat", "two is unlucky")),
     "crash_and_restart": Case(  # the counter may crash once anywhere, and starts afresh
         [node("counter", "Counter", respawn=True), node("boss", "Boss")],
