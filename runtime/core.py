@@ -46,9 +46,10 @@ and never touches a socket:
    handler that raises (or a service that returns a non-message) did not
    complete: its effects are cleared and `self.state` is put back as it was
    before it ran, as the checker does (it keeps the state's snapshot bytes).
-   So the core keeps the snapshot of the state after the last handler that
-   went well, one `snapshot` per handler; a state that cannot be snapshot is
-   that handler's failure, rolled back too, as in the checker.
+   So the core keeps a pickled copy of the state after the last handler that
+   went well, one `pickle.dumps` per handler (2.5× cheaper than a canonical
+   `snapshot`, which rollback does not need: benchmarks/core_rollback.py); a
+   state that cannot be copied is that handler's failure, rolled back too.
 7. Observers. After each handler the core calls ``handled(record)`` on its
    observers, as trio calls its Instruments: the event log and the replay gate
    observe the core, they are not modes of it. Without observers a delivery
@@ -59,6 +60,7 @@ and never touches a socket:
 from __future__ import annotations
 
 import heapq
+import pickle
 from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -78,7 +80,6 @@ from twinfleet.runtime.messages import (
 )
 from twinfleet.runtime.node import LIVELINESS_TOPIC, HandlerSpec, Node, Reliability
 from twinfleet.runtime.outbox import Answer, Line, Outbox, Output
-from twinfleet.runtime.snapshot import SnapshotError, restore, snapshot
 
 MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is not a loss
 _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
@@ -89,6 +90,7 @@ _TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOU
 _COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "published",
                     "handled", "keep_last", "best_effort", "seq_jumps")
 _NOTHING: Final[tuple[()]] = ()
+_PICKLE: Final = pickle.HIGHEST_PROTOCOL  # rollback copies never leave the process
 
 
 # ------------------------------------------------------------------ observers and statistics
@@ -422,7 +424,7 @@ class NodeCore:
         node = self.node
         ctx = Context(node, now, chooser)
         if self._saved is None:
-            self._saved = snapshot(node.state)
+            self._saved = pickle.dumps(node.state, _PICKLE)
         reply, error = invoke(node, method, ctx, args, responder is not None)
         error = self._keep_or_roll_back(method, error, ctx)
         self._n["handled"] += 1
@@ -443,17 +445,17 @@ class NodeCore:
 
     def _keep_or_roll_back(self, method: str, error: HandlerError | None,
                            ctx: Context) -> HandlerError | None:
-        """Keep the state a handler left (its snapshot), or put back the one before it ran
-        when it failed or left a state that cannot be snapshot (module docstring, 6)."""
+        """Keep the state a handler left (a pickled copy), or put back the one before it ran
+        when it failed or left a state that cannot be copied (module docstring, 6)."""
         node = self.node
         if error is None:
             try:
-                self._saved = snapshot(node.state)
+                self._saved = pickle.dumps(node.state, _PICKLE)
                 return None
-            except SnapshotError as exc:
-                error = HandlerError(node.name, method, f"state cannot be snapshot: {exc}")
+            except (pickle.PicklingError, TypeError, AttributeError) as exc:
+                error = HandlerError(node.name, method, f"state cannot be copied: {exc}")
         ctx.effects.clear()  # a bad service reply too: the checker keeps none of its effects
-        node.state = restore(self._saved)  # type: ignore[arg-type]
+        node.state = pickle.loads(self._saved)  # type: ignore[arg-type]
         return error
 
     def statistics(self, dropped_overflow: int = 0) -> HostStatistics:

@@ -306,7 +306,7 @@ def test_a_handler_that_raises_leaves_the_state_as_before_it_ran():
     assert node.state.seen == [(2, "high 3"), (3, "high 4")]
 
 
-def test_a_state_that_cannot_be_snapshot_is_the_handlers_failure_and_rolled_back():
+def test_a_state_that_cannot_be_copied_is_the_handlers_failure_and_rolled_back():
     class Leaky(Node):
         def initial_state(self) -> Log:
             return Log()
