@@ -44,6 +44,12 @@ blind to the model's timing. Whatever the rule, the report gives
 how far ahead of the model's clock the path had to run events (``ahead``:
 the event's logical due time minus t*): the timing gap between run and model.
 
+Liveliness. A node's liveliness handler runs live for every peer appearing
+at the start and, at a crash, going and coming back (the checker's events);
+at the run's end it may also hear peers leave as the fleet shuts down, which
+the model does not have: such a "gone" of a node that never restarted is
+taken without a checker step.
+
 KEEP_LAST. The live log does not say which messages a subscription's depth
 dropped (`checker.semantics` Rule 6): a pending delivery the checker may drop
 is one more option of every step, tried after the live events (under the
@@ -82,6 +88,7 @@ from typing import Any, final
 from twinfleet.agreement.events import (
     EventLogError,
     EventLogFile,
+    LiveEvent,
     Signatures,
     live_signature,
     load_events,
@@ -111,8 +118,9 @@ from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.system import System
 from twinfleet.checker.transition import Crash, Drop, RunEvent
 from twinfleet.checker.world import World
-from twinfleet.runtime.eventlog import state_digest
+from twinfleet.runtime.eventlog import payload_digest, state_digest
 from twinfleet.runtime.kinds import EventKind, FailureKind
+from twinfleet.runtime.messages import NodeAlive
 
 __all__ = ["CHOICES", "ERROR", "NO_EVENT", "ORDER", "OUTSIDE", "PAYLOAD", "START", "STATE",
            "TIMING", "Unexplained", "Validation", "timing_name", "validate", "validate_command"]
@@ -152,6 +160,7 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
 Option = tuple[int, int, tuple[int, ...]]  # (node, pending event, branch prefix)
 DROPPED = -1  # the `node` of an option that drops the pending event (KEEP_LAST)
 RESTART = -1  # the `pending event` of an option that crashes and restarts the node
+LEFT = -2  # the `pending event` of an option that takes a peer leaving at shutdown
 
 
 @final
@@ -326,6 +335,11 @@ class _Search:
         world = frame.world
         if k == RESTART:
             return self._restart(frame, i, branches)
+        if k == LEFT:  # the node heard a peer leave at the run's end: nothing to model
+            pos = (*frame.pos[:i], frame.pos[i] + 1, *frame.pos[i + 1:])
+            options, why = self._options(world, pos)
+            live = self.queues[i][frame.pos[i]]
+            return _Frame(world, pos, options, why, 0, f"{live.label()} (shutdown)")
         if i == DROPPED:  # KEEP_LAST drops: no live event, the node just never ran it
             t = self.system.step(world, Drop(k), PrefixChooser())
             options, why = self._options(t.world, frame.pos)
@@ -359,6 +373,15 @@ class _Search:
         now = world.next_time  # t* of the world the event ran in (0 is a time, not 'none')
         ahead = ev.due - (ev.due if now is None else now)
         return _Frame(t.world, pos, options, why, ahead, f"{live.label()} [{live.where()}]")
+
+    def _leaving(self, live: LiveEvent) -> bool:
+        """Whether `live` tells of a node leaving as the fleet shuts down: a node that never
+        restarted went away (the run's end is outside the model; a crash is not)."""
+        if live.kind is not EventKind.LIVELINESS or live.sender not in self.system.index:
+            return False
+        gone = payload_digest((NodeAlive(live.sender, False),))
+        queue = self.queues[self.system.index[live.sender]]
+        return live.args == gone and not any(e.kind is EventKind.CRASH for e in queue)
 
     def _restart(self, frame: _Frame, i: int, branches: tuple[int, ...]) -> _Frame | Unexplained:
         """A live crash record and the new process's start events: the checker's `Crash`."""
@@ -397,7 +420,10 @@ class _Search:
         allowed = self._enabled(world)
         options: list[Option] = []
         why = []
-        for _, i, live in sorted(h for h in heads if h[0] <= first + self.window):
+        # A crash record carries the restart's time, not the death's (which no log has):
+        # it may be taken whenever it heads its node's log.
+        for _, i, live in sorted(h for h in heads if h[0] <= first + self.window
+                                 or h[2].kind is EventKind.CRASH):
             if live.kind is EventKind.CRASH:
                 if Crash(i) in self.system.actions(world):
                     options.append((i, RESTART, ()))
@@ -411,6 +437,8 @@ class _Search:
             ok = [k for k in matches if k in allowed]
             if ok:
                 options.append((i, ok[0], ()))
+            elif self._leaving(live):
+                options.append((i, LEFT, ()))
             else:
                 why.append(self.explain.why_not(world, live, matches, allowed))
         # Tried after every live event: a message KEEP_LAST may have dropped (Rule 6).

@@ -307,19 +307,23 @@ class Alive:
     seen: tuple[tuple[str, bool], ...] = ()
 
 
-class Watcher(Ender):
+class Onlooker(Node):
     """Records every liveliness change it is told about."""
 
     def initial_state(self) -> Alive:
         return Alive()
 
-    @on_start
-    def start(self, ctx: Context) -> None:
-        stop_later(ctx, self)
-
     @subscribe(LIVELINESS_TOPIC)
     def on_alive(self, ctx: Context, msg: NodeAlive) -> None:
         self.state.seen += ((msg.name, msg.alive),)
+
+
+class Watcher(Onlooker, Ender):
+    """An onlooker that ends the run at t=60."""
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        stop_later(ctx, self)
 
 
 class Quiet(Node):

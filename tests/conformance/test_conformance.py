@@ -118,6 +118,12 @@ CASES: dict[str, Case] = {
         [prop("counted", "invariant", "0 <= counter <= 5 and 0 <= boss.last <= 5"),
          prop("restart_seen", "invariant", "not boss.done or boss.restarted")],
         check={"faults": {"crash": {"nodes": ["counter"], "max": 1}}}, crash="counter"),
+    "liveliness_and_restart": Case(  # the onlooker sees the counter go and come back
+        [node("counter", "Counter", respawn=True), node("boss", "Boss"),
+         node("onlooker", "Onlooker")],
+        [prop("one_crash", "invariant", "onlooker.seen.count(('counter', False)) <= 1"),
+         prop("back", "invariant", "onlooker.seen.count(('counter', True)) <= 2")],
+        check={"faults": {"crash": {"nodes": ["counter"], "max": 1}}}, crash="counter"),
     "liveliness": Case(  # every node appears at the start, the watcher included
         [node("watcher", "Watcher"), node("quiet", "Quiet")],
         [prop("alive", "invariant", "all(alive for _, alive in watcher.seen)"),
