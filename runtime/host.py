@@ -24,7 +24,10 @@ most ``_DRAIN_BATCH`` handlers before yielding to I/O.
 
 Start first. Whatever arrives while a node waits for its peers stays in the
 core until its `@on_start` handlers have run, as in the checker, whose initial
-world runs every start handler before any event.
+world runs every start handler before any event. With ``fleet_epoch`` the host
+also waits for the launcher's epoch token and takes it as the clock's time 0:
+what arrived before keeps its order (`NodeCore.shift_arrivals`) and the start
+handlers run at time 0 (a ``restarted`` node's at the time it restarted).
 
 Event log and replay gate (issue 6): ``events=EventLog(...)`` makes the log an
 observer of the core; ``gated=True`` puts a `ReplayGate` in charge (it needs a

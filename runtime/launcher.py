@@ -10,7 +10,10 @@ scenario says ``respawn: true``, and otherwise ends the run as failed.
 
 The run ends at the timeout, when a node publishes a `String` on
 ``/twinfleet/shutdown``, when every node has exited, when a node fails, or on
-SIGINT/SIGTERM. Shutdown escalates SIGINT → SIGTERM → SIGKILL per process;
+SIGINT/SIGTERM. Fleet time 0: once every node's liveliness token is seen, the
+launcher declares the fleet's epoch as a token (`transport.epoch_key`); the
+nodes (``--fleet-epoch``) wait for it and run `@on_start` at time 0, as the
+checker does, a respawned one (``--restarted``) at its restart time. Shutdown escalates SIGINT → SIGTERM → SIGKILL per process;
 children also get PR_SET_PDEATHSIG, so none outlives a SIGKILLed launcher.
 
 With ``run_record=PATH`` the run is also written as JSON lines, one flushed
@@ -21,7 +24,8 @@ With ``record_events=PATH`` every node logs each event it dispatches
 (`runtime.replay_gate.EventLog`) into ``PATH.parts/<node>.jsonl``, flushed per line;
 after shutdown the launcher merges the parts into PATH: a ``fleet`` header
 line, the node headers, then every event in dispatch-time order (each
-node's own order kept), and removes the parts. ``node_args`` are appended to
+node's own order kept, a respawn as a ``crash`` record: `eventlog.with_restarts`),
+and removes the parts. ``node_args`` are appended to
 every node's command line (``--gate`` for a live replay), and a ``driver``
 coroutine, started once the nodes are, ends the run with the reason it returns.
 """
