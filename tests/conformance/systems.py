@@ -11,6 +11,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from twinfleet import (
+    QOS_LATCHED,
     QOS_SENSOR_DATA,
     CallError,
     Context,
@@ -128,6 +129,14 @@ class Lossy(Listener):
     """Listener whose subscription is BEST_EFFORT (sensor data QoS, depth 5)."""
 
     @subscribe("/chat", qos=QOS_SENSOR_DATA)
+    def on_chat(self, ctx: Context, msg: Num) -> None:
+        super().on_chat(ctx, msg)
+
+
+class Latched(Listener):
+    """Listener whose subscription is TRANSIENT_LOCAL (latched)."""
+
+    @subscribe("/chat", qos=QOS_LATCHED)
     def on_chat(self, ctx: Context, msg: Num) -> None:
         super().on_chat(ctx, msg)
 

@@ -29,6 +29,7 @@ from tests.support import ROOT, child_env
 from twinfleet.agreement.validate import validate
 from twinfleet.checker.check import CheckOptions, check, load
 from twinfleet.checker.system import System
+from twinfleet.runtime.scenario import ScenarioError
 
 M = "tests.conformance.systems:"
 
@@ -238,3 +239,14 @@ def test_best_effort_may_lose_any_message(tmp_path):
     path = CASES["qos_reliability"].scenario(tmp_path, "lossy")
     finals = final_states(path, "listener")
     assert (1, 2, 3) in finals and () in finals and (1, 3) in finals and len(finals) == 8
+
+
+def test_latched_subscriptions_of_nodes_that_may_crash_are_refused_at_load(tmp_path):
+    case = Case([node("talker", "Talker"), node("listener", "Latched")],
+                check={"faults": {"crash": {"nodes": ["listener"], "max": 1}}})
+    with pytest.raises(ScenarioError, match=r"node listener: on_chat \(/chat\) has qos "
+                                            r"durability TRANSIENT_LOCAL"):
+        check(case.scenario(tmp_path, "latched"), CheckOptions())
+    fine = Case([node("talker", "Talker"), node("listener", "Latched")],
+                [prop("all_heard", "eventually", "listener.count == 3")])
+    assert check(fine.scenario(tmp_path, "latched_ok"), CheckOptions()).status == "holds"
