@@ -19,8 +19,9 @@ node's state after the handler; ``error`` is present when the handler raised.
 ``kind`` is an `EventKind` value, the same vocabulary as the checker's events:
 ``start`` (`@on_start`), ``delivery``, ``request``, ``reply``, ``timeout`` (a
 call got no answer in time: its reply handler gets a `CallError`), ``timer``
-(`ctx.after`), ``periodic`` (`@every`) and ``liveliness`` (which has no
-checker counterpart). A live event and a checker event correspond when node,
+(`ctx.after`), ``periodic`` (`@every`), ``liveliness`` (a node appearing or
+disappearing) and ``crash`` (the node's process died and was respawned: the
+checker's crash fault, followed by the new process's ``start`` events). A live event and a checker event correspond when node,
 handler, kind, sender and argument digest agree (`Signatures`, `live_signature`).
 """
 
@@ -36,7 +37,7 @@ from twinfleet.checker.choices import PrefixChooser
 from twinfleet.checker.world import Event
 from twinfleet.runtime.context import Context
 from twinfleet.runtime.dispatch import run_handler
-from twinfleet.runtime.eventlog import EVENTS_FORMAT, payload_digest
+from twinfleet.runtime.eventlog import EVENTS_FORMAT, payload_digest, with_restarts
 from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.scenario import Scenario
 
@@ -141,10 +142,16 @@ def _load_parts(path: str | Path, parts: Path) -> EventLogFile:
     log = EventLogFile(str(path), {"kind": "fleet", "format": EVENTS_FORMAT}, {})
     for part in sorted(parts.glob("*.jsonl")):
         lines = part.read_text().splitlines()
-        for n, line in enumerate(lines, start=1):
-            rec = _parse(part, n, line, last=n == len(lines))
-            if rec is not None:
-                _add(log, rec, n)
+        records = [rec for n, line in enumerate(lines, start=1)
+                   if (rec := _parse(part, n, line, last=n == len(lines))) is not None]
+        heads = [r for r in records if r.get("kind") == "header"]
+        for rec in heads[:1]:
+            _add(log, rec, 0)
+        events, restarted = with_restarts(records)
+        if restarted and heads:
+            log.header.setdefault("restarts", {})[heads[0]["node"]] = restarted
+        for n, rec in enumerate(events, start=1):
+            _add(log, rec, n)
     log.events.sort(key=lambda e: e.t)
     return log
 
@@ -234,15 +241,13 @@ def refuse_unreplayable(system: System, *, gated: bool) -> None:
 
     No live node records the checker's latency and fault branches. `validate`
     (``gated=False``) searches them: any delay, drop or duplicate the checker
-    allows may explain what the live run did; only crash faults are refused (a
-    live run shows a crash as a restart). A gated replay (``gated=True``)
-    takes latency and drop branches itself — it grants a delivery at its
-    delayed time, or never — but cannot make Zenoh deliver a message twice.
+    allows may explain what the live run did, and a live restart is a crash fault.
+    A gated replay (``gated=True``) takes latency and drop branches itself — it
+    grants a delivery at its delayed time, or never — but cannot make Zenoh
+    deliver a message twice (its crash steps are refused one by one).
     """
     s = system.settings
     if gated and s.duplicate:
         raise ValueError(f"{system.scenario.path}: check.faults.duplicate cannot be replayed "
                          "live (a live message arrives once)")
-    if not gated and s.crash:
-        raise ValueError(f"{system.scenario.path}: check.faults.crash cannot be validated "
-                         "against a live run (restarts are outside the model)")
+

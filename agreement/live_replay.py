@@ -234,6 +234,9 @@ def _step_grants(system: System, world: World, records: Sequence[Mapping[str, An
     """The grants of a trace's step records, taken from `world`, and the world at the end."""
     steps = []
     for n, rec in enumerate(records, start=1):
+        if rec.get("kind") == EventKind.DROP:
+            raise ValueError(f"{where}: step {rec['index']} is a KEEP_LAST drop; a live "
+                             "replay holds every message and cannot drop one on cue")
         if rec.get("kind") == EventKind.CRASH:
             raise ValueError(f"{where}: step {rec['index']} is a crash fault; a live "
                              "replay cannot crash a node on cue")

@@ -44,6 +44,17 @@ blind to the model's timing. Whatever the rule, the report gives
 how far ahead of the model's clock the path had to run events (``ahead``:
 the event's logical due time minus t*): the timing gap between run and model.
 
+Liveliness. A node's liveliness handler runs live for every peer appearing
+at the start and, at a crash, going and coming back (the checker's events);
+at the run's end it may also hear peers leave as the fleet shuts down, which
+the model does not have: such a "gone" of a node that never restarted is
+taken without a checker step.
+
+KEEP_LAST. The live log does not say which messages a subscription's depth
+dropped (`checker.semantics` Rule 6): a pending delivery the checker may drop
+is one more option of every step, tried after the live events (under the
+timing rule's tolerance, as events may run ahead); it consumes no live event.
+
 Latency and faults. A scenario's ``check.latency`` and ``check.faults``
 (drop, duplicate) are branches of the checker that no live node records: the
 live log holds only each handler's own `ctx.choose` answers. Each step first
@@ -51,7 +62,10 @@ takes the checker's first branch on its effects (no delay, delivered once)
 and leaves every other branch as a sibling to try on backtracking, so a live
 delivery that came late may be explained by a delayed one. Branches on the
 messages of the `@on_start` handlers give one initial world each, tried in
-turn. Crash faults are refused (a live run shows a crash as a restart).
+turn. A node that died and was respawned live has a ``crash`` record in its
+log, then its new process's start events: that is the checker's `Crash` action
+(allowed by ``check.faults.crash``), whose restart must make the same start
+choices and reach the same state.
 
 Reasons a step is unexplained: ``model drift`` (no such pending event, a
 different message, different choices, a different state, a failure on one
@@ -59,7 +73,7 @@ side only), ``order`` (an earlier message of the same channel is pending:
 a lost message), ``timing outside the model`` (the event is pending but the
 timing rule does not enable it yet), ``startup`` (a node handled something
 before its `@on_start`, which the model runs for every node at t=0 first)
-and ``outside the model`` (liveliness changes, node restarts).
+and ``outside the model`` (a restart the scenario's crash faults do not allow).
 """
 
 from __future__ import annotations
@@ -74,6 +88,7 @@ from typing import Any, final
 from twinfleet.agreement.events import (
     EventLogError,
     EventLogFile,
+    LiveEvent,
     Signatures,
     live_signature,
     load_events,
@@ -97,14 +112,15 @@ from twinfleet.agreement.validation import (
     timing_name,
 )
 from twinfleet.checker.check import load
-from twinfleet.checker.choices import SplitChooser
+from twinfleet.checker.choices import PrefixChooser, SplitChooser
 from twinfleet.checker.commands import BAD_INPUT
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.system import System
-from twinfleet.checker.transition import RunEvent
+from twinfleet.checker.transition import Crash, Drop, RunEvent
 from twinfleet.checker.world import World
-from twinfleet.runtime.eventlog import state_digest
+from twinfleet.runtime.eventlog import payload_digest, state_digest
 from twinfleet.runtime.kinds import EventKind, FailureKind
+from twinfleet.runtime.messages import NodeAlive
 
 __all__ = ["CHOICES", "ERROR", "NO_EVENT", "ORDER", "OUTSIDE", "PAYLOAD", "START", "STATE",
            "TIMING", "Unexplained", "Validation", "timing_name", "validate", "validate_command"]
@@ -142,6 +158,9 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
 
 
 Option = tuple[int, int, tuple[int, ...]]  # (node, pending event, branch prefix)
+DROPPED = -1  # the `node` of an option that drops the pending event (KEEP_LAST)
+RESTART = -1  # the `pending event` of an option that crashes and restarts the node
+LEFT = -2  # the `pending event` of an option that takes a peer leaving at shutdown
 
 
 @final
@@ -264,19 +283,11 @@ class _Search:
     # ------------------------------------------------------------ start
 
     def _outside(self) -> Unexplained | None:
-        restarts = self.log.header.get("restarts") or {}
-        if restarts:
-            node = sorted(restarts)[0]
-            return Unexplained(0, None, OUTSIDE, "no node restarts (crash faults are not "
-                               "validated)", f"{node} restarted {restarts[node]} time(s)")
         known = set(self.system.names)
         for ev in self.log.events:
             if ev.node not in known:
                 return Unexplained(0, ev, OUTSIDE, f"nodes {sorted(known)}",
                                    f"events of node {ev.node}")
-            if ev.kind is EventKind.LIVELINESS:
-                return Unexplained(0, ev, OUTSIDE, "no liveliness events (the checker has "
-                                   "no liveliness changes)", ev.summary)
         return None
 
     def _start(self, branches: tuple[int, ...]
@@ -322,6 +333,17 @@ class _Search:
     def _step(self, frame: _Frame, i: int, k: int, branches: tuple[int, ...]
               ) -> _Frame | Unexplained:
         world = frame.world
+        if k == RESTART:
+            return self._restart(frame, i, branches)
+        if k == LEFT:  # the node heard a peer leave at the run's end: nothing to model
+            pos = (*frame.pos[:i], frame.pos[i] + 1, *frame.pos[i + 1:])
+            options, why = self._options(world, pos)
+            live = self.queues[i][frame.pos[i]]
+            return _Frame(world, pos, options, why, 0, f"{live.label()} (shutdown)")
+        if i == DROPPED:  # KEEP_LAST drops: no live event, the node just never ran it
+            t = self.system.step(world, Drop(k), PrefixChooser())
+            options, why = self._options(t.world, frame.pos)
+            return _Frame(t.world, frame.pos, options, why, 0, f"drop of {t.event.method}")
         live = self.queues[i][frame.pos[i]]
         ev = world.events[k]
         # The live node made the handler's choices; the checker's own branches on the
@@ -352,6 +374,42 @@ class _Search:
         ahead = ev.due - (ev.due if now is None else now)
         return _Frame(t.world, pos, options, why, ahead, f"{live.label()} [{live.where()}]")
 
+    def _leaving(self, live: LiveEvent) -> bool:
+        """Whether `live` tells of a node leaving as the fleet shuts down: a node that never
+        restarted went away (the run's end is outside the model; a crash is not)."""
+        if live.kind is not EventKind.LIVELINESS or live.sender not in self.system.index:
+            return False
+        gone = payload_digest((NodeAlive(live.sender, False),))
+        queue = self.queues[self.system.index[live.sender]]
+        return live.args == gone and not any(e.kind is EventKind.CRASH for e in queue)
+
+    def _restart(self, frame: _Frame, i: int, branches: tuple[int, ...]) -> _Frame | Unexplained:
+        """A live crash record and the new process's start events: the checker's `Crash`."""
+        world, queue, p = frame.world, self.queues[i], frame.pos[i]
+        n = len(self.system.nodes[i].spec().of_kind("start"))
+        starts = queue[p + 1:p + 1 + n]
+        crash = queue[p]
+        if len(starts) < n or any(e.kind is not EventKind.START for e in starts):
+            return self.explain.unexplained(crash, START, f"{n} @on_start event(s) after the "
+                                            "restart", "other events")
+        choices = [c for e in starts for c in e.choices]
+        chooser = SplitChooser(choices, branches)
+        t = self.system.step(world, Crash(i), chooser)
+        if t.failure is not None:
+            return self.explain.unexplained(crash, ERROR, str(t.failure), "a restart")
+        digest = state_digest(t.world.states[i])
+        if starts and digest != starts[-1].digest:
+            return self.explain.unexplained(starts[-1], STATE, f"digest {digest}: "
+                                            f"{self.explain.state(i, t.world)}",
+                                            f"digest {starts[-1].digest}")
+        sibling = chooser.next_branch_prefix()
+        if sibling is not None:
+            frame.options.insert(frame.next, (i, RESTART, sibling))
+        pos = (*frame.pos[:i], p + 1 + n, *frame.pos[i + 1:])
+        options, why = self._options(t.world, pos)
+        return _Frame(t.world, pos, options, why, 0, f"{crash.node} crashed and restarted "
+                      f"[{crash.where()}]")
+
     def _options(self, world: World, pos: tuple[int, ...]
                  ) -> tuple[list[Option], list[Unexplained]]:
         heads = [(q[p].t, i, q[p]) for i, (q, p) in enumerate(zip(self.queues, pos, strict=True))
@@ -362,14 +420,30 @@ class _Search:
         allowed = self._enabled(world)
         options: list[Option] = []
         why = []
-        for _, i, live in sorted(h for h in heads if h[0] <= first + self.window):
+        # A crash record carries the restart's time, not the death's (which no log has):
+        # it may be taken whenever it heads its node's log.
+        for _, i, live in sorted(h for h in heads if h[0] <= first + self.window
+                                 or h[2].kind is EventKind.CRASH):
+            if live.kind is EventKind.CRASH:
+                if Crash(i) in self.system.actions(world):
+                    options.append((i, RESTART, ()))
+                else:
+                    why.append(self.explain.unexplained(
+                        live, OUTSIDE, f"a crash of {live.node} the scenario allows now "
+                        "(check.faults.crash: its nodes and max)", f"{live.node} restarted"))
+                continue
             sig = live_signature(live)
             matches = [k for k, ev in enumerate(world.events) if self.sigs.of(ev) == sig]
             ok = [k for k in matches if k in allowed]
             if ok:
                 options.append((i, ok[0], ()))
+            elif self._leaving(live):
+                options.append((i, LEFT, ()))
             else:
                 why.append(self.explain.why_not(world, live, matches, allowed))
+        # Tried after every live event: a message KEEP_LAST may have dropped (Rule 6).
+        drops = self.system.rules.droppable(world.events, self.tolerance)
+        options += [(DROPPED, k, ()) for k in drops]
         return options, why
 
     def _enabled(self, world: World) -> set[int]:

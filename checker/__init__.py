@@ -26,7 +26,7 @@ from twinfleet.checker.semantics import Rules, Semantics
 from twinfleet.checker.store import StateStore
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import NondeterminismError, ReplayResult, build_trace, replay
-from twinfleet.checker.transition import Action, Crash, Failure, RunEvent, Step, Transition
+from twinfleet.checker.transition import Action, Crash, Drop, Failure, RunEvent, Step, Transition
 from twinfleet.checker.world import Event, World
 from twinfleet.runtime.tracefile import TraceError
 
@@ -38,6 +38,7 @@ __all__ = [
     "CheckpointError",
     "Counterexample",
     "Crash",
+    "Drop",
     "Event",
     "Failure",
     "Limits",

@@ -274,7 +274,8 @@ class Runner:
                     lost = server is not None and self._copies(service, server[0], chooser,
                                                                faults) == 0
                     if server is None or lost:
-                        err = CallError(service, "timeout" if lost else "no server")
+                        err = CallError(service, "timeout" if lost else
+                                        self.rules.no_server(chooser))
                         out.append(Event(now + timeout, EventKind.TIMEOUT, i, reply_to, i,
                                          (err,), topology.priority(i, reply_to)))
                     else:
@@ -299,7 +300,7 @@ class Runner:
 
     def _copies(self, name: str, j: int, chooser: Chooser, faults: list[str]) -> int:
         """How many copies of one message on `name` to node `j` arrive (fault branches)."""
-        n, fault = self.rules.copies(name, chooser)
+        n, fault = self.rules.copies(name, chooser, j)
         if fault:
             faults.append(f"{name} to {self.names[j]}: {fault}")
         return n

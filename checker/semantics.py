@@ -6,7 +6,8 @@ Theory of operation
 A world holds pending events; each is "run handler `method` of node
 `target` with `args` at time `due`", of an `EventKind`. What may happen next
 in a world are its *actions* (`checker.transition.Action`): run one *enabled*
-event (`RunEvent`), or crash a node (`Crash`, Rule 5). Taking an action runs
+event (`RunEvent`), crash a node (`Crash`, Rule 5), or drop a waiting delivery
+(`Drop`, Rule 6). Taking an action runs
 the handler to completion (one transition per `ctx.choose` variant, see
 `checker.choices`). Which events are enabled is decided here, by rules
 applied in this order:
@@ -56,7 +57,32 @@ Rule 5 (latency and faults, all off by default; see `checker.faults` for the
     than `faults.crash.max` crashes (`Rules.crashable`), taken at t*. A
     message due after its deadline (`Rules.delivery` sets it) is a deadline
     miss when it is taken; because of Rule 1 it is taken exactly at its due
-    time, so only latency or FIFO clamping can make it late.
+    time, so only latency or FIFO clamping can make it late. A call to a
+    service nobody serves fails at its timeout with `CallError` reason "no
+    server" or "timeout", each a branch (`Rules.no_server`): live, which one
+    depends on how soon Zenoh gives up on the query.
+
+Rule 6 (QoS). A subscription declared `qos=QoS(depth=d)` (KEEP_LAST, default
+    10) holds at most d waiting messages live: when one more arrives the
+    core drops the oldest waiting one (`runtime.core`, ``dropped_keep_last``).
+    In a world, the deliveries due at t* to one subscription are the ones
+    waiting there (Rule 1: nothing pending is due earlier). Whether live
+    dropped one depends on whether the handler ran before the newer ones
+    arrived, so the drop is an action, not a forced step: a pending delivery
+    due at t* may be dropped (`Drop`, `Rules.droppable`) while d other
+    deliveries to the same subscription are due at t* and, under `ros`, it
+    is the earliest-sent of its stream (the oldest of its sender: Zenoh keeps
+    a publisher's order). With one sender per subscription this is exactly
+    the live rule; with several, which waiting message is oldest is an order
+    the world does not keep, so any sender's oldest may go (more behaviours,
+    never fewer). Below the depth nothing is ever dropped, in either driver.
+    BEST_EFFORT (on the subscription, or in the publishing node's
+    `publications`) makes each delivery to that subscription a branch:
+    delivered or lost (`Rules.copies`), as Zenoh's `CongestionControl.DROP`
+    may lose it live. `/_liveliness` subscriptions are refused at load, and
+    TRANSIENT_LOCAL ones of nodes that may crash (`checker.topology`). Both
+    parts of the rule read only the target node's own pending deliveries: a
+    node's enabling stays decidable per node.
 
 Relaxed timing (`Rules.enabled_within`), used only to compare a live run with
 the model (`agreement.validate`). A live clock is continuous, so events the
@@ -71,7 +97,7 @@ channel order only holds among events of equal time and priority.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from enum import StrEnum, unique
 from typing import TYPE_CHECKING, final
@@ -79,6 +105,7 @@ from typing import TYPE_CHECKING, final
 from twinfleet.checker.choices import Chooser
 from twinfleet.checker.faults import DROP, DUPLICATE, CheckSettings
 from twinfleet.checker.world import Event
+from twinfleet.runtime.kinds import EventKind
 
 if TYPE_CHECKING:
     from twinfleet.checker.world import World
@@ -107,15 +134,20 @@ class Rules:
         node_priorities: per node index, its instance priority (used by `rebeca`).
         global_priority: `rebeca` only: compare handler priorities across nodes.
         settings: the optional `check:` settings of Rule 5 (latency, deadlines, faults).
+        depths: KEEP_LAST depth per (node index, subscription handler) (Rule 6).
+        lossy: (topic, node index) pairs whose deliveries may be lost (BEST_EFFORT, Rule 6).
     """
 
     semantics: Semantics = Semantics.ROS
     node_priorities: tuple[int, ...] = ()
     global_priority: bool = False
     settings: CheckSettings = field(default_factory=CheckSettings)
+    depths: Mapping[tuple[int, str], int] = field(default_factory=dict)
+    lossy: frozenset[tuple[str, int]] = frozenset()
     fifo: bool = field(init=False)
     has_latency: bool = field(init=False)
     _ranges: dict[str, tuple[int, int] | None] = field(init=False, repr=False, compare=False)
+    _shallowest: int = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         try:
@@ -127,6 +159,7 @@ class Rules:
         if latency is not None and not 0 <= latency[0] <= latency[1]:
             raise ValueError(f"latency must be [min, max] with 0 <= min <= max, got {latency}")
         object.__setattr__(self, "fifo", self.semantics is Semantics.ROS)
+        object.__setattr__(self, "_shallowest", min(self.depths.values(), default=1 << 62))
         ranges = dict(self.settings.topic_latency)
         object.__setattr__(self, "_ranges", ranges)
         object.__setattr__(self, "has_latency", latency is not None
@@ -229,10 +262,13 @@ class Rules:
         limit = settings.deadline_for(name) if settings.has_deadlines else None
         return due, None if limit is None else now + limit
 
-    def copies(self, name: str, chooser: Chooser) -> tuple[int, str]:
-        """How many copies of one message on `name` arrive (a branch of `chooser` when
-        `name` may be dropped or duplicated), and the fault taken ("" for none)."""
+    def copies(self, name: str, chooser: Chooser, target: int = -1) -> tuple[int, str]:
+        """How many copies of one message on `name` to node `target` arrive (a branch of
+        `chooser` when `name` may be dropped or duplicated, or is BEST_EFFORT for `target`,
+        Rule 6), and the fault taken ("" for none)."""
         options = self.settings.delivery_options(name)
+        if (name, target) in self.lossy and DROP not in options:
+            options = (*options, DROP)
         if len(options) == 1:
             return 1, ""
         pick = options[chooser.branch(len(options))]
@@ -241,6 +277,32 @@ class Rules:
         if pick == DUPLICATE:
             return 2, "duplicated"
         return 1, ""
+
+    def no_server(self, chooser: Chooser) -> str:
+        """Rule 5: the reason a call to a service nobody serves fails with, a branch of
+        `chooser`: live, Zenoh finalises such a query early ("no server") or only at its
+        timeout ("timeout"), depending on timing; either way at the call's timeout here."""
+        return _NO_SERVER[chooser.branch(len(_NO_SERVER))]
+
+    def droppable(self, events: Sequence[Event], tolerance_ms: int | None = 0) -> list[int]:
+        """Rule 6: indices (into the sorted `events`) of the deliveries KEEP_LAST may drop
+        now: due at t*, with at least their subscription's depth of other deliveries to it
+        due at t*, and under `ros` the earliest-sent of their stream. Under relaxed timing
+        (`enabled_within`'s `tolerance_ms`, None: any) "at t*" is "by t* + tolerance"."""
+        if len(events) <= self._shallowest:
+            return []
+        limit = None if tolerance_ms is None else events[0].due + tolerance_ms
+        waiting: dict[tuple[int, str], list[int]] = {}
+        for i, ev in enumerate(events):
+            if limit is not None and ev.due > limit:
+                break
+            if ev.kind is EventKind.DELIVERY:
+                waiting.setdefault((ev.target, ev.method), []).append(i)
+        depths, out = self.depths, []
+        for sub, found in waiting.items():
+            if len(found) > depths.get(sub, len(found)):
+                out += _stream_heads(events, found) if self.fifo else found
+        return sorted(out)
 
     def crashable(self, world: World) -> tuple[int, ...]:
         """The nodes that may crash in `world`: none with nothing pending or once the path
@@ -278,9 +340,22 @@ class Rules:
         return min((e for e in events if stream(e) == key), key=lambda e: (e.due, e.rank))
 
 
+_NO_SERVER = ("no server", "timeout")
+
+
 def stream(ev: Event) -> tuple[int, int, str, str] | None:
     """The live FIFO stream of a message (module docstring); None for timers."""
     return (ev.sender, ev.target, ev.kind, ev.method) if ev.message else None
+
+
+def _stream_heads(events: Sequence[Event], found: list[int]) -> list[int]:
+    """Of the deliveries `found` (indices into `events`), the earliest-sent of each sender."""
+    first: dict[int, int] = {}
+    for i in found:
+        j = first.get(events[i].sender)
+        if j is None or events[i].rank < events[j].rank:
+            first[events[i].sender] = i
+    return list(first.values())
 
 
 def _earliest_sent(events: Sequence[Event], picked: list[int]) -> list[int]:

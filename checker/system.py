@@ -2,7 +2,8 @@
 
 The system is a model in Stateright's sense: `initial()` gives the initial
 worlds, `actions(world)` what may happen next (`RunEvent` of an enabled
-event, `Crash` of a node; the rules are `checker.semantics`), and
+event, `Crash` of a node, `Drop` of a waiting delivery; the rules are
+`checker.semantics`), and
 `step(world, action, chooser)` the one function from a world, an action and
 the answers to its choice points to the next world (a `Transition`, which
 also says what the step did). `outcomes(world, action)` takes an action with
@@ -11,7 +12,8 @@ every combination of answers (the siblings a search explores), and
 replay, `agreement.validate` and the live replay use these; a handler runs
 in `checker.runner`.
 
-Initial worlds: every node's `initial_state()`, the first firing of each
+Initial worlds: every node's `initial_state()`, the liveliness events of every
+node appearing (to `/_liveliness` subscribers), the first firing of each
 `@every` timer at phase + period, then every `@on_start` handler run at t=0 in
 scenario order, like Rebeca constructors: they are not transitions (R10) and
 their effects are the initial pending events. If start handlers call
@@ -58,6 +60,7 @@ from twinfleet.checker.topology import Topology
 from twinfleet.checker.transition import (
     Action,
     Crash,
+    Drop,
     Failure,
     RunEvent,
     Step,
@@ -72,7 +75,7 @@ from twinfleet.runtime.snapshot import restore
 if TYPE_CHECKING:
     from twinfleet.checker.properties import PropertySet
 
-__all__ = ["Action", "Crash", "Failure", "RunEvent", "Step", "System", "Transition"]
+__all__ = ["Action", "Crash", "Drop", "Failure", "RunEvent", "Step", "System", "Transition"]
 
 _MEMO_LIMIT = 1_024  # handler outcomes per cache generation (two kept; ~0.55 KB each on C1b)
 _DECODED_LIMIT = 64  # decoded states kept for property expressions (~2.5 KB each on C1a)
@@ -118,12 +121,15 @@ class System:
         self.settings = parse_settings(scenario, set(self.topology.subscribers),
                                        set(self.topology.servers),
                                        latency=() if latency is None else latency)
+        if self.settings.crash is not None:
+            self.topology.refuse_late_joiners(self.settings.crash.nodes, scenario.path)
         if global_priority is None:
             global_priority = scenario.check.global_priority
         try:
             self.rules = Rules(semantics or scenario.semantics,
                                tuple(cfg.priority for cfg in scenario.nodes),
-                               bool(global_priority), self.settings)
+                               bool(global_priority), self.settings, self.topology.depths,
+                               frozenset(self.topology.lossy))
         except ValueError as exc:
             raise ScenarioError(f"{scenario.source}: check: {exc}") from None
         self.debug_state = debug_state
@@ -170,6 +176,8 @@ class System:
         chooser = chooser if chooser is not None else PrefixChooser(choices)
         states = list(self.topology.initial_states)
         pending: list[Event] = []
+        for ev in self.topology.started():  # before the start handlers' events: Zenoh
+            self.rules.add(pending, ev)     # announces a node before it runs anything
         failure, logs, faults, branches = None, [], [], []
         i = 0
         for i in range(len(self.nodes)):
@@ -202,10 +210,12 @@ class System:
         return Transition(t.step, t.world, t.event, failure, t.logs, t.faults)
 
     def actions(self, world: World) -> list[Action]:
-        """What may happen next: each enabled event (`RunEvent`), then each crash fault."""
+        """What may happen next: each enabled event (`RunEvent`), then each crash fault, then
+        each KEEP_LAST drop (`Drop`)."""
         acts: list[Action] = [_run_event(i) for i in self.rules.enabled(world.events)]
         if self.settings.crash is not None:
             acts += [Crash(j) for j in self.rules.crashable(world)]
+        acts += [Drop(i) for i in self.rules.droppable(world.events)]
         return acts
 
     def step(self, world: World, action: Action, chooser: Chooser) -> Transition:
@@ -236,11 +246,15 @@ class System:
                 action = Crash(j)
                 for v in self._variants(world, action):
                     yield apply(world, action, v)
+        for index in self.rules.droppable(events):
+            yield self._apply_drop(world, index)
 
     # ------------------------------------------------------------ variants
 
     def _variant(self, world: World, action: Action, chooser: Chooser) -> Variant:
         """What taking `action` in `world` with `chooser` does, independent of the world."""
+        if isinstance(action, Drop):  # nothing runs (`_apply_drop` does the dropping)
+            return Variant((), (), world.states[world.events[action.index].target])
         if isinstance(action, Crash):
             j, now = action.node, world.events[0].due
             return self.runner.start(j, self._crash_state(world, j), now, chooser)
@@ -252,6 +266,8 @@ class System:
 
     def _variants(self, world: World, action: Action) -> list[Variant]:
         """Every choice variant of `action` in `world` (cached, see the module docstring)."""
+        if type(action) is Drop:
+            return [self._variant(world, action, PrefixChooser())]
         if type(action) is RunEvent:
             ev = world.events[action.index]
             if ev.sk[3]:  # late: a deadline miss, nothing runs
@@ -283,8 +299,10 @@ class System:
 
     def _apply(self, world: World, action: Action, v: Variant) -> Transition:
         """The transition of variant `v` of `action` in `world`."""
-        if type(action) is not RunEvent:
+        if type(action) is Crash:
             return self._apply_crash(world, action.node, v)
+        if type(action) is Drop:
+            return self._apply_drop(world, action.index)
         ev = world.events[action.index]
         rules = self.rules
         pending = rules.remove(world.events, action.index)
@@ -298,10 +316,22 @@ class System:
         return Transition(Step(action, v.choices, v.options), new, ev, v.failure, v.logs,
                           v.faults, v.branches, v.events, changed)
 
+    def _apply_drop(self, world: World, index: int) -> Transition:
+        """KEEP_LAST drops pending delivery `index` (Rule 6): nothing runs, no state changes."""
+        ev = world.events[index]
+        pending = self.rules.remove(world.events, index)
+        new = self._world(ev.due, world.states, pending, world, world.crashes)
+        label = Event(ev.due, EventKind.DROP, ev.target, ev.method, ev.sender, ev.args,
+                      ev.priority)
+        depth = self.rules.depths[(ev.target, ev.method)]
+        note = (f"{self.names[ev.target]}.{ev.method}: a waiting message dropped "
+                f"(KEEP_LAST depth {depth})")
+        return Transition(Step(Drop(index)), new, label, faults=(note,))
+
     def _apply_crash(self, world: World, j: int, v: Variant) -> Transition:
         now = world.events[0].due
         pending = [e for e in world.events if e.target != j]
-        for e in v.events:
+        for e in (*self.topology.crashed(j, now), *v.events):
             self.rules.add(pending, e)
         states = (*world.states[:j], v.state, *world.states[j + 1:])
         new = self._world(now, states, pending, world, world.crashes + 1)

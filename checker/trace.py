@@ -6,13 +6,14 @@ step: logical time, node, handler, event kind, sender, a summary of the
 arguments, the `ctx.choose` indices (and how many options each choice point
 had), the fault branches taken (`faults`), the digest of the resulting world
 and the decoded state of the node that changed. A crash fault is a step of
-kind "crash" whose `event` is the crashed node's index. A lasso trace also
+kind "crash" whose `event` is the crashed node's index; a KEEP_LAST drop is a step
+of kind "drop" whose `event` is the dropped delivery's index. A lasso trace also
 has `cycle_start`: the index of the world (0 = initial) that the last step
 returns to.
 
 Kinds are `EventKind` values ("delivery", "request", "reply", "timeout",
 "timer", "periodic", "crash"); a step of kind "crash" is a `Crash` action,
-any other a `RunEvent` of pending event `event`.
+"drop" a `Drop` of pending event `event`, any other a `RunEvent` of it.
 
 `replay(system, trace)` re-runs the steps from the recorded choices (with
 `System.step`, the one step function), checks
@@ -33,7 +34,7 @@ from twinfleet.checker.choices import PrefixChooser
 from twinfleet.checker.outcome import Counterexample
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.system import System
-from twinfleet.checker.transition import Action, Crash, RunEvent, Step, Transition
+from twinfleet.checker.transition import Action, Crash, Drop, RunEvent, Step, Transition
 from twinfleet.checker.world import ENVIRONMENT, World
 from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.tracefile import TRACE_FORMAT
@@ -131,6 +132,8 @@ def _action_index(action: Action | None) -> int:
             return index
         case Crash(node=node):
             return node
+        case Drop(index=index):
+            return index
     raise ValueError(f"not a step's action: {action!r}")
 
 
@@ -206,6 +209,11 @@ def recorded_step(system: System, world: World, rec: Mapping[str, Any]) -> Step:
             raise NondeterminismError(k, rec["node"], "crash", "the scenario does not let this "
                                       "node crash (check.faults.crash)")
         return Step(Crash(index), choices, options)
+    if rec.get("kind") == EventKind.DROP:
+        if index not in system.rules.droppable(world.events):
+            raise NondeterminismError(k, rec["node"], rec["handler"], f"pending event {index} "
+                                      "cannot be dropped here (KEEP_LAST, Rule 6)")
+        return Step(Drop(index), choices, options)
     if not 0 <= index < len(world.events):
         raise NondeterminismError(k, rec["node"], rec["handler"],
                                   f"event {index} does not exist ({len(world.events)} pending)")

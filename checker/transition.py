@@ -2,7 +2,7 @@
 
 An `Action` is what may happen next in a world (`System.actions`): run one of
 its enabled pending events (`RunEvent`, by index into the world's canonically
-sorted events) or crash a node (`Crash`). A `Step` is an action with the
+sorted events), crash a node (`Crash`) or drop a waiting delivery (`Drop`). A `Step` is an action with the
 answers its choice points got (`ctx.choose` and the checker's own latency and
 fault branches); a trace is a list of steps. A `Variant` is what one run of a
 handler did, independent of the world it ran in (new node state, new events,
@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING, final
 
 from twinfleet.runtime.context import Log
 from twinfleet.runtime.kinds import FailureKind
+from twinfleet.runtime.node import PureMemo
 from twinfleet.runtime.snapshot import SnapshotError, snapshot
 
 if TYPE_CHECKING:
@@ -43,7 +44,15 @@ class Crash:
     node: int
 
 
-Action = RunEvent | Crash
+@final
+@dataclass(frozen=True, slots=True)
+class Drop:
+    """Drop the pending delivery `index` of a world: KEEP_LAST (Rule 6 of `checker.semantics`)."""
+
+    index: int
+
+
+Action = RunEvent | Crash | Drop
 
 
 @final
@@ -126,8 +135,8 @@ class Variant:
 def fingerprint(node: Node) -> dict[str, bytes]:
     out = {}
     for attr, value in vars(node).items():
-        if attr == "state" or getattr(value, "pure_memo", False):
-            continue  # a declared memo of a pure function may fill up: that is not state
+        if attr == "state" or isinstance(value, PureMemo):
+            continue  # a declared memo of pure functions may fill up: that is not state
         try:
             out[attr] = snapshot(value)
         except (SnapshotError, TypeError, ValueError):

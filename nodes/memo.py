@@ -12,16 +12,15 @@ from collections import OrderedDict
 from collections.abc import Callable, Hashable
 
 from twinfleet.nodes.grid import Cell
+from twinfleet.runtime.node import PureMemo
 
 
-class CellsMemo:
+class CellsMemo(PureMemo):  # its content grows, its answers do not change
     """Least-recently-used memo of functions returning a tuple of cells.
 
     Args:
         maxsize: entries kept; the least recently used is evicted beyond it.
     """
-
-    pure_memo = True  # its content changes, its answers do not (--debug-state skips it)
 
     def __init__(self, maxsize: int = 65536) -> None:
         self._entries: OrderedDict[Hashable, tuple[Cell, ...]] = OrderedDict()

@@ -14,7 +14,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 
-from twinfleet import CallError, Context, Node, QoS, handler, on_start, subscribe
+from twinfleet import CallError, Context, Node, handler, on_start, subscribe
 from twinfleet.nodes.congestion import (
     backoff_candidates,
     backoff_options,
@@ -128,7 +128,7 @@ class Robot(Node):
     def start(self, ctx: Context) -> None:
         self._set_target(ctx, tuple(self.params.goal))
 
-    @subscribe("scan", priority=3, qos=QoS(depth=1000))  # a lagging robot must not lose scans
+    @subscribe("scan", priority=3)  # KEEP_LAST 10 (default): no checked world has more waiting
     def on_scan(self, ctx: Context, msg: ObstacleScan) -> None:
         """Keep the latest scan; while waiting, re-evaluate at once (the waiting loop)."""
         self.state.obstacles = tuple(tuple(c) for c in msg.cells)

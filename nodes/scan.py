@@ -18,6 +18,7 @@ import numpy as np
 from twinfleet.nodes.grid import COS8, SIN8, Cell, Dims, cell_centre
 from twinfleet.nodes.memo import CellsMemo
 from twinfleet.nodes.profile import Profile
+from twinfleet.runtime.node import PureMemo
 
 #: Sample step along a beam, in cells, per scan mode.
 MODEL_STEP = 0.8
@@ -164,7 +165,7 @@ def scan_cells(
     return tuple(out)
 
 
-class Scanner:
+class Scanner(PureMemo):  # its content grows, its answers do not change
     """Memoised :func:`scan_cells` for one static map (a pure function of its inputs).
 
     Args:
@@ -172,8 +173,6 @@ class Scanner:
         tables: beam tables.
         maxsize: number of memo entries kept (least recently used evicted).
     """
-
-    pure_memo = True  # its memo changes, its answers do not (the checker's --debug-state skips it)
 
     def __init__(self, static_occ: np.ndarray, tables: ScanTables, maxsize: int = 65536) -> None:
         self._occ = np.array(static_occ, dtype=bool)

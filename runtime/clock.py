@@ -64,6 +64,10 @@ class FleetClock:
         self.time_scale = float(time_scale)
         self._ns_per_ms = 1e6 / self.time_scale  # exactly 1e6 at scale 1: same value as before
 
+    def rebase(self, epoch_ns: int) -> None:
+        """Take `epoch_ns` as fleet time 0 from now on (the launcher's, once all are alive)."""
+        self.epoch_ns = int(epoch_ns)
+
     def _now_precise(self) -> float:
         return (_time_ns() - self.epoch_ns) / self._ns_per_ms
 

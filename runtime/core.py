@@ -11,7 +11,9 @@ and never touches a socket:
 1. Ordering. Whatever can run is an inbox entry keyed by ``(arrival_ms,
    priority, n)``: events of one fleet millisecond run in handler-priority
    order, others in arrival order, ``n`` keeps arrival order among equals.
-   `start` queues the `@on_start` handlers ahead of everything that arrived.
+   `start(now)` queues the `@on_start` handlers ahead of everything that
+   arrived; they run at `now` (the host passes fleet time 0 on a fresh fleet)
+   whenever the loop gets to them.
 2. Timed entries. `ctx.after` timers (TIMER), `@every` ticks (PERIODIC) and
    call timeouts (TIMEOUT) are due entries of the core (`runtime.due`): the
    driver asks `next_due()` and calls `release_due(now)`, which moves the due
@@ -49,8 +51,14 @@ and never touches a socket:
    a failure). `After` and `Call` arm due entries inside the core.
 6. Failures. A handler exception, a service reply that is not a message, an
    effect that cannot be encoded: counted, reported as `Line`s, published as a
-   `Violation` on /violations, answered "server error: ..." to a caller. The
-   state the handler left stays as it is (rolling it back is issue 13).
+   `Violation` on /violations, answered "server error: ..." to a caller. A
+   handler that raises (or a service that returns a non-message) did not
+   complete: its effects are cleared and `self.state` is put back as it was
+   before it ran, as the checker does (it keeps the state's snapshot bytes).
+   So the core keeps a pickled copy of the state after the last handler that
+   went well, one `pickle.dumps` per handler (2.5× cheaper than a canonical
+   `snapshot`, which rollback does not need: benchmarks/core_rollback.py); a
+   state that cannot be copied is that handler's failure, rolled back too.
 7. Observers. After each handler the core calls ``handled(record)`` on its
    observers, as trio calls its Instruments: the event log and the replay gate
    observe the core, they are not modes of it. Without observers a delivery
@@ -61,6 +69,7 @@ and never touches a socket:
 from __future__ import annotations
 
 import heapq
+import pickle
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -79,17 +88,20 @@ from twinfleet.runtime.messages import (
     NodeAlive,
     decode_fields,
 )
-from twinfleet.runtime.node import HandlerSpec, Node, Reliability
+from twinfleet.runtime.node import LIVELINESS_TOPIC, HandlerSpec, Node, Reliability
 from twinfleet.runtime.outbox import Answer, Line, Outbox, Output
 
-LIVELINESS_TOPIC: Final = "/_liveliness"
 MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is not a loss
 _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
-_TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOUT})
+# Entries that run at their own time, not the clock's: timers at their due time, start
+# handlers at the start time (fleet time 0 on a fresh fleet, as in the checker).
+_TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOUT,
+                           EventKind.START})
 _COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "published",
                     "handled", "keep_last", "best_effort", "seq_jumps", "lossless", "stalls",
                     "max_late", "period", "rejected_invalid", "rejected_wrong_type")
 _NOTHING: Final[tuple[()]] = ()
+_PICKLE: Final = pickle.HIGHEST_PROTOCOL  # rollback copies never leave the process
 
 
 # ------------------------------------------------------------------ observers and statistics
@@ -235,6 +247,7 @@ class NodeCore:
             elif self._liveliness is None:
                 self._liveliness = spec
         self.services = {s.method: node.resolve(s.name or "") for s in self.spec.of_kind("service")}
+        self._saved: bytes | None = None  # the state after the last handler that went well
 
     def observe(self, observer: Observer) -> None:
         """Tell `observer` about every handler run from now on."""
@@ -354,13 +367,22 @@ class NodeCore:
         return True
 
     def receive_liveliness(self, node: str, alive: bool, arrival_ms: int) -> bool:
-        """Node `node` appeared or disappeared; True if a `/_liveliness` handler will run."""
+        """Node `node` appeared or disappeared; True if a `/_liveliness` handler will run
+        (its event's sender is `node`, as in the checker)."""
         spec = self._liveliness
         if spec is None:
             return False
         self._push(arrival_ms, spec.priority, Entry(EventKind.LIVELINESS, spec.method,
-                                                    (NodeAlive(node, alive),), "", LIVELINESS_TOPIC))
+                                                    (NodeAlive(node, alive),), node,
+                                                    LIVELINESS_TOPIC))
         return True
+
+    def shift_arrivals(self, delta_ms: int) -> None:
+        """Move every held arrival time `delta_ms` earlier: the clock's epoch moved (the
+        fleet's time 0 arrived after they did), and arrival order must survive it."""
+        inbox = self._inbox  # in place: the receivers hold this list
+        inbox[:] = [(a - delta_ms if a != _BEFORE_ALL else a, p, n, w) for a, p, n, w in inbox]
+        heapq.heapify(inbox)
 
     def release_due(self, now_ms: int) -> int:
         """Move the due entries due by `now_ms` into the inbox; return how many moved."""
@@ -464,7 +486,10 @@ class NodeCore:
         """Run one handler; what it did, as outputs (and its effects and error, for observers)."""
         node = self.node
         ctx = Context(node, now, chooser)
+        if self._saved is None:
+            self._saved = pickle.dumps(node.state, _PICKLE)
         reply, error = invoke(node, method, ctx, args, responder is not None)
+        error = self._keep_or_roll_back(method, error, ctx)
         self._n["handled"] += 1
         effects = ctx.effects
         if error is None and responder is None:  # the common case: a handler that went well
@@ -480,6 +505,21 @@ class NodeCore:
                 error = error or self._outbox.translate(effects, now, method, out)
         error = self._outbox.finish(method, args, reply, error, responder, now, out)
         return out, effects, error
+
+    def _keep_or_roll_back(self, method: str, error: HandlerError | None,
+                           ctx: Context) -> HandlerError | None:
+        """Keep the state a handler left (a pickled copy), or put back the one before it ran
+        when it failed or left a state that cannot be copied (module docstring, 6)."""
+        node = self.node
+        if error is None:
+            try:
+                self._saved = pickle.dumps(node.state, _PICKLE)
+                return None
+            except (pickle.PicklingError, TypeError, AttributeError) as exc:
+                error = HandlerError(node.name, method, f"state cannot be copied: {exc}")
+        ctx.effects.clear()  # a bad service reply too: the checker keeps none of its effects
+        node.state = pickle.loads(self._saved)  # type: ignore[arg-type]
+        return error
 
     def statistics(self, dropped_overflow: int = 0,
                    transport: Mapping[str, int] | None = None) -> HostStatistics:

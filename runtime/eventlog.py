@@ -16,7 +16,9 @@ is one run with the server's answer.
 
 The first line of a file is a header (``kind: "header"``, ``format:``
 `EVENTS_FORMAT`, the node and what the caller adds); a respawned node appends
-a second header to the same file.
+a second header to the same file. `with_restarts` reads such a file as one
+sequence: numbered on across the processes, each restart a ``crash`` record
+(the checker's crash-and-restart) at the time of the new process's first event.
 """
 
 from __future__ import annotations
@@ -82,6 +84,28 @@ def summarise(args: Sequence[Any], limit: int = 160) -> str:
 
 
 @final
+def with_restarts(records: Sequence[dict[str, Any]]) -> tuple[list[dict[str, Any]], int]:
+    """One node's event records across its processes (module docstring) and how many
+    restarts there were; header records are left out."""
+    out: list[dict[str, Any]] = []
+    headers = 0
+    for rec in records:
+        if rec.get("kind") == "header":
+            headers += 1
+            if headers > 1:
+                out.append({"node": rec.get("node", ""), "kind": "crash", "handler": "",
+                            "sender": "", "args": "", "digest": "", "t": None})
+            continue
+        if out and out[-1]["kind"] == "crash" and out[-1]["t"] is None:
+            out[-1]["t"] = rec.get("t", 0)
+        out.append(dict(rec))
+    for i, rec in enumerate(out):
+        rec["i"] = i
+        if rec["t"] is None:  # a restart that logged nothing: at the last time known
+            rec["t"] = out[i - 1]["t"] if i else 0
+    return out, max(0, headers - 1)
+
+
 class EventLog:
     """One node's handler runs as JSON lines, flushed one by one (module docstring).
 

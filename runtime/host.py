@@ -24,7 +24,10 @@ most ``_DRAIN_BATCH`` handlers before yielding to I/O.
 
 Start first. Whatever arrives while a node waits for its peers stays in the
 core until its `@on_start` handlers have run, as in the checker, whose initial
-world runs every start handler before any event.
+world runs every start handler before any event. With ``fleet_epoch`` the host
+also waits for the launcher's epoch token and takes it as the clock's time 0:
+what arrived before keeps its order (`NodeCore.shift_arrivals`) and the start
+handlers run at time 0 (a ``restarted`` node's at the time it restarted).
 
 Event log and replay gate (issue 6): ``events=EventLog(...)`` makes the log an
 observer of the core; ``gated=True`` puts a `ReplayGate` in charge (it needs a
@@ -49,7 +52,7 @@ from twinfleet.runtime.names import key_expr
 from twinfleet.runtime.node import QOS_DEFAULT, Node
 from twinfleet.runtime.outbox import Answer, Line, Output, Put, Query, Stop
 from twinfleet.runtime.replay_gate import LogicalClock, ReplayGate, gate_key
-from twinfleet.runtime.transport import Respond, Transport, graph_key, parse_graph_key
+from twinfleet.runtime.transport import Respond, Transport, epoch_key, graph_key, parse_graph_key
 
 _DRAIN_BATCH = 256  # handlers per loop callback before yielding to I/O
 _DROP_LINES = 20  # log lines about dropped samples before they are only counted
@@ -72,14 +75,21 @@ class NodeHost:
         events: log every handler run there (an observer of the core).
         gated: run only events granted by a replay coordinator (needs a `LogicalClock`).
         stall_ms: timers released later than this after their due time count as stalls.
+        fleet_epoch: also wait for the launcher's epoch token (`transport.epoch_key`) and
+            take it as fleet time 0: `@on_start` then runs at time 0, as in the checker
+            (a `restarted` node runs it at the time it restarted).
+        restarted: this process replaces one of the node that died (a respawn).
     """
 
     def __init__(self, node: Node, transport: Transport, clock: Clock, *, seed: int,
                  fleet: str, stop_on_error: bool = False, wait_for: Sequence[str] = (),
                  ready_timeout_s: float = 10.0, out: TextIO | None = None,
                  events: EventLog | None = None, gated: bool = False,
-                 stall_ms: int | None = None) -> None:
+                 stall_ms: int | None = None, fleet_epoch: bool = False,
+                 restarted: bool = False) -> None:
         self.node, self.transport, self.clock, self.fleet = node, transport, clock, fleet
+        self.fleet_epoch, self.restarted = fleet_epoch, restarted
+        self._epoch: int | None = None
         self.wait_for, self.ready_timeout_s = tuple(wait_for), ready_timeout_s
         self.out = out if out is not None else sys.stdout
         self.core = NodeCore(node, seed=seed, stop_on_error=stop_on_error, keep_last=not gated,
@@ -123,7 +133,7 @@ class NodeHost:
         try:
             self._declare()
             await self._wait_ready()
-            now = self.clock.now_ms()
+            now = self._time_zero()
             self._line(f"t={now} started ({len(self.alive)} nodes alive)")
             self.core.start(now)  # ahead of anything that already arrived
             self._started, self._scheduled = True, False
@@ -133,6 +143,23 @@ class NodeHost:
         finally:
             if self._wake_timer is not None:
                 self._wake_timer.cancel()
+
+    def _time_zero(self) -> int:
+        """The time `@on_start` runs at: 0 on the fleet's epoch when the launcher gave one
+        (a restarted node: the fleet time it restarted at), else the clock's time."""
+        rebase = getattr(self.clock, "rebase", None)
+        if self._epoch is None or rebase is None:
+            return self.clock.now_ms()
+        before = self.clock.now_ms()
+        rebase(self._epoch)
+        self.core.shift_arrivals(before - self.clock.now_ms())  # what came before time 0
+        return self.clock.now_ms() if self.restarted else 0
+
+    def _on_epoch(self, key: str, alive: bool) -> None:
+        if alive:
+            self._epoch = int(key.rsplit("/", 1)[1])
+            if self._alive_changed is not None:
+                self._alive_changed.set()
 
     def stop(self) -> None:
         """Make `run()` return (safe to call from signal handlers on the loop)."""
@@ -168,6 +195,8 @@ class NodeHost:
         for method, name in self.core.services.items():
             t.serve(key_expr(fleet, name), self._serve(method))
             t.announce(graph_key(fleet, "srv", node.name, name))
+        if self.fleet_epoch:
+            t.watch(epoch_key(fleet), self._on_epoch)
         t.watch(graph_key(fleet, "node", "*"), self._on_liveliness)
         t.announce(graph_key(fleet, "node", node.name))
 
@@ -176,10 +205,11 @@ class NodeHost:
         wanted = set(self.wait_for)
         loop = asyncio.get_running_loop()
         deadline = loop.time() + self.ready_timeout_s
-        while not wanted <= self.alive and not self._stop_requested:
+        while (not wanted <= self.alive or (self.fleet_epoch and self._epoch is None)) \
+                and not self._stop_requested:
             remaining = deadline - loop.time()
             if remaining <= 0:
-                missing = ", ".join(sorted(wanted - self.alive))
+                missing = ", ".join(sorted(wanted - self.alive)) or "the launcher's epoch"
                 self._line(f"warning: starting without peers {missing} "
                            f"(not alive after {self.ready_timeout_s:g} s)", err=True)
                 return

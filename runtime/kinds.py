@@ -24,6 +24,7 @@ class EventKind(StrEnum):
     PERIODIC = "periodic"  # an @every tick
     CRASH = "crash"  # a node crashing (a checker fault; live, the process dies)
     LIVELINESS = "liveliness"  # a node appearing or disappearing, to /_liveliness subscribers
+    DROP = "drop"  # a waiting delivery dropped by KEEP_LAST (a label of the checker, never run)
 
     @property
     def is_message(self) -> bool:

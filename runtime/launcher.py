@@ -10,7 +10,10 @@ scenario says ``respawn: true``, and otherwise ends the run as failed.
 
 The run ends at the timeout, when a node publishes a `String` on
 ``/twinfleet/shutdown``, when every node has exited, when a node fails, or on
-SIGINT/SIGTERM. Shutdown escalates SIGINT → SIGTERM → SIGKILL per process;
+SIGINT/SIGTERM. Fleet time 0: once every node's liveliness token is seen, the
+launcher declares the fleet's epoch as a token (`transport.epoch_key`); the
+nodes (``--fleet-epoch``) wait for it and run `@on_start` at time 0, as the
+checker does, a respawned one (``--restarted``) at its restart time. Shutdown escalates SIGINT → SIGTERM → SIGKILL per process;
 children also get PR_SET_PDEATHSIG, so none outlives a SIGKILLed launcher.
 
 With ``run_record=PATH`` the run is also written as JSON lines, one flushed
@@ -21,7 +24,8 @@ With ``record_events=PATH`` every node logs each event it dispatches
 (`runtime.replay_gate.EventLog`) into ``PATH.parts/<node>.jsonl``, flushed per line;
 after shutdown the launcher merges the parts into PATH: a ``fleet`` header
 line, the node headers, then every event in dispatch-time order (each
-node's own order kept), and removes the parts. ``node_args`` are appended to
+node's own order kept, a respawn as a ``crash`` record: `eventlog.with_restarts`),
+and removes the parts. ``node_args`` are appended to
 every node's command line (``--gate`` for a live replay), and a ``driver``
 coroutine, started once the nodes are, ends the run with the reason it returns.
 """
@@ -53,7 +57,7 @@ import yaml
 
 from twinfleet.runtime import fleetauth, registry
 from twinfleet.runtime.cliargs import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-from twinfleet.runtime.eventlog import EVENTS_FORMAT
+from twinfleet.runtime.eventlog import EVENTS_FORMAT, with_restarts
 from twinfleet.runtime.guard import Rejected, check_message, payload_limit
 from twinfleet.runtime.introspect import param_arguments
 from twinfleet.runtime.live_verdict import HOLDS, LiveMonitor, RunEnd, Verdict
@@ -65,7 +69,7 @@ from twinfleet.runtime.run_record import RunRecord, versions
 from twinfleet.runtime.scenario import NodeConfig, Scenario
 from twinfleet.runtime.scenario_file import write_scenario
 from twinfleet.runtime.state_report import decode_report, state_key
-from twinfleet.runtime.transport import graph_key, parse_graph_key
+from twinfleet.runtime.transport import epoch_key, graph_key, parse_graph_key
 from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config
 
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"
@@ -338,7 +342,7 @@ class Fleet:
         argv = [sys.executable, "-m", "twinfleet.runtime.node_main", "--scenario", str(self.scenario.path),
                 "--node", cfg.name, "--connect", self.endpoint, "--epoch-ns", str(self.epoch_ns),
                 "--time-scale", repr(self.time_scale), "--seed", str(self.seed),
-                *self.node_args]
+                "--fleet-epoch", *self.node_args]
         if self.monitor is not None:
             states = cfg.name in self.monitor.reads()
             argv += ["--monitor", "states" if states else "failures",
@@ -372,7 +376,9 @@ class Fleet:
                 "give this one another fleet name (the scenario's `fleet:`)")
 
     async def start_nodes(self) -> list[asyncio.Task[None]]:
-        """Start every node process and one supervisor task per node."""
+        """Start every node process and one supervisor task per node; once every node is
+        alive, declare the fleet's epoch (time 0) for them (`epoch_key`)."""
+        self._watch_for_epoch()
         tasks = []
         for cfg in self.scenario.nodes:
             proc = _NodeProcess(cfg, self._argv(cfg), self.out, self.node_secrets())
@@ -380,6 +386,22 @@ class Fleet:
             await proc.start()
             tasks.append(asyncio.create_task(self._supervise(proc)))
         return tasks
+
+    def _watch_for_epoch(self) -> None:
+        """Declare the epoch token when the last node's token appears: the nodes wait for
+        it, so every `@on_start` runs at fleet time 0 on one shared clock."""
+        assert self.transport is not None
+        fleet, waiting = self.scenario.fleet, {cfg.name for cfg in self.scenario.nodes}
+        transport = self.transport
+
+        def on_node(key: str, alive: bool) -> None:
+            if alive and waiting:
+                waiting.discard(parse_graph_key(key)[2])
+                if not waiting:
+                    self.epoch_ns = time.time_ns()
+                    transport.announce(epoch_key(fleet, self.epoch_ns))
+
+        transport.watch(graph_key(fleet, "node", "*"), on_node)
 
     async def _supervise(self, proc: _NodeProcess) -> None:
         while True:
@@ -400,6 +422,8 @@ class Fleet:
                 await asyncio.sleep(_RESPAWN_DELAY_S)
                 if self.shutting_down:
                     return
+                if "--restarted" not in proc.argv:
+                    proc.argv.append("--restarted")
                 await proc.start()
                 continue
             if code != 0:
@@ -658,11 +682,11 @@ def merge_events(parts: Path, path: str, fleet: Fleet) -> int:
         for line in lines:
             with contextlib.suppress(json.JSONDecodeError):  # a torn last line
                 records.append(json.loads(line))
-        heads = [r for r in records if r.get("kind") == "header"]
-        headers += heads[:1]
-        if len(heads) > 1:
-            restarts[cfg.name] = len(heads) - 1
-        streams.append([r for r in records if r.get("kind") != "header"])
+        headers += [r for r in records if r.get("kind") == "header"][:1]
+        events, restarted = with_restarts(records)
+        if restarted:
+            restarts[cfg.name] = restarted
+        streams.append(events)
     with open(path, "w", encoding="utf-8") as f:
         f.write(json.dumps({"format": EVENTS_FORMAT, "kind": "fleet",
                             "scenario": str(fleet.scenario.path), "fleet": fleet.scenario.fleet,

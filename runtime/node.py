@@ -32,7 +32,7 @@ import inspect
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any, ClassVar, Literal, TypeVar
+from typing import Any, ClassVar, Final, Literal, TypeVar
 
 from twinfleet.runtime.names import normalise_namespace, resolve
 
@@ -67,6 +67,10 @@ class QoS:
     durability: Durability = Durability.VOLATILE
     depth: int = 10
 
+
+#: The topic of liveliness events: `@subscribe(LIVELINESS_TOPIC)` gets a `NodeAlive` when a
+#: node of the fleet appears or disappears (live only: the checker refuses it at load).
+LIVELINESS_TOPIC: Final = "/_liveliness"
 
 QOS_DEFAULT = QoS()
 QOS_SENSOR_DATA = QoS(Reliability.BEST_EFFORT, Durability.VOLATILE, 5)
@@ -216,6 +220,22 @@ def _check_signature(cls: type, fn: Callable[..., Any], spec: HandlerSpec) -> No
             f"{cls.__name__}.{spec.method}: @{spec.kind} handlers take {shape}, "
             f"got {len(params)} positional parameters"
         )
+
+
+class PureMemo:
+    """Base class of a memo of pure functions that a node keeps outside `self.state`.
+
+    A node may keep attributes besides `state` only when they are configuration (set
+    in `configure`, never changed by a handler) or a *pure memo*: an object that
+    caches answers of functions of their arguments alone (a scan of a static map, a
+    plan), whose content may grow while its answers never change. Derive such a
+    cache from `PureMemo` to declare it: the checker then knows it is not state
+    (`--debug-state` does not report it filling up), both drivers keep it across
+    handlers and it is never rolled back. A memo whose answers depend on what it
+    saw before breaks the node contract, as any state outside `self.state` does.
+    """
+
+    __slots__ = ()
 
 
 @dataclass(frozen=True, slots=True)

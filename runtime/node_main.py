@@ -84,6 +84,12 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                    help="exit with code 1 at the first handler exception")
     p.add_argument("--no-wait", action="store_true",
                    help="run @on_start without waiting for the other nodes of the scenario")
+    p.add_argument("--fleet-epoch", action="store_true",
+                   help="wait for the launcher's epoch token and run @on_start at fleet time 0 "
+                        "(the launcher declares it once every node is alive)")
+    p.add_argument("--restarted", action="store_true",
+                   help="this process respawns a node that died: @on_start runs at the "
+                        "fleet time it restarts at")
     p.add_argument("--close-timeout", type=float, default=5.0,
                    help="seconds allowed for closing Zenoh before the process is forced out")
     p.add_argument("--record-events", default=None, metavar="FILE",
@@ -133,7 +139,8 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
                           gated=bool(args.gate))
     host = NodeHost(node, transport, clock, seed=seed, fleet=scenario.fleet,
                     stop_on_error=stop_on_error, wait_for=peers, events=events,
-                    gated=bool(args.gate), stall_ms=args.stall_ms)
+                    gated=bool(args.gate), stall_ms=args.stall_ms,
+                    fleet_epoch=args.fleet_epoch and not args.gate, restarted=args.restarted)
     stopping = asyncio.Event()
 
     def on_signal() -> None:

@@ -51,6 +51,13 @@ def graph_key(fleet: str, kind: str, node: str, name: str = "") -> str:
     return key + name if name else key
 
 
+def epoch_key(fleet: str, epoch_ns: int | None = None) -> str:
+    """Liveliness key by which a launcher tells its nodes the fleet's time 0 (`epoch_ns`,
+    as `time.time_ns()`), declared once every node is alive; None: the key expression
+    that matches it."""
+    return f"{KEY_PREFIX}/{fleet}/@epoch/{'*' if epoch_ns is None else epoch_ns}"
+
+
 def parse_graph_key(key: str) -> tuple[str, str, str, str]:
     """Inverse of `graph_key`: (fleet, kind, node, name) with name '' for node tokens."""
     parts = key.split("/")

@@ -547,7 +547,7 @@ def test_latency_of_a_start_handler_message_is_searched_too(tmp_path):
     assert not plain.ok and plain.failure.reason == v.TIMING, plain.summary()
 
 
-def test_crash_faults_are_refused_but_drops_and_duplicates_are_searched(tmp_path):
+def test_crash_faults_and_drops_and_duplicates_are_searched(tmp_path):
     from tests.checker.helpers import node, scenario
 
     nodes = [node("ping", "Ping", rounds=3), node("pong", "Pong")]
@@ -561,5 +561,19 @@ def test_crash_faults_are_refused_but_drops_and_duplicates_are_searched(tmp_path
     result = v.validate(log, faulty, tolerance_ms=0)
     assert result.ok, result.summary()
     crashing = scenario(tmp_path, nodes, name="crashing", faults={"crash": {"nodes": ["pong"]}})
-    with pytest.raises(ValueError, match="crash cannot be validated"):
-        v.validate(log, crashing)
+    assert v.validate(log, crashing).ok  # a crash may happen, it need not
+    # A live restart is the checker's crash: refused where the scenario has no crash fault,
+    # and where it has one but nothing is pending any more (no crash action then).
+    k = index_of(records, node="pong")
+    crashed = [*records[:k], {"node": "pong", "i": 0, "t": records[k]["t"], "kind": "crash",
+                              "handler": "", "sender": "", "args": "", "digest": ""},
+               *records[k:]]
+    for r in crashed[k + 1:]:
+        if r["node"] == "pong":
+            r["i"] += 1
+    log2 = write_log(tmp_path / "e2.jsonl", crashed, names)
+    refused = v.validate(log2, faulty)
+    assert refused.failure is not None and refused.failure.reason == v.OUTSIDE
+    allowed = v.validate(log2, crashing)  # the crash is taken: whatever fails later, not it
+    assert allowed.failure is None or allowed.failure.reason != v.OUTSIDE, allowed.summary()
+    assert allowed.explained > refused.explained

@@ -12,6 +12,7 @@ from twinfleet import (
     CallError,
     Context,
     Node,
+    PureMemo,
     every,
     handler,
     message,
@@ -498,6 +499,49 @@ class Sloppy(Node):
     @handler()
     def bump(self, ctx: Context) -> None:
         self.hits += 1
+
+
+class SquareCache:
+    """A cache of a pure function: its content grows, its answers do not change."""
+
+    def __init__(self) -> None:
+        self.known: dict[int, int] = {}
+
+    def square(self, n: int) -> int:
+        return self.known.setdefault(n, n * n)
+
+
+class SquareMemo(SquareCache, PureMemo):
+    """The cache declared as a pure memo."""
+
+
+class Undeclared(SquareCache):
+    """The cache with the attribute the checker once read: a magic name declares nothing."""
+
+    pure_memo = True
+
+
+class Memoising(Node):
+    """Keeps a cache beside its state: a `PureMemo` (allowed) or, with `declared=False`,
+    an undeclared one that --debug-state reports."""
+
+    @dataclass(frozen=True)
+    class Params:
+        declared: bool = True
+
+    def configure(self) -> None:
+        self.memo = SquareMemo() if self.params.declared else Undeclared()
+
+    def initial_state(self) -> int:
+        return 0
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.after(1, self.bump)
+
+    @handler()
+    def bump(self, ctx: Context) -> None:
+        self.state = self.memo.square(3)
 
 
 class Crasher(Node):

@@ -178,6 +178,15 @@ def test_debug_state_names_node_and_handler(tmp_path):
         assert "hits" in result.breach
 
 
+def test_a_declared_pure_memo_is_not_state_and_a_magic_attribute_declares_nothing(tmp_path):
+    declared = scenario(tmp_path, [node("m", "Memoising")], name="declared")
+    assert run(declared, debug_state=True).status == "holds"
+    magic = scenario(tmp_path, [node("m", "Memoising", declared=False)], name="magic")
+    result = run(magic, debug_state=True)
+    assert result.status == "violated"
+    assert "m.bump" in result.violation.message and "memo" in result.violation.message
+
+
 def test_replay_detects_divergence(tmp_path):
     result = run(scenario(tmp_path, DOOR))
     trace = copy.deepcopy(result.trace)

@@ -110,7 +110,8 @@ def test_topic_info_and_type(runtime_dir, c1a):
     out = ok(tf(runtime_dir, "topic", "info", "/poses", "-v"))
     assert "Type: twinfleet_msgs/RobotPose" in out
     assert "Publisher count: 5" in out and "Subscription count: 1" in out
-    assert "Node name: map_server" in out and "History (Depth): KEEP_LAST (10000)" in out
+    subscription = out.split("Endpoint type: SUBSCRIPTION", 1)[1]  # the map server's
+    assert "Node name: map_server" in out and "History (Depth): KEEP_LAST (10)" in subscription
     latched = ok(tf(runtime_dir, "topic", "info", "/map", "-v"))
     assert "Durability: TRANSIENT_LOCAL" in latched
     assert ok(tf(runtime_dir, "topic", "type", "/map")).strip() == "twinfleet_msgs/OccupancyGrid"

@@ -293,6 +293,50 @@ def test_a_handler_exception_is_reported_and_the_next_entries_still_run():
     assert core.statistics().handler_errors == 1
 
 
+def test_a_handler_that_raises_leaves_the_state_as_before_it_ran():
+    node = Faulty("busy")
+    core = started(node)
+    receive = core.receiver("on_high")
+    receive(sample(3, seq=1), 1)
+    receive(sample(-1, seq=2), 2)  # appends to the state, then raises
+    drain(core, 2)
+    assert node.state.seen == [(2, "high 3")]  # the partial change is rolled back
+    receive(sample(4, seq=3), 3)
+    drain(core, 3)
+    assert node.state.seen == [(2, "high 3"), (3, "high 4")]
+
+
+def test_a_state_that_cannot_be_copied_is_the_handlers_failure_and_rolled_back():
+    class Leaky(Node):
+        def initial_state(self) -> Log:
+            return Log()
+
+        @subscribe("/high")
+        def on_high(self, ctx: Context, msg: Num) -> None:
+            self.state.seen.append(lambda: msg)  # not a value: the checker refuses it too
+            ctx.publish("/out", Num(1))
+
+    node = Leaky("leaky")
+    core = started(node)
+    core.receiver("on_high")(sample(1), 1)
+    out = drain(core, 1)
+    assert node.state.seen == []
+    assert not any(isinstance(o, Put) and o.topic.endswith("/out") for o in out)
+    assert core.statistics().handler_errors == 1
+
+
+def test_arrivals_before_a_new_epoch_keep_their_order_and_later_ones_still_arrive():
+    node = Faulty("busy")
+    core = NodeCore(node, seed=1)
+    receive = core.receiver("on_high")
+    receive(sample(1, seq=1), 9000)  # stamped on the launcher's clock, before time 0
+    core.shift_arrivals(9000 - 2)  # the fleet's epoch came: those arrived at t=-2
+    core.start(0)
+    receive(sample(2, seq=2), 1)
+    drain(core, 3)
+    assert node.state.seen == [(3, "high 1"), (3, "high 2")]
+
+
 def test_stop_on_error_adds_a_stop_output():
     core = started(Faulty("busy"), stop_on_error=True)
     core.receiver("on_high")(sample(-1), 1)
@@ -334,9 +378,9 @@ def test_observers_see_every_run_with_a_named_entry():
     drain(core, 100)
     seen = [(r.entry.kind, r.entry.handler, r.entry.sender, r.entry.due, r.now)
             for r in recorder.records]
-    assert seen[0] == (EventKind.START, "start", "busy", 0, 2)
+    assert seen[0] == (EventKind.START, "start", "busy", 0, 0)  # at its start time
     assert seen[1] == (EventKind.DELIVERY, "on_low", "r2", None, 2)
-    assert seen[2:] == [(EventKind.TIMER, "later", "busy", 52, 52),
+    assert seen[2:] == [(EventKind.TIMER, "later", "busy", 50, 50),
                         (EventKind.PERIODIC, "fast_tick", "busy", 100, 100),
                         (EventKind.PERIODIC, "slow_tick", "busy", 100, 100)]
     delivery = recorder.records[1].entry
