@@ -375,13 +375,14 @@ class _Search:
         return _Frame(t.world, pos, options, why, ahead, f"{live.label()} [{live.where()}]")
 
     def _leaving(self, live: LiveEvent) -> bool:
-        """Whether `live` tells of a node leaving as the fleet shuts down: a node that never
-        restarted went away (the run's end is outside the model; a crash is not)."""
+        """Whether `live` tells of a node leaving as the fleet shuts down: the peer went
+        away and did nothing after it (the run's end is outside the model). Tried only when
+        the model has no such event, so a crash's leave (which the model has) is not it."""
         if live.kind is not EventKind.LIVELINESS or live.sender not in self.system.index:
             return False
         gone = payload_digest((NodeAlive(live.sender, False),))
         queue = self.queues[self.system.index[live.sender]]
-        return live.args == gone and not any(e.kind is EventKind.CRASH for e in queue)
+        return live.args == gone and not any(e.t > live.t for e in queue)
 
     def _restart(self, frame: _Frame, i: int, branches: tuple[int, ...]) -> _Frame | Unexplained:
         """A live crash record and the new process's start events: the checker's `Crash`."""

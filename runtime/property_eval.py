@@ -156,9 +156,9 @@ def _check_node(node: ast.AST, readable: set[str], node_names: Sequence[str]) ->
     if not isinstance(node, _ALLOWED_NODES):
         raise ExpressionError(f"{_describe(node)} is not allowed ({_HELP})")
     if isinstance(node, ast.Name):
-        if node.id.startswith("_"):
+        if node.id.startswith("_") and node.id != "_":  # `_` alone: a throw-away loop name
             raise ExpressionError(f"the name {node.id!r} is not allowed (names starting with "
-                                  "'_' are refused)")
+                                  "'_' are refused, but for `_` itself)")
         if node.id not in readable:
             raise ExpressionError(f"unknown name {node.id!r} (nodes: {', '.join(node_names)}; "
                                   f"{_HELP})")

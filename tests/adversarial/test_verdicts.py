@@ -5,6 +5,7 @@ never PASSED. Each test starts its own fleet on loopback with bounded traffic.""
 from __future__ import annotations
 
 import os
+import re
 import signal
 import time
 
@@ -62,6 +63,7 @@ def test_a_robot_stopped_and_continued_stalls_and_the_run_is_inconclusive(tmp_pa
         rest, _ = proc.communicate(timeout=60)
     out = "".join(seen) + rest
     assert proc.returncode == 3, out[-3000:]
-    assert "result: INCONCLUSIVE (r2 fell behind its timers by up to" in out
-    assert "it stalled" in out
+    # the stall is a reason (beside, now, the scans r2's depth-10 queue dropped meanwhile)
+    assert "result: INCONCLUSIVE (r2 " in out, out[-2500:]
+    assert re.search(r"r2 fell behind its timers by up to \d+ ms .*: it stalled\)", out), out[-2500:]
     assert poll(lambda: not processes_mentioning(str(path)), 10)

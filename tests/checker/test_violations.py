@@ -183,8 +183,8 @@ def test_a_declared_pure_memo_is_not_state_and_a_magic_attribute_declares_nothin
     assert run(declared, debug_state=True).status == "holds"
     magic = scenario(tmp_path, [node("m", "Memoising", declared=False)], name="magic")
     result = run(magic, debug_state=True)
-    assert result.status == "violated"
-    assert "m.bump" in result.violation.message and "memo" in result.violation.message
+    assert result.status == "contract breach" and result.exit_code == 4
+    assert "node m, handler bump" in result.breach and "memo" in result.breach
 
 
 def test_replay_detects_divergence(tmp_path):
