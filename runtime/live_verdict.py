@@ -16,9 +16,9 @@ arrive — the same expressions, in the same safe language, as the checker
   property, else ``no_failure``);
 - `eventually`: holds once the expression was true on some report; judged at
   the end of the run (or as soon as it held);
-- `within`: holds if it was true no later than ``within_ms`` after the run's
-  start (the first report), violated as soon as a report comes later while it
-  never was;
+- `within`: holds if it was true no later than ``within_ms`` of fleet time
+  (0 is the launcher's epoch, as in the checker), violated as soon as a report
+  comes later while it never was;
 - `deadlock` and `quiescence` need to know that no event is pending anywhere,
   which a live run cannot see: they are listed as not judged live.
 
@@ -185,7 +185,6 @@ class LiveMonitor:
         self.reports = 0
         self.strangers = 0  # reports from names that are not nodes of the scenario
         self.undecodable: list[str] = []
-        self.t0: int | None = None
         self.now = 0
         self._seq: dict[str, int] = {}
         for w in self.watches:  # as the checker checks the initial world
@@ -220,9 +219,7 @@ class LiveMonitor:
         if report.seq > last + 1:
             self.lost[report.node] = self.lost.get(report.node, 0) + report.seq - last - 1
         self._seq[report.node] = max(last, report.seq)
-        if self.t0 is None:
-            self.t0 = report.now_ms
-        self.now = max(self.now, report.now_ms - self.t0)
+        self.now = max(self.now, report.now_ms)  # fleet time: 0 is the launcher's epoch
         if report.failure is not None:
             self.failures[report.node] = self.failures.get(report.node, 0) + 1
             if not any(v[0] == self.failure_name for v in self.violations):

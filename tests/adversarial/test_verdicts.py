@@ -63,7 +63,8 @@ def test_a_robot_stopped_and_continued_stalls_and_the_run_is_inconclusive(tmp_pa
         rest, _ = proc.communicate(timeout=60)
     out = "".join(seen) + rest
     assert proc.returncode == 3, out[-3000:]
-    # the stall is a reason (beside, now, the scans r2's depth-10 queue dropped meanwhile)
-    assert "result: INCONCLUSIVE (r2 " in out, out[-2500:]
+    # the stall is a reason (beside the samples the depth-10 queues of r2 and of the map
+    # server may drop meanwhile)
+    assert "result: INCONCLUSIVE (" in out, out[-2500:]
     assert re.search(r"r2 fell behind its timers by up to \d+ ms .*: it stalled\)", out), out[-2500:]
     assert poll(lambda: not processes_mentioning(str(path)), 10)

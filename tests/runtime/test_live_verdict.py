@@ -73,7 +73,7 @@ def test_an_invariant_violated_names_the_property_the_event_and_the_states():
     fleet.run(300)
     v = fleet.verdict()
     assert (v.status, v.property_name, v.exit_code) == (VIOLATED, "small", 1)
-    assert "invariant 'counter.count < 3' is false at t=100 ms" in v.summary  # since the first report (t=50)
+    assert "invariant 'counter.count < 3' is false at t=150 ms" in v.summary  # fleet time: 3rd tick
     assert "after periodic → counter.tick" in v.details[0]
     assert v.details[1] == "counter: CountState(count=3)"
 
