@@ -25,6 +25,7 @@ from twinfleet.checker import checkpoint as ckpt
 from twinfleet.checker.checkpoint import CheckpointError
 from twinfleet.checker.outcome import HOLDS, VIOLATED, Limits, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.reduction import describe, plan
 from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
@@ -54,6 +55,7 @@ class CheckOptions:
     checkpoint: str | None = None
     checkpoint_every_s: float = 300.0
     resume: str | None = None
+    reduction: str | None = None
     progress: Callable[[SearchStatistics], None] | None = field(default=None, compare=False)
 
 
@@ -74,6 +76,8 @@ class CheckResult:
     trace_path: str | None = None
     checkpoint: str | None = None
     resumed_from: str | None = None
+    reduction: str = "none"
+    reduction_statistics: dict[str, int] | None = None
 
     @property
     def rmc_transitions(self) -> int:
@@ -103,6 +107,7 @@ class CheckResult:
             "checkpoint": self.checkpoint, "resumed_from": self.resumed_from,
             "trace": self.trace_path,
             "trace_steps": None if self.trace is None else len(self.trace["steps"]),
+            "reduction": self.reduction, "reduction_statistics": self.reduction_statistics,
             "exit_code": self.exit_code,
         }
 
@@ -126,7 +131,8 @@ class CheckResult:
                  f"peak memory {s.peak_rss_mb:.0f} MB",
                  f"visited-state store {s.store_bytes / 2**20:.1f} MB "
                  f"({s.bytes_per_state:.0f} B/state, {s.digest_bits}-bit digests, "
-                 f"collision probability <= {s.collision_probability:.1e})"]
+                 f"collision probability <= {s.collision_probability:.1e})",
+                 f"reduction: {self.reduction}"]
         if self.resumed_from:
             lines.append(f"resumed from checkpoint {self.resumed_from}")
         if self.checkpoint:
@@ -204,13 +210,19 @@ def check(scenario: str | Path | Scenario | None,
     strategy = meta.get("strategy") or options.search or scenario.check.search
     if strategy not in SEARCHES:
         raise ScenarioError(f"search: expected {', '.join(SEARCHES)}, got {strategy!r}")
+    try:
+        reduction, reduction_name = plan(system, props, strategy,
+                                         meta.get("reduction") or options.reduction)
+    except ValueError as exc:
+        raise ScenarioError(f"{scenario.source}: {exc}") from None
     meta = {"scenario": None if path is None else str(path.resolve()),
             "sha256": None if path is None else ckpt.file_sha256(path),
             "semantics": system.semantics.value, "profile": scenario.profile,
-            "strategy": strategy, **flags}
+            "strategy": strategy, "reduction": reduction_name.split()[0], **flags}
     search = Search(system, props, limits_for(options, scenario.check), progress=options.progress,
                     checkpoint=options.checkpoint or options.resume,
-                    checkpoint_every_s=options.checkpoint_every_s, checkpoint_meta=meta)
+                    checkpoint_every_s=options.checkpoint_every_s, checkpoint_meta=meta,
+                    reduction=reduction)
     if data is not None:
         search.restore(data)
     seed = options.seed if options.seed is not None else scenario.seed
@@ -220,7 +232,10 @@ def check(scenario: str | Path | Scenario | None,
         names.append("determinism (every transition run twice and compared)")
     result = CheckResult(scenario.source, system.semantics.value, strategy, outcome.status,
                          outcome.reason, names, outcome.statistics, outcome.violation,
-                         checkpoint=outcome.checkpoint, resumed_from=options.resume)
+                         checkpoint=outcome.checkpoint, resumed_from=options.resume,
+                         reduction=describe(reduction, reduction_name),
+                         reduction_statistics=None if reduction is None else
+                         reduction.statistics())
     if outcome.violation is not None and outcome.counterexample is not None:
         result.trace = build_trace(system, outcome.violation, outcome.counterexample,
                                    scenario_path=meta["scenario"], search=strategy)
@@ -269,6 +284,9 @@ def _resume_path(path: Path | None, options: CheckOptions,
         if value is not None and value != meta[key]:
             raise CheckpointError(f"{where}: written with {key} {meta[key]}, cannot resume "
                                   f"with {value}")
+    if options.reduction is not None and options.reduction != meta.get("reduction", "none"):
+        raise CheckpointError(f"{where}: written with reduction {meta.get('reduction', 'none')}, "
+                              f"cannot resume with {options.reduction}")
     for key in _SEARCH_FLAGS:
         if getattr(options, key) != getattr(CheckOptions, key) and \
                 getattr(options, key) != meta[key]:

@@ -48,6 +48,7 @@ from twinfleet.checker.builder import WorldBuilder
 from twinfleet.checker.cache import GenerationCache
 from twinfleet.checker.choices import Chooser, PrefixChooser
 from twinfleet.checker.faults import parse_settings
+from twinfleet.checker.publications import Publications
 from twinfleet.checker.runner import CAUSES, Runner
 from twinfleet.checker.semantics import Rules, Semantics
 from twinfleet.checker.topology import Topology
@@ -131,6 +132,8 @@ class System:
         self._worlds = WorldBuilder(self, monitors, exact=exact_states)
         self._world = self._worlds.world
         self._decoded: dict[bytes, Any] = {}
+        #: zero-delay sends seen in every handler run computed (`checker.reduction`)
+        self.publications = Publications(len(self.nodes))
 
     @property
     def semantics(self) -> Semantics:
@@ -239,6 +242,10 @@ class System:
             return self.runner.deadline_miss(ev, data)
         return self.runner.run(ev, data, chooser)
 
+    def variants(self, world: World, action: Action) -> list[Variant]:
+        """Every choice variant of `action` in `world`: what it does, before it is applied."""
+        return self._variants(world, action)
+
     def _variants(self, world: World, action: Action) -> list[Variant]:
         """Every choice variant of `action` in `world` (cached, see the module docstring)."""
         if type(action) is RunEvent:
@@ -246,8 +253,9 @@ class System:
             if ev.sk[3]:  # late: a deadline miss, nothing runs
                 return [self._variant(world, action, PrefixChooser())]
             mk: tuple[Any, ...] = (world.states[ev.target], ev.key, ev.due)  # time last
+            node = ev.target
         else:
-            j = action.node
+            node = j = action.node
             mk = (EventKind.CRASH, j, self._crash_state(world, j), world.events[0].due)
         memo = self._memo
         found = None if memo is None else memo.get(mk)
@@ -259,6 +267,7 @@ class System:
             chooser = PrefixChooser(prefix)
             variants.append(self._variant(world, action, chooser))
             prefix = chooser.next_prefix()
+        self.publications.observe(node, mk[-1], variants)
         if memo is not None:
             memo.put(mk, variants)
         return variants
