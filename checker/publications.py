@@ -31,6 +31,8 @@ from twinfleet.runtime.kinds import EventKind
 if TYPE_CHECKING:
     from twinfleet.checker.transition import Variant
 
+Handler = tuple[int, str]  # (node index, method name)
+
 #: Event kinds whose rules `checker.reduction` knows; any other kind turns it off for the run.
 KNOWN_KINDS: Final = frozenset({EventKind.DELIVERY, EventKind.REQUEST, EventKind.REPLY,
                                 EventKind.TIMEOUT, EventKind.TIMER, EventKind.PERIODIC})
@@ -38,12 +40,12 @@ KNOWN_KINDS: Final = frozenset({EventKind.DELIVERY, EventKind.REQUEST, EventKind
 
 @final
 class Publications:
-    """Zero-delay events nodes have been seen to create, per (target, sender).
+    """Zero-delay events handlers have been seen to create, per target and sending handler.
 
-    Attributes:
-        into: per target node X, sender Y -> the handler priorities of events Y created
-            at X due at the instant of the run (Y == X: X's own zero-delay timers).
-        out: per sender Y, the nodes it created such events at.
+    A *handler* here is (node index, method name). Attributes:
+        into: per target node X, sending handler (Y, m) -> the (method, priority) of the
+            events m created at X due at the instant of its run (Y == X: zero-delay timers).
+        out: per sending handler, the handlers (X, method) those events run.
         version: grows whenever the relation grows (a search compares it).
         unknown: the first event kind outside `KNOWN_KINDS` seen, or None.
     """
@@ -51,13 +53,13 @@ class Publications:
     __slots__ = ("into", "out", "unknown", "version")
 
     def __init__(self, nodes: int) -> None:
-        self.into: list[dict[int, set[int]]] = [{} for _ in range(nodes)]
-        self.out: list[set[int]] = [set() for _ in range(nodes)]
+        self.into: list[dict[Handler, set[tuple[str, int]]]] = [{} for _ in range(nodes)]
+        self.out: dict[Handler, set[Handler]] = {}
         self.version = 0
         self.unknown: str | None = None
 
-    def observe(self, sender: int, now: int, variants: Sequence[Variant]) -> None:
-        """Record the zero-delay events that node `sender`'s run at `now` created."""
+    def observe(self, sender: Handler, now: int, variants: Sequence[Variant]) -> None:
+        """Record the zero-delay events that handler `sender`'s run at `now` created."""
         into = self.into
         for v in variants:
             for e in v.events:
@@ -66,16 +68,17 @@ class Publications:
                     self.version += 1
                 if e.due != now:
                     continue
-                prios = into[e.target].get(sender)
-                if prios is None:
-                    prios = into[e.target][sender] = set()
-                    self.out[sender].add(e.target)
-                if e.priority not in prios:
-                    prios.add(e.priority)
+                made = into[e.target].get(sender)
+                if made is None:
+                    made = into[e.target][sender] = set()
+                item = (e.method, e.priority)
+                if item not in made:
+                    made.add(item)
+                    self.out.setdefault(sender, set()).add((e.target, e.method))
                     self.version += 1
 
     def edges(self) -> int:
-        """How many (sender, target, priority) triples are known."""
+        """How many (sending handler, target, method, priority) entries are known."""
         return sum(len(p) for per in self.into for p in per.values())
 
     def __getstate__(self) -> tuple[object, ...]:

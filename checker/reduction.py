@@ -141,9 +141,6 @@ class Reduction:
         self.publications = system.publications
         self.stats = ReductionStatistics()
         self._version = self.publications.version
-        topo = system.topology
-        self._maxprio = [max([0, *(topo.priority(i, h.method) for h in n.spec().handlers)])
-                         for i, n in enumerate(system.nodes)]
 
     def begin(self) -> None:
         """Start (or start again) a search: remember the relation it is based on."""
@@ -228,7 +225,7 @@ class _Closure:
         for i in enabled:
             self.by_node.setdefault(events[i].target, []).append(i)
         self.p = {x: events[idxs[0]].priority for x, idxs in self.by_node.items()}
-        self.pending: dict[int, list[int]] = {}  # node -> priorities of its events due t
+        self.due: set[tuple[int, str]] = set()  # handlers with an event due t
         self.harmless: set[tuple[int, int]] = set()  # channels with a message at p_target
         self.unknown = False
         fifo = reduction.rules.fifo
@@ -236,34 +233,33 @@ class _Closure:
             if ev.due != t:
                 break
             self.unknown |= ev.kind not in KNOWN_KINDS
-            self.pending.setdefault(ev.target, []).append(ev.priority)
+            self.due.add((ev.target, ev.method))
             if fifo and ev.message and ev.priority == self.p.get(ev.target):
                 self.harmless.add((ev.sender, ev.target))
         self._sends: dict[int, list[tuple[int, int]] | None] = {}
 
-    def may_run(self, frozen: set[int]) -> set[int]:
-        """Nodes that may run at t while the nodes of `frozen` do not."""
+    def runnable(self, frozen: set[int]) -> set[tuple[int, str]]:
+        """Handlers of nodes outside `frozen` that may run at t: those with an event due
+        and those such handlers may trigger at zero delay (the learned relation)."""
         out = self.r.publications.out
-        reach = [x for x in self.pending if x not in frozen]
+        reach = [h for h in self.due if h[0] not in frozen]
         seen = set(reach)
         while reach:
-            y = reach.pop()
-            for x in out[y]:
-                if x not in seen and x not in frozen:
-                    seen.add(x)
-                    reach.append(x)
+            for h in out.get(reach.pop(), ()):
+                if h not in seen and h[0] not in frozen:
+                    seen.add(h)
+                    reach.append(h)
         return seen
 
     def sends(self, i: int) -> list[tuple[int, int]] | None:
         """(target, priority) of the events due t that some variant of event i creates at
-        other nodes; None if one is of an unknown kind or the event is visible."""
+        other nodes; None if one is of a kind the reduction does not know."""
         if i in self._sends:
             return self._sends[i]
-        world, system = self.world, self.r.system
+        world = self.world
         ev = world.events[i]
-        variants = system.variants(world, RunEvent(i))
         found: list[tuple[int, int]] | None = []
-        for v in variants:
+        for v in self.r.system.variants(world, RunEvent(i)):
             for e in v.events:
                 if e.kind not in KNOWN_KINDS:
                     found = None
@@ -275,80 +271,70 @@ class _Closure:
         self._sends[i] = found
         return found
 
-    def visible(self, i: int) -> bool:
-        """True if event i may change what a property reads."""
-        world = self.world
-        ev = world.events[i]
-        variants = self.r.system.variants(world, RunEvent(i))
-        return self.r.visibility.visible(self.r.system, ev.target, world.states[ev.target],
-                                         variants)
-
     def persistent(self, seed: int) -> list[int] | None:
-        """The persistent set grown from `seed`, if smaller than everything and invisible."""
-        nodes = self.grow(seed)
-        if nodes is None:
-            return None
-        chosen = sorted(i for x in nodes for i in self.by_node.get(x, ()))
-        if len(chosen) == len(self.enabled):
-            return None
-        if any(self.visible(i) for i in chosen):
-            return None
-        return chosen
+        """The persistent set grown from `seed`, if smaller than everything and invisible
+        (a visible event may still be guarded by adding the nodes of a guard)."""
+        nodes = self.grow({seed})
+        for _ in range(len(self.by_node)):
+            if nodes is None:
+                return None
+            chosen = sorted(i for x in nodes for i in self.by_node.get(x, ()))
+            if len(chosen) == len(self.enabled):
+                return None
+            guard = self.r.visibility.needs(self.r.system, self.world, chosen, nodes)
+            if guard is None:
+                return chosen
+            if not guard or guard <= nodes:
+                return None
+            nodes = self.grow(nodes | guard)
+        return None
 
-    def grow(self, seed: int) -> set[int] | None:
-        """Close {seed} under C-in and C-out; None when it must hold every enabled node."""
+    def grow(self, start: set[int]) -> set[int] | None:
+        """Close `start` under C-in and C-out; None when it must hold every enabled node."""
         into = self.r.publications.into
-        frozen = {seed}
-        work = [seed]
-        can = self.may_run(frozen)
+        frozen = set(start)
+        work = list(start)
+        can = self.runnable(frozen)
         while work:
             x = work.pop()
             added = self._incoming(x, frozen, can, into[x]) + self._outgoing(x, frozen, can)
-            for y in added:
-                if y not in frozen:
-                    frozen.add(y)
-                    work.append(y)
-            if added:
-                if all(n in frozen for n in self.by_node):
-                    return None
-                can = self.may_run(frozen)
+            added = [y for y in added if y not in frozen]
+            if not added:
+                continue
+            frozen.update(added)
+            work += added
+            if all(n in frozen for n in self.by_node):
+                return None
+            can = self.runnable(frozen)
         return frozen
 
-    def _incoming(self, x: int, frozen: set[int], can: set[int],
-                  senders: dict[int, set[int]]) -> list[int]:
-        """C-in for node x: the senders to add."""
+    def _incoming(self, x: int, frozen: set[int], can: set[tuple[int, str]],
+                  senders: dict[tuple[int, str], set[tuple[str, int]]]) -> list[int]:
+        """C-in for node x: the nodes of runnable handlers that may disturb it."""
         px = self.p.get(x, _INF)
         out = []
-        for y, prios in senders.items():
-            if y == x or y in frozen or y not in can:
+        for h, made in senders.items():
+            y = h[0]
+            if y in frozen or h not in can:
                 continue
-            low = min(prios)
-            if low < px or (low == px and (y, x) not in self.harmless):
-                out.append(y)
+            for _, q in made:
+                if q < px or (q == px and (y, x) not in self.harmless):
+                    out.append(y)
+                    break
         return out
 
-    def _outgoing(self, x: int, frozen: set[int], can: set[int]) -> list[int]:
+    def _outgoing(self, x: int, frozen: set[int], can: set[tuple[int, str]]) -> list[int]:
         """C-out for the events of node x: the receivers to add (every node if unknown)."""
         out = []
+        priority = self.r.system.topology.priority
         for i in self.by_node.get(x, ()):
             sent = self.sends(i)
             if sent is None:
                 return list(self.by_node)
             for b, q in sent:
-                if b not in frozen and b in can and self._may_exceed(b, q, frozen, can):
+                if b not in frozen and any(h[0] == b and priority(b, h[1]) > q for h in can):
                     out.append(b)
         return out
-
-    def _may_exceed(self, b: int, q: int, frozen: set[int], can: set[int]) -> bool:
-        """True if node b may run, at t, an event of priority above q."""
-        if self.r._maxprio[b] <= q and all(pr <= q for pr in self.pending.get(b, ())):
-            return False
-        if any(pr > q for pr in self.pending.get(b, ())):
-            return True
-        for y, prios in self.r.publications.into[b].items():
-            if (y == b or y not in frozen) and y in can and max(prios) > q:
-                return True
-        return False
 
 
 def plan(system: System, properties: PropertySet, strategy: str,

@@ -253,9 +253,10 @@ class System:
             if ev.sk[3]:  # late: a deadline miss, nothing runs
                 return [self._variant(world, action, PrefixChooser())]
             mk: tuple[Any, ...] = (world.states[ev.target], ev.key, ev.due)  # time last
-            node = ev.target
+            sender = (ev.target, ev.method)
         else:
-            node = j = action.node
+            j = action.node
+            sender = (j, "")
             mk = (EventKind.CRASH, j, self._crash_state(world, j), world.events[0].due)
         memo = self._memo
         found = None if memo is None else memo.get(mk)
@@ -267,7 +268,7 @@ class System:
             chooser = PrefixChooser(prefix)
             variants.append(self._variant(world, action, chooser))
             prefix = chooser.next_prefix()
-        self.publications.observe(node, mk[-1], variants)
+        self.publications.observe(sender, mk[-1], variants)
         if memo is not None:
             memo.put(mk, variants)
         return variants
