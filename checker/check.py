@@ -233,7 +233,7 @@ def check(scenario: str | Path | Scenario | None,
     result = CheckResult(scenario.source, system.semantics.value, strategy, outcome.status,
                          outcome.reason, names, outcome.statistics, outcome.violation,
                          checkpoint=outcome.checkpoint, resumed_from=options.resume,
-                         reduction=describe(reduction, reduction_name),
+                         reduction=describe(reduction, reduction_name, strategy),
                          reduction_statistics=None if reduction is None else
                          reduction.statistics())
     if outcome.violation is not None and outcome.counterexample is not None:

@@ -379,7 +379,7 @@ def plan(system: System, properties: PropertySet, strategy: str,
     return Reduction(system, properties, visibility), POR
 
 
-def describe(reduction: Reduction | None, name: str) -> str:
+def describe(reduction: Reduction | None, name: str, strategy: str = "bfs") -> str:
     """One line for the summary: what ran, and what it did."""
     if reduction is None:
         return name
@@ -389,4 +389,5 @@ def describe(reduction: Reduction | None, name: str) -> str:
     restarts = f", {s.restarts} restart{'s' * (s.restarts != 1)}" if s.restarts else ""
     return (f"por (persistent sets: {s.reduced:,} worlds reduced, {s.full:,} expanded fully, "
             f"{s.cycle_proviso:,} by the cycle proviso; {reduction.publications.edges()} sends "
-            f"learned{restarts}; a BFS trace is shortest in the reduced graph)")
+            f"learned{restarts}"
+            + ("; a BFS trace is shortest in the reduced graph)" if strategy == "bfs" else ")"))
