@@ -134,3 +134,25 @@ def test_changed_rules_turn_it_off(tmp_path, monkeypatch):
                  reduction=None)
     assert result.reduction.startswith("none (the enabling rules changed")
     assert counts(result) == (4, 4, 5)
+
+
+@pytest.mark.parametrize(("reduction", "expected"), [
+    # Ping-pong (3 rounds: 7 worlds in a chain, see test_counts) beside an independent flag.
+    # Unreduced: each chain world with and without the flag, 14 states; 6 chain steps twice
+    # and 7 flag steps, 19 transitions.
+    ("none", (14, 19, 20)),
+    # Reduced: the chain first (pong's and ping's events alone: nothing else can send to
+    # them at the instant), the flag last: 8 states, 7 transitions. The send relation is
+    # learned on the way: pong's on_ping sends to ping (restart 1), ping's on_pong to pong
+    # (restart 2); the third search knows both from its start.
+    ("por", (8, 7, 8)),
+])
+def test_send_relation_is_learned_with_restarts(tmp_path, reduction, expected):
+    path = scenario(tmp_path, [node("ping", "Ping", rounds=3), node("pong", "Pong"),
+                               node("f", "Flagger")])
+    result = run(path, reduction=reduction)
+    assert counts(result) == expected
+    if reduction == "por":
+        assert result.reduction_statistics is not None
+        assert result.reduction_statistics["restarts"] == 2
+        assert "2 restarts" in result.reduction
