@@ -57,8 +57,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final, final
 
+from twinfleet.checker.closure import Closure
 from twinfleet.checker.faults import CheckSettings
-from twinfleet.checker.publications import KNOWN_KINDS
 from twinfleet.checker.semantics import Rules, Semantics
 from twinfleet.checker.transition import RunEvent, Transition
 from twinfleet.checker.visibility import Visibility
@@ -70,7 +70,7 @@ if TYPE_CHECKING:
 
 POR, NONE = "por", "none"
 REDUCTIONS: Final = (POR, NONE)
-_INF: Final = 1 << 62
+_INF: Final = 1 << 62  # larger than any state id
 
 # The fields of the settings the closure's rules were written for: a new rule (a field
 # set to anything but its default) turns the reduction off until it is covered here.
@@ -224,7 +224,7 @@ class Reduction:
         enabled = self.rules.enabled(world.events)
         if len(enabled) < 2:
             return None
-        closure = _Closure(self, world, enabled)
+        closure = Closure(self.system, self.publications, self.visibility, world, enabled)
         if len(closure.by_node) < 2 or closure.unknown:
             return None
         best: list[int] | None = None
@@ -235,132 +235,6 @@ class Reduction:
                 if len(best) == 1:
                     break
         return best
-
-
-@final
-class _Closure:
-    """The per-world facts the closure reads, and the closure itself (module docstring)."""
-
-    def __init__(self, reduction: Reduction, world: World, enabled: list[int]) -> None:
-        self.r = reduction
-        self.world = world
-        self.enabled = enabled
-        events = world.events
-        self.t = t = events[0].due
-        self.by_node: dict[int, list[int]] = {}
-        for i in enabled:
-            self.by_node.setdefault(events[i].target, []).append(i)
-        self.p = {x: events[idxs[0]].priority for x, idxs in self.by_node.items()}
-        self.due: set[tuple[int, str]] = set()  # handlers with an event due t
-        self.harmless: set[tuple[int, int]] = set()  # channels with a message at p_target
-        self.unknown = False
-        fifo = reduction.rules.fifo
-        for ev in events:
-            if ev.due != t:
-                break
-            self.unknown |= ev.kind not in KNOWN_KINDS
-            self.due.add((ev.target, ev.method))
-            if fifo and ev.message and ev.priority == self.p.get(ev.target):
-                self.harmless.add((ev.sender, ev.target))
-        self._sends: dict[int, list[tuple[int, int]] | None] = {}
-
-    def runnable(self, frozen: set[int]) -> set[tuple[int, str]]:
-        """Handlers of nodes outside `frozen` that may run at t: those with an event due
-        and those such handlers may trigger at zero delay (the learned relation)."""
-        out = self.r.publications.out
-        reach = [h for h in self.due if h[0] not in frozen]
-        seen = set(reach)
-        while reach:
-            for h in out.get(reach.pop(), ()):
-                if h not in seen and h[0] not in frozen:
-                    seen.add(h)
-                    reach.append(h)
-        return seen
-
-    def sends(self, i: int) -> list[tuple[int, int]] | None:
-        """(target, priority) of the events due t that some variant of event i creates at
-        other nodes; None if one is of a kind the reduction does not know."""
-        if i in self._sends:
-            return self._sends[i]
-        world = self.world
-        ev = world.events[i]
-        found: list[tuple[int, int]] | None = []
-        for v in self.r.system.variants(world, RunEvent(i)):
-            for e in v.events:
-                if e.kind not in KNOWN_KINDS:
-                    found = None
-                    break
-                if e.due == self.t and e.target != ev.target:
-                    found.append((e.target, e.priority))
-            if found is None:
-                break
-        self._sends[i] = found
-        return found
-
-    def persistent(self, seed: int) -> list[int] | None:
-        """The persistent set grown from `seed`, if smaller than everything and invisible
-        (a visible event may still be guarded by adding the nodes of a guard)."""
-        nodes = self.grow({seed})
-        for _ in range(len(self.by_node)):
-            if nodes is None:
-                return None
-            chosen = sorted(i for x in nodes for i in self.by_node.get(x, ()))
-            if len(chosen) == len(self.enabled):
-                return None
-            guard = self.r.visibility.needs(self.r.system, self.world, chosen, nodes)
-            if guard is None:
-                return chosen
-            if not guard or guard <= nodes:
-                return None
-            nodes = self.grow(nodes | guard)
-        return None
-
-    def grow(self, start: set[int]) -> set[int] | None:
-        """Close `start` under C-in and C-out; None when it must hold every enabled node."""
-        into = self.r.publications.into
-        frozen = set(start)
-        work = list(start)
-        can = self.runnable(frozen)
-        while work:
-            x = work.pop()
-            added = self._incoming(x, frozen, can, into[x]) + self._outgoing(x, frozen, can)
-            added = [y for y in added if y not in frozen]
-            if not added:
-                continue
-            frozen.update(added)
-            work += added
-            if all(n in frozen for n in self.by_node):
-                return None
-            can = self.runnable(frozen)
-        return frozen
-
-    def _incoming(self, x: int, frozen: set[int], can: set[tuple[int, str]],
-                  senders: dict[tuple[int, str], set[tuple[str, int]]]) -> list[int]:
-        """C-in for node x: the nodes of runnable handlers that may disturb it."""
-        px = self.p.get(x, _INF)
-        out = []
-        for h, made in senders.items():
-            y = h[0]
-            if y in frozen or h not in can:
-                continue
-            for _, q in made:
-                if q < px or (q == px and (y, x) not in self.harmless):
-                    out.append(y)
-                    break
-        return out
-
-    def _outgoing(self, x: int, frozen: set[int], can: set[tuple[int, str]]) -> list[int]:
-        """C-out for the events of node x: the receivers to add (every node if unknown)."""
-        out = []
-        priority = self.r.system.topology.priority
-        for i in self.by_node.get(x, ()):
-            sent = self.sends(i)
-            if sent is None:
-                return list(self.by_node)
-            for b, q in sent:
-                if b not in frozen and any(h[0] == b and priority(b, h[1]) > q for h in can):
-                    out.append(b)
-        return out
 
 
 def plan(system: System, properties: PropertySet, strategy: str,
