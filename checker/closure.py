@@ -60,6 +60,7 @@ class Closure:
             if fifo and ev.message and ev.priority == self.p.get(ev.target):
                 self.harmless.add((ev.sender, ev.target))
         self._sends: dict[int, list[tuple[int, int]] | None] = {}
+        self._tops: dict[int, tuple[set[tuple[int, str]], int]] = {}
 
     def runnable(self, frozen: set[int]) -> set[tuple[int, str]]:
         """Handlers of nodes outside `frozen` that may run at t: those with an event due
@@ -149,13 +150,22 @@ class Closure:
     def _outgoing(self, x: int, frozen: set[int], can: set[tuple[int, str]]) -> list[int]:
         """C-out for the events of node x: the receivers to add (every node if unknown)."""
         out = []
-        priority = self.system.topology.priority
         for i in self.by_node.get(x, ()):
             sent = self.sends(i)
             if sent is None:
                 return list(self.by_node)
             for b, q in sent:
-                if b not in frozen and any(h[0] == b and priority(b, h[1]) > q for h in can):
+                if b not in frozen and self._top(b, can) > q:
                     out.append(b)
         return out
+
+    def _top(self, b: int, can: set[tuple[int, str]]) -> int:
+        """The highest priority number among node b's handlers that may run at t."""
+        cached = self._tops.get(b)
+        if cached is not None and cached[0] is can:
+            return cached[1]
+        priority = self.system.topology.priority
+        top = max((priority(b, m) for n, m in can if n == b), default=-_INF)
+        self._tops[b] = (can, top)
+        return top
 

@@ -221,9 +221,13 @@ class Reduction:
         """A persistent set of enabled event indices smaller than all, or None."""
         if self.rules.crashable(world):
             return None
-        enabled = self.rules.enabled(world.events)
+        events = world.events
+        enabled = self.rules.enabled(events)
         if len(enabled) < 2:
             return None
+        first = events[enabled[0]].target
+        if all(events[i].target == first for i in enabled):
+            return None  # one node's events: dependent, nothing to choose
         closure = Closure(self.system, self.publications, self.visibility, world, enabled)
         if len(closure.by_node) < 2 or closure.unknown:
             return None
