@@ -97,8 +97,9 @@ def _size_event(states: int) -> None:
 @given(doc=systems())
 def test_bfs_and_dfs_agree_and_counterexamples_replay(workdir: Path, doc: dict[str, Any]) -> None:
     path = write_scenario(doc, workdir / "system.yaml")
-    bfs = outcome(path, search="bfs")
-    dfs = outcome(path, search="dfs")
+    # the full graph: reduced BFS and DFS graphs differ (the cycle proviso depends on the order)
+    bfs = outcome(path, search="bfs", reduction="none")
+    dfs = outcome(path, search="dfs", reduction="none")
     _size_event(bfs.states)
     event(f"verdict {bfs.status}")
     assert bfs.status == dfs.status
@@ -116,8 +117,9 @@ def test_bfs_and_dfs_agree_and_counterexamples_replay(workdir: Path, doc: dict[s
 @settings(DIFFERENTIAL, max_examples=max(1, EXAMPLES // 10))
 @given(doc=systems(), search=st.sampled_from(["bfs", "dfs"]))
 def test_transition_cache_changes_nothing(workdir: Path, doc: dict[str, Any], search: str) -> None:
-    # The cache reuses handler outcomes by (node state, event, time): what a reduction that
-    # reads transitions' effects relies on. With and without it the search is the same.
+    # The cache reuses handler outcomes by (node state, event, time): what the reduction,
+    # which reads transitions' effects, relies on. With and without it the search (reduced
+    # under ros, by default) is the same.
     path = write_scenario(doc, workdir / "system.yaml")
     cached = outcome(path, search=search)
     fresh = outcome(path, search=search, transition_cache=False)
@@ -125,6 +127,8 @@ def test_transition_cache_changes_nothing(workdir: Path, doc: dict[str, Any], se
         (fresh.status, fresh.property, fresh.states, fresh.transitions, fresh.steps)
 
 
+@pytest.mark.slow  # about 22 s for 300 systems on the 2-core VM: CI runs it, the fast path not
+@pytest.mark.timeout(600)
 @DIFFERENTIAL
 @given(doc=systems(), search=st.sampled_from(["bfs", "dfs"]))
 def test_reduction_keeps_the_verdict_and_its_counterexamples_replay(
