@@ -48,8 +48,9 @@ class BookkeepingOnly(Reduction):
     """
 
     def successors(self, world: Any, find: Any, done: int | None) -> list[Any]:
-        self._choose(world)
-        return list(self.system.successors(world))
+        enabled = self.rules.enabled(world.events)
+        self._choose(world, enabled)
+        return list(self.system.successors(world, enabled))
 
     @property
     def stale(self) -> bool:

@@ -199,10 +199,11 @@ class Reduction:
         being expanded when every id up to it is expanded (BFS), else None (any stored
         world then counts as expanded)."""
         system = self.system
-        chosen = None if self.disabled else self._choose(world)
+        enabled = self.rules.enabled(world.events)
+        chosen = None if self.disabled else self._choose(world, enabled)
         if chosen is None:
             self.stats.full += 1
-            return list(system.successors(world))
+            return list(system.successors(world, enabled))
         out: list[Transition] = []
         for i in chosen:
             out += system.outcomes(world, RunEvent(i))
@@ -213,18 +214,15 @@ class Reduction:
                     0 <= find(w.key) <= (done if done is not None else _INF):
                 self.stats.full += 1
                 self.stats.cycle_proviso += 1
-                return list(system.successors(world))
+                return list(system.successors(world, enabled))
         self.stats.reduced += 1
         return out
 
-    def _choose(self, world: World) -> list[int] | None:
-        """A persistent set of enabled event indices smaller than all, or None."""
-        if self.rules.crashable(world):
+    def _choose(self, world: World, enabled: list[int]) -> list[int] | None:
+        """A persistent set of the `enabled` event indices smaller than all, or None."""
+        if len(enabled) < 2 or self.rules.crashable(world):
             return None
         events = world.events
-        enabled = self.rules.enabled(events)
-        if len(enabled) < 2:
-            return None
         first = events[enabled[0]].target
         if all(events[i].target == first for i in enabled):
             return None  # one node's events: dependent, nothing to choose
