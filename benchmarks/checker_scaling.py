@@ -327,14 +327,20 @@ def _cell(res: Result) -> str:
             f" {res.seconds:>7.1f} {res.peak_mb:>6.0f}")
 
 
+def _rate(res: Result) -> float:
+    """Transitions per second of one run."""
+    return res.transitions / max(res.seconds, 1e-3)
+
+
 def _ratio(a: Result, b: Result) -> str:
-    """`a` against `b` (unreduced over reduced) in states and time; '>' when only `b` answered."""
+    """`a` against `b` (unreduced over reduced) in states and time, '>' when only `b`
+    answered; then `b`'s throughput (transitions/s) over `a`'s."""
     if not (a.states and b.states) or b.limited or b.verdict in ("skipped", "killed", "error"):
-        return f"{'-':>8}{'-':>8}"
+        return f"{'-':>8}{'-':>8}{'-':>8}"
     more = ">" if a.limited else ""
     states = f"{more}{a.states / b.states:.1f}"
     seconds = f"{more}{a.seconds / max(b.seconds, 1e-3):.1f}"
-    return f"{states:>8}{seconds:>8}"
+    return f"{states:>8}{seconds:>8}{_rate(b) / _rate(a):>8.2f}"
 
 
 def print_table(results: list[Result], modes: Sequence[str]) -> None:
@@ -346,8 +352,8 @@ def print_table(results: list[Result], modes: Sequence[str]) -> None:
         groups += " | " + f"{'unreduced' if mode in ('none', 'default') else mode:<{width}}"
         head += f" | {'verdict':>9} {'states':>11} {'transitions':>12} {'s':>7} {'MB':>6}"
     if len(modes) == 2:
-        groups += f" | {'none / por':>16}"
-        head += f" | {'x states':>8}{'x time':>8}"
+        groups += f" | {'none / por':>16}{'por/none':>8}"
+        head += f" | {'x states':>8}{'x time':>8}{'x tr/s':>8}"
     print(groups)
     print(head)
     print("-" * len(head))
@@ -364,7 +370,8 @@ def print_table(results: list[Result], modes: Sequence[str]) -> None:
         print(line)
     print("\n'>' marks a run stopped by --max-time (its counts, and ratios against it, are "
           "lower bounds); MB is the child process's peak RSS (interpreter, numpy and the node "
-          "code included).")
+          "code included); x tr/s is the reduced search's throughput (transitions/s, its "
+          "restarts included) over the unreduced one's.")
     for res in results:
         if res.reduction is not None and res.mode == "por" and "por" not in res.reduction:
             print(f"note: {res.run.name} ({res.run.semantics}): --reduction por ran as "

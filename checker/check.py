@@ -33,6 +33,7 @@ from twinfleet.checker.diagnosis import (
 )
 from twinfleet.checker.outcome import BREACH, HOLDS, VIOLATED, Limits, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.reduction import describe, plan
 from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
@@ -66,6 +67,7 @@ class CheckOptions:
     checkpoint: str | None = None
     checkpoint_every_s: float = 300.0
     resume: str | None = None
+    reduction: str | None = None
     progress: Callable[[SearchStatistics], None] | None = field(default=None, compare=False)
 
 
@@ -88,6 +90,8 @@ class CheckResult:
     resumed_from: str | None = None
     breach: str | None = None  # the one-line diagnosis of a contract breach
     warnings: list[str] = field(default_factory=list)  # load-time lint (runtime.lint)
+    reduction: str = "none"
+    reduction_statistics: dict[str, int] | None = None
 
     @property
     def rmc_transitions(self) -> int:
@@ -118,6 +122,7 @@ class CheckResult:
             "checkpoint": self.checkpoint, "resumed_from": self.resumed_from,
             "trace": self.trace_path,
             "trace_steps": None if self.trace is None else len(self.trace["steps"]),
+            "reduction": self.reduction, "reduction_statistics": self.reduction_statistics,
             "exit_code": self.exit_code,
         }
 
@@ -143,7 +148,8 @@ class CheckResult:
                  f"peak memory {s.peak_rss_mb:.0f} MB",
                  f"visited-state store {s.store_bytes / 2**20:.1f} MB "
                  f"({s.bytes_per_state:.0f} B/state, {s.digest_bits}-bit digests, "
-                 f"collision probability <= {s.collision_probability:.1e})"]
+                 f"collision probability <= {s.collision_probability:.1e})",
+                 f"reduction: {self.reduction}"]
         if self.resumed_from:
             lines.append(f"resumed from checkpoint {self.resumed_from}")
         if self.checkpoint:
@@ -222,13 +228,19 @@ def check(scenario: str | Path | Scenario | None,
     strategy = meta.get("strategy") or options.search or scenario.check.search
     if strategy not in SEARCHES:
         raise ScenarioError(f"search: expected {', '.join(SEARCHES)}, got {strategy!r}")
+    try:
+        reduction, reduction_name = plan(system, props, strategy,
+                                         meta.get("reduction") or options.reduction)
+    except ValueError as exc:
+        raise ScenarioError(f"{scenario.source}: {exc}") from None
     meta = {"scenario": None if path is None else str(path.resolve()),
             "sha256": None if path is None else ckpt.file_sha256(path),
             "semantics": system.semantics.value, "profile": scenario.profile,
-            "strategy": strategy, **flags}
+            "strategy": strategy, "reduction": reduction_name.split()[0], **flags}
     search = Search(system, props, limits_for(options, scenario.check), progress=options.progress,
                     checkpoint=options.checkpoint or options.resume,
-                    checkpoint_every_s=options.checkpoint_every_s, checkpoint_meta=meta)
+                    checkpoint_every_s=options.checkpoint_every_s, checkpoint_meta=meta,
+                    reduction=reduction)
     if data is not None:
         search.restore(data)
     seed = options.seed if options.seed is not None else scenario.seed
@@ -241,7 +253,10 @@ def check(scenario: str | Path | Scenario | None,
     result = CheckResult(scenario.source, system.semantics.value, strategy, outcome.status,
                          outcome.reason, _property_names(system, props), outcome.statistics,
                          outcome.violation, checkpoint=outcome.checkpoint,
-                         resumed_from=options.resume, warnings=warnings)
+                         resumed_from=options.resume, warnings=warnings,
+                         reduction=describe(reduction, reduction_name, strategy),
+                         reduction_statistics=None if reduction is None else
+                         reduction.statistics())
     if outcome.violation is not None and outcome.counterexample is not None:
         try:
             result.trace = build_trace(system, outcome.violation, outcome.counterexample,
@@ -334,6 +349,9 @@ def _resume_path(path: Path | None, options: CheckOptions,
         if value is not None and value != meta[key]:
             raise CheckpointError(f"{where}: written with {key} {meta[key]}, cannot resume "
                                   f"with {value}")
+    if options.reduction is not None and options.reduction != meta.get("reduction", "none"):
+        raise CheckpointError(f"{where}: written with reduction {meta.get('reduction', 'none')}, "
+                              f"cannot resume with {options.reduction}")
     for key in _SEARCH_FLAGS:
         if getattr(options, key) != getattr(CheckOptions, key) and \
                 getattr(options, key) != meta[key]:

@@ -22,6 +22,7 @@ from twinfleet.checker.checkpoint import CheckpointError
 from twinfleet.checker.diagnosis import ContractBreachError
 from twinfleet.checker.outcome import SearchStatistics
 from twinfleet.checker.properties import PropertyError
+from twinfleet.checker.reduction import REDUCTIONS
 from twinfleet.checker.semantics import Semantics
 from twinfleet.checker.trace import NondeterminismError, replay
 from twinfleet.runtime.node import NodeDefinitionError
@@ -79,6 +80,14 @@ def register(subparsers: Any) -> None:
     p.add_argument("--no-transition-cache", action="store_true",
                    help="re-run every handler instead of reusing the outcome of the same "
                    "(node state, event, time) (for comparison; same results, slower)")
+    p.add_argument("--reduction", choices=REDUCTIONS, default=None,
+                   help="partial-order reduction: por (explore one persistent set of "
+                   "simultaneous events per world; same verdicts, far fewer states for "
+                   "independent robots) or none (every interleaving). Default: por under ros, "
+                   "none under rebeca (its counts are compared with RMC's). It turns itself "
+                   "off, and says why in the summary, for settings it does not cover "
+                   "(check.queue_bound, properties reading now, --search random, rebeca "
+                   "node priorities)")
     p.add_argument("--checkpoint", default=None, metavar="FILE",
                    help="save the search to FILE periodically and when it stops early "
                    "(a limit or Ctrl-C); continue it with --resume FILE. A checkpoint is a "
@@ -130,7 +139,7 @@ def check_command(args: argparse.Namespace) -> int:
                            check_determinism=args.check_determinism, verify=args.verify,
                            transition_cache=not args.no_transition_cache,
                            checkpoint=args.checkpoint, checkpoint_every_s=args.checkpoint_every,
-                           resume=args.resume,
+                           resume=args.resume, reduction=args.reduction,
                            progress=None if args.quiet or args.json else _progress)
     try:
         result = check(args.scenario, options)

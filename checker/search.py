@@ -51,6 +51,7 @@ from twinfleet.checker.outcome import (
     peak_rss_mb,
 )
 from twinfleet.checker.properties import Property, PropertySet, PropertyViolation
+from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.store import StateStore
 from twinfleet.checker.system import System
 from twinfleet.checker.transition import Transition
@@ -63,6 +64,10 @@ __all__ = ["HOLDS", "UNKNOWN", "VIOLATED", "Counterexample", "Limits", "Outcome"
 
 _GRACE_S = 0.25  # after max-time, before a property still running is interrupted
 _FORGET_EVERY = 512  # expansions between two `System.forget_before` calls (at least)
+
+
+class _Restart(Exception):
+    """The send relation a reduced search relies on grew: explore again."""
 
 
 @final
@@ -78,6 +83,7 @@ class Search:
         checkpoint_every_s: seconds between periodic checkpoints.
         checkpoint_meta: what the checkpoint must record to be resumed (scenario, options).
         handle_sigint: stop cleanly on the first Ctrl-C (main thread only).
+        reduction: expand worlds by persistent sets (`checker.reduction`); None: fully.
     """
 
     def __init__(self, system: System, properties: PropertySet, limits: Limits = NO_LIMITS, *,
@@ -85,8 +91,9 @@ class Search:
                  progress_interval: float = 1.0, checkpoint: str | None = None,
                  checkpoint_every_s: float = 300.0,
                  checkpoint_meta: Mapping[str, Any] | None = None,
-                 handle_sigint: bool = True) -> None:
+                 handle_sigint: bool = True, reduction: Reduction | None = None) -> None:
         self.system = system
+        self.reduction = reduction
         self.properties = properties
         self.guard = Guard(limits, progress, progress_interval, handle_sigint)
         self._max_states = limits.max_states  # read once per new state
@@ -144,7 +151,7 @@ class Search:
                 if strategy not in ("bfs", "dfs"):
                     raise ValueError(f"unknown search strategy {strategy!r}")
                 self._lifo = strategy == "dfs"
-                self._explore()
+                self._explore_until_stable()
                 if self._pruned:
                     return self._outcome(UNKNOWN, f"max-depth {self.limits.max_depth} reached "
                                          "before the search finished")
@@ -199,7 +206,9 @@ class Search:
                     "pruned": self._pruned, "peak_frontier": c.peak_frontier,
                     "elapsed": self._elapsed_before + time.monotonic() - self.guard.started,
                     "hashed": self.system.hashed + self._hashed_before,
-                    "strategy": "dfs" if self._lifo else "bfs"}
+                    "strategy": "dfs" if self._lifo else "bfs",
+                    "publications": self.system.publications.__getstate__(),
+                    "reduction": None if self.reduction is None else self.reduction.stats}
         checkpoint.save(path, self._checkpoint_meta, self.store, list(self._frontier), counters)
         self._last_checkpoint = time.monotonic()
 
@@ -212,9 +221,39 @@ class Search:
         self._pruned = c["pruned"]
         self._elapsed_before = c["elapsed"]
         self._hashed_before = c["hashed"]
+        if "publications" in c:  # what the reduced search so far relied on
+            self.system.publications.__setstate__(c["publications"])
+        if self.reduction is not None and c.get("reduction") is not None:
+            self.reduction.stats = c["reduction"]
         self._resumed = True
 
     # -------------------------------------------------------- safety search
+
+    def _explore_until_stable(self) -> None:
+        """Explore; with a reduction, start again from scratch whenever the send relation
+        it relies on grew during the search (`checker.publications`)."""
+        reduction = self.reduction
+        while True:
+            if reduction is not None:
+                reduction.begin()
+            try:
+                self._explore()
+                return
+            except _Restart:
+                assert reduction is not None
+                reduction.restarted()
+                self._reset()
+
+    def _reset(self) -> None:
+        """Forget everything explored (a restart of a reduced search)."""
+        self.store = StateStore(exact=self.store.exact, record_edges=self.store.edges is not None,
+                                flags=tuple(self.store.holds))
+        self.counters = Counters()
+        self._frontier.clear()
+        self._expansions = 0
+        self._next_forget = _FORGET_EVERY
+        self._pruned = False
+        self._resumed = False
 
     def _explore(self) -> None:
         max_depth = self.limits.max_depth
@@ -226,6 +265,9 @@ class Search:
         pop = frontier.pop if self._lifo else frontier.popleft
         edges = self.store.edges
         successors = self.system.successors
+        reduction = self.reduction
+        find = self.store.find
+        lifo = self._lifo
         discover = self._discover
         counters = self.counters
         # without checkpoints, a tick is only the guard's (one call less per expansion)
@@ -239,7 +281,8 @@ class Search:
                 continue
             self._expanding = item
             children = []
-            for t in successors(world):
+            for t in (successors(world) if reduction is None
+                      else reduction.successors(world, find, None if lifo else sid)):
                 counters.transitions += 1
                 self._partial += 1
                 children.append(discover(t, sid, depth + 1))
@@ -247,6 +290,8 @@ class Search:
                 edges.set(sid, children)
             self._expanding = None
             self._partial = 0
+            if reduction is not None and reduction.stale:
+                raise _Restart
             self._expansions += 1
             if self._expansions >= self._next_forget:
                 self._forget()

@@ -54,6 +54,7 @@ from twinfleet.checker.cache import GenerationCache
 from twinfleet.checker.choices import Chooser, PrefixChooser
 from twinfleet.checker.diagnosis import FIX_HIDDEN
 from twinfleet.checker.faults import parse_settings
+from twinfleet.checker.publications import Publications
 from twinfleet.checker.runner import Runner
 from twinfleet.checker.semantics import Rules, Semantics
 from twinfleet.checker.topology import Topology
@@ -144,6 +145,8 @@ class System:
         self._worlds = WorldBuilder(self, monitors, exact=exact_states)
         self._world = self._worlds.world
         self._decoded: dict[bytes, Any] = {}
+        #: zero-delay sends seen in every handler run computed (`checker.reduction`)
+        self.publications = Publications(len(self.nodes))
 
     @property
     def semantics(self) -> Semantics:
@@ -226,14 +229,15 @@ class System:
         """`action` taken with every combination of answers to its choice points."""
         return [self._apply(world, action, v) for v in self._variants(world, action)]
 
-    def successors(self, world: World) -> Iterator[Transition]:
+    def successors(self, world: World, enabled: list[int] | None = None) -> Iterator[Transition]:
         """Every outcome of every action of `world`, in `actions` order (the same
-        transitions as `outcomes` of each of `actions`)."""
+        transitions as `outcomes` of each of `actions`); `enabled`: the world's enabled
+        event indices, if the caller has them already."""
         # The search's inner loop, so `actions` and `outcomes` are spelled out here: a hit
         # of the outcome cache (the key of `_variants`) costs one lookup (C1a: 96 % hits).
         events, states = world.events, world.states
         apply, memo = self._apply, self._memo
-        for index in self.rules.enabled(events):
+        for index in self.rules.enabled(events) if enabled is None else enabled:
             action = _RUN_EVENTS[index] if index < _SHARED else RunEvent(index)
             ev = events[index]
             found = None
@@ -264,6 +268,10 @@ class System:
             return self.runner.deadline_miss(ev, data)
         return self.runner.run(ev, data, chooser)
 
+    def variants(self, world: World, action: Action) -> list[Variant]:
+        """Every choice variant of `action` in `world`: what it does, before it is applied."""
+        return self._variants(world, action)
+
     def _variants(self, world: World, action: Action) -> list[Variant]:
         """Every choice variant of `action` in `world` (cached, see the module docstring)."""
         if type(action) is Drop:
@@ -273,8 +281,10 @@ class System:
             if ev.sk[3]:  # late: a deadline miss, nothing runs
                 return [self._variant(world, action, PrefixChooser())]
             mk: tuple[Any, ...] = (world.states[ev.target], ev.key, ev.due)  # time last
+            sender = (ev.target, ev.method)
         else:
             j = action.node
+            sender = (j, "")
             mk = (EventKind.CRASH, j, self._crash_state(world, j), world.events[0].due)
         memo = self._memo
         found = None if memo is None else memo.get(mk)
@@ -286,6 +296,7 @@ class System:
             chooser = PrefixChooser(prefix)
             variants.append(self._variant(world, action, chooser))
             prefix = chooser.next_prefix()
+        self.publications.observe(sender, mk[-1], variants)
         if memo is not None:
             memo.put(mk, variants)
         return variants

@@ -71,7 +71,7 @@ def test_non_working_cases_collide_in_the_fixed_profile(name):
 
 
 def test_c1a_holds_in_the_fixed_profile_under_ros_semantics_including_arrival():
-    result = run("c1a")
+    result = run("c1a", reduction="none")  # the full graph (the reduced one: docs/reduction.md)
     assert result.status == "holds"
     assert "all_arrive" in " ".join(result.properties)
     assert result.statistics.states == 41_608
@@ -79,7 +79,7 @@ def test_c1a_holds_in_the_fixed_profile_under_ros_semantics_including_arrival():
 
 
 def test_headon_collides_and_the_shortest_trace_is_found():
-    result = run("headon")
+    result = run("headon", reduction="none")  # reduced: shortest in the reduced graph only
     assert result.status == "violated"
     assert result.violation.property == "no_collision"
     assert len(result.trace["steps"]) == 162

@@ -37,8 +37,10 @@ def scenario(tmp_path: Path, nodes: list[dict[str, Any]], *, properties: list[di
 
 
 def run(path: Path, **options: Any) -> CheckResult:
-    """check() with a trace file in the scenario's directory."""
+    """check() with a trace file in the scenario's directory; unreduced unless `reduction`
+    is given (hand counts and traces are of the full graph; None: the default)."""
     options.setdefault("trace_out", str(path.with_suffix(".trace.json")))
+    options.setdefault("reduction", "none")
     return check(path, CheckOptions(**options))
 
 

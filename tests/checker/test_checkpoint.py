@@ -27,7 +27,9 @@ def _counts(result):
 
 
 @pytest.mark.parametrize(("path", "search", "stop_at"), [
-    (C1A, "bfs", 15_000),  # with edges for the `eventually` property, checked after resuming
+    # with edges for the `eventually` property, checked after resuming; the reduction (on by
+    # default under ros: 6,176 of C1a's 41,608 states) resumes with the send relation it learned
+    (C1A, "bfs", 3_000),
     (C1A_REBECA, "dfs", 7_000),
 ])
 def test_resume_after_a_state_limit_matches_an_uninterrupted_search(tmp_path, path, search,
@@ -85,7 +87,7 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
                                node("p", "Picker", second=[0, 100])], name="mix",
                     properties=[{"name": "f", "kind": "eventually",
                                  "expr": "a.stage == 'done' and b.stage == 'done'"}])
-    whole = check(path, CheckOptions())
+    whole = check(path, CheckOptions(reduction="none"))  # the Search below is unreduced
     calls = []
 
     def interrupt(stats):

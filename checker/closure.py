@@ -1,0 +1,171 @@
+"""The closure of a seed node under C-in and C-out: a persistent set of one world.
+
+`checker.reduction` explains the conditions; this module computes them for one
+world at time t from what the world holds (its events due t, their channels and
+priorities), the variants of the events considered (what they create at whom at
+t) and the learned send relation (`checker.publications`: which handlers may
+still run at t, and what they may create at whom).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Final, final
+
+from twinfleet.checker.publications import KNOWN_KINDS
+from twinfleet.checker.transition import RunEvent
+
+if TYPE_CHECKING:
+    from twinfleet.checker.publications import Publications
+    from twinfleet.checker.system import System
+    from twinfleet.checker.visibility import Visibility
+    from twinfleet.checker.world import World
+
+_INF: Final = 1 << 62  # the enabled priority of a node with nothing enabled
+
+
+@final
+class Closure:
+    """The facts of one world the closure reads, and the closure (module docstring).
+
+    Args:
+        system: the system searched.
+        publications: the learned send relation.
+        visibility: what the properties read.
+        world: the world to expand.
+        enabled: indices of its enabled events.
+    """
+
+    def __init__(self, system: System, publications: Publications, visibility: Visibility,
+                 world: World, enabled: list[int]) -> None:
+        self.system = system
+        self.publications = publications
+        self.visibility = visibility
+        self.world = world
+        self.enabled = enabled
+        events = world.events
+        self.t = t = events[0].due
+        self.by_node: dict[int, list[int]] = {}
+        for i in enabled:
+            self.by_node.setdefault(events[i].target, []).append(i)
+        self.p = {x: events[idxs[0]].priority for x, idxs in self.by_node.items()}
+        self.due: set[tuple[int, str]] = set()  # handlers with an event due t
+        self.harmless: set[tuple[int, int]] = set()  # channels with a message at p_target
+        self.unknown = False
+        fifo = system.rules.fifo
+        for ev in events:
+            if ev.due != t:
+                break
+            self.unknown |= ev.kind not in KNOWN_KINDS
+            self.due.add((ev.target, ev.method))
+            if fifo and ev.message and ev.priority == self.p.get(ev.target):
+                self.harmless.add((ev.sender, ev.target))
+        self._sends: dict[int, list[tuple[int, int]] | None] = {}
+        self._tops: dict[int, tuple[set[tuple[int, str]], int]] = {}
+
+    def runnable(self, frozen: set[int]) -> set[tuple[int, str]]:
+        """Handlers of nodes outside `frozen` that may run at t: those with an event due
+        and those such handlers may trigger at zero delay (the learned relation)."""
+        out = self.publications.out
+        reach = [h for h in self.due if h[0] not in frozen]
+        seen = set(reach)
+        while reach:
+            for h in out.get(reach.pop(), ()):
+                if h not in seen and h[0] not in frozen:
+                    seen.add(h)
+                    reach.append(h)
+        return seen
+
+    def sends(self, i: int) -> list[tuple[int, int]] | None:
+        """(target, priority) of the events due t that some variant of event i creates at
+        other nodes; None if one is of a kind the reduction does not know."""
+        if i in self._sends:
+            return self._sends[i]
+        world = self.world
+        ev = world.events[i]
+        found: list[tuple[int, int]] | None = []
+        for v in self.system.variants(world, RunEvent(i)):
+            for e in v.events:
+                if e.kind not in KNOWN_KINDS:
+                    found = None
+                    break
+                if e.due == self.t and e.target != ev.target:
+                    found.append((e.target, e.priority))
+            if found is None:
+                break
+        self._sends[i] = found
+        return found
+
+    def persistent(self, seed: int) -> list[int] | None:
+        """The persistent set grown from `seed`, if smaller than everything and invisible
+        (a visible event may still be guarded by adding the nodes of a guard)."""
+        nodes = self.grow({seed})
+        for _ in range(len(self.by_node)):
+            if nodes is None:
+                return None
+            chosen = sorted(i for x in nodes for i in self.by_node.get(x, ()))
+            if len(chosen) == len(self.enabled):
+                return None
+            guard = self.visibility.needs(self.system, self.world, chosen, nodes)
+            if guard is None:
+                return chosen
+            if not guard or guard <= nodes:
+                return None
+            nodes = self.grow(nodes | guard)
+        return None
+
+    def grow(self, start: set[int]) -> set[int] | None:
+        """Close `start` under C-in and C-out; None when it must hold every enabled node."""
+        into = self.publications.into
+        frozen = set(start)
+        work = list(start)
+        can = self.runnable(frozen)
+        while work:
+            x = work.pop()
+            added = self._incoming(x, frozen, can, into[x]) + self._outgoing(x, frozen, can)
+            added = [y for y in added if y not in frozen]
+            if not added:
+                continue
+            frozen.update(added)
+            work += added
+            if all(n in frozen for n in self.by_node):
+                return None
+            can = self.runnable(frozen)
+        return frozen
+
+    def _incoming(self, x: int, frozen: set[int], can: set[tuple[int, str]],
+                  senders: dict[tuple[int, str], set[tuple[str, int]]]) -> list[int]:
+        """C-in for node x: the nodes of runnable handlers that may disturb it."""
+        px = self.p.get(x, _INF)
+        out = []
+        for h, made in senders.items():
+            y = h[0]
+            if y in frozen or h not in can:
+                continue
+            for _, q in made:
+                if q < px or (q == px and (y, x) not in self.harmless):
+                    out.append(y)
+                    break
+        return out
+
+    def _outgoing(self, x: int, frozen: set[int], can: set[tuple[int, str]]) -> list[int]:
+        """C-out for the events of node x: the receivers to add (every node if unknown)."""
+        out = []
+        for i in self.by_node.get(x, ()):
+            sent = self.sends(i)
+            if sent is None:
+                return list(self.by_node)
+            for b, q in sent:
+                if b not in frozen and self._top(b, can) > q:
+                    out.append(b)
+        return out
+
+    def _top(self, b: int, can: set[tuple[int, str]]) -> int:
+        """The highest priority number among node b's handlers that may run at t."""
+        cached = self._tops.get(b)
+        if cached is not None and cached[0] is can:
+            return cached[1]
+        priority = self.system.topology.priority
+        top = max((priority(b, m) for n, m in can if n == b), default=-_INF)
+        self._tops[b] = (can, top)
+        return top
+

@@ -1,0 +1,158 @@
+"""The partial-order reduction (issue 12): exact reduced counts of hand-counted models,
+where it turns itself off and how the result says which reduction ran.
+
+Notation as in tests/checker/test_counts.py: a world is "what is done {pending}".
+"""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.checker.helpers import counts, node, replay_confirms, run, scenario
+from twinfleet.checker import reduction
+from twinfleet.checker.check import CheckOptions, check
+from twinfleet.cli import main
+
+pytestmark = pytest.mark.timeout(60)
+
+SUM_OK = {"name": "total_ok", "kind": "invariant", "expr": "sum.total in (0, 1, 2, 3, 4, 5, 6, 7)"}
+
+
+@pytest.mark.parametrize(("reduction", "expected"), [
+    # Three independent zero-delay flag timers at t=0. Unreduced: every subset of raised
+    # flags is a world, 8 states; a world with k flags pending has k transitions, 12.
+    ("none", (8, 12, 13)),
+    # Reduced: each world's persistent set is the lowest node's flag alone (no node sends
+    # anything, so nothing can disturb it): {f1,f2,f3} -> {f2,f3} -> {f3} -> {}: 4 states,
+    # 3 transitions.
+    ("por", (4, 3, 4)),
+])
+def test_independent_flags(tmp_path, reduction, expected):
+    path = scenario(tmp_path, [node(f"f{i}", "Flagger") for i in (1, 2, 3)])
+    result = run(path, reduction=reduction)
+    assert result.status == "holds"
+    assert counts(result) == expected
+    assert result.reduction.split(" ")[0] == reduction
+
+
+@pytest.mark.parametrize(("reduction", "expected"), [
+    # Two flags f1, f2 and a shared sink `sum` receiving 1, 2 (FIFO, from `two`) and 4.
+    # Unreduced: 4 flag combinations x the sink's 6 worlds (see test_counts) = 24 states;
+    # transitions: per flag combination the sink's 7, plus 2 x 6 + 2 x 6 flag steps = 52.
+    ("none", (24, 52, 53)),
+    # Reduced: f1's flag, then f2's, each alone ({f1,f2,1,2,4} -> {f2,1,2,4} -> {1,2,4});
+    # then only the sink has enabled events, which are all dependent (one node): its 6
+    # worlds and 7 transitions in full. 2 + 6 = 8 states, 2 + 7 = 9 transitions. The
+    # invariant reads the sink only, so the flags are invisible to it.
+    ("por", (8, 9, 10)),
+])
+def test_flags_and_a_shared_sink(tmp_path, reduction, expected):
+    path = scenario(tmp_path, [node("f1", "Flagger"), node("f2", "Flagger"),
+                               node("two", "TwoSender"), node("four", "FourSender"),
+                               node("sum", "Summer")], properties=[SUM_OK])
+    result = run(path, reduction=reduction)
+    assert result.status == "holds"
+    assert counts(result) == expected
+
+
+def test_default_is_por_under_ros_and_none_under_rebeca(tmp_path):
+    nodes = [node("f1", "Flagger"), node("f2", "Flagger")]
+    ros = run(scenario(tmp_path, nodes), reduction=None)
+    rebeca = run(scenario(tmp_path, nodes, semantics="rebeca"), reduction=None)
+    assert ros.reduction.startswith("por (")
+    assert rebeca.reduction == "none (default under rebeca)"
+    assert counts(rebeca) == (4, 4, 5)
+    forced = run(scenario(tmp_path, nodes, semantics="rebeca"), reduction="por")
+    assert forced.reduction.startswith("por (") and counts(forced) == (3, 2, 3)
+
+
+@pytest.mark.parametrize(("extra", "why"), [
+    ({"check": {"queue_bound": 5}}, "none (check.queue_bound reads the pending counts)"),
+    ({"properties": [{"name": "soon", "kind": "invariant", "expr": "now < 10 or f1.done"}]},
+     "none (a property reads now)"),
+    ({"search": "random"}, "none (random walks pick among all actions)"),
+])
+def test_turns_itself_off_and_says_why(tmp_path, extra, why):
+    nodes = [node("f1", "Flagger"), node("f2", "Flagger")]
+    path = scenario(tmp_path, nodes, properties=extra.get("properties"),
+                    **extra.get("check", {}))
+    result = run(path, search=extra.get("search"), reduction=None)
+    assert result.reduction == why
+    assert why in result.summary()
+    assert result.to_json()["reduction"] == why
+
+
+def test_rebeca_node_priorities_turn_it_off(tmp_path):
+    path = scenario(tmp_path, [node("f1", "Flagger", 1), node("f2", "Flagger", 2)],
+                    semantics="rebeca")
+    result = run(path, reduction="por")
+    assert result.reduction == "none (node-instance priorities under rebeca (Rule 4))"
+    assert counts(result) == (3, 2, 3)
+
+
+def test_reduced_counterexample_replays(tmp_path):
+    # A violation behind independent flags: the reduced trace is an ordinary path.
+    bad = {"name": "small", "kind": "invariant", "expr": "sum.total < 3"}
+    path = scenario(tmp_path, [node("f1", "Flagger"), node("f2", "Flagger"),
+                               node("two", "TwoSender"), node("four", "FourSender"),
+                               node("sum", "Summer")], properties=[bad])
+    result = run(path, reduction="por")
+    assert result.status == "violated"
+    assert replay_confirms(result)
+
+
+def test_cli_flag_and_json(tmp_path, capsys):
+    path = scenario(tmp_path, [node(f"f{i}", "Flagger") for i in (1, 2, 3)])
+    code = main(["check", str(path), "--json", "--reduction", "none"])
+    doc = json.loads(capsys.readouterr().out)
+    assert code == 0 and doc["reduction"] == "none" and doc["states"] == 8
+    code = main(["check", str(path), "--json"])
+    doc = json.loads(capsys.readouterr().out)
+    assert doc["reduction"].startswith("por") and doc["states"] == 4
+    # S0 and S1 are reduced; S2 (one event left) and the terminal S3 count as full
+    assert (doc["reduction_statistics"]["reduced"], doc["reduction_statistics"]["full"]) == (2, 2)
+
+
+def test_unknown_reduction_is_bad_input(tmp_path):
+    path = scenario(tmp_path, [node("f1", "Flagger")])
+    with pytest.raises(ValueError, match="unknown reduction 'fast'"):
+        check(path, CheckOptions(reduction="fast"))
+
+
+def test_the_rules_it_was_checked_against_are_the_rules_that_run():
+    # A changed enabling or effect rule (checker/semantics.py, Runner._effects) may make
+    # events dependent that the closure treats as independent: review checker/reduction.py
+    # for the new rule, then update RULES_FINGERPRINT.
+    assert reduction.rules_fingerprint() == reduction.RULES_FINGERPRINT
+
+
+def test_changed_rules_turn_it_off(tmp_path, monkeypatch):
+    monkeypatch.setattr(reduction, "RULES_FINGERPRINT", "0" * 16)
+    result = run(scenario(tmp_path, [node("f1", "Flagger"), node("f2", "Flagger")]),
+                 reduction=None)
+    assert result.reduction.startswith("none (the enabling rules changed")
+    assert counts(result) == (4, 4, 5)
+
+
+@pytest.mark.parametrize(("reduction", "expected"), [
+    # Ping-pong (3 rounds: 7 worlds in a chain, see test_counts) beside an independent flag.
+    # Unreduced: each chain world with and without the flag, 14 states; 6 chain steps twice
+    # and 7 flag steps, 19 transitions.
+    ("none", (14, 19, 20)),
+    # Reduced: the chain first (pong's and ping's events alone: nothing else can send to
+    # them at the instant), the flag last: 8 states, 7 transitions. The send relation is
+    # learned on the way: pong's on_ping sends to ping (restart 1), ping's on_pong to pong
+    # (restart 2); the third search knows both from its start.
+    ("por", (8, 7, 8)),
+])
+def test_send_relation_is_learned_with_restarts(tmp_path, reduction, expected):
+    path = scenario(tmp_path, [node("ping", "Ping", rounds=3), node("pong", "Pong"),
+                               node("f", "Flagger")])
+    result = run(path, reduction=reduction)
+    assert counts(result) == expected
+    if reduction == "por":
+        assert result.reduction_statistics is not None
+        assert result.reduction_statistics["restarts"] == 2
+        assert "2 restarts" in result.reduction
