@@ -60,7 +60,7 @@ from typing import TYPE_CHECKING, Final, final
 from twinfleet.checker.closure import Closure
 from twinfleet.checker.faults import CheckSettings
 from twinfleet.checker.semantics import Rules, Semantics
-from twinfleet.checker.transition import RunEvent, Transition
+from twinfleet.checker.transition import Drop, RunEvent, Transition
 from twinfleet.checker.visibility import Visibility
 
 if TYPE_CHECKING:
@@ -77,14 +77,15 @@ _INF: Final = 1 << 62  # larger than any state id
 _KNOWN_SETTINGS: Final = frozenset({"latency", "topic_latency", "deadline_default",
                                     "deadlines", "queue_bounds", "drop", "duplicate", "crash"})
 _KNOWN_RULES: Final = frozenset({"semantics", "node_priorities", "global_priority",
-                                 "settings", "fifo", "has_latency", "_ranges"})
+                                 "settings", "depths", "lossy", "fifo", "has_latency",
+                                 "_ranges", "_shallowest"})
 
 #: The source of the code that decides what is enabled and what a transition does to the
 #: pending events, as this module's closure was checked against it. A change there (a new
 #: rule: KEEP_LAST dropping pending deliveries, a new kind of fault) may make events
 #: dependent that the closure treats as independent, so it turns the reduction off until
 #: the closure has been reviewed for it and the fingerprint updated (`rules_fingerprint`).
-RULES_FINGERPRINT: Final = "0f71594341dbd63b"
+RULES_FINGERPRINT: Final = "db02353acc8a2eb5"  # reviewed for Rule 6 (KEEP_LAST, BEST_EFFORT) and no-server branches
 
 
 def rules_fingerprint() -> str:
@@ -93,7 +94,7 @@ def rules_fingerprint() -> str:
 
     rules = semantics.Rules
     functions = (rules.enabled, rules._across_nodes, rules.add, rules.remove, rules.delivery,
-                 rules.copies, rules.crashable, semantics._earliest_sent,
+                 rules.copies, rules.crashable, rules.droppable, semantics._earliest_sent,
                  runner.Runner._effects, system.System._apply, system.System._apply_crash)
     digest = hashlib.sha256()
     for fn in functions:
@@ -207,6 +208,7 @@ class Reduction:
         out: list[Transition] = []
         for i in chosen:
             out += system.outcomes(world, RunEvent(i))
+        out += self._drops(world, {world.events[i].target for i in chosen})
         t = world.events[0].due
         for tr in out:
             w = tr.world
@@ -217,6 +219,16 @@ class Reduction:
                 return list(system.successors(world, enabled))
         self.stats.reduced += 1
         return out
+
+    def _drops(self, world: World, nodes: set[int]) -> list[Transition]:
+        """The KEEP_LAST drops (Rule 6) of the chosen nodes' waiting deliveries: actions of
+        those nodes, so a node-granular set takes them with its events. A drop of another
+        node's delivery commutes with every chosen event: it only shortens that node's
+        queue, which no other node's enabling reads, and a send into the queue (a chosen
+        event's effect) leaves an enabled drop enabled."""
+        events = world.events
+        return [t for k in self.rules.droppable(events) if events[k].target in nodes
+                for t in self.system.outcomes(world, Drop(k))]
 
     def _choose(self, world: World, enabled: list[int]) -> list[int] | None:
         """A persistent set of the `enabled` event indices smaller than all, or None."""

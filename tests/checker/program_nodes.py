@@ -45,6 +45,8 @@ from twinfleet import (
     CallError,
     Context,
     Node,
+    QoS,
+    Reliability,
     every,
     handler,
     message,
@@ -227,6 +229,19 @@ class ProgramNode(Node):
             self._run(ctx, "reply", 0, MOD - 1)
         else:
             self._run(ctx, "reply", reply.ttl, reply.value)
+
+
+class ShallowProgramNode(ProgramNode):
+    """A program node whose QoS can lose messages (Rule 6): its `/bus` subscription keeps
+    one waiting message (KEEP_LAST depth 1) and its `in2` one is BEST_EFFORT."""
+
+    @subscribe(BUS, priority=PRIORITIES["bus"], qos=QoS(depth=1))
+    def on_bus(self, ctx: Context, msg: Token) -> None:
+        self._run(ctx, "bus", msg.ttl, msg.value)
+
+    @subscribe("in2", priority=PRIORITIES["in2"], qos=QoS(Reliability.BEST_EFFORT, depth=2))
+    def on_in2(self, ctx: Context, msg: Token) -> None:
+        self._run(ctx, "in2", msg.ttl, msg.value)
 
 
 class PeriodicProgramNode(ProgramNode):

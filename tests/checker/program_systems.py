@@ -28,8 +28,10 @@ from hypothesis import strategies as st
 from tests.checker.program_nodes import BUS, INPUT_TOPICS, MOD, REGISTERS, SERVICE, TIMER_SLOTS
 
 CLASSES = {"plain": "tests.checker.program_nodes:ProgramNode",
+           "shallow": "tests.checker.program_nodes:ShallowProgramNode",
            "periodic": "tests.checker.program_nodes:PeriodicProgramNode"}
 HANDLERS_OF = {"plain": ("start", "in0", "in1", "in2", "bus", "svc", "t0", "t1", "reply"),
+               "shallow": ("start", "in0", "in1", "in2", "bus", "svc", "t0", "t1", "reply"),
                "periodic": ("start", "in0", "in1", "in2", "bus", "svc", "t0", "t1", "reply",
                             "tick")}
 NO_SERVER = "/nobody/svc"  # a call to it ends in CallError("no server") after its timeout
@@ -96,7 +98,7 @@ def _action(names: list[str]) -> st.SearchStrategy[list[Any]]:
 
 @st.composite
 def _node(draw: st.DrawFn, name: str, names: list[str], semantics: str) -> dict[str, Any]:
-    kind = draw(st.sampled_from(["plain", "plain", "periodic"]))
+    kind = draw(st.sampled_from(["plain", "plain", "shallow", "periodic"]))
     action = _action(names)
     program: dict[str, list[Any]] = {}
     if name == names[0] or draw(st.booleans()):  # n1 starts something: not one state
