@@ -51,13 +51,17 @@ class Closure:
         self.due: set[tuple[int, str]] = set()  # handlers with an event due t
         self.harmless: set[tuple[int, int]] = set()  # channels with a message at p_target
         self.unknown = False
-        fifo = system.rules.fifo
+        fifo, depths = system.rules.fifo, system.rules.depths
         for ev in events:
             if ev.due != t:
                 break
             self.unknown |= ev.kind not in KNOWN_KINDS
             self.due.add((ev.target, ev.method))
-            if fifo and ev.message and ev.priority == self.p.get(ev.target):
+            if fifo and ev.message and ev.priority == self.p.get(ev.target) and \
+                    (ev.target, ev.method) not in depths:
+                # A later message on a FIFO channel cannot overtake this one, so its sender
+                # cannot disturb the target; but into a KEEP_LAST queue (Rule 6) it could
+                # push the target over its depth and let this delivery be dropped.
                 self.harmless.add((ev.sender, ev.target))
         self._sends: dict[int, list[tuple[int, int]] | None] = {}
         self._tops: dict[int, tuple[set[tuple[int, str]], int]] = {}
