@@ -49,10 +49,10 @@ from __future__ import annotations
 from collections.abc import Iterator
 from typing import TYPE_CHECKING, Any, final
 
+from twinfleet.checker import start
 from twinfleet.checker.builder import WorldBuilder
 from twinfleet.checker.cache import GenerationCache
 from twinfleet.checker.choices import Chooser, PrefixChooser
-from twinfleet.checker.diagnosis import FIX_HIDDEN
 from twinfleet.checker.faults import parse_settings
 from twinfleet.checker.publications import Publications
 from twinfleet.checker.runner import Runner
@@ -69,7 +69,7 @@ from twinfleet.checker.transition import (
     Variant,
 )
 from twinfleet.checker.world import ENVIRONMENT, Event, World
-from twinfleet.runtime.kinds import EventKind, FailureKind
+from twinfleet.runtime.kinds import EventKind
 from twinfleet.runtime.scenario import Scenario, ScenarioError
 from twinfleet.runtime.snapshot import restore
 
@@ -162,55 +162,12 @@ class System:
 
     def initial(self) -> list[Transition]:
         """Every initial world (one per combination of choices made by start handlers)."""
-        result = []
-        prefix: tuple[int, ...] | None = ()
-        while prefix is not None:
-            chooser = PrefixChooser(prefix)
-            t = self.initial_world(chooser=chooser)
-            if self.runner.verify and t.failure is None:
-                t = self._recheck_start(t)
-            result.append(t)
-            prefix = chooser.next_prefix()
-        return result
+        return start.initial_transitions(self)
 
     def initial_world(self, choices: tuple[int, ...] = (), *,
                       chooser: Chooser | None = None) -> Transition:
         """The initial world reached with the start-handler `choices` (or `chooser`)."""
-        chooser = chooser if chooser is not None else PrefixChooser(choices)
-        states = list(self.topology.initial_states)
-        pending: list[Event] = []
-        for ev in self.topology.started():  # before the start handlers' events: Zenoh
-            self.rules.add(pending, ev)     # announces a node before it runs anything
-        failure, logs, faults, branches = None, [], [], []
-        i = 0
-        for i in range(len(self.nodes)):
-            v = self.runner.start(i, states[i], 0, chooser)
-            states[i] = v.state
-            logs += v.logs
-            faults += v.faults
-            branches += v.branches
-            for ev in v.events:
-                self.rules.add(pending, ev)
-            failure = v.failure
-            if failure is not None:
-                break
-        step = Step(None, tuple(chooser.indices), tuple(chooser.options))
-        world = self._world(0, tuple(states), pending, None)
-        label = Event(0, EventKind.START, i, "", ENVIRONMENT, (), 0)
-        return Transition(step, world, label, failure, tuple(logs), tuple(faults), tuple(branches))
-
-    def _recheck_start(self, t: Transition) -> Transition:
-        self.runner.forget_loaded()
-        again = self.initial_world(t.step.choices)
-        if again.world.digest == t.world.digest and again.step == t.step:
-            return t
-        differ = [name for name, a, b in zip(self.names, t.world.states, again.world.states,
-                                             strict=True) if a != b] or list(self.names)
-        failure = Failure(FailureKind.NONDETERMINISM, ", ".join(differ), "on_start",
-                          "running every node's start handlers twice gave different initial "
-                          f"worlds (a start handler depends on another's hidden state); fix: "
-                          f"{FIX_HIDDEN}")
-        return Transition(t.step, t.world, t.event, failure, t.logs, t.faults)
+        return start.initial_world(self, self._worlds, choices, chooser=chooser)
 
     def actions(self, world: World) -> list[Action]:
         """What may happen next: each enabled event (`RunEvent`), then each crash fault, then

@@ -71,7 +71,7 @@ from __future__ import annotations
 import heapq
 import pickle
 from collections import deque
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final, Protocol, final
 
@@ -198,6 +198,47 @@ class _Subscription:
         msg, stamp, seq, sender = sample
         return Entry(EventKind.DELIVERY, self.method, (msg,), sender, self.topic, seq, stamp)
 
+    def receiver(self, n: dict[str, int], counter: Iterator[int],
+                 inbox: list[tuple[int, int, int, Any]], last_seq: dict[str, int]) -> Receive:
+        """`NodeCore.receiver` of this subscription: counters `n`, the core's tie-breaking
+        `counter` and `inbox`, and the last sequence number per sender of its topic."""
+        # Everything is bound once here: one sample costs a decode, a gap check, a deque
+        # append and a heap push, with no attribute chains.
+        sub, push = self, heapq.heappush
+        waiting, priority, gap_counter = self.waiting, self.priority, self.gap_counter
+        lossless, admit = self.lossless, self.admit
+
+        def receive(payload: bytes, arrival_ms: int) -> bool:
+            n["received"] += 1
+            try:
+                sample = decode_fields(payload)
+            except Exception as exc:  # DecodeError (anything else would be a codec bug)
+                n["undecodable"] += 1
+                raise DecodeError(str(exc)) from None
+            try:  # before the gap check: a refused sample leaves no trace in the core
+                admit(sample[0])
+            except Rejected as exc:
+                n[exc.counter] += 1
+                raise
+            seq, sender = sample[2], sample[3]
+            last = last_seq.get(sender)
+            if last is not None and seq > last + 1:
+                if seq - last <= MAX_GAP:
+                    n[gap_counter] += seq - last - 1
+                else:  # not a loss: a sender that lies about its numbers, or a corrupt one
+                    n["seq_jumps"] += 1
+            last_seq[sender] = seq
+            if len(waiting) == waiting.maxlen:  # KEEP_LAST: the oldest waiting sample goes
+                waiting.append(sample)
+                n["keep_last"] += 1
+                n["lossless"] += lossless
+                return False
+            waiting.append(sample)
+            push(inbox, (arrival_ms, priority, next(counter), sub))
+            return True
+
+        return receive
+
     def take(self, entry: Entry, inbox: list[tuple[int, int, int, Any]]) -> bool:
         """Remove the sample `entry` was made of, and one inbox slot; False if not waiting."""
         k = next((i for i, (msg, _, seq, sender) in enumerate(self.waiting)
@@ -208,6 +249,38 @@ class _Subscription:
         inbox.remove(sorted(key for key in inbox if key[3] is self)[k])
         heapq.heapify(inbox)
         return True
+
+
+@final
+class Rollback:
+    """A handler that raises changes nothing (module docstring, 6): the node's state after
+    the last handler that went well, kept as a pickled copy, is put back."""
+
+    __slots__ = ("node", "saved")
+
+    def __init__(self, node: Node) -> None:
+        self.node = node
+        self.saved: bytes | None = None
+
+    def arm(self) -> None:
+        """Copy the state once, before the first handler runs."""
+        if self.saved is None:
+            self.saved = pickle.dumps(self.node.state, _PICKLE)
+
+    def keep_or_restore(self, method: str, error: HandlerError | None,
+                        ctx: Context) -> HandlerError | None:
+        """Keep the state a handler left, or put back the one before it ran when it failed
+        or left a state that cannot be copied (that is then its error)."""
+        node = self.node
+        if error is None:
+            try:
+                self.saved = pickle.dumps(node.state, _PICKLE)
+                return None
+            except (pickle.PicklingError, TypeError, AttributeError) as exc:
+                error = HandlerError(node.name, method, f"state cannot be copied: {exc}")
+        ctx.effects.clear()  # a bad service reply too: the checker keeps none of its effects
+        node.state = pickle.loads(self.saved)  # type: ignore[arg-type]
+        return error
 
 
 @final
@@ -247,7 +320,7 @@ class NodeCore:
             elif self._liveliness is None:
                 self._liveliness = spec
         self.services = {s.method: node.resolve(s.name or "") for s in self.spec.of_kind("service")}
-        self._saved: bytes | None = None  # the state after the last handler that went well
+        self._rollback = Rollback(node)
 
     def observe(self, observer: Observer) -> None:
         """Tell `observer` about every handler run from now on."""
@@ -279,43 +352,8 @@ class NodeCore:
         (counted) for a payload that is not a twinfleet envelope.
         """
         sub = self._subs[method]
-        # Everything is bound once here: one sample costs a decode, a gap check, a deque
-        # append and a heap push, with no attribute chains.
-        n, counter, push, inbox = self._n, self._counter, heapq.heappush, self._inbox
-        waiting, priority, gap_counter = sub.waiting, sub.priority, sub.gap_counter
-        lossless, admit = sub.lossless, sub.admit
         last_seq = self._last_seq.setdefault(sub.topic, {})  # shared by one topic's subscriptions
-
-        def receive(payload: bytes, arrival_ms: int) -> bool:
-            n["received"] += 1
-            try:
-                sample = decode_fields(payload)
-            except Exception as exc:  # DecodeError (anything else would be a codec bug)
-                n["undecodable"] += 1
-                raise DecodeError(str(exc)) from None
-            try:  # before the gap check: a refused sample leaves no trace in the core
-                admit(sample[0])
-            except Rejected as exc:
-                n[exc.counter] += 1
-                raise
-            seq, sender = sample[2], sample[3]
-            last = last_seq.get(sender)
-            if last is not None and seq > last + 1:
-                if seq - last <= MAX_GAP:
-                    n[gap_counter] += seq - last - 1
-                else:  # not a loss: a sender that lies about its numbers, or a corrupt one
-                    n["seq_jumps"] += 1
-            last_seq[sender] = seq
-            if len(waiting) == waiting.maxlen:  # KEEP_LAST: the oldest waiting sample goes
-                waiting.append(sample)
-                n["keep_last"] += 1
-                n["lossless"] += lossless
-                return False
-            waiting.append(sample)
-            push(inbox, (arrival_ms, priority, next(counter), sub))
-            return True
-
-        return receive
+        return sub.receiver(self._n, self._counter, self._inbox, last_seq)
 
     def receive_request(self, method: str, payload: bytes, responder: Any,
                         arrival_ms: int) -> Sequence[Output]:
@@ -486,10 +524,9 @@ class NodeCore:
         """Run one handler; what it did, as outputs (and its effects and error, for observers)."""
         node = self.node
         ctx = Context(node, now, chooser)
-        if self._saved is None:
-            self._saved = pickle.dumps(node.state, _PICKLE)
+        self._rollback.arm()
         reply, error = invoke(node, method, ctx, args, responder is not None)
-        error = self._keep_or_roll_back(method, error, ctx)
+        error = self._rollback.keep_or_restore(method, error, ctx)
         self._n["handled"] += 1
         effects = ctx.effects
         if error is None and responder is None:  # the common case: a handler that went well
@@ -505,21 +542,6 @@ class NodeCore:
                 error = error or self._outbox.translate(effects, now, method, out)
         error = self._outbox.finish(method, args, reply, error, responder, now, out)
         return out, effects, error
-
-    def _keep_or_roll_back(self, method: str, error: HandlerError | None,
-                           ctx: Context) -> HandlerError | None:
-        """Keep the state a handler left (a pickled copy), or put back the one before it ran
-        when it failed or left a state that cannot be copied (module docstring, 6)."""
-        node = self.node
-        if error is None:
-            try:
-                self._saved = pickle.dumps(node.state, _PICKLE)
-                return None
-            except (pickle.PicklingError, TypeError, AttributeError) as exc:
-                error = HandlerError(node.name, method, f"state cannot be copied: {exc}")
-        ctx.effects.clear()  # a bad service reply too: the checker keeps none of its effects
-        node.state = pickle.loads(self._saved)  # type: ignore[arg-type]
-        return error
 
     def statistics(self, dropped_overflow: int = 0,
                    transport: Mapping[str, int] | None = None) -> HostStatistics:

@@ -51,6 +51,7 @@ from twinfleet.runtime.messages import DecodeError
 from twinfleet.runtime.names import key_expr
 from twinfleet.runtime.node import QOS_DEFAULT, Node
 from twinfleet.runtime.outbox import Answer, Line, Output, Put, Query, Stop
+from twinfleet.runtime.readiness import Readiness
 from twinfleet.runtime.replay_gate import LogicalClock, ReplayGate, gate_key
 from twinfleet.runtime.transport import Respond, Transport, epoch_key, graph_key, parse_graph_key
 
@@ -89,15 +90,13 @@ class NodeHost:
                  restarted: bool = False) -> None:
         self.node, self.transport, self.clock, self.fleet = node, transport, clock, fleet
         self.fleet_epoch, self.restarted = fleet_epoch, restarted
-        self._epoch: int | None = None
-        self.wait_for, self.ready_timeout_s = tuple(wait_for), ready_timeout_s
+        self.readiness = Readiness(wait_for, ready_timeout_s, fleet_epoch)
         self.out = out if out is not None else sys.stdout
         self.core = NodeCore(node, seed=seed, stop_on_error=stop_on_error, keep_last=not gated,
                              stall_ms=stall_ms)
         self.publications = {node.resolve(k): v for k, v in node.spec().publications.items()}
         self.failed = False
         self._dropped = 0
-        self.alive: set[str] = set()
         if events is not None:
             self.core.observe(events)
         self._gate: ReplayGate | None = None
@@ -118,7 +117,6 @@ class NodeHost:
         self._started = False
         self._stop_requested = False
         self._stop: asyncio.Event | None = None
-        self._alive_changed: asyncio.Event | None = None
         self._wake_at: int | None = None
         self._wake_timer: TimerHandle | None = None
 
@@ -129,11 +127,13 @@ class NodeHost:
         self._stop = asyncio.Event()
         if self._stop_requested:
             return
-        self._alive_changed = asyncio.Event()
         try:
             self._declare()
-            await self._wait_ready()
-            now = self._time_zero()
+            missing = await self.readiness.wait()
+            if missing is not None:
+                self._line(f"warning: starting without peers {missing} (not alive after "
+                           f"{self.readiness.timeout_s:g} s)", err=True)
+            now = self.readiness.time_zero(self.clock, self.core.shift_arrivals, self.restarted)
             self._line(f"t={now} started ({len(self.alive)} nodes alive)")
             self.core.start(now)  # ahead of anything that already arrived
             self._started, self._scheduled = True, False
@@ -144,30 +144,17 @@ class NodeHost:
             if self._wake_timer is not None:
                 self._wake_timer.cancel()
 
-    def _time_zero(self) -> int:
-        """The time `@on_start` runs at: 0 on the fleet's epoch when the launcher gave one
-        (a restarted node: the fleet time it restarted at), else the clock's time."""
-        rebase = getattr(self.clock, "rebase", None)
-        if self._epoch is None or rebase is None:
-            return self.clock.now_ms()
-        before = self.clock.now_ms()
-        rebase(self._epoch)
-        self.core.shift_arrivals(before - self.clock.now_ms())  # what came before time 0
-        return self.clock.now_ms() if self.restarted else 0
-
-    def _on_epoch(self, key: str, alive: bool) -> None:
-        if alive:
-            self._epoch = int(key.rsplit("/", 1)[1])
-            if self._alive_changed is not None:
-                self._alive_changed.set()
+    @property
+    def alive(self) -> set[str]:
+        """The nodes of the fleet whose liveliness tokens this node sees now."""
+        return self.readiness.alive
 
     def stop(self) -> None:
         """Make `run()` return (safe to call from signal handlers on the loop)."""
         self._stop_requested = True
         if self._stop is not None:
             self._stop.set()
-        if self._alive_changed is not None:
-            self._alive_changed.set()
+        self.readiness.stop()
 
     def statistics(self) -> HostStatistics:
         """Counters since start, as a frozen record."""
@@ -196,28 +183,9 @@ class NodeHost:
             t.serve(key_expr(fleet, name), self._serve(method))
             t.announce(graph_key(fleet, "srv", node.name, name))
         if self.fleet_epoch:
-            t.watch(epoch_key(fleet), self._on_epoch)
+            t.watch(epoch_key(fleet), self.readiness.epoch)
         t.watch(graph_key(fleet, "node", "*"), self._on_liveliness)
         t.announce(graph_key(fleet, "node", node.name))
-
-    async def _wait_ready(self) -> None:
-        assert self._alive_changed is not None
-        wanted = set(self.wait_for)
-        loop = asyncio.get_running_loop()
-        deadline = loop.time() + self.ready_timeout_s
-        while (not wanted <= self.alive or (self.fleet_epoch and self._epoch is None)) \
-                and not self._stop_requested:
-            remaining = deadline - loop.time()
-            if remaining <= 0:
-                missing = ", ".join(sorted(wanted - self.alive)) or "the launcher's epoch"
-                self._line(f"warning: starting without peers {missing} "
-                           f"(not alive after {self.ready_timeout_s:g} s)", err=True)
-                return
-            self._alive_changed.clear()
-            try:
-                await asyncio.wait_for(self._alive_changed.wait(), remaining)
-            except TimeoutError:
-                continue
 
     # ---------------------------------------------------------------- arrivals
 
@@ -253,9 +221,7 @@ class NodeHost:
 
     def _on_liveliness(self, key: str, alive: bool) -> None:
         name = parse_graph_key(key)[2]
-        (self.alive.add if alive else self.alive.discard)(name)
-        if self._alive_changed is not None:
-            self._alive_changed.set()
+        self.readiness.node(name, alive)
         if self.core.receive_liveliness(name, alive, self.clock.now_ms()):
             self._wake_soon()
 
