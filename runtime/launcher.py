@@ -351,30 +351,6 @@ class Fleet:
             argv += ["--record-events", str(self.events_dir / f"{cfg.name}.jsonl")]
         return argv
 
-    async def alive_names(self, timeout_s: float = 1.0) -> list[str]:
-        """Names of this fleet's nodes whose liveliness tokens the router holds now."""
-        if self.transport is None or self.transport.session is None:
-            return []
-        key = graph_key(self.scenario.fleet, "node", "*")
-        session = self.transport.session
-
-        def query() -> list[str]:
-            return [parse_graph_key(str(r.ok.key_expr))[2]
-                    for r in session.liveliness().get(key, timeout=timeout_s) if r.ok is not None]
-
-        return sorted(set(await asyncio.to_thread(query)))
-
-    async def refuse_twins(self) -> None:
-        """Raise `FleetConflict` when nodes of this scenario already run in the fleet (a
-        second launch on the same router would merge both runs' traffic silently)."""
-        wanted = {cfg.name for cfg in self.scenario.nodes}
-        twins = [name for name in await self.alive_names() if name in wanted]
-        if twins:
-            raise FleetConflict(
-                f"fleet {self.scenario.fleet!r} at {self.endpoint} already runs "
-                f"{', '.join(twins)}: a second launch would merge with it; stop that run, or "
-                "give this one another fleet name (the scenario's `fleet:`)")
-
     async def start_nodes(self) -> list[asyncio.Task[None]]:
         """Start every node process and one supervisor task per node; once every node is
         alive, declare the fleet's epoch (time 0) for them (`epoch_key`)."""
@@ -562,14 +538,10 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     running: list[str] = []
     try:
         if record is not None:
-            record.write("start", scenario=str(scenario.path), name=scenario.name,
-                         fleet=scenario.fleet, seed=seed, time_scale=time_scale,
-                         timeout_s=timeout_s, endpoint=fleet.endpoint, versions=versions(),
-                         nodes=[{"name": c.name, "class": c.class_path, "respawn": c.respawn}
-                                for c in scenario.nodes])
+            _record_start(record, fleet, seed=seed, time_scale=time_scale, timeout_s=timeout_s)
         await fleet.open()
         if connect:  # an embedded router is new: only a shared one can hold a twin fleet
-            await fleet.refuse_twins()
+            await refuse_twins(fleet)
         entry = _register(fleet, params)
         fleet.log(f"fleet {scenario.fleet!r} on {fleet.endpoint} "
                   f"(time scale {time_scale:g}, seed {seed}); monitor with: twinfleet node list --fleet "
@@ -580,21 +552,9 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         if driver is not None:
             driving = asyncio.create_task(driver(fleet))
             driving.add_done_callback(lambda task: fleet.end(_driver_reason(task)))
-        try:
-            reason = await asyncio.wait_for(asyncio.shield(fleet.ended), timeout_s)
-        except TimeoutError:
-            reason = f"timeout after {timeout_s:g} s"
-        fleet.log(f"run ended: {reason}")
+        reason = await _until_end(fleet, timeout_s)
         running = [name for name, p in fleet.processes.items() if p.running()]
-        if record is not None or fleet.monitor is not None:
-            fleet.statistics = await fleet.node_statistics(_STATS_TIMEOUT_S)
-        refused = {k: v for k, v in fleet.refusals().items() if v}
-        if refused:
-            fleet.log("refused samples on the report and shutdown topics: "
-                      + ", ".join(f"{k} {v}" for k, v in refused.items()))
-        if record is not None:
-            record.write("end", reason=reason)
-            record.write("node_stats", stats=fleet.statistics)
+        await _final_statistics(fleet, record, reason)
     finally:
         if driving is not None and not driving.done():
             driving.cancel()
@@ -604,32 +564,101 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         for task in tasks:
             task.cancel()
         if events_dir is not None and record_events is not None:
-            try:
-                count = merge_events(events_dir, record_events, fleet)
-                fleet.log(f"{count} events written to {record_events}; check them with: "
-                          f"twinfleet validate {record_events} {scenario.path}")
-            except OSError as exc:  # the parts stay; `validate` reads them too
-                fleet.log(f"could not merge the event logs in {events_dir}: {exc}")
+            _merge_logged(events_dir, record_events, fleet)
         for sig in signals:
             loop.remove_signal_handler(sig)
         if record is not None and sys.exc_info()[0] is not None:
             record.write("end", reason=f"launcher error: {sys.exc_info()[1]!r}")
             record.close()
-    codes = {name: p.exit_code for name, p in fleet.processes.items()}
-    result = FleetResult(fleet=scenario.fleet, endpoint=fleet.endpoint, reason=reason,
-                         exit_codes=codes, failed=tuple(fleet.failed),
-                         restarts={n: p.restarts for n, p in fleet.processes.items()},
-                         last_messages=dict(fleet.last_messages),
-                         duration_s=time.monotonic() - started, report=fleet.report,
-                         verdict=_verdict(fleet, reason, running, codes),
-                         handler_failures=dict(fleet.monitor.failures) if fleet.monitor else {},
-                         state_reports=fleet.monitor.reports if fleet.monitor else 0)
+    result = _result(fleet, reason, running, time.monotonic() - started)
     if record is not None:
         _record_summary(record, result)
         record.close()
     if driving is not None and not driving.cancelled() and driving.exception() is not None:
         raise driving.exception()  # type: ignore[misc]
     return result
+
+
+async def alive_names(fleet: Fleet, timeout_s: float = 1.0) -> list[str]:
+    """Names of `fleet`'s nodes whose liveliness tokens the router holds now."""
+    if fleet.transport is None or fleet.transport.session is None:
+        return []
+    key = graph_key(fleet.scenario.fleet, "node", "*")
+    session = fleet.transport.session
+
+    def query() -> list[str]:
+        return [parse_graph_key(str(r.ok.key_expr))[2]
+                for r in session.liveliness().get(key, timeout=timeout_s) if r.ok is not None]
+
+    return sorted(set(await asyncio.to_thread(query)))
+
+
+async def refuse_twins(fleet: Fleet) -> None:
+    """Raise `FleetConflict` when nodes of `fleet`'s scenario already run in it (a
+    second launch on the same router would merge both runs' traffic silently)."""
+    wanted = {cfg.name for cfg in fleet.scenario.nodes}
+    twins = [name for name in await alive_names(fleet) if name in wanted]
+    if twins:
+        raise FleetConflict(
+            f"fleet {fleet.scenario.fleet!r} at {fleet.endpoint} already runs "
+            f"{', '.join(twins)}: a second launch would merge with it; stop that run, or "
+            "give this one another fleet name (the scenario's `fleet:`)")
+
+
+def _record_start(record: RunRecord, fleet: Fleet, *, seed: int, time_scale: float,
+                  timeout_s: float | None) -> None:
+    scenario = fleet.scenario
+    record.write("start", scenario=str(scenario.path), name=scenario.name, fleet=scenario.fleet,
+                 seed=seed, time_scale=time_scale, timeout_s=timeout_s, endpoint=fleet.endpoint,
+                 versions=versions(),
+                 nodes=[{"name": c.name, "class": c.class_path, "respawn": c.respawn}
+                        for c in scenario.nodes])
+
+
+async def _until_end(fleet: Fleet, timeout_s: float | None) -> str:
+    """Why the run ended: what `fleet.end` was told, or the timeout."""
+    assert fleet.ended is not None
+    try:
+        reason = await asyncio.wait_for(asyncio.shield(fleet.ended), timeout_s)
+    except TimeoutError:
+        reason = f"timeout after {timeout_s:g} s"
+    fleet.log(f"run ended: {reason}")
+    return reason
+
+
+async def _final_statistics(fleet: Fleet, record: RunRecord | None, reason: str) -> None:
+    """Ask the nodes for their counters (the verdict and the run record read them) and say
+    what the launcher's own subscriptions refused."""
+    if record is not None or fleet.monitor is not None:
+        fleet.statistics = await fleet.node_statistics(_STATS_TIMEOUT_S)
+    refused = {k: v for k, v in fleet.refusals().items() if v}
+    if refused:
+        fleet.log("refused samples on the report and shutdown topics: "
+                  + ", ".join(f"{k} {v}" for k, v in refused.items()))
+    if record is not None:
+        record.write("end", reason=reason)
+        record.write("node_stats", stats=fleet.statistics)
+
+
+def _merge_logged(parts: Path, path: str, fleet: Fleet) -> None:
+    try:
+        count = merge_events(parts, path, fleet)
+        fleet.log(f"{count} events written to {path}; check them with: "
+                  f"twinfleet validate {path} {fleet.scenario.path}")
+    except OSError as exc:  # the parts stay; `validate` reads them too
+        fleet.log(f"could not merge the event logs in {parts}: {exc}")
+
+
+def _result(fleet: Fleet, reason: str, running: Sequence[str], duration_s: float) -> FleetResult:
+    codes = {name: p.exit_code for name, p in fleet.processes.items()}
+    monitor = fleet.monitor
+    return FleetResult(fleet=fleet.scenario.fleet, endpoint=fleet.endpoint, reason=reason,
+                       exit_codes=codes, failed=tuple(fleet.failed),
+                       restarts={n: p.restarts for n, p in fleet.processes.items()},
+                       last_messages=dict(fleet.last_messages), duration_s=duration_s,
+                       report=fleet.report, verdict=_verdict(fleet, reason, running, codes),
+                       handler_failures=dict(monitor.failures) if monitor else {},
+                       state_reports=monitor.reports if monitor else 0)
 
 
 def _verdict(fleet: Fleet, reason: str, running: Sequence[str],
