@@ -98,7 +98,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
             print(f"[launcher] {line}", flush=True)
         worst = _worse(worst, result.exit_code)
         passed += result.passed
-        if result.reason.startswith(("SIGINT", "SIGTERM")):
+        if result.interrupted:
             break
     if args.runs > 1:
         print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "

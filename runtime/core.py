@@ -159,15 +159,16 @@ class HostStatistics:
 
     @classmethod
     def of(cls, n: dict[str, int], inbox_depth: int, timers_pending: int,
-           dropped_overflow: int, stall_threshold_ms: int = 0,
+           stall_threshold_ms: int = 0,
            transport: Mapping[str, int] | None = None) -> HostStatistics:
-        """The record of a core's counters `n` (`transport`: what the transport refused)."""
+        """The record of a core's counters `n` (`transport`: what the transport dropped at
+        its hand-off, ``overflow``, and refused, ``forged`` and ``oversize``)."""
         below = transport or {}
         return cls(received=n["received"], dropped_undecodable=n["undecodable"],
                    handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
                    inbox_depth=inbox_depth, timers_pending=timers_pending,
                    published=n["published"], handled=n["handled"],
-                   dropped_keep_last=n["keep_last"], dropped_overflow=dropped_overflow,
+                   dropped_keep_last=n["keep_last"], dropped_overflow=below.get("overflow", 0),
                    dropped_best_effort=n["best_effort"], sequence_jumps=n["seq_jumps"],
                    dropped_lossless=n["lossless"], stalls=n["stalls"],
                    max_lateness_ms=n["max_late"], stall_threshold_ms=stall_threshold_ms,
@@ -426,11 +427,12 @@ class NodeCore:
         """Move the due entries due by `now_ms` into the inbox; return how many moved."""
         released = self.due.pop_due(now_ms)
         n = self._n
+        threshold = None if self.stall_ms is None else self.stall_threshold()
         for due, priority, entry in released:
             late = now_ms - due  # a loop that fell behind its timers (a stall) runs them late
             if late > n["max_late"]:
                 n["max_late"] = late
-            if self.stall_ms is not None and late > self.stall_threshold():
+            if threshold is not None and late > threshold:
                 n["stalls"] += 1
             self._push(due, priority, entry)
         return len(released)
@@ -543,10 +545,9 @@ class NodeCore:
         error = self._outbox.finish(method, args, reply, error, responder, now, out)
         return out, effects, error
 
-    def statistics(self, dropped_overflow: int = 0,
-                   transport: Mapping[str, int] | None = None) -> HostStatistics:
-        """Counters since start, as a frozen record (`dropped_overflow`, `transport`: the
-        transport's drops and refusals)."""
-        return HostStatistics.of(self._n, len(self._inbox), self.due.timers(), dropped_overflow,
+    def statistics(self, transport: Mapping[str, int] | None = None) -> HostStatistics:
+        """Counters since start, as a frozen record (`transport`: the transport's counters,
+        `Transport.statistics`)."""
+        return HostStatistics.of(self._n, len(self._inbox), self.due.timers(),
                                  self.stall_threshold() if self.stall_ms is not None else 0,
                                  transport)

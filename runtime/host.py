@@ -75,7 +75,8 @@ class NodeHost:
         out: where log lines go.
         events: log every handler run there (an observer of the core).
         gated: run only events granted by a replay coordinator (needs a `LogicalClock`).
-        stall_ms: timers released later than this after their due time count as stalls.
+        stall_ms: the floor of the stall threshold (`NodeCore`: timers released later than
+            max(stall_ms, twice the shortest timer period) count as stalls; None: never).
         fleet_epoch: also wait for the launcher's epoch token (`transport.epoch_key`) and
             take it as fleet time 0: `@on_start` then runs at time 0, as in the checker
             (a `restarted` node runs it at the time it restarted).
@@ -160,7 +161,7 @@ class NodeHost:
         """Counters since start, as a frozen record."""
         transport_stats = getattr(self.transport, "statistics", None)
         below = transport_stats() if callable(transport_stats) else {}
-        return self.core.statistics(below.get("overflow", 0), below)
+        return self.core.statistics(below)
 
     def idle(self) -> bool:
         """True when nothing can run now: no handler is ready and no drain is scheduled (a

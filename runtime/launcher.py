@@ -13,7 +13,8 @@ The run ends at the timeout, when a node publishes a `String` on
 SIGINT/SIGTERM. Fleet time 0: once every node's liveliness token is seen, the
 launcher declares the fleet's epoch as a token (`transport.epoch_key`); the
 nodes (``--fleet-epoch``) wait for it and run `@on_start` at time 0, as the
-checker does, a respawned one (``--restarted``) at its restart time. Shutdown escalates SIGINT → SIGTERM → SIGKILL per process;
+checker does, a respawned one (``--restarted``) at its restart time.
+Shutdown escalates SIGINT → SIGTERM → SIGKILL per process;
 children also get PR_SET_PDEATHSIG, so none outlives a SIGKILLed launcher.
 
 With ``run_record=PATH`` the run is also written as JSON lines, one flushed
@@ -130,12 +131,17 @@ class FleetResult:
         return self.ok and (self.report is None or self.report.passed())
 
     @property
+    def interrupted(self) -> bool:
+        """True when the run ended on SIGINT or SIGTERM (Ctrl-C, a stop request)."""
+        return _interrupted(self.reason)
+
+    @property
     def exit_code(self) -> int:
         """0 passed, 1 violated or a node failed, 2 a property raised, 3 inconclusive,
         130 interrupted (`runtime.cliargs`)."""
         if self.verdict is not None:
             return self.verdict.exit_code
-        if self.reason.startswith(("SIGINT", "SIGTERM")):
+        if self.interrupted:
             return EXIT_INTERRUPTED
         return EXIT_OK if self.passed else EXIT_FAILED
 
@@ -667,7 +673,7 @@ def _verdict(fleet: Fleet, reason: str, running: Sequence[str],
     if fleet.monitor is None:
         return None
     stats = fleet.transport.statistics() if fleet.transport is not None else {}
-    end = RunEnd(reason, interrupted=reason.startswith(("SIGINT", "SIGTERM")),
+    end = RunEnd(reason, interrupted=_interrupted(reason),
                  failed={n: codes.get(n) for n in fleet.failed}, statistics=fleet.statistics,
                  running=tuple(running), dropped_reports=stats.get("overflow", 0))
     return fleet.monitor.verdict(end)
@@ -759,6 +765,11 @@ def load_report(scenario: Scenario) -> Any:
         return None
     module, _, attr = path.partition(":")
     return getattr(importlib.import_module(module), attr)(scenario)
+
+
+def _interrupted(reason: str) -> bool:
+    """Whether a run's end `reason` is a signal `_install_signals` turned into an end."""
+    return reason.startswith(("SIGINT", "SIGTERM"))
 
 
 def _install_signals(loop: asyncio.AbstractEventLoop, fleet: Fleet) -> list[int]:
