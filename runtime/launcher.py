@@ -237,6 +237,10 @@ class Fleet:
         self._login = joined.login(write=True) if joined is not None else None
         self.transport: ZenohTransport | None = None
         self.epoch_ns = time.time_ns()
+        #: nodes whose liveliness token has not appeared yet; `all_alive` is set when none is
+        #: left (the epoch is declared then: `_watch_for_epoch`)
+        self.unseen = {cfg.name for cfg in scenario.nodes}
+        self.all_alive = asyncio.Event()
         self.processes: dict[str, _NodeProcess] = {}
         self.last_messages: dict[str, Any] = {}
         self.ended: asyncio.Future[str] | None = None
@@ -373,15 +377,15 @@ class Fleet:
         """Declare the epoch token when the last node's token appears: the nodes wait for
         it, so every `@on_start` runs at fleet time 0 on one shared clock."""
         assert self.transport is not None
-        fleet, waiting = self.scenario.fleet, {cfg.name for cfg in self.scenario.nodes}
-        transport = self.transport
+        fleet, unseen, transport = self.scenario.fleet, self.unseen, self.transport
 
         def on_node(key: str, alive: bool) -> None:
-            if alive and waiting:
-                waiting.discard(parse_graph_key(key)[2])
-                if not waiting:
+            if alive and unseen:
+                unseen.discard(parse_graph_key(key)[2])
+                if not unseen:
                     self.epoch_ns = time.time_ns()
                     transport.announce(epoch_key(fleet, self.epoch_ns))
+                    self.all_alive.set()
 
         transport.watch(graph_key(fleet, "node", "*"), on_node)
 

@@ -48,7 +48,6 @@ from twinfleet.runtime.node import QOS_DEFAULT, Node
 from twinfleet.runtime.scenario import NodeEntry, PropertyConfig, Scenario
 from twinfleet.runtime.scenario_file import write_scenario
 from twinfleet.runtime.tracefile import write_trace
-from twinfleet.runtime.transport import graph_key, parse_graph_key
 
 __all__ = ["CheckReport", "LiveFleet", "check", "eventually", "invariant", "live_fleet",
            "no_failure", "run_live", "system", "within"]
@@ -323,23 +322,13 @@ async def live_fleet(scenario: Scenario | str | Path, *, time_scale: float = 1.0
 
 
 async def _every_node_alive(fleet: Any, timeout_s: float) -> None:
-    """Wait until every node's liveliness token is up (its handlers are declared), so
-    that a test starts with the whole fleet running; RuntimeError naming the missing."""
-    names = {cfg.name for cfg in fleet.scenario.nodes}
-    alive: set[str] = set()
-    up = asyncio.Event()
-
-    def on_change(key: str, is_alive: bool) -> None:
-        node = parse_graph_key(key)[2]
-        (alive.add if is_alive else alive.discard)(node)
-        if names <= alive:
-            up.set()
-
-    fleet.transport.watch(graph_key(fleet.scenario.fleet, "node", "*"), on_change)
+    """Wait until every node's liveliness token is up (its handlers are declared: the
+    launcher's `Fleet.all_alive`), so that a test starts with the whole fleet running;
+    RuntimeError naming the missing."""
     try:
-        await asyncio.wait_for(up.wait(), timeout_s)
+        await asyncio.wait_for(fleet.all_alive.wait(), timeout_s)
     except TimeoutError:
-        raise RuntimeError(f"nodes {', '.join(sorted(names - alive))} did not start within "
+        raise RuntimeError(f"nodes {', '.join(sorted(fleet.unseen))} did not start within "
                            f"{timeout_s:g} s") from None
 
 
