@@ -49,7 +49,7 @@ from twinfleet.checker.transition import (
     fingerprint,
 )
 from twinfleet.checker.world import ENVIRONMENT, Event
-from twinfleet.runtime.context import After, Call, Context, ContractError, Fail, Log, Publish
+from twinfleet.runtime.context import After, Call, Context, Fail, Log, Publish
 from twinfleet.runtime.dispatch import HandlerOutcome, run_handler
 from twinfleet.runtime.kinds import EventKind, FailureKind
 from twinfleet.runtime.messages import CallError
@@ -57,7 +57,6 @@ from twinfleet.runtime.node import Node
 from twinfleet.runtime.snapshot import SnapshotError, restore, snapshot
 
 _INTERN_LIMIT = 100_000  # interned node states kept before starting afresh
-CONTRACT_ERROR = f"{ContractError.__name__}:"  # how runtime.dispatch words a ContractError
 # failures not to verify by a second run: breaches already, or a forced answer that the
 # run does not offer (a trace that does not fit)
 _UNVERIFIED = CONTRACT_KINDS | {FailureKind.CHOICE_MISMATCH}
@@ -221,7 +220,7 @@ class Runner:
         """A contract breach of one handler run: a misused ctx, or attributes other than
         `state` that changed (by identity; with `debug_state`, by value)."""
         error = outcome.error
-        if error is not None and error.message.startswith(CONTRACT_ERROR):
+        if error is not None and error.contract:
             return (FailureKind.CONTRACT, node.name, ev.method,
                     f"{error.message}; fix: {FIX_CONTEXT}")
         if attributes is not None:

@@ -6,7 +6,7 @@ import traceback
 from dataclasses import dataclass
 from typing import Any
 
-from twinfleet.runtime.context import Context, Effect
+from twinfleet.runtime.context import Context, ContractError, Effect
 from twinfleet.runtime.messages import is_message
 from twinfleet.runtime.node import Node
 
@@ -19,6 +19,7 @@ class HandlerError:
     handler: str
     message: str
     traceback: str = ""
+    contract: bool = False  # a `ContractError`: the handler misused `ctx`
 
     def __str__(self) -> str:
         return f"{self.node}.{self.handler}: {self.message}"
@@ -50,7 +51,7 @@ def invoke(node: Node, method: str, ctx: Context, args: tuple[Any, ...] = (),
     except Exception as exc:
         ctx.effects.clear()
         return None, HandlerError(node.name, method, f"{type(exc).__name__}: {exc}",
-                                  traceback.format_exc(limit=8))
+                                  traceback.format_exc(limit=8), isinstance(exc, ContractError))
     if expects_reply and not is_message(reply):
         return None, HandlerError(node.name, method,
                                   f"service handler returned {reply!r:.60}, not a message")
