@@ -38,7 +38,13 @@ from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
 from twinfleet.runtime.config import SEARCHES, CheckConfig
-from twinfleet.runtime.kinds import FailureKind
+from twinfleet.runtime.kinds import (
+    EXIT_BAD_INPUT,
+    EXIT_CONTRACT_BREACH,
+    EXIT_FAILED,
+    EXIT_OK,
+    FailureKind,
+)
 from twinfleet.runtime.lint import lint_scenario
 from twinfleet.runtime.node import NodeSpec
 from twinfleet.runtime.scenario import Scenario, ScenarioError, load_scenario, resolve_scenario
@@ -101,7 +107,8 @@ class CheckResult:
     @property
     def exit_code(self) -> int:
         """0 holds, 1 violated, 2 no answer, 4 a node breaks the node contract."""
-        return {HOLDS: 0, VIOLATED: 1, BREACH: 4}.get(self.status, 2)
+        return {HOLDS: EXIT_OK, VIOLATED: EXIT_FAILED,
+                BREACH: EXIT_CONTRACT_BREACH}.get(self.status, EXIT_BAD_INPUT)
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready record of the result."""

@@ -25,6 +25,7 @@ from twinfleet.checker.properties import PropertyError
 from twinfleet.checker.reduction import REDUCTIONS
 from twinfleet.checker.semantics import Semantics
 from twinfleet.checker.trace import NondeterminismError, replay
+from twinfleet.runtime.kinds import EXIT_BAD_INPUT, EXIT_CONTRACT_BREACH
 from twinfleet.runtime.node import NodeDefinitionError
 from twinfleet.runtime.scenario import ScenarioError
 from twinfleet.runtime.tracefile import TraceError, load_trace
@@ -128,7 +129,7 @@ def check_command(args: argparse.Namespace) -> int:
     """Run `check` for parsed arguments; return the exit code."""
     if args.scenario is None and args.resume is None:
         print("twinfleet check: give a scenario file, or --resume CHECKPOINT", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     stem = Path(args.scenario or args.resume).stem
     trace_out = args.trace_out or str(Path("out") / f"{stem}.trace.json")
     options = CheckOptions(search=args.search, walks=args.walks, seed=args.seed,
@@ -145,10 +146,10 @@ def check_command(args: argparse.Namespace) -> int:
         result = check(args.scenario, options)
     except BAD_INPUT as exc:
         print(f"twinfleet check: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     except ContractBreachError as exc:  # before any search: an initial state (checker.topology)
         print(f"twinfleet check: {exc}", file=sys.stderr)
-        return 4
+        return EXIT_CONTRACT_BREACH
     if options.progress is not None and sys.stderr.isatty():
         print(file=sys.stderr)
     if not args.json:
@@ -166,7 +167,7 @@ def _report(result: CheckResult, *, as_json: bool) -> None:
         print(f"twinfleet check: {result.breach}", file=sys.stderr)
         return
     print(result.summary())
-    if result.exit_code == 2:
+    if result.exit_code == EXIT_BAD_INPUT:
         print(f"exit 2: no answer ({result.reason})")
 
 

@@ -28,10 +28,15 @@ from twinfleet.runtime.fleetauth import (
     read_credentials,
     registry_auth,
 )
+from twinfleet.runtime.kinds import (  # noqa: F401 (the commands' exit codes, from here too)
+    EXIT_BAD_INPUT,
+    EXIT_CONTRACT_BREACH,
+    EXIT_FAILED,
+    EXIT_INCONCLUSIVE,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+)
 
-# One table of exit codes for every command (README and `twinfleet --help` list it).
-EXIT_OK, EXIT_FAILED, EXIT_BAD_INPUT, EXIT_INCONCLUSIVE, EXIT_INTERRUPTED = 0, 1, 2, 3, 130
-EXIT_CONTRACT_BREACH = 4  # a user's node broke the node contract (nondeterminism, state outside self.state)
 DISCOVERY_S = 1.0
 
 

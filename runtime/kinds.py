@@ -4,11 +4,22 @@ One `EventKind` names an event the same way in the node contract, both drivers
 (the live node core and the checker), the live event log, checker traces and
 `twinfleet.agreement`. One `FailureKind` names why a handler run failed. Both
 are `StrEnum`s, so their values are the strings written to logs and traces.
+The exit codes of every command are here too: the checker's results and the
+CLI's commands give the same answers the same numbers.
 """
 
 from __future__ import annotations
 
 from enum import StrEnum, unique
+from typing import Final
+
+# One table of exit codes for every command (README and `twinfleet --help` list it).
+EXIT_OK: Final = 0  # ok; every property holds; the run passed
+EXIT_FAILED: Final = 1  # a property is violated; the run FAILED
+EXIT_BAD_INPUT: Final = 2  # bad input, or no answer
+EXIT_INCONCLUSIVE: Final = 3  # the run cannot back a verdict (it says why)
+EXIT_CONTRACT_BREACH: Final = 4  # a user's node broke the node contract
+EXIT_INTERRUPTED: Final = 130  # Ctrl-C
 
 
 @unique

@@ -42,7 +42,7 @@ longer than its evaluation budget. Such a run is inconclusive even when a
 property was seen violated (listed in the details): a robot that teleported
 after a stall collides because of the stall, not of its code.
 
-Result (`Verdict.status` and exit code, `runtime.cliargs`): ``holds`` 0,
+Result (`Verdict.status` and exit code, `runtime.kinds`): ``holds`` 0,
 ``violated`` 1 (the property named), ``error`` 2 (a property raised: a
 scenario mistake, as `check` says), ``inconclusive`` 3, ``interrupted`` 130.
 """
@@ -87,7 +87,7 @@ class Verdict:
 
     @property
     def exit_code(self) -> int:
-        """The command's exit code for this verdict (`runtime.cliargs`)."""
+        """The command's exit code for this verdict (`runtime.kinds`)."""
         return EXIT_CODES[self.status]
 
     def lines(self) -> list[str]:
