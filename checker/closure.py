@@ -36,7 +36,8 @@ class Closure:
     """
 
     def __init__(self, system: System, publications: Publications, visibility: Visibility,
-                 world: World, enabled: list[int]) -> None:
+                 world: World, enabled: list[int],
+                 queued: frozenset[tuple[int, int]] = frozenset()) -> None:
         self.system = system
         self.publications = publications
         self.visibility = visibility
@@ -51,17 +52,18 @@ class Closure:
         self.due: set[tuple[int, str]] = set()  # handlers with an event due t
         self.harmless: set[tuple[int, int]] = set()  # channels with a message at p_target
         self.unknown = False
-        fifo, depths = system.rules.fifo, system.rules.depths
+        fifo = system.rules.fifo
         for ev in events:
             if ev.due != t:
                 break
             self.unknown |= ev.kind not in KNOWN_KINDS
             self.due.add((ev.target, ev.method))
             if fifo and ev.message and ev.priority == self.p.get(ev.target) and \
-                    (ev.target, ev.method) not in depths:
+                    (ev.target, ev.priority) not in queued:
                 # A later message on a FIFO channel cannot overtake this one, so its sender
-                # cannot disturb the target; but into a KEEP_LAST queue (Rule 6) it could
-                # push the target over its depth and let this delivery be dropped.
+                # cannot disturb the target; but into a KEEP_LAST queue at this priority
+                # (Rule 6) it could push the target over its depth and let a delivery of
+                # the target's enabled ones be dropped (`queued`: (node, priority) pairs).
                 self.harmless.add((ev.sender, ev.target))
         self._sends: dict[int, list[tuple[int, int]] | None] = {}
         self._tops: dict[int, tuple[set[tuple[int, str]], int]] = {}

@@ -168,6 +168,8 @@ class Reduction:
         self.publications = system.publications
         self.stats = ReductionStatistics()
         self._version = self.publications.version
+        # (node, priority) of every KEEP_LAST subscription: once, not per world (`Closure`)
+        self._queued = frozenset((n, system.topology.priority(n, m)) for n, m in self.rules.depths)
 
     def begin(self) -> None:
         """Start (or start again) a search: remember the relation it is based on."""
@@ -238,7 +240,8 @@ class Reduction:
         first = events[enabled[0]].target
         if all(events[i].target == first for i in enabled):
             return None  # one node's events: dependent, nothing to choose
-        closure = Closure(self.system, self.publications, self.visibility, world, enabled)
+        closure = Closure(self.system, self.publications, self.visibility, world, enabled,
+                          self._queued)
         if len(closure.by_node) < 2 or closure.unknown:
             return None
         best: list[int] | None = None
