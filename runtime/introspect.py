@@ -38,6 +38,7 @@ from typing import Any
 
 import yaml
 
+from twinfleet.runtime.guard import expected_type
 from twinfleet.runtime.messages import type_name_of
 from twinfleet.runtime.names import KEY_PREFIX
 from twinfleet.runtime.node import HandlerSpec, NodeSpec, QoS
@@ -69,23 +70,20 @@ def plain_value(value: Any) -> Any:
     return str(value)
 
 
-def _annotated_type(hints: Mapping[str, Any], name: str) -> str:
-    try:
-        return type_name_of(hints[name])
-    except (KeyError, TypeError):  # no annotation, or not a registered message class
-        return "?"
+def _type_name(cls: type | None) -> str:
+    return "?" if cls is None else type_name_of(cls)
 
 
 def service_types(node: Any, spec: HandlerSpec) -> list[str]:
-    """[request type, reply type] of a service handler, from its annotations ("?" if unknown)."""
-    fn = getattr(type(node), spec.method)
+    """[request type, reply type] of a service handler, from its annotations ("?" if unknown):
+    the request as `guard.expected_type` reads it for the admission check."""
     try:
-        hints = typing.get_type_hints(fn)
+        reply = typing.get_type_hints(getattr(type(node), spec.method)).get("return")
     except Exception:  # an unresolvable forward reference: say what is known, nothing
-        hints = {}
-    params = [n for n in fn.__code__.co_varnames[:fn.__code__.co_argcount] if n not in ("self",)]
-    request = _annotated_type(hints, params[-1]) if len(params) >= 2 else "?"
-    return [request, _annotated_type(hints, "return")]
+        reply = None
+    if not (isinstance(reply, type) and hasattr(reply, "__message_type__")):
+        reply = None
+    return [_type_name(expected_type(node, spec.method)), _type_name(reply)]
 
 
 def node_description(node: Any, class_path: str) -> dict[str, Any]:
