@@ -236,8 +236,9 @@ async def record_live(connect: str, fleet: str, path: str | Path, *,
     tap = FleetTap(lambda: tap_config(connect, auth), fleet, recorder.write,
                    retry=False)
     try:
-        await tap.open()
-        recorder.known_schemas.update(await asyncio.to_thread(fleet_schemas, tap.session, fleet))
+        # the schemas first: a sample recorded before them would get a guessed one
+        await tap.open(prepare=lambda session: recorder.known_schemas.update(
+            fleet_schemas(session, fleet)))
         waiter = asyncio.ensure_future(stop.wait())
         flusher = asyncio.create_task(_flush_until(recorder, stop))
         await asyncio.wait([waiter], timeout=duration_s)

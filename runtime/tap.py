@@ -77,8 +77,10 @@ class FleetTap:
         self._seen: dict[str, deque[tuple[bytes, float]]] = {}
         self._stopped = False
 
-    async def open(self) -> None:
-        """Open the session (retrying if asked) and declare the subscribers."""
+    async def open(self, prepare: Callable[[zenoh.Session], object] | None = None) -> None:
+        """Open the session (retrying if asked), then run `prepare(session)` in a thread if
+        given (what must be known before the first sample arrives, such as the fleet's
+        message schemas), then declare the subscribers."""
         while not self._stopped:
             try:
                 self.session = await asyncio.to_thread(zenoh.open, self.make_config())
@@ -90,6 +92,8 @@ class FleetTap:
         if self._stopped or self.session is None:
             await self.close()
             return
+        if prepare is not None:
+            await asyncio.to_thread(prepare, self.session)
         self._handoff = Handoff(asyncio.get_running_loop())
         push = self._handoff.push
         prefix = f"{KEY_PREFIX}/{self.fleet}"
