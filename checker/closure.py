@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from typing import TYPE_CHECKING, Final, final
 
+from twinfleet.checker.commuting import commute, loose_nodes
 from twinfleet.checker.publications import KNOWN_KINDS
 from twinfleet.checker.transition import RunEvent
 
@@ -67,12 +68,19 @@ class Closure:
                 self.harmless.add((ev.sender, ev.target))
         self._sends: dict[int, list[tuple[int, int]] | None] = {}
         self._tops: dict[int, tuple[set[tuple[int, str]], int]] = {}
+        #: loose node -> its representative (`checker.commuting`)
+        self.loose = loose_nodes(system, world, self.by_node)
+        self._commutes: dict[int, bool] = {}  # loose node -> all its pairs commute here
+        self.pairs = self.refuted = 0  # pairs checked in both orders; of those, not commuting
 
-    def runnable(self, frozen: set[int]) -> set[tuple[int, str]]:
-        """Handlers of nodes outside `frozen` that may run at t: those with an event due
-        and those such handlers may trigger at zero delay (the learned relation)."""
+    def runnable(self, frozen: set[int], loose: frozenset[int] = frozenset()
+                 ) -> set[tuple[int, str]]:
+        """Handlers of nodes outside `frozen` that may run at t: those with an event due,
+        the handlers of the `loose` nodes of `frozen` (their other events may run), and
+        those such handlers may trigger at zero delay (the learned relation)."""
         out = self.publications.out
         reach = [h for h in self.due if h[0] not in frozen]
+        reach += [self._handler(x) for x in loose if x in frozen]
         seen = set(reach)
         while reach:
             for h in out.get(reach.pop(), ()):
@@ -103,44 +111,93 @@ class Closure:
 
     def persistent(self, seed: int) -> list[int] | None:
         """The persistent set grown from `seed`, if smaller than everything and invisible
-        (a visible event may still be guarded by adding the nodes of a guard)."""
-        nodes = self.grow({seed})
-        for _ in range(len(self.by_node)):
+        (a visible event may still be guarded by adding the nodes of a guard). A loose
+        node gives its representative only, unless its other events may disturb the set or
+        a pair of its events does not commute here (`checker.commuting`)."""
+        loose = frozenset(self.loose)
+        nodes = self.grow({seed}, loose)
+        for _ in range(len(self.by_node) + len(loose) + 1):
             if nodes is None:
                 return None
-            chosen = sorted(i for x in nodes for i in self.by_node.get(x, ()))
+            chosen = sorted(i for x in nodes for i in self._events(x, loose))
             if len(chosen) == len(self.enabled):
                 return None
-            guard = self.visibility.needs(self.system, self.world, chosen, nodes)
-            if guard is None:
-                return chosen
-            if not guard or guard <= nodes:
-                return None
-            nodes = self.grow(nodes | guard)
+            bad = self._disturbing(nodes, loose)
+            if not bad:
+                guard = self.visibility.needs(self.system, self.world, chosen, nodes - loose,
+                                              lambda: self.acyclic(nodes, loose))
+                if guard is not None:
+                    if not guard or guard <= nodes:
+                        return None
+                    nodes = self.grow(nodes | guard, loose)
+                    continue
+                bad = {x for x in loose & nodes if not self._pairs_commute(x)}
+                if not bad:
+                    return chosen
+            loose -= bad
+            nodes = self.grow(nodes, loose)
         return None
 
-    def grow(self, start: set[int]) -> set[int] | None:
-        """Close `start` under C-in and C-out; None when it must hold every enabled node."""
+    def grow(self, start: set[int], loose: frozenset[int] = frozenset()) -> set[int] | None:
+        """Close `start` under C-in and C-out; None when it must hold every enabled event.
+        Nodes of `loose` that join contribute their representative only."""
         into = self.publications.into
         frozen = set(start)
         work = list(start)
-        can = self.runnable(frozen)
+        can = self.runnable(frozen, loose)
         while work:
             x = work.pop()
-            added = self._incoming(x, frozen, can, into[x]) + self._outgoing(x, frozen, can)
+            added = (self._incoming(x, frozen, can, into[x], loose)
+                     + self._outgoing(x, frozen, can, loose))
             added = [y for y in added if y not in frozen]
             if not added:
                 continue
             frozen.update(added)
             work += added
-            if all(n in frozen for n in self.by_node):
+            if all(n in frozen for n in self.by_node) and not loose & frozen:
                 return None
-            can = self.runnable(frozen)
+            can = self.runnable(frozen, loose)
         return frozen
 
+    def acyclic(self, nodes: set[int], loose: frozenset[int]) -> bool:
+        """True if the handlers that may run at t beside the set of `nodes` trigger no
+        zero-time cycle among themselves (by the learned relation): every path that
+        avoids the set is then finite (`checker.visibility`: rising goals)."""
+        can = self.runnable(nodes, loose)
+        out = self.publications.out
+        done: set[tuple[int, str]] = set()
+        for root in can:
+            if root in done:
+                continue
+            path, stack = {root}, [(root, iter(out.get(root, ())))]
+            while stack:
+                h, it = stack[-1]
+                nxt = next((n for n in it if n in can and n not in done), None)
+                if nxt is None:
+                    stack.pop()
+                    path.discard(h)
+                    done.add(h)
+                elif nxt in path:
+                    return False
+                else:
+                    path.add(nxt)
+                    stack.append((nxt, iter(out.get(nxt, ()))))
+        return True
+
+    def _events(self, x: int, loose: frozenset[int]) -> list[int]:
+        """The enabled events node x contributes: its representative if loose, else all."""
+        return [self.loose[x]] if x in loose else self.by_node.get(x, [])
+
+    def _handler(self, x: int) -> tuple[int, str]:
+        """The declared commuting handler of loose node x."""
+        return (x, self.world.events[self.loose[x]].method)
+
     def _incoming(self, x: int, frozen: set[int], can: set[tuple[int, str]],
-                  senders: dict[tuple[int, str], set[tuple[str, int]]]) -> list[int]:
-        """C-in for node x: the nodes of runnable handlers that may disturb it."""
+                  senders: dict[tuple[int, str], set[tuple[str, int]]],
+                  loose: frozenset[int] = frozenset()) -> list[int]:
+        """C-in for node x: the nodes of runnable handlers that may disturb it. Nothing is
+        harmless to a loose node: a new message behind one of its waiting ones would run on
+        a path that avoids the set, with no pair check."""
         px = self.p.get(x, _INF)
         out = []
         for h, made in senders.items():
@@ -148,15 +205,53 @@ class Closure:
             if y in frozen or h not in can:
                 continue
             for _, q in made:
-                if q < px or (q == px and (y, x) not in self.harmless):
+                if q < px or (q == px and ((y, x) not in self.harmless or x in loose)):
                     out.append(y)
                     break
         return out
 
-    def _outgoing(self, x: int, frozen: set[int], can: set[tuple[int, str]]) -> list[int]:
-        """C-out for the events of node x: the receivers to add (every node if unknown)."""
+    def _disturbing(self, nodes: set[int], loose: frozenset[int]) -> set[int]:
+        """The loose nodes of `nodes` whose other events (which may run on a path that avoids
+        the set) create at t what C-in forbids at a node of `nodes`: at their own node
+        anything at or below their priority, elsewhere what `_incoming` would count."""
+        into = self.publications.into
+        bad = set()
+        for x in loose & nodes:
+            h, px = self._handler(x), self.p[x]
+            for target in nodes:
+                pt = self.p.get(target, _INF)
+                if any(q <= px if target == x else
+                       q < pt or (q == pt and ((x, target) not in self.harmless
+                                               or target in loose))
+                       for _, q in into[target].get(h, ())):
+                    bad.add(x)
+                    break
+        return bad
+
+    def _pairs_commute(self, x: int) -> bool:
+        """True if loose node x's representative commutes here with each of its other
+        enabled events (`checker.commuting.commute`; each pair checked once per world)."""
+        found = self._commutes.get(x)
+        if found is None:
+            e = self.loose[x]
+            found = True
+            for j in self.by_node[x]:
+                if j == e:
+                    continue
+                self.pairs += 1
+                if not commute(self.system, self.visibility, self.world, e, j):
+                    self.refuted += 1
+                    found = False
+                    break
+            self._commutes[x] = found
+        return found
+
+    def _outgoing(self, x: int, frozen: set[int], can: set[tuple[int, str]],
+                  loose: frozenset[int] = frozenset()) -> list[int]:
+        """C-out for the events node x contributes: the receivers to add (every node if
+        unknown)."""
         out = []
-        for i in self.by_node.get(x, ()):
+        for i in self._events(x, loose):
             sent = self.sends(i)
             if sent is None:
                 return list(self.by_node)

@@ -150,6 +150,9 @@ class ReductionStatistics:
     cycle_proviso: int = 0  # of those, expanded fully by C3t
     restarts: int = 0  # searches started again after the send relation grew
     edges: int = 0  # (sender, target, priority) triples learned
+    commuted: int = 0  # worlds where a node declared commuting gave one of its events
+    pairs: int = 0  # pairs of such events checked in both orders
+    refuted: int = 0  # of those, pairs that did not commute (the node then gave all)
 
     def to_json(self) -> dict[str, int]:
         """The counters as a JSON-ready mapping."""
@@ -168,12 +171,17 @@ class Reduction:
         self.publications = system.publications
         self.stats = ReductionStatistics()
         self._version = self.publications.version
+        self._rising = self.visibility.rising
         # (node, priority) of every KEEP_LAST subscription: once, not per world (`Closure`)
         self._queued = frozenset((n, system.topology.priority(n, m)) for n, m in self.rules.depths)
+        self._commuting = bool(system.topology.commuting)
+        self.relied: set[str] = set()  # "node.handler" declared commuting, relied on
 
     def begin(self) -> None:
-        """Start (or start again) a search: remember the relation it is based on."""
+        """Start (or start again) a search: remember the relation and the assumptions it
+        is based on."""
         self._version = self.publications.version
+        self._rising = self.visibility.rising
 
     def statistics(self) -> dict[str, int]:
         """The counters of the search, with the size of the learned relation."""
@@ -186,8 +194,10 @@ class Reduction:
 
     @property
     def stale(self) -> bool:
-        """True when the send relation grew since `begin` (the search must restart)."""
-        return self.publications.version != self._version
+        """True when the send relation grew, or a rising goal fell, since `begin` (the
+        search must restart)."""
+        return self.publications.version != self._version or \
+            self.visibility.rising != self._rising
 
     @property
     def disabled(self) -> str | None:
@@ -206,7 +216,7 @@ class Reduction:
         chosen = None if self.disabled else self._choose(world, enabled)
         if chosen is None:
             self.stats.full += 1
-            return list(system.successors(world, enabled))
+            return self._observed(world, list(system.successors(world, enabled)))
         out: list[Transition] = []
         for i in chosen:
             out += system.outcomes(world, RunEvent(i))
@@ -218,9 +228,14 @@ class Reduction:
                     0 <= find(w.key) <= (done if done is not None else _INF):
                 self.stats.full += 1
                 self.stats.cycle_proviso += 1
-                return list(system.successors(world, enabled))
+                return self._observed(world, list(system.successors(world, enabled)))
         self.stats.reduced += 1
-        return out
+        return self._observed(world, out)
+
+    def _observed(self, world: World, transitions: list[Transition]) -> list[Transition]:
+        """`transitions`, once checked for falling goal atoms (`Visibility.observe`)."""
+        self.visibility.observe(self.system, world, transitions)
+        return transitions
 
     def _drops(self, world: World, nodes: set[int]) -> list[Transition]:
         """The KEEP_LAST drops (Rule 6) of the chosen nodes' waiting deliveries: actions of
@@ -238,20 +253,35 @@ class Reduction:
             return None
         events = world.events
         first = events[enabled[0]].target
-        if all(events[i].target == first for i in enabled):
+        if not self._commuting and all(events[i].target == first for i in enabled):
             return None  # one node's events: dependent, nothing to choose
         closure = Closure(self.system, self.publications, self.visibility, world, enabled,
                           self._queued)
-        if len(closure.by_node) < 2 or closure.unknown:
+        if (len(closure.by_node) < 2 and not closure.loose) or closure.unknown:
             return None
         best: list[int] | None = None
-        for seed in sorted(closure.by_node, key=lambda x: (len(closure.by_node[x]), x)):
+        # Plain singletons first: a loose node's one event costs its pair checks.
+        for seed in sorted(closure.by_node, key=lambda x: (
+                len(closure.by_node[x]) + (x in closure.loose) / 2, x)):
             found = closure.persistent(seed)
             if found is not None and (best is None or len(found) < len(best)):
                 best = found
                 if len(best) == 1:
                     break
+        self._count_commuted(world, closure, best)
         return best
+
+    def _count_commuted(self, world: World, closure: Closure, chosen: list[int] | None
+                        ) -> None:
+        """Count `closure`'s pair checks, and the worlds where `chosen` took one event of a
+        loose node (naming the declared handlers relied on)."""
+        self.stats.pairs += closure.pairs
+        self.stats.refuted += closure.refuted
+        taken = set(chosen or ())
+        for x, e in closure.loose.items():
+            if e in taken and not taken.issuperset(closure.by_node[x]):
+                self.stats.commuted += 1
+                self.relied.add(f"{self.system.names[x]}.{world.events[e].method}")
 
 
 def plan(system: System, properties: PropertySet, strategy: str,
@@ -278,7 +308,20 @@ def describe(reduction: Reduction | None, name: str, strategy: str = "bfs") -> s
         return f"none ({reduction.disabled}; turned off during the search)"
     s = reduction.stats
     restarts = f", {s.restarts} restart{'s' * (s.restarts != 1)}" if s.restarts else ""
+    if reduction.visibility.fell:
+        restarts += f"; goals not rising: {reduction.visibility.fell}"
     return (f"por (persistent sets: {s.reduced:,} worlds reduced, {s.full:,} expanded fully, "
             f"{s.cycle_proviso:,} by the cycle proviso; {reduction.publications.edges()} sends "
-            f"learned{restarts}"
+            f"learned{restarts}{_commuted(reduction)}"
             + ("; a BFS trace is shortest in the reduced graph)" if strategy == "bfs" else ")"))
+
+
+def _commuted(reduction: Reduction) -> str:
+    """The summary's words on declared same-node commutation, if the search relied on it."""
+    s = reduction.stats
+    if not s.commuted and not s.pairs:
+        return ""
+    relied = ", ".join(sorted(reduction.relied)) or "none"
+    return (f"; one order of messages declared commutes=True in {s.commuted:,} worlds "
+            f"({relied}), {s.pairs:,} pairs checked in both orders, {s.refuted:,} did not "
+            "commute")

@@ -46,10 +46,12 @@ class Topology:
         self.depths: dict[tuple[int, str], int] = {}  # KEEP_LAST depth per (node, handler)
         self.lossy: set[tuple[str, int]] = set()  # (topic, subscriber) BEST_EFFORT on a side
         self.liveliness: list[Target] = []  # the `/_liveliness` subscribers
+        self.commuting: set[tuple[int, str]] = set()  # handlers declared `commutes=True`
         self.initial_states = tuple(_initial(node) for node in self.nodes)
         for i, node in enumerate(self.nodes):
             spec = node.spec()
             self._priorities.append({h.method: h.priority for h in spec.handlers})
+            self.commuting.update((i, h.method) for h in spec.handlers if h.commutes)
             for h in spec.of_kind("subscribe"):
                 topic = node.resolve(h.name or "")
                 self.subscribers.setdefault(topic, []).append((i, h.method, h.priority))

@@ -20,13 +20,31 @@ where robots arrive, two arrivals guard each other.
 Evaluating the whole expression before and after would not be sound: with
 ``r2.done and not r1.done`` an r1 step that keeps it false here may make it
 true in a world where r2 arrived first.
+
+Rising goals. An `eventually` expression that is a conjunction of one-node
+atoms (``r1.done and r2.done``) is *rising* while no transition has made one
+of its atoms fall (true to false). Then an event that only makes its atoms
+rise is not visible to it, provided no zero-time cycle can run beside the set
+(`Closure.acyclic`). Why: a run that never reaches the goal must take the
+postponed event e (time cannot pass before it, and no zero-time cycle can
+postpone it for ever); moved to the front, e's rise is there earlier, and if
+the goal held at some world of the moved run, it would hold at the world of
+the original run right after e, since atoms that rose stay up. So the moved
+run avoids the goal too, and the reduced graph keeps every counterexample.
+Robots arriving at one instant (each arrival a rise of `all_arrive`) then
+cost one world each instead of every subset of arrivals. Whether atoms fall
+is checked on every transition the search takes (`observe`); the first fall
+turns the relaxation off and the search restarts, as for the learned send
+relation (`checker.publications`: a reduced search that never met a falling
+transition has none among the reachable ones, by the same first-violation
+argument, since a fall depends only on its node's state and event).
 """
 
 from __future__ import annotations
 
 import ast
 import builtins
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any, final
 
 from twinfleet.checker.transition import RunEvent
@@ -34,6 +52,7 @@ from twinfleet.checker.transition import RunEvent
 if TYPE_CHECKING:
     from twinfleet.checker.properties import PropertySet
     from twinfleet.checker.system import System
+    from twinfleet.checker.transition import Transition
     from twinfleet.checker.world import World
 
 _CACHE_LIMIT = 4_096  # values kept per part (by the node states it reads)
@@ -97,8 +116,9 @@ def _leaves(tree: ast.expr) -> Iterable[ast.expr]:
 class Expression:
     """One property expression: its atoms by node, and its top-level guards."""
 
-    def __init__(self, source: str, index: dict[str, int]) -> None:
+    def __init__(self, source: str, index: dict[str, int], goal: bool = False) -> None:
         tree = ast.parse(source.strip(), mode="eval").body
+        self.source = source
         self.uses_now = False
         self.atoms: dict[int, list[Part]] = {}
         self.whole: set[int] = set()
@@ -112,6 +132,12 @@ class Expression:
                 self.atoms.setdefault(part.reads[0], []).append(part)
             else:
                 self.whole.update(part.reads)
+        #: an `eventually` conjunction of one-node atoms (module docstring: rising goals)
+        conjuncts = tree.values if isinstance(tree, ast.BoolOp) and isinstance(
+            tree.op, ast.And) else [tree]
+        self.rising = goal and not self.whole and not any(
+            isinstance(c, ast.BoolOp) or isinstance(c, ast.UnaryOp) and isinstance(
+                c.op, ast.Not) for c in conjuncts)
         #: for `and`, the conjuncts (a false one guards); for `or`, the disjuncts
         self.guard_value = isinstance(tree, ast.BoolOp) and isinstance(tree.op, ast.Or)
         self.guards = ([Part(v, index) for v in tree.values] if isinstance(tree, ast.BoolOp)
@@ -123,11 +149,28 @@ class Expression:
         return node in self.whole or node in self.atoms
 
     def changes(self, system: System, states: Sequence[bytes], node: int,
-                afters: Sequence[bytes]) -> bool:
-        """True if some atom over `node` changes (any change if a multi-node atom reads it)."""
+                afters: Sequence[bytes], rises: bool = False) -> bool:
+        """True if some atom over `node` changes (any change if a multi-node atom reads it);
+        with `rises`, a change from false to true does not count."""
         if node in self.whole:
             return True
+        if rises:
+            return any(self._falls_or_varies(system, states, node, afters))
         return any(a.changed(system, states, node, afters) for a in self.atoms.get(node, ()))
+
+    def _falls_or_varies(self, system: System, states: Sequence[bytes], node: int,
+                         afters: Sequence[bytes]) -> Iterable[bool]:
+        for a in self.atoms.get(node, ()):
+            before = a.value(system, states)
+            for after in afters:
+                value = a.value(system, (*states[:node], after, *states[node + 1:]))
+                yield value != before and not (before is False and value is True)
+
+    def falls(self, system: System, before: Sequence[bytes], after: Sequence[bytes],
+              node: int) -> bool:
+        """True if an atom over `node` is true in `before` and not in `after`."""
+        return any(a.value(system, before) is True and a.value(system, after) is not True
+                   for a in self.atoms.get(node, ()))
 
     def guard(self, system: System, states: Sequence[bytes], node: int,
               afters: Sequence[bytes], frozen: set[int]) -> set[int] | None:
@@ -159,31 +202,69 @@ class Visibility:
 
     def __init__(self, properties: PropertySet, names: Sequence[str]) -> None:
         index = {n: i for i, n in enumerate(names)}
-        self.expressions = [Expression(p.expr.source, index)
+        self.expressions = [Expression(p.expr.source, index, p.kind == "eventually")
                             for p in (*properties.invariants, *properties.within,
                                       *properties.eventually) if p.expr is not None]
         self.uses_now = any(e.uses_now for e in self.expressions)
         self._of: list[list[Expression]] = [[e for e in self.expressions if e.reads(i)]
                                             for i in range(len(names))]
+        self._rising: list[list[Expression]] = [[e for e in of if e.rising] for of in self._of]
+        #: the rising-goal relaxation holds (no falling transition seen); why not, if not
+        self.rising = any(self._rising)
+        self.fell: str | None = None
+
+    def observe(self, system: System, world: World, transitions: Iterable[Transition]) -> None:
+        """Check that no transition makes an atom of a rising goal fall; the first that does
+        turns the relaxation off (`rising`; the search must restart)."""
+        if not self.rising:
+            return
+        rising = self._rising
+        for tr in transitions:
+            for node in tr.changed:
+                for expr in rising[node]:
+                    if expr.falls(system, world.states, tr.world.states, node):
+                        self.rising = False
+                        self.fell = (f"{system.names[node]}.{tr.event.method} makes an atom "
+                                     f"of `{expr.source}` false")
+                        return
 
     def needs(self, system: System, world: World, chosen: Sequence[int],
-              frozen: set[int]) -> set[int] | None:
+              frozen: set[int], acyclic: Callable[[], bool] | None = None) -> set[int] | None:
         """None if no event of `chosen` (indices into `world.events`, of the nodes
         `frozen`) is visible; else the nodes whose addition to `frozen` might guard the
-        first visible one (empty: none can)."""
+        first visible one (empty: none can). `acyclic()` says whether no zero-time cycle
+        can run beside the set (then rising goals may rise unseen)."""
         states = world.states
+        rises: bool | None = None  # decided on first need
         for i in chosen:
             node = world.events[i].target
             exprs = self._of[node]
-            if not exprs:
-                continue
-            before = states[node]
-            afters = [v.state for v in system.variants(world, RunEvent(i)) if v.state != before]
+            afters = self._afters(system, world, i) if exprs else None
             if not afters:
                 continue
             for expr in exprs:
+                if expr.rising and self.rising:
+                    if rises is None:
+                        rises = acyclic is not None and acyclic()
+                    if rises and not expr.changes(system, states, node, afters, True):
+                        continue
                 if expr.changes(system, states, node, afters):
                     guard = expr.guard(system, states, node, afters, frozen)
                     if guard is not None:
                         return guard
         return None
+
+    def changed(self, system: System, world: World, index: int) -> bool:
+        """True if pending event `index` of `world` changes an atom of some expression
+        there (no guard considered)."""
+        node = world.events[index].target
+        exprs = self._of[node]
+        afters = self._afters(system, world, index) if exprs else None
+        return bool(afters) and any(e.changes(system, world.states, node, afters)
+                                    for e in exprs)
+
+    @staticmethod
+    def _afters(system: System, world: World, index: int) -> list[bytes]:
+        """The states the event's variants leave its node in, where they change it."""
+        before = world.states[world.events[index].target]
+        return [v.state for v in system.variants(world, RunEvent(index)) if v.state != before]

@@ -12,7 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twinfleet import QOS_LATCHED, Context, Node, String, handler, on_start, service, subscribe
+from twinfleet import QOS_LATCHED, Context, Node, QoS, String, handler, on_start, service, subscribe
 from twinfleet.nodes.geometry import shadows_intersect
 from twinfleet.nodes.grid import Cell, Dims
 from twinfleet.nodes.mapfile import static_grids
@@ -30,6 +30,9 @@ from twinfleet.nodes.profile import profile_named
 from twinfleet.nodes.scan import Scanner, build_tables
 
 UNKNOWN: Cell = (-1, -1)
+#: The most robots one map server tracks: the depth of its /poses queue, so that one pose of
+#: every robot may wait at once and none is lost to KEEP_LAST (Rule 6 of the checker).
+MAX_ROBOTS = 100
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"
 
 
@@ -75,6 +78,9 @@ class MapServer(Node):
         p = self.params
         if not p.robots:
             raise ValueError(f"{self.name}: params.robots must name at least one robot")
+        if len(p.robots) > MAX_ROBOTS:
+            raise ValueError(f"{self.name}: params.robots names {len(p.robots)} robots; one "
+                             f"map server tracks at most {MAX_ROBOTS}")
         if p.scan_rate_ms <= 0:
             raise ValueError(f"{self.name}: params.scan_rate_ms must be > 0, got {p.scan_rate_ms}")
         self.profile = profile_named(p.profile)
@@ -108,7 +114,8 @@ class MapServer(Node):
         ctx.publish(f"/{robot}/scan", ObstacleScan(robot, cells))
         ctx.after(self.params.scan_rate_ms, self.scan_robot, robot)
 
-    @service("/generate_path", priority=3)
+    # Commutes: it reads the state and changes nothing, and each reply goes to its caller.
+    @service("/generate_path", priority=3, commutes=True)
     def generate_path(self, ctx: Context, req: PathRequest) -> Path:
         """Plan on the static map inflated by one cell plus the other robots (REFERENCE §3.4, §4)."""
         i = self.index.get(req.robot, -1)
@@ -117,9 +124,12 @@ class MapServer(Node):
                   for j in range(len(st.cells)) if j != i and st.cells[j] != UNKNOWN]
         return Path(self.planner.plan(others, tuple(req.start), tuple(req.goal)))
 
-    # Default QoS (KEEP_LAST 10): the checker models drops and finds no world of the shipped
-    # scenarios with more than 10 poses waiting here, so none is ever lost to the depth.
-    @subscribe("/poses", priority=5)
+    # KEEP_LAST MAX_ROBOTS: a pose of every robot may wait here at once (with the default 10,
+    # a fleet of more than 10 robots reporting together would lose poses, live and checked).
+    # Commutes: a pose writes its robot's slot and tests it against each other robot, so two
+    # poses of one instant end in the same state in either order unless one of them collides
+    # (the checker checks each pair in both orders and expands the world fully where not).
+    @subscribe("/poses", priority=5, qos=QoS(depth=MAX_ROBOTS), commutes=True)
     def on_pose(self, ctx: Context, msg: RobotPose) -> None:
         """Track a robot's report and test its shadow against every other robot's."""
         i = self.index.get(msg.robot)

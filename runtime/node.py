@@ -88,6 +88,7 @@ class HandlerSpec:
     phase_ms: int = 0
     priority: int = 0
     qos: QoS = QOS_DEFAULT
+    commutes: bool = False  # messages at one instant may be handled in any order (checker hint)
 
 
 _SPEC_ATTR = "__twinfleet_handler__"
@@ -102,14 +103,27 @@ def _declare(fn: H, spec: HandlerSpec) -> H:
     return fn
 
 
-def subscribe(topic: str, *, priority: int = 0, qos: QoS = QOS_DEFAULT) -> Callable[[H], H]:
-    """Declare `fn(self, ctx, msg)` as the handler of messages on `topic`."""
-    return lambda fn: _declare(fn, HandlerSpec("subscribe", "", topic, priority=priority, qos=qos))
+def subscribe(topic: str, *, priority: int = 0, qos: QoS = QOS_DEFAULT,
+              commutes: bool = False) -> Callable[[H], H]:
+    """Declare `fn(self, ctx, msg)` as the handler of messages on `topic`.
+
+    `commutes=True` declares that messages arriving at the same instant (from different
+    senders) leave the node in the same state and send the same messages whichever is
+    handled first. It changes nothing live; the checker then explores one order of them
+    (its partial-order reduction), checking each pair it relies on in both orders.
+    """
+    spec = HandlerSpec("subscribe", "", topic, priority=priority, qos=qos, commutes=commutes)
+    return lambda fn: _declare(fn, spec)
 
 
-def service(name: str, *, priority: int = 0) -> Callable[[H], H]:
-    """Declare `fn(self, ctx, request) -> reply` as the server of service `name`."""
-    return lambda fn: _declare(fn, HandlerSpec("service", "", name, priority=priority))
+def service(name: str, *, priority: int = 0, commutes: bool = False) -> Callable[[H], H]:
+    """Declare `fn(self, ctx, request) -> reply` as the server of service `name`.
+
+    `commutes=True`: requests arriving at the same instant may be served in any order
+    (as for `subscribe`).
+    """
+    spec = HandlerSpec("service", "", name, priority=priority, commutes=commutes)
+    return lambda fn: _declare(fn, spec)
 
 
 def every(period_ms: int | str, *, phase_ms: int = 0, priority: int = 0) -> Callable[[H], H]:

@@ -234,6 +234,58 @@ class SlowFlagger(Flagger):
         self.state.done = True
 
 
+class Flipper(Flagger):
+    """Raises its flag at t=0 and lowers it again 5 ms later."""
+
+    @handler()
+    def flag(self, ctx: Context) -> None:
+        self.state.done = True
+        ctx.after(5, self.lower)
+
+    @handler()
+    def lower(self, ctx: Context) -> None:
+        self.state.done = False
+
+
+# ------------------------------------------------- declared commutation
+
+
+@dataclass(frozen=True)
+class ReporterParams:
+    """Parameters of Reporter."""
+
+    value: int = 1
+
+
+class Reporter(Node):
+    """Publishes its `value` on /report at start."""
+
+    Params = ReporterParams
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.publish("/report", Num(self.params.value))
+
+
+class Tally(Node):
+    """Adds up the reports: any order gives the same total (declared commutes=True)."""
+
+    def initial_state(self) -> SumState:
+        return SumState()
+
+    @subscribe("/report", commutes=True)
+    def on_report(self, ctx: Context, msg: Num) -> None:
+        self.state.total += msg.value
+
+
+class Digits(Tally):
+    """Declares commutes=True but writes the reports as digits: the order shows."""
+
+    @subscribe("/report", commutes=True)
+    def on_report(self, ctx: Context, msg: Num) -> None:
+        self.state.total = self.state.total * 10 + msg.value
+
+
 # ------------------------------------------------------ deadlock, livelock
 
 

@@ -156,3 +156,74 @@ def test_send_relation_is_learned_with_restarts(tmp_path, reduction, expected):
         assert result.reduction_statistics is not None
         assert result.reduction_statistics["restarts"] == 2
         assert "2 restarts" in result.reduction
+
+
+REPORTERS = [node(f"r{v}", "Reporter", value=v) for v in (1, 2, 3)]
+TOTAL_OK = {"name": "total_ok", "kind": "invariant", "expr": "tally.total <= 321"}
+
+
+@pytest.mark.parametrize(("reduction", "expected"), [
+    # Three reports reach `tally` at t=0 from three senders. Unreduced: every subset of
+    # handled reports is a world (the total is the subset's sum), 8 states, 12 transitions.
+    ("none", (8, 12, 13)),
+    # Reduced: the handler is declared commutes=True, so the tally gives one report at a
+    # time: {1,2,3} -> {2,3} -> {3} -> {}, 4 states, 3 transitions. The pairs checked in
+    # both orders: (1,2), (1,3) in the first world, (2,3) in the second.
+    ("por", (4, 3, 4)),
+])
+def test_declared_commuting_messages_take_one_order(tmp_path, reduction, expected):
+    path = scenario(tmp_path, [*REPORTERS, node("tally", "Tally")], properties=[TOTAL_OK])
+    result = run(path, reduction=reduction)
+    assert result.status == "holds"
+    assert counts(result) == expected
+    if reduction == "por":
+        stats = result.reduction_statistics
+        assert stats is not None
+        assert (stats["commuted"], stats["pairs"], stats["refuted"]) == (2, 3, 0)
+        assert "(tally.on_report), 3 pairs checked in both orders, 0 did not commute" \
+            in result.reduction
+
+
+def test_a_false_commutes_declaration_is_caught_by_the_pair_check(tmp_path):
+    # Digits writes 123 or 321 or ...: every pair differs in its two orders, so every world
+    # with two reports waiting is expanded fully and the counts are the unreduced ones:
+    # every ordered sequence of handled reports is a world, 1 + 3 + 6 + 6 = 16 states and
+    # 3 + 6 + 6 = 15 transitions.
+    path = scenario(tmp_path, [*REPORTERS, node("tally", "Digits")], properties=[TOTAL_OK])
+    full = run(path, reduction="none")
+    reduced = run(path, reduction="por")
+    assert counts(reduced) == counts(full) == (16, 15, 16)
+    stats = reduced.reduction_statistics
+    assert stats is not None and stats["commuted"] == 0
+    # the first pair of each world with 2+ reports waiting fails: 1 + 3 worlds
+    assert stats["pairs"] == stats["refuted"] == 4
+
+
+ALL_FLAGS = {"name": "all_flags", "kind": "eventually", "expr": "f1.done and f2.done and f3.done"}
+
+
+@pytest.mark.parametrize(("reduction", "expected"), [
+    ("none", (8, 12, 13)),
+    # Each flag makes an atom of the goal rise, which no flag ever lowers: the flags are
+    # taken one at a time as without the goal (4 states, 3 transitions). Without the rising
+    # rule every flag would be visible and the persistent set would hold all three.
+    ("por", (4, 3, 4)),
+])
+def test_rising_goal_atoms_are_not_visible(tmp_path, reduction, expected):
+    path = scenario(tmp_path, [node(f"f{i}", "Flagger") for i in (1, 2, 3)],
+                    properties=[ALL_FLAGS])
+    result = run(path, reduction=reduction)
+    assert result.status == "holds"
+    assert counts(result) == expected
+
+
+def test_a_falling_goal_atom_turns_the_rising_rule_off(tmp_path):
+    goal = {"name": "both", "kind": "eventually", "expr": "f1.done and f2.done"}
+    path = scenario(tmp_path, [node("f1", "Flagger"), node("f2", "Flipper")], properties=[goal])
+    full = run(path, reduction="none")
+    reduced = run(path, reduction="por")
+    assert reduced.status == full.status == "holds"
+    assert "goals not rising: f2.lower makes an atom of `f1.done and f2.done` false" \
+        in reduced.reduction
+    assert reduced.reduction_statistics is not None
+    assert reduced.reduction_statistics["restarts"] >= 1

@@ -1,0 +1,127 @@
+"""Same-node commutation: one event of a node whose handler is declared `commutes=True`.
+
+A persistent set normally takes a node with all its enabled events (two
+events of one node are dependent: each may read what the other writes). A
+handler declared ``@subscribe(..., commutes=True)`` (or ``@service``) says
+that messages it receives at one instant, from different senders, leave the
+node in the same state and send the same messages whichever is handled first
+(the map server storing r3's pose, then r7's). A node whose enabled events
+are all such messages to one such handler is *loose*: the persistent set may
+take just one of them, its *representative* e, and leave the others (E') to
+later worlds of the same instant, so an instant where N robots report
+together costs N worlds instead of 2^N.
+
+What the closure must then also hold (`checker.closure`, which calls here):
+
+- E' runs on paths that avoid the persistent set, so E''s handler is a
+  *sender that may run*: what it creates at t, directly or through other
+  nodes, must not disturb a node of the set (C-in), and it creates nothing at
+  its own node at a priority <= the representative's (that would disable e or
+  bring an event nobody checked). New messages at the loose node's priority
+  from others are never "harmless" for it (`Closure._incoming`).
+- No KEEP_LAST drop of the handler's queue may become possible at t (Rule 6):
+  the deliveries waiting fit its depth.
+- e commutes with every event of E' *in the worlds where both may run*. That
+  is the declaration; it cannot be derived from one world (docs/reduction.md
+  §4 has a counterexample). The checker *checks* every pair it relies on in
+  the world where it relies on it (`commute`): both orders run, to the same
+  set of worlds, with no failure, each event still enabled after the other,
+  and e invisible to the properties after the other as well as before. A pair
+  that fails expands the node fully in that world (counted in the summary).
+  Along the instant the representatives form a chain, so every pair of the
+  instant's messages is checked once, in both orders.
+
+What stays an assumption: that a pair which commutes where it is checked also
+commutes after further messages of the instant were handled (three events x,
+y, z where only "x handled last" differs pass every pairwise check). A
+handler whose effect is a sum of pairwise terms over the senders' slots (the
+map server: store the sender's pose, test it against each other robot) meets
+it: a pair's outcome reads only the two senders' own slots, which no other
+message of the instant writes. The summary names every declared handler the
+search relied on.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from twinfleet.checker.transition import RunEvent
+from twinfleet.runtime.kinds import EventKind
+
+if TYPE_CHECKING:
+    from twinfleet.checker.system import System
+    from twinfleet.checker.visibility import Visibility
+    from twinfleet.checker.world import Event, World
+
+_MESSAGES = (EventKind.DELIVERY, EventKind.REQUEST)
+
+
+def loose_nodes(system: System, world: World, by_node: dict[int, list[int]]
+                ) -> dict[int, int]:
+    """Per loose node of `world` (module docstring), the index of its representative: the
+    first of its >= 2 enabled events, all messages to one handler declared commuting whose
+    waiting deliveries fit the handler's KEEP_LAST depth."""
+    events = world.events
+    commuting = system.topology.commuting
+    out: dict[int, int] = {}
+    for x, idxs in by_node.items():
+        if len(idxs) < 2:
+            continue
+        first = events[idxs[0]]
+        handler = (x, first.method)
+        if handler not in commuting or any(
+                events[i].kind not in _MESSAGES or events[i].method != first.method
+                for i in idxs):
+            continue
+        depth = system.rules.depths.get(handler)
+        if depth is not None and _waiting(events, x, first.method) > depth:
+            continue
+        out[x] = idxs[0]
+    return out
+
+
+def _waiting(events: list[Event], node: int, method: str) -> int:
+    """Deliveries to `node.method` due at t*."""
+    t = events[0].due
+    count = 0
+    for ev in events:
+        if ev.due != t:
+            break
+        count += ev.target == node and ev.method == method and ev.kind is EventKind.DELIVERY
+    return count
+
+
+def commute(system: System, visibility: Visibility, world: World, e: int, j: int) -> bool:
+    """True if events `e` and `j` of one node, both enabled in `world`, commute there: both
+    orders reach the same worlds with no failure, and `e` changes no property atom after `j`
+    (it was checked before `j` by the closure's visibility proviso)."""
+    ends = []
+    for first, second in ((e, j), (j, e)):
+        reached = set()
+        for tr in system.outcomes(world, RunEvent(first)):
+            if tr.failure is not None:
+                return False
+            after = tr.world
+            k = _find(after, world.events[second])
+            if k is None or k not in system.rules.enabled(after.events):
+                return False
+            if second == e and visibility.changed(system, after, k):
+                return False
+            for tr2 in system.outcomes(after, RunEvent(k)):
+                if tr2.failure is not None:
+                    return False
+                reached.add(tr2.world.key)
+        ends.append(reached)
+    return ends[0] == ends[1]
+
+
+def _find(world: World, ev: Event) -> int | None:
+    """The index of pending event `ev` in `world` (the same object, or an equal one)."""
+    events = world.events
+    for k, other in enumerate(events):
+        if other is ev:
+            return k
+    for k, other in enumerate(events):
+        if other.sk == ev.sk and other.target == ev.target:
+            return k
+    return None
