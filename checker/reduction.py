@@ -153,6 +153,7 @@ class ReductionStatistics:
     commuted: int = 0  # worlds where a node declared commuting gave one of its events
     pairs: int = 0  # pairs of such events checked in both orders
     refuted: int = 0  # of those, pairs that did not commute (the node then gave all)
+    rises: int = 0  # events not visible only because they make a rising goal's atoms rise
 
     def to_json(self) -> dict[str, int]:
         """The counters as a JSON-ready mapping."""
@@ -186,11 +187,13 @@ class Reduction:
     def statistics(self) -> dict[str, int]:
         """The counters of the search, with the size of the learned relation."""
         self.stats.edges = self.publications.edges()
+        self.stats.rises = self.visibility.rises
         return self.stats.to_json()
 
     def restarted(self) -> None:
         """Count a restart; the other counters start again with the search."""
         self.stats = ReductionStatistics(restarts=self.stats.restarts + 1)
+        self.visibility.rises = 0
 
     @property
     def stale(self) -> bool:

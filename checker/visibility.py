@@ -212,6 +212,7 @@ class Visibility:
         #: the rising-goal relaxation holds (no falling transition seen); why not, if not
         self.rising = any(self._rising)
         self.fell: str | None = None
+        self.rises = 0  # events a rising goal let through (for the statistics)
 
     def observe(self, system: System, world: World, transitions: Iterable[Transition]) -> None:
         """Check that no transition makes an atom of a rising goal fall; the first that does
@@ -247,6 +248,7 @@ class Visibility:
                     if rises is None:
                         rises = acyclic is not None and acyclic()
                     if rises and not expr.changes(system, states, node, afters, True):
+                        self.rises += 1
                         continue
                 if expr.changes(system, states, node, afters):
                     guard = expr.guard(system, states, node, afters, frozen)

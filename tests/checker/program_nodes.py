@@ -21,6 +21,7 @@ JSON list:
     ["call", service, timeout]  ctx.call(service, Token(ttl - 1, regs[0]), on_reply)
                                 with timeout_ms=timeout                   (if ttl > 0)
     ["add", reg, k]             regs[reg] = (regs[reg] + k) % MOD
+    ["max", reg, k]             regs[reg] = max(regs[reg], k): never lowers a register
     ["take", reg]               regs[reg] = (value of the handled input) % MOD
     ["if", reg, v, then, else]  run `then` if regs[reg] == v, else `else` (action lists)
     ["choose", [a, b, ...]]     run one of the action lists, picked by ctx.choose
@@ -108,13 +109,13 @@ def _check_action(act: Any, where: str) -> None:
         raise ProgramError(f"{where}: expected an action list such as ['add', 0, 1], got {act!r}")
     op, args = act[0], list(act[1:])
     shapes = {"pub": (str,), "echo": (str,), "after": (int, int), "call": (str, int), "add": (int, int),
-              "take": (int,), "fail": (int, int)}
+              "max": (int, int), "take": (int,), "fail": (int, int)}
     if op in shapes:
         if len(args) != len(shapes[op]) or not all(isinstance(a, t) for a, t in
                                                    zip(args, shapes[op], strict=True)):
             raise ProgramError(f"{where}: {op} takes {[t.__name__ for t in shapes[op]]}, "
                                f"got {args!r}")
-        if op in ("add", "take", "fail") and not 0 <= args[0] < REGISTERS:
+        if op in ("add", "max", "take", "fail") and not 0 <= args[0] < REGISTERS:
             raise ProgramError(f"{where}: register {args[0]} out of range")
         if op == "after" and not (args[0] >= 0 and 0 <= args[1] < TIMER_SLOTS):
             raise ProgramError(f"{where}: after needs delay >= 0 and slot < {TIMER_SLOTS}")
@@ -176,6 +177,8 @@ class ProgramNode(Node):
             ctx.call(act[1], Token(ttl - 1, regs[0]), self.on_reply, timeout_ms=act[2])
         elif op == "add":
             regs[act[1]] = (regs[act[1]] + act[2]) % MOD
+        elif op == "max":
+            regs[act[1]] = max(regs[act[1]], act[2] % MOD)
         elif op == "take":
             regs[act[1]] = value % MOD
         elif op == "fail" and regs[act[1]] == act[2]:
@@ -250,3 +253,12 @@ class PeriodicProgramNode(ProgramNode):
     @every("period_ms", priority=PRIORITIES["tick"])
     def tick(self, ctx: Context) -> None:
         self._run(ctx, "tick", self.params.ttl, 0)
+
+
+class CommutingProgramNode(ProgramNode):
+    """A program node whose `/bus` handler is declared `commutes=True` (the generator gives
+    it programs whose pairs of messages commute wherever they do at all: adds, sends)."""
+
+    @subscribe(BUS, priority=PRIORITIES["bus"], commutes=True)
+    def on_bus(self, ctx: Context, msg: Token) -> None:
+        self._run(ctx, "bus", msg.ttl, msg.value)

@@ -29,11 +29,13 @@ from tests.checker.program_nodes import BUS, INPUT_TOPICS, MOD, REGISTERS, SERVI
 
 CLASSES = {"plain": "tests.checker.program_nodes:ProgramNode",
            "shallow": "tests.checker.program_nodes:ShallowProgramNode",
-           "periodic": "tests.checker.program_nodes:PeriodicProgramNode"}
+           "periodic": "tests.checker.program_nodes:PeriodicProgramNode",
+           "commuting": "tests.checker.program_nodes:CommutingProgramNode"}
 HANDLERS_OF = {"plain": ("start", "in0", "in1", "in2", "bus", "svc", "t0", "t1", "reply"),
                "shallow": ("start", "in0", "in1", "in2", "bus", "svc", "t0", "t1", "reply"),
                "periodic": ("start", "in0", "in1", "in2", "bus", "svc", "t0", "t1", "reply",
-                            "tick")}
+                            "tick"),
+               "commuting": ("start", "in0", "in1", "in2", "bus", "svc", "t0", "t1", "reply")}
 NO_SERVER = "/nobody/svc"  # a call to it ends in CallError("no server") after its timeout
 DELAYS = (0, 0, 5, 10)  # ctx.after delays in ms (0 twice: simultaneous events matter most)
 TIMEOUTS = (5, 20)
@@ -81,8 +83,17 @@ def _leaf(names: list[str]) -> st.SearchStrategy[list[Any]]:
         st.tuples(st.just("take"), reg),
         st.tuples(st.just("add"), reg, st.integers(1, MOD - 1)),
         st.tuples(st.just("fail"), reg, st.integers(1, MOD - 1)),
+        st.tuples(st.just("max"), reg, st.integers(1, MOD - 1)),
     ).map(list)
     return st.one_of(_send(names), local)
+
+
+def _commuting(names: list[str]) -> st.SearchStrategy[list[Any]]:
+    """An action of a handler declared commutes=True: an add, a max or a send, so whether two
+    of its messages commute does not depend on the node's state (the pair check is exact)."""
+    reg = st.integers(0, REGISTERS - 1)
+    return st.one_of(_send(names), st.tuples(st.sampled_from(["add", "max"]), reg,
+                                             st.integers(1, MOD - 1)).map(list))
 
 
 def _action(names: list[str]) -> st.SearchStrategy[list[Any]]:
@@ -97,15 +108,20 @@ def _action(names: list[str]) -> st.SearchStrategy[list[Any]]:
 
 
 @st.composite
-def _node(draw: st.DrawFn, name: str, names: list[str], semantics: str) -> dict[str, Any]:
-    kind = draw(st.sampled_from(["plain", "plain", "shallow", "periodic"]))
+def _node(draw: st.DrawFn, name: str, names: list[str], semantics: str,
+          bus_start: bool = False, kind: str | None = None) -> dict[str, Any]:
+    kind = kind or draw(st.sampled_from(["plain", "plain", "shallow", "periodic", "commuting"]))
     action = _action(names)
     program: dict[str, list[Any]] = {}
-    if name == names[0] or draw(st.booleans()):  # n1 starts something: not one state
+    if bus_start:  # every node publishes on /bus at t=0: simultaneous messages to each node
+        program["start"] = [["pub", BUS]]
+    elif name == names[0] or draw(st.booleans()):  # n1 starts something: not one state
         program["start"] = [draw(_send(names)), *draw(st.lists(action, max_size=1))]
     for h in draw(st.lists(st.sampled_from(HANDLERS_OF[kind]), min_size=2, max_size=6,
                            unique=True)):
         program.setdefault(h, draw(st.lists(action, min_size=1, max_size=2)))
+    if kind == "commuting":  # its /bus handler is declared commutes=True
+        program["bus"] = draw(st.lists(_commuting(names), min_size=1, max_size=2))
     inputs = [h for h in program if h in INPUT_TOPICS]
     if inputs and _sometimes(draw, 3):  # one input handler only echoes
         echoing = draw(st.sampled_from(inputs))
@@ -135,7 +151,7 @@ def _expr(names: list[str], ops: list[str]) -> st.SearchStrategy[str]:
 
 
 SAFE_OPS = ["!=", "<="]  # invariants: true in the initial world
-GOAL_OPS = ["=="]  # eventually, within, deadlock goals: false in the initial world
+GOAL_OPS = ["==", ">="]  # eventually, within, deadlock goals: false in the initial world
 
 
 @st.composite
@@ -147,6 +163,9 @@ def _property(draw: st.DrawFn, index: int, names: list[str]) -> dict[str, Any]:
         prop["expr"] = draw(_expr(names, SAFE_OPS))
     elif kind in ("eventually", "within") or (kind == "deadlock" and draw(st.booleans())):
         prop["expr"] = draw(_expr(names, GOAL_OPS))
+    if kind == "eventually" and _sometimes(draw, 2):  # a conjunction: maybe a rising goal
+        prop["expr"] = " and ".join(draw(st.lists(_atom(names, [">="]), min_size=2,
+                                                  max_size=3)))
     if kind == "within":
         prop["within_ms"] = draw(st.sampled_from([5, 20, 60]))
     return prop
@@ -186,14 +205,21 @@ def _check(draw: st.DrawFn, names: list[str]) -> dict[str, Any]:
 
 
 @st.composite
-def systems(draw: st.DrawFn, *, max_nodes: int = 4) -> dict[str, Any]:
-    """A scenario mapping of 2..`max_nodes` program nodes, settings and properties."""
+def systems(draw: st.DrawFn, *, max_nodes: int = 4, crowded: bool = False) -> dict[str, Any]:
+    """A scenario mapping of 2..`max_nodes` program nodes, settings and properties.
+    `crowded`: under `ros`, every node publishes on /bus at t=0 and n1's /bus handler is
+    declared commutes=True (the messages that meet there are what the declaration is for)."""
     names = names_of(draw(st.integers(2, max_nodes)))
-    semantics = draw(st.sampled_from(["ros", "ros", "rebeca"]))
+    semantics = "ros" if crowded else draw(st.sampled_from(["ros", "ros", "rebeca"]))
+    check = {} if crowded else draw(_check(names))
+    # Everyone publishing on /bus at t=0 only without latency and faults: their branches per
+    # delivery would multiply the initial worlds (4 nodes x 4 subscribers x 2 delays = 65,536).
+    bus_start = crowded or (not check and _sometimes(draw, 2))
     doc: dict[str, Any] = {"name": "generated", "semantics": semantics,
-                           "nodes": [draw(_node(n, names, semantics)) for n in names]}
+                           "nodes": [draw(_node(n, names, semantics, bus_start,
+                                                "commuting" if crowded and n == "n1" else None))
+                                     for n in names]}
     doc["properties"] = [draw(_property(i, names)) for i in range(draw(st.integers(1, 3)))]
-    check = draw(_check(names))
     if semantics == "rebeca" and _sometimes(draw, 4):
         check["global_priority"] = True
     if check:

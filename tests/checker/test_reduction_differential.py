@@ -136,6 +136,22 @@ def test_reduction_keeps_the_verdict_and_its_counterexamples_replay(
     # The partial-order reduction (issue 12) on every generated system, asked for explicitly
     # (under rebeca it is off by default): the same verdict as the full search; a reduced
     # search visits a subset of the reachable worlds; its counterexamples replay and violate.
+    _reduced_equals_full(workdir, doc, search)
+
+
+@pytest.mark.slow  # about 15 s for 100 systems
+@pytest.mark.timeout(600)
+@settings(DIFFERENTIAL, max_examples=max(1, EXAMPLES // 3))
+@given(doc=systems(crowded=True), search=st.sampled_from(["bfs", "dfs"]))
+def test_declared_commutation_keeps_the_verdict(workdir: Path, doc: dict[str, Any],
+                                                search: str) -> None:
+    # Systems where every node's start publishes on /bus and n1's /bus handler is declared
+    # commutes=True (`tests/checker/program_nodes.CommutingProgramNode`): the reduction takes
+    # one order of the messages that meet there, checking each pair it relies on.
+    _reduced_equals_full(workdir, doc, search)
+
+
+def _reduced_equals_full(workdir: Path, doc: dict[str, Any], search: str) -> None:
     path = write_scenario(doc, workdir / "system.yaml")
     full = outcome(path, search=search, reduction="none")
     reduced = outcome(path, search=search, reduction="por",
@@ -144,6 +160,12 @@ def test_reduction_keeps_the_verdict_and_its_counterexamples_replay(
     event(f"reduction {ran}" if ran == "por" else f"reduction {reduced.result.reduction}")
     assert full.result.reduction == "none"
     assert reduced.status == full.status, (reduced.result.summary(), full.result.summary())
+    stats = reduced.result.reduction_statistics or {}
+    for name in ("commuted", "refuted", "rises"):
+        if stats.get(name):
+            event(f"reduction relied on {name}")
+    if "goals not rising" in reduced.result.reduction:
+        event("a goal fell")
     if ran == "por" and reduced.status == HOLDS:
         event("fewer states" if reduced.states < full.states else "as many states")
         assert reduced.states <= full.states
