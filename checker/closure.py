@@ -9,6 +9,7 @@ still run at t, and what they may create at whom).
 
 from __future__ import annotations
 
+from functools import partial
 from typing import TYPE_CHECKING, Final, final
 
 from twinfleet.checker.commuting import commute, loose_nodes
@@ -125,7 +126,7 @@ class Closure:
             bad = self._disturbing(nodes, loose)
             if not bad:
                 guard = self.visibility.needs(self.system, self.world, chosen, nodes - loose,
-                                              lambda: self.acyclic(nodes, loose))
+                                              partial(self.acyclic, nodes, loose))
                 if guard is not None:
                     if not guard or guard <= nodes:
                         return None
