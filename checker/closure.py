@@ -45,26 +45,40 @@ class Closure:
         self.enabled = enabled
         events = world.events
         self.t = t = events[0].due
-        self.by_node: dict[int, list[int]] = {}
+        # One pass over the enabled events and one over the events due t, with locals:
+        # this runs for nearly every world of a reduced search.
+        by_node: dict[int, list[int]] = {}
+        p: dict[int, int] = {}
         for i in enabled:
-            self.by_node.setdefault(events[i].target, []).append(i)
-        self.p = {x: events[idxs[0]].priority for x, idxs in self.by_node.items()}
-        self.due: set[tuple[int, str]] = set()  # handlers with an event due t
-        self.harmless: set[tuple[int, int]] = set()  # channels with a message at p_target
-        self.unknown = False
+            ev = events[i]
+            idxs = by_node.get(ev.target)
+            if idxs is None:
+                by_node[ev.target] = [i]
+                p[ev.target] = ev.priority  # a node's enabled events share one priority
+            else:
+                idxs.append(i)
+        self.by_node = by_node
+        self.p = p
+        due: set[tuple[int, str]] = set()  # handlers with an event due t
+        harmless: set[tuple[int, int]] = set()  # channels with a message at p_target
+        unknown = False
         fifo = system.rules.fifo
         for ev in events:
             if ev.due != t:
                 break
-            self.unknown |= ev.kind not in KNOWN_KINDS
-            self.due.add((ev.target, ev.method))
-            if fifo and ev.message and ev.priority == self.p.get(ev.target) and \
+            if ev.kind not in KNOWN_KINDS:
+                unknown = True
+            due.add((ev.target, ev.method))
+            if fifo and ev.message and ev.priority == p.get(ev.target) and \
                     (ev.target, ev.priority) not in queued:
                 # A later message on a FIFO channel cannot overtake this one, so its sender
                 # cannot disturb the target; but into a KEEP_LAST queue at this priority
                 # (Rule 6) it could push the target over its depth and let a delivery of
                 # the target's enabled ones be dropped (`queued`: (node, priority) pairs).
-                self.harmless.add((ev.sender, ev.target))
+                harmless.add((ev.sender, ev.target))
+        self.due = due
+        self.harmless = harmless
+        self.unknown = unknown
         self._sends: dict[int, list[tuple[int, int]] | None] = {}
         self._tops: dict[int, tuple[set[tuple[int, str]], int]] = {}
 
@@ -108,7 +122,9 @@ class Closure:
         for _ in range(len(self.by_node)):
             if nodes is None:
                 return None
-            chosen = sorted(i for x in nodes for i in self.by_node.get(x, ()))
+            # `enabled` is ascending (`Rules.enabled`): filtering it keeps them sorted
+            events = self.world.events
+            chosen = [i for i in self.enabled if events[i].target in nodes]
             if len(chosen) == len(self.enabled):
                 return None
             guard = self.visibility.needs(self.system, self.world, chosen, nodes)

@@ -238,14 +238,18 @@ class Reduction:
             return None
         events = world.events
         first = events[enabled[0]].target
-        if all(events[i].target == first for i in enabled):
+        for i in enabled:
+            if events[i].target != first:
+                break
+        else:
             return None  # one node's events: dependent, nothing to choose
         closure = Closure(self.system, self.publications, self.visibility, world, enabled,
                           self._queued)
         if len(closure.by_node) < 2 or closure.unknown:
             return None
         best: list[int] | None = None
-        for seed in sorted(closure.by_node, key=lambda x: (len(closure.by_node[x]), x)):
+        # seeds with the fewest events first (then by index); tuples sort without a key call
+        for _, seed in sorted([(len(idxs), x) for x, idxs in closure.by_node.items()]):
             found = closure.persistent(seed)
             if found is not None and (best is None or len(found) < len(best)):
                 best = found
