@@ -9,7 +9,7 @@ still run at t, and what they may create at whom).
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING, Final, final
+from typing import TYPE_CHECKING, Any, Final, TypeVar, final
 
 from twinfleet.checker.publications import KNOWN_KINDS
 from twinfleet.checker.transition import RunEvent
@@ -21,6 +21,7 @@ if TYPE_CHECKING:
     from twinfleet.checker.world import World
 
 _INF: Final = 1 << 62  # the enabled priority of a node with nothing enabled
+_T = TypeVar("_T")
 
 
 @final
@@ -80,20 +81,30 @@ class Closure:
         self.harmless = harmless
         self.unknown = unknown
         self._sends: dict[int, list[tuple[int, int]] | None] = {}
-        self._tops: dict[int, tuple[set[tuple[int, str]], int]] = {}
+        # the last set `runnable` returned, and its nodes' top priorities (`_top`)
+        self._tops: tuple[set[tuple[int, str]] | None, dict[int, int]] = (None, {})
 
     def runnable(self, frozen: set[int]) -> set[tuple[int, str]]:
         """Handlers of nodes outside `frozen` that may run at t: those with an event due
-        and those such handlers may trigger at zero delay (the learned relation)."""
-        out = self.publications.out
-        reach = [h for h in self.due if h[0] not in frozen]
-        seen = set(reach)
-        while reach:
-            for h in out.get(reach.pop(), ()):
-                if h not in seen and h[0] not in frozen:
-                    seen.add(h)
-                    reach.append(h)
-        return seen
+        and those such handlers may trigger at zero delay (the learned relation). The set
+        is shared by the closures of every world with the same due handlers: read only."""
+        # Few distinct (due handlers, frozen) pairs recur in many worlds, so the search
+        # (and `_top`'s maxima over the set) is done once per pair and relation version.
+        derived = self.publications.derived
+        key = (frozenset(self.due), frozenset(frozen))
+        entry = derived.get(key)
+        if entry is None:
+            out = self.publications.out
+            reach = [h for h in self.due if h[0] not in frozen]
+            seen = set(reach)
+            while reach:
+                for h in out.get(reach.pop(), ()):
+                    if h not in seen and h[0] not in frozen:
+                        seen.add(h)
+                        reach.append(h)
+            entry = _remember(derived, key, (seen, {}))
+        self._tops = entry
+        return entry[0]
 
     def sends(self, i: int) -> list[tuple[int, int]] | None:
         """(target, priority) of the events due t that some variant of event i creates at
@@ -102,16 +113,25 @@ class Closure:
             return self._sends[i]
         world = self.world
         ev = world.events[i]
-        found: list[tuple[int, int]] | None = []
-        for v in self.system.variants(world, RunEvent(i)):
-            for e in v.events:
-                if e.kind not in KNOWN_KINDS:
-                    found = None
+        variants = self.system.variants(world, RunEvent(i))
+        # System keeps one variant list per (node state, event, time), met in many worlds:
+        # what it sends is kept beside it (the entry holds the list, so its id stays unique)
+        derived = self.publications.derived
+        entry = derived.get(id(variants))
+        if entry is not None and entry[0] is variants:
+            found: list[tuple[int, int]] | None = entry[1]
+        else:
+            found = []
+            for v in variants:
+                for e in v.events:
+                    if e.kind not in KNOWN_KINDS:
+                        found = None
+                        break
+                    if e.due == self.t and e.target != ev.target:
+                        found.append((e.target, e.priority))
+                if found is None:
                     break
-                if e.due == self.t and e.target != ev.target:
-                    found.append((e.target, e.priority))
-            if found is None:
-                break
+            _remember(derived, id(variants), (variants, found))
         self._sends[i] = found
         return found
 
@@ -183,11 +203,23 @@ class Closure:
 
     def _top(self, b: int, can: set[tuple[int, str]]) -> int:
         """The highest priority number among node b's handlers that may run at t."""
-        cached = self._tops.get(b)
-        if cached is not None and cached[0] is can:
-            return cached[1]
-        priority = self.system.topology.priority
-        top = max((priority(b, m) for n, m in can if n == b), default=-_INF)
-        self._tops[b] = (can, top)
+        if self._tops[0] is not can:  # not the set `runnable` returned last: no maxima yet
+            self._tops = (can, {})
+        tops = self._tops[1]
+        top = tops.get(b)
+        if top is None:
+            priority = self.system.topology.priority
+            top = tops[b] = max((priority(b, m) for n, m in can if n == b), default=-_INF)
         return top
+
+
+_DERIVED_LIMIT: Final = 8_192  # entries kept in `Publications.derived`
+
+
+def _remember(derived: dict[Any, Any], key: object, value: _T) -> _T:
+    """Store `value` under `key` in `derived` (emptied first when full); return it."""
+    if len(derived) >= _DERIVED_LIMIT:
+        derived.clear()
+    derived[key] = value
+    return value
 
