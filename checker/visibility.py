@@ -34,6 +34,7 @@ from twinfleet.checker.transition import RunEvent
 if TYPE_CHECKING:
     from twinfleet.checker.properties import PropertySet
     from twinfleet.checker.system import System
+    from twinfleet.checker.transition import Variant
     from twinfleet.checker.world import World
 
 _CACHE_LIMIT = 4_096  # values kept per part (by the node states it reads)
@@ -165,6 +166,9 @@ class Visibility:
         self.uses_now = any(e.uses_now for e in self.expressions)
         self._of: list[list[Expression]] = [[e for e in self.expressions if e.reads(i)]
                                             for i in range(len(names))]
+        # per variant list (System keeps one per node state, event and time): the list,
+        # its new states and the expressions they change (`needs`)
+        self._changes: dict[int, tuple[list[Variant], list[bytes], list[Expression]]] = {}
 
     def needs(self, system: System, world: World, chosen: Sequence[int],
               frozen: set[int]) -> set[int] | None:
@@ -177,13 +181,21 @@ class Visibility:
             exprs = self._of[node]
             if not exprs:
                 continue
-            before = states[node]
-            afters = [v.state for v in system.variants(world, RunEvent(i)) if v.state != before]
-            if not afters:
-                continue
-            for expr in exprs:
-                if expr.changes(system, states, node, afters):
-                    guard = expr.guard(system, states, node, afters, frozen)
-                    if guard is not None:
-                        return guard
+            variants = system.variants(world, RunEvent(i))
+            # Whether an expression changes reads only the node's state before (fixed by
+            # the list) and after, so it is decided once per list; a guard reads the world.
+            cached = self._changes.get(id(variants))
+            if cached is None or cached[0] is not variants:
+                before = states[node]
+                afters = [v.state for v in variants if v.state != before]
+                changing = [e for e in exprs if e.changes(system, states, node, afters)] \
+                    if afters else []
+                if len(self._changes) >= _CACHE_LIMIT:
+                    self._changes.clear()
+                cached = self._changes[id(variants)] = (variants, afters, changing)
+            afters, changing = cached[1], cached[2]
+            for expr in changing:
+                guard = expr.guard(system, states, node, afters, frozen)
+                if guard is not None:
+                    return guard
         return None
