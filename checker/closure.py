@@ -10,7 +10,7 @@ still run at t, and what they may create at whom).
 from __future__ import annotations
 
 from functools import partial
-from typing import TYPE_CHECKING, Final, final
+from typing import TYPE_CHECKING, Any, Final, TypeVar, final
 
 from twinfleet.checker.commuting import commute, loose_nodes
 from twinfleet.checker.publications import KNOWN_KINDS
@@ -23,6 +23,7 @@ if TYPE_CHECKING:
     from twinfleet.checker.world import World
 
 _INF: Final = 1 << 62  # the enabled priority of a node with nothing enabled
+_T = TypeVar("_T")
 
 
 @final
@@ -47,30 +48,45 @@ class Closure:
         self.enabled = enabled
         events = world.events
         self.t = t = events[0].due
-        self.by_node: dict[int, list[int]] = {}
+        # One pass over the enabled events and one over the events due t, with locals:
+        # this runs for nearly every world of a reduced search.
+        by_node: dict[int, list[int]] = {}
+        p: dict[int, int] = {}
         for i in enabled:
-            self.by_node.setdefault(events[i].target, []).append(i)
-        self.p = {x: events[idxs[0]].priority for x, idxs in self.by_node.items()}
-        self.due: set[tuple[int, str]] = set()  # handlers with an event due t
-        self.harmless: set[tuple[int, int]] = set()  # channels with a message at p_target
-        self.unknown = False
+            ev = events[i]
+            idxs = by_node.get(ev.target)
+            if idxs is None:
+                by_node[ev.target] = [i]
+                p[ev.target] = ev.priority  # a node's enabled events share one priority
+            else:
+                idxs.append(i)
+        self.by_node = by_node
+        self.p = p
+        due: set[tuple[int, str]] = set()  # handlers with an event due t
+        harmless: set[tuple[int, int]] = set()  # channels with a message at p_target
+        unknown = False
         fifo = system.rules.fifo
         for ev in events:
             if ev.due != t:
                 break
-            self.unknown |= ev.kind not in KNOWN_KINDS
-            self.due.add((ev.target, ev.method))
-            if fifo and ev.message and ev.priority == self.p.get(ev.target) and \
+            if ev.kind not in KNOWN_KINDS:
+                unknown = True
+            due.add((ev.target, ev.method))
+            if fifo and ev.message and ev.priority == p.get(ev.target) and \
                     (ev.target, ev.priority) not in queued:
                 # A later message on a FIFO channel cannot overtake this one, so its sender
                 # cannot disturb the target; but into a KEEP_LAST queue at this priority
                 # (Rule 6) it could push the target over its depth and let a delivery of
                 # the target's enabled ones be dropped (`queued`: (node, priority) pairs).
-                self.harmless.add((ev.sender, ev.target))
+                harmless.add((ev.sender, ev.target))
+        self.due = due
+        self.harmless = harmless
+        self.unknown = unknown
         self._sends: dict[int, list[tuple[int, int]] | None] = {}
-        self._tops: dict[int, tuple[set[tuple[int, str]], int]] = {}
+        # the last set `runnable` returned, and its nodes' top priorities (`_top`)
+        self._tops: tuple[set[tuple[int, str]] | None, dict[int, int]] = (None, {})
         #: loose node -> its representative (`checker.commuting`)
-        self.loose = loose_nodes(system, world, self.by_node)
+        self.loose = loose_nodes(system, world, by_node)
         self._commutes: dict[int, bool] = {}  # loose node -> all its pairs commute here
         self.pairs = self.refuted = 0  # pairs checked in both orders; of those, not commuting
 
@@ -78,17 +94,26 @@ class Closure:
                  ) -> set[tuple[int, str]]:
         """Handlers of nodes outside `frozen` that may run at t: those with an event due,
         the handlers of the `loose` nodes of `frozen` (their other events may run), and
-        those such handlers may trigger at zero delay (the learned relation)."""
-        out = self.publications.out
-        reach = [h for h in self.due if h[0] not in frozen]
-        reach += [self._handler(x) for x in loose if x in frozen]
-        seen = set(reach)
-        while reach:
-            for h in out.get(reach.pop(), ()):
-                if h not in seen and h[0] not in frozen:
-                    seen.add(h)
-                    reach.append(h)
-        return seen
+        those such handlers may trigger at zero delay (the learned relation). The set is
+        shared by the closures of every world with the same due handlers: read only."""
+        # Few distinct (due handlers, frozen, loose handlers) recur in many worlds, so the
+        # search (and `_top`'s maxima over the set) is done once per key and relation version.
+        roots = [self._handler(x) for x in loose if x in frozen]
+        derived = self.publications.derived
+        key = (frozenset(self.due), frozenset(frozen), frozenset(roots))
+        entry = derived.get(key)
+        if entry is None:
+            out = self.publications.out
+            reach = [h for h in self.due if h[0] not in frozen] + roots
+            seen = set(reach)
+            while reach:
+                for h in out.get(reach.pop(), ()):
+                    if h not in seen and h[0] not in frozen:
+                        seen.add(h)
+                        reach.append(h)
+            entry = _remember(derived, key, (seen, {}))
+        self._tops = entry
+        return entry[0]
 
     def sends(self, i: int) -> list[tuple[int, int]] | None:
         """(target, priority) of the events due t that some variant of event i creates at
@@ -97,16 +122,25 @@ class Closure:
             return self._sends[i]
         world = self.world
         ev = world.events[i]
-        found: list[tuple[int, int]] | None = []
-        for v in self.system.variants(world, RunEvent(i)):
-            for e in v.events:
-                if e.kind not in KNOWN_KINDS:
-                    found = None
+        variants = self.system.variants(world, RunEvent(i))
+        # System keeps one variant list per (node state, event, time), met in many worlds:
+        # what it sends is kept beside it (the entry holds the list, so its id stays unique)
+        derived = self.publications.derived
+        entry = derived.get(id(variants))
+        if entry is not None and entry[0] is variants:
+            found: list[tuple[int, int]] | None = entry[1]
+        else:
+            found = []
+            for v in variants:
+                for e in v.events:
+                    if e.kind not in KNOWN_KINDS:
+                        found = None
+                        break
+                    if e.due == self.t and e.target != ev.target:
+                        found.append((e.target, e.priority))
+                if found is None:
                     break
-                if e.due == self.t and e.target != ev.target:
-                    found.append((e.target, e.priority))
-            if found is None:
-                break
+            _remember(derived, id(variants), (variants, found))
         self._sends[i] = found
         return found
 
@@ -120,7 +154,10 @@ class Closure:
         for _ in range(len(self.by_node) + len(loose) + 1):
             if nodes is None:
                 return None
-            chosen = sorted(i for x in nodes for i in self._events(x, loose))
+            # `enabled` is ascending (`Rules.enabled`): filtering it keeps them sorted
+            events, rep = self.world.events, self.loose
+            chosen = [i for i in self.enabled if events[i].target in nodes
+                      and (events[i].target not in loose or rep[events[i].target] == i)]
             if len(chosen) == len(self.enabled):
                 return None
             bad = self._disturbing(nodes, loose)
@@ -263,11 +300,23 @@ class Closure:
 
     def _top(self, b: int, can: set[tuple[int, str]]) -> int:
         """The highest priority number among node b's handlers that may run at t."""
-        cached = self._tops.get(b)
-        if cached is not None and cached[0] is can:
-            return cached[1]
-        priority = self.system.topology.priority
-        top = max((priority(b, m) for n, m in can if n == b), default=-_INF)
-        self._tops[b] = (can, top)
+        if self._tops[0] is not can:  # not the set `runnable` returned last: no maxima yet
+            self._tops = (can, {})
+        tops = self._tops[1]
+        top = tops.get(b)
+        if top is None:
+            priority = self.system.topology.priority
+            top = tops[b] = max((priority(b, m) for n, m in can if n == b), default=-_INF)
         return top
+
+
+_DERIVED_LIMIT: Final = 8_192  # entries kept in `Publications.derived`
+
+
+def _remember(derived: dict[Any, Any], key: object, value: _T) -> _T:
+    """Store `value` under `key` in `derived` (emptied first when full); return it."""
+    if len(derived) >= _DERIVED_LIMIT:
+        derived.clear()
+    derived[key] = value
+    return value
 

@@ -24,7 +24,7 @@ relation, and restarts.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Final, final
+from typing import TYPE_CHECKING, Any, Final, final
 
 from twinfleet.runtime.kinds import EventKind
 
@@ -48,15 +48,19 @@ class Publications:
         out: per sending handler, the handlers (X, method) those events run.
         version: grows whenever the relation grows (a search compares it).
         unknown: the first event kind outside `KNOWN_KINDS` seen, or None.
+        derived: what `checker.closure` derives from the relation and from variant lists,
+            kept across worlds; emptied whenever the relation grows, so nothing in it was
+            derived from an older relation.
     """
 
-    __slots__ = ("into", "out", "unknown", "version")
+    __slots__ = ("derived", "into", "out", "unknown", "version")
 
     def __init__(self, nodes: int) -> None:
         self.into: list[dict[Handler, set[tuple[str, int]]]] = [{} for _ in range(nodes)]
         self.out: dict[Handler, set[Handler]] = {}
         self.version = 0
         self.unknown: str | None = None
+        self.derived: dict[Any, Any] = {}
 
     def observe(self, sender: Handler, now: int, variants: Sequence[Variant]) -> None:
         """Record the zero-delay events that handler `sender`'s run at `now` created."""
@@ -65,7 +69,7 @@ class Publications:
             for e in v.events:
                 if e.kind not in KNOWN_KINDS and self.unknown is None:
                     self.unknown = str(e.kind)
-                    self.version += 1
+                    self._grew()
                 if e.due != now:
                     continue
                 made = into[e.target].get(sender)
@@ -75,7 +79,11 @@ class Publications:
                 if item not in made:
                     made.add(item)
                     self.out.setdefault(sender, set()).add((e.target, e.method))
-                    self.version += 1
+                    self._grew()
+
+    def _grew(self) -> None:
+        self.version += 1
+        self.derived.clear()
 
     def edges(self) -> int:
         """How many (sending handler, target, method, priority) entries are known."""
@@ -86,3 +94,4 @@ class Publications:
 
     def __setstate__(self, state: tuple[object, ...]) -> None:
         self.into, self.out, self.version, self.unknown = state  # type: ignore[assignment]
+        self.derived = {}

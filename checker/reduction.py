@@ -256,16 +256,22 @@ class Reduction:
             return None
         events = world.events
         first = events[enabled[0]].target
-        if not self._commuting and all(events[i].target == first for i in enabled):
-            return None  # one node's events: dependent, nothing to choose
+        for i in enabled:
+            if events[i].target != first:
+                break
+        else:
+            if not self._commuting:
+                return None  # one node's events: dependent, nothing to choose
         closure = Closure(self.system, self.publications, self.visibility, world, enabled,
                           self._queued)
         if (len(closure.by_node) < 2 and not closure.loose) or closure.unknown:
             return None
         best: list[int] | None = None
-        # Plain singletons first: a loose node's one event costs its pair checks.
-        for seed in sorted(closure.by_node, key=lambda x: (
-                len(closure.by_node[x]) + (x in closure.loose) / 2, x)):
+        # Seeds with the fewest events first (then by index); plain singletons before a loose
+        # node's one event, which costs its pair checks. Tuples sort without a key call.
+        loose = closure.loose
+        for _, seed in sorted([(len(idxs) + (x in loose) / 2, x)
+                               for x, idxs in closure.by_node.items()]):
             found = closure.persistent(seed)
             if found is not None and (best is None or len(found) < len(best)):
                 best = found

@@ -52,7 +52,7 @@ from twinfleet.checker.transition import RunEvent
 if TYPE_CHECKING:
     from twinfleet.checker.properties import PropertySet
     from twinfleet.checker.system import System
-    from twinfleet.checker.transition import Transition
+    from twinfleet.checker.transition import Transition, Variant
     from twinfleet.checker.world import World
 
 _CACHE_LIMIT = 4_096  # values kept per part (by the node states it reads)
@@ -208,6 +208,11 @@ class Visibility:
         self.uses_now = any(e.uses_now for e in self.expressions)
         self._of: list[list[Expression]] = [[e for e in self.expressions if e.reads(i)]
                                             for i in range(len(names))]
+        # per variant list (System keeps one per node state, event and time): the list,
+        # its new states and the expressions they change, each with whether the change is
+        # only a rise (`needs`)
+        self._changes: dict[int, tuple[list[Variant], list[bytes],
+                                       list[tuple[Expression, bool]]]] = {}
         self._rising: list[list[Expression]] = [[e for e in of if e.rising] for of in self._of]
         #: the rising-goal relaxation holds (no falling transition seen); why not, if not
         self.rising = any(self._rising)
@@ -240,20 +245,31 @@ class Visibility:
         for i in chosen:
             node = world.events[i].target
             exprs = self._of[node]
-            afters = self._afters(system, world, i) if exprs else None
-            if not afters:
+            if not exprs:
                 continue
-            for expr in exprs:
-                if expr.rising and self.rising:
+            variants = system.variants(world, RunEvent(i))
+            # Whether an expression changes reads only the node's state before (fixed by
+            # the list) and after, so it is decided once per list; a guard reads the world.
+            cached = self._changes.get(id(variants))
+            if cached is None or cached[0] is not variants:
+                before = states[node]
+                afters = [v.state for v in variants if v.state != before]
+                changing = [(e, e.rising and not e.changes(system, states, node, afters, True))
+                            for e in exprs if afters and e.changes(system, states, node, afters)]
+                if len(self._changes) >= _CACHE_LIMIT:
+                    self._changes.clear()
+                cached = self._changes[id(variants)] = (variants, afters, changing)
+            afters, changing = cached[1], cached[2]
+            for expr, only_rises in changing:
+                if only_rises and self.rising:
                     if rises is None:
                         rises = acyclic is not None and acyclic()
-                    if rises and not expr.changes(system, states, node, afters, True):
+                    if rises:
                         self.rises += 1
                         continue
-                if expr.changes(system, states, node, afters):
-                    guard = expr.guard(system, states, node, afters, frozen)
-                    if guard is not None:
-                        return guard
+                guard = expr.guard(system, states, node, afters, frozen)
+                if guard is not None:
+                    return guard
         return None
 
     def changed(self, system: System, world: World, index: int) -> bool:
