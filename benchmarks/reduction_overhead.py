@@ -9,8 +9,9 @@ process, on each scenario (default `launch/c1a.yaml`, BFS to the end):
 
 - `none`: the unreduced search;
 - `bookkeeping`: every world's persistent set is computed exactly as `por`
-  computes it (variants, closure, visibility), then the world is expanded
-  fully anyway: the same transitions as `none`, plus all of the bookkeeping,
+  computes it (variants, closure, visibility, pair checks of declared
+  commuting handlers), then the world is expanded fully anyway and its
+  transitions checked for falling goal atoms, as `por` checks them: the same transitions as `none`, plus all of the bookkeeping,
   so its transitions/s over `none`'s is the cost;
 - `por`: the reduced search.
 
@@ -50,7 +51,7 @@ class BookkeepingOnly(Reduction):
     def successors(self, world: Any, find: Any, done: int | None) -> list[Any]:
         enabled = self.rules.enabled(world.events)
         self._choose(world, enabled)
-        return list(self.system.successors(world, enabled))
+        return self._observed(world, list(self.system.successors(world, enabled)))
 
     @property
     def stale(self) -> bool:
