@@ -9,6 +9,7 @@ still run at t, and what they may create at whom).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import partial
 from typing import TYPE_CHECKING, Any, Final, TypeVar, final
 
@@ -169,7 +170,8 @@ class Closure:
                         return None
                     nodes = self.grow(nodes | guard, loose)
                     continue
-                bad = {x for x in loose & nodes if not self._pairs_commute(x)}
+                bad = {x for x in loose & nodes
+                       if not self._pairs_commute(x, partial(self.acyclic, nodes, loose))}
                 if not bad:
                     return chosen
             loose -= bad
@@ -266,7 +268,7 @@ class Closure:
                     break
         return bad
 
-    def _pairs_commute(self, x: int) -> bool:
+    def _pairs_commute(self, x: int, acyclic: Callable[[], bool]) -> bool:
         """True if loose node x's representative commutes here with each of its other
         enabled events (`checker.commuting.commute`; each pair checked once per world)."""
         found = self._commutes.get(x)
@@ -277,7 +279,7 @@ class Closure:
                 if j == e:
                     continue
                 self.pairs += 1
-                if not commute(self.system, self.visibility, self.world, e, j):
+                if not commute(self.system, self.visibility, self.world, e, j, acyclic):
                     self.refuted += 1
                     found = False
                     break

@@ -43,6 +43,7 @@ search relied on.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from twinfleet.checker.transition import RunEvent
@@ -91,10 +92,11 @@ def _waiting(events: list[Event], node: int, method: str) -> int:
     return count
 
 
-def commute(system: System, visibility: Visibility, world: World, e: int, j: int) -> bool:
+def commute(system: System, visibility: Visibility, world: World, e: int, j: int,
+            acyclic: Callable[[], bool] | None = None) -> bool:
     """True if events `e` and `j` of one node, both enabled in `world`, commute there: both
     orders reach the same worlds with no failure, and `e` changes no property atom after `j`
-    (it was checked before `j` by the closure's visibility proviso)."""
+    (it was checked before `j` by the closure's visibility proviso; `acyclic` as there)."""
     ends = []
     for first, second in ((e, j), (j, e)):
         reached = set()
@@ -105,7 +107,7 @@ def commute(system: System, visibility: Visibility, world: World, e: int, j: int
             k = _find(after, world.events[second])
             if k is None or k not in system.rules.enabled(after.events):
                 return False
-            if second == e and visibility.changed(system, after, k):
+            if second == e and visibility.changed(system, after, k, acyclic):
                 return False
             for tr2 in system.outcomes(after, RunEvent(k)):
                 if tr2.failure is not None:

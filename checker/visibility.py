@@ -272,14 +272,23 @@ class Visibility:
                     return guard
         return None
 
-    def changed(self, system: System, world: World, index: int) -> bool:
+    def changed(self, system: System, world: World, index: int,
+                acyclic: Callable[[], bool] | None = None) -> bool:
         """True if pending event `index` of `world` changes an atom of some expression
-        there (no guard considered)."""
+        there (no guard considered; a rise of a rising goal counts as in `needs`)."""
         node = world.events[index].target
         exprs = self._of[node]
         afters = self._afters(system, world, index) if exprs else None
-        return bool(afters) and any(e.changes(system, world.states, node, afters)
-                                    for e in exprs)
+        if not afters:
+            return False
+        states = world.states
+        for e in exprs:
+            if not e.changes(system, states, node, afters):
+                continue
+            if not (e.rising and self.rising and acyclic is not None
+                    and not e.changes(system, states, node, afters, True) and acyclic()):
+                return True
+        return False
 
     @staticmethod
     def _afters(system: System, world: World, index: int) -> list[bytes]:
