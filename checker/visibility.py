@@ -218,21 +218,32 @@ class Visibility:
         self.rising = any(self._rising)
         self.fell: str | None = None
         self.rises = 0  # events a rising goal let through (for the statistics)
+        self._rose: set[tuple[int, bytes, bytes]] = set()  # (node, before, after) seen not to fall
 
     def observe(self, system: System, world: World, transitions: Iterable[Transition]) -> None:
         """Check that no transition makes an atom of a rising goal fall; the first that does
         turns the relaxation off (`rising`; the search must restart)."""
         if not self.rising:
             return
-        rising = self._rising
+        rising, seen = self._rising, self._rose
+        before = world.states
         for tr in transitions:
             for node in tr.changed:
+                if not rising[node]:
+                    continue
+                # a fall reads the node's state before and after only: once per pair
+                key = (node, before[node], tr.world.states[node])
+                if key in seen:
+                    continue
                 for expr in rising[node]:
-                    if expr.falls(system, world.states, tr.world.states, node):
+                    if expr.falls(system, before, tr.world.states, node):
                         self.rising = False
                         self.fell = (f"{system.names[node]}.{tr.event.method} makes an atom "
                                      f"of `{expr.source}` false")
                         return
+                if len(seen) >= _CACHE_LIMIT:
+                    seen.clear()
+                seen.add(key)
 
     def needs(self, system: System, world: World, chosen: Sequence[int],
               frozen: set[int], acyclic: Callable[[], bool] | None = None) -> set[int] | None:
