@@ -87,7 +87,7 @@ class Closure:
         # the last set `runnable` returned, and its nodes' top priorities (`_top`)
         self._tops: tuple[set[tuple[int, str]] | None, dict[int, int]] = (None, {})
         #: loose node -> its representative (`checker.commuting`)
-        self.loose = loose_nodes(system, world, by_node)
+        self.loose = loose_nodes(system, world, by_node) if system.topology.commuting else {}
         self._commutes: dict[int, bool] = {}  # loose node -> all its pairs commute here
         self.pairs = self.refuted = 0  # pairs checked in both orders; of those, not commuting
 

@@ -58,6 +58,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final, final
 
 from twinfleet.checker.closure import Closure
+from twinfleet.checker.commuting import loose_nodes
 from twinfleet.checker.faults import CheckSettings
 from twinfleet.checker.semantics import Rules, Semantics
 from twinfleet.checker.transition import Drop, RunEvent, Transition
@@ -259,9 +260,9 @@ class Reduction:
         for i in enabled:
             if events[i].target != first:
                 break
-        else:
-            if not self._commuting:
-                return None  # one node's events: dependent, nothing to choose
+        else:  # one node's events: dependent unless it is loose (`checker.commuting`)
+            if not self._commuting or not loose_nodes(self.system, world, {first: enabled}):
+                return None
         closure = Closure(self.system, self.publications, self.visibility, world, enabled,
                           self._queued)
         if (len(closure.by_node) < 2 and not closure.loose) or closure.unknown:
@@ -284,6 +285,8 @@ class Reduction:
                         ) -> None:
         """Count `closure`'s pair checks, and the worlds where `chosen` took one event of a
         loose node (naming the declared handlers relied on)."""
+        if not closure.pairs:
+            return  # no loose node gave one event without its pairs checked
         self.stats.pairs += closure.pairs
         self.stats.refuted += closure.refuted
         taken = set(chosen or ())
