@@ -203,26 +203,7 @@ class Closure:
         """True if the handlers that may run at t beside the set of `nodes` trigger no
         zero-time cycle among themselves (by the learned relation): every path that
         avoids the set is then finite (`checker.visibility`: rising goals)."""
-        can = self.runnable(nodes, loose)
-        out = self.publications.out
-        done: set[tuple[int, str]] = set()
-        for root in can:
-            if root in done:
-                continue
-            path, stack = {root}, [(root, iter(out.get(root, ())))]
-            while stack:
-                h, it = stack[-1]
-                nxt = next((n for n in it if n in can and n not in done), None)
-                if nxt is None:
-                    stack.pop()
-                    path.discard(h)
-                    done.add(h)
-                elif nxt in path:
-                    return False
-                else:
-                    path.add(nxt)
-                    stack.append((nxt, iter(out.get(nxt, ()))))
-        return True
+        return self.publications.acyclic(self.runnable(nodes, loose))
 
     def _events(self, x: int, loose: frozenset[int]) -> list[int]:
         """The enabled events node x contributes: its representative if loose, else all."""

@@ -85,6 +85,28 @@ class Publications:
         self.version += 1
         self.derived.clear()
 
+    def acyclic(self, handlers: set[Handler]) -> bool:
+        """True if the relation has no cycle among `handlers` (no zero-time cycle can run
+        among them, as far as the relation knows)."""
+        out, done = self.out, set()
+        for root in handlers:
+            if root in done:
+                continue
+            path, stack = {root}, [(root, iter(out.get(root, ())))]
+            while stack:  # depth-first; `path` holds the handlers on the stack
+                h, it = stack[-1]
+                nxt = next((n for n in it if n in handlers and n not in done), None)
+                if nxt is None:
+                    stack.pop()
+                    path.discard(h)
+                    done.add(h)
+                elif nxt in path:
+                    return False
+                else:
+                    path.add(nxt)
+                    stack.append((nxt, iter(out.get(nxt, ()))))
+        return True
+
     def edges(self) -> int:
         """How many (sending handler, target, method, priority) entries are known."""
         return sum(len(p) for per in self.into for p in per.values())
