@@ -111,7 +111,8 @@ def test_topic_info_and_type(runtime_dir, c1a):
     assert "Type: twinfleet_msgs/RobotPose" in out
     assert "Publisher count: 5" in out and "Subscription count: 1" in out
     subscription = out.split("Endpoint type: SUBSCRIPTION", 1)[1]  # the map server's
-    assert "Node name: map_server" in out and "History (Depth): KEEP_LAST (10)" in subscription
+    # the map server keeps one pose of every robot it may track (nodes.map_server.MAX_ROBOTS)
+    assert "Node name: map_server" in out and "History (Depth): KEEP_LAST (100)" in subscription
     latched = ok(tf(runtime_dir, "topic", "info", "/map", "-v"))
     assert "Durability: TRANSIENT_LOCAL" in latched
     assert ok(tf(runtime_dir, "topic", "type", "/map")).strip() == "twinfleet_msgs/OccupancyGrid"
