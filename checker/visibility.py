@@ -263,8 +263,7 @@ class Visibility:
             # the list) and after, so it is decided once per list; a guard reads the world.
             cached = self._changes.get(id(variants))
             if cached is None or cached[0] is not variants:
-                before = states[node]
-                afters = [v.state for v in variants if v.state != before]
+                afters = self._afters(states[node], variants)
                 changing = [(e, e.rising and not e.changes(system, states, node, afters, True))
                             for e in exprs if afters and e.changes(system, states, node, afters)]
                 if len(self._changes) >= _CACHE_LIMIT:
@@ -289,7 +288,8 @@ class Visibility:
         there (no guard considered; a rise of a rising goal counts as in `needs`)."""
         node = world.events[index].target
         exprs = self._of[node]
-        afters = self._afters(system, world, index) if exprs else None
+        afters = self._afters(world.states[node], system.variants(world, RunEvent(index))) \
+            if exprs else None
         if not afters:
             return False
         states = world.states
@@ -302,7 +302,6 @@ class Visibility:
         return False
 
     @staticmethod
-    def _afters(system: System, world: World, index: int) -> list[bytes]:
-        """The states the event's variants leave its node in, where they change it."""
-        before = world.states[world.events[index].target]
-        return [v.state for v in system.variants(world, RunEvent(index)) if v.state != before]
+    def _afters(before: bytes, variants: Sequence[Variant]) -> list[bytes]:
+        """The states an event's variants leave its node in, where they change it."""
+        return [v.state for v in variants if v.state != before]
