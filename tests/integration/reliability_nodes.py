@@ -6,7 +6,11 @@ which is what the node processes started by the launcher see.
 
 from __future__ import annotations
 
+import gc
+import re
+import sys
 from dataclasses import dataclass, field
+from pathlib import Path
 
 from twinfleet import Context, Node, String, every, message, service, subscribe
 from twinfleet.runtime.messages import NodeAlive
@@ -135,6 +139,7 @@ class FloodParams:
     burst: int = 20
     size: int = 64
     limit: int = 0  # stop after this many samples per topic (0 = never)
+    rounds: int = 1  # split `limit` into rounds; the next starts when the sink says `/soak/next`
 
 
 @dataclass
@@ -142,6 +147,7 @@ class FloodState:
     """State of Flood."""
 
     sent: int = 0
+    rounds_open: int = 1  # rounds the sink has let start
 
 
 class Flood(Node):
@@ -159,12 +165,17 @@ class Flood(Node):
     @every("period_ms")
     def burst(self, ctx: Context) -> None:
         st, p = self.state, self.params
+        cap = p.limit * st.rounds_open // p.rounds if p.limit else 0
         for _ in range(p.burst):
-            if p.limit and st.sent >= p.limit:
+            if cap and st.sent >= cap:
                 return
             st.sent += 1
             ctx.publish("/soak/reliable", Tick(self.name, st.sent, self.blob))
             ctx.publish("/soak/fast", Tick(self.name, st.sent, self.blob))
+
+    @subscribe("/soak/next")
+    def on_next(self, ctx: Context, msg: String) -> None:
+        self.state.rounds_open = max(self.state.rounds_open, int(msg.data))
 
 
 @dataclass(frozen=True)
@@ -172,6 +183,7 @@ class SinkParams:
     """Parameters of Sink."""
 
     expected: int = 0  # reliable samples to receive before asking the launcher to stop
+    rounds: int = 1  # the publishers' rounds: after each, measure memory and open the next
 
 
 @dataclass
@@ -187,10 +199,21 @@ class SinkState:
     last: dict[str, int] = field(default_factory=dict)
 
 
+def memory_now() -> dict[str, int]:
+    """This process's resident set (kB) and live Python objects (pymalloc blocks, after a
+    collection): the second does not depend on how much memory a backlog once took."""
+    gc.collect()
+    status = Path("/proc/self/status").read_text()
+    rss = re.search(r"^VmRSS:\s+(\d+) kB", status, re.M)
+    return {"rss_kb": int(rss.group(1)) if rss else -1, "blocks": sys.getallocatedblocks()}
+
+
 class Sink(Node):
     """The soak subscriber: counts both topics and checks per-source order on the reliable one.
 
-    Once `expected` reliable samples arrived, it logs ``soak_done`` and publishes on
+    At the end of each of the publishers' rounds it logs ``round_done`` with its memory
+    (`memory_now`) and publishes the next round's number on ``/soak/next``; once
+    `expected` reliable samples arrived, it logs ``soak_done`` and publishes on
     ``/twinfleet/shutdown``.
     """
 
@@ -201,7 +224,7 @@ class Sink(Node):
 
     @subscribe("/soak/reliable", qos=QoS(depth=100_000))
     def on_reliable(self, ctx: Context, msg: Tick) -> None:
-        st = self.state
+        st, p = self.state, self.params
         if msg.n != st.last.get(msg.source, 0) + 1:
             st.out_of_order += 1
         st.last[msg.source] = msg.n
@@ -209,7 +232,12 @@ class Sink(Node):
         if st.first_ms < 0:
             st.first_ms = ctx.now()
         st.last_ms = ctx.now()
-        if st.reliable == self.params.expected and not st.done:
+        finished, rest = divmod(st.reliable * p.rounds, p.expected) if p.expected else (0, 1)
+        if not rest and finished:  # the last sample of a round: nothing of it is waiting
+            ctx.log("round_done", round=finished, **memory_now())
+            if finished < p.rounds:
+                ctx.publish("/soak/next", String(str(finished + 1)))
+        if st.reliable == p.expected and not st.done:
             st.done = True
             ctx.log("soak_done", reliable=st.reliable, fast=st.fast, out_of_order=st.out_of_order,
                     first_ms=st.first_ms, last_ms=st.last_ms)
