@@ -32,7 +32,7 @@ from twinfleet.runtime.tracefile import load_trace
 
 MAX_TRAIL = 20_000
 MAX_LOG = 500
-RESTART_MS = 1000  # a robot's stamps going back this far: the fleet was launched again
+RESTART_MS = 1000  # one sender's stamps going back this far: the fleet was launched again
 ROBOT_TYPES = {
     "twinfleet_msgs/RobotPose": "pose",
     "twinfleet_msgs/RobotStatus": "status",
@@ -130,7 +130,8 @@ class LiveState:
         self.latest: dict[str, dict[str, Any]] = {}  # topic → its last envelope (JSON values)
         self._dirty_topics: set[str] = set()
         self.messages = 0
-        self._stamps: dict[str, int] = {}
+        self._stamps: dict[tuple[str, str], int] = {}  # (sender, robot) → latest stamp
+        self._reset: set[str] = set()  # robots restarted since the last update
         self._dirty: dict[str, set[str]] = {}
         self._dirty_top: set[str] = set()
 
@@ -158,7 +159,7 @@ class LiveState:
         kind, data = env["type"], env["data"]
         field = ROBOT_TYPES.get(kind)
         if field is not None and isinstance(data.get("robot"), str):
-            self._new_run_check(data["robot"], env.get("stamp_ms"))
+            self._new_run_check(str(env.get("sender", "")), data["robot"], env.get("stamp_ms"))
             self._robot(data["robot"], field, data)
         elif kind == "twinfleet_msgs/Path" and topic.count("/") == 2 and topic.endswith("/path"):
             self._robot(topic.split("/")[1], "path", data)  # /<robot>/path: its latest plan
@@ -182,16 +183,22 @@ class LiveState:
             self.ended = str(data.get("data", ""))
             self._dirty_top.add("ended")
 
-    def _new_run_check(self, name: str, stamp: Any) -> None:
-        """A robot's fleet clock jumping back means a new run of the fleet: restart its trail."""
+    def _new_run_check(self, sender: str, name: str, stamp: Any) -> None:
+        """A sender's fleet clock jumping back means a new run of the fleet: restart the
+        robot's trail and fields. Only one sender's stamps are compared with each other: the
+        map server publishes the robots' scans on its own clock, which may lag theirs by
+        seconds when it is busy (that restarted robots mid-run)."""
         if not isinstance(stamp, int):
             return
-        last = self._stamps.get(name)
-        self._stamps[name] = stamp if last is None else max(stamp, last)
+        key = (sender, name)
+        last = self._stamps.get(key)
+        self._stamps[key] = stamp if last is None else max(stamp, last)
         if last is not None and stamp < last - RESTART_MS:
-            self._stamps[name] = stamp
+            self._stamps = {k: v for k, v in self._stamps.items() if k[1] != name}
+            self._stamps[key] = stamp
             self.trails[name] = _Log(MAX_TRAIL)
             self.robots[name] = {}
+            self._reset.add(name)
             if self.ended is not None:
                 self.ended = None
                 self._dirty_top.add("ended")
@@ -235,6 +242,8 @@ class LiveState:
         robots = {}
         for name, fields in self._dirty.items():
             entry = {f: self.robots[name][f] for f in fields if f in self.robots[name]}
+            if name in self._reset:  # the page drops what it holds of the robot's last run
+                entry["reset"] = True
             trail = self.trails[name].new()
             if trail:
                 entry["trail"] = trail
@@ -250,6 +259,7 @@ class LiveState:
             update["topics"] = {t: self._topic(t) for t in sorted(self._dirty_topics)}
         changed = bool(robots) or len(update) > 2
         self._dirty.clear()
+        self._reset.clear()
         self._dirty_top.clear()
         self._dirty_topics.clear()
         if not changed:

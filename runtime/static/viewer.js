@@ -299,6 +299,7 @@
     if ("map" in msg) setMap(msg.map);
     if (msg.order) view.order = msg.order;
     for (const [name, e] of Object.entries(msg.robots || {})) {
+      if (e.reset) delete view.robots[name];  // a new run: nothing of the last one stays
       const r = view.robots[name] || (view.robots[name] = { trail: emptyLog() });
       for (const k of ["pose", "status", "scan", "path"]) if (k in e) r[k] = e[k];
       if (e.trail) applyLog(r.trail, e.trail);

@@ -84,6 +84,28 @@ def test_live_state_restarts_a_robot_when_the_fleet_is_launched_again():
     assert update["ended"] is None
 
 
+def test_live_state_compares_stamps_per_sender_not_across_senders():
+    """The map server publishes the robots' scans on its own clock, which lags theirs when it
+    is busy: a scan stamped seconds behind r1's last pose is not a new run."""
+    state = LiveState("f")
+    pose = encode(RobotPose("r1", (0, 0), 2, 1), stamp_ms=4000, sender="r1")
+    state.on_sample("twinfleet/f/poses", pose)
+    state.on_sample("twinfleet/f/r1/status", encode(RobotStatus("r1", "moving", (0, 0), (3, 3),
+                                                                0, 0, 4000), stamp_ms=4000, sender="r1"))
+    state.on_sample("twinfleet/f/r1/scan", encode(ObstacleScan("r1", ((1, 1),)), stamp_ms=500,
+                                                  sender="map_server"))
+    update = state.take_update()
+    assert "reset" not in update["robots"]["r1"]
+    assert update["robots"]["r1"]["status"]["mode"] == "moving"
+    assert state.snapshot()["robots"]["r1"]["trail"]["items"] == [[0, 0]]
+    # the same sender going back is a new run: the page is told to drop the old status
+    state.on_sample("twinfleet/f/poses", encode(RobotPose("r1", (5, 5), 2, 1), stamp_ms=50,
+                                                sender="r1"))
+    update = state.take_update()
+    assert update["robots"]["r1"]["reset"] is True and "status" not in update["robots"]["r1"]
+    assert state.snapshot()["robots"]["r1"]["trail"]["items"] == [[5, 5]]
+
+
 def test_live_state_ignores_garbage():
     state = LiveState("f")
     state.on_sample("twinfleet/f/poses", b"\xc1 not msgpack")
