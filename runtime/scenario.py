@@ -54,6 +54,7 @@ import importlib
 import inspect
 import math
 import os
+import re
 import sys
 import typing
 from collections.abc import Mapping, Sequence
@@ -226,7 +227,7 @@ def load_scenario(path: str | Path, overrides: Mapping[str, Any] | None = None) 
     `overrides` replace top-level keys (e.g. profile)."""
     path = resolve_scenario(path)
     try:
-        doc = yaml.safe_load(path.read_text())
+        doc = parse_yaml(path.read_text())
     except OSError as exc:
         raise ScenarioError(f"{path}: cannot read scenario file: {exc.strerror}") from None
     except UnicodeDecodeError as exc:
@@ -241,6 +242,33 @@ def load_scenario(path: str | Path, overrides: Mapping[str, Any] | None = None) 
     doc = {**doc, **(overrides or {})}
     user_import_path(path.parent)
     return parse_scenario(doc, path)
+
+
+_C_LOADER_DEPTH = 1_000  # nesting the C parser is given (it crashes at ~30,000)
+_BRACKETS = re.compile(r"[][{}]")
+_INDENT = re.compile(r"^[ \t]*", re.M)
+
+
+def parse_yaml(text: str) -> Any:
+    """`yaml.safe_load`, with libyaml's parser where PyYAML has it: five times faster on a
+    large scenario (10,001 nodes: 3 s against 15 s, before the node cap can refuse it).
+    libyaml recurses in C on nesting and crashes the process on deep input, so text nested
+    deeper than `_C_LOADER_DEPTH` (brackets or indentation, counted generously) goes to the
+    pure-Python parser, whose RecursionError the caller reports."""
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+    if loader is not yaml.SafeLoader and _nesting(text) > _C_LOADER_DEPTH:
+        loader = yaml.SafeLoader
+    return yaml.load(text, Loader=loader)  # both loaders are the safe (plain-data) ones
+
+
+def _nesting(text: str) -> int:
+    """An upper bound of the nesting depth of `text`: open brackets (quotes ignored) or
+    the deepest indentation."""
+    depth = deepest = 0
+    for match in _BRACKETS.finditer(text):
+        depth += 1 if match.group() in "[{" else -1
+        deepest = max(deepest, depth)
+    return max(deepest, max((len(m.group()) for m in _INDENT.finditer(text)), default=0))
 
 
 def _yaml_problem(exc: yaml.YAMLError) -> str:
