@@ -219,35 +219,27 @@ class Closure:
         """C-in for node x: the nodes of runnable handlers that may disturb it. Nothing is
         harmless to a loose node: a new message behind one of its waiting ones would run on
         a path that avoids the set, with no pair check."""
-        px = self.p.get(x, _INF)
-        out = []
-        for h, made in senders.items():
-            y = h[0]
-            if y in frozen or h not in can:
-                continue
-            for _, q in made:
-                if q < px or (q == px and ((y, x) not in self.harmless or x in loose)):
-                    out.append(y)
-                    break
-        return out
+        disturbs = self._disturbs
+        return [h[0] for h, made in senders.items()
+                if h[0] not in frozen and h in can
+                and any(disturbs(h[0], q, x, loose) for _, q in made)]
+
+    def _disturbs(self, sender: int, q: int, target: int, loose: frozenset[int]) -> bool:
+        """Whether a message created at t with priority `q` by `sender` disturbs node
+        `target`: it would run before target's events, or beside them at their priority,
+        unless its FIFO channel makes that harmless (never so at a loose node)."""
+        pt = self.p.get(target, _INF)
+        return q < pt or (q == pt and ((sender, target) not in self.harmless
+                                       or target in loose))
 
     def _disturbing(self, nodes: set[int], loose: frozenset[int]) -> set[int]:
         """The loose nodes of `nodes` whose other events (which may run on a path that avoids
-        the set) create at t what C-in forbids at a node of `nodes`: at their own node
-        anything at or below their priority, elsewhere what `_incoming` would count."""
-        into = self.publications.into
-        bad = set()
-        for x in loose & nodes:
-            h, px = self._handler(x), self.p[x]
-            for target in nodes:
-                pt = self.p.get(target, _INF)
-                if any(q <= px if target == x else
-                       q < pt or (q == pt and ((x, target) not in self.harmless
-                                               or target in loose))
-                       for _, q in into[target].get(h, ())):
-                    bad.add(x)
-                    break
-        return bad
+        the set) create at t what C-in forbids at a node of `nodes` (`_disturbs`; at their
+        own node, which is loose, anything at or below their priority)."""
+        into, disturbs = self.publications.into, self._disturbs
+        return {x for x in loose & nodes
+                if any(disturbs(x, q, target, loose)
+                       for target in nodes for _, q in into[target].get(self._handler(x), ()))}
 
     def _pairs_commute(self, x: int, acyclic: Callable[[], bool]) -> bool:
         """True if loose node x's representative commutes here with each of its other

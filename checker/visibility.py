@@ -210,7 +210,7 @@ class Visibility:
                                             for i in range(len(names))]
         # per variant list (System keeps one per node state, event and time): the list,
         # its new states and the expressions they change, each with whether the change is
-        # only a rise (`needs`)
+        # only a rise (`_changing`)
         self._changes: dict[int, tuple[list[Variant], list[bytes],
                                        list[tuple[Expression, bool]]]] = {}
         self._rising: list[list[Expression]] = [[e for e in of if e.rising] for of in self._of]
@@ -251,33 +251,20 @@ class Visibility:
         `frozen`) is visible; else the nodes whose addition to `frozen` might guard the
         first visible one (empty: none can). `acyclic()` says whether no zero-time cycle
         can run beside the set (then rising goals may rise unseen)."""
-        states = world.states
-        rises: bool | None = None  # decided on first need
+        unseen: bool | None = None  # whether rises go unseen here, asked on the first one
         for i in chosen:
             node = world.events[i].target
-            exprs = self._of[node]
-            if not exprs:
+            if not self._of[node]:
                 continue
-            variants = system.variants(world, RunEvent(i))
-            # Whether an expression changes reads only the node's state before (fixed by
-            # the list) and after, so it is decided once per list; a guard reads the world.
-            cached = self._changes.get(id(variants))
-            if cached is None or cached[0] is not variants:
-                afters = self._afters(states[node], variants)
-                changing = [(e, e.rising and not e.changes(system, states, node, afters, True))
-                            for e in exprs if afters and e.changes(system, states, node, afters)]
-                if len(self._changes) >= _CACHE_LIMIT:
-                    self._changes.clear()
-                cached = self._changes[id(variants)] = (variants, afters, changing)
-            afters, changing = cached[1], cached[2]
+            afters, changing = self._changing(system, world, i)
             for expr, only_rises in changing:
-                if only_rises and self.rising:
-                    if rises is None:
-                        rises = acyclic is not None and acyclic()
-                    if rises:
+                if only_rises:
+                    if unseen is None:
+                        unseen = self._rises_unseen(acyclic)
+                    if unseen:
                         self.rises += 1
                         continue
-                guard = expr.guard(system, states, node, afters, frozen)
+                guard = expr.guard(system, world.states, node, afters, frozen)
                 if guard is not None:
                     return guard
         return None
@@ -286,20 +273,36 @@ class Visibility:
                 acyclic: Callable[[], bool] | None = None) -> bool:
         """True if pending event `index` of `world` changes an atom of some expression
         there (no guard considered; a rise of a rising goal counts as in `needs`)."""
-        node = world.events[index].target
-        exprs = self._of[node]
-        afters = self._afters(world.states[node], system.variants(world, RunEvent(index))) \
-            if exprs else None
-        if not afters:
+        if not self._of[world.events[index].target]:
             return False
-        states = world.states
-        for e in exprs:
-            if not e.changes(system, states, node, afters):
-                continue
-            if not (e.rising and self.rising and acyclic is not None
-                    and not e.changes(system, states, node, afters, True) and acyclic()):
-                return True
-        return False
+        return any(not (only_rises and self._rises_unseen(acyclic))
+                   for _, only_rises in self._changing(system, world, index)[1])
+
+    def _rises_unseen(self, acyclic: Callable[[], bool] | None) -> bool:
+        """The rising-goal rule (module docstring): a change that only makes atoms of a
+        rising goal rise is not visible while the goals rise and no zero-time cycle can run
+        beside the set (`acyclic()`)."""
+        return self.rising and acyclic is not None and acyclic()
+
+    def _changing(self, system: System, world: World, index: int,
+                  ) -> tuple[list[bytes], list[tuple[Expression, bool]]]:
+        """The states pending event `index` leaves its node in (where it changes it), and
+        the expressions that change, each with whether the change is only a rise. It reads
+        only the node's state before (fixed by the variant list) and after, so it is
+        decided once per list; a guard reads the world."""
+        node = world.events[index].target
+        variants = system.variants(world, RunEvent(index))
+        cached = self._changes.get(id(variants))
+        if cached is None or cached[0] is not variants:
+            states = world.states
+            afters = self._afters(states[node], variants)
+            changing = [(e, e.rising and not e.changes(system, states, node, afters, True))
+                        for e in self._of[node]
+                        if afters and e.changes(system, states, node, afters)]
+            if len(self._changes) >= _CACHE_LIMIT:
+                self._changes.clear()
+            cached = self._changes[id(variants)] = (variants, afters, changing)
+        return cached[1], cached[2]
 
     @staticmethod
     def _afters(before: bytes, variants: Sequence[Variant]) -> list[bytes]:
