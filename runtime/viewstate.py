@@ -5,7 +5,9 @@ with plain msgpack, so no node code is imported) into the latest map, poses,
 statuses, scans, collisions and violations, and hands out the changes since
 the last call (`take_update`) for the page's websocket. Append-only lists
 (trails, collisions, violations) travel as ``{"start": i, "items": [...]}``
-so that a change delivered twice is applied once.
+so that a change delivered twice is applied once. A fleet launched again on
+the same endpoint shows as one sender's stamps going back: that robot's trail
+and fields start again, and its next update says ``"reset": true``.
 
 `trace_document` turns a checker trace (``twinfleet-trace/1``) into what the
 page steps through: the map (the ``/map`` message the scenario's nodes publish
