@@ -18,7 +18,9 @@ actions, and nesting (`if`, `choose`) is one level deep.
 
 from __future__ import annotations
 
+import functools
 import json
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -48,17 +50,18 @@ def names_of(count: int) -> list[str]:
     return [f"n{i + 1}" for i in range(count)]
 
 
-def topics_of(names: list[str]) -> list[str]:
+def topics_of(names: Sequence[str]) -> list[str]:
     """Every topic some program node subscribes to (all of them have a subscriber)."""
     return [f"/{n}/{t}" for n in names for t in INPUT_TOPICS] + [BUS]
 
 
-def services_of(names: list[str]) -> list[str]:
+def services_of(names: Sequence[str]) -> list[str]:
     """Every served service name."""
     return [f"/{n}/{SERVICE}" for n in names]
 
 
-def _send(names: list[str]) -> st.SearchStrategy[list[Any]]:
+@functools.cache  # strategies are immutable: built once per set of names, not per draw
+def _send(names: tuple[str, ...]) -> st.SearchStrategy[list[Any]]:
     """An action that makes something happen later: a publish, a timer or a call."""
     return st.one_of(
         st.tuples(st.just("pub"), st.sampled_from(topics_of(names))),
@@ -69,14 +72,15 @@ def _send(names: list[str]) -> st.SearchStrategy[list[Any]]:
     ).map(list)
 
 
-def _echo(name: str, names: list[str], handler: str) -> st.SearchStrategy[list[Any]]:
+def _echo(name: str, names: Sequence[str], handler: str) -> st.SearchStrategy[list[Any]]:
     """A publish that keeps its ttl, to the same input of some node (itself included): echoes
     on one input name chain up and often close a zero-time cycle. One subscriber only (on
     /bus echoes would multiply)."""
     return st.builds(lambda n: ["echo", f"/{n}/{handler}"], st.sampled_from([name, *names]))
 
 
-def _leaf(names: list[str]) -> st.SearchStrategy[list[Any]]:
+@functools.cache
+def _leaf(names: tuple[str, ...]) -> st.SearchStrategy[list[Any]]:
     reg = st.integers(0, REGISTERS - 1)
     local = st.one_of(
         st.tuples(st.just("add"), reg, st.integers(1, MOD - 1)),
@@ -88,7 +92,8 @@ def _leaf(names: list[str]) -> st.SearchStrategy[list[Any]]:
     return st.one_of(_send(names), local)
 
 
-def _commuting(names: list[str]) -> st.SearchStrategy[list[Any]]:
+@functools.cache
+def _commuting(names: tuple[str, ...]) -> st.SearchStrategy[list[Any]]:
     """An action of a handler declared commutes=True: an add, a max or a send, so whether two
     of its messages commute does not depend on the node's state (the pair check is exact)."""
     reg = st.integers(0, REGISTERS - 1)
@@ -96,7 +101,8 @@ def _commuting(names: list[str]) -> st.SearchStrategy[list[Any]]:
                                              st.integers(1, MOD - 1)).map(list))
 
 
-def _action(names: list[str]) -> st.SearchStrategy[list[Any]]:
+@functools.cache
+def _action(names: tuple[str, ...]) -> st.SearchStrategy[list[Any]]:
     leaf = _leaf(names)
     short = st.lists(leaf, max_size=1)
     nested = st.one_of(
@@ -107,21 +113,34 @@ def _action(names: list[str]) -> st.SearchStrategy[list[Any]]:
     return st.one_of(leaf, leaf, leaf, nested)  # nesting one time in four
 
 
+_KINDS = st.sampled_from(["plain", "plain", "shallow", "periodic", "commuting"])
+
+
+@functools.cache
+def _lists(strategy: st.SearchStrategy[Any], min_size: int, max_size: int,
+           ) -> st.SearchStrategy[list[Any]]:
+    return st.lists(strategy, min_size=min_size, max_size=max_size)
+
+
+@functools.cache
+def _handlers(kind: str) -> st.SearchStrategy[list[str]]:
+    return st.lists(st.sampled_from(HANDLERS_OF[kind]), min_size=2, max_size=6, unique=True)
+
+
 @st.composite
-def _node(draw: st.DrawFn, name: str, names: list[str], semantics: str,
+def _node(draw: st.DrawFn, name: str, names: tuple[str, ...], semantics: str,
           bus_start: bool = False, kind: str | None = None) -> dict[str, Any]:
-    kind = kind or draw(st.sampled_from(["plain", "plain", "shallow", "periodic", "commuting"]))
+    kind = kind or draw(_KINDS)
     action = _action(names)
     program: dict[str, list[Any]] = {}
     if bus_start:  # every node publishes on /bus at t=0: simultaneous messages to each node
         program["start"] = [["pub", BUS]]
     elif name == names[0] or draw(st.booleans()):  # n1 starts something: not one state
-        program["start"] = [draw(_send(names)), *draw(st.lists(action, max_size=1))]
-    for h in draw(st.lists(st.sampled_from(HANDLERS_OF[kind]), min_size=2, max_size=6,
-                           unique=True)):
-        program.setdefault(h, draw(st.lists(action, min_size=1, max_size=2)))
+        program["start"] = [draw(_send(names)), *draw(_lists(action, 0, 1))]
+    for h in draw(_handlers(kind)):
+        program.setdefault(h, draw(_lists(action, 1, 2)))
     if kind == "commuting":  # its /bus handler is declared commutes=True
-        program["bus"] = draw(st.lists(_commuting(names), min_size=1, max_size=2))
+        program["bus"] = draw(_lists(_commuting(names), 1, 2))
     inputs = [h for h in program if h in INPUT_TOPICS]
     if inputs and _sometimes(draw, 3):  # one input handler only echoes
         echoing = draw(st.sampled_from(inputs))
@@ -137,25 +156,27 @@ def _node(draw: st.DrawFn, name: str, names: list[str], semantics: str,
     return entry
 
 
-def _atom(names: list[str], ops: list[str]) -> st.SearchStrategy[str]:
+@functools.cache
+def _atom(names: tuple[str, ...], ops: tuple[str, ...]) -> st.SearchStrategy[str]:
     # Registers start at 0: "!= v" and "<= v" hold at first, "== v" (v > 0) does not.
     return st.builds(lambda n, r, op, v: f"{n}.regs[{r}] {op} {v}",
                      st.sampled_from(names), st.integers(0, REGISTERS - 1),
                      st.sampled_from(ops), st.integers(1, MOD - 1))
 
 
-def _expr(names: list[str], ops: list[str]) -> st.SearchStrategy[str]:
+@functools.cache
+def _expr(names: tuple[str, ...], ops: tuple[str, ...]) -> st.SearchStrategy[str]:
     atom = _atom(names, ops)
     return st.one_of(atom, atom, st.builds(lambda a, op, b: f"({a}) {op} ({b})", atom,
                                            st.sampled_from(["and", "or"]), atom))
 
 
-SAFE_OPS = ["!=", "<="]  # invariants: true in the initial world
-GOAL_OPS = ["==", ">="]  # eventually, within, deadlock goals: false in the initial world
+SAFE_OPS = ("!=", "<=")  # invariants: true in the initial world
+GOAL_OPS = ("==", ">=")  # eventually, within, deadlock goals: false in the initial world
 
 
 @st.composite
-def _property(draw: st.DrawFn, index: int, names: list[str]) -> dict[str, Any]:
+def _property(draw: st.DrawFn, index: int, names: tuple[str, ...]) -> dict[str, Any]:
     kind = draw(st.sampled_from(["invariant", "eventually", "within", "deadlock", "quiescence",
                                  "no_failure"]))
     prop: dict[str, Any] = {"name": f"p{index}_{kind}", "kind": kind}
@@ -164,7 +185,7 @@ def _property(draw: st.DrawFn, index: int, names: list[str]) -> dict[str, Any]:
     elif kind in ("eventually", "within") or (kind == "deadlock" and draw(st.booleans())):
         prop["expr"] = draw(_expr(names, GOAL_OPS))
     if kind == "eventually" and _sometimes(draw, 2):  # a conjunction: maybe a rising goal
-        prop["expr"] = " and ".join(draw(st.lists(_atom(names, [">="]), min_size=2,
+        prop["expr"] = " and ".join(draw(st.lists(_atom(names, (">=",)), min_size=2,
                                                   max_size=3)))
     if kind == "within":
         prop["within_ms"] = draw(st.sampled_from([5, 20, 60]))
@@ -177,7 +198,7 @@ def _sometimes(draw: st.DrawFn, one_in: int) -> bool:
 
 
 @st.composite
-def _check(draw: st.DrawFn, names: list[str]) -> dict[str, Any]:
+def _check(draw: st.DrawFn, names: Sequence[str]) -> dict[str, Any]:
     """Optional checker settings; each is absent more often than present."""
     check: dict[str, Any] = {}
     topics, services = topics_of(names), services_of(names)
@@ -209,7 +230,7 @@ def systems(draw: st.DrawFn, *, max_nodes: int = 4, crowded: bool = False) -> di
     """A scenario mapping of 2..`max_nodes` program nodes, settings and properties.
     `crowded`: under `ros`, every node publishes on /bus at t=0 and n1's /bus handler is
     declared commutes=True (the messages that meet there are what the declaration is for)."""
-    names = names_of(draw(st.integers(2, max_nodes)))
+    names = tuple(names_of(draw(st.integers(2, max_nodes))))
     semantics = "ros" if crowded else draw(st.sampled_from(["ros", "ros", "rebeca"]))
     check = {} if crowded else draw(_check(names))
     # Everyone publishing on /bus at t=0 only without latency and faults: their branches per
