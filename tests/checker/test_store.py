@@ -82,14 +82,14 @@ def test_optimisations_match_the_unoptimised_search(tmp_path, model, semantics, 
         assert _summary(run(path, search=search, **options)) == expected, options
 
 
-def test_c1a_rebeca_counts_are_the_same_in_every_mode():
+def test_c1a_rebeca_counts_are_the_same_in_both_stores():
+    # Without the transition cache the same search takes 5x as long: that it changes nothing
+    # is checked on the models above and on generated systems (test_reduction_differential).
     path = ROOT / "launch" / "c1a_rebeca.yaml"
     fast = run(path, trace_out=None)
     assert (fast.statistics.states, fast.rmc_transitions) == (18_527, 43_077)  # = RMC's
-    for options in VARIANTS[:2]:
-        other = run(path, trace_out=None, **options)
-        assert _summary(other) == _summary(fast), options
     exact = run(path, trace_out=None, exact_states=True)
+    assert _summary(exact) == _summary(fast)
     assert exact.statistics.digest_bits == 128
     assert fast.statistics.digest_bits == 64
     assert fast.statistics.bytes_per_state < 40 < exact.statistics.bytes_per_state
