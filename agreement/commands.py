@@ -27,6 +27,7 @@ from twinfleet.agreement import DEFAULT_TIME_SCALE
 from twinfleet.agreement.table import to_markdown
 from twinfleet.checker.commands import add_replay_parser, replay_command
 from twinfleet.checker.semantics import Semantics
+from twinfleet.runtime.kinds import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 
 _SEMANTICS = {"both": (Semantics.ROS, Semantics.REBECA), **{s.value: (s,) for s in Semantics}}
 
@@ -81,10 +82,10 @@ def experiment_command(args: argparse.Namespace) -> int:
     if args.jobs != 1:
         print("twinfleet experiment: --jobs: only 1 is supported; live fleets run one at a "
               "time so that their timing is not disturbed", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     if args.runs < 0 or args.time_scale <= 0:
         print("twinfleet experiment: --runs must be >= 0 and --time-scale > 0", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     options = ExperimentOptions(runs=args.runs, time_scale=args.time_scale,
                                 semantics=_SEMANTICS[args.semantics], out=Path(args.out),
                                 seed=args.seed, max_states=args.max_states,
@@ -95,13 +96,13 @@ def experiment_command(args: argparse.Namespace) -> int:
         exp = run_experiment(args.scenarios, options, command=command)
     except (*BAD_INPUT, ValueError) as exc:
         print(f"twinfleet experiment: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     print(to_markdown(exp.rows, options.semantics), end="")
     print(f"wrote {options.out / 'experiment.md'}, {options.out / 'experiment.csv'}, "
           f"{options.out / 'experiment.json'}; node output in {options.out / 'logs'}")
     if exp.interrupted:
-        return 130
-    return 1 if exp.contradictions else 0
+        return EXIT_INTERRUPTED
+    return EXIT_FAILED if exp.contradictions else EXIT_OK
 
 
 def command_line(args: argparse.Namespace) -> str:

@@ -25,7 +25,7 @@ from twinfleet.checker.properties import PropertyError
 from twinfleet.checker.reduction import REDUCTIONS
 from twinfleet.checker.semantics import Semantics
 from twinfleet.checker.trace import NondeterminismError, replay
-from twinfleet.runtime.kinds import EXIT_BAD_INPUT, EXIT_CONTRACT_BREACH
+from twinfleet.runtime.kinds import EXIT_BAD_INPUT, EXIT_CONTRACT_BREACH, EXIT_FAILED
 from twinfleet.runtime.node import NodeDefinitionError
 from twinfleet.runtime.scenario import ScenarioError
 from twinfleet.runtime.tracefile import TraceError, load_trace
@@ -179,17 +179,17 @@ def replay_command(args: argparse.Namespace) -> int:
         result = replay(system, trace, props)
     except (*BAD_INPUT, NondeterminismError) as exc:
         print(f"twinfleet replay: {args.trace}: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     except (KeyError, TypeError, ValueError, IndexError) as exc:  # fits no node of the scenario
         print(f"twinfleet replay: {args.trace}: the trace does not fit its scenario "
               f"({type(exc).__name__}: {exc})", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     if result.confirmed:
         print(f"replay confirmed: {result.property} violated after {result.steps} steps "
               f"({result.message})")
-        return 1
+        return EXIT_FAILED
     print(f"replay NOT confirmed: {result.property}: {result.message}")
-    return 2
+    return EXIT_BAD_INPUT  # not confirmed: no answer (module docstring)
 
 
 def main(argv: Sequence[str] | None = None) -> int:
