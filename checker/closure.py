@@ -155,23 +155,20 @@ class Closure:
         for _ in range(len(self.by_node) + len(loose) + 1):
             if nodes is None:
                 return None
-            # `enabled` is ascending (`Rules.enabled`): filtering it keeps them sorted
-            events, rep = self.world.events, self.loose
-            chosen = [i for i in self.enabled if events[i].target in nodes
-                      and (events[i].target not in loose or rep[events[i].target] == i)]
+            chosen = sorted(i for x in nodes for i in self._events(x, loose))
             if len(chosen) == len(self.enabled):
                 return None
             bad = self._disturbing(nodes, loose)
             if not bad:
+                acyclic = partial(self.acyclic, nodes, loose)
                 guard = self.visibility.needs(self.system, self.world, chosen, nodes - loose,
-                                              partial(self.acyclic, nodes, loose))
+                                              acyclic)
                 if guard is not None:
                     if not guard or guard <= nodes:
                         return None
                     nodes = self.grow(nodes | guard, loose)
                     continue
-                bad = {x for x in loose & nodes
-                       if not self._pairs_commute(x, partial(self.acyclic, nodes, loose))}
+                bad = {x for x in loose & nodes if not self._pairs_commute(x, acyclic)}
                 if not bad:
                     return chosen
             loose -= bad

@@ -65,6 +65,7 @@ def loose_nodes(system: System, world: World, by_node: dict[int, list[int]]
     events = world.events
     commuting = system.topology.commuting
     out: dict[int, int] = {}
+    dropping: set[tuple[int, str]] | None = None  # handlers Rule 6 may drop from, asked once
     for x, idxs in by_node.items():
         if len(idxs) < 2:
             continue
@@ -74,22 +75,13 @@ def loose_nodes(system: System, world: World, by_node: dict[int, list[int]]
                 events[i].kind not in _MESSAGES or events[i].method != first.method
                 for i in idxs):
             continue
-        depth = system.rules.depths.get(handler)
-        if depth is not None and _waiting(events, x, first.method) > depth:
+        if dropping is None:
+            dropping = {(events[i].target, events[i].method)
+                        for i in system.rules.droppable(events)}
+        if handler in dropping:
             continue
         out[x] = idxs[0]
     return out
-
-
-def _waiting(events: list[Event], node: int, method: str) -> int:
-    """Deliveries to `node.method` due at t*."""
-    t = events[0].due
-    count = 0
-    for ev in events:
-        if ev.due != t:
-            break
-        count += ev.target == node and ev.method == method and ev.kind is EventKind.DELIVERY
-    return count
 
 
 def commute(system: System, visibility: Visibility, world: World, e: int, j: int,
@@ -118,12 +110,9 @@ def commute(system: System, visibility: Visibility, world: World, e: int, j: int
 
 
 def _find(world: World, ev: Event) -> int | None:
-    """The index of pending event `ev` in `world` (the same object, or an equal one)."""
-    events = world.events
-    for k, other in enumerate(events):
-        if other is ev:
-            return k
-    for k, other in enumerate(events):
-        if other.sk == ev.sk and other.target == ev.target:
-            return k
-    return None
+    """The index of pending event `ev` in `world` (it, or an equal one: `Event.__eq__`
+    compares the canonical sort key, which holds the target)."""
+    try:
+        return world.events.index(ev)
+    except ValueError:
+        return None
