@@ -76,6 +76,7 @@ class FleetTap:
         self._handoff: Handoff | None = None
         self._seen: dict[str, deque[tuple[bytes, float]]] = {}
         self._stopped = False
+        self._config = ""  # the text of the config the session was opened with
 
     async def open(self, prepare: Callable[[zenoh.Session], object] | None = None) -> None:
         """Open the session (retrying if asked), then run `prepare(session)` in a thread if
@@ -83,7 +84,9 @@ class FleetTap:
         message schemas), then declare the subscribers."""
         while not self._stopped:
             try:
-                self.session = await asyncio.to_thread(zenoh.open, self.make_config())
+                config = self.make_config()
+                self.session = await asyncio.to_thread(zenoh.open, config)
+                self._config = str(config)
                 break
             except (zenoh.ZError, LookupError):
                 if not self.retry:
@@ -132,9 +135,30 @@ class FleetTap:
         """Make a pending `open()` give up after its current attempt."""
         self._stopped = True
 
+    async def reopen_if_stale(self) -> bool:
+        """Open a new session when this one has lost its router and the config would now
+        differ; True if it did. A fleet launched again on the same endpoint has new
+        credentials (`runtime.fleetauth`), which the old session's reconnects never
+        present, so without this a tap never saw the new run."""
+        if self._stopped or not self.is_open or self.routers():
+            return False
+        try:
+            fresh = str(await asyncio.to_thread(self.make_config))
+        except (zenoh.ZError, LookupError):  # no fleet registered yet: nothing newer
+            return False
+        if fresh == self._config:
+            return False
+        await self._shut()
+        await self.open()
+        return True
+
     async def close(self) -> None:
         """Undeclare (advanced subscribers first), then close the session, on the loop thread."""
         self._stopped = True
+        await self._shut()
+
+    async def _shut(self) -> None:
+        """`close` without stopping: the session and its subscribers go, `open` may follow."""
         if self._handoff is not None:
             self._handoff.drain()  # what already arrived still counts
             self._handoff.closed = True
@@ -145,3 +169,4 @@ class FleetTap:
         self._entities.clear()
         if self.session is not None and not self.session.is_closed():
             self.session.close()
+        self.session, self._handoff = None, None

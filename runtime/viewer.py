@@ -131,22 +131,31 @@ async def _websocket(request: web.Request) -> web.WebSocketResponse:
 
 
 async def _flush(app: web.Application) -> None:
-    """Every FLUSH_S: send the state's changes to every open page."""
+    """Every FLUSH_S: send the state's changes to every open page. Every LINK_CHECK_S:
+    record the link, and without a router, let the tap follow a fleet launched again."""
     state, tap = app[_STATE], app[_TAP]
     next_link = 0.0
-    while True:
-        await asyncio.sleep(FLUSH_S)
-        if tap is not None and time.monotonic() >= next_link:
-            next_link = time.monotonic() + LINK_CHECK_S
-            state.set_link(tap.is_open, tap.routers() > 0)
-        update = state.take_update()
-        if update is None:
-            continue
-        text = json.dumps(update)
-        for ws in list(app[_SOCKETS]):
-            if not ws.closed:
-                with contextlib.suppress(ConnectionError, RuntimeError):
-                    await ws.send_str(text)
+    reopening: asyncio.Task[bool] | None = None
+    try:
+        while True:
+            await asyncio.sleep(FLUSH_S)
+            if tap is not None and time.monotonic() >= next_link:
+                next_link = time.monotonic() + LINK_CHECK_S
+                router = tap.routers() > 0
+                state.set_link(tap.is_open, router)
+                if not router and (reopening is None or reopening.done()):
+                    reopening = asyncio.create_task(tap.reopen_if_stale())
+            update = state.take_update()
+            if update is None:
+                continue
+            text = json.dumps(update)
+            for ws in list(app[_SOCKETS]):
+                if not ws.closed:
+                    with contextlib.suppress(ConnectionError, RuntimeError):
+                        await ws.send_str(text)
+    finally:  # the tap was stopped first (`_live`): a reopen ends after its attempt
+        if reopening is not None:
+            await asyncio.gather(reopening, return_exceptions=True)
 
 
 async def serve(*, connect: str | None, fleet: str = "*", port: int = 0,
