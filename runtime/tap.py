@@ -13,7 +13,9 @@ Opening retries every 0.25 s when asked to (a viewer may start before the
 fleet's router, or before any fleet is registered: `make_config` may raise
 `LookupError` for "no endpoint yet"); the retried `zenoh.open` runs in a worker
 thread and is never abandoned half-way, so no session is left open behind the
-loop's back.
+loop's back. A session that lost its router is replaced by a new one when
+the config would now differ (`reopen_if_stale`): a fleet launched again on the
+same endpoint has new credentials, which reconnecting never presents.
 """
 
 from __future__ import annotations
