@@ -33,7 +33,7 @@ from twinfleet.agreement.discretization import (  # noqa: E402
     scale_map,
     scale_scenario,
 )
-from twinfleet.runtime.scenario import ScenarioError, load_scenario  # noqa: E402
+from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario  # noqa: E402
 
 SETTINGS = (  # name, factor, scan period multiplier
     ("paper", Fraction(1), 1),
@@ -46,10 +46,10 @@ SETTINGS = (  # name, factor, scan period multiplier
 def build(case: str, out: Path) -> list[tuple[str, Path]]:
     """Write every setting's map and scenarios; return (setting, scenario) pairs."""
     pairs = []
-    base_map = ROOT / "maps" / "map50.yaml"
+    base_map = ROOT / "twinfleet" / "maps" / "map50.yaml"
     for name, factor, scan_mult in SETTINGS:
         for variant in (case, f"{case}_rebeca"):
-            src = ROOT / "launch" / f"{variant}.yaml"
+            src = ROOT / "twinfleet" / "launch" / f"{variant}.yaml"
             if factor == 1 and scan_mult == 1:
                 pairs.append((name, src))
                 continue

@@ -34,7 +34,7 @@ sys.path.insert(0, str(ROOT))
 
 from twinfleet.agreement.live import live_run, private_copy  # noqa: E402
 from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, summarise  # noqa: E402
-from twinfleet.runtime.scenario import load_scenario  # noqa: E402
+from twinfleet.runtime.scenario.spec import load_scenario  # noqa: E402
 
 
 def parse_scales(text: str) -> list[tuple[float, int]]:
@@ -48,7 +48,7 @@ def parse_scales(text: str) -> list[tuple[float, int]]:
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--scenario", default=str(ROOT / "launch" / "c1a.yaml"))
+    p.add_argument("--scenario", default=str(ROOT / "twinfleet" / "launch" / "c1a.yaml"))
     p.add_argument("--scales", default="1:2,2:3,5:3,10:3,20:3",
                    help="comma-separated SCALE:RUNS (default: %(default)s)")
     p.add_argument("--seed", type=int, default=1, help="seed of the first run at each scale")

@@ -67,7 +67,7 @@ from twinfleet.nodes.profile import FIXED  # noqa: E402
 LANES = (1, 2, 4, 6, 8, 12, 16)
 FLEETS = (4, 6, 8, 10)
 PAPER_CASES = ("c1a", "c1b", "c1c", "c2a", "c2b", "c2c")
-RANDOM100 = ROOT / "maps" / "random100.yaml"
+RANDOM100 = ROOT / "twinfleet" / "maps" / "random100.yaml"
 LANE_LENGTH = 36  # columns: one robot's run is ~390 states, close to the 399
 SPEEDS = (0.5, 0.7, 0.8, 0.5, 0.3)  # m/s, cycled over crossing robots as in the paper cases
 JITTER = 3  # cells a goal may lie off the exact opposite point: lines cross near, not at, the centre
@@ -210,7 +210,7 @@ def plan_runs(args: argparse.Namespace, out: Path) -> list[Run]:
     if "paper" in sets:
         for case in PAPER_CASES:
             for file, semantics in ((f"{case}.yaml", "ros"), (f"{case}_rebeca.yaml", "rebeca")):
-                path = ROOT / "launch" / file
+                path = ROOT / "twinfleet" / "launch" / file
                 robots = len(yaml.safe_load(path.read_text())["nodes"]) - 1
                 runs.append(Run("paper", path.stem, path, semantics, robots))
     return runs

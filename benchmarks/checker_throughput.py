@@ -110,7 +110,7 @@ class Spinner(Node):
 
 def ring_scenario(nodes: int, modulo: int, semantics: str) -> Any:
     """The ring of `nodes` spinners: each ticks and passes a token on; rounds interleave."""
-    from twinfleet.runtime.scenario import parse_scenario
+    from twinfleet.runtime.scenario.spec import parse_scenario
 
     doc = {"name": "bench", "semantics": semantics, "nodes": [
         {"name": f"s{i}", "namespace": f"/s{i}", "class": "checker_throughput:Spinner",

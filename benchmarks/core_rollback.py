@@ -1,7 +1,7 @@
 """Cost of live rollback: NodeCore handler runs with and without the state copy.
 
 A handler that raises leaves `self.state` as before it ran, live as in the
-checker (runtime/core.py, 6): the core keeps the snapshot of the state after
+checker (twinfleet/runtime/core/node_core.py, 6): the core keeps the snapshot of the state after
 the last handler that went well, one `pickle.dumps` per handler.
 This measures what that costs per message, in one process, no I/O: a sample
 goes in through the core's receiver, `run_next` runs the handler. Modes,
@@ -31,10 +31,10 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from twinfleet import Context, Node, subscribe  # noqa: E402
-from twinfleet.runtime.core import NodeCore  # noqa: E402
-from twinfleet.runtime.dispatch import HandlerError  # noqa: E402
-from twinfleet.runtime.messages import String, encode  # noqa: E402
-from twinfleet.runtime.scenario import load_scenario  # noqa: E402
+from twinfleet.runtime.contract.dispatch import HandlerError  # noqa: E402
+from twinfleet.runtime.contract.messages import String, encode  # noqa: E402
+from twinfleet.runtime.core.node_core import NodeCore  # noqa: E402
+from twinfleet.runtime.scenario.spec import load_scenario  # noqa: E402
 
 
 class Sink(Node):

@@ -1,4 +1,4 @@
-"""What the input guard (runtime.guard) costs per sample, against decoding it.
+"""What the input guard (runtime.core.guard) costs per sample, against decoding it.
 
 Prints JSON: microseconds per operation for a RobotPose and an ObstacleScan
 envelope — `decode_fields` (the baseline every sample pays), signing,
@@ -19,8 +19,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # this checkout's twinfleet
 
 from twinfleet.nodes.msgs import ObstacleScan, RobotPose  # noqa: E402
-from twinfleet.runtime.guard import Admission, authentic, new_key, sign  # noqa: E402
-from twinfleet.runtime.messages import decode_fields, encode  # noqa: E402
+from twinfleet.runtime.contract.messages import decode_fields, encode  # noqa: E402
+from twinfleet.runtime.core.guard import Admission, authentic, new_key, sign  # noqa: E402
 
 
 def per_op_us(fn, seconds: float) -> float:

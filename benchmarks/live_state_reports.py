@@ -32,8 +32,8 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from twinfleet.runtime.launcher import run_fleet  # noqa: E402
-from twinfleet.runtime.scenario import load_scenario  # noqa: E402
+from twinfleet.runtime.fleet.launcher import run_fleet  # noqa: E402
+from twinfleet.runtime.scenario.spec import load_scenario  # noqa: E402
 
 
 def _cpu(who: int) -> float:

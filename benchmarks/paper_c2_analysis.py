@@ -46,7 +46,7 @@ MAX_WAITS = {"1500 each": (1500,) * 5, "1500..3000": (1500, 2000, 2500, 3000, 15
 
 def load_case(case: str) -> dict[str, Any]:
     """The scenario document of `launch/<case>_rebeca.yaml` with an absolute map path."""
-    path = ROOT / "launch" / f"{case}_rebeca.yaml"
+    path = ROOT / "twinfleet" / "launch" / f"{case}_rebeca.yaml"
     doc = yaml.safe_load(path.read_text())
     doc["map"] = str((path.parent / doc["map"]).resolve())
     return doc

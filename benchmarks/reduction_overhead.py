@@ -76,7 +76,7 @@ MODES = ("none", "bookkeeping", "por")
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("scenarios", nargs="*", default=[str(ROOT / "launch" / "c1a.yaml")])
+    parser.add_argument("scenarios", nargs="*", default=[str(ROOT / "twinfleet" / "launch" / "c1a.yaml")])
     parser.add_argument("--repeat", type=int, default=3,
                         help="rounds; each round runs every mode once (fastest counts)")
     args = parser.parse_args(argv)

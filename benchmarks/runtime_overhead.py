@@ -3,7 +3,7 @@
 Two processes on loopback per measurement pair, started with `subprocess`: an
 *echo* process that listens on ``tcp/127.0.0.1:<free port>`` and a *ping*
 process that connects to it. Every Zenoh config comes from
-`runtime.zenoh_transport.zenoh_config`: multicast scouting off, shared memory
+`runtime.host.zenoh_transport.zenoh_config`: multicast scouting off, shared memory
 off, loopback endpoints only. All implementations share each process's
 session (so they share its TCP link and thread placement) and run
 **interleaved** inside the pair, because on a small VM the absolute figures
@@ -15,7 +15,7 @@ are stable. Same application payloads (64 B, 4 KiB) for all:
   `recv()` for the pong (RUNTIME-NOTES §6 a). Floods go to a callback that
   checks sequence numbers.
 * ``asyncio`` — raw zenoh-python whose callbacks hand each sample to an
-  asyncio loop with `runtime.zenoh_transport.Handoff` (what `ZenohTransport`
+  asyncio loop with `runtime.host.zenoh_transport.Handoff` (what `ZenohTransport`
   does) and act there: the floor of any runtime that runs handlers on a loop,
   as DESIGN.md §3 requires. Not a target, a reference.
 * ``twinfleet`` — a `NodeHost` per process over `ZenohTransport`, running
@@ -69,13 +69,13 @@ sys.path.insert(0, str(ROOT))
 import zenoh  # noqa: E402
 
 from twinfleet import Context, Node, every, handler, message, on_start, subscribe  # noqa: E402
-from twinfleet.runtime.clock import FleetClock  # noqa: E402
-from twinfleet.runtime.host import NodeHost  # noqa: E402
-from twinfleet.runtime.launcher import free_port  # noqa: E402
-from twinfleet.runtime.messages import decode  # noqa: E402
-from twinfleet.runtime.names import key_expr  # noqa: E402
-from twinfleet.runtime.node import QoS  # noqa: E402
-from twinfleet.runtime.zenoh_transport import Handoff, ZenohTransport, zenoh_config  # noqa: E402
+from twinfleet.runtime.contract.messages import decode  # noqa: E402
+from twinfleet.runtime.contract.names import key_expr  # noqa: E402
+from twinfleet.runtime.contract.node import QoS  # noqa: E402
+from twinfleet.runtime.fleet.launcher import free_port  # noqa: E402
+from twinfleet.runtime.host.clock import FleetClock  # noqa: E402
+from twinfleet.runtime.host.node_host import NodeHost  # noqa: E402
+from twinfleet.runtime.host.zenoh_transport import Handoff, ZenohTransport, zenoh_config  # noqa: E402
 
 FLEET = "bench"
 RAW = "rawbench"

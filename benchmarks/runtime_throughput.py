@@ -5,7 +5,7 @@ receiving session and its asyncio loop) and a publisher subprocess that puts
 N samples back to back with congestion control BLOCK. Modes, interleaved over
 `--runs` rounds in the same run:
 
-* ``coalesced``  — `runtime.zenoh_transport.Handoff`: append to a deque, one
+* ``coalesced``  — `runtime.host.zenoh_transport.Handoff`: append to a deque, one
   `call_soon_threadsafe` per burst (what `ZenohTransport` does);
 * ``per_sample`` — one `loop.call_soon_threadsafe(handler, payload)` per sample.
 
@@ -31,13 +31,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 import contextlib
 
-from twinfleet.runtime.launcher import free_port  # noqa: E402
-from twinfleet.runtime.zenoh_transport import Handoff, zenoh_config  # noqa: E402
+from twinfleet.runtime.fleet.launcher import free_port  # noqa: E402
+from twinfleet.runtime.host.zenoh_transport import Handoff, zenoh_config  # noqa: E402
 
 PUBLISHER = """
 import sys, time, zenoh
 sys.path.insert(0, sys.argv[4])
-from twinfleet.runtime.zenoh_transport import zenoh_config
+from twinfleet.runtime.host.zenoh_transport import zenoh_config
 endpoint, key, count, size = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[5])
 with zenoh.open(zenoh_config(connect=[endpoint])) as s:
     pub = s.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)

@@ -1,19 +1,18 @@
-"""Import layering and import circles, checked on the source with `ast` (DESIGN.md §1).
+"""Import layering and import circles, checked on the source with `ast` (docs/design.md §1).
 
-Every source file belongs to one layer, named by its folder; each layer may import
-only the layers listed under it in `ALLOWED`, with no exemptions:
+Every source file belongs to one layer, read from its folder under `twinfleet/`:
 
-- `twinfleet/__init__.py` (the node API) re-exports the contract of `runtime/`;
-- `runtime/` (contract + live driver) imports no other layer, and its contract modules
-  (`CONTRACT`) import only each other;
-- `checker/` imports the contract modules of `runtime/` and nothing of zenoh or asyncio;
-- `nodes/` (the case study) imports the node API and the runtime's contract modules, and
-  no source of nondeterminism (random, time, asyncio, threading, socket, zenoh);
-- `agreement/` (the layer over both drivers) imports runtime, checker and nodes;
+- `runtime/<wing>/` for each wing of the runtime (`contract`, `scenario`, `core`, `host`,
+  `fleet`, `tools`, `cli`);
+- `checker/`, `agreement/`, `nodes/`;
+- `twinfleet/__init__.py` (the node API, which re-exports the contract);
 - the command line (`twinfleet/cli.py`, `twinfleet/__main__.py`) and the testing API
-  (`twinfleet/testing.py`) sit on top, side by side.
+  (`twinfleet/testing.py`) on top.
 
-No two source files import each other, directly or through others.
+`RULES` names the layers each layer may import, with no exemptions; `PURE` the third-party
+modules a layer must not import (checked on the source here, and on what a fresh interpreter
+loads in `test_pure_layers_load_no_io`). No two source files import each other, directly or
+through others.
 """
 
 from __future__ import annotations
@@ -28,55 +27,53 @@ import pytest
 pytestmark = pytest.mark.timeout(60)
 
 ROOT = Path(__file__).resolve().parents[1]
-FOLDERS = {"runtime": "runtime", "checker": "checker", "nodes": "nodes", "agreement": "agreement"}
-#: runtime/ modules that import neither Zenoh nor asyncio: the checker and the nodes may use them.
-CONTRACT = {"config", "context", "dispatch", "examples", "kinds", "lint", "messages", "names", "node",
-            "params", "property_eval", "scenario", "snapshot", "tracefile"}
-ALLOWED = {
-    "api": {"api", "runtime-contract"},
-    "runtime-contract": {"runtime-contract"},
-    "runtime": {"runtime", "runtime-contract"},
-    "checker": {"checker", "runtime-contract", "api"},
-    "nodes": {"nodes", "runtime-contract", "api"},
-    "agreement": {"agreement", "checker", "nodes", "runtime", "runtime-contract", "api"},
-    "cli": {"cli", "agreement", "checker", "nodes", "runtime", "runtime-contract", "api"},
-    "testing": {"testing", "agreement", "checker", "nodes", "runtime", "runtime-contract", "api"},
+PACKAGE = ROOT / "twinfleet"
+WINGS = ("contract", "scenario", "core", "host", "fleet", "tools", "cli")
+_BELOW_HOST = {"host", "core", "scenario", "contract"}
+RULES: dict[str, set[str]] = {
+    "api": {"contract"},
+    "contract": set(),
+    "scenario": {"contract"},
+    "core": {"contract"},
+    "host": {"core", "scenario", "contract"},
+    "fleet": _BELOW_HOST,
+    "tools": {"fleet", *_BELOW_HOST},
+    "cli": {"api", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes"},
+    "checker": {"api", "contract", "scenario"},
+    "nodes": {"api", "contract"},
+    "agreement": {"api", "fleet", "tools", *_BELOW_HOST, "checker", "nodes"},
+    "runtime": set(),  # runtime/__init__.py: names its wings, imports none
+    "maps": set(), "launch": set(),  # package data: shipped maps and scenarios
+    "top": {"api", "fleet", "tools", *_BELOW_HOST, "cli", "checker", "agreement", "nodes", "top"},
 }
-BANNED_THIRD_PARTY = {
-    "checker": {"zenoh", "asyncio"},
+IO = {"asyncio", "zenoh", "aiohttp", "mcap", "foxglove"}
+PURE: dict[str, set[str]] = {
+    "contract": IO, "scenario": IO, "core": IO, "checker": IO,
     "nodes": {"random", "time", "asyncio", "threading", "socket", "zenoh"},
 }
 
 
 def _module_name(path: Path) -> str:
-    rel = path.relative_to(ROOT).with_suffix("")
-    parts = list(rel.parts)
-    if parts[0] in FOLDERS:
-        parts = ["twinfleet", *parts]
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
     if parts[-1] == "__init__":
         parts.pop()
     return ".".join(parts)
 
 
-def _sources() -> dict[str, Path]:
-    files = [p for folder in (*FOLDERS, "twinfleet") for p in (ROOT / folder).rglob("*.py")]
-    return {_module_name(p): p for p in sorted(files)}
-
-
-SOURCES = _sources()
+SOURCES = {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
 
 
 def _layer(module: str) -> str:
-    parts = module.split(".")
-    if len(parts) == 1:
+    parts = module.split(".")[1:]
+    if not parts:
         return "api"
-    if parts[1] in ("cli", "__main__"):
-        return "cli"
-    if parts[1] == "testing":  # twinfleet.testing: checks and fleets in pytest, on top too
-        return "testing"
-    if parts[1] == "runtime" and len(parts) > 2 and parts[2] in CONTRACT:
-        return "runtime-contract"
-    return parts[1]
+    if parts[0] == "runtime":
+        if len(parts) == 1:
+            return "runtime"
+        return parts[1]
+    if parts[0] in ("cli", "__main__", "testing"):
+        return "top"
+    return parts[0]
 
 
 def _imported(path: Path) -> set[str]:
@@ -104,10 +101,28 @@ def _imported(path: Path) -> set[str]:
 
 
 def test_every_source_file_has_a_layer():
-    assert {_layer(m) for m in SOURCES} == set(ALLOWED)
+    layers = {_layer(m) for m in SOURCES}
+    assert layers == set(RULES)
 
 
-@pytest.mark.parametrize("layer", sorted(ALLOWED))
+def test_the_runtime_root_holds_only_its_wings():
+    root = PACKAGE / "runtime"
+    files = {p.name for p in root.iterdir() if p.name != "__pycache__"}
+    assert files == {"__init__.py", *WINGS}
+
+
+def test_wings_and_packages_name_their_public_modules():
+    for folder in [PACKAGE / "runtime", *(PACKAGE / "runtime").glob("*/"),
+                   *(PACKAGE / "runtime" / "tools").glob("*/")]:
+        if folder.name == "__pycache__" or not folder.is_dir() or folder.name == "static":
+            continue
+        tree = ast.parse((folder / "__init__.py").read_text())
+        names = [n for n in tree.body if isinstance(n, ast.Assign)
+                 and any(getattr(t, "id", "") == "__all__" for t in n.targets)]
+        assert names, f"{folder} has no __all__"
+
+
+@pytest.mark.parametrize("layer", sorted(RULES))
 def test_layer_imports_only_what_lies_below_it(layer):
     bad = []
     for module, path in SOURCES.items():
@@ -117,15 +132,34 @@ def test_layer_imports_only_what_lies_below_it(layer):
             top = name.split(".")[0]
             if top == "twinfleet":
                 target = name if name in SOURCES else name.rsplit(".", 1)[0]
-                if target in SOURCES and _layer(target) not in ALLOWED[layer]:
-                    bad.append(f"{path.relative_to(ROOT)} imports {name} ({_layer(target)})")
-            elif top in BANNED_THIRD_PARTY.get(layer, ()):
+                other = _layer(target) if target in SOURCES else None
+                if other is not None and other != layer and other not in RULES[layer]:
+                    bad.append(f"{path.relative_to(ROOT)} imports {name} ({other})")
+            elif top in PURE.get(layer, ()):
                 bad.append(f"{path.relative_to(ROOT)} imports {name}")
-            elif top in FOLDERS:
+            elif top in ("runtime", "checker", "nodes", "agreement"):
                 bad.append(f"{path.relative_to(ROOT)} imports {name}: use twinfleet.{name}")
     assert bad == []
 
 
+def test_pure_layers_load_no_io():
+    """Importing every module of the contract, scenario, core and checker loads no I/O library."""
+    pure = sorted(m for m in SOURCES if _layer(m) in ("contract", "scenario", "core", "checker")
+                  and not m.endswith("__main__"))
+    code = ("import importlib, sys\n"
+            f"for m in {pure!r}: importlib.import_module(m)\n"
+            f"print(sorted(b for b in {sorted(IO)!r} if b in sys.modules))")
+    proc = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True,
+                          cwd=ROOT.parent, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]", proc.stdout
+
+
+def test_the_layer_test_catches_a_wrong_import(tmp_path):
+    sample = tmp_path / "m.py"
+    sample.write_text("from twinfleet.runtime.host.clock import FleetClock\n")
+    assert "twinfleet.runtime.host.clock" in _imported(sample)
+    assert _layer("twinfleet.runtime.host.clock") not in RULES["core"]
 
 
 def test_no_import_circles():
@@ -181,14 +215,19 @@ def test_circle_finder_finds_circles():
     assert _strongly_connected(graph) == [["a", "b", "c"]]
 
 
-def test_import_of_the_checker_and_the_api_loads_no_zenoh():
-    code = ("import sys, twinfleet, twinfleet.checker, twinfleet.checker.commands, "
-            "twinfleet.nodes.robot; print('zenoh' in sys.modules, 'asyncio' in sys.modules)")
-    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          cwd=ROOT, timeout=60)
+def test_help_loads_neither_zenoh_nor_the_checker():
+    """`twinfleet --help` loads the checker's argument parser, not its search."""
+    code = ("import sys, contextlib, io\n"
+            "from twinfleet.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()), contextlib.suppress(SystemExit):\n"
+            "    main(['--help'])\n"
+            "parsers = {'twinfleet.checker.commands', 'twinfleet.checker.options'}\n"
+            "print('zenoh' in sys.modules,\n"
+            "      any(m.startswith('twinfleet.checker.') and m not in parsers for m in sys.modules))")
+    proc = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True,
+                          cwd=ROOT.parent, timeout=60)
     assert proc.returncode == 0, proc.stderr
-    zenoh_loaded, _asyncio_loaded = proc.stdout.split()
-    assert zenoh_loaded == "False"
+    assert proc.stdout.split() == ["False", "False"]
 
 
 def test_the_scanner_sees_imports_inside_functions(tmp_path):

@@ -15,15 +15,15 @@ import yaml
 from tests.checker.models import Num, Ping, PingParams, Pong
 from twinfleet import Node
 from twinfleet.checker import CheckOptions, PropertySet, System, check
-from twinfleet.runtime.config import CheckConfig, ConfigError, LiveConfig, PerName
-from twinfleet.runtime.scenario import (
+from twinfleet.runtime.scenario.config import CheckConfig, ConfigError, LiveConfig, PerName
+from twinfleet.runtime.scenario.scenario_file import to_document, write_scenario
+from twinfleet.runtime.scenario.spec import (
     NodeEntry,
     PropertyConfig,
     Scenario,
     ScenarioError,
     load_scenario,
 )
-from twinfleet.runtime.scenario_file import to_document, write_scenario
 
 BOUNDED = PropertyConfig("bounded", "invariant", "ping.sent - pong.received <= 1")
 PING_PONG_YAML = """\
@@ -193,7 +193,7 @@ def pong_report(scenario: Scenario) -> PongReport:
 @pytest.mark.parametrize("record", [False, True], ids=["private-file", "beside-the-event-log"])
 def test_a_python_scenario_runs_live(tmp_path: Path, record: bool) -> None:
     from tests.integration.itest_support import poll, processes_mentioning
-    from twinfleet.runtime.launcher import format_result, run_fleet
+    from twinfleet.runtime.fleet.launcher import format_result, run_fleet
 
     scenario = Scenario.build("pypong", [NodeEntry("ping", Ping, {"rounds": 3}),
                                          NodeEntry("pong", Pong)],

@@ -24,7 +24,7 @@ def colour_near(arr: np.ndarray, cell: tuple[int, int], colour: tuple[int, int, 
 
 def test_render_scenario_png(tmp_path, capsys):
     out = tmp_path / "c1a.png"
-    assert main(["render", str(ROOT / "launch" / "c1a.yaml"), "-o", str(out), "--scan-of", "r3"]) == 0
+    assert main(["render", str(ROOT / "twinfleet" / "launch" / "c1a.yaml"), "-o", str(out), "--scan-of", "r3"]) == 0
     arr = np.asarray(Image.open(out).convert("RGB"))
     assert arr.shape == (50 * PX + 18, 50 * PX, 3)
     for i, start in enumerate([(5, 5), (5, 15), (5, 25), (5, 35), (5, 45)]):
@@ -34,7 +34,7 @@ def test_render_scenario_png(tmp_path, capsys):
 @pytest.mark.slow
 def test_render_c2a_counterexample_shows_the_colliding_pair(tmp_path):
     trace_path = tmp_path / "c2a.trace.json"
-    result = check(ROOT / "launch" / "c2a.yaml", CheckOptions(trace_out=str(trace_path)))
+    result = check(ROOT / "twinfleet" / "launch" / "c2a.yaml", CheckOptions(trace_out=str(trace_path)))
     assert result.status == "violated"
     last = result.trace["steps"][-1]
     pair = last["changed"]["map_server"]["collided"][-1]
@@ -57,4 +57,4 @@ def test_render_rejects_bad_input(tmp_path, capsys):
     bad.write_text('{"format": "other"}')
     assert main(["render", str(bad), "-o", str(tmp_path / "x.png")]) == 2
     assert "not a twinfleet-trace/1 trace" in capsys.readouterr().err
-    assert main(["render", str(ROOT / "launch" / "c1a.yaml"), "-o", str(tmp_path / "x.bmp")]) == 2
+    assert main(["render", str(ROOT / "twinfleet" / "launch" / "c1a.yaml"), "-o", str(tmp_path / "x.bmp")]) == 2

@@ -17,7 +17,7 @@ pytestmark = pytest.mark.timeout(300)
 
 
 def run(name: str, **options):
-    return check(ROOT / "launch" / f"{name}.yaml", CheckOptions(**options))
+    return check(ROOT / "twinfleet" / "launch" / f"{name}.yaml", CheckOptions(**options))
 
 
 @pytest.mark.parametrize(

@@ -9,15 +9,21 @@ import pytest
 import yaml
 
 from twinfleet.cli import main as cli
-from twinfleet.runtime.config import CheckConfig, CrashConfig, FaultConfig, LiveConfig, PerName
-from twinfleet.runtime.examples import shipped_scenarios
-from twinfleet.runtime.scenario import ScenarioError, load_scenario, resolve_scenario
+from twinfleet.runtime.scenario.config import (
+    CheckConfig,
+    CrashConfig,
+    FaultConfig,
+    LiveConfig,
+    PerName,
+)
+from twinfleet.runtime.scenario.examples import shipped_scenarios
+from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario, resolve_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
-SHIPPED = sorted((ROOT / "launch").glob("*.yaml"))
+SHIPPED = sorted((ROOT / "twinfleet" / "launch").glob("*.yaml"))
 GOOD = {
     "name": "t",
-    "map": str(ROOT / "maps" / "corridor12.yaml"),
+    "map": str(ROOT / "twinfleet" / "maps" / "corridor12.yaml"),
     "nodes": [
         {"name": "map_server", "class": "twinfleet.nodes.map_server:MapServer", "params": {"robots": ["r1"]}},
         {"name": "r1", "class": "twinfleet.nodes.robot:Robot", "namespace": "/r1",
@@ -156,11 +162,11 @@ def test_shipped_scenarios_resolve_by_name_from_any_directory(tmp_path, monkeypa
     monkeypatch.chdir(tmp_path)
     shipped = shipped_scenarios()
     assert set(shipped) == {p.stem for p in SHIPPED}
-    assert resolve_scenario("c1a") == ROOT / "launch" / "c1a.yaml"
-    assert resolve_scenario("c1a.yaml") == ROOT / "launch" / "c1a.yaml"
+    assert resolve_scenario("c1a") == ROOT / "twinfleet" / "launch" / "c1a.yaml"
+    assert resolve_scenario("c1a.yaml") == ROOT / "twinfleet" / "launch" / "c1a.yaml"
     scenario = load_scenario("c1a_rebeca")
-    assert scenario.path == ROOT / "launch" / "c1a_rebeca.yaml"
-    assert scenario.map_path == ROOT / "maps" / "map50.yaml"
+    assert scenario.path == ROOT / "twinfleet" / "launch" / "c1a_rebeca.yaml"
+    assert scenario.map_path == ROOT / "twinfleet" / "maps" / "map50.yaml"
     assert scenario.live.report == "twinfleet.nodes.report:report_for"
     # A file of that name in the working directory wins: a path still works as it did.
     (tmp_path / "c1a").write_text(yaml.safe_dump({**GOOD, "name": "mine"}))
@@ -179,7 +185,7 @@ def test_examples_lists_names_and_descriptions(capsys):
     listed = {line.split()[0]: line.split(None, 1)[1] for line in lines if line and
               not line.startswith("run one")}
     assert set(listed) == {p.stem for p in SHIPPED}
-    assert listed["headon"] == load_scenario(ROOT / "launch" / "headon.yaml").description
+    assert listed["headon"] == load_scenario(ROOT / "twinfleet" / "launch" / "headon.yaml").description
 
 
 def test_examples_copy_writes_an_editable_scenario_and_its_map(tmp_path, capsys):
@@ -189,7 +195,7 @@ def test_examples_copy_writes_an_editable_scenario_and_its_map(tmp_path, capsys)
     assert f"wrote {copied}" in out
     assert sorted(p.name for p in copied.parent.iterdir()) == \
         ["corridor12.pgm", "corridor12.yaml", "headon.yaml"]
-    original = (ROOT / "launch" / "headon.yaml").read_text()
+    original = (ROOT / "twinfleet" / "launch" / "headon.yaml").read_text()
     assert copied.read_text() == original.replace("map: ../maps/corridor12.yaml",
                                                   "map: corridor12.yaml")
     scenario = load_scenario(copied)

@@ -1,4 +1,4 @@
-"""runtime.snapshot: canonical bytes, exact types back, both dataclass paths."""
+"""runtime.contract.snapshot: canonical bytes, exact types back, both dataclass paths."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from twinfleet.runtime.snapshot import restore, snapshot
+from twinfleet.runtime.contract.snapshot import restore, snapshot
 
 Cell = tuple[int, int]
 

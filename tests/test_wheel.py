@@ -132,7 +132,7 @@ def test_check_a_shipped_scenario_by_name_beside_a_user_nodes_package(venv: Path
                                                                      workdir: Path) -> None:
     from twinfleet.checker import check
 
-    expected = check(ROOT / "launch" / "c1a_rebeca.yaml")  # today 19,559 states
+    expected = check(ROOT / "twinfleet" / "launch" / "c1a_rebeca.yaml")  # today 19,559 states
     for argv in ([str(venv / "bin" / "twinfleet")],  # the console script
                  [str(venv / "bin" / "python"), "-m", "twinfleet"]):  # the work dir on sys.path
         out = json.loads(ok(run([*argv, "check", "c1a_rebeca", "--json"], workdir)))
@@ -158,7 +158,7 @@ def test_examples_list_copy_and_a_bad_name(venv: Path, workdir: Path) -> None:
     assert bad.returncode == 2
     assert bad.stderr.strip().splitlines() == [
         "error: c1z: cannot read scenario file: no such file, and no shipped example is called "
-        "'c1z' (shipped: " + ", ".join(sorted(p.stem for p in (ROOT / "launch").glob("*.yaml")))
+        "'c1z' (shipped: " + ", ".join(sorted(p.stem for p in (ROOT / "twinfleet" / "launch").glob("*.yaml")))
         + "; `twinfleet examples` describes them)"]
 
 

@@ -1,8 +1,8 @@
 """The `twinfleet` command line, assembled from the commands each layer registers.
 
     twinfleet launch|node|topic|service|param|interface|view|foxglove|record|play|export|bag
-                                                                  (twinfleet.runtime.commands)
-    twinfleet render                                              (twinfleet.nodes.commands)
+                                                                  (twinfleet.runtime.cli.commands)
+    twinfleet render                                              (twinfleet.runtime.cli.render)
     twinfleet check                                               (twinfleet.checker.commands)
     twinfleet replay|validate|experiment                          (twinfleet.agreement.commands)
 
@@ -28,9 +28,9 @@ from collections.abc import Sequence
 
 from twinfleet.agreement import commands as agreement_commands
 from twinfleet.checker import commands as checker_commands
-from twinfleet.nodes import commands as nodes_commands
-from twinfleet.runtime import commands as runtime_commands
-from twinfleet.runtime.cliargs import EXIT_BAD_INPUT, EXIT_INTERRUPTED, CommandError
+from twinfleet.runtime.cli import commands as runtime_commands
+from twinfleet.runtime.cli import render as render_command
+from twinfleet.runtime.fleet.connection import EXIT_BAD_INPUT, EXIT_INTERRUPTED, CommandError
 
 DESCRIPTION = """\
 twinfleet runs a fleet of robot nodes (or any nodes you write in Python) as separate
@@ -69,7 +69,7 @@ def build_parser() -> argparse.ArgumentParser:
                         help="show the traceback of an error instead of one line")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     runtime_commands.register(sub)
-    nodes_commands.register(sub)
+    render_command.register(sub)
     checker_commands.register(sub)
     agreement_commands.register(sub)
     return parser
@@ -94,7 +94,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def error_line(exc: BaseException) -> str:
     """One line for an error that reached `main`, naming what and where."""
-    from twinfleet.runtime.cliargs import zenoh_error_text
+    from twinfleet.runtime.fleet.connection import zenoh_error_text
 
     if isinstance(exc, CommandError):
         return str(exc)

@@ -41,13 +41,13 @@ from twinfleet.checker.check import CheckOptions, CheckResult
 from twinfleet.checker.check import check as _check
 from twinfleet.checker.diagnosis import ContractBreachError
 from twinfleet.checker.outcome import BREACH, HOLDS, VIOLATED
-from twinfleet.runtime.launcher import FleetResult, run_fleet
-from twinfleet.runtime.messages import DecodeError, decode, encode
-from twinfleet.runtime.names import key_expr
-from twinfleet.runtime.node import QOS_DEFAULT, Node
-from twinfleet.runtime.scenario import NodeEntry, PropertyConfig, Scenario
-from twinfleet.runtime.scenario_file import write_scenario
-from twinfleet.runtime.tracefile import write_trace
+from twinfleet.runtime.contract.messages import DecodeError, decode, encode
+from twinfleet.runtime.contract.names import key_expr
+from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
+from twinfleet.runtime.contract.tracefile import write_trace
+from twinfleet.runtime.fleet.launcher import FleetResult, run_fleet
+from twinfleet.runtime.scenario.scenario_file import write_scenario
+from twinfleet.runtime.scenario.spec import NodeEntry, PropertyConfig, Scenario
 
 __all__ = ["CheckReport", "LiveFleet", "check", "eventually", "invariant", "live_fleet",
            "no_failure", "run_live", "system", "within"]
@@ -115,7 +115,7 @@ class CheckReport:
         states, transitions: distinct worlds and steps explored.
         elapsed_s: search time.
         trace: the counterexample (`twinfleet-trace/1`), or None.
-        warnings: load-time lint warnings (`runtime.lint`).
+        warnings: load-time lint warnings (`runtime.scenario.lint`).
         result: the checker's full `CheckResult` (None for a breach found at load).
     """
 
@@ -292,7 +292,7 @@ async def live_fleet(scenario: Scenario | str | Path, *, time_scale: float = 1.0
     `timeout_s` bounds the whole run (wall seconds); lines of the launcher go to `out`
     (default: stdout, which pytest captures and shows on failure)."""
     if not isinstance(scenario, Scenario):
-        from twinfleet.runtime.scenario import load_scenario
+        from twinfleet.runtime.scenario.spec import load_scenario
 
         scenario = load_scenario(scenario)
     loop = asyncio.get_running_loop()

@@ -27,8 +27,8 @@ import msgpack
 import zenoh
 
 from tests.support import ROOT, RUNTIME_DIR, RunningFleet, child_env, pick_free_port
-from twinfleet.runtime.guard import sign
-from twinfleet.runtime.zenoh_transport import zenoh_config
+from twinfleet.runtime.core.guard import sign
+from twinfleet.runtime.host.zenoh_transport import zenoh_config
 
 SCENARIO = """\
 name: {name}

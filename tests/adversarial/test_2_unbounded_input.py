@@ -19,7 +19,7 @@ import time
 import pytest
 
 from tests.adversarial import harness as h
-from twinfleet.runtime.guard import DEFAULT_LIMIT, sign
+from twinfleet.runtime.core.guard import DEFAULT_LIMIT, sign
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 

@@ -24,8 +24,8 @@ from mcap.reader import NonSeekingReader, make_reader
 
 from tests.adversarial.harness import poll, stop, write_scenario
 from tests.support import ROOT, child_env
-from twinfleet.runtime.bag import read_summary, repair
-from twinfleet.runtime.recorder import McapRecorder
+from twinfleet.runtime.tools.record.bag import read_summary, repair
+from twinfleet.runtime.tools.record.recorder import McapRecorder
 
 
 def _messages(path) -> int:

@@ -12,7 +12,7 @@ import pytest
 
 from tests.adversarial.fleets import write_scenario
 from tests.support import ROOT, child_env
-from twinfleet.runtime.scenario import ScenarioError, load_scenario
+from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
 
 pytestmark = pytest.mark.timeout(60)
 

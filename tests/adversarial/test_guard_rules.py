@@ -1,4 +1,4 @@
-"""The pure rules under the live checks (runtime.guard, runtime.fleetauth), without a fleet."""
+"""The pure rules under the live checks (runtime.core.guard, runtime.fleet.fleetauth), without a fleet."""
 
 from __future__ import annotations
 
@@ -8,8 +8,7 @@ import pytest
 
 from tests.integration.reliability_nodes import Tick
 from twinfleet.nodes.msgs import ObstacleScan, PathRequest, RobotPose
-from twinfleet.runtime.fleetauth import FleetCredentials, listen_problem, loopback_only
-from twinfleet.runtime.guard import (
+from twinfleet.runtime.core.guard import (
     DEFAULT_LIMIT,
     Admission,
     Rejected,
@@ -20,6 +19,7 @@ from twinfleet.runtime.guard import (
     sign,
     signer,
 )
+from twinfleet.runtime.fleet.fleetauth import FleetCredentials, listen_problem, loopback_only
 
 
 def test_a_tag_binds_key_expression_and_payload() -> None:

@@ -27,7 +27,7 @@ from tests.adversarial.harness import (
     write_scenario,
 )
 from tests.support import ROOT, child_env, pick_free_port
-from twinfleet.runtime.guard import sign
+from twinfleet.runtime.core.guard import sign
 
 
 def _nested(depth: int) -> bytes:

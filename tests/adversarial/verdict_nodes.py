@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from twinfleet import Context, Node, every, handler, message, on_start, subscribe
-from twinfleet.runtime.node import QoS
+from twinfleet.runtime.contract.node import QoS
 
 
 @message("twinfleet_test/Blip")

@@ -17,10 +17,10 @@ from twinfleet.agreement.discretization import (
 )
 from twinfleet.nodes.mapfile import load_map
 from twinfleet.nodes.profile import FIXED
-from twinfleet.runtime.scenario import load_scenario
+from twinfleet.runtime.scenario.spec import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
-MAP50 = ROOT / "maps" / "map50.yaml"
+MAP50 = ROOT / "twinfleet" / "maps" / "map50.yaml"
 
 
 def test_refining_by_two_keeps_the_obstacles_and_halves_the_cell(tmp_path):
@@ -42,7 +42,7 @@ def test_coarsening_marks_a_block_occupied_if_any_cell_was(tmp_path):
 
 def test_scaled_scenario_loads_with_scaled_cells_and_rules(tmp_path):
     fine_map = scale_map(MAP50, Fraction(2), tmp_path / "maps" / "fine.yaml")
-    out = scale_scenario(ROOT / "launch" / "c1a.yaml", Fraction(2), fine_map,
+    out = scale_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml", Fraction(2), fine_map,
                          tmp_path / "c1a_fine.yaml", name="c1a_fine")
     sc = load_scenario(out)
     assert sc.name == "c1a_fine" and sc.map_path == fine_map.resolve()
@@ -53,16 +53,16 @@ def test_scaled_scenario_loads_with_scaled_cells_and_rules(tmp_path):
     # hop 0.1275 m: 0.7 and 0.8 m/s need 182 and 159 ms, not above 2 x 100 ms (Eq. 1)
     assert rules.unsafe_robots == ("r2", "r3")
     assert sc.node("r2").params.allow_unsafe_speed and not r1.allow_unsafe_speed
-    halved = scale_scenario(ROOT / "launch" / "c1a.yaml", Fraction(2), fine_map,
+    halved = scale_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml", Fraction(2), fine_map,
                             tmp_path / "c1a_fine50.yaml", scan_rate_ms=50)
     assert cell_rules(halved).unsafe_robots == ()
 
 
 @pytest.mark.filterwarnings("ignore:.*breaks Eq. 2")
 def test_the_paper_map_keeps_eq2_and_a_coarse_one_breaks_it(tmp_path):
-    assert cell_rules(ROOT / "launch" / "c1a.yaml").cell_rule is None
+    assert cell_rules(ROOT / "twinfleet" / "launch" / "c1a.yaml").cell_rule is None
     coarse = scale_map(MAP50, Fraction(1, 2), tmp_path / "coarse.yaml")
-    out = scale_scenario(ROOT / "launch" / "c1a.yaml", Fraction(1, 2), coarse,
+    out = scale_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml", Fraction(1, 2), coarse,
                          tmp_path / "c1a_coarse.yaml")
     rules = cell_rules(out)
     assert rules.cell_rule is not None and "0.2828" in rules.cell_rule

@@ -19,7 +19,7 @@ from twinfleet.agreement.table import (
     to_csv,
     to_markdown,
 )
-from twinfleet.runtime.scenario import load_scenario
+from twinfleet.runtime.scenario.spec import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 BOTH = ("ros", "rebeca")
@@ -121,7 +121,7 @@ def test_check_cell_result_uses_the_papers_words():
 @pytest.mark.parametrize("case", ["c1a", "c1b", "c1c", "c2a", "c2b", "c2c"])
 @pytest.mark.parametrize("suffix", ["", "_rebeca"])
 def test_paper_rows_match_the_launch_files(case, suffix):
-    path = ROOT / "launch" / f"{case}{suffix}.yaml"
+    path = ROOT / "twinfleet" / "launch" / f"{case}{suffix}.yaml"
     row = scenario_row(path, load_scenario(path))
     paper = PAPER[f"{case}{suffix}"]
     assert row.paper is paper and paper.case.lower() == case

@@ -16,7 +16,7 @@ def _status(robot: str, mode: str, t: int) -> RobotStatus:
 
 
 def test_c1a_arrivals_are_the_same_on_every_checker_path():
-    walks = [predicted_arrivals(ROOT / "launch" / "c1a.yaml", seed=s) for s in range(3)]
+    walks = [predicted_arrivals(ROOT / "twinfleet" / "launch" / "c1a.yaml", seed=s) for s in range(3)]
     first = walks[0].arrival_ms
     assert set(first) == {"r1", "r2", "r3", "r4", "r5"}
     assert all(v is not None and v > 0 for v in first.values())
@@ -24,7 +24,7 @@ def test_c1a_arrivals_are_the_same_on_every_checker_path():
 
 
 def test_a_walk_gives_up_at_the_horizon():
-    p = predicted_arrivals(ROOT / "launch" / "c1a.yaml", horizon_ms=1000)
+    p = predicted_arrivals(ROOT / "twinfleet" / "launch" / "c1a.yaml", horizon_ms=1000)
     assert all(v is None for v in p.arrival_ms.values())
 
 
@@ -70,9 +70,9 @@ def test_timed_report_stops_at_a_collision_only_when_asked():
 
 def test_private_copy_runs_the_same_scenario_from_elsewhere(tmp_path):
     from twinfleet.agreement.live import private_copy
-    from twinfleet.runtime.scenario import load_scenario
+    from twinfleet.runtime.scenario.spec import load_scenario
 
-    original = load_scenario(ROOT / "launch" / "c1a.yaml")
+    original = load_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml")
     copy = private_copy(original, tmp_path)
     assert copy.path == tmp_path / "c1a.yaml" and copy.path != original.path
     assert (copy.name, copy.fleet, copy.map_path) == (original.name, original.fleet,

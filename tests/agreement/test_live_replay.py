@@ -28,14 +28,14 @@ from twinfleet.agreement.live_replay import (
     replay_live,
 )
 from twinfleet.checker.check import CheckOptions, check
-from twinfleet.runtime.eventlog import EventLog
-from twinfleet.runtime.host import NodeHost
-from twinfleet.runtime.replay_gate import LogicalClock
-from twinfleet.runtime.transport import LoopbackBus, LoopbackTransport
+from twinfleet.runtime.core.eventlog import EventLog
+from twinfleet.runtime.host.node_host import NodeHost
+from twinfleet.runtime.host.replay_gate import LogicalClock
+from twinfleet.runtime.host.transport import LoopbackBus, LoopbackTransport
 
 ROOT = Path(__file__).resolve().parents[2]
-HEADON = ROOT / "launch" / "headon.yaml"
-C2A = ROOT / "launch" / "c2a.yaml"
+HEADON = ROOT / "twinfleet" / "launch" / "headon.yaml"
+C2A = ROOT / "twinfleet" / "launch" / "c2a.yaml"
 
 
 def trace_of(scenario: Path, out: Path) -> Path:
@@ -137,14 +137,14 @@ def test_node_logs_of_an_in_process_replay_match_the_trace(headon_plan, tmp_path
 
 
 def _my_node_processes() -> list[int]:
-    """Node processes started by this test process (children running runtime.node_main)."""
+    """Node processes started by this test process (children running runtime.fleet.node_main)."""
     found = []
     for entry in Path("/proc").iterdir():
         if not entry.name.isdigit():
             continue
         with contextlib.suppress(OSError, IndexError, ValueError):
             ppid = int((entry / "stat").read_text().rsplit(")", 1)[1].split()[1])
-            if ppid == os.getpid() and b"twinfleet.runtime.node_main" in (entry / "cmdline").read_bytes():
+            if ppid == os.getpid() and b"twinfleet.runtime.fleet.node_main" in (entry / "cmdline").read_bytes():
                 found.append(int(entry.name))
     return found
 

@@ -29,15 +29,15 @@ from twinfleet.agreement.live_replay import plan
 from twinfleet.checker.check import CheckOptions, check, load
 from twinfleet.checker.choices import PrefixChooser
 from twinfleet.checker.system import System
-from twinfleet.runtime.clock import ManualClock
-from twinfleet.runtime.eventlog import EventLog, payload_digest, state_digest
-from twinfleet.runtime.host import NodeHost
-from twinfleet.runtime.snapshot import snapshot
-from twinfleet.runtime.transport import LoopbackBus, LoopbackTransport
+from twinfleet.runtime.contract.snapshot import snapshot
+from twinfleet.runtime.core.eventlog import EventLog, payload_digest, state_digest
+from twinfleet.runtime.host.clock import ManualClock
+from twinfleet.runtime.host.node_host import NodeHost
+from twinfleet.runtime.host.transport import LoopbackBus, LoopbackTransport
 
 ROOT = Path(__file__).resolve().parents[2]
-HEADON = ROOT / "launch" / "headon.yaml"
-C1A = ROOT / "launch" / "c1a.yaml"
+HEADON = ROOT / "twinfleet" / "launch" / "headon.yaml"
+C1A = ROOT / "twinfleet" / "launch" / "c1a.yaml"
 
 
 # ------------------------------------------------------------------ helpers

@@ -2,7 +2,7 @@
 test_contract_breaches.py): each class is one mistake, and the checker must name it.
 
 This module imports `random`, `time`, `datetime`, `uuid` and `os` on purpose; the
-load-time lint (runtime.lint) warns about it, which the tests check too.
+load-time lint (runtime.scenario.lint) warns about it, which the tests check too.
 """
 
 from __future__ import annotations

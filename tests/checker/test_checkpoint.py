@@ -16,8 +16,8 @@ from twinfleet.checker.checkpoint import CheckpointError
 pytestmark = pytest.mark.timeout(120)
 
 ROOT = Path(__file__).resolve().parents[2]
-C1A = ROOT / "launch" / "c1a.yaml"
-C1A_REBECA = ROOT / "launch" / "c1a_rebeca.yaml"
+C1A = ROOT / "twinfleet" / "launch" / "c1a.yaml"
+C1A_REBECA = ROOT / "twinfleet" / "launch" / "c1a_rebeca.yaml"
 DOOR = [node("opener", "Opener"), node("locker", "Locker"), node("door", "Door")]
 
 

@@ -101,7 +101,7 @@ def test_python_m_checker_subprocess_and_cross_process_replay(tmp_path):
 
 
 def test_demo_scenario_checks_with_a_limit(tmp_path, capsys):
-    demo = ROOT / "launch" / "demo.yaml"
+    demo = ROOT / "twinfleet" / "launch" / "demo.yaml"
     code = commands.main([str(demo), "--max-states", "3000", "--json",
                           "--trace-out", str(tmp_path / "demo.json")])
     out = json.loads(capsys.readouterr().out)

@@ -15,7 +15,7 @@ import pytest
 from tests.checker.helpers import counts, node, replay_confirms, run, scenario, steps
 from twinfleet.checker import PropertySet, System
 from twinfleet.checker.check import load
-from twinfleet.runtime.scenario import ScenarioError
+from twinfleet.runtime.scenario.spec import ScenarioError
 
 pytestmark = pytest.mark.timeout(60)
 

@@ -10,9 +10,10 @@ from twinfleet.checker import Crash, PropertySet, RunEvent, System
 from twinfleet.checker.check import load
 from twinfleet.checker.choices import PrefixChooser
 from twinfleet.checker.faults import CheckSettings
-from twinfleet.checker.semantics import Rules, Semantics
+from twinfleet.checker.options import Semantics
+from twinfleet.checker.semantics import Rules
 from twinfleet.checker.world import Event
-from twinfleet.runtime.kinds import EventKind, FailureKind
+from twinfleet.runtime.contract.kinds import EventKind, FailureKind
 
 pytestmark = pytest.mark.timeout(30)
 

@@ -122,8 +122,8 @@ def test_unknown_reduction_is_bad_input(tmp_path):
 
 
 def test_the_rules_it_was_checked_against_are_the_rules_that_run():
-    # A changed enabling or effect rule (checker/semantics.py, Runner._effects) may make
-    # events dependent that the closure treats as independent: review checker/reduction.py
+    # A changed enabling or effect rule (twinfleet/checker/semantics.py, Runner._effects) may make
+    # events dependent that the closure treats as independent: review twinfleet/checker/reduction.py
     # for the new rule, then update RULES_FINGERPRINT.
     assert reduction.rules_fingerprint() == reduction.RULES_FINGERPRINT
 

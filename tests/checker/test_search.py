@@ -8,10 +8,11 @@ from tests.checker.helpers import node, scenario
 from twinfleet.checker import Limits, PropertySet, Search, System, bfs, dfs
 from twinfleet.checker.check import load
 from twinfleet.checker.faults import CheckSettings
-from twinfleet.checker.semantics import Rules, Semantics
+from twinfleet.checker.options import Semantics
+from twinfleet.checker.semantics import Rules
 from twinfleet.checker.world import Event
-from twinfleet.runtime.kinds import EventKind
-from twinfleet.runtime.scenario import ScenarioError
+from twinfleet.runtime.contract.kinds import EventKind
+from twinfleet.runtime.scenario.spec import ScenarioError
 
 pytestmark = pytest.mark.timeout(30)
 

@@ -85,7 +85,7 @@ def test_optimisations_match_the_unoptimised_search(tmp_path, model, semantics, 
 def test_c1a_rebeca_counts_are_the_same_in_both_stores():
     # Without the transition cache the same search takes 5x as long: that it changes nothing
     # is checked on the models above and on generated systems (test_reduction_differential).
-    path = ROOT / "launch" / "c1a_rebeca.yaml"
+    path = ROOT / "twinfleet" / "launch" / "c1a_rebeca.yaml"
     fast = run(path, trace_out=None)
     assert (fast.statistics.states, fast.rmc_transitions) == (18_527, 43_077)  # = RMC's
     exact = run(path, trace_out=None, exact_states=True)

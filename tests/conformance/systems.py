@@ -25,8 +25,8 @@ from twinfleet import (
     service,
     subscribe,
 )
-from twinfleet.runtime.messages import NodeAlive
-from twinfleet.runtime.node import LIVELINESS_TOPIC
+from twinfleet.runtime.contract.messages import NodeAlive
+from twinfleet.runtime.contract.node import LIVELINESS_TOPIC
 
 SHUTDOWN = "/twinfleet/shutdown"
 END_MS = 60  # fleet ms after its last action at which a system asks the run to end

@@ -29,7 +29,7 @@ from tests.support import ROOT, child_env
 from twinfleet.agreement.validate import validate
 from twinfleet.checker.check import CheckOptions, check, load
 from twinfleet.checker.system import System
-from twinfleet.runtime.scenario import ScenarioError
+from twinfleet.runtime.scenario.spec import ScenarioError
 
 M = "tests.conformance.systems:"
 

@@ -19,12 +19,12 @@ from hypothesis import strategies as st
 
 from twinfleet.cli import main
 from twinfleet.nodes.mapfile import MapError, load_map
-from twinfleet.runtime.scenario import ScenarioError, load_scenario
+from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
-GOOD_SCENARIO = yaml.safe_load((ROOT / "launch" / "headon.yaml").read_text())
-GOOD_SCENARIO["map"] = str(ROOT / "maps" / "corridor12.yaml")
+GOOD_SCENARIO = yaml.safe_load((ROOT / "twinfleet" / "launch" / "headon.yaml").read_text())
+GOOD_SCENARIO["map"] = str(ROOT / "twinfleet" / "maps" / "corridor12.yaml")
 
 
 def pgm_header(magic: bytes, w: int, h: int, maxval: int) -> bytes:
@@ -111,7 +111,7 @@ def headon_trace(tmp_path_factory):
     from twinfleet.checker.check import CheckOptions, check
 
     out = tmp_path_factory.mktemp("trace") / "headon.json"
-    check(ROOT / "launch" / "headon.yaml", CheckOptions(trace_out=str(out)))
+    check(ROOT / "twinfleet" / "launch" / "headon.yaml", CheckOptions(trace_out=str(out)))
     return out.read_text()  # text: hypothesis prints the arguments of a failing example
 
 

@@ -33,12 +33,12 @@ from hypothesis import strategies as st
 zenoh = pytest.importorskip("zenoh")
 
 from tests.integration.reliability_nodes import AddReply, AddRequest, Tick  # noqa: E402
-from twinfleet.runtime.guard import Admission, Rejected, check_message  # noqa: E402
-from twinfleet.runtime.launcher import free_port  # noqa: E402
-from twinfleet.runtime.messages import decode, encode  # noqa: E402
-from twinfleet.runtime.names import key_expr  # noqa: E402
-from twinfleet.runtime.node_main import stats_key  # noqa: E402
-from twinfleet.runtime.zenoh_transport import zenoh_config  # noqa: E402
+from twinfleet.runtime.contract.messages import decode, encode  # noqa: E402
+from twinfleet.runtime.contract.names import key_expr  # noqa: E402
+from twinfleet.runtime.core.guard import Admission, Rejected, check_message  # noqa: E402
+from twinfleet.runtime.fleet.launcher import free_port  # noqa: E402
+from twinfleet.runtime.fleet.node_main import stats_key  # noqa: E402
+from twinfleet.runtime.host.zenoh_transport import zenoh_config  # noqa: E402
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(150)]
 
@@ -81,7 +81,7 @@ payloads = st.one_of(st.binary(max_size=64), plain.map(msgpack.packb),
 
 
 def expect_sample(payload: bytes) -> str:
-    """What FuzzTarget.on_tick does with `payload`: undecodable, rejected_* (runtime.guard:
+    """What FuzzTarget.on_tick does with `payload`: undecodable, rejected_* (runtime.core.guard:
     not a Tick, or fields that do not fit it), error or ok."""
     try:
         msg = decode(payload).msg
@@ -158,7 +158,7 @@ def target(tmp_path_factory: pytest.TempPathFactory) -> Iterator[Target]:
     session = zenoh.open(zenoh_config(connect=[endpoint]))
     log = tmp / "target.log"
     with log.open("w") as sink:
-        proc = subprocess.Popen([sys.executable, "-m", "twinfleet.runtime.node_main", "--scenario",
+        proc = subprocess.Popen([sys.executable, "-m", "twinfleet.runtime.fleet.node_main", "--scenario",
                                  str(scenario), "--node", "target", "--connect", endpoint],
                                 stdout=sink, stderr=subprocess.STDOUT, cwd=ROOT)
     publisher = session.declare_publisher(TICKS, congestion_control=zenoh.CongestionControl.BLOCK)

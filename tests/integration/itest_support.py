@@ -92,6 +92,6 @@ def node_pid(scenario: Path | str, node: str) -> int | None:
             argv = (Path("/proc") / str(pid) / "cmdline").read_bytes().split(b"\0")
         except OSError:
             continue
-        if b"twinfleet.runtime.node_main" in argv and argv[argv.index(b"--node") + 1] == node.encode():
+        if b"twinfleet.runtime.fleet.node_main" in argv and argv[argv.index(b"--node") + 1] == node.encode():
             return pid
     return None

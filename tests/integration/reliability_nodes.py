@@ -13,8 +13,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from twinfleet import Context, Node, String, every, message, service, subscribe
-from twinfleet.runtime.messages import NodeAlive
-from twinfleet.runtime.node import QOS_SENSOR_DATA, QoS
+from twinfleet.runtime.contract.messages import NodeAlive
+from twinfleet.runtime.contract.node import QOS_SENSOR_DATA, QoS
 
 
 @message("twinfleet_test/FleetStatus")

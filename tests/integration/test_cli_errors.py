@@ -20,7 +20,7 @@ from itest_support import ROOT, launch_in, pick_free_port, poll, run_cli_in, sto
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
-DEMO = str(ROOT / "launch" / "demo.yaml")
+DEMO = str(ROOT / "twinfleet" / "launch" / "demo.yaml")
 
 
 @pytest.fixture(scope="module")

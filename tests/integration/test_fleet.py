@@ -274,9 +274,9 @@ def test_run_fleet_as_a_library_with_respawn_and_summary(tmp_path: Path) -> None
     import dataclasses
     import io
 
-    from twinfleet.runtime.launcher import run_fleet
-    from twinfleet.runtime.messages import String
-    from twinfleet.runtime.scenario import load_scenario
+    from twinfleet.runtime.contract.messages import String
+    from twinfleet.runtime.fleet.launcher import run_fleet
+    from twinfleet.runtime.scenario.spec import load_scenario
 
     path = tmp_path / "respawn.yaml"
     path.write_text(RESPAWN)

@@ -66,7 +66,7 @@ def test_ctrl_c_reports_interrupted_with_exit_130(tmp_path):
 
 def test_a_robot_collision_is_the_no_collision_invariant_violated(tmp_path):
     # headon: two robots swap ends of a narrow corridor and collide within seconds
-    text = (ROOT / "launch" / "headon.yaml").read_text()
+    text = (ROOT / "twinfleet" / "launch" / "headon.yaml").read_text()
     path = tmp_path / "headon.yaml"
     path.write_text(text.replace("../maps/", f"{ROOT / 'maps'}/"))
     out = expect(run_launch(path, "--time-scale", "4", "--timeout", "8"), 1,

@@ -32,14 +32,14 @@ from itest_support import (
     processes_mentioning,
 )
 
-from twinfleet.runtime.fleetauth import login_settings, registry_auth
-from twinfleet.runtime.guard import sign
-from twinfleet.runtime.launcher import SHUTDOWN_TOPIC, format_result, run_fleet
-from twinfleet.runtime.messages import String, encode
-from twinfleet.runtime.names import key_expr
-from twinfleet.runtime.run_record import read_run_record
-from twinfleet.runtime.scenario import load_scenario
-from twinfleet.runtime.zenoh_transport import zenoh_config
+from twinfleet.runtime.contract.messages import String, encode
+from twinfleet.runtime.contract.names import key_expr
+from twinfleet.runtime.core.guard import sign
+from twinfleet.runtime.fleet.fleetauth import login_settings, registry_auth
+from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, format_result, run_fleet
+from twinfleet.runtime.fleet.run_record import read_run_record
+from twinfleet.runtime.host.zenoh_transport import zenoh_config
+from twinfleet.runtime.scenario.spec import load_scenario
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
@@ -174,8 +174,8 @@ def test_killed_node_is_detected_within_a_second_respawned_and_reported(tmp_path
 
 LAUNCH_SCRIPT = """
 import asyncio, sys
-from twinfleet.runtime.launcher import run_fleet
-from twinfleet.runtime.scenario import load_scenario
+from twinfleet.runtime.fleet.launcher import run_fleet
+from twinfleet.runtime.scenario.spec import load_scenario
 asyncio.run(run_fleet(load_scenario(sys.argv[1]), run_record=sys.argv[2], listen=sys.argv[3]))
 """
 

@@ -13,9 +13,9 @@ pytestmark = [pytest.mark.slow, pytest.mark.timeout(150)]
 
 def test_c1a_live_all_robots_arrive_without_collision(tmp_path):
     # A private copy: the cleanup below must not touch fleets of the same file started elsewhere.
-    text = (ROOT / "launch" / "c1a.yaml").read_text()
+    text = (ROOT / "twinfleet" / "launch" / "c1a.yaml").read_text()
     copy = tmp_path / "c1a.yaml"
-    copy.write_text(text.replace("../maps/map50.yaml", str(ROOT / "maps" / "map50.yaml")))
+    copy.write_text(text.replace("../maps/map50.yaml", str(ROOT / "twinfleet" / "maps" / "map50.yaml")))
     scenario = str(copy)
     cmd = [sys.executable, "-m", "twinfleet", "launch", scenario, "--time-scale", "10",
            "--timeout", "60"]

@@ -22,7 +22,7 @@ from itest_support import ROOT, launch_in, poll, run_cli_in, stop_launch
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 
-C1A = ROOT / "launch" / "c1a.yaml"
+C1A = ROOT / "twinfleet" / "launch" / "c1a.yaml"
 ROBOTS = ["r1", "r2", "r3", "r4", "r5"]
 
 
@@ -49,7 +49,7 @@ def c1a(runtime_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator
 @pytest.fixture(scope="module")
 def demo(runtime_dir: Path, c1a: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     log = tmp_path_factory.mktemp("demo") / "fleet.log"
-    scenario = str(ROOT / "launch" / "demo.yaml")
+    scenario = str(ROOT / "twinfleet" / "launch" / "demo.yaml")
     proc = launch_in(runtime_dir, log, scenario, "talker.period_ms:=250", "--param",
                    "caller.period_ms=300", "--timeout", "100")
     try:

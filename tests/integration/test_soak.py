@@ -26,9 +26,9 @@ from pathlib import Path
 import pytest
 from itest_support import kill_all, pick_free_port, processes_mentioning
 
-from twinfleet.runtime.launcher import run_fleet
-from twinfleet.runtime.run_record import read_run_record
-from twinfleet.runtime.scenario import load_scenario
+from twinfleet.runtime.fleet.launcher import run_fleet
+from twinfleet.runtime.fleet.run_record import read_run_record
+from twinfleet.runtime.scenario.spec import load_scenario
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(120)]
 

@@ -9,9 +9,9 @@ import pytest
 from twinfleet.nodes.map_server import MapServer, MapServerParams
 from twinfleet.nodes.msgs import Collision, ObstacleScan, Path, PathRequest, RobotPose
 from twinfleet.nodes.robot import Robot, RobotParams
-from twinfleet.runtime.context import After, Call, Context, Publish
-from twinfleet.runtime.dispatch import run_handler
-from twinfleet.runtime.messages import CallError
+from twinfleet.runtime.contract.context import After, Call, Context, Publish
+from twinfleet.runtime.contract.dispatch import run_handler
+from twinfleet.runtime.contract.messages import CallError
 
 MAP50 = str(FsPath(__file__).resolve().parents[2] / "maps" / "map50.yaml")
 ROBOTS = ("r1", "r2", "r3", "r4", "r5")
@@ -212,7 +212,7 @@ def test_report_counts_hops_waits_and_collisions_from_messages():
     rep.on_message("/collisions", Collision("r1", "r2", (7, 6), (7, 7), 5000))
     text = rep.render()
     assert "collisions: 1" in text and "r1 (7, 6) <-> r2 (7, 7)" in text
-    assert "result" not in text  # the run's result is the live verdict's (runtime.live_verdict)
+    assert "result" not in text  # the run's result is the live verdict's (runtime.fleet.live_verdict)
 
 
 @pytest.mark.parametrize(("profile", "hops"), [("fixed", False), ("rebeca", True)])

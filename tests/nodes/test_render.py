@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 
 from twinfleet.nodes.render import draw_world, robot_colour, scenario_view, states_view
-from twinfleet.runtime.scenario import load_scenario
+from twinfleet.runtime.scenario.spec import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
 PX = 12
@@ -19,7 +19,7 @@ def pixel(img, cell):
 
 
 def test_c1a_picture_shows_map_and_each_robot_in_its_colour_at_its_start():
-    scenario = load_scenario(ROOT / "launch" / "c1a.yaml")
+    scenario = load_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml")
     img = draw_world(scenario_view(scenario), cell_px=PX)
     assert img.size == (50 * PX, 50 * PX + 18)
     arr = np.asarray(img)
@@ -29,7 +29,7 @@ def test_c1a_picture_shows_map_and_each_robot_in_its_colour_at_its_start():
 
 
 def test_collision_is_circled_in_red(tmp_path):
-    scenario = load_scenario(ROOT / "launch" / "c1a.yaml")
+    scenario = load_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml")
     r1, r2 = scenario.node("r1").instantiate(), scenario.node("r2").instantiate()
     r1.state.cell, r2.state.cell = (20, 30), (20, 31)
     view = states_view(scenario, {"r1": r1.state, "r2": r2.state}, collision=("r1", "r2"))

@@ -298,7 +298,7 @@ def trace_path(case: str) -> Path:
 
 def scenario_path(case: str) -> Path:
     """Our scenario file for a case, under the `rebeca` profile and semantics."""
-    return ROOT / "launch" / f"{case}_rebeca.yaml"
+    return ROOT / "twinfleet" / "launch" / f"{case}_rebeca.yaml"
 
 
 def follow_case(case: str) -> FollowResult:

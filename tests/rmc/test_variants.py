@@ -29,7 +29,7 @@ HEAD_MAIN = ((0.6, 1500, 3), (0.7, 2000, 6), (0.7, 2500, 5), (0.7, 3000, 4), (0.
 
 def variant(tmp_path: Path, base: str, scan: int, robots=None) -> Path:
     """`launch/<base>_rebeca.yaml` with another scan period and (speed, wait, priority)s."""
-    path = ROOT / "launch" / f"{base}_rebeca.yaml"
+    path = ROOT / "twinfleet" / "launch" / f"{base}_rebeca.yaml"
     doc = yaml.safe_load(path.read_text())
     doc["map"] = str((path.parent / doc["map"]).resolve())
     doc["params"]["scan_rate_ms"] = scan

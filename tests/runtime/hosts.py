@@ -19,10 +19,10 @@ from twinfleet import (
     service,
     subscribe,
 )
-from twinfleet.runtime.clock import ManualClock
-from twinfleet.runtime.host import NodeHost
-from twinfleet.runtime.node import QoS, Reliability
-from twinfleet.runtime.transport import LoopbackBus, LoopbackTransport
+from twinfleet.runtime.contract.node import QoS, Reliability
+from twinfleet.runtime.host.clock import ManualClock
+from twinfleet.runtime.host.node_host import NodeHost
+from twinfleet.runtime.host.transport import LoopbackBus, LoopbackTransport
 
 FLEET = "t"
 

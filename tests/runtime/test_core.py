@@ -17,12 +17,12 @@ from twinfleet import (
     on_start,
     subscribe,
 )
-from twinfleet.runtime.choosers import RecordingChooser
-from twinfleet.runtime.core import MAX_GAP, Handled, NodeCore
-from twinfleet.runtime.entries import Entry
-from twinfleet.runtime.kinds import EventKind
-from twinfleet.runtime.messages import DecodeError, NodeAlive, Violation, decode, encode
-from twinfleet.runtime.outbox import Answer, Line, Output, Put, Query, Stop
+from twinfleet.runtime.contract.kinds import EventKind
+from twinfleet.runtime.contract.messages import DecodeError, NodeAlive, Violation, decode, encode
+from twinfleet.runtime.core.choosers import RecordingChooser
+from twinfleet.runtime.core.entries import Entry
+from twinfleet.runtime.core.node_core import MAX_GAP, Handled, NodeCore
+from twinfleet.runtime.core.outbox import Answer, Line, Output, Put, Query, Stop
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -433,9 +433,9 @@ def test_the_core_knows_no_asyncio_and_does_no_io(module):
     tree = ast.parse((ROOT / "runtime" / f"{module}.py").read_text())
     names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     names |= {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    banned = {"asyncio", "zenoh", "socket", "threading", "time", "twinfleet.runtime.clock",
-              "twinfleet.runtime.transport", "twinfleet.runtime.host",
-              "twinfleet.runtime.zenoh_transport", "twinfleet.runtime.eventlog"}
+    banned = {"asyncio", "zenoh", "socket", "threading", "time", "twinfleet.runtime.host.clock",
+              "twinfleet.runtime.host.transport", "twinfleet.runtime.host.node_host",
+              "twinfleet.runtime.host.zenoh_transport", "twinfleet.runtime.core.eventlog"}
     assert not names & banned
     calls = {n.func.id for n in ast.walk(tree) if isinstance(n, ast.Call)
              and isinstance(n.func, ast.Name)}

@@ -10,13 +10,13 @@ from typing import Any
 
 import pytest
 
-from twinfleet.runtime.node import QOS_DEFAULT
-from twinfleet.runtime.zenoh_transport import Handoff
+from twinfleet.runtime.contract.node import QOS_DEFAULT
+from twinfleet.runtime.host.zenoh_transport import Handoff
 
 zenoh = pytest.importorskip("zenoh")
 
-from twinfleet.runtime.launcher import free_port  # noqa: E402
-from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config  # noqa: E402
+from twinfleet.runtime.fleet.launcher import free_port  # noqa: E402
+from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config  # noqa: E402
 
 
 def run(coro: Coroutine[Any, Any, Any], timeout: float = 15.0) -> Any:

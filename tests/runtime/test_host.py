@@ -29,14 +29,14 @@ from twinfleet import (
     service,
     subscribe,
 )
-from twinfleet.runtime.choosers import derive_seed
-from twinfleet.runtime.clock import ManualClock
-from twinfleet.runtime.core import MAX_GAP
-from twinfleet.runtime.host import NodeHost
-from twinfleet.runtime.messages import NodeAlive, Violation, decode, encode
-from twinfleet.runtime.names import key_expr
-from twinfleet.runtime.node import QOS_DEFAULT, QOS_LATCHED
-from twinfleet.runtime.transport import LoopbackTransport
+from twinfleet.runtime.contract.messages import NodeAlive, Violation, decode, encode
+from twinfleet.runtime.contract.names import key_expr
+from twinfleet.runtime.contract.node import QOS_DEFAULT, QOS_LATCHED
+from twinfleet.runtime.core.choosers import derive_seed
+from twinfleet.runtime.core.node_core import MAX_GAP
+from twinfleet.runtime.host.clock import ManualClock
+from twinfleet.runtime.host.node_host import NodeHost
+from twinfleet.runtime.host.transport import LoopbackTransport
 
 
 class Fragile(Node):

@@ -22,14 +22,14 @@ from tests.runtime.hosts import (
     settle,
 )
 from twinfleet import CallError, Context, Node, every, handler, on_start, subscribe
-from twinfleet.runtime.clock import ManualClock
-from twinfleet.runtime.eventlog import EVENTS_FORMAT, EventLog, payload_digest
-from twinfleet.runtime.host import NodeHost
-from twinfleet.runtime.messages import encode
-from twinfleet.runtime.names import key_expr
-from twinfleet.runtime.node import QOS_DEFAULT
-from twinfleet.runtime.replay_gate import LogicalClock, gate_key
-from twinfleet.runtime.transport import LoopbackBus, LoopbackTransport
+from twinfleet.runtime.contract.messages import encode
+from twinfleet.runtime.contract.names import key_expr
+from twinfleet.runtime.contract.node import QOS_DEFAULT
+from twinfleet.runtime.core.eventlog import EVENTS_FORMAT, EventLog, payload_digest
+from twinfleet.runtime.host.clock import ManualClock
+from twinfleet.runtime.host.node_host import NodeHost
+from twinfleet.runtime.host.replay_gate import LogicalClock, gate_key
+from twinfleet.runtime.host.transport import LoopbackBus, LoopbackTransport
 
 
 class Ticker(Node):

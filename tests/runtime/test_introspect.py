@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from twinfleet import Context, Node, service
 from twinfleet.nodes.demo import Adder
-from twinfleet.runtime.introspect import node_description
+from twinfleet.runtime.host.introspect import node_description
 
 
 class Untyped(Node):

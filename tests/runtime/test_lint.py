@@ -1,4 +1,4 @@
-"""Load-time lint (runtime/lint.py): risky imports, and names nothing answers."""
+"""Load-time lint (twinfleet/runtime/scenario/lint.py): risky imports, and names nothing answers."""
 
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ from dataclasses import dataclass
 import pytest
 
 from twinfleet import Context, Node, String, on_start, service, subscribe
-from twinfleet.runtime.examples import shipped_scenarios
-from twinfleet.runtime.lint import lint_scenario
-from twinfleet.runtime.scenario import NodeEntry, Scenario, load_scenario
+from twinfleet.runtime.scenario.examples import shipped_scenarios
+from twinfleet.runtime.scenario.lint import lint_scenario
+from twinfleet.runtime.scenario.spec import NodeEntry, Scenario, load_scenario
 
 pytestmark = pytest.mark.timeout(60)
 TALLY = 0

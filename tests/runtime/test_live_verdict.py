@@ -9,8 +9,10 @@ import pytest
 
 from tests.adversarial.verdict_nodes import Counter, Flooder
 from tests.runtime.hosts import Num, Shallow
-from twinfleet.runtime.core import NodeCore
-from twinfleet.runtime.live_verdict import (
+from twinfleet.runtime.contract.messages import encode
+from twinfleet.runtime.core.node_core import NodeCore
+from twinfleet.runtime.core.state_report import StateReport, StateReporter, decode_report
+from twinfleet.runtime.fleet.live_verdict import (
     ERROR,
     HOLDS,
     INCONCLUSIVE,
@@ -20,9 +22,7 @@ from twinfleet.runtime.live_verdict import (
     RunEnd,
     stall_floor_ms,
 )
-from twinfleet.runtime.messages import encode
-from twinfleet.runtime.scenario import NodeEntry, Scenario
-from twinfleet.runtime.state_report import StateReport, StateReporter, decode_report
+from twinfleet.runtime.scenario.spec import NodeEntry, Scenario
 
 pytestmark = pytest.mark.timeout(30)
 

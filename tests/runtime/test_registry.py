@@ -10,8 +10,8 @@ import sys
 
 import pytest
 
-from twinfleet.runtime import registry
-from twinfleet.runtime.registry import RegistryError, find_fleet, register, running_fleets
+from twinfleet.runtime.fleet import registry
+from twinfleet.runtime.fleet.registry import RegistryError, find_fleet, register, running_fleets
 
 
 @pytest.fixture

@@ -7,7 +7,7 @@ from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
 
-from twinfleet.runtime.run_record import RunRecord, plain, read_run_record, versions
+from twinfleet.runtime.fleet.run_record import RunRecord, plain, read_run_record, versions
 
 
 @dataclass(frozen=True)

@@ -10,8 +10,8 @@ from typing import Any
 
 import pytest
 
-from twinfleet.runtime.node import QOS_DEFAULT, QOS_LATCHED
-from twinfleet.runtime.transport import (
+from twinfleet.runtime.contract.node import QOS_DEFAULT, QOS_LATCHED
+from twinfleet.runtime.host.transport import (
     LoopbackBus,
     LoopbackTransport,
     Transport,
@@ -21,8 +21,8 @@ from twinfleet.runtime.transport import (
 
 zenoh = pytest.importorskip("zenoh")
 
-from twinfleet.runtime.launcher import free_port  # noqa: E402
-from twinfleet.runtime.zenoh_transport import ZenohTransport, zenoh_config  # noqa: E402
+from twinfleet.runtime.fleet.launcher import free_port  # noqa: E402
+from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config  # noqa: E402
 
 KEY = "twinfleet/conf/topic"
 

@@ -9,7 +9,7 @@ import pytest
 
 pytest.importorskip("zenoh")
 
-from twinfleet.runtime.zenoh_transport import OVERRIDE_ENV, config_overrides, zenoh_config  # noqa: E402
+from twinfleet.runtime.host.zenoh_transport import OVERRIDE_ENV, config_overrides, zenoh_config  # noqa: E402
 
 
 def get(conf: Any, key: str) -> Any:

@@ -103,7 +103,7 @@ def test_foxglove_protocol_client_gets_map_robots_and_scan_from_live_c1a(cli):
     poll(lambda: "open connection ws://" in bridge.log.read_text(), 20, "the Foxglove server")
 
     def launch() -> None:
-        cli("launch", str(ROOT / "launch" / "c1a.yaml"), "--time-scale", "10", "--listen",
+        cli("launch", str(ROOT / "twinfleet" / "launch" / "c1a.yaml"), "--time-scale", "10", "--listen",
             endpoint, log="fleet.log")
 
     seen = asyncio.run(_collect(f"ws://127.0.0.1:{port}/", launch, 60))
@@ -124,7 +124,7 @@ def test_foxglove_protocol_client_gets_map_robots_and_scan_from_live_c1a(cli):
 
 def test_a_late_foxglove_client_still_gets_the_map(cli):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    fleet = cli("launch", str(ROOT / "launch" / "c1a.yaml"), "--time-scale", "1", "--listen",
+    fleet = cli("launch", str(ROOT / "twinfleet" / "launch" / "c1a.yaml"), "--time-scale", "1", "--listen",
                 endpoint, log="fleet.log")
     poll(lambda: fleet.log.read_text().count("started") >= 6, 30, "the fleet's nodes")
     port = free_port()

@@ -26,8 +26,8 @@ from mcap.reader import make_reader
 from viewer_support import ROOT, child_env, free_port, poll
 
 import twinfleet.nodes.msgs  # noqa: F401 - registers the fleet's message classes
-from twinfleet.runtime.messages import registered_types
-from twinfleet.runtime.zenoh_transport import zenoh_config
+from twinfleet.runtime.contract.messages import registered_types
+from twinfleet.runtime.host.zenoh_transport import zenoh_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
@@ -41,7 +41,7 @@ TOPICS = {"/map", "/poses", "/fleet_status", "/twinfleet/shutdown",
 def recording(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("mcap") / "c1a.mcap"
     proc = subprocess.run([sys.executable, "-m", "twinfleet", "record",
-                           str(ROOT / "launch" / "c1a.yaml"), "--time-scale", "10", "-o", str(out)],
+                           str(ROOT / "twinfleet" / "launch" / "c1a.yaml"), "--time-scale", "10", "-o", str(out)],
                           capture_output=True, text=True, timeout=70, env=child_env(), cwd=ROOT,
                           check=False)
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -188,7 +188,7 @@ def test_record_connect_gets_exact_schemas_from_the_fleets_nodes(cli, tmp_path):
     # The recording process never imports nodes.msgs: the schemas come from the node
     # processes (twinfleet/<fleet>/@types/<node>), not from guessing at the first samples.
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    fleet = cli("launch", str(ROOT / "launch" / "c1a.yaml"), "--time-scale", "2", "--listen",
+    fleet = cli("launch", str(ROOT / "twinfleet" / "launch" / "c1a.yaml"), "--time-scale", "2", "--listen",
                 endpoint, log="fleet.log")
     poll(lambda: "started" in fleet.log.read_text(), 30, "the fleet's nodes to start")
     out = tmp_path / "joined.mcap"

@@ -69,7 +69,7 @@ def test_viewer_shows_the_live_c1a_fleet_moving(cli, browser_page):
     page.goto(url)
     page.wait_for_function("() => window.twinfleetView && twinfleetView.wsOpen")
     launched = time.monotonic()
-    cli("launch", str(ROOT / "launch" / "c1a.yaml"), "--time-scale", "10", "--listen", endpoint,
+    cli("launch", str(ROOT / "twinfleet" / "launch" / "c1a.yaml"), "--time-scale", "10", "--listen", endpoint,
         log="fleet.log")
 
     page.wait_for_function("() => twinfleetView.mapDrawn && twinfleetView.drawnRobots.length === 5")
@@ -132,7 +132,7 @@ def test_viewer_steps_through_a_checker_trace(cli, browser_page, tmp_path):
     from twinfleet.checker.check import CheckOptions, check
 
     trace = tmp_path / "headon.trace.json"
-    result = check(ROOT / "launch" / "headon.yaml", CheckOptions(trace_out=str(trace)))
+    result = check(ROOT / "twinfleet" / "launch" / "headon.yaml", CheckOptions(trace_out=str(trace)))
     assert result.status == "violated"
     steps = len(json.loads(trace.read_text())["steps"])
     url = _start_viewer(cli, "--trace", str(trace))
@@ -162,7 +162,7 @@ def test_viewer_lists_and_inspects_the_topics_of_a_non_robot_fleet(cli, browser_
     page = browser_page
     page.goto(url)
     page.wait_for_function("() => window.twinfleetView && twinfleetView.wsOpen")
-    cli("launch", str(ROOT / "launch" / "demo.yaml"), "--timeout", "30", log="fleet.log")
+    cli("launch", str(ROOT / "twinfleet" / "launch" / "demo.yaml"), "--timeout", "30", log="fleet.log")
     page.wait_for_selector("tr.topic[data-topic='/chatter']")
     row = page.eval_on_selector("tr.topic[data-topic='/chatter']",
                                 "r => Array.from(r.cells).map(c => c.textContent)")

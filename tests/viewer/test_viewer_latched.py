@@ -18,10 +18,10 @@ import pytest
 import zenoh
 from viewer_support import ROOT, free_port, get_json, poll
 
-from twinfleet.runtime.fleetauth import login_settings, registry_auth
-from twinfleet.runtime.scenario import load_scenario
-from twinfleet.runtime.viewstate import start_map
-from twinfleet.runtime.zenoh_transport import zenoh_config
+from twinfleet.runtime.fleet.fleetauth import login_settings, registry_auth
+from twinfleet.runtime.host.zenoh_transport import zenoh_config
+from twinfleet.runtime.scenario.spec import load_scenario
+from twinfleet.runtime.tools.view.viewstate import start_map
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
 
@@ -46,7 +46,7 @@ async def _websocket_snapshot(url: str) -> dict:
 
 def test_late_viewer_receives_the_latched_map(cli):
     endpoint = f"tcp/127.0.0.1:{free_port()}"
-    cli("launch", str(ROOT / "launch" / "c1a.yaml"), "--time-scale", "1", "--listen", endpoint,
+    cli("launch", str(ROOT / "twinfleet" / "launch" / "c1a.yaml"), "--time-scale", "1", "--listen", endpoint,
         log="fleet.log")
     session = _open_when_up(endpoint)
     scans, late_maps = [], []
@@ -61,7 +61,7 @@ def test_late_viewer_receives_the_latched_map(cli):
         state = poll(lambda: (s := get_json(url + "api/state")) and s["map"] and s, 15,
                      "the late viewer to receive /map")
         print(f"late viewer had the map {time.monotonic() - joined:.2f} s after it started")
-        expected = start_map(load_scenario(ROOT / "launch" / "c1a.yaml"))
+        expected = start_map(load_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml"))
         assert (state["map"]["width"], state["map"]["height"]) == (50, 50)
         assert base64.b64decode(state["map"]["data"]) == base64.b64decode(expected["data"])
         assert state["stats"]["topics"]["/map"] == 1  # history and live copies counted once

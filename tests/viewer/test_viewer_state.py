@@ -20,10 +20,10 @@ from twinfleet.nodes.msgs import (
     RobotPose,
     RobotStatus,
 )
-from twinfleet.runtime.messages import String, encode
-from twinfleet.runtime.recorder import McapRecorder, message_schema
-from twinfleet.runtime.viewer import make_app
-from twinfleet.runtime.viewstate import LiveState, trace_document
+from twinfleet.runtime.contract.messages import String, encode
+from twinfleet.runtime.tools.record.recorder import McapRecorder, message_schema
+from twinfleet.runtime.tools.view.viewer import make_app
+from twinfleet.runtime.tools.view.viewstate import LiveState, trace_document
 
 ROOT = Path(__file__).resolve().parents[2]
 GRID = OccupancyGrid(3, 2, 0.25, (0.0, 0.0, 0.0), bytes([0, 100, 0, 0, 0, 100]))
@@ -143,7 +143,7 @@ def test_trace_document_has_map_robots_and_steps(tmp_path):
     from twinfleet.checker.check import CheckOptions, check
 
     trace = tmp_path / "headon.trace.json"
-    assert check(ROOT / "launch" / "headon.yaml", CheckOptions(trace_out=str(trace))).status == "violated"
+    assert check(ROOT / "twinfleet" / "launch" / "headon.yaml", CheckOptions(trace_out=str(trace))).status == "violated"
     doc = trace_document(trace)
     raw = json.loads(trace.read_text())
     assert [r["name"] for r in doc["robots"]] == ["r1", "r2"]

@@ -1,0 +1,187 @@
+"""The agreement layer's commands: `experiment`, `validate` and `replay` (with `--live`).
+
+`register(subparsers)` adds them to `twinfleet` (`twinfleet.cli`); `main()` is
+`python -m twinfleet.agreement`. `replay` is the checker's offline replay
+(`checker.commands.add_replay_parser`) plus `--live`, a re-enactment on the
+real processes, which needs both drivers and so lives in this layer.
+
+    twinfleet experiment SCENARIO... [--runs N] [--time-scale K]
+                         [--semantics both|ros|rebeca] [--out DIR] [--jobs 1]
+
+Exit codes: 0 done, and no live run contradicted a checker verdict; 1 a live
+run did what the checker says cannot happen (a collision in a scenario the
+checker proved collision-free, say); 2 bad input; 130 interrupted (the
+outputs written so far are kept).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shlex
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+from twinfleet.agreement import DEFAULT_TIME_SCALE
+from twinfleet.agreement.table import to_markdown
+from twinfleet.checker.commands import add_replay_parser, replay_command
+from twinfleet.checker.options import Semantics
+from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+
+_SEMANTICS = {"both": (Semantics.ROS, Semantics.REBECA), **{s.value: (s,) for s in Semantics}}
+
+
+def register(subparsers: Any) -> None:
+    """Add `experiment`, `validate` and `replay` to an argparse subparsers object (imports
+    nothing heavy: the checker and the live runtime are loaded when a command runs)."""
+    _experiment_parser(subparsers)
+    _validate_parser(subparsers)
+    _replay_parser(subparsers)
+
+
+def _experiment_parser(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "experiment", help="the paper's Table 4/5: checker verdicts and N live runs per scenario",
+        description="For each scenario: run the checker (both semantics by default) and N live "
+        "runs with seeds S, S+1, ..., then print the paper's Table 4/5 rows with the paper's own "
+        "figures beside ours, and write them as Markdown and CSV into --out.")
+    p.add_argument("scenarios", nargs="+", metavar="SCENARIO", help="scenario YAML files")
+    p.add_argument("--runs", type=int, default=20, metavar="N",
+                   help="live runs per scenario; 0 runs the checker only (default: %(default)s)")
+    p.add_argument("--time-scale", type=float, default=DEFAULT_TIME_SCALE, metavar="K",
+                   help="live fleet time K times faster than wall time (default: %(default)g, "
+                        "measured in docs/experiment.md)")
+    p.add_argument("--semantics", choices=tuple(_SEMANTICS), default="both",
+                   help="checker message rules to run (default: %(default)s)")
+    p.add_argument("--out", default="out/experiment", metavar="DIR",
+                   help="where experiment.md/.csv/.json, traces/ and logs/ go "
+                        "(default: %(default)s)")
+    p.add_argument("--jobs", type=int, default=1, metavar="1",
+                   help="only 1: live runs are sequential so that no fleet shares the CPU with "
+                        "another (timing is what is being measured)")
+    p.add_argument("--seed", type=int, default=None, metavar="S",
+                   help="seed of the first live run (default: the scenario's seed)")
+    p.add_argument("--max-states", type=int, default=None, metavar="N",
+                   help="checker state limit (default: the scenario's check.max_states)")
+    p.add_argument("--max-time", type=float, default=None, metavar="S",
+                   help="checker time limit per semantics (default: the scenario's)")
+    p.add_argument("--horizon", type=float, default=180.0, metavar="S",
+                   help="fleet seconds a live run may last before it counts as not arrived "
+                        "(default: %(default)g)")
+    p.add_argument("--keep-going", action="store_true",
+                   help="do not end a live run at its first collision")
+    p.set_defaults(func=experiment_command)
+
+
+def experiment_command(args: argparse.Namespace) -> int:
+    """Run `experiment` for parsed arguments; return the exit code."""
+    from twinfleet.agreement.experiment import ExperimentOptions, run_experiment
+    from twinfleet.checker.commands import bad_input_errors
+
+    if args.jobs != 1:
+        print("twinfleet experiment: --jobs: only 1 is supported; live fleets run one at a "
+              "time so that their timing is not disturbed", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.runs < 0 or args.time_scale <= 0:
+        print("twinfleet experiment: --runs must be >= 0 and --time-scale > 0", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    options = ExperimentOptions(runs=args.runs, time_scale=args.time_scale,
+                                semantics=_SEMANTICS[args.semantics], out=Path(args.out),
+                                seed=args.seed, max_states=args.max_states,
+                                max_time_s=args.max_time, horizon_s=args.horizon,
+                                stop_on_collision=not args.keep_going)
+    command = command_line(args)
+    try:
+        exp = run_experiment(args.scenarios, options, command=command)
+    except (*bad_input_errors(), ValueError) as exc:
+        print(f"twinfleet experiment: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    print(to_markdown(exp.rows, options.semantics), end="")
+    print(f"wrote {options.out / 'experiment.md'}, {options.out / 'experiment.csv'}, "
+          f"{options.out / 'experiment.json'}; node output in {options.out / 'logs'}")
+    if exp.interrupted:
+        return EXIT_INTERRUPTED
+    return EXIT_FAILED if exp.contradictions else EXIT_OK
+
+
+def command_line(args: argparse.Namespace) -> str:
+    """The `twinfleet experiment` command that reproduces these arguments, every option spelled."""
+    words = ["twinfleet", "experiment", *args.scenarios, "--runs", str(args.runs),
+             "--time-scale", f"{args.time_scale:g}", "--semantics", args.semantics,
+             "--out", args.out]
+    for flag, value in (("--seed", args.seed), ("--max-states", args.max_states),
+                        ("--max-time", args.max_time)):
+        if value is not None:
+            words += [flag, f"{value:g}" if isinstance(value, float) else str(value)]
+    if args.horizon != 180.0:
+        words += ["--horizon", f"{args.horizon:g}"]
+    if args.keep_going:
+        words.append("--keep-going")
+    return " ".join(shlex.quote(w) for w in words)
+
+
+def cmd_validate(args: argparse.Namespace) -> int:
+    """`twinfleet validate`: is a recorded live run a path of the checker's transitions?"""
+    from twinfleet.agreement.validate import validate_command
+
+    return validate_command(args)
+
+
+def _validate_parser(sub: Any) -> None:
+    p = sub.add_parser("validate", help="check that a live run recorded with `launch "
+                                        "--record-events` is a path of the checker's transitions",
+                       description="Find an interleaving of the nodes' logged events that the "
+                       "checker's transition relation can run, with the same arguments, "
+                       "ctx.choose answers and node states; report the first step it cannot "
+                       "explain (exit 0 valid, 1 unexplained, 2 bad input).")
+    p.add_argument("events", help="event log written by `twinfleet launch --record-events FILE`")
+    p.add_argument("scenario", help="the scenario YAML the run used")
+    p.add_argument("--tolerance-ms", type=int, default=None, metavar="T",
+                   help="also judge timing: events whose model times differ by at most T ms may "
+                        "run in either order; 0 = the checker's exact rules (default: judge "
+                        "order and state only, and report the first step outside the exact "
+                        "timing rules and the tolerance this run needs)")
+    p.add_argument("--window-ms", type=int, default=5, metavar="W",
+                   help="live events of different nodes dispatched within W ms of each other "
+                        "may be taken in either order (default: %(default)s)")
+    p.add_argument("--semantics", choices=[s.value for s in Semantics], default=None,
+                   help="checker message rules (default: the scenario's)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON")
+    p.set_defaults(func=cmd_validate)
+
+
+def _replay_parser(sub: Any) -> None:
+    """`replay TRACE [--live]`: the checker's replay command, plus a live re-enactment."""
+    replay = add_replay_parser(sub)
+    replay.add_argument("--live", action="store_true",
+                        help="re-enact the trace on the real multi-process fleet over Zenoh: a "
+                             "coordinator grants each node's deliveries, timers and ctx.choose "
+                             "answers in the trace's order (logical time, as fast as the "
+                             "processes go) and confirms the violation on the live processes "
+                             "(exit 1 confirmed, 2 not)")
+    replay.add_argument("--cycles", type=int, default=2, metavar="N",
+                        help="with --live and a lasso trace (a liveness violation): go round its "
+                             "cycle N more times, checking that the live nodes come back to the "
+                             "same states every round (default: %(default)s)")
+    replay.set_defaults(func=_replay_or_live)
+
+
+def _replay_or_live(args: argparse.Namespace) -> int:
+    if not args.live:
+        return replay_command(args)
+    from twinfleet.agreement.live_replay import live_replay_command
+
+    return live_replay_command(args)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """`python -m twinfleet.agreement [experiment] SCENARIO... [options]`."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] not in ("experiment", "-h", "--help"):
+        argv.insert(0, "experiment")
+    parser = argparse.ArgumentParser(prog="python -m twinfleet.agreement",
+                                     description="twinfleet's model-system agreement tools")
+    _experiment_parser(parser.add_subparsers(dest="command", required=True))
+    args = parser.parse_args(argv)
+    return int(args.func(args))

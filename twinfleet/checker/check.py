@@ -1,0 +1,367 @@
+"""`check()`: load a scenario, search it, and report a verdict (the CLI's engine).
+
+Exit codes of a `CheckResult`: 0 every property holds, 1 a property is
+violated, 2 no answer (a limit was reached, the search was interrupted, or
+random walks found nothing, which proves nothing), 4 a node breaks the node
+contract (`checker.diagnosis`: no verdict, one line naming node, handler,
+what differed and the fix, in `CheckResult.breach`). Bad input raises before
+a result exists (`ScenarioError`, `PropertyError`, `NodeDefinitionError`).
+The search always stops at the first violation (RMC does the same, R11), so
+the scenario key `check.stop_at_first` is accepted but has no other value.
+
+`CheckOptions.checkpoint` saves the search to a file every
+`checkpoint_every_s` seconds and when it stops early (a limit, Ctrl-C);
+`CheckOptions.resume` continues such a file with the settings it was started
+with (the scenario file must be unchanged: its hash is recorded).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, final
+
+from twinfleet.checker import checkpoint as ckpt
+from twinfleet.checker.checkpoint import CheckpointError
+from twinfleet.checker.diagnosis import (
+    CONTRACT_KINDS,
+    FIX_HIDDEN,
+    ContractBreachError,
+    breach_line,
+)
+from twinfleet.checker.outcome import BREACH, HOLDS, VIOLATED, Limits, SearchStatistics
+from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.reduction import describe, plan
+from twinfleet.checker.search import Search
+from twinfleet.checker.system import System
+from twinfleet.checker.trace import build_trace
+from twinfleet.runtime.contract.kinds import (
+    EXIT_BAD_INPUT,
+    EXIT_CONTRACT_BREACH,
+    EXIT_FAILED,
+    EXIT_OK,
+    FailureKind,
+)
+from twinfleet.runtime.contract.node import NodeSpec
+from twinfleet.runtime.contract.tracefile import write_trace
+from twinfleet.runtime.scenario.config import SEARCHES, CheckConfig
+from twinfleet.runtime.scenario.lint import lint_scenario
+from twinfleet.runtime.scenario.spec import Scenario, ScenarioError, load_scenario, resolve_scenario
+
+
+@final
+@dataclass(frozen=True)
+class CheckOptions:
+    """How to check; None means "the scenario's `check:` setting, else the default"."""
+
+    search: str | None = None
+    walks: int = 100
+    seed: int | None = None
+    max_states: int | None = None
+    max_time_s: float | None = None
+    max_depth: int | None = None
+    semantics: str | None = None
+    profile: str | None = None
+    trace_out: str | None = None
+    debug_state: bool = False
+    exact_states: bool = False
+    check_determinism: bool = False
+    transition_cache: bool = True
+    verify: bool = True
+    checkpoint: str | None = None
+    checkpoint_every_s: float = 300.0
+    resume: str | None = None
+    reduction: str | None = None
+    progress: Callable[[SearchStatistics], None] | None = field(default=None, compare=False)
+
+
+@final
+@dataclass
+class CheckResult:
+    """The verdict and what it cost."""
+
+    scenario: str
+    semantics: str
+    search: str
+    status: str
+    reason: str
+    properties: list[str]
+    statistics: SearchStatistics
+    violation: PropertyViolation | None = None
+    trace: dict[str, Any] | None = None
+    trace_path: str | None = None
+    checkpoint: str | None = None
+    resumed_from: str | None = None
+    breach: str | None = None  # the one-line diagnosis of a contract breach
+    warnings: list[str] = field(default_factory=list)  # load-time lint (runtime.scenario.lint)
+    reduction: str = "none"
+    reduction_statistics: dict[str, int] | None = None
+
+    @property
+    def rmc_transitions(self) -> int:
+        """Transitions as RMC counts them: executed steps plus one per initial state (R10)."""
+        return self.statistics.transitions + self.statistics.initial_states
+
+    @property
+    def exit_code(self) -> int:
+        """0 holds, 1 violated, 2 no answer, 4 a node breaks the node contract."""
+        return {HOLDS: EXIT_OK, VIOLATED: EXIT_FAILED,
+                BREACH: EXIT_CONTRACT_BREACH}.get(self.status, EXIT_BAD_INPUT)
+
+    def to_json(self) -> dict[str, Any]:
+        """A JSON-ready record of the result."""
+        s = self.statistics
+        return {
+            "scenario": self.scenario, "semantics": self.semantics, "search": self.search,
+            "verdict": self.status, "reason": self.reason, "breach": self.breach,
+            "warnings": self.warnings,
+            "violation": None if self.violation is None else {
+                "property": self.violation.property, "kind": self.violation.kind,
+                "message": self.violation.message, "shape": self.violation.shape},
+            "properties": self.properties, "states": s.states, "transitions": s.transitions,
+            "rmc_transitions": self.rmc_transitions, "initial_states": s.initial_states,
+            "depth": s.depth,
+            "wall_time_s": round(s.elapsed_s, 3), "peak_memory_mb": round(s.peak_rss_mb, 1),
+            "store_bytes": s.store_bytes, "bytes_per_state": round(s.bytes_per_state, 1),
+            "digest_bits": s.digest_bits, "collision_probability": s.collision_probability,
+            "checkpoint": self.checkpoint, "resumed_from": self.resumed_from,
+            "trace": self.trace_path,
+            "trace_steps": None if self.trace is None else len(self.trace["steps"]),
+            "reduction": self.reduction, "reduction_statistics": self.reduction_statistics,
+            "exit_code": self.exit_code,
+        }
+
+    def summary(self) -> str:
+        """A human-readable summary, several lines."""
+        s = self.statistics
+        if self.status == HOLDS:
+            verdict = "HOLDS: every property holds"
+        elif self.status == BREACH:
+            verdict = f"CONTRACT BREACH (no verdict): {self.breach}"
+        elif self.status == VIOLATED and self.violation is not None:
+            verdict = f"VIOLATED {self.violation.property}: {self.violation.message}"
+        else:
+            verdict = f"UNKNOWN: {self.reason}"
+        lines = [f"twinfleet check {self.scenario} (semantics {self.semantics}, "
+                 f"search {self.search})",
+                 f"verdict: {verdict}",
+                 "properties: " + "; ".join(self.properties),
+                 f"states {s.states:,}  transitions {s.transitions:,} "
+                 f"(RMC-style {self.rmc_transitions:,})  depth {s.depth}  "
+                 f"initial states {s.initial_states}",
+                 f"time {s.elapsed_s:.2f} s ({s.transitions_per_s:,.0f} transitions/s)  "
+                 f"peak memory {s.peak_rss_mb:.0f} MB",
+                 f"visited-state store {s.store_bytes / 2**20:.1f} MB "
+                 f"({s.bytes_per_state:.0f} B/state, {s.digest_bits}-bit digests, "
+                 f"collision probability <= {s.collision_probability:.1e})",
+                 f"reduction: {self.reduction}"]
+        if self.resumed_from:
+            lines.append(f"resumed from checkpoint {self.resumed_from}")
+        if self.checkpoint:
+            lines.append(f"checkpoint: {self.checkpoint} (continue with: twinfleet check "
+                         f"--resume {self.checkpoint})")
+        if self.trace is not None:
+            where = self.trace_path or "(not written)"
+            lines.append(f"trace: {where} ({len(self.trace['steps'])} steps, "
+                         f"{self.trace['shape']})")
+            if self.trace_path:
+                lines.append(f"reproduce with: twinfleet replay {self.trace_path}")
+        return "\n".join(lines)
+
+
+def load(path: str | Path, *, profile: str | None = None,
+         semantics: str | None = None) -> Scenario:
+    """Load a scenario with optional profile/semantics overrides."""
+    overrides: dict[str, Any] = {}
+    if profile is not None:
+        overrides["profile"] = profile
+    if semantics is not None:
+        overrides["semantics"] = semantics
+    return load_scenario(path, overrides)
+
+
+def system_for_trace(trace: Mapping[str, Any]) -> tuple[System, PropertySet]:
+    """The system a trace was found on (its scenario, profile, semantics, latency and flags),
+    with the scenario's properties watching it, as `twinfleet replay` re-executes it."""
+    if trace.get("scenario") is None:
+        raise ScenarioError("the trace names no scenario file (its scenario was built in "
+                            "Python): replay it with checker.replay(System(scenario), trace)")
+    scenario = load(trace["scenario"], profile=trace.get("profile"),
+                    semantics=trace.get("semantics"))
+    props = PropertySet.from_scenario(scenario)
+    latency = trace.get("latency")
+    system = System(scenario, latency=tuple(latency) if latency else None,
+                    global_priority=trace.get("global_priority"),
+                    debug_state=bool(trace.get("debug_state")), monitors=props,
+                    check_determinism=bool(trace.get("check_determinism")))
+    return system, props
+
+
+def _limit(value: Any, scenario_value: Any) -> Any:
+    chosen = value if value is not None else scenario_value
+    return None if chosen in (None, 0) else chosen
+
+
+def limits_for(options: CheckOptions, check: CheckConfig) -> Limits:
+    """Limits from the options, falling back to the scenario's `check:` block (0 = none)."""
+    return Limits(max_states=_limit(options.max_states, check.max_states),
+                  max_time_s=_limit(options.max_time_s, check.max_time_s),
+                  max_depth=_limit(options.max_depth, check.max_depth))
+
+
+def check(scenario: str | Path | Scenario | None,
+          options: CheckOptions = CheckOptions()) -> CheckResult:
+    """Check a scenario (a file, a shipped example's name, or a `Scenario` built in Python);
+    write a trace to `options.trace_out` on a violation.
+
+    With `options.resume`, continue that checkpoint (`scenario` may then be None).
+    """
+    data, path = None, _scenario_file(scenario)
+    if options.resume is not None:
+        data = ckpt.load(options.resume)
+        path = _resume_path(path, options, data["meta"])
+    if path is None and not isinstance(scenario, Scenario):
+        raise ScenarioError("no scenario file given (pass one, or --resume CHECKPOINT)")
+    meta = data["meta"] if data is not None else {}
+    scenario = _scenario(scenario if isinstance(scenario, Scenario) else path, options, meta)
+    if path is None and options.checkpoint is not None:
+        raise ScenarioError(f"{scenario.source}: a checkpoint needs a scenario file")
+    props = PropertySet.from_scenario(scenario)
+    warnings = [str(w) for w in lint_scenario(scenario)]
+    flags = {key: meta.get(key, getattr(options, key)) for key in _SEARCH_FLAGS}
+    system = System(scenario, monitors=props, **flags)
+    strategy = meta.get("strategy") or options.search or scenario.check.search
+    if strategy not in SEARCHES:
+        raise ScenarioError(f"search: expected {', '.join(SEARCHES)}, got {strategy!r}")
+    try:
+        reduction, reduction_name = plan(system, props, strategy,
+                                         meta.get("reduction") or options.reduction)
+    except ValueError as exc:
+        raise ScenarioError(f"{scenario.source}: {exc}") from None
+    meta = {"scenario": None if path is None else str(path.resolve()),
+            "sha256": None if path is None else ckpt.file_sha256(path),
+            "semantics": system.semantics.value, "profile": scenario.profile,
+            "strategy": strategy, "reduction": reduction_name.split()[0], **flags}
+    search = Search(system, props, limits_for(options, scenario.check), progress=options.progress,
+                    checkpoint=options.checkpoint or options.resume,
+                    checkpoint_every_s=options.checkpoint_every_s, checkpoint_meta=meta,
+                    reduction=reduction)
+    if data is not None:
+        search.restore(data)
+    seed = options.seed if options.seed is not None else scenario.seed
+    try:
+        outcome = search.run(strategy, walks=options.walks, seed=seed)
+    except ContractBreachError as exc:  # found while rebuilding a path (checker.graph)
+        return _breach_result(scenario, system, strategy, props, str(exc), search, warnings)
+    if outcome.violation is not None and (breach := _breach_of(system, outcome.violation)):
+        return _breach_result(scenario, system, strategy, props, breach, search, warnings)
+    result = CheckResult(scenario.source, system.semantics.value, strategy, outcome.status,
+                         outcome.reason, _property_names(system, props), outcome.statistics,
+                         outcome.violation, checkpoint=outcome.checkpoint,
+                         resumed_from=options.resume, warnings=warnings,
+                         reduction=describe(reduction, reduction_name, strategy),
+                         reduction_statistics=None if reduction is None else
+                         reduction.statistics())
+    if outcome.violation is not None and outcome.counterexample is not None:
+        try:
+            result.trace = build_trace(system, outcome.violation, outcome.counterexample,
+                                       scenario_path=meta["scenario"], search=strategy)
+        except IndexError:  # the path's events are not there when it runs again
+            return _breach_result(scenario, system, strategy, props, breach_line(
+                FailureKind.NONDETERMINISM, "", "(unknown)", "the counterexample does not run "
+                "again from its initial world: some handler depends on something outside "
+                "self.state" + ("" if system.runner.verify else " (the contract checks were "
+                                "off: rerun without --no-contract-checks to name it)") +
+                f"; fix: {FIX_HIDDEN}"), search, warnings)
+        if options.trace_out:
+            write_trace(result.trace, options.trace_out)
+            result.trace_path = options.trace_out
+    return result
+
+
+def _property_names(system: System, props: PropertySet) -> list[str]:
+    names = props.names()
+    if system.runner.verify:
+        names.append("node contract (new handler runs probed and run twice)" if not
+                     system.check_determinism else
+                     "node contract (every transition probed and run twice)")
+    return names
+
+
+_DECORATORS = {"start": "on_start"}  # HandlerSpec.kind -> the decorator's name
+
+
+def _breach_of(system: System, violation: PropertyViolation) -> str | None:
+    """The one-line diagnosis of a violation that is a contract breach, or None."""
+    failure = violation.failure
+    if failure is None or failure.kind not in CONTRACT_KINDS:
+        return None
+    handler = failure.handler
+    if failure.node in system.index:  # name the decorator too: "go (@on_start)"
+        node = system.nodes[system.index[failure.node]]
+        spec = NodeSpec.of(type(node)).by_method(handler)
+        if spec is not None:
+            handler = f"{handler} (@{_DECORATORS.get(spec.kind, spec.kind)})"
+    return breach_line(failure.kind, failure.node, handler, failure.message)
+
+
+def _breach_result(scenario: Scenario, system: System, strategy: str, props: PropertySet,
+                   breach: str, search: Search, warnings: list[str]) -> CheckResult:
+    """The result of a search stopped by a node that breaks the contract (exit 4): no
+    verdict, and no trace, since a breach is not a path the nodes would take again."""
+    return CheckResult(scenario.source, system.semantics.value, strategy, BREACH,
+                       "a node breaks the node contract", _property_names(system, props),
+                       search.statistics(), breach=breach, warnings=warnings)
+
+
+_SEARCH_FLAGS = ("debug_state", "exact_states", "check_determinism", "transition_cache",
+                 "verify")
+
+
+def _scenario_file(scenario: str | Path | Scenario | None) -> Path | None:
+    """The file a scenario argument names (a shipped example's name resolved), if any."""
+    if isinstance(scenario, Scenario):
+        return scenario.path
+    return None if scenario is None else resolve_scenario(scenario)
+
+
+def _scenario(scenario: Path | Scenario | None, options: CheckOptions,
+              meta: Mapping[str, Any]) -> Scenario:
+    """The scenario to check, with the profile and semantics of the options or checkpoint."""
+    profile = meta.get("profile", options.profile)
+    semantics = meta.get("semantics", options.semantics)
+    if not isinstance(scenario, Scenario):
+        return load(scenario, profile=profile, semantics=semantics)
+    if profile is not None and profile != scenario.profile:
+        raise ScenarioError(f"{scenario.source}: the profile of a scenario built in Python is "
+                            "chosen when it is built (Scenario.build(..., profile=...))")
+    return scenario if semantics is None else dataclasses.replace(scenario, semantics=semantics)
+
+
+def _resume_path(path: Path | None, options: CheckOptions,
+                 meta: Mapping[str, Any]) -> Path:
+    """The scenario a checkpoint was written for, after checking it still fits."""
+    recorded = meta["scenario"]
+    where = options.resume
+    if path is not None and Path(path).resolve() != Path(recorded):
+        raise CheckpointError(f"{where}: written for {recorded}, not {path}")
+    if not Path(recorded).is_file():
+        raise CheckpointError(f"{where}: its scenario {recorded} no longer exists")
+    if ckpt.file_sha256(recorded) != meta["sha256"]:
+        raise CheckpointError(f"{where}: {recorded} changed since the checkpoint was written")
+    for key, value in (("semantics", options.semantics), ("profile", options.profile),
+                       ("strategy", options.search)):
+        if value is not None and value != meta[key]:
+            raise CheckpointError(f"{where}: written with {key} {meta[key]}, cannot resume "
+                                  f"with {value}")
+    if options.reduction is not None and options.reduction != meta.get("reduction", "none"):
+        raise CheckpointError(f"{where}: written with reduction {meta.get('reduction', 'none')}, "
+                              f"cannot resume with {options.reduction}")
+    for key in _SEARCH_FLAGS:
+        if getattr(options, key) != getattr(CheckOptions, key) and \
+                getattr(options, key) != meta[key]:
+            raise CheckpointError(f"{where}: written with {key}={meta[key]}, cannot resume "
+                                  f"with {getattr(options, key)}")
+    return Path(recorded)

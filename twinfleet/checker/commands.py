@@ -1,0 +1,217 @@
+"""The `check` and `replay` commands: argument parsing over `checker.check` and `checker.trace`.
+
+`twinfleet.cli` calls `register(subparsers)` for `check`; `replay` is
+registered by `twinfleet.agreement.commands`, which adds `--live` to the
+arguments `add_replay_arguments` defines here. `python -m twinfleet.checker
+SCENARIO` runs `main()` here (both commands, no live replay). Exit codes: 0 holds
+(or replay confirmed), 1 violated, 2 bad input, a limit reached before an answer,
+or a replay that diverged, 4 a node breaks the node contract (one line on stderr).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from twinfleet.checker.options import REDUCTIONS, Semantics
+from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_CONTRACT_BREACH, EXIT_FAILED
+
+if TYPE_CHECKING:
+    from twinfleet.checker.check import CheckResult
+    from twinfleet.checker.outcome import SearchStatistics
+
+
+def bad_input_errors() -> tuple[type[Exception], ...]:
+    """The errors that mean bad input (exit 2); importing them loads the checker, so only
+    a running command asks."""
+    from twinfleet.checker.checkpoint import CheckpointError
+    from twinfleet.checker.properties import PropertyError
+    from twinfleet.runtime.contract.node import NodeDefinitionError
+    from twinfleet.runtime.contract.tracefile import TraceError
+    from twinfleet.runtime.scenario.spec import ScenarioError
+
+    return (ScenarioError, PropertyError, NodeDefinitionError, TraceError, CheckpointError)
+
+
+def register(subparsers: Any) -> None:
+    """Add the `check` subcommand to an argparse subparsers object."""
+    p = subparsers.add_parser("check", help="explore every interleaving of a scenario",
+                              description="Check a scenario's properties exhaustively "
+                              "(exit 0 holds, 1 violated, 2 bad input or no answer, 4 a node "
+                              "breaks the node contract: reads a clock or random, keeps state "
+                              "outside self.state, state that cannot be encoded, a lambda as a "
+                              "timer).")
+    p.add_argument("scenario", nargs="?", default=None,
+                   help="scenario YAML file (optional with --resume)")
+    p.add_argument("--search", choices=("bfs", "dfs", "random"), default=None,
+                   help="search order: bfs (shortest counterexample, default), dfs, or random walks")
+    p.add_argument("--walks", type=int, default=100, help="number of random walks (--search random)")
+    p.add_argument("--seed", type=int, default=None,
+                   help="seed of the random walks (default: the scenario's seed)")
+    p.add_argument("--max-states", type=int, default=None,
+                   help="stop after this many distinct states (default: check.max_states)")
+    p.add_argument("--max-time", type=float, default=None,
+                   help="stop after this many seconds (default: check.max_time_s)")
+    p.add_argument("--max-depth", type=int, default=None,
+                   help="do not expand worlds deeper than this many steps (random: walk length)")
+    p.add_argument("--semantics", choices=[s.value for s in Semantics], default=None,
+                   help="message rules: ros (per-sender FIFO) or rebeca (RMC); default: scenario")
+    p.add_argument("--profile", choices=("fixed", "rebeca"), default=None,
+                   help="robot behaviour profile passed to the nodes; default: scenario")
+    p.add_argument("--trace-out", default=None,
+                   help="where to write a counterexample trace (default: out/<name>.trace.json)")
+    p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
+    p.add_argument("--debug-state", action="store_true",
+                   help="also compare every node attribute other than self.state by value "
+                   "before and after each handler (finds in-place changes such as "
+                   "self.seen.append(x); slow, turns off the transition cache)")
+    p.add_argument("--check-determinism", action="store_true",
+                   help="verify every transition, not only new handler runs (finds a "
+                   "handler that reads a counter another handler keeps outside self.state; "
+                   "slower: turns off the transition cache)")
+    p.add_argument("--no-contract-checks", dest="verify", action="store_false",
+                   help="skip the node-contract checks that run by default (clocks and "
+                   "random sources probed, attributes outside self.state compared, every "
+                   "new handler run run twice and compared; 20-40%% of the search time "
+                   "on c1a). A breach ends the check with one line naming node, handler, "
+                   "what differed and the fix, exit 4")
+    p.add_argument("--exact-states", action="store_true",
+                   help="store 128-bit digests of full world encodings instead of 64-bit "
+                   "digests (about 3x the memory per state; false merges ~n^2/2^129)")
+    p.add_argument("--no-transition-cache", action="store_true",
+                   help="re-run every handler instead of reusing the outcome of the same "
+                   "(node state, event, time) (for comparison; same results, slower)")
+    p.add_argument("--reduction", choices=REDUCTIONS, default=None,
+                   help="partial-order reduction: por (explore one persistent set of "
+                   "simultaneous events per world; same verdicts, far fewer states for "
+                   "independent robots) or none (every interleaving). Default: por under ros, "
+                   "none under rebeca (its counts are compared with RMC's). It turns itself "
+                   "off, and says why in the summary, for settings it does not cover "
+                   "(check.queue_bound, properties reading now, --search random, rebeca "
+                   "node priorities)")
+    p.add_argument("--checkpoint", default=None, metavar="FILE",
+                   help="save the search to FILE periodically and when it stops early "
+                   "(a limit or Ctrl-C); continue it with --resume FILE. A checkpoint is a "
+                   "Python pickle of the search (visited states, queue, node states): loading "
+                   "one runs code, so it is trusted like code; resume only your own files")
+    p.add_argument("--checkpoint-every", type=float, default=300.0, metavar="SECONDS",
+                   help="seconds between periodic checkpoints (default 300)")
+    p.add_argument("--resume", default=None, metavar="FILE",
+                   help="continue the search saved in checkpoint FILE (and keep saving to it "
+                   "unless --checkpoint names another file); FILE is a pickle, trusted like "
+                   "code (see --checkpoint)")
+    p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
+    p.set_defaults(func=check_command)
+
+
+def add_replay_parser(subparsers: Any) -> argparse.ArgumentParser:
+    """Add the `replay` subcommand (offline replay of a trace) and return its parser."""
+    r = subparsers.add_parser("replay", help="re-execute a counterexample trace",
+                              description="Re-run a trace written by `check`, verify every "
+                              "step's world digest and confirm the violation (exit 1 when "
+                              "confirmed, 2 when not or when the replay diverges).")
+    r.add_argument("trace", help="trace JSON file written by `twinfleet check`")
+    r.add_argument("--quiet", action="store_true", help="print only the verdict line")
+    r.set_defaults(func=replay_command)
+    return r
+
+
+def _progress(stats: SearchStatistics) -> None:
+    tty = sys.stderr.isatty()
+    lead = "\r" if tty else ""
+    print(f"{lead}[check] states {stats.states:,}  "
+          f"transitions {stats.transitions:,}  {stats.states_per_s:,.0f} states/s  "
+          f"depth {stats.depth}  frontier {stats.frontier:,}  mem {stats.peak_rss_mb:.0f} MB",
+          file=sys.stderr, end="" if tty else "\n", flush=True)
+
+
+def check_command(args: argparse.Namespace) -> int:
+    """Run `check` for parsed arguments; return the exit code."""
+    if args.scenario is None and args.resume is None:
+        print("twinfleet check: give a scenario file, or --resume CHECKPOINT", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    from twinfleet.checker.check import CheckOptions, check
+    from twinfleet.checker.diagnosis import ContractBreachError
+
+    stem = Path(args.scenario or args.resume).stem
+    trace_out = args.trace_out or str(Path("out") / f"{stem}.trace.json")
+    options = CheckOptions(search=args.search, walks=args.walks, seed=args.seed,
+                           max_states=args.max_states, max_time_s=args.max_time,
+                           max_depth=args.max_depth, semantics=args.semantics,
+                           profile=args.profile, trace_out=trace_out,
+                           debug_state=args.debug_state, exact_states=args.exact_states,
+                           check_determinism=args.check_determinism, verify=args.verify,
+                           transition_cache=not args.no_transition_cache,
+                           checkpoint=args.checkpoint, checkpoint_every_s=args.checkpoint_every,
+                           resume=args.resume, reduction=args.reduction,
+                           progress=None if args.quiet or args.json else _progress)
+    try:
+        result = check(args.scenario, options)
+    except bad_input_errors() as exc:
+        print(f"twinfleet check: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except ContractBreachError as exc:  # before any search: an initial state (checker.topology)
+        print(f"twinfleet check: {exc}", file=sys.stderr)
+        return EXIT_CONTRACT_BREACH
+    if options.progress is not None and sys.stderr.isatty():
+        print(file=sys.stderr)
+    if not args.json:
+        for line in result.warnings:
+            print(line, file=sys.stderr)
+    _report(result, as_json=args.json)
+    return result.exit_code
+
+
+def _report(result: CheckResult, *, as_json: bool) -> None:
+    if as_json:
+        print(json.dumps(result.to_json(), indent=1))
+        return
+    if result.breach is not None:  # no verdict to summarise: one line, exit 4
+        print(f"twinfleet check: {result.breach}", file=sys.stderr)
+        return
+    print(result.summary())
+    if result.exit_code == EXIT_BAD_INPUT:
+        print(f"exit 2: no answer ({result.reason})")
+
+
+def replay_command(args: argparse.Namespace) -> int:
+    """Run `replay` for parsed arguments; return the exit code."""
+    from twinfleet.checker.check import system_for_trace
+    from twinfleet.checker.trace import NondeterminismError, replay
+    from twinfleet.runtime.contract.tracefile import load_trace
+
+    try:
+        trace = load_trace(args.trace)
+        system, props = system_for_trace(trace)
+        result = replay(system, trace, props)
+    except (*bad_input_errors(), NondeterminismError) as exc:
+        print(f"twinfleet replay: {args.trace}: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (KeyError, TypeError, ValueError, IndexError) as exc:  # fits no node of the scenario
+        print(f"twinfleet replay: {args.trace}: the trace does not fit its scenario "
+              f"({type(exc).__name__}: {exc})", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if result.confirmed:
+        print(f"replay confirmed: {result.property} violated after {result.steps} steps "
+              f"({result.message})")
+        return EXIT_FAILED
+    print(f"replay NOT confirmed: {result.property}: {result.message}")
+    return EXIT_BAD_INPUT  # not confirmed: no answer (module docstring)
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """`python -m twinfleet.checker [check|replay] ...`; a bare scenario path means `check`."""
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if argv and argv[0] not in ("check", "replay", "-h", "--help"):
+        argv.insert(0, "check")
+    parser = argparse.ArgumentParser(prog="python -m twinfleet.checker",
+                                     description="twinfleet's model checker")
+    sub = parser.add_subparsers(dest="command", required=True)
+    register(sub)
+    add_replay_parser(sub)
+    args = parser.parse_args(argv)
+    return int(args.func(args))

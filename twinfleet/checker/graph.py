@@ -1,0 +1,112 @@
+"""Paths and cycles on the visited-state store (`checker.store.StateStore`).
+
+Steps are not stored: `steps_along` turns a path of state ids back into steps
+by re-running the successors of each world on it and taking the one whose key
+the store maps to the next id.
+
+`find_lasso` is the liveness check on the recorded graph: a depth-first search
+restricted to states where the property's expression is false, colouring
+states on the stack grey, so a back edge closes a reachable cycle on which the
+expression never holds (a lasso) and a state with nothing pending ends a
+finite counterexample; `lasso_counterexample` turns what it finds into the
+violation and the `Counterexample` a search reports.
+"""
+
+from __future__ import annotations
+
+from twinfleet.checker.diagnosis import FIX_HIDDEN, ContractBreachError, breach_line
+from twinfleet.checker.outcome import Counterexample
+from twinfleet.checker.properties import Property, PropertyViolation
+from twinfleet.checker.store import StateStore
+from twinfleet.checker.system import System
+from twinfleet.checker.transition import Step, Transition
+from twinfleet.checker.world import World
+from twinfleet.runtime.contract.kinds import FailureKind
+
+_GREY, _BLACK = 1, 2
+
+
+def steps_along(system: System, store: StateStore, ids: list[int]) -> tuple[tuple[int, ...],
+                                                                            list[Step]]:
+    """The initial choices and steps that follow the path of state ids `ids`."""
+    initial = store.roots[ids[0]]
+    world = system.initial_world(initial).world
+    steps = []
+    for nxt in ids[1:]:
+        t = _successor_to(system, store, world, nxt)
+        steps.append(t.step)
+        world = t.world
+    return initial, steps
+
+
+def _successor_to(system: System, store: StateStore, world: World, sid: int) -> Transition:
+    for t in system.successors(world):
+        if t.failure is None and store.find(t.world.key) == sid:
+            return t
+    raise ContractBreachError(breach_line(
+        FailureKind.NONDETERMINISM, "", "(unknown)", "a path the search recorded does not "
+        "run again from its initial world: some handler depends on something outside "
+        f"self.state that the checks of single runs did not catch; rerun with "
+        f"--check-determinism (every transition verified) to name it; fix: {FIX_HIDDEN}"))
+
+
+def lasso_counterexample(system: System, store: StateStore, prop: Property
+                         ) -> tuple[PropertyViolation, Counterexample] | None:
+    """The violation of `eventually` property `prop` on the recorded graph, and the path
+    that shows it (a lasso, or a path to a world with nothing pending); None if it holds."""
+    found = find_lasso(store, prop.name)
+    if found is None:
+        return None
+    ids, start = found
+    initial, steps = steps_along(system, store, ids)
+    path = Counterexample(initial, tuple(steps), start)
+    assert prop.expr is not None
+    if start is None:
+        message = (f"{prop.expr.source!r} never holds on a path that ends with nothing "
+                   f"pending ({len(steps)} steps)")
+        return PropertyViolation(prop.name, prop.kind, message, "terminal"), path
+    message = (f"{prop.expr.source!r} never holds on a reachable cycle "
+               f"(steps {start + 1}..{len(steps)} repeat for ever)")
+    return PropertyViolation(prop.name, prop.kind, message, "lasso"), path
+
+
+def find_lasso(store: StateStore, prop: str) -> tuple[list[int], int | None] | None:
+    """A path of ids on which `prop` never holds, ending in a cycle or a terminal state.
+
+    Returns (ids, cycle_start) where `ids[-1] == ids[cycle_start]` for a lasso and
+    cycle_start is None for a path ending in a terminal state; None if there is none.
+    """
+    edges = store.edges
+    assert edges is not None, "find_lasso needs a store recorded with edges"
+    holds, terminal, targets = store.holds[prop], store.terminal, edges.targets
+    colour = bytearray(len(store))
+    for root in store.roots:
+        if holds[root] or colour[root]:
+            continue
+        colour[root] = _GREY
+        if terminal[root]:
+            return [root], None
+        stack = [root]
+        cursor = [edges.out(root)]
+        pos = [0]
+        while stack:
+            out = cursor[-1]
+            k = pos[-1]
+            if k == len(out):
+                colour[stack.pop()] = _BLACK
+                cursor.pop()
+                pos.pop()
+                continue
+            pos[-1] = k + 1
+            w = targets[out[k]]
+            if holds[w] or colour[w] == _BLACK:
+                continue
+            if colour[w] == _GREY:
+                return [*stack, w], stack.index(w)
+            colour[w] = _GREY
+            stack.append(w)
+            cursor.append(edges.out(w))
+            pos.append(0)
+            if terminal[w]:
+                return list(stack), None
+    return None

@@ -1,0 +1,338 @@
+"""Partial-order reduction: expand a world by a persistent set of its enabled events.
+
+Theory of operation (the design and its sources: docs/reduction.md)
+===================================================================
+
+From a world s at time t a reduced search takes the transitions of a set T
+of enabled events instead of all of them. T is *persistent* if every path
+from s that avoids T only takes transitions independent of every event in T;
+then every terminal world, every failing transition and (with the provisos
+below) every property verdict of the full graph is also found in the
+reduced one. Two facts of the checker's own rules make this simple:
+
+1. Rule 1 (time): while an event of T is pending, time cannot pass, so a
+   T-avoiding path stays at instant t. Persistence is a question about one
+   instant; events created with a delay play no part in it.
+2. The node contract: a handler's outcome depends only on (its node's state,
+   the event, the time). Events of different nodes touch disjoint states;
+   their new events go into per-(sender, receiver) channels whose ranks and
+   FIFO clamping (`Rules.add`, `Rules.remove`) act within one channel.
+
+So T is node-granular: all enabled events of a set N of nodes, every variant
+of each (`ctx.choose`, latency, drop and duplicate branches are one unit).
+N is grown from a seed node until closed under (`_Closure`):
+
+- C-in: no node outside N that may still run at t can create, at t, an event
+  at a node X of N with a priority below X's enabled priority p_X (it would
+  disable X's events, Rule 2), or equal to it on a channel that has no event
+  of that priority pending at t (it would be a new enabled event of X, under
+  `rebeca` always). Then nodes of N run nothing but T in a T-avoiding path.
+  Who may create what at whom is the learned relation of
+  `checker.publications` (restarts keep it honest); who "may still run at t"
+  is every node with an event due at t and every node such events may reach
+  at zero delay through nodes outside N.
+- C-out: an event of T that creates, at t, an event of priority q at a node
+  B outside N adds B if B may run at t an event of priority > q (it would be
+  disabled there), from its pending events or from what may reach it.
+- C2 (visibility, `checker.visibility`): if T is not everything enabled, no
+  variant in T may change an atom of an invariant, `within` or `eventually`
+  expression.
+- C3t (zero-time cycles): if some successor by T stays at instant t and is
+  already stored, the world is expanded fully. Every cycle of the reduced
+  graph that does not let time pass then holds a fully expanded world; a
+  cycle that lets time pass runs every event pending at its worlds (Rule 1).
+
+Worlds where a crash may be injected, where an event of a kind the reduction
+does not know is due, or where no seed closes to less than everything are
+expanded fully. Settings the reduction does not cover turn it off for the
+run (`why_off`), and the checker says so.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import inspect
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Final, final
+
+from twinfleet.checker.closure import Closure
+from twinfleet.checker.commuting import loose_nodes
+from twinfleet.checker.faults import CheckSettings
+from twinfleet.checker.options import NONE, POR, REDUCTIONS, Semantics
+from twinfleet.checker.semantics import Rules
+from twinfleet.checker.transition import Drop, RunEvent, Transition
+from twinfleet.checker.visibility import Visibility
+
+if TYPE_CHECKING:
+    from twinfleet.checker.properties import PropertySet
+    from twinfleet.checker.system import System
+    from twinfleet.checker.world import World
+
+_INF: Final = 1 << 62  # larger than any state id
+
+# The fields of the settings the closure's rules were written for: a new rule (a field
+# set to anything but its default) turns the reduction off until it is covered here.
+_KNOWN_SETTINGS: Final = frozenset({"latency", "topic_latency", "deadline_default",
+                                    "deadlines", "queue_bounds", "drop", "duplicate", "crash"})
+_KNOWN_RULES: Final = frozenset({"semantics", "node_priorities", "global_priority",
+                                 "settings", "depths", "lossy", "fifo", "has_latency",
+                                 "_ranges", "_shallowest"})
+
+#: The source of the code that decides what is enabled and what a transition does to the
+#: pending events, as this module's closure was checked against it. A change there (a new
+#: rule: KEEP_LAST dropping pending deliveries, a new kind of fault) may make events
+#: dependent that the closure treats as independent, so it turns the reduction off until
+#: the closure has been reviewed for it and the fingerprint updated (`rules_fingerprint`).
+RULES_FINGERPRINT: Final = "db02353acc8a2eb5"  # reviewed for Rule 6 (KEEP_LAST, BEST_EFFORT) and no-server branches
+
+
+def rules_fingerprint() -> str:
+    """16 hex digits of SHA-256 over the source of the enabling and effect rules."""
+    from twinfleet.checker import runner, semantics, system  # noqa: PLC0415 (only when planned)
+
+    rules = semantics.Rules
+    functions = (rules.enabled, rules._across_nodes, rules.add, rules.remove, rules.delivery,
+                 rules.copies, rules.crashable, rules.droppable, semantics._earliest_sent,
+                 runner.Runner._effects, system.System._apply, system.System._apply_crash)
+    digest = hashlib.sha256()
+    for fn in functions:
+        digest.update(inspect.getsource(fn).encode())
+    return digest.hexdigest()[:16]
+
+
+def default_reduction(semantics: Semantics | str) -> str:
+    """`por` under `ros`; `none` under `rebeca` (its counts are compared with RMC's)."""
+    return POR if Semantics(semantics) is Semantics.ROS else NONE
+
+
+def why_off(rules: Rules, properties: PropertySet, visibility: Visibility,
+            strategy: str) -> str | None:
+    """Why the reduction cannot run on this system and these properties, or None."""
+    if strategy == "random":
+        return "random walks pick among all actions"
+    if properties.queue_bounds:
+        return "check.queue_bound reads the pending counts"
+    if visibility.uses_now:
+        return "a property reads now"
+    if rules.semantics is Semantics.REBECA and (
+            rules.global_priority or len(set(rules.node_priorities)) > 1):
+        return "node-instance priorities under rebeca (Rule 4)"
+    return _unknown_rule(rules)
+
+
+def _unknown_rule(rules: Rules) -> str | None:
+    if rules_fingerprint() != RULES_FINGERPRINT:
+        return ("the enabling rules changed since the reduction was checked against them "
+                "(twinfleet/checker/reduction.py: RULES_FINGERPRINT)")
+    for f in dataclasses.fields(rules):
+        if f.name not in _KNOWN_RULES:
+            return f"rule {f.name} is not covered"
+    for f in dataclasses.fields(CheckSettings):
+        if f.name in _KNOWN_SETTINGS:
+            continue
+        value = getattr(rules.settings, f.name)
+        default = f.default if f.default is not dataclasses.MISSING else (
+            f.default_factory() if f.default_factory is not dataclasses.MISSING else None)
+        if value != default:
+            return f"check setting {f.name} is not covered"
+    return None
+
+
+@final
+@dataclass
+class ReductionStatistics:
+    """What the reduction did in one search."""
+
+    reduced: int = 0  # worlds expanded by a proper subset of their enabled events
+    full: int = 0  # worlds expanded fully (one enabled event counts here too)
+    cycle_proviso: int = 0  # of those, expanded fully by C3t
+    restarts: int = 0  # searches started again after the send relation grew
+    edges: int = 0  # (sender, target, priority) triples learned
+    commuted: int = 0  # worlds where a node declared commuting gave one of its events
+    pairs: int = 0  # pairs of such events checked in both orders
+    refuted: int = 0  # of those, pairs that did not commute (the node then gave all)
+    rises: int = 0  # events not visible only because they make a rising goal's atoms rise
+
+    def to_json(self) -> dict[str, int]:
+        """The counters as a JSON-ready mapping."""
+        return dataclasses.asdict(self)
+
+
+@final
+class Reduction:
+    """Persistent-set expansion of worlds for one `System` and `PropertySet`."""
+
+    def __init__(self, system: System, properties: PropertySet,
+                 visibility: Visibility | None = None) -> None:
+        self.system = system
+        self.rules = system.rules
+        self.visibility = visibility or Visibility(properties, system.names)
+        self.publications = system.publications
+        self.stats = ReductionStatistics()
+        self._version = self.publications.version
+        self._rising = self.visibility.rising
+        # (node, priority) of every KEEP_LAST subscription: once, not per world (`Closure`)
+        self._queued = frozenset((n, system.topology.priority(n, m)) for n, m in self.rules.depths)
+        self._commuting = bool(system.topology.commuting)
+        self.relied: set[str] = set()  # "node.handler" declared commuting, relied on
+
+    def begin(self) -> None:
+        """Start (or start again) a search: remember the relation and the assumptions it
+        is based on."""
+        self._version = self.publications.version
+        self._rising = self.visibility.rising
+
+    def statistics(self) -> dict[str, int]:
+        """The counters of the search, with the size of the learned relation."""
+        self.stats.edges = self.publications.edges()
+        self.stats.rises = self.visibility.rises
+        return self.stats.to_json()
+
+    def restarted(self) -> None:
+        """Count a restart; the other counters start again with the search."""
+        self.stats = ReductionStatistics(restarts=self.stats.restarts + 1)
+        self.visibility.rises = 0
+
+    @property
+    def stale(self) -> bool:
+        """True when the send relation grew, or a rising goal fell, since `begin` (the
+        search must restart)."""
+        return self.publications.version != self._version or \
+            self.visibility.rising != self._rising
+
+    @property
+    def disabled(self) -> str | None:
+        """Why the reduction stopped for the run (an unknown event kind), or None."""
+        kind = self.publications.unknown
+        return None if kind is None else f"event kind {kind} is not covered"
+
+    def successors(self, world: World, find: Callable[[object], int],
+                   done: int | None) -> list[Transition]:
+        """The transitions a reduced search takes from `world`. For the cycle proviso,
+        `find(key)` is a world's id in the store (-1: none) and `done` the id of the world
+        being expanded when every id up to it is expanded (BFS), else None (any stored
+        world then counts as expanded)."""
+        system = self.system
+        enabled = self.rules.enabled(world.events)
+        chosen = None if self.disabled else self._choose(world, enabled)
+        if chosen is None:
+            self.stats.full += 1
+            return self._observed(world, list(system.successors(world, enabled)))
+        out: list[Transition] = []
+        for i in chosen:
+            out += system.outcomes(world, RunEvent(i))
+        out += self._drops(world, {world.events[i].target for i in chosen})
+        t = world.events[0].due
+        for tr in out:
+            w = tr.world
+            if tr.failure is None and w.events and w.events[0].due == t and \
+                    0 <= find(w.key) <= (done if done is not None else _INF):
+                self.stats.full += 1
+                self.stats.cycle_proviso += 1
+                return self._observed(world, list(system.successors(world, enabled)))
+        self.stats.reduced += 1
+        return self._observed(world, out)
+
+    def _observed(self, world: World, transitions: list[Transition]) -> list[Transition]:
+        """`transitions`, once checked for falling goal atoms (`Visibility.observe`)."""
+        self.visibility.observe(self.system, world, transitions)
+        return transitions
+
+    def _drops(self, world: World, nodes: set[int]) -> list[Transition]:
+        """The KEEP_LAST drops (Rule 6) of the chosen nodes' waiting deliveries: actions of
+        those nodes, so a node-granular set takes them with its events. A drop of another
+        node's delivery commutes with every chosen event: it only shortens that node's
+        queue, which no other node's enabling reads, and a send into the queue (a chosen
+        event's effect) leaves an enabled drop enabled."""
+        events = world.events
+        return [t for k in self.rules.droppable(events) if events[k].target in nodes
+                for t in self.system.outcomes(world, Drop(k))]
+
+    def _choose(self, world: World, enabled: list[int]) -> list[int] | None:
+        """A persistent set of the `enabled` event indices smaller than all, or None."""
+        if len(enabled) < 2 or self.rules.crashable(world):
+            return None
+        events = world.events
+        first = events[enabled[0]].target
+        for i in enabled:
+            if events[i].target != first:
+                break
+        else:  # one node's events: dependent unless it is loose (`checker.commuting`)
+            if not self._commuting or not loose_nodes(self.system, world, {first: enabled}):
+                return None
+        closure = Closure(self.system, self.publications, self.visibility, world, enabled,
+                          self._queued)
+        if (len(closure.by_node) < 2 and not closure.loose) or closure.unknown:
+            return None
+        best: list[int] | None = None
+        # Seeds with the fewest events first (then by index); plain singletons before a loose
+        # node's one event, which costs its pair checks. Tuples sort without a key call.
+        loose = closure.loose
+        for _, seed in sorted([(len(idxs) + (x in loose) / 2, x)
+                               for x, idxs in closure.by_node.items()]):
+            found = closure.persistent(seed)
+            if found is not None and (best is None or len(found) < len(best)):
+                best = found
+                if len(best) == 1:
+                    break
+        self._count_commuted(world, closure, best)
+        return best
+
+    def _count_commuted(self, world: World, closure: Closure, chosen: list[int] | None
+                        ) -> None:
+        """Count `closure`'s pair checks, and the worlds where `chosen` took one event of a
+        loose node (naming the declared handlers relied on)."""
+        if not closure.pairs:
+            return  # no loose node gave one event without its pairs checked
+        self.stats.pairs += closure.pairs
+        self.stats.refuted += closure.refuted
+        taken = set(chosen or ())
+        for x, e in closure.loose.items():
+            if e in taken and not taken.issuperset(closure.by_node[x]):
+                self.stats.commuted += 1
+                self.relied.add(f"{self.system.names[x]}.{world.events[e].method}")
+
+
+def plan(system: System, properties: PropertySet, strategy: str,
+         requested: str | None) -> tuple[Reduction | None, str]:
+    """The reduction a search runs, and its name for summaries: "por", "none", or
+    "none (why)" when the default or the request cannot be followed."""
+    asked = requested or default_reduction(system.semantics)
+    if asked not in REDUCTIONS:
+        raise ValueError(f"unknown reduction {asked!r}; expected {' or '.join(REDUCTIONS)}")
+    if asked == NONE:
+        return None, NONE if requested else f"none (default under {system.semantics})"
+    visibility = Visibility(properties, system.names)
+    why = why_off(system.rules, properties, visibility, strategy)
+    if why is not None:
+        return None, f"none ({why})"
+    return Reduction(system, properties, visibility), POR
+
+
+def describe(reduction: Reduction | None, name: str, strategy: str = "bfs") -> str:
+    """One line for the summary: what ran, and what it did."""
+    if reduction is None:
+        return name
+    if reduction.disabled:
+        return f"none ({reduction.disabled}; turned off during the search)"
+    s = reduction.stats
+    restarts = f", {s.restarts} restart{'s' * (s.restarts != 1)}" if s.restarts else ""
+    if reduction.visibility.fell:
+        restarts += f"; goals not rising: {reduction.visibility.fell}"
+    return (f"por (persistent sets: {s.reduced:,} worlds reduced, {s.full:,} expanded fully, "
+            f"{s.cycle_proviso:,} by the cycle proviso; {reduction.publications.edges()} sends "
+            f"learned{restarts}{_commuted(reduction)}"
+            + ("; a BFS trace is shortest in the reduced graph)" if strategy == "bfs" else ")"))
+
+
+def _commuted(reduction: Reduction) -> str:
+    """The summary's words on declared same-node commutation, if the search relied on it."""
+    s = reduction.stats
+    if not s.commuted and not s.pairs:
+        return ""
+    relied = ", ".join(sorted(reduction.relied)) or "none"
+    return (f"; one order of messages declared commutes=True in {s.commuted:,} worlds "
+            f"({relied}), {s.pairs:,} pairs checked in both orders, {s.refuted:,} did not "
+            "commute")

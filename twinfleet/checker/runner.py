@@ -1,0 +1,326 @@
+"""Running one handler of one node on a snapshot state: its new state and new events.
+
+`Runner.run` sets the node's `state` from the world's snapshot bytes, runs the
+handler through `runtime.contract.dispatch.run_handler` with a `Context` whose chooser
+is the checker's, snapshots the state again and turns the recorded effects
+into pending events (`Publish` → one delivery per subscriber, `Call` → a
+request to the server, or a TIMEOUT carrying a `CallError` after the call's
+timeout when there is no server or the request is lost, `After` → a timer, a
+service's return value → a reply), with the latency, deadline and fault
+branches of `checker.semantics` (Rule 5). Node code is never special-cased.
+The result is a `checker.transition.Variant`, independent of the world, so
+the system can cache it.
+
+Every run is verified (`checker.diagnosis`): clocks and random sources are
+probed, the node's other attributes compared by identity, the module and class
+variables of its code watched, and the handler is run a second time from the same state with the same answers; a difference is
+a contract breach. The system caches outcomes, so only new runs are verified.
+
+Equal node states are interned to one bytes object; the node object keeps
+the last state it was given, so running several events of one node in a row
+restores nothing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import re
+from collections.abc import Sequence
+from typing import Any, final
+
+from twinfleet.checker.choices import ChoiceMismatch, Chooser, PrefixChooser
+from twinfleet.checker.diagnosis import (
+    CONTRACT_KINDS,
+    FIX_CONTEXT,
+    FIX_ENCODABLE,
+    FIX_HIDDEN,
+    FIX_STATE,
+    EnvironmentProbe,
+    ScopeWatch,
+    describe_difference,
+    environment_message,
+)
+from twinfleet.checker.semantics import Rules
+from twinfleet.checker.topology import Topology
+from twinfleet.checker.transition import (
+    Failure,
+    Variant,
+    changed_attributes,
+    fingerprint,
+)
+from twinfleet.checker.world import ENVIRONMENT, Event
+from twinfleet.runtime.contract.context import After, Call, Context, Fail, Log, Publish
+from twinfleet.runtime.contract.dispatch import HandlerOutcome, run_handler
+from twinfleet.runtime.contract.kinds import EventKind, FailureKind
+from twinfleet.runtime.contract.messages import CallError
+from twinfleet.runtime.contract.node import Node
+from twinfleet.runtime.contract.snapshot import SnapshotError, restore, snapshot
+
+_INTERN_LIMIT = 100_000  # interned node states kept before starting afresh
+# failures not to verify by a second run: breaches already, or a forced answer that the
+# run does not offer (a trace that does not fit)
+_UNVERIFIED = CONTRACT_KINDS | {FailureKind.CHOICE_MISMATCH}
+_NO_PROBE = contextlib.nullcontext()
+_ADDRESS = re.compile(r" at 0x[0-9a-f]+")  # object addresses differ between two runs
+
+
+@final
+class Runner:
+    """Runs the handlers of a scenario's nodes (module docstring).
+
+    Args:
+        topology: the scenario's node graph.
+        rules: the enabling rules (latency, deadlines and faults of Rule 5).
+        debug_state: detect handlers that change node attributes other than `state`, by
+            value (slow: every attribute is encoded before and after each handler).
+        verify: probe clocks and random sources, compare attributes by identity, watch
+            module and class variables, and run every handler twice and compare
+            (checker.diagnosis; on by default).
+    """
+
+    def __init__(self, topology: Topology, rules: Rules, *, debug_state: bool = False,
+                 verify: bool = True) -> None:
+        self.topology = topology
+        self.rules = rules
+        self.nodes: tuple[Node, ...] = topology.nodes
+        self.names = tuple(node.name for node in self.nodes)
+        self.debug_state = debug_state
+        self.verify = verify
+        self._probe = EnvironmentProbe() if verify else None
+        self._scopes = [ScopeWatch(type(node)) for node in self.nodes] if verify else None
+        self._current: list[bytes | None] = [None] * len(self.nodes)
+        self._canon: dict[bytes, bytes] = {}
+        self.hashed = 0  # events created: content hashes for the collision bound
+        self.handler_runs = 0  # handlers actually run (re-executions included)
+        self.reruns = 0  # re-executions that verified a run (checker.diagnosis)
+
+    def interned(self) -> int:
+        """How many node-state encodings are interned."""
+        return len(self._canon)
+
+    def forget_loaded(self) -> None:
+        """Restore every node's state from bytes on its next run (for re-runs)."""
+        self._current = [None] * len(self.nodes)
+
+    # ---------------------------------------------------------------- runs
+
+    def run(self, ev: Event, data: bytes, chooser: Chooser) -> Variant:
+        """Run `ev`'s handler on node state `data` (verified unless `verify` is off)."""
+        return self._checked(ev, data, chooser)
+
+    def deadline_miss(self, ev: Event, data: bytes) -> Variant:
+        """Taking `ev` after its deadline (Rule 5): nothing runs, the step fails."""
+        names = self.names
+        sender = "environment" if ev.sender == ENVIRONMENT else names[ev.sender]
+        message = (f"{ev.kind} from {sender} to {names[ev.target]}.{ev.method} is handled "
+                   f"at t={ev.due} ms, {ev.due - (ev.deadline or 0)} ms after its deadline "
+                   f"t={ev.deadline} ms")
+        failure = Failure(FailureKind.DEADLINE, names[ev.target], ev.method, message)
+        return Variant((), (), data, (), failure)
+
+    def start(self, j: int, data: bytes, now: int, chooser: Chooser) -> Variant:
+        """Node `j` started at `now` from state `data` (also its restart after a crash
+        fault): the first firing of each periodic timer, then every `@on_start` run in
+        declaration order (until one fails)."""
+        topology = self.topology
+        events = list(topology.periodic(j, now))
+        failure, logs, faults, branches = None, [], [], []
+        for spec in topology.starts(j):
+            v = self._checked(topology.start_event(j, spec, now), data, chooser)
+            data, failure = v.state, v.failure
+            events += v.events
+            logs += v.logs
+            faults += v.faults
+            branches += v.branches  # positions in the chooser, which the handlers share
+            if failure is not None:
+                break
+        return Variant(tuple(chooser.indices), tuple(chooser.options), data, tuple(events),
+                       failure, tuple(logs), tuple(faults), tuple(branches))
+
+    def _checked(self, ev: Event, data: bytes, chooser: Chooser) -> Variant:
+        """`_exec`, then (with `verify`) once more from the same state with the same
+        answers: a difference is a contract breach (checker.diagnosis)."""
+        first = len(chooser.indices)  # start handlers share one chooser
+        v = self._exec(ev, data, chooser)
+        if not self.verify or (v.failure is not None and v.failure.kind in _UNVERIFIED):
+            return v
+        self.reruns += 1
+        self._current[ev.target] = None  # restore the node state from the bytes again
+        again = self._exec(ev, data, PrefixChooser(v.choices[first:]))
+        a, b = _comparable(v, first), _comparable(again, 0)
+        if a == b and v.logs == again.logs:
+            return v
+        diff = (describe_difference((v.state, v.events, a[2], a[3]),
+                                    (again.state, again.events, b[2], b[3]))
+                if a != b else "the ctx.log records differ")
+        return _failed(chooser, data, FailureKind.NONDETERMINISM, self.names[ev.target],
+                       ev.method, f"running it twice from the same state gave different "
+                       f"results: {diff}; fix: {FIX_HIDDEN}")
+
+    def _load(self, i: int, data: bytes) -> Node:
+        node = self.nodes[i]
+        current = self._current[i]
+        if current is not data and current != data:
+            node.state = restore(data)
+            self._current[i] = data
+        return node
+
+    def _exec(self, ev: Event, data: bytes, chooser: Chooser) -> Variant:
+        """Run `ev`'s handler on node state `data`: its new state, new events and failure."""
+        i = ev.target
+        node = self._load(i, data)
+        self.handler_runs += 1
+        before = fingerprint(node) if self.debug_state else None
+        attributes = dict(vars(node)) if self.verify else None
+        scope = None if self._scopes is None else self._scopes[i]
+        held = None if scope is None else scope.take()
+        ctx = Context(node, ev.due, chooser)
+        self._current[i] = None  # the state object is about to change
+        probe = self._probe
+        with probe or _NO_PROBE:
+            outcome = run_handler(node, ev.method, ctx, ev.args,
+                                  expects_reply=ev.kind is EventKind.REQUEST)
+        if probe is not None and probe.calls:
+            return _failed(chooser, data, FailureKind.CONTRACT, node.name, ev.method,
+                           environment_message(probe.calls))
+        if scope is not None and (stray := scope.changed(held)):
+            return _failed(chooser, data, FailureKind.STATE_OUTSIDE, node.name, ev.method,
+                           f"it changed {', '.join(stray)}, outside self.state; fix: "
+                           f"{FIX_STATE}")
+        breach = self._breach(node, ev, attributes, before, outcome)
+        if breach is not None:
+            return _failed(chooser, data, *breach)
+        if chooser.mismatch is not None:  # even if the handler caught the exception
+            return _failed(chooser, data, FailureKind.CHOICE_MISMATCH, node.name, ev.method,
+                           str(chooser.mismatch))
+        if outcome.error is not None:
+            return _failed(chooser, data, FailureKind.HANDLER, node.name, ev.method,
+                           outcome.error.message, outcome.error.traceback)
+        try:
+            new = snapshot(node.state)
+        except SnapshotError as exc:
+            return _failed(chooser, data, FailureKind.CONTRACT, node.name, ev.method,
+                           f"its new state cannot be encoded ({exc}); fix: {FIX_ENCODABLE}")
+        new = data if new == data else self._intern(new)
+        self._current[i] = new
+        handler_end = len(chooser.indices)
+        try:
+            events, failure, logs, faults = self._effects(ev, outcome.effects, outcome.reply,
+                                                          chooser)
+        except ChoiceMismatch as exc:  # a forced latency or fault branch that does not exist
+            return _failed(chooser, data, FailureKind.CHOICE_MISMATCH, node.name, ev.method,
+                           str(exc))
+        indices = tuple(chooser.indices)
+        return Variant(indices, tuple(chooser.options), new, tuple(events), failure,
+                       tuple(logs), tuple(faults), tuple(range(handler_end, len(indices))))
+
+    def _breach(self, node: Node, ev: Event, attributes: dict[str, Any] | None,
+                before: dict[str, bytes] | None, outcome: HandlerOutcome
+                ) -> tuple[FailureKind, str, str, str] | None:
+        """A contract breach of one handler run: a misused ctx, or attributes other than
+        `state` that changed (by identity; with `debug_state`, by value)."""
+        error = outcome.error
+        if error is not None and error.contract:
+            return (FailureKind.CONTRACT, node.name, ev.method,
+                    f"{error.message}; fix: {FIX_CONTEXT}")
+        if attributes is not None:
+            now = vars(node)
+            stray = sorted(k for k in attributes.keys() | now.keys()
+                           if k != "state" and attributes.get(k) is not now.get(k))
+            if stray:
+                return (FailureKind.STATE_OUTSIDE, node.name, ev.method,
+                        f"it changed {', '.join('self.' + k for k in stray)}, outside "
+                        f"self.state; fix: {FIX_STATE}")
+        if before is not None:
+            stray = changed_attributes(before, fingerprint(node))
+            if stray:
+                return (FailureKind.STATE_OUTSIDE, node.name, ev.method,
+                        f"handler changed attribute(s) {', '.join(stray)} outside "
+                        f"self.state; fix: {FIX_STATE}")
+        return None
+
+    def _intern(self, data: bytes) -> bytes:
+        """The one bytes object kept for this node-state encoding."""
+        canon = self._canon.get(data)
+        if canon is None:
+            if len(self._canon) >= _INTERN_LIMIT:
+                self._canon.clear()
+            canon = self._canon[data] = data
+        return canon
+
+    # ------------------------------------------------------------- effects
+
+    def _effects(self, ev: Event, effects: Sequence[Any], reply: Any, chooser: Chooser
+                 ) -> tuple[list[Event], Failure | None, list[Log], list[str]]:
+        """The events a handler's effects create, in order (the rules of one transition)."""
+        i, now, topology = ev.target, ev.due, self.topology
+        out: list[Event] = []
+        faults: list[str] = []
+        logs: list[Log] = []
+        if ev.kind is EventKind.PERIODIC:
+            out.append(Event(now + topology.period(i, ev.method), EventKind.PERIODIC, i,
+                             ev.method, i, (), ev.priority))
+        failure = None
+        for eff in effects:
+            match eff:
+                case Publish(topic=topic, msg=msg):
+                    for j, method, prio in topology.subscribers.get(topic, ()):
+                        for _ in range(self._copies(topic, j, chooser, faults)):
+                            out.append(self._message(now, topic, EventKind.DELIVERY, j, method,
+                                                     i, (msg,), prio, "", chooser))
+                case Call(service=service, request=req, reply_to=reply_to, timeout_ms=timeout):
+                    server = topology.servers.get(service)
+                    lost = server is not None and self._copies(service, server[0], chooser,
+                                                               faults) == 0
+                    if server is None or lost:
+                        err = CallError(service, "timeout" if lost else
+                                        self.rules.no_server(chooser))
+                        out.append(Event(now + timeout, EventKind.TIMEOUT, i, reply_to, i,
+                                         (err,), topology.priority(i, reply_to)))
+                    else:
+                        j, method, prio = server
+                        out.append(self._message(now, service, EventKind.REQUEST, j, method, i,
+                                                 (req,), prio, reply_to, chooser))
+                case After(delay_ms=delay, handler=method, args=args):
+                    out.append(Event(now + delay, EventKind.TIMER, i, method, i, args,
+                                     topology.priority(i, method)))
+                case Fail(reason=reason):
+                    failure = failure or Failure(FailureKind.HANDLER, self.names[i], ev.method,
+                                                 f"ctx.fail: {reason}")
+                case Log():
+                    logs.append(eff)
+        if ev.kind is EventKind.REQUEST:
+            service = topology.service_of.get((i, ev.method), "")
+            out.append(self._message(now, service, EventKind.REPLY, ev.sender, ev.reply_to, i,
+                                     (reply,), topology.priority(ev.sender, ev.reply_to), "",
+                                     chooser))
+        self.hashed += len(out)
+        return out, failure, logs, faults
+
+    def _copies(self, name: str, j: int, chooser: Chooser, faults: list[str]) -> int:
+        """How many copies of one message on `name` to node `j` arrive (fault branches)."""
+        n, fault = self.rules.copies(name, chooser, j)
+        if fault:
+            faults.append(f"{name} to {self.names[j]}: {fault}")
+        return n
+
+    def _message(self, now: int, name: str, kind: EventKind, target: int, method: str,
+                 sender: int, args: tuple[Any, ...], priority: int, reply_to: str,
+                 chooser: Chooser) -> Event:
+        """A message on topic/service `name`, with its latency branch and deadline."""
+        due, deadline = self.rules.delivery(now, name, chooser)
+        return Event(due, kind, target, method, sender, args, priority, reply_to,
+                     deadline=deadline)
+
+
+def _comparable(v: Variant, first: int) -> tuple[Any, ...]:
+    """What two runs of one handler must agree on (choices from position `first`)."""
+    failure = None if v.failure is None else (
+        v.failure.kind, _ADDRESS.sub("", v.failure.message))
+    return v.state, [(e.sk, e.deadline) for e in v.events], failure, v.choices[first:]
+
+
+def _failed(chooser: Chooser, data: bytes, kind: FailureKind, node: str, method: str,
+            message: str, traceback: str = "") -> Variant:
+    return Variant(tuple(chooser.indices), tuple(chooser.options), data, (),
+                   Failure(kind, node, method, message, traceback))

@@ -1,0 +1,389 @@
+"""State-space search: BFS, DFS, random walks, and the lasso search for liveness.
+
+`Search.run("bfs")` explores breadth-first, so the first violation found has
+a shortest trace; "dfs" pops the newest world first (less memory on deep
+spaces); both check every safety property on every new world and every
+handler failure on every transition, and stop at the first violation. Visited
+states live in a `checker.store.StateStore` (64-bit digests, or 128-bit with
+`exact_states`); when the scenario has `eventually` properties it also
+records every edge, and once the safety search is complete each of them is
+checked on that graph by `find_lasso` (no handler is re-run). "random" runs
+seeded random walks instead (`checker.walks`) and can only find violations,
+never prove their absence. Every search works on the model's API only:
+`System.initial`, `System.successors` (every outcome of every action) and,
+for walks, `System.actions` and `System.step`.
+
+A search stops cleanly between two expansions on Ctrl-C (the first SIGINT
+sets a flag; a second one interrupts at once), on `max_time_s` and on
+`max_states` (then the world being expanded is put back), so it can always be
+saved: with `checkpoint=PATH` it writes `checker.checkpoint` files every
+`checkpoint_every_s` seconds and when it stops early, and `Search.restore`
+continues one to the same result as an uninterrupted run.
+
+Counters (`SearchStatistics`): `states` are distinct worlds and `transitions`
+every handler run (one per choice variant, revisits included).
+"""
+
+from __future__ import annotations
+
+import time
+from collections import deque
+from collections.abc import Callable, Mapping
+from functools import partial
+from typing import Any, final
+
+from twinfleet.checker import checkpoint
+from twinfleet.checker.graph import lasso_counterexample, steps_along
+from twinfleet.checker.outcome import (
+    HOLDS,
+    INTERRUPTED,
+    NO_LIMITS,
+    UNKNOWN,
+    VIOLATED,
+    Counterexample,
+    Counters,
+    Found,
+    Guard,
+    Limits,
+    Outcome,
+    SearchStatistics,
+    Stop,
+    peak_rss_mb,
+)
+from twinfleet.checker.properties import Property, PropertySet, PropertyViolation
+from twinfleet.checker.reduction import Reduction
+from twinfleet.checker.store import StateStore
+from twinfleet.checker.system import System
+from twinfleet.checker.transition import Transition
+from twinfleet.checker.walks import RandomWalks
+from twinfleet.checker.world import World
+from twinfleet.runtime.scenario.property_eval import Overtime, time_limit
+
+__all__ = ["HOLDS", "UNKNOWN", "VIOLATED", "Counterexample", "Limits", "Outcome", "Search",
+           "SearchStatistics", "bfs", "dfs", "peak_rss_mb", "random_walk"]
+
+_GRACE_S = 0.25  # after max-time, before a property still running is interrupted
+_FORGET_EVERY = 512  # expansions between two `System.forget_before` calls (at least)
+
+
+class _Restart(Exception):
+    """The send relation a reduced search relies on grew: explore again."""
+
+
+@final
+class Search:
+    """One search over a `System` for a `PropertySet`.
+
+    Args:
+        system: the compiled scenario.
+        properties: what to check.
+        limits: state, time and depth limits.
+        progress: called with statistics at most every `progress_interval` seconds.
+        checkpoint: file to save the search to (periodically and when it stops early).
+        checkpoint_every_s: seconds between periodic checkpoints.
+        checkpoint_meta: what the checkpoint must record to be resumed (scenario, options).
+        handle_sigint: stop cleanly on the first Ctrl-C (main thread only).
+        reduction: expand worlds by persistent sets (`checker.reduction`); None: fully.
+    """
+
+    def __init__(self, system: System, properties: PropertySet, limits: Limits = NO_LIMITS, *,
+                 progress: Callable[[SearchStatistics], None] | None = None,
+                 progress_interval: float = 1.0, checkpoint: str | None = None,
+                 checkpoint_every_s: float = 300.0,
+                 checkpoint_meta: Mapping[str, Any] | None = None,
+                 handle_sigint: bool = True, reduction: Reduction | None = None) -> None:
+        self.system = system
+        self.reduction = reduction
+        self.properties = properties
+        self.guard = Guard(limits, progress, progress_interval, handle_sigint)
+        self._max_states = limits.max_states  # read once per new state
+        live = tuple(p.name for p in properties.eventually)
+        self.store = StateStore(exact=system.exact_states, record_edges=bool(live), flags=live)
+        self.counters = Counters()
+        self._frontier: deque[tuple[World, int, int]] = deque()
+        self._expansions = 0
+        self._next_forget = _FORGET_EVERY
+        self._pruned = False
+        self._resumed = False
+        self._elapsed_before = 0.0
+        self._hashed_before = 0  # content hashes of the searches this one continues
+        self._expanding: tuple[World, int, int] | None = None
+        self._partial = 0
+        self._checkpoint = checkpoint
+        self._checkpoint_every = checkpoint_every_s
+        self._checkpoint_meta = dict(checkpoint_meta or {})
+        self._lifo = False
+        self._strategy = "bfs"
+        self._last_checkpoint = time.monotonic()
+
+    @property
+    def limits(self) -> Limits:
+        """The search's limits (may be replaced before `run`)."""
+        return self.guard.limits
+
+    @limits.setter
+    def limits(self, limits: Limits) -> None:
+        self.guard.limits = limits
+        self._max_states = limits.max_states
+
+    def statistics(self) -> SearchStatistics:
+        """The counters so far."""
+        store, c = self.store, self.counters
+        hashed = 0 if store.exact else self.system.hashed + self._hashed_before
+        return SearchStatistics(
+            len(store), c.transitions, c.initial, c.depth, len(self._frontier),
+            self._elapsed_before + time.monotonic() - self.guard.started, peak_rss_mb(),
+            store.nbytes(), store.digest_bits, store.collision_probability(hashed),
+            c.peak_frontier)
+
+    def run(self, strategy: str = "bfs", *, walks: int = 100, seed: int = 0) -> Outcome:
+        """Search with `strategy` ("bfs", "dfs" or "random") until a verdict or a limit."""
+        self.guard.restart_clock()
+        self._last_checkpoint = self.guard.started
+        self._strategy = strategy
+        limit = self.limits.max_time_s
+        # A backstop for a property that runs past the limit (runtime.scenario.property_eval); the
+        # grace lets the search's own check stop cleanly between expansions first.
+        with self.guard.sigint_handler(), time_limit(None if limit is None else limit + _GRACE_S):
+            try:
+                if strategy == "random":
+                    return self._random(walks, seed)
+                if strategy not in ("bfs", "dfs"):
+                    raise ValueError(f"unknown search strategy {strategy!r}")
+                self._lifo = strategy == "dfs"
+                self._explore_until_stable()
+                if self._pruned:
+                    return self._outcome(UNKNOWN, f"max-depth {self.limits.max_depth} reached "
+                                         "before the search finished")
+                for prop in self.properties.eventually:
+                    self._lasso(prop)
+                return self._outcome(HOLDS, "every property holds")
+            except Found as found:
+                return self._outcome(VIOLATED, found.violation.property, found.violation,
+                                     found.counterexample)
+            except Stop as stop:
+                return self._stopped(stop.reason, clean=True)
+            except KeyboardInterrupt:  # a second Ctrl-C: anywhere, maybe inside the store
+                return self._stopped(INTERRUPTED, clean=False)
+            except Overtime as exc:  # inside an expression: the expansion is half done
+                return self._stopped(f"max-time {limit:g} s reached while evaluating the "
+                                     f"property {exc}", clean=False)
+
+    def _stopped(self, reason: str, *, clean: bool) -> Outcome:
+        """An early stop: put back a half-expanded world, then save a checkpoint if asked.
+
+        `Stop` is only raised where the store is consistent (between expansions,
+        or right after a state was added), so the world being expanded can be put
+        back and expanded again on resume: it re-finds the successors already
+        added as known states, in the same order.
+        """
+        saved = None
+        if clean and self._expanding is not None:
+            self.counters.transitions -= self._partial
+            if self._lifo:
+                self._frontier.append(self._expanding)
+            else:
+                self._frontier.appendleft(self._expanding)
+            self._expanding = None
+            self._partial = 0
+        if clean and self._checkpoint is not None and self._strategy != "random":
+            self.save(self._checkpoint)
+            saved = self._checkpoint
+        outcome = self._outcome(UNKNOWN, reason)
+        outcome.checkpoint = saved
+        return outcome
+
+    def _outcome(self, status: str, reason: str, violation: PropertyViolation | None = None,
+                 counterexample: Counterexample | None = None) -> Outcome:
+        return Outcome(status, reason, self.statistics(), violation, counterexample)
+
+    # ------------------------------------------------------ checkpoints
+
+    def save(self, path: str) -> None:
+        """Write the search (store, frontier, counters) to `path` atomically."""
+        c = self.counters
+        counters = {"transitions": c.transitions, "initial": c.initial, "depth": c.depth,
+                    "pruned": self._pruned, "peak_frontier": c.peak_frontier,
+                    "elapsed": self._elapsed_before + time.monotonic() - self.guard.started,
+                    "hashed": self.system.hashed + self._hashed_before,
+                    "strategy": "dfs" if self._lifo else "bfs",
+                    "publications": self.system.publications.__getstate__(),
+                    "reduction": None if self.reduction is None else self.reduction.stats}
+        checkpoint.save(path, self._checkpoint_meta, self.store, list(self._frontier), counters)
+        self._last_checkpoint = time.monotonic()
+
+    def restore(self, data: Mapping[str, Any]) -> None:
+        """Continue from a loaded checkpoint (`checker.checkpoint.load`)."""
+        self.store = data["store"]
+        self._frontier = deque(data["frontier"])
+        c = data["counters"]
+        self.counters = Counters(c["transitions"], c["initial"], c["depth"], c["peak_frontier"])
+        self._pruned = c["pruned"]
+        self._elapsed_before = c["elapsed"]
+        self._hashed_before = c["hashed"]
+        if "publications" in c:  # what the reduced search so far relied on
+            self.system.publications.__setstate__(c["publications"])
+        if self.reduction is not None and c.get("reduction") is not None:
+            self.reduction.stats = c["reduction"]
+        self._resumed = True
+
+    # -------------------------------------------------------- safety search
+
+    def _explore_until_stable(self) -> None:
+        """Explore; with a reduction, start again from scratch whenever the send relation
+        it relies on grew during the search (`checker.publications`)."""
+        reduction = self.reduction
+        while True:
+            if reduction is not None:
+                reduction.begin()
+            try:
+                self._explore()
+                return
+            except _Restart:
+                assert reduction is not None
+                reduction.restarted()
+                self._reset()
+
+    def _reset(self) -> None:
+        """Forget everything explored (a restart of a reduced search)."""
+        self.store = StateStore(exact=self.store.exact, record_edges=self.store.edges is not None,
+                                flags=tuple(self.store.holds))
+        self.counters = Counters()
+        self._frontier.clear()
+        self._expansions = 0
+        self._next_forget = _FORGET_EVERY
+        self._pruned = False
+        self._resumed = False
+
+    def _explore(self) -> None:
+        max_depth = self.limits.max_depth
+        if not self._resumed:
+            for init in self.system.initial():
+                self.counters.initial += 1
+                self._discover(init, -1, 0)
+        frontier = self._frontier
+        pop = frontier.pop if self._lifo else frontier.popleft
+        edges = self.store.edges
+        successors = self.system.successors
+        reduction = self.reduction
+        find = self.store.find
+        lifo = self._lifo
+        discover = self._discover
+        counters = self.counters
+        # without checkpoints, a tick is only the guard's (one call less per expansion)
+        tick = self._tick if self._checkpoint is not None else partial(self.guard.tick,
+                                                                           self.statistics)
+        while frontier:
+            item = pop()
+            world, sid, depth = item
+            if max_depth is not None and depth >= max_depth:
+                self._pruned = True
+                continue
+            self._expanding = item
+            children = []
+            for t in (successors(world) if reduction is None
+                      else reduction.successors(world, find, None if lifo else sid)):
+                counters.transitions += 1
+                self._partial += 1
+                children.append(discover(t, sid, depth + 1))
+            if edges is not None:
+                edges.set(sid, children)
+            self._expanding = None
+            self._partial = 0
+            if reduction is not None and reduction.stale:
+                raise _Restart
+            self._expansions += 1
+            if self._expansions >= self._next_forget:
+                self._forget()
+            tick()
+
+    def _forget(self) -> None:
+        """Let the system drop cached outcomes no world left to expand can use.
+
+        Runs every 512 expansions, or every len(frontier) when that is larger, so
+        scanning the frontier costs O(1) per expansion.
+        """
+        self._next_forget = self._expansions + max(_FORGET_EVERY, len(self._frontier))
+        times = [w.events[0].due for w, _, _ in self._frontier if w.events]
+        if times:
+            self.system.forget_before(min(times))
+
+    def _discover(self, t: Transition, parent: int, depth: int) -> int:
+        if t.failure is not None:
+            raise Found(self.properties.check_failure(t.failure), self._path_to(parent, t))
+        world = t.world
+        sid, new = self.store.add(world.key, parent, terminal=not world.events)
+        if not new:
+            return sid
+        if parent < 0:
+            self.store.roots[sid] = t.step.choices
+        counters = self.counters
+        if depth > counters.depth:
+            counters.depth = depth
+        for name, bits in self.store.holds.items():
+            bits.append(self._holds(self.properties.eventually_named(name), world))
+        violation = self.properties.check_world(self.system, world)
+        if violation is not None:
+            raise Found(violation, self._path_to(sid))
+        frontier = self._frontier
+        frontier.append((world, sid, depth))
+        if len(frontier) > counters.peak_frontier:
+            counters.peak_frontier = len(frontier)
+        if self._max_states is not None:
+            self.guard.count_states(len(self.store))
+        return sid
+
+    def _path_to(self, sid: int, failing: Transition | None = None) -> Counterexample:
+        if sid < 0:  # a start handler failed: no steps
+            assert failing is not None
+            return Counterexample(failing.step.choices, ())
+        initial, steps = steps_along(self.system, self.store, self.store.path_ids(sid))
+        if failing is not None:
+            steps.append(failing.step)
+        return Counterexample(initial, tuple(steps))
+
+    def _tick(self) -> None:
+        self.guard.tick(self.statistics)
+        if (self._checkpoint is not None
+                and time.monotonic() - self._last_checkpoint >= self._checkpoint_every):
+            self.save(self._checkpoint)
+
+    # ------------------------------------------------------- liveness search
+
+    def _holds(self, prop: Property, world: World) -> bool:
+        assert prop.expr is not None
+        return prop.expr.holds(self.system, world.states, world.now)
+
+    def _lasso(self, prop: Property) -> None:
+        found = lasso_counterexample(self.system, self.store, prop)
+        if found is not None:
+            raise Found(*found)
+
+    # ---------------------------------------------------------- random walks
+
+    def _random(self, walks: int, seed: int) -> Outcome:
+        max_depth = self.limits.max_depth or 1000
+        RandomWalks(self.system, self.properties, self.store, self.counters, self.guard,
+                    self.statistics).run(walks, seed, max_depth)
+        return self._outcome(UNKNOWN, f"random search is not exhaustive: no violation in {walks} "
+                             f"walks of at most {max_depth} steps (seed {seed})")
+
+
+def bfs(system: System, properties: PropertySet, limits: Limits = NO_LIMITS,
+        progress: Callable[[SearchStatistics], None] | None = None) -> Outcome:
+    """Breadth-first search: the first violation found has a shortest trace."""
+    return Search(system, properties, limits, progress=progress).run("bfs")
+
+
+def dfs(system: System, properties: PropertySet, limits: Limits = NO_LIMITS,
+        progress: Callable[[SearchStatistics], None] | None = None) -> Outcome:
+    """Depth-first order (newest world first)."""
+    return Search(system, properties, limits, progress=progress).run("dfs")
+
+
+def random_walk(system: System, properties: PropertySet, limits: Limits = NO_LIMITS, *,
+                walks: int = 100, seed: int = 0,
+                progress: Callable[[SearchStatistics], None] | None = None) -> Outcome:
+    """`walks` seeded random walks of at most `limits.max_depth` (default 1000) steps."""
+    return Search(system, properties, limits, progress=progress).run("random", walks=walks,
+                                                                     seed=seed)

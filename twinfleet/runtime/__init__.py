@@ -1,0 +1,25 @@
+"""The node contract and the live driver, in wings that show the layers.
+
+    contract/  what a node is and says: Node, Context, messages, names, kinds, snapshots, traces
+    scenario/  one description of a fleet for both drivers: files, settings, parameters, properties
+    core/      one node's event handling with no I/O (sans-IO), and what observes it
+    host/      the asyncio loop, the clock and the Zenoh transport under one node
+    fleet/     the launcher, node processes, credentials, the registry and the live verdict
+    tools/     monitors (ROS 2-style verbs), recordings, the web viewer and the Foxglove bridge
+    cli/       the runtime's commands
+
+Each wing imports only the wings below it (tests/test_layering.py reads the rule from
+`WING_RULES` there): contract nothing of ours; scenario and core the contract; host core
+and scenario; fleet host; tools fleet; cli anything. The contract, scenario and core load
+neither asyncio nor Zenoh, so the checker can use them.
+"""
+
+__all__ = [
+    "cli",
+    "contract",
+    "core",
+    "fleet",
+    "host",
+    "scenario",
+    "tools",
+]

@@ -1,0 +1,491 @@
+"""The live runtime's commands: launch, examples, the ROS 2-style monitors, view, foxglove
+(and record, play, export, bag).
+
+    twinfleet launch SCENARIO [NODE.NAME:=VALUE ...] [--param NODE.NAME=VALUE] [--time-scale K]
+                              [--timeout S] [--seed S] [--runs N] [--connect EP] [--listen EP]
+    twinfleet examples [--copy NAME [DIR]]
+    twinfleet node list|info     twinfleet topic list|info|type|echo|hz|pub
+    twinfleet service list|type|call   twinfleet param list|get   twinfleet interface list|show
+    twinfleet view [--port P] [--trace FILE]      twinfleet foxglove [--port P]
+
+SCENARIO is a scenario file or the name of a shipped example (`twinfleet examples`
+lists them). Monitors find the fleet in the fleet registry unless --connect is
+given (`runtime.fleet.connection.connection`). `register(subparsers)` adds the commands to
+the `twinfleet` command line (`twinfleet.cli`); `record`, `play`, `export` and
+`bag` come from `runtime.cli.recording_commands`. Every command imports its engine
+when it runs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import sys
+from typing import Any
+
+from twinfleet.runtime.cli import recording_commands
+from twinfleet.runtime.fleet.connection import (
+    CommandError,
+    add_connection_arguments,
+    add_message_arguments,
+    connection,
+    import_modules,
+    need_fleet,
+)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add the live runtime's subcommands to the `twinfleet` command line."""
+    _launch_parser(sub)
+    _topic_parser(sub)
+    _service_parser(sub)
+    _node_parser(sub)
+    _param_parser(sub)
+    _interface_parser(sub)
+    _view_parser(sub)
+    _examples_parser(sub)
+    _foxglove_parser(sub)
+    recording_commands.register(sub)
+
+
+def cmd_launch(args: argparse.Namespace) -> int:
+    """`twinfleet launch`: validate, run the fleet `--runs` times, print summaries."""
+    from twinfleet.runtime.fleet.fleetauth import CredentialsError, listen_problem, read_credentials
+    from twinfleet.runtime.host.introspect import load_with_params
+    from twinfleet.runtime.scenario.spec import ScenarioError
+
+    params = launch_params(args)
+    problem = listen_problem(args.listen, insecure=args.insecure_listen) if args.listen else None
+    if problem:
+        raise CommandError(problem)
+    try:
+        auth = read_credentials(args.credentials)[1] if args.credentials else None
+    except CredentialsError as exc:
+        raise CommandError(str(exc)) from None
+    try:
+        scenario = load_with_params(args.scenario, params)
+    except ScenarioError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    from twinfleet.runtime.scenario.lint import lint_scenario
+
+    for warning in lint_scenario(scenario):  # nondeterminism sources, names nothing answers
+        print(warning, file=sys.stderr)
+    import zenoh
+
+    from twinfleet.runtime.fleet.launcher import FleetConflict, format_result, run_fleet
+
+    worst, passed = 0, 0
+    for run in range(args.runs):
+        seed = (args.seed if args.seed is not None else scenario.seed) + run
+        if args.runs > 1:
+            print(f"[launcher] run {run + 1}/{args.runs} (seed {seed})", flush=True)
+        try:
+            result = asyncio.run(run_fleet(scenario, time_scale=args.time_scale,
+                                           timeout_s=args.timeout, seed=seed,
+                                           connect=args.connect, listen=args.listen,
+                                           run_record=args.record_run,
+                                           record_events=_events_path(args, run),
+                                           params=params, auth=auth))
+        except FleetConflict as exc:
+            raise CommandError(str(exc)) from None
+        except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
+            print(f"error: {exc}", file=sys.stderr)
+            return 2
+        except (OSError, zenoh.ZError) as exc:  # e.g. a --listen port in use
+            raise CommandError(router_error(args, exc)) from None
+        for line in format_result(result):
+            print(f"[launcher] {line}", flush=True)
+        worst = _worse(worst, result.exit_code)
+        passed += result.passed
+        if result.interrupted:
+            break
+    if args.runs > 1:
+        print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "
+              f"{args.runs - passed}/{args.runs} failed", flush=True)
+    return worst
+
+
+_SEVERITY = (0, 3, 2, 1, 130)  # ok < inconclusive < bad input < failed < interrupted
+
+
+def _worse(a: int, b: int) -> int:
+    """The more severe of two runs' exit codes (an unknown code counts as failed)."""
+    rank = {code: i for i, code in enumerate(_SEVERITY)}
+    return max(a, b, key=lambda c: rank.get(c, rank[1]))
+
+
+def cmd_examples(args: argparse.Namespace) -> int:
+    """`twinfleet examples`: list the shipped scenarios, or copy one (and its map) to edit."""
+    from twinfleet.runtime.scenario.examples import (
+        ExampleError,
+        copy_example,
+        describe,
+        shipped_scenarios,
+    )
+
+    if args.copy is None:
+        if args.dir is not None:
+            print("error: a directory is given only with --copy NAME", file=sys.stderr)
+            return 2
+        shipped = shipped_scenarios()
+        width = max(map(len, shipped))
+        for name, path in shipped.items():
+            print(f"{name:<{width}}  {describe(path)}")
+        print("\nrun one with `twinfleet launch NAME` or `twinfleet check NAME`; "
+              "edit a copy: `twinfleet examples --copy NAME [DIR]`")
+        return 0
+    from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
+
+    try:
+        files = copy_example(args.copy, args.dir or ".")
+        load_scenario(files[0][0])  # the copy must load as it is
+    except (ExampleError, ScenarioError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+    for path, written in files:
+        print(f"{'wrote' if written else 'kept existing'} {path}")
+    return 0
+
+
+def launch_params(args: argparse.Namespace) -> list[str]:
+    """The launch's parameter overrides: ``NAME:=VALUE`` words, then ``--param NAME=VALUE``."""
+    for word in args.overrides:
+        if ":=" not in word:
+            raise CommandError(f"launch: unexpected argument {word!r}; parameter overrides look "
+                               "like r1.speed:=0.4")
+    return [*args.overrides, *args.param]
+
+
+def router_error(args: argparse.Namespace, exc: Exception) -> str:
+    """One line for a router that cannot be opened or joined (e.g. a --listen port in use)."""
+    from twinfleet.runtime.fleet.connection import zenoh_error_text
+
+    where = f"--connect {args.connect}" if args.connect else (
+        f"--listen {args.listen}" if args.listen else "the embedded router")
+    return f"cannot open {where}: {zenoh_error_text(exc)}"
+
+
+def _events_path(args: argparse.Namespace, run: int) -> str | None:
+    """Where run `run` of `launch --record-events FILE` writes: FILE, or FILE.<k> with --runs."""
+    if not args.record_events or args.runs == 1:
+        return args.record_events
+    return f"{args.record_events}.{run + 1}"
+
+
+def cmd_topic(args: argparse.Namespace) -> int:
+    """`twinfleet topic ...`."""
+    from twinfleet.runtime.tools.monitor import data_verbs, graph_verbs
+
+    conn, out, wait = connection(args), sys.stdout, args.query_timeout
+    if args.action == "list":
+        return graph_verbs.topic_list(conn, out=out, verbose=args.verbose, types=args.show_types,
+                                  timeout_s=wait)
+    if args.action == "info":
+        return graph_verbs.topic_info(conn, args.topic, out=out, verbose=args.verbose, timeout_s=wait)
+    if args.action == "type":
+        return graph_verbs.topic_type(conn, args.topic, out=out, timeout_s=wait)
+    if args.action == "echo":
+        count = 1 if args.once else args.count
+        return data_verbs.topic_echo(conn, args.topic, out=out, count=count,
+                                       duration_s=args.duration, field=args.field,
+                                       wait=args.wait, timeout_s=wait)
+    if args.action == "hz":
+        return data_verbs.topic_hz(conn, args.topic, out=out, window=args.window,
+                                     duration_s=args.duration, timeout_s=wait)
+    import_modules(args.module)
+    need_fleet(args, conn)
+    return data_verbs.topic_pub(conn, args.topic, args.type, parse_fields(args.data), out=out,
+                                  rate_hz=args.rate, count=None if args.count == 0 else args.count,
+                                  timeout_s=wait)
+
+
+def parse_fields(text: str) -> dict:
+    """The DATA argument of `topic pub` / `service call` as a mapping (one-line errors)."""
+    from twinfleet.runtime.tools.monitor.payload import PayloadError, parse_data
+
+    try:
+        return parse_data(text)
+    except PayloadError as exc:
+        raise CommandError(str(exc)) from None
+
+
+def cmd_service(args: argparse.Namespace) -> int:
+    """`twinfleet service ...`."""
+    from twinfleet.runtime.tools.monitor import data_verbs, graph_verbs
+
+    conn = connection(args)
+    if args.action == "list":
+        return graph_verbs.service_list(conn, out=sys.stdout, verbose=args.verbose,
+                                    types=args.show_types, timeout_s=args.query_timeout)
+    if args.action == "type":
+        return graph_verbs.service_type(conn, args.service, out=sys.stdout,
+                                    timeout_s=args.query_timeout)
+    import_modules(args.module)
+    need_fleet(args, conn)
+    return data_verbs.service_call(conn, args.service, args.type, parse_fields(args.data),
+                                     out=sys.stdout, timeout_s=args.timeout,
+                                     discovery_s=args.query_timeout)
+
+
+def cmd_node(args: argparse.Namespace) -> int:
+    """`twinfleet node list|info`."""
+    from twinfleet.runtime.tools.monitor import graph_verbs
+
+    conn = connection(args)
+    if args.action == "info":
+        return graph_verbs.node_info(conn, args.node, out=sys.stdout, timeout_s=args.query_timeout)
+    return graph_verbs.node_list(conn, out=sys.stdout, stats=args.stats,
+                             timeout_s=args.query_timeout)
+
+
+def cmd_param(args: argparse.Namespace) -> int:
+    """`twinfleet param list|get`."""
+    from twinfleet.runtime.tools.monitor import graph_verbs
+
+    conn = connection(args)
+    if args.action == "get":
+        return graph_verbs.param_get(conn, args.node, args.name, out=sys.stdout,
+                                 timeout_s=args.query_timeout)
+    return graph_verbs.param_list(conn, args.node, out=sys.stdout, timeout_s=args.query_timeout)
+
+
+def cmd_interface(args: argparse.Namespace) -> int:
+    """`twinfleet interface list|show`: types of this process, and of the fleet when one runs."""
+    from twinfleet.runtime.tools.monitor import graph_verbs
+
+    import_modules(args.module)
+    try:
+        conn = connection(args)
+    except CommandError:
+        if args.connect or args.fleet != "*":
+            raise
+        conn = None  # no fleet running: the types this process knows still answer
+    if args.action == "show":
+        return graph_verbs.interface_show(conn, args.type, out=sys.stdout,
+                                      timeout_s=args.query_timeout)
+    return graph_verbs.interface_list(conn, out=sys.stdout, timeout_s=args.query_timeout)
+
+
+def cmd_view(args: argparse.Namespace) -> int:
+    """`twinfleet view`: serve the live viewer (or a trace) on 127.0.0.1."""
+    from twinfleet.runtime.tools.view.viewer import run_viewer
+
+    connect, fleet = args.connect, args.fleet
+    if args.trace is None and not connect:
+        from twinfleet.runtime.fleet.registry import running_fleets
+
+        if any(fleet in ("*", e.fleet) for e in running_fleets()):
+            conn = connection(args)  # one fleet: that one; several: the one-line question
+            connect, fleet = conn.endpoint, conn.fleet
+    try:
+        return run_viewer(connect=connect, fleet=fleet, port=args.port, trace_path=args.trace)
+    except (ValueError, KeyError, OSError) as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return 2
+
+
+def cmd_foxglove(args: argparse.Namespace) -> int:
+    """`twinfleet foxglove`: a Foxglove WebSocket server showing the fleet."""
+    from twinfleet.runtime.tools.view.foxglove_bridge import run_foxglove
+
+    conn = connection(args)
+    try:
+        return run_foxglove(conn.endpoint, conn.fleet, port=args.port)
+    except RuntimeError as exc:  # the SDK's server could not bind the port
+        raise CommandError(f"foxglove: cannot serve on 127.0.0.1:{args.port}: {exc}") from None
+
+
+def _foxglove_parser(sub: argparse._SubParsersAction) -> None:
+    text = ("serve the live fleet to Foxglove (WebSocket, foxglove.websocket.v1): the map as a "
+            "grid, robots as scene entities, scans as point clouds, every topic as JSON")
+    p = sub.add_parser("foxglove", help=text, description=text[0].upper() + text[1:] + ". In "
+                       "Foxglove: Open connection, ws://127.0.0.1:PORT; the 3D panel draws the "
+                       "fleet in frame 'map' with no configuration.")
+    p.add_argument("--port", type=int, default=None, metavar="P",
+                   help="TCP port on 127.0.0.1; 0 picks a free one (default: 8765, Foxglove's "
+                        "usual one, or a free one when 8765 is taken: the URL is printed)")
+    add_connection_arguments(p)
+    p.set_defaults(func=cmd_foxglove)
+
+
+def _launch_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("launch", help="run a scenario live: a router plus one process per node",
+                       description="Run a scenario live: an embedded Zenoh router plus one process "
+                       "per node. The scenario's properties are judged on the running fleet "
+                       "(runtime verification over the states the nodes report); the run ends "
+                       "with `result: PASSED` (exit 0), `FAILED` and the property violated (1), "
+                       "`INCONCLUSIVE` and why (3: a node dropped samples or stalled), or "
+                       "`interrupted` (130, Ctrl-C).")
+    p.add_argument("scenario", help="scenario YAML file, or the name of a shipped example "
+                                    "(twinfleet examples lists them)")
+    p.add_argument("overrides", nargs="*", metavar="[NODE.]NAME:=VALUE",
+                   help="parameter overrides, ROS 2 style: r1.speed:=0.4 sets r1's speed, "
+                        "scan_rate_ms:=50 every node's (values are YAML)")
+    p.add_argument("--param", action="append", default=[], metavar="[NODE.]NAME=VALUE",
+                   help="a parameter override, as NAME:=VALUE (repeatable); `twinfleet param "
+                        "get` shows the values in force")
+    p.add_argument("--time-scale", type=float, default=None, metavar="K",
+                   help="run fleet time K times faster than wall time (default: live.time_scale or 1)")
+    p.add_argument("--timeout", type=float, default=None, metavar="S",
+                   help="end the run after S wall seconds (default: live.timeout_s, else never)")
+    p.add_argument("--seed", type=int, default=None, help="fleet seed (default: the scenario's)")
+    p.add_argument("--runs", type=int, default=1, metavar="N",
+                   help="run the fleet N times with seeds S, S+1, ... (default: 1)")
+    p.add_argument("--connect", default=None, metavar="EP",
+                   help="join the Zenoh router at EP (e.g. tcp/10.0.0.2:7447) instead of embedding one")
+    p.add_argument("--listen", default=None, metavar="EP",
+                   help="endpoint of the embedded router (default: tcp/127.0.0.1:<free port>); "
+                        "an endpoint other machines can reach must be tls/ or quic/ (README "
+                        "\"Trust model\")")
+    p.add_argument("--credentials", default=None, metavar="FILE",
+                   help="with --connect: join the fleet whose registry entry FILE is (copied "
+                        "from the machine that launched it, owner-only): its key signs this "
+                        "launch's nodes (default: this machine's registry entry for EP)")
+    p.add_argument("--insecure-listen", action="store_true",
+                   help="allow --listen on a plain tcp/udp endpoint reachable from other "
+                        "machines: the fleet's traffic then crosses the network unencrypted")
+    p.add_argument("--record-run", default=None, metavar="FILE",
+                   help="append a run record to FILE as JSON lines, flushed per line (scenario, "
+                        "seed, versions, node exits and respawns, end reason, statistics, summary)")
+    p.add_argument("--record-events", default=None, metavar="FILE",
+                   help="write every event each node dispatches to FILE as JSON lines (handler, "
+                        "kind, sender, seq, stamp, choices, state digest), for `twinfleet "
+                        "validate FILE SCENARIO`; with --runs N, FILE.1 ... FILE.N")
+    p.set_defaults(func=cmd_launch)
+
+
+def _examples_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("examples", help="list the shipped example scenarios, or copy one to edit",
+                       description="Without --copy: list the shipped scenarios (run one by name: "
+                       "twinfleet launch c1a, twinfleet check c1a_rebeca). With --copy NAME: "
+                       "copy that scenario and its map into DIR (default: here), the copy's "
+                       "map path pointing at the copied map.")
+    p.add_argument("--copy", default=None, metavar="NAME", help="the example to copy")
+    p.add_argument("dir", nargs="?", default=None, metavar="DIR",
+                   help="where --copy writes (default: the current directory)")
+    p.set_defaults(func=cmd_examples)
+
+
+def _sub(parent: argparse._SubParsersAction, name: str, text: str) -> argparse.ArgumentParser:
+    return parent.add_parser(name, help=text, description=text[0].upper() + text[1:] + ".")
+
+
+def _topic_parser(sub: argparse._SubParsersAction) -> None:
+    topic = sub.add_parser("topic", help="list, inspect, echo, measure or publish topics")
+    ts = topic.add_subparsers(dest="action", required=True, metavar="ACTION")
+    tl = _sub(ts, "list", "list topics with publishers or subscribers")
+    tl.add_argument("-t", "--show-types", action="store_true",
+                    help="also show each topic's message type (learned from its messages)")
+    tl.add_argument("-v", "--verbose", action="store_true", help="show which nodes publish/subscribe")
+    ti = _sub(ts, "info", "print a topic's type and its publisher and subscription counts")
+    ti.add_argument("topic", help="fully qualified topic name, e.g. /poses")
+    ti.add_argument("-v", "--verbose", action="store_true",
+                    help="also list each publisher and subscriber with its node and QoS")
+    tt = _sub(ts, "type", "print a topic's message type")
+    tt.add_argument("topic", help="fully qualified topic name, e.g. /poses")
+    te = _sub(ts, "echo", "print messages on a topic (a latched topic's last one at once)")
+    te.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
+    te.add_argument("--once", action="store_true", help="print one message and exit")
+    te.add_argument("--count", type=int, default=None, metavar="N", help="exit after N messages")
+    te.add_argument("--field", default=None, metavar="PATH",
+                    help="print only this field, e.g. cell or data.cell.0 (envelope fields: "
+                         "type, stamp_ms, seq, sender)")
+    te.add_argument("--duration", type=float, default=None, metavar="S", help="exit after S seconds")
+    te.add_argument("--wait", action="store_true",
+                    help="wait for a publisher of a topic no node uses yet (default: exit 2 "
+                         "after the discovery timeout)")
+    th = _sub(ts, "hz", "print the rate of a topic every second")
+    th.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
+    th.add_argument("--window", type=int, default=100, metavar="N",
+                    help="number of recent messages the rate is computed over (default: 100)")
+    th.add_argument("--duration", type=float, default=None, metavar="S", help="exit after S seconds")
+    tp = _sub(ts, "pub", "publish a message on a topic (checked against its type first)")
+    tp.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
+    add_message_arguments(tp)
+    tp.add_argument("--rate", type=float, default=1.0, metavar="HZ",
+                    help="messages per second (default: 1)")
+    tp.add_argument("--count", type=int, default=1, metavar="N",
+                    help="number of messages, 0 for until Ctrl-C (default: 1)")
+    for p in (tl, ti, tt, te, th, tp):
+        add_connection_arguments(p, discovery=True)
+        p.set_defaults(func=cmd_topic)
+
+
+def _service_parser(sub: argparse._SubParsersAction) -> None:
+    service = sub.add_parser("service", help="list, inspect or call services")
+    ss = service.add_subparsers(dest="action", required=True, metavar="ACTION")
+    sl = _sub(ss, "list", "list served services")
+    sl.add_argument("-t", "--show-types", action="store_true",
+                    help="also show each service's request and reply types (from the serving "
+                         "handler's annotations; ? where it has none)")
+    sl.add_argument("-v", "--verbose", action="store_true", help="show which nodes serve them")
+    st = _sub(ss, "type", "print a service's request and reply types as REQUEST -> REPLY")
+    st.add_argument("service", help="fully qualified service name, e.g. /generate_path")
+    sc = _sub(ss, "call", "call a service once and print the reply")
+    sc.add_argument("service", help="fully qualified service name, e.g. /add_two_ints")
+    add_message_arguments(sc)
+    sc.add_argument("--timeout", type=float, default=2.0, metavar="S",
+                    help="seconds to wait for the reply (default: 2)")
+    for p in (sl, st, sc):
+        add_connection_arguments(p, discovery=True)
+        p.set_defaults(func=cmd_service)
+
+
+def _verbs(sub: argparse._SubParsersAction, name: str, text: str, func: Any,
+           verbs: dict[str, tuple[str, list[tuple[str, dict[str, Any]]]]]
+           ) -> dict[str, argparse.ArgumentParser]:
+    """A command with sub-verbs, each with its positional arguments and the connection options."""
+    parent = sub.add_parser(name, help=text)
+    actions = parent.add_subparsers(dest="action", required=True, metavar="ACTION")
+    made = {}
+    for verb, (verb_text, arguments) in verbs.items():
+        p = made[verb] = _sub(actions, verb, verb_text)
+        for arg, options in arguments:
+            p.add_argument(arg, **options)
+        add_connection_arguments(p, discovery=True)
+        p.set_defaults(func=func)
+    return made
+
+
+def _node_parser(sub: argparse._SubParsersAction) -> None:
+    made = _verbs(sub, "node", "list and inspect running nodes", cmd_node, {
+        "list": ("list running nodes (from liveliness tokens)", []),
+        "info": ("show a node's topics with types, services, timers, parameters",
+                 [("node", {"help": "node name, e.g. r1 or /r1"})])})
+    made["list"].add_argument("--stats", action="store_true",
+                              help="also show each node's counters")
+
+
+def _param_parser(sub: argparse._SubParsersAction) -> None:
+    _verbs(sub, "param", "list and read node parameters", cmd_param, {
+        "list": ("list the parameters of every node, or of one",
+                 [("node", {"nargs": "?", "default": None,
+                            "help": "node name (default: every node)"})]),
+        "get": ("print one parameter of a node",
+                [("node", {"help": "node name, e.g. r1"}),
+                 ("name", {"help": "parameter name, e.g. speed"})])})
+
+
+def _interface_parser(sub: argparse._SubParsersAction) -> None:
+    made = _verbs(sub, "interface", "list message types and show their fields", cmd_interface, {
+        "list": ("list the message types known here and to the running fleet", []),
+        "show": ("show the fields of a message type",
+                 [("type", {"help": "type name, e.g. twinfleet_msgs/RobotPose or "
+                                    "std_msgs/msg/String"})])})
+    for p in made.values():
+        p.add_argument("--module", action="append", default=[], metavar="MODULE",
+                       help="import MODULE first so its message types are known (repeatable)")
+
+
+def _view_parser(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("view", help="web page on 127.0.0.1 showing a live fleet, or stepping "
+                                    "through a checker trace")
+    p.add_argument("--port", type=int, default=8765, metavar="P",
+                   help="TCP port of the page on 127.0.0.1; 0 picks a free one (default: %(default)s)")
+    p.add_argument("--trace", default=None, metavar="FILE",
+                   help="step through this checker trace JSON (from `twinfleet check --trace-out`) "
+                        "instead of watching a live fleet")
+    add_connection_arguments(p, fleet_help="fleet to show; '*' shows the first fleet whose data "
+                             "arrives")
+    p.set_defaults(func=cmd_view)

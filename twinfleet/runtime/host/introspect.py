@@ -1,0 +1,234 @@
+"""What a node process tells monitors about itself, and launch-time parameter overrides.
+
+Every node process serves ``twinfleet/<fleet>/@info/<node>`` (`info_key`): a
+msgpack map built once from the scenario entry and the node class's declared
+handlers (`node_description`)::
+
+    {"name", "namespace", "class", "pid",
+     "params":        {name: value},            # the node's Params, overrides applied
+     "subscriptions": {"/r1/scan": qos}, "services": ["/generate_path"],
+     "service_types": {"/generate_path": ["twinfleet_msgs/PathRequest", "twinfleet_msgs/Path"]},
+     "timers": [{"handler", "period_ms"}], "publication_qos": {"/map": qos},
+     "publications":  {"/poses": "twinfleet_msgs/RobotPose"}}   # published so far
+
+with ``qos = {"reliability", "durability", "depth"}``. `twinfleet node info`,
+`topic info`, `service list -t|type` and `param list|get` read it (a
+service's request and reply types come from its handler's annotations, "?"
+where it has none); what a node *publishes* is only
+known once it publishes (its ``@pub`` liveliness token and ``publications``,
+which records the envelope type of each topic's first message), and its QoS
+is ``publication_qos`` or the default.
+
+Overrides. ``twinfleet launch SCENARIO r1.speed:=0.4`` (or ``--param
+r1.speed=0.4``) sets parameter `speed` of node r1; ``scan_rate_ms:=50``
+without a node sets the scenario's common ``params``. Values are YAML
+(``0.4``, ``[5, 5]``, ``true``). The launcher validates them by loading the
+scenario with them (`load_with_params`) and hands the same ``--param``
+arguments to every node process, which loads its scenario the same way.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import typing
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from twinfleet.runtime.contract.messages import type_name_of
+from twinfleet.runtime.contract.names import KEY_PREFIX
+from twinfleet.runtime.contract.node import HandlerSpec, NodeSpec, QoS
+from twinfleet.runtime.core.guard import expected_type
+
+PARAM_FLAG = "--param"
+
+
+def info_key(fleet: str, node: str) -> str:
+    """Key of the queryable through which a node process describes itself."""
+    return f"{KEY_PREFIX}/{fleet}/@info/{node}"
+
+
+def qos_dict(qos: QoS) -> dict[str, Any]:
+    """A QoS as plain values, with rclpy's policy names."""
+    return {"reliability": qos.reliability.value, "durability": qos.durability.value,
+            "depth": qos.depth}
+
+
+def plain_value(value: Any) -> Any:
+    """A parameter value as msgpack-ready data (tuples → lists, other objects → str)."""
+    if isinstance(value, bool | int | float | str | bytes) or value is None:
+        return value
+    if isinstance(value, list | tuple):
+        return [plain_value(v) for v in value]
+    if isinstance(value, Mapping):
+        return {str(k): plain_value(v) for k, v in value.items()}
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        return {f.name: plain_value(getattr(value, f.name)) for f in dataclasses.fields(value)}
+    return str(value)
+
+
+def _type_name(cls: type | None) -> str:
+    return "?" if cls is None else type_name_of(cls)
+
+
+def service_types(node: Any, spec: HandlerSpec) -> list[str]:
+    """[request type, reply type] of a service handler, from its annotations ("?" if unknown):
+    the request as `guard.expected_type` reads it for the admission check."""
+    try:
+        reply = typing.get_type_hints(getattr(type(node), spec.method)).get("return")
+    except Exception:  # an unresolvable forward reference: say what is known, nothing
+        reply = None
+    if not (isinstance(reply, type) and hasattr(reply, "__message_type__")):
+        reply = None
+    return [_type_name(expected_type(node, spec.method)), _type_name(reply)]
+
+
+def node_description(node: Any, class_path: str) -> dict[str, Any]:
+    """What `info_key` serves for a built node object (module docstring)."""
+    spec = NodeSpec.of(type(node))
+    params = node.params
+    values = ({f.name: plain_value(getattr(params, f.name)) for f in dataclasses.fields(params)}
+              if dataclasses.is_dataclass(params) else {})
+    timers = []
+    for s in spec.of_kind("every"):
+        try:
+            period = node.period_ms(s)
+        except Exception:  # a bad period fails the node elsewhere; describe what is known
+            period = None
+        timers.append({"handler": s.method, "period_ms": period})
+    return {"name": node.name, "namespace": node.namespace or "/", "class": class_path,
+            "pid": os.getpid(), "params": values,
+            "subscriptions": {node.resolve(s.name or ""): qos_dict(s.qos)
+                              for s in spec.of_kind("subscribe")},
+            "services": [node.resolve(s.name or "") for s in spec.of_kind("service")],
+            "service_types": {node.resolve(s.name or ""): service_types(node, s)
+                              for s in spec.of_kind("service")},
+            "timers": timers,
+            "publication_qos": {node.resolve(t): qos_dict(q)
+                                for t, q in spec.publications.items()}}
+
+
+def serve_info(transport: Any, fleet: str, node: Any, class_path: str) -> None:
+    """Serve `node_description` on `info_key` through a `Transport`, with ``publications``:
+    topic → message type of every topic the node has published on so far.
+
+    Call it before the host first publishes: it wraps `transport.publisher` so that the
+    first payload of each topic records its envelope type (one dict lookup per message).
+    """
+    import msgpack
+
+    base = node_description(node, class_path)
+    prefix = f"{KEY_PREFIX}/{fleet}"
+    published: dict[str, str] = {}
+    make_publisher = transport.publisher
+
+    def publisher(key: str, qos: QoS) -> Any:
+        put = make_publisher(key, qos)
+        topic = key[len(prefix):] if key.startswith(prefix + "/") else key
+
+        def put_and_note(payload: bytes) -> None:
+            if topic not in published:
+                published[topic] = _envelope_type(payload)
+            put(payload)
+        return put_and_note
+
+    transport.publisher = publisher
+
+    def respond_info(_request: bytes, respond: Any) -> None:
+        respond(msgpack.packb({**base, "publications": dict(published)}, use_bin_type=True), "")
+
+    transport.serve(info_key(fleet, node.name), respond_info)
+
+
+def _envelope_type(payload: bytes) -> str:
+    import msgpack
+
+    try:
+        kind = msgpack.unpackb(payload, raw=False).get("type")
+    except Exception:  # msgpack raises several unrelated types; never break a publish
+        return "?"
+    return kind if isinstance(kind, str) else "?"
+
+
+def parse_param(text: str) -> tuple[str | None, str, Any]:
+    """``r1.speed=0.4`` or ``r1.speed:=0.4`` → ("r1", "speed", 0.4); no node → (None, name, v).
+
+    Raises:
+        ValueError: not NAME=VALUE, or a value that is not YAML.
+    """
+    name, sep, raw = text.partition(":=") if ":=" in text else text.partition("=")
+    name = name.strip()
+    if not sep or not name or any(c.isspace() for c in name):
+        raise ValueError(f"parameter override {text!r}: expected [NODE.]NAME=VALUE, "
+                         "e.g. r1.speed=0.4")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else ""
+    except yaml.YAMLError as exc:
+        raise ValueError(f"parameter override {text!r}: the value is not YAML "
+                         f"({str(exc).splitlines()[0]})") from None
+    node, _, param = name.rpartition(".")
+    return (node or None), param, value
+
+
+def overrides_doc(path: Path, params: Sequence[str]) -> dict[str, Any]:
+    """The top-level keys (`nodes`, `params`) of scenario `path` with `params` applied.
+
+    Raises:
+        ValueError: a malformed override, or one naming a node the scenario does not have.
+    """
+    doc = yaml.safe_load(path.read_text())
+    nodes = [dict(n) if isinstance(n, dict) else n for n in doc.get("nodes") or []]
+    common = dict(doc.get("params") or {})
+    for text in params:
+        node, name, value = parse_param(text)
+        if node is None:
+            common[name] = value
+            continue
+        entry = next((n for n in nodes if isinstance(n, dict) and n.get("name") == node), None)
+        if entry is None:
+            names = ", ".join(str(n.get("name")) for n in nodes if isinstance(n, dict))
+            raise ValueError(f"parameter override {text!r}: {path} has no node {node!r} "
+                             f"(nodes: {names})")
+        entry["params"] = {**(entry.get("params") or {}), name: value}
+    out: dict[str, Any] = {"nodes": nodes}
+    if common:
+        out["params"] = common
+    return out
+
+
+def load_with_params(path: str | Path, params: Sequence[str] = (),
+                     overrides: Mapping[str, Any] | None = None) -> Any:
+    """`load_scenario(path, overrides)` with parameter overrides applied and validated.
+
+    Raises:
+        ScenarioError: the file or an override is invalid (the text names which).
+    """
+    from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
+
+    scenario = load_scenario(path, overrides)  # the file's own errors first, as they are
+    if not params:
+        return scenario
+    try:
+        doc = overrides_doc(Path(scenario.path), params)
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None
+    fields = {f.name for cfg in scenario.nodes for f in dataclasses.fields(cfg.cls.Params)}
+    for name in (doc.get("params") or {}):
+        if name not in fields and name not in (scenario_common(scenario.path)):
+            raise ScenarioError(f"{scenario.path}: parameter override {name!r}: no node of the "
+                                "scenario has that parameter")
+    return load_scenario(scenario.path, {**(overrides or {}), **doc})
+
+
+def scenario_common(path: str | Path) -> dict[str, Any]:
+    """The common ``params`` of a scenario file, as written."""
+    doc = yaml.safe_load(Path(path).read_text())
+    return dict(doc.get("params") or {}) if isinstance(doc, dict) else {}
+
+
+def param_arguments(params: Sequence[str]) -> list[str]:
+    """``--param X`` for each override: what the launcher appends to a node's command line."""
+    return [arg for p in params for arg in (PARAM_FLAG, p)]

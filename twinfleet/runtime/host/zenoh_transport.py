@@ -1,0 +1,422 @@
+"""ZenohTransport: the live `Transport`, one Zenoh session per process.
+
+Thread boundary. Zenoh runs Python callbacks on its own threads. Every
+callback here does one thing: append ``(fn, args)`` — plain bytes and strings,
+or the `Query` object — to a deque, and schedule **one** drain on the asyncio
+loop per burst (`call_soon_threadsafe` only when no drain is pending). The
+drain runs the host's callbacks on the loop. No handler, decoding or session
+method ever runs on a Zenoh thread.
+
+Bounded hand-off. Samples wait in that deque only until the loop drains it;
+if the loop stalls (a long handler, a suspended process), at most
+``max_pending`` samples wait and later ones are dropped and counted
+(``statistics()["overflow"]``) rather than blocking Zenoh's thread. Queries,
+replies and liveliness changes are never dropped (they are rare, and losing
+one would hang a caller or hide a node). Per-subscription KEEP_LAST depth is
+the node core's job, after decoding (see `runtime.core.node_core`).
+
+Configuration. `zenoh_config` is the only place a Zenoh config is built: it
+always disables multicast scouting and shared memory and enables timestamping
+(needed by the advanced publisher of latched topics). The environment variable
+``TWINFLEET_ZENOH_CONFIG_OVERRIDE='key=json5;key=json5'`` adjusts other keys
+for every session of a fleet (the launcher's environment reaches its nodes),
+e.g. ``transport/link/tx/lease=1000`` to notice a cut link within a second;
+keys under ``scouting/multicast`` and ``transport/shared_memory`` are refused.
+
+Guard (`runtime.core.guard`, README "Trust model"). With a fleet key, every put
+and query carries a signature as its attachment, and a sample (or a service
+request) without a valid one is dropped on Zenoh's thread before it is copied
+and counted (``statistics()["forged"]``); a sample above the payload limit is
+dropped first (``"oversize"``). Both tests are cheaper than the hand-off they
+spare a flood.
+
+QoS mapping. Reliable topics publish with congestion control BLOCK,
+best-effort ones with DROP. Transient-local ("latched") topics use
+`zenoh.ext` advanced publishers (cache of `depth` samples, publisher
+detection) and advanced subscribers (history with late-publisher detection),
+so a late joiner receives the last samples.
+
+Services. A queryable hands the `Query` to the loop; the host replies on the
+queryable's key (or with `reply_err` "server error: ...") and the query is
+finalised with ``with query:``. A caller gets the first reply, or, when the
+query is finalised with no reply, "no server" (finalised early) or "timeout".
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import os
+import time
+import traceback
+from collections import deque
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, final
+
+import zenoh
+from zenoh import ext
+
+from twinfleet.runtime.contract.node import Durability, QoS, Reliability
+from twinfleet.runtime.core.guard import authentic, sign, signer
+from twinfleet.runtime.host.transport import Deliver, OnChange, OnDone, OnRequest
+
+OVERRIDE_ENV = "TWINFLEET_ZENOH_CONFIG_OVERRIDE"
+_LOCKED = ("scouting/multicast", "transport/shared_memory")
+
+
+def config_overrides(text: str | None = None) -> list[tuple[str, str]]:
+    """Parse ``key=json5;key=json5`` (default: the `OVERRIDE_ENV` variable) into pairs.
+
+    Raises:
+        ValueError: on a malformed entry or a key that would re-enable multicast
+            scouting or shared memory.
+    """
+    text = os.environ.get(OVERRIDE_ENV, "") if text is None else text
+    pairs = []
+    for entry in filter(None, (e.strip() for e in text.split(";"))):
+        key, sep, value = entry.partition("=")
+        key = key.strip().strip("/")
+        if not sep or not key or not value.strip():
+            raise ValueError(f"{OVERRIDE_ENV}: expected key=value, got {entry!r}")
+        if key.startswith(_LOCKED) or any(lock.startswith(key) for lock in _LOCKED):
+            raise ValueError(f"{OVERRIDE_ENV}: {key} cannot be overridden "
+                             "(multicast scouting and shared memory stay off)")
+        pairs.append((key, value.strip()))
+    return pairs
+
+
+def zenoh_config(*, connect: Sequence[str] = (), listen: Sequence[str] = (),
+                 mode: str = "client", settings: Mapping[str, Any] | None = None,
+                 ) -> zenoh.Config:
+    """Build a Zenoh config: loopback/explicit endpoints only, no multicast, no shared memory.
+
+    Args:
+        connect: endpoints to connect to, e.g. ``["tcp/127.0.0.1:7447"]``.
+        listen: endpoints to listen on (routers and peers).
+        mode: "client", "peer" or "router".
+        settings: more keys (path → JSON value), e.g. a fleet's credentials and access
+            control (`runtime.fleet.fleetauth`); applied before the override variable.
+
+    Raises:
+        ValueError: on a bad mode, or a bad ``TWINFLEET_ZENOH_CONFIG_OVERRIDE`` entry.
+    """
+    if mode not in ("client", "peer", "router"):
+        raise ValueError(f"mode must be client, peer or router, got {mode!r}")
+    conf = zenoh.Config()
+    conf.insert_json5("mode", json.dumps(mode))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("scouting/gossip/enabled", "false")
+    conf.insert_json5("transport/shared_memory/enabled", "false")
+    conf.insert_json5("timestamping/enabled", "true")
+    conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    for key, value in (settings or {}).items():
+        conf.insert_json5(key, json.dumps(value))
+    for key, value in config_overrides():
+        try:
+            conf.insert_json5(key, value)
+        except zenoh.ZError as exc:
+            raise ValueError(f"{OVERRIDE_ENV}: {key}={value}: {exc}") from None
+    return conf
+
+
+DEFAULT_MAX_PENDING = 20_000
+
+
+class Handoff:
+    """Coalesced hand-off of work from Zenoh threads to one asyncio loop.
+
+    Args:
+        loop: the loop that runs the queued calls.
+        capacity: how many calls `offer` lets wait; `push` is not bounded.
+    """
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, capacity: int = DEFAULT_MAX_PENDING,
+                 ) -> None:
+        self.loop = loop
+        self.capacity = capacity
+        self.pending: deque[tuple[Callable[..., Any], tuple[Any, ...]]] = deque()
+        self.scheduled = False
+        self.closed = False
+        self.wakeups = 0
+        self.overflow = 0
+        self.after_drain: list[Callable[[], None]] = []
+
+    def push(self, fn: Callable[..., Any], *args: Any) -> None:
+        """Queue `fn(*args)` to run on the loop (any thread)."""
+        if self.closed:
+            return
+        self.pending.append((fn, args))
+        if not self.scheduled:  # after the append: a drain that already started sees it
+            self._schedule()
+
+    def _schedule(self) -> None:
+        self.scheduled = True
+        self.wakeups += 1
+        try:
+            self.loop.call_soon_threadsafe(self.drain)
+        except RuntimeError:  # loop closed during shutdown
+            self.closed = True
+
+    def offer(self, fn: Callable[..., Any], *args: Any) -> bool:
+        """Like `push`, but drop and count the call when `capacity` calls already wait."""
+        pending = self.pending
+        if len(pending) >= self.capacity:
+            self.overflow += 1
+            return False
+        if not self.closed:  # `push`, inlined: this runs on Zenoh's thread for every sample
+            pending.append((fn, args))
+            if not self.scheduled:
+                self._schedule()
+        return True
+
+    def drain(self) -> None:
+        """Run every queued call, then the `after_drain` callbacks (on the loop)."""
+        self.scheduled = False  # before popping: a push racing with us schedules again
+        pending = self.pending
+        while pending and not self.closed:
+            fn, args = pending.popleft()
+            fn(*args)
+        for fn in self.after_drain:
+            fn()
+
+
+@final
+class ZenohTransport:
+    """`Transport` over one Zenoh session.
+
+    Args:
+        config: a config from `zenoh_config`.
+        max_pending: samples allowed to wait for the loop before new ones are dropped.
+        key: the fleet key (`runtime.core.guard`): sign what is published and queried, drop
+            (and count as ``forged``) samples and requests without a valid tag.
+        limit: payload bytes a sample may have (larger: dropped, counted as ``oversize``);
+            `limits` sets it per key expression.
+    """
+
+    def __init__(self, config: zenoh.Config, *, max_pending: int = DEFAULT_MAX_PENDING,
+                 key: bytes | None = None, limit: int | None = None,
+                 limits: Mapping[str, int] | None = None) -> None:
+        self.config = config
+        self.max_pending = max_pending
+        self.key, self.limit, self.limits = key, limit, dict(limits or {})
+        self._refused = {"forged": 0, "oversize": 0}
+        self.session: zenoh.Session | None = None
+        self._handoff: Handoff | None = None
+        self._publishers: dict[str, Any] = {}
+        self._advanced: list[Any] = []
+        self._entities: list[Any] = []
+
+    @property
+    def _s(self) -> zenoh.Session:
+        if self.session is None:
+            raise RuntimeError("ZenohTransport used before open()")
+        return self.session
+
+    @property
+    def _h(self) -> Handoff:
+        assert self._handoff is not None
+        return self._handoff
+
+    async def open(self) -> None:
+        """Open the session (in a worker thread: connecting may take a moment)."""
+        self._handoff = Handoff(asyncio.get_running_loop(), self.max_pending)
+        self.session = await asyncio.to_thread(zenoh.open, self.config)
+
+    async def __aenter__(self) -> ZenohTransport:
+        await self.open()
+        return self
+
+    async def __aexit__(self, *exc: object) -> None:
+        await self.close()
+
+    def subscribe(self, key: str, deliver: Deliver, qos: QoS) -> None:
+        """Subscribe; latched QoS uses an advanced subscriber with history."""
+        offer = self._h.offer
+        if self.key is not None or self.limits.get(key, self.limit) is not None:
+            on_sample = self._guarded(key, deliver)
+        elif "*" in key:
+            def on_sample(sample: zenoh.Sample) -> None:
+                offer(deliver, str(sample.key_expr), sample.payload.to_bytes())
+        else:  # a concrete key: every sample carries exactly this key
+            def on_sample(sample: zenoh.Sample) -> None:
+                offer(deliver, key, sample.payload.to_bytes())
+
+        if qos.durability is Durability.TRANSIENT_LOCAL:
+            history = ext.HistoryConfig(detect_late_publishers=True, max_samples=max(1, qos.depth))
+            self._advanced.append(ext.declare_advanced_subscriber(self._s, key, on_sample,
+                                                                  history=history))
+        else:
+            self._entities.append(self._s.declare_subscriber(key, on_sample))
+
+    def _guarded(self, key: str, deliver: Deliver) -> Callable[[zenoh.Sample], None]:
+        """A sample callback that refuses oversize and unsigned samples before copying them.
+
+        It runs on Zenoh's thread, as the plain callbacks do: a length test and one
+        HMAC per sample, cheaper than the copy and hand-off it saves a forged flood.
+        """
+        offer, fleet_key, refused = self._h.offer, self.key, self._refused
+        limit = self.limits.get(key, self.limit) or (1 << 62)
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            if len(sample.payload) > limit:
+                refused["oversize"] += 1
+                return
+            payload, where = sample.payload.to_bytes(), str(sample.key_expr)
+            if fleet_key is not None:
+                tag = sample.attachment
+                if not authentic(fleet_key, where, payload, tag and tag.to_bytes()):
+                    refused["forged"] += 1
+                    return
+            offer(deliver, where, payload)
+
+        return on_sample
+
+    def serve(self, key: str, on_request: OnRequest) -> None:
+        """Declare a queryable; each query is answered on the loop and then finalised.
+
+        With a fleet key, a request to a service without a valid tag is answered
+        "server error: unauthenticated request" at once and counted as ``forged``.
+        """
+        push, refused = self._h.push, self._refused
+        # "@" queryables (statistics, types, info) are read-only views monitors may ask
+        fleet_key = self.key if "/@" not in key else None
+
+        def on_query(query: zenoh.Query) -> None:
+            payload = query.payload.to_bytes() if query.payload is not None else b""
+            tag = query.attachment
+            if fleet_key is not None and not authentic(fleet_key, key, payload,
+                                                       tag and tag.to_bytes()):
+                refused["forged"] += 1
+                push(self._refuse, query)
+                return
+            push(self._answer, key, query, payload, on_request)
+
+        self._entities.append(self._s.declare_queryable(key, on_query))
+
+    @staticmethod
+    def _refuse(query: zenoh.Query) -> None:
+        with query:
+            query.reply_err(b"server error: unauthenticated request (not signed with the "
+                            b"fleet key)")
+
+    @staticmethod
+    def _answer(key: str, query: zenoh.Query, payload: bytes, on_request: OnRequest) -> None:
+        answered = False
+
+        def respond(reply: bytes | None, reason: str) -> None:
+            nonlocal answered
+            if answered:
+                return
+            answered = True
+            with query:  # finalises the query: the caller does not wait for its timeout
+                if reply is not None:
+                    query.reply(key, reply)
+                else:
+                    query.reply_err(reason.encode())
+
+        try:
+            on_request(payload, respond)
+        except Exception as exc:  # never leave a query unfinalised
+            respond(None, f"server error: {exc}")
+            traceback.print_exc()
+
+    def put(self, key: str, payload: bytes, qos: QoS) -> None:
+        """Publish through a per-key publisher declared on first use."""
+        self.publisher(key, qos)(payload)
+
+    def publisher(self, key: str, qos: QoS) -> Callable[[bytes], None]:
+        """The `put` of the per-key publisher (declared on first use): no lookup per message."""
+        pub = self._publishers.get(key)
+        if pub is None:
+            pub = self._declare_publisher(key, qos)
+            self._publishers[key] = pub
+        if self.key is None:
+            return pub.put
+        put, tag = pub.put, signer(self.key, key)
+        return lambda payload: put(payload, attachment=tag(payload))
+
+    def _declare_publisher(self, key: str, qos: QoS) -> Any:
+        reliable = qos.reliability is Reliability.RELIABLE
+        cc = zenoh.CongestionControl.BLOCK if reliable else zenoh.CongestionControl.DROP
+        if qos.durability is Durability.TRANSIENT_LOCAL:
+            pub = ext.declare_advanced_publisher(self._s, key, congestion_control=cc,
+                                                 cache=ext.CacheConfig(max(1, qos.depth)),
+                                                 publisher_detection=True)
+            self._advanced.append(pub)
+            return pub
+        return self._s.declare_publisher(key, congestion_control=cc)
+
+    def query(self, key: str, payload: bytes, timeout_ms: float, on_done: OnDone) -> None:
+        """Query `key`; `on_done` gets the first reply, or None and a reason."""
+        push = self._h.push
+        state = {"done": False}
+        started = time.monotonic()
+        timeout_s = timeout_ms / 1000.0
+
+        def finish(reply: bytes | None, reason: str) -> None:
+            if not state["done"]:
+                state["done"] = True
+                on_done(reply, reason)
+
+        def on_reply(reply: zenoh.Reply) -> None:
+            if reply.ok is not None:
+                push(finish, reply.ok.payload.to_bytes(), "")
+            elif reply.err is not None:
+                text = reply.err.payload.to_string()
+                push(finish, None, "timeout" if text == "Timeout" else _server_error(text))
+
+        def on_final() -> None:
+            elapsed = time.monotonic() - started
+            push(finish, None, "timeout" if elapsed >= 0.9 * timeout_s else "no server")
+
+        attachment = sign(self.key, key, payload) if self.key is not None else None
+        self._s.get(key, zenoh.handlers.Callback(on_reply, on_final), payload=payload,
+                    timeout=timeout_s, attachment=attachment)
+
+    def announce(self, token_key: str) -> None:
+        """Declare a liveliness token."""
+        self._entities.append(self._s.liveliness().declare_token(token_key))
+
+    def watch(self, key_expr: str, on_change: OnChange) -> None:
+        """Subscribe to liveliness changes, present tokens included."""
+        push = self._h.push
+
+        def on_sample(sample: zenoh.Sample) -> None:
+            push(on_change, str(sample.key_expr), sample.kind == zenoh.SampleKind.PUT)
+
+        self._entities.append(self._s.liveliness().declare_subscriber(key_expr, on_sample,
+                                                                      history=True))
+
+    def after_burst(self, fn: Callable[[], None]) -> None:
+        """Call `fn()` on the loop after each burst of deliveries has been handed over.
+
+        The host runs its handlers there, in the same loop iteration as the burst
+        (one loop iteration less per message than a `call_soon`).
+        """
+        self._h.after_drain.append(fn)
+
+    def statistics(self) -> dict[str, int]:
+        """Loop wake-ups used so far (one per burst), samples dropped by the bounded hand-off,
+        and samples and requests refused as ``forged`` or ``oversize``."""
+        h = self._handoff
+        return {"wakeups": h.wakeups if h else 0, "overflow": h.overflow if h else 0,
+                **self._refused}
+
+    async def close(self) -> None:
+        """Undeclare (advanced entities first), then close the session, on the loop thread."""
+        if self._handoff is not None:
+            self._handoff.closed = True
+        for entity in [*self._advanced, *self._publishers.values(), *self._entities]:
+            with contextlib.suppress(Exception):  # already undeclared: nothing to do
+                entity.undeclare()
+        self._advanced.clear()
+        self._publishers.clear()
+        self._entities.clear()
+        if self.session is not None and not self.session.is_closed():
+            self.session.close()
+
+
+def _server_error(text: str) -> str:
+    return text if text.startswith("server error") else f"server error: {text}"

@@ -1,0 +1,252 @@
+"""Logic of the data-plane monitoring commands: `topic echo|hz|pub` and `service call`.
+
+Like `runtime.tools.monitor.graph_verbs` (the graph verbs), each command takes a `Connection`
+and returns an exit code, and a fleet or topic that is not there is reported
+after the discovery timeout instead of being waited on silently. `echo` uses
+an advanced subscriber with history, so a latched topic (``/map``) prints its
+last sample however late the echo starts. `pub` and `call` check the message
+against its type first (`runtime.tools.monitor.payload`) and `pub` warns when no subscriber
+matches.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from collections import deque
+from collections.abc import Sequence
+from typing import Any, TextIO
+
+import msgpack
+import yaml
+import zenoh
+
+from twinfleet.runtime.core.guard import signer
+from twinfleet.runtime.fleet.connection import CommandError, Connection
+from twinfleet.runtime.tools.monitor import graph as g
+from twinfleet.runtime.tools.monitor.graph_verbs import (
+    POLL_S,
+    checked_type,
+    graph_of,
+    inline,
+    known_topic,
+    open_session,
+    pick,
+)
+from twinfleet.runtime.tools.monitor.payload import PayloadError, build_fields, envelope
+
+
+def render_envelope(payload: bytes) -> str:
+    """A YAML rendering of a raw envelope (no message classes needed)."""
+    try:
+        env = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    except Exception as exc:  # msgpack raises several unrelated types
+        return f"<undecodable payload of {len(payload)} bytes: {exc}>\n"
+    return yaml.safe_dump(env, sort_keys=False, default_flow_style=None, width=100)
+
+
+def field_of(payload: bytes, path: str) -> Any:
+    """The value at `path` (``data.cell``, ``cell`` = ``data.cell``, ``stamp_ms``) of an
+    envelope; raises KeyError naming the missing part."""
+    value: Any = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    parts = path.split(".")
+    if parts[0] not in ("type", "stamp_ms", "seq", "sender", "data"):
+        parts = ["data", *parts]
+    for part in parts:
+        if isinstance(value, list | tuple) and part.lstrip("-").isdigit():
+            value = value[int(part)]
+        elif isinstance(value, dict) and part in value:
+            value = value[part]
+        else:
+            raise KeyError(part)
+    return value
+
+
+def topic_echo(conn: Connection, topic: str, *, out: TextIO, count: int | None = None,
+               duration_s: float | None = None, field: str | None = None, wait: bool = False,
+               timeout_s: float = 1.0, err: TextIO = sys.stderr) -> int:
+    """Print each sample on `topic` as YAML, `---` between samples (`field`: that field only).
+
+    A latched topic's last sample arrives at once, however late the echo starts.
+    Returns 0, or 2 when the topic is unknown (no publisher, no subscriber; with
+    `wait`, a warning and a wait instead) or `count` samples did not arrive in time.
+    """
+    seen = 0
+    deadline = None if duration_s is None else time.monotonic() + duration_s
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s, warn=err if wait else None)
+        where = pick(conn, graph, topic, "topic")
+        latched = g.latched_topics(g.node_infos(session, where[0], timeout_s))
+        samples: deque[bytes] = deque()
+        sub = g.subscribe(session, g.data_key(*where), lambda s: samples.append(
+            s.payload.to_bytes()), history=True)
+        try:
+            _check_echo_topic(conn, graph, where, latched, wait, timeout_s, err, samples)
+            while (count is None or seen < count) and (deadline is None or time.monotonic() < deadline):
+                while samples and (count is None or seen < count):
+                    _print_sample(out, samples.popleft(), field, where[1])
+                    seen += 1
+                out.flush()
+                time.sleep(POLL_S)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            sub.undeclare()
+    if count is not None and seen < count:
+        raise CommandError(f"{where[1]}: {seen} of {count} messages within {duration_s:g} s")
+    return 0
+
+
+def _check_echo_topic(conn: Connection, graph: g.Graph, where: tuple[str, str],
+                      latched: set[tuple[str, str]], wait: bool, timeout_s: float, err: TextIO,
+                      samples: deque[bytes]) -> None:
+    if where in graph.publishers or where in graph.subscribers or where in latched:
+        return
+    deadline = time.monotonic() + timeout_s
+    while not samples and time.monotonic() < deadline:
+        time.sleep(POLL_S)
+    if samples:
+        return
+    topics = ", ".join(t for f, t in graph.topics() if f == where[0])
+    text = (f"no node publishes or subscribes {where[1]} in fleet {where[0]!r} "
+            f"(topics: {topics})")
+    if not wait:
+        raise CommandError(text + "; add --wait to wait for a publisher")
+    print(f"warning: {text}; waiting for a publisher", file=err, flush=True)
+
+
+def _print_sample(out: TextIO, payload: bytes, field: str | None, topic: str) -> None:
+    if field is None:
+        out.write(render_envelope(payload) + "---\n")
+        return
+    try:
+        value = field_of(payload, field)
+    except (KeyError, IndexError, ValueError, TypeError) as exc:
+        raise CommandError(f"{topic}: its messages have no field {field!r} "
+                           f"(missing {exc}); fields: {_fields(payload)}") from None
+    out.write(yaml.safe_dump(value, default_flow_style=None, width=100, sort_keys=False)
+              .removesuffix("...\n") + "---\n")
+
+
+def _fields(payload: bytes) -> str:
+    try:
+        data = msgpack.unpackb(payload, raw=False, strict_map_key=False).get("data", {})
+    except Exception:  # msgpack raises several unrelated types
+        return "?"
+    return ", ".join(map(str, data)) if isinstance(data, dict) else "?"
+
+
+def rate_report(stamps: Sequence[float]) -> str | None:
+    """`ros2 topic hz`-style line for arrival times `stamps` (seconds), or None if < 2."""
+    if len(stamps) < 2:
+        return None
+    gaps = [b - a for a, b in zip(stamps, stamps[1:], strict=False)]
+    mean = sum(gaps) / len(gaps)
+    std = (sum((x - mean) ** 2 for x in gaps) / len(gaps)) ** 0.5
+    rate = 1.0 / mean if mean > 0 else float("inf")
+    return (f"average rate: {rate:.3f} Hz  min: {min(gaps):.4f} s  max: {max(gaps):.4f} s  "
+            f"std dev: {std:.5f} s  window: {len(stamps)}")
+
+
+def topic_hz(conn: Connection, topic: str, *, out: TextIO, window: int = 100,
+             duration_s: float | None = None, every_s: float = 1.0,
+             timeout_s: float = 1.0) -> int:
+    """Print the publishing rate of `topic` every `every_s` over the last `window` samples."""
+    stamps: deque[float] = deque(maxlen=max(2, window))
+    deadline = None if duration_s is None else time.monotonic() + duration_s
+    arrivals: deque[float] = deque()
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s)
+        where = pick(conn, graph, topic, "topic")
+        known_topic(conn, graph, where)
+        sub = session.declare_subscriber(g.data_key(*where),
+                                         lambda _s: arrivals.append(time.monotonic()))
+        next_report = time.monotonic() + every_s
+        try:
+            while deadline is None or time.monotonic() < deadline:
+                time.sleep(POLL_S)
+                while arrivals:
+                    stamps.append(arrivals.popleft())
+                if time.monotonic() >= next_report:
+                    next_report += every_s
+                    print(rate_report(list(stamps)) or "no new messages", file=out, flush=True)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            sub.undeclare()
+    if not stamps:
+        raise CommandError(f"{where[1]}: no message within {duration_s:g} s")
+    return 0
+
+
+def _known_schemas(session: zenoh.Session, fleet: str, timeout_s: float) -> dict[str, Any]:
+    return {name: schema for name, (schema, _) in g.served_schemas(session, fleet,
+                                                                     timeout_s).items()}
+
+
+def _payload_fields(type_name: str, data: Any, known: dict[str, Any]) -> dict[str, Any]:
+    try:
+        return build_fields(type_name, data, known)
+    except PayloadError as exc:
+        raise CommandError(str(exc)) from None
+
+
+def topic_pub(conn: Connection, topic: str, type_name: str, data: dict[str, Any], *,
+              out: TextIO, rate_hz: float = 1.0, count: int | None = 1,
+              wait_matched_s: float = 2.0, timeout_s: float = 1.0,
+              err: TextIO = sys.stderr) -> int:
+    """Publish `data` as `type_name` on `topic` `count` times (None: until Ctrl-C) at `rate_hz`.
+
+    The message is checked against the type first (`runtime.tools.monitor.payload`); a warning
+    says when no subscriber matches within `wait_matched_s`.
+    """
+    sent = 0
+    type_name = checked_type(type_name)
+    with open_session(conn, write=True) as session:
+        fields = _payload_fields(type_name, data, _known_schemas(session, conn.fleet, timeout_s))
+        key = g.data_key(conn.fleet, topic)
+        tag = signer(conn.auth.key, key)  # the fleet's nodes take only signed samples
+        pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+        deadline = time.monotonic() + wait_matched_s
+        while not pub.matching_status.matching and time.monotonic() < deadline:
+            time.sleep(POLL_S)
+        if not pub.matching_status.matching:
+            print(f"warning: no subscriber on {topic} in fleet {conn.fleet!r} (waited "
+                  f"{wait_matched_s:g} s); publishing anyway", file=err, flush=True)
+        try:
+            while count is None or sent < count:
+                payload = envelope(type_name, fields, seq=sent + 1)
+                pub.put(payload, attachment=tag(payload))
+                sent += 1
+                print(f"published #{sent} on {topic}: {type_name} {inline(fields)}",
+                      file=out, flush=True)
+                if count is None or sent < count:
+                    time.sleep(1.0 / rate_hz)
+        except KeyboardInterrupt:
+            pass
+        finally:
+            pub.undeclare()
+    return 0
+
+
+def service_call(conn: Connection, service: str, type_name: str, data: dict[str, Any], *,
+                 out: TextIO, timeout_s: float = 2.0, discovery_s: float = 1.0) -> int:
+    """Call `service` once and print the reply envelope; 2 on error, timeout or no server."""
+    type_name = checked_type(type_name, service=True)
+    with open_session(conn, write=True) as session:
+        fields = _payload_fields(type_name, data, _known_schemas(session, conn.fleet,
+                                                                 discovery_s))
+        key, payload = g.data_key(conn.fleet, service), envelope(type_name, fields)
+        replies = list(session.get(key, payload=payload, timeout=timeout_s,
+                                   attachment=signer(conn.auth.key, key)(payload)))
+    for reply in replies:
+        if reply.ok is not None:
+            out.write(render_envelope(reply.ok.payload.to_bytes()))
+            out.flush()
+            return 0
+        if reply.err is not None:
+            text = reply.err.payload.to_string()
+            raise CommandError(f"{service}: " + (f"no reply within {timeout_s:g} s"
+                                                 if text == "Timeout" else text))
+    raise CommandError(f"{service}: no server in fleet {conn.fleet!r} "
+                       "(see `twinfleet service list`)")

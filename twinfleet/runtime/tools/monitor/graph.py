@@ -1,0 +1,216 @@
+"""Reading a running fleet's graph over one Zenoh session: nodes, topics, services, types.
+
+What the monitors (`runtime.tools.monitor.graph_verbs`) and the Foxglove bridge know about a
+fleet comes from four sources, all served by the node processes themselves:
+
+* liveliness tokens (`runtime.host.transport.graph_key`): who runs, publishes,
+  subscribes and serves;
+* ``@info/<node>`` (`runtime.host.introspect`): class, parameters, declared QoS;
+* ``@types/<node>`` (`runtime.host.schemas`): the JSON Schemas of the message
+  types each process knows;
+* the samples themselves: a topic's type is the ``type`` of its envelopes
+  (publishers are not declared ahead in twinfleet, so `sample_types` listens,
+  with history for latched topics, for at most the discovery timeout).
+
+Functions here are synchronous and take an open `zenoh.Session`.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import time
+from collections import defaultdict
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+import msgpack
+import zenoh
+from zenoh import ext
+
+from twinfleet.runtime.contract.names import KEY_PREFIX
+from twinfleet.runtime.host.introspect import info_key
+from twinfleet.runtime.host.schemas import types_key
+from twinfleet.runtime.host.transport import graph_key, parse_graph_key
+
+_POLL_S = 0.02
+
+
+@dataclass
+class Graph:
+    """Who is there: node names and, per (fleet, name), the nodes on each side."""
+
+    nodes: list[tuple[str, str]] = field(default_factory=list)
+    publishers: dict[tuple[str, str], list[str]] = field(default_factory=dict)
+    subscribers: dict[tuple[str, str], list[str]] = field(default_factory=dict)
+    servers: dict[tuple[str, str], list[str]] = field(default_factory=dict)
+
+    def fleets(self) -> list[str]:
+        """The fleets that have at least one node."""
+        return sorted({f for f, _ in self.nodes})
+
+    def topics(self) -> list[tuple[str, str]]:
+        """(fleet, topic) of every topic with a publisher or a subscriber."""
+        return sorted({*self.publishers, *self.subscribers})
+
+    def entities_of(self, fleet: str, node: str) -> dict[str, list[str]]:
+        """The topics `node` publishes and subscribes and the services it serves."""
+        def mine(table: dict[tuple[str, str], list[str]]) -> list[str]:
+            return sorted(n for (f, n), who in table.items() if f == fleet and node in who)
+        return {"publishers": mine(self.publishers), "subscribers": mine(self.subscribers),
+                "servers": mine(self.servers)}
+
+
+def liveliness_keys(session: zenoh.Session, key_expr: str, timeout_s: float) -> list[str]:
+    """Keys of the liveliness tokens matching `key_expr`."""
+    keys = {str(r.ok.key_expr) for r in session.liveliness().get(key_expr, timeout=timeout_s)
+            if r.ok is not None}
+    return sorted(keys)
+
+
+def read_graph(session: zenoh.Session, fleet: str, timeout_s: float) -> Graph:
+    """The graph of `fleet` (``*``: every fleet behind the router)."""
+    graph = Graph()
+    tables = {"pub": graph.publishers, "sub": graph.subscribers, "srv": graph.servers}
+    for kind in ("node", "pub", "sub", "srv"):
+        pattern = graph_key(fleet, kind, "*") + ("/**" if kind != "node" else "")
+        for key in liveliness_keys(session, pattern, timeout_s):
+            entry_fleet, _, node, name = parse_graph_key(key)
+            if kind == "node":
+                graph.nodes.append((entry_fleet, node))
+            else:
+                tables[kind].setdefault((entry_fleet, name), []).append(node)
+    for table in tables.values():
+        for who in table.values():
+            who.sort()
+    return graph
+
+
+def _query(session: zenoh.Session, key: str, timeout_s: float) -> list[tuple[str, bytes]]:
+    return [(str(r.ok.key_expr), r.ok.payload.to_bytes())
+            for r in session.get(key, timeout=timeout_s) if r.ok is not None]
+
+
+def node_infos(session: zenoh.Session, fleet: str, timeout_s: float,
+               node: str = "*") -> dict[tuple[str, str], dict[str, Any]]:
+    """(fleet, node) → the node's self-description (`runtime.host.introspect.node_description`)."""
+    found = {}
+    for key, payload in _query(session, info_key(fleet, node), timeout_s):
+        parts = key.split("/")
+        with contextlib.suppress(ValueError, TypeError):
+            found[(parts[1], parts[3])] = msgpack.unpackb(payload, raw=False)
+    return found
+
+
+def node_stats(session: zenoh.Session, fleet: str, timeout_s: float) -> dict[tuple[str, str], Any]:
+    """(fleet, node) → the node's counters (`@stats`, `runtime.host.node_host.HostStatistics`)."""
+    found = {}
+    for key, payload in _query(session, f"{KEY_PREFIX}/{fleet}/@stats/*", timeout_s):
+        parts = key.split("/")
+        with contextlib.suppress(ValueError, TypeError):
+            found[(parts[1], parts[3])] = msgpack.unpackb(payload, raw=False)
+    return found
+
+
+def served_schemas(session: zenoh.Session, fleet: str, timeout_s: float
+                   ) -> dict[str, tuple[dict[str, Any], list[str]]]:
+    """Type name → (data schema, the nodes that serve it), from every ``@types`` queryable."""
+    found: dict[str, tuple[dict[str, Any], list[str]]] = {}
+    for key, payload in _query(session, types_key(fleet, "*"), timeout_s):
+        node = key.rsplit("/", 1)[-1]
+        try:
+            schemas = json.loads(payload)
+        except ValueError:
+            continue
+        for name, schema in schemas.items() if isinstance(schemas, dict) else ():
+            found.setdefault(name, (schema, []))[1].append(node)
+    return found
+
+
+def latched_topics(infos: dict[tuple[str, str], dict[str, Any]]) -> set[tuple[str, str]]:
+    """(fleet, topic) of every topic that some node declares transient-local."""
+    latched = set()
+    for (fleet, _), info in infos.items():
+        for table in ("publication_qos", "subscriptions"):
+            for topic, qos in (info.get(table) or {}).items():
+                if isinstance(qos, dict) and qos.get("durability") == "transient_local":
+                    latched.add((fleet, topic))
+    return latched
+
+
+def data_key(fleet: str, name: str) -> str:
+    """Key expression of topic or service `name` (fully qualified) in `fleet` (may be `*`)."""
+    return f"{KEY_PREFIX}/{fleet}{name if name.startswith('/') else '/' + name}"
+
+
+def subscribe(session: zenoh.Session, key: str, callback: Any, *, history: bool) -> Any:
+    """A subscriber on `key`; with `history`, an advanced one that also gets the latched
+    samples that publishers keep (transient-local topics: ``/map``)."""
+    if not history:
+        return session.declare_subscriber(key, callback)
+    return ext.declare_advanced_subscriber(
+        session, key, callback,
+        history=ext.HistoryConfig(detect_late_publishers=True, max_samples=1))
+
+
+def envelope_type(payload: bytes) -> str | None:
+    """The ``type`` of a raw envelope, or None if it is not one."""
+    try:
+        env = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    except Exception:  # msgpack raises several unrelated types
+        return None
+    kind = env.get("type") if isinstance(env, dict) else None
+    return kind if isinstance(kind, str) else None
+
+
+def sample_types(session: zenoh.Session, fleet: str, topics: Iterable[tuple[str, str]],
+                 timeout_s: float, latched: set[tuple[str, str]] = frozenset()
+                 ) -> dict[tuple[str, str], str]:
+    """(fleet, topic) → message type, from the first sample of each topic within `timeout_s`."""
+    wanted = set(topics)
+    seen: dict[tuple[str, str], str] = {}
+    if not wanted:
+        return seen
+
+    def on_sample(sample: zenoh.Sample) -> None:
+        parts = str(sample.key_expr).split("/", 2)
+        where = (parts[1], "/" + parts[2]) if len(parts) == 3 else None
+        if where in wanted and where not in seen:
+            kind = envelope_type(sample.payload.to_bytes())
+            if kind is not None:
+                seen[where] = kind
+
+    subs = [subscribe(session, data_key(f, t), on_sample, history=(f, t) in latched)
+            for f, t in sorted(wanted)]
+    try:
+        deadline = time.monotonic() + timeout_s
+        while len(seen) < len(wanted) and time.monotonic() < deadline:
+            time.sleep(_POLL_S)
+    finally:
+        for sub in subs:
+            sub.undeclare()
+    return dict(seen)
+
+
+def topic_types(session: zenoh.Session, fleet: str, topics: Iterable[tuple[str, str]],
+                timeout_s: float, infos: dict[tuple[str, str], dict[str, Any]] | None = None
+                ) -> dict[tuple[str, str], str]:
+    """(fleet, topic) → type: what the publishing nodes say (``@info`` ``publications``), else
+    the first sample within `timeout_s` (a publisher that is not a twinfleet node)."""
+    infos = node_infos(session, fleet, timeout_s) if infos is None else infos
+    said = {(f, topic): kind for (f, _), info in infos.items()
+            for topic, kind in (info.get("publications") or {}).items() if kind != "?"}
+    wanted = list(topics)
+    found = {t: said[t] for t in wanted if t in said}
+    rest = [t for t in wanted if t not in found]
+    found.update(sample_types(session, fleet, rest, timeout_s, latched_topics(infos)))
+    return found
+
+
+def group_by_type(types: dict[tuple[str, str], str]) -> dict[str, list[tuple[str, str]]]:
+    """Type name → the (fleet, topic)s that carry it."""
+    out: dict[str, list[tuple[str, str]]] = defaultdict(list)
+    for where, kind in sorted(types.items()):
+        out[kind].append(where)
+    return dict(out)

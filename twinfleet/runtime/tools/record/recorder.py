@@ -1,0 +1,328 @@
+"""`twinfleet record` and `twinfleet play`: fleet topics to an MCAP file and back onto Zenoh.
+
+File layout (MCAP, written with the `mcap` package, zstd chunks, full index):
+
+* one **schema** per message type: name = the envelope's type name (e.g.
+  ``twinfleet_msgs/RobotPose``), encoding ``jsonschema``, data = a JSON Schema
+  of the envelope ``{type, stamp_ms, seq, sender, data}`` whose ``data`` lists
+  the dataclass fields of the registered message class (`runtime.host.schemas`;
+  joining a running fleet, the schemas its node processes serve; inferred
+  from the first sample, and said so, when neither knows the type);
+* one **channel** per topic key (and type): topic = the fully qualified name
+  (``/r1/scan``), message encoding ``msgpack``, metadata ``key`` (the Zenoh
+  key), ``fleet`` and ``durability`` (``transient_local`` for ``/map``);
+* **messages**: the raw envelope bytes as received; log time = receive time
+  (ns since the Unix epoch, made strictly increasing so that log-time order
+  is arrival order), publish time = log time, sequence = arrival index.
+* one metadata record ``twinfleet`` (fleet, scenario, time scale, seed).
+
+Crash safety. Messages are written in chunks as they come: the chunk in
+progress is closed and flushed to the file at least every `FLUSH_S` seconds
+(and whenever it reaches `CHUNK_BYTES`), so after a kill -9 the file holds
+every chunk up to the last flush; it then has no summary, and `twinfleet bag
+repair FILE` (`runtime.tools.record.bag.repair`) rewrites it as a complete recording. A
+write that fails (a full disk: ENOSPC) stops the recording at once: the file
+is cut back to its last complete chunk (readable after `bag repair`), and
+`failed` holds the one line that says so.
+
+`record_scenario` makes the recorder's session the fleet's router and then
+launches the fleet with `run_fleet(connect=...)`, so the recorder is subscribed
+before the first node starts. `record_live` joins a running fleet and asks its
+nodes for their message schemas (`fleet_schemas`).
+`play` re-publishes the messages in log-time order at the recorded pace
+divided by `rate`, latched topics through advanced publishers.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import json
+import sys
+import time
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import Any, BinaryIO, TextIO, final
+
+import msgpack
+from mcap.reader import make_reader
+from mcap.writer import Writer
+
+from twinfleet.runtime.contract.names import KEY_PREFIX
+from twinfleet.runtime.host.schemas import message_schema, types_key
+from twinfleet.runtime.host.zenoh_transport import zenoh_config
+from twinfleet.runtime.tools.monitor.tap import LATCHED_TOPICS, FleetTap, tap_config
+
+DRAIN_S = 0.3
+LINGER_S = 0.5
+FLUSH_S = 0.5  # the chunk in progress reaches the file at least this often (wall seconds)
+CHUNK_BYTES = 256 * 1024
+@final
+class McapRecorder:
+    """Writes raw envelopes to an MCAP file: a schema per type, a channel per topic key.
+
+    Args:
+        stream: a binary file opened for writing (closed by `close`).
+        latched: fully qualified names recorded with durability ``transient_local``.
+    """
+
+    def __init__(self, stream: BinaryIO, *, latched: tuple[str, ...] = LATCHED_TOPICS,
+                 on_failure: Callable[[str], None] | None = None) -> None:
+        self.known_schemas: dict[str, dict[str, Any]] = {}  # data schemas the fleet served
+        self._stream = stream
+        self.failed: str | None = None  # why the recording stopped early (module docstring)
+        self.on_failure = on_failure
+        self._good = 0  # file offset after the last complete flush
+        self._flushed_at = time.monotonic()
+        self._writer = Writer(stream, chunk_size=CHUNK_BYTES)
+        self._guarded(lambda: self._writer.start(profile="", library="twinfleet"))
+        self.latched = latched
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[tuple[str, str], int] = {}
+        self._last_ns = 0
+        self.messages = 0
+        self.undecodable = 0
+
+    def metadata(self, values: Mapping[str, Any]) -> None:
+        """Add the ``twinfleet`` metadata record (values become strings)."""
+        self._guarded(lambda: self._writer.add_metadata(
+            "twinfleet", {k: str(v) for k, v in values.items()}))
+        self.flush()
+
+    def flush(self) -> None:
+        """Close the chunk in progress and write it to the file (now)."""
+        if self._guarded(self._writer.flush):
+            self._good = self._stream.tell()
+        self._flushed_at = time.monotonic()
+
+    def flush_due(self) -> None:
+        """`flush` if the last one is `FLUSH_S` old (a periodic task calls this)."""
+        if self.failed is None and time.monotonic() - self._flushed_at >= FLUSH_S:
+            self.flush()
+
+    def _guarded(self, write: Callable[[], Any]) -> bool:
+        """Run a write; on OSError stop the recording (module docstring). False if it failed."""
+        if self.failed is not None:
+            return False
+        try:
+            write()
+            return True
+        except OSError as exc:
+            name = getattr(self._stream, "name", "the recording")
+            self.failed = (f"recording stopped after {self.messages} messages: cannot write "
+                           f"{name} ({exc.strerror or exc}); the file keeps what was written "
+                           f"before: `twinfleet bag repair {name}` makes it a complete recording")
+            with contextlib.suppress(OSError, ValueError):
+                self._stream.truncate(self._good)  # cut a half-written chunk off
+            if self.on_failure is not None:
+                self.on_failure(self.failed)
+            return False
+
+    def write(self, key: str, payload: bytes) -> None:
+        """Record one sample of `key` received now."""
+        parts = key.split("/", 2)
+        if self.failed is not None or len(parts) < 3 or parts[0] != KEY_PREFIX:
+            return
+        try:
+            env = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+            type_name = env["type"] if isinstance(env, dict) and isinstance(env.get("type"), str) else None
+        except Exception:  # msgpack raises several unrelated types
+            env, type_name = None, None
+        if type_name is None:
+            self.undecodable += 1
+            type_name = "twinfleet/Undecodable"
+        now = max(time.time_ns(), self._last_ns + 1)
+        self._last_ns = now
+
+        def add() -> None:
+            channel = self._channel(key, parts[1], "/" + parts[2], type_name, env)
+            self._writer.add_message(channel, log_time=now, data=payload, publish_time=now,
+                                     sequence=self.messages)
+
+        if self._guarded(add):
+            self.messages += 1
+        self.flush_due()
+
+    def _channel(self, key: str, fleet: str, topic: str, type_name: str, env: Any) -> int:
+        channel = self._channels.get((key, type_name))
+        if channel is not None:
+            return channel
+        schema = self._schemas.get(type_name)
+        if schema is None:
+            sample = env.get("data") if isinstance(env, dict) else None
+            text = json.dumps(message_schema(type_name, sample, self.known_schemas),
+                              indent=1).encode()
+            schema = self._writer.register_schema(type_name, "jsonschema", text)
+            self._schemas[type_name] = schema
+        durability = "transient_local" if topic in self.latched else "volatile"
+        channel = self._writer.register_channel(topic, "msgpack", schema, {
+            "key": key, "fleet": fleet, "durability": durability})
+        self._channels[(key, type_name)] = channel
+        return channel
+
+    def close(self) -> None:
+        """Write the summary and close the file (a failed recording stays as it was cut)."""
+        if self.failed is None:
+            self._guarded(self._writer.finish)
+        with contextlib.suppress(OSError):
+            self._stream.close()
+
+    @property
+    def topics(self) -> int:
+        """Number of channels written so far."""
+        return len(self._channels)
+
+
+async def record_scenario(scenario: Any, path: str | Path, *, time_scale: float | None = None,
+                          duration_s: float | None = None, seed: int | None = None,
+                          listen: str | None = None, out: TextIO = sys.stdout) -> tuple[Any, McapRecorder]:
+    """Launch `scenario` with the recorder as its router; record until the run ends.
+
+    Returns the launcher's `FleetResult` and the (closed) recorder with its counts.
+    """
+    from twinfleet.runtime.fleet.launcher import free_port, run_fleet
+
+    endpoint = listen or f"tcp/127.0.0.1:{free_port()}"
+    failed = asyncio.Event()
+    recorder = McapRecorder(open(path, "wb"),  # noqa: SIM115 - closed by recorder.close()
+                            on_failure=lambda _why: failed.set())
+    recorder.metadata({"fleet": scenario.fleet, "scenario": scenario.path,
+                       "seed": scenario.seed if seed is None else seed,
+                       "time_scale": time_scale or scenario.live.time_scale})
+    tap = FleetTap(lambda: zenoh_config(listen=[endpoint], mode="router"), scenario.fleet,
+                   recorder.write, retry=False)
+    flusher: asyncio.Task[None] | None = None
+    try:
+        await tap.open()
+        flusher = asyncio.create_task(_flush_until(recorder, failed))
+
+        async def until_failed(_fleet: Any) -> str:
+            await failed.wait()
+            return str(recorder.failed)
+
+        result = await run_fleet(scenario, time_scale=time_scale, timeout_s=duration_s, seed=seed,
+                                 connect=endpoint, out=out, driver=until_failed)
+        await asyncio.sleep(DRAIN_S)  # the last samples may still be on their way
+    finally:
+        if flusher is not None:
+            flusher.cancel()
+        await tap.close()
+        recorder.close()
+    return result, recorder
+
+
+async def _flush_until(recorder: McapRecorder, failed: asyncio.Event) -> None:
+    """Flush the recorder every `FLUSH_S` / 2 (a quiet fleet sends nothing that would)."""
+    while not failed.is_set():
+        await asyncio.sleep(FLUSH_S / 2)
+        recorder.flush_due()
+
+
+async def record_live(connect: str, fleet: str, path: str | Path, *,
+                      duration_s: float | None = None, stop: asyncio.Event | None = None,
+                      handle_signals: bool = False, auth: Any = None) -> McapRecorder:
+    """Record a running fleet reached at `connect` for `duration_s` or until `stop` is set
+    (with `handle_signals`, also until SIGINT/SIGTERM); `auth`: the fleet's logins
+    (`runtime.fleet.fleetauth.MonitorAuth`; default: this machine's registry)."""
+    import signal
+
+    stop = stop or asyncio.Event()
+    if handle_signals:
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            asyncio.get_running_loop().add_signal_handler(sig, stop.set)
+    recorder = McapRecorder(open(path, "wb"),  # noqa: SIM115 - closed by recorder.close()
+                            on_failure=lambda _why: stop.set())
+    recorder.metadata({"fleet": fleet, "connect": connect})
+    tap = FleetTap(lambda: tap_config(connect, auth), fleet, recorder.write,
+                   retry=False)
+    try:
+        # the schemas first: a sample recorded before them would get a guessed one
+        await tap.open(prepare=lambda session: recorder.known_schemas.update(
+            fleet_schemas(session, fleet)))
+        waiter = asyncio.ensure_future(stop.wait())
+        flusher = asyncio.create_task(_flush_until(recorder, stop))
+        await asyncio.wait([waiter], timeout=duration_s)
+        waiter.cancel()
+        flusher.cancel()
+    finally:
+        await tap.close()
+        recorder.close()
+    return recorder
+
+
+def fleet_schemas(session: Any, fleet: str, timeout_s: float = 1.0) -> dict[str, dict[str, Any]]:
+    """Message data schemas served by the running node processes of `fleet` ('*': all)."""
+    found: dict[str, dict[str, Any]] = {}
+    if session is None:
+        return found
+    for reply in session.get(types_key(fleet, "*"), timeout=timeout_s):
+        if reply.ok is not None:
+            with contextlib.suppress(ValueError, TypeError):  # a node of another version
+                found.update(json.loads(reply.ok.payload.to_bytes()))
+    return found
+
+
+def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
+         fleet: str | None = None, out: TextIO = sys.stdout, wait_s: float = 2.0,
+         linger_s: float = LINGER_S) -> int:
+    """Publish every recorded message in log-time order, at the recorded pace divided by `rate`.
+
+    Args:
+        make_config: builds the Zenoh config (client of a router, or a router itself).
+        path: the MCAP file.
+        rate: speed factor (2 = twice as fast); must be > 0.
+        fleet: publish into this fleet instead of the recorded one.
+        out: where progress lines go.
+        wait_s: wait up to this long for a subscriber to match before publishing.
+        linger_s: keep the session open this long after the last message.
+
+    Returns 0, or 2 when the file holds no twinfleet messages.
+    """
+    import zenoh
+    from zenoh import ext
+
+    if not rate > 0:
+        raise ValueError(f"rate must be > 0, got {rate}")
+    with open(path, "rb") as stream, zenoh.open(make_config()) as session:
+        reader = make_reader(stream)
+        summary = reader.get_summary()
+        pubs: dict[int, Any] = {}
+
+        def publisher(channel: Any) -> Any:
+            if channel.message_encoding != "msgpack":
+                raise ValueError(f"{path}: channel {channel.topic} is {channel.message_encoding}-"
+                                 "encoded (an exported copy?); play needs the msgpack recording")
+            key = f"{KEY_PREFIX}/{fleet}{channel.topic}" if fleet else channel.metadata.get("key")
+            if not key:
+                raise ValueError(f"{path}: channel {channel.topic} has no 'key' metadata; "
+                                 "give the fleet to publish into")
+            if channel.metadata.get("durability") == "transient_local":
+                pub = ext.declare_advanced_publisher(session, key, cache=ext.CacheConfig(1),
+                                                     publisher_detection=True)
+            else:
+                pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+            pubs[channel.id] = pub
+            return pub
+
+        for channel in (summary.channels.values() if summary else ()):
+            publisher(channel)
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline and not any(
+                getattr(p, "matching_status", None) and p.matching_status.matching for p in pubs.values()):
+            time.sleep(0.02)
+        count, started, first = 0, time.monotonic(), None
+        try:
+            for _schema, channel, message in reader.iter_messages(log_time_order=True):
+                first = message.log_time if first is None else first
+                delay = started + (message.log_time - first) / 1e9 / rate - time.monotonic()
+                if delay > 0:
+                    time.sleep(delay)
+                (pubs.get(channel.id) or publisher(channel)).put(message.data)
+                count += 1
+            time.sleep(linger_s)
+        finally:
+            for pub in pubs.values():
+                pub.undeclare()
+    print(f"played {count} messages on {len(pubs)} topics in {time.monotonic() - started:.1f} s",
+          file=out, flush=True)
+    return 0 if count else 2

@@ -1,0 +1,9 @@
+"""Viewers: the web viewer and the Foxglove bridge, and what they draw.
+"""
+
+__all__ = [
+    "foxglove_bridge",
+    "foxglove_scene",
+    "viewer",
+    "viewstate",
+]

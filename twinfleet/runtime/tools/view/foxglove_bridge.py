@@ -1,0 +1,197 @@
+"""`twinfleet foxglove`: a live fleet in Foxglove, through the official `foxglove-sdk` server.
+
+One Zenoh session (`runtime.tools.monitor.tap.FleetTap`, latched ``/map`` with history)
+hears every topic of the fleet; each sample goes, on the loop, to a
+`FoxgloveBridge`, which logs it on a Foxglove WebSocket server
+(``foxglove.start_server``, protocol ``foxglove.websocket.v1``) twice:
+
+* as itself, on a channel of the same topic name, JSON-encoded with the JSON
+  Schema of its type (bytes as base64: `runtime.tools.record.mcap_export.message_json`),
+  so the Raw Messages and Plot panels work for any node's topics;
+* as Foxglove's well-known messages (`runtime.tools.view.foxglove_scene`): the map as a
+  ``foxglove.Grid``, the robots as ``foxglove.SceneUpdate`` entities, scans as
+  ``foxglove.PointCloud``, collisions as red markers, protobuf-encoded, all in
+  frame ``map``, so the 3D panel draws the fleet with no configuration.
+
+A client that subscribes late gets the latest map, every robot and the last
+message of each latched topic again at once (the SDK keeps no history).
+Open Foxglove, "Open connection", ``ws://127.0.0.1:8765``.
+`twinfleet export` writes the same channels into an MCAP file.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import sys
+import time
+from collections.abc import Callable, Mapping
+from typing import Any, TextIO, final
+
+import foxglove
+import msgpack
+
+from twinfleet.runtime.host.schemas import message_schema
+from twinfleet.runtime.tools.record.mcap_export import json_schema, message_json
+from twinfleet.runtime.tools.view.foxglove_scene import MAP_TOPIC, ROBOTS_TOPIC, FoxgloveScene
+from twinfleet.runtime.tools.view.viewstate import in_fleet
+
+RESEND_DELAY_S = 0.05
+DEFAULT_PORT = 8765  # what Foxglove's "Open connection" proposes  # let the server finish a subscription before re-sending to it
+
+
+@final
+class FoxgloveBridge:
+    """Logs fleet samples on Foxglove channels of one `foxglove.Context` (module docstring).
+
+    Args:
+        context: the SDK context the WebSocket server (or an MCAP writer) sinks.
+        fleet: the fleet to show; ``*`` takes the first fleet whose data arrives.
+        latched: fully qualified names of transient-local topics (re-sent to late clients).
+    """
+
+    def __init__(self, context: foxglove.Context, fleet: str = "*",
+                 latched: tuple[str, ...] = ("/map",)) -> None:
+        self.context, self.fleet, self.latched = context, fleet, latched
+        self.scene = FoxgloveScene()
+        self.known_schemas: dict[str, dict[str, Any]] = {}
+        self.channels: dict[str, foxglove.Channel] = {}
+        self.last: dict[str, bytes] = {}  # latched topics: last JSON copy
+        self.logged: dict[str, int] = {}
+        self._waiting: list[tuple[str, bytes]] | None = []  # until the schemas are known
+
+    def start(self, schemas: Mapping[str, dict[str, Any]]) -> None:
+        """Take the data schemas the fleet's nodes serve, then log what waited for them."""
+        self.known_schemas.update(schemas)
+        waiting, self._waiting = self._waiting or [], None
+        for key, payload in waiting:
+            self.on_sample(key, payload)
+
+    def on_sample(self, key: str, payload: bytes) -> None:
+        """One raw sample of key ``twinfleet/<fleet>/<topic>`` (call on the loop); samples
+        wait until `start` so that every channel gets its exact schema."""
+        if self._waiting is not None:
+            self._waiting.append((key, payload))
+            return
+        where = in_fleet(self.fleet, key)
+        if where is None:
+            return
+        self.fleet, topic = where  # '*' locks onto the first fleet whose data arrives
+        try:
+            env = msgpack.unpackb(payload, raw=False, strict_map_key=False)
+        except Exception:  # msgpack raises several unrelated types
+            return
+        if not isinstance(env, dict) or not isinstance(env.get("type"), str):
+            return
+        now = time.time_ns()
+        copy = message_json(payload)
+        self._json_channel(topic, env).log(copy, log_time=now)
+        self._count(topic)
+        if topic in self.latched:
+            self.last[topic] = copy
+        for fox_topic, msg in self.scene.feed(topic, env, now):
+            self._typed_channel(fox_topic, msg).log(msg.encode(), log_time=now)
+            self._count(fox_topic)
+
+    def _count(self, topic: str) -> None:
+        self.logged[topic] = self.logged.get(topic, 0) + 1
+
+    def _json_channel(self, topic: str, env: Mapping[str, Any]) -> foxglove.Channel:
+        channel = self.channels.get(topic)
+        if channel is None:
+            schema = json_schema(message_schema(env["type"], env.get("data"), self.known_schemas))
+            channel = foxglove.Channel(topic, schema=schema, context=self.context,
+                                       metadata={"twinfleet_type": env["type"]})
+            self.channels[topic] = channel
+        return channel
+
+    def _typed_channel(self, topic: str, msg: Any) -> foxglove.Channel:
+        channel = self.channels.get(topic)
+        if channel is None:
+            channel = foxglove.Channel(topic, schema=type(msg).get_schema(),
+                                       message_encoding="protobuf", context=self.context)
+            self.channels[topic] = channel
+        return channel
+
+    def resend(self, topic: str) -> None:
+        """Log again what a late subscriber of `topic` needs: the map, the robots, a latched
+        topic's last message."""
+        now = time.time_ns()
+        if topic == MAP_TOPIC and self.scene.grid is not None:
+            self.channels[topic].log(self.scene.grid.encode(), log_time=now)
+        elif topic == ROBOTS_TOPIC and self.scene.poses:
+            from foxglove.messages import SceneUpdate
+
+            entities = [self.scene._entity(r, now) for r in self.scene.order]  # noqa: SLF001
+            self.channels[topic].log(SceneUpdate(entities=entities).encode(), log_time=now)
+        elif topic in self.last:
+            self.channels[topic].log(self.last[topic], log_time=now)
+
+
+class _Listener:
+    """The server's subscribe callback hands a re-send to the loop (SDK threads never touch
+    the bridge)."""
+
+    def __init__(self, loop: asyncio.AbstractEventLoop, bridge: FoxgloveBridge) -> None:
+        self.loop, self.bridge = loop, bridge
+
+    def on_subscribe(self, _client: Any, channel: Any) -> None:
+        topic = channel.topic
+        self.loop.call_soon_threadsafe(self.loop.call_later, RESEND_DELAY_S,
+                                       self.bridge.resend, topic)
+
+
+async def serve_foxglove(endpoint: str, fleet: str, *, port: int | None = None,
+                         out: TextIO = sys.stdout, ready: Callable[[int], None] | None = None,
+                         stop: asyncio.Event | None = None) -> None:
+    """Bridge the fleet behind `endpoint` to a Foxglove WebSocket server on 127.0.0.1:`port`
+    until `stop` is set (None: 8765, or a free port if that one is taken; 0: a free port;
+    `ready` gets the port)."""
+    from twinfleet.runtime.tools.monitor.tap import FleetTap, tap_config
+    from twinfleet.runtime.tools.record.recorder import fleet_schemas
+
+    context = foxglove.Context()
+    bridge = FoxgloveBridge(context, fleet)
+    listener = _Listener(asyncio.get_running_loop(), bridge)
+
+    def start(on: int) -> Any:
+        return foxglove.start_server(name=f"twinfleet {fleet}", host="127.0.0.1", port=on,
+                                     context=context, server_listener=listener)
+
+    try:
+        server = start(DEFAULT_PORT if port is None else port)
+    except RuntimeError:
+        if port is not None:
+            raise
+        server = start(0)  # Foxglove's usual port is taken (by `twinfleet view`?): any other
+    tap = FleetTap(lambda: tap_config(endpoint), fleet,
+                   bridge.on_sample, retry=True)
+    try:
+        opening = asyncio.ensure_future(tap.open())
+        print(f"[foxglove] fleet {fleet!r} via {endpoint}: in Foxglove, open connection "
+              f"ws://127.0.0.1:{server.port}", file=out, flush=True)
+        if ready is not None:
+            ready(server.port)
+        stopping = asyncio.ensure_future((stop or asyncio.Event()).wait())
+        await asyncio.wait([opening, stopping], return_when=asyncio.FIRST_COMPLETED)
+        if opening.done() and tap.session is not None:
+            bridge.start(await asyncio.to_thread(fleet_schemas, tap.session, fleet))
+            await stopping
+    finally:
+        tap.stop()
+        await tap.close()
+        server.stop()
+
+
+def run_foxglove(endpoint: str, fleet: str, *, port: int | None = None) -> int:
+    """Blocking entry point of `twinfleet foxglove`: serve until SIGINT/SIGTERM."""
+    import signal
+
+    async def main() -> None:
+        stop = asyncio.Event()
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, stop.set)
+        await serve_foxglove(endpoint, fleet, port=port, stop=stop)
+
+    asyncio.run(main())
+    return 0
