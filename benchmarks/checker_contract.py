@@ -16,7 +16,7 @@ import statistics
 import time
 
 from twinfleet.checker import System, check
-from twinfleet.checker.check import CheckOptions, load
+from twinfleet.checker.driver import CheckOptions, load
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.search import Search
 

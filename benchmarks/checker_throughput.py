@@ -158,7 +158,7 @@ def child(args: argparse.Namespace) -> None:
     if hasattr(os, "sched_setaffinity"):
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[-1]})
     from twinfleet.checker import PropertySet, Search, System
-    from twinfleet.checker.check import load
+    from twinfleet.checker.driver import load
     from twinfleet.checker.search import peak_rss_mb
 
     semantics = None

@@ -33,7 +33,7 @@ import yaml
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from twinfleet.checker.check import CheckOptions, check  # noqa: E402
+from twinfleet.checker.driver import CheckOptions, check  # noqa: E402
 
 CASES = ("c1a", "c1b", "c1c", "c2a", "c2b", "c2c")
 SEPARATION = ("all(max(abs(a[0] - b[0]), abs(a[1] - b[1])) > {k} "

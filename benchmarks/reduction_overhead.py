@@ -35,7 +35,7 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from twinfleet.checker.check import load  # noqa: E402
+from twinfleet.checker.driver import load  # noqa: E402
 from twinfleet.checker.properties import PropertySet  # noqa: E402
 from twinfleet.checker.reduction import Reduction  # noqa: E402
 from twinfleet.checker.search import Search  # noqa: E402

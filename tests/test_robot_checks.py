@@ -7,7 +7,7 @@ from pathlib import Path
 
 import pytest
 
-from twinfleet.checker.check import CheckOptions, check, load
+from twinfleet.checker.driver import CheckOptions, check, load
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import replay

@@ -37,9 +37,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO, final
 
-from twinfleet.checker.check import CheckOptions, CheckResult
-from twinfleet.checker.check import check as _check
 from twinfleet.checker.diagnosis import ContractBreachError
+from twinfleet.checker.driver import CheckOptions, CheckResult
+from twinfleet.checker.driver import check as _check
 from twinfleet.checker.outcome import BREACH, HOLDS, VIOLATED
 from twinfleet.runtime.contract.messages import DecodeError, decode, encode
 from twinfleet.runtime.contract.names import key_expr

@@ -27,7 +27,7 @@ from twinfleet.agreement.live_replay import (
     plan,
     replay_live,
 )
-from twinfleet.checker.check import CheckOptions, check
+from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.host.node_host import NodeHost
 from twinfleet.runtime.host.replay_gate import LogicalClock

@@ -26,8 +26,8 @@ from twinfleet import Context, Node, String, handler, on_start, subscribe
 from twinfleet.agreement import validate as v
 from twinfleet.agreement.events import EVENTS_FORMAT, EventLogFile, LiveEvent, load_events
 from twinfleet.agreement.live_replay import plan
-from twinfleet.checker.check import CheckOptions, check, load
 from twinfleet.checker.choices import PrefixChooser
+from twinfleet.checker.driver import CheckOptions, check, load
 from twinfleet.checker.system import System
 from twinfleet.runtime.contract.snapshot import snapshot
 from twinfleet.runtime.core.eventlog import EventLog, payload_digest, state_digest

@@ -8,7 +8,7 @@ from typing import Any
 import yaml
 
 from twinfleet.checker import CheckOptions, CheckResult, PropertySet, System, check, replay
-from twinfleet.checker.check import load
+from twinfleet.checker.driver import load
 
 M = "tests.checker.models:"
 

@@ -10,8 +10,8 @@ import pytest
 
 from tests.checker.helpers import node, replay_confirms, scenario
 from twinfleet.checker import checkpoint, commands
-from twinfleet.checker.check import CheckOptions, check
 from twinfleet.checker.checkpoint import CheckpointError
+from twinfleet.checker.driver import CheckOptions, check
 
 pytestmark = pytest.mark.timeout(120)
 
@@ -97,7 +97,7 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
 
     ckpt = str(tmp_path / "int.ckpt")
     from twinfleet.checker import PropertySet, Search, System
-    from twinfleet.checker.check import load
+    from twinfleet.checker.driver import load
 
     scen = load(path)
     props = PropertySet.from_scenario(scen)

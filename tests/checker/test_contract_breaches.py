@@ -13,7 +13,7 @@ import pytest
 import yaml
 
 from twinfleet.checker import check
-from twinfleet.checker.check import CheckOptions
+from twinfleet.checker.driver import CheckOptions
 from twinfleet.cli import main
 
 pytestmark = pytest.mark.timeout(60)

@@ -11,7 +11,7 @@ import pytest
 
 from tests.checker.helpers import counts, node, run, scenario
 from twinfleet.checker import PropertySet, System
-from twinfleet.checker.check import load
+from twinfleet.checker.driver import load
 from twinfleet.checker.world import World
 
 pytestmark = pytest.mark.timeout(30)

@@ -14,7 +14,7 @@ import pytest
 
 from tests.checker.helpers import counts, node, replay_confirms, run, scenario, steps
 from twinfleet.checker import PropertySet, System
-from twinfleet.checker.check import load
+from twinfleet.checker.driver import load
 from twinfleet.runtime.scenario.spec import ScenarioError
 
 pytestmark = pytest.mark.timeout(60)

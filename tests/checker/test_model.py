@@ -7,8 +7,8 @@ import pytest
 
 from tests.checker.helpers import node, scenario
 from twinfleet.checker import Crash, PropertySet, RunEvent, System
-from twinfleet.checker.check import load
 from twinfleet.checker.choices import PrefixChooser
+from twinfleet.checker.driver import load
 from twinfleet.checker.faults import CheckSettings
 from twinfleet.checker.options import Semantics
 from twinfleet.checker.semantics import Rules

@@ -12,7 +12,7 @@ import pytest
 
 from tests.checker.helpers import counts, node, replay_confirms, run, scenario
 from twinfleet.checker import reduction
-from twinfleet.checker.check import CheckOptions, check
+from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.cli import main
 
 pytestmark = pytest.mark.timeout(60)

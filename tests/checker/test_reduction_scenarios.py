@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pytest
 
-from twinfleet.checker.check import CheckOptions, check
+from twinfleet.checker.driver import CheckOptions, check
 
 LAUNCH = Path(__file__).resolve().parents[2] / "twinfleet" / "launch"
 INFINITE = {"demo"}  # no verdict either way (see the module docstring)

@@ -6,7 +6,7 @@ import pytest
 
 from tests.checker.helpers import node, scenario
 from twinfleet.checker import Limits, PropertySet, Search, System, bfs, dfs
-from twinfleet.checker.check import load
+from twinfleet.checker.driver import load
 from twinfleet.checker.faults import CheckSettings
 from twinfleet.checker.options import Semantics
 from twinfleet.checker.semantics import Rules

@@ -10,7 +10,7 @@ import pytest
 
 from tests.checker.helpers import counts, node, replay_confirms, run, scenario, steps
 from twinfleet.checker import NondeterminismError, PropertySet, System, replay
-from twinfleet.checker.check import load
+from twinfleet.checker.driver import load
 
 pytestmark = pytest.mark.timeout(30)
 

@@ -27,7 +27,7 @@ import yaml
 
 from tests.support import ROOT, child_env
 from twinfleet.agreement.validate import validate
-from twinfleet.checker.check import CheckOptions, check, load
+from twinfleet.checker.driver import CheckOptions, check, load
 from twinfleet.checker.system import System
 from twinfleet.runtime.scenario.spec import ScenarioError
 

@@ -108,7 +108,7 @@ def test_garbage_scenario_bytes_fail_with_a_scenario_error(tmp_path, raw):
 
 @pytest.fixture(scope="module")
 def headon_trace(tmp_path_factory):
-    from twinfleet.checker.check import CheckOptions, check
+    from twinfleet.checker.driver import CheckOptions, check
 
     out = tmp_path_factory.mktemp("trace") / "headon.json"
     check(ROOT / "twinfleet" / "launch" / "headon.yaml", CheckOptions(trace_out=str(out)))

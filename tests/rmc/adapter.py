@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from twinfleet.checker.check import load
+from twinfleet.checker.driver import load
 from twinfleet.checker.system import System
 
 

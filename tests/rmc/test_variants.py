@@ -18,7 +18,7 @@ import yaml
 from tests.rmc import adapter, rmc_order
 from tests.rmc.follower import DATA, follow
 from tests.rmc.rmc_trace import read_trace
-from twinfleet.checker.check import CheckOptions, check
+from twinfleet.checker.driver import CheckOptions, check
 
 pytestmark = pytest.mark.timeout(300)
 

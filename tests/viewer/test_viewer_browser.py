@@ -129,7 +129,7 @@ def test_viewer_shows_the_live_c1a_fleet_moving(cli, browser_page):
 
 
 def test_viewer_steps_through_a_checker_trace(cli, browser_page, tmp_path):
-    from twinfleet.checker.check import CheckOptions, check
+    from twinfleet.checker.driver import CheckOptions, check
 
     trace = tmp_path / "headon.trace.json"
     result = check(ROOT / "twinfleet" / "launch" / "headon.yaml", CheckOptions(trace_out=str(trace)))
@@ -190,7 +190,7 @@ properties:
 
 
 def test_viewer_steps_through_a_trace_of_a_users_fleet(cli, browser_page, tmp_path):
-    from twinfleet.checker.check import CheckOptions, check
+    from twinfleet.checker.driver import CheckOptions, check
 
     scenario = tmp_path / "mine.yaml"
     scenario.write_text(USER_TRACE_SCENARIO)

@@ -140,7 +140,7 @@ def test_web_app_serves_page_state_and_websocket_updates():
 
 
 def test_trace_document_has_map_robots_and_steps(tmp_path):
-    from twinfleet.checker.check import CheckOptions, check
+    from twinfleet.checker.driver import CheckOptions, check
 
     trace = tmp_path / "headon.trace.json"
     assert check(ROOT / "twinfleet" / "launch" / "headon.yaml", CheckOptions(trace_out=str(trace))).status == "violated"

@@ -27,7 +27,7 @@ from typing import Any, final
 import numpy as np
 import yaml
 
-from twinfleet.checker.check import CheckOptions, check
+from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.nodes.mapfile import load_map, save_map
 from twinfleet.nodes.motion import check_cell_size_rule, check_scan_rate_rule, hop_time_ms
 from twinfleet.nodes.profile import profile_named

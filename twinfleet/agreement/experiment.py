@@ -34,7 +34,7 @@ from twinfleet.agreement.live import LiveRunResult, live_run, private_copy
 from twinfleet.agreement.paper import paper_row
 from twinfleet.agreement.table import CheckCell, LiveSummary, Row, csv_record, to_csv, to_markdown
 from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, robot_names, summarise
-from twinfleet.checker.check import CheckOptions, check
+from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.checker.options import Semantics
 from twinfleet.checker.outcome import SearchStatistics
 from twinfleet.runtime.scenario.spec import Scenario, ScenarioError, load_scenario

@@ -58,7 +58,7 @@ from twinfleet.agreement.events import (
     refuse_unreplayable,
     split_start_choices,
 )
-from twinfleet.checker.check import load, system_for_trace
+from twinfleet.checker.driver import load, system_for_trace
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import NondeterminismError, recorded_step, replay_step
 from twinfleet.checker.world import World

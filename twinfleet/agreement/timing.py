@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, final
 
-from twinfleet.checker.check import load
 from twinfleet.checker.choices import RandomChooser
+from twinfleet.checker.driver import load
 from twinfleet.checker.system import System
 from twinfleet.runtime.scenario.spec import Scenario
 

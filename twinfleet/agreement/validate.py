@@ -111,9 +111,9 @@ from twinfleet.agreement.validation import (
     strict_line,
     timing_name,
 )
-from twinfleet.checker.check import load
 from twinfleet.checker.choices import PrefixChooser, SplitChooser
 from twinfleet.checker.commands import bad_input_errors
+from twinfleet.checker.driver import load
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.system import System
 from twinfleet.checker.transition import Crash, Drop, RunEvent

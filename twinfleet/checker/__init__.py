@@ -25,8 +25,8 @@ import importlib
 from typing import TYPE_CHECKING, Any
 
 if TYPE_CHECKING:
-    from twinfleet.checker.check import CheckOptions, CheckResult, check
     from twinfleet.checker.checkpoint import CheckpointError
+    from twinfleet.checker.driver import CheckOptions, CheckResult, check
     from twinfleet.checker.faults import CheckSettings
     from twinfleet.checker.options import Semantics
     from twinfleet.checker.outcome import Counterexample, Limits, Outcome, SearchStatistics
@@ -49,8 +49,8 @@ if TYPE_CHECKING:
 
 _HOMES: dict[str, str] = {
     "Action": "twinfleet.checker.transition",
-    "CheckOptions": "twinfleet.checker.check",
-    "CheckResult": "twinfleet.checker.check",
+    "CheckOptions": "twinfleet.checker.driver",
+    "CheckResult": "twinfleet.checker.driver",
     "CheckSettings": "twinfleet.checker.faults",
     "CheckpointError": "twinfleet.checker.checkpoint",
     "Counterexample": "twinfleet.checker.outcome",
@@ -77,7 +77,7 @@ _HOMES: dict[str, str] = {
     "World": "twinfleet.checker.world",
     "bfs": "twinfleet.checker.search",
     "build_trace": "twinfleet.checker.trace",
-    "check": "twinfleet.checker.check",
+    "check": "twinfleet.checker.driver",
     "dfs": "twinfleet.checker.search",
     "random_walk": "twinfleet.checker.search",
     "replay": "twinfleet.checker.trace",

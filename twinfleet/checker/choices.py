@@ -14,9 +14,11 @@ import random
 from collections.abc import Sequence
 from typing import Protocol, final
 
+from twinfleet.runtime.contract.context import Chooser
 
-class Chooser(Protocol):
-    """What the checker's choosers offer: `choose` for a handler's `ctx.choose`, `branch`
+
+class ExploringChooser(Chooser, Protocol):
+    """A `Chooser` (what answers `ctx.choose`) that the checker explores with: `branch`
     for the checker's own branches on its effects (latency, drop, duplicate), the
     answers given so far in call order, and `mismatch`: the `ChoiceMismatch` raised when
     a forced answer did not exist (a handler may catch the exception; the chooser keeps

@@ -1,4 +1,4 @@
-"""The `check` and `replay` commands: argument parsing over `checker.check` and `checker.trace`.
+"""The `check` and `replay` commands: argument parsing over `checker.driver` and `checker.trace`.
 
 `twinfleet.cli` calls `register(subparsers)` for `check`; `replay` is
 registered by `twinfleet.agreement.commands`, which adds `--live` to the
@@ -21,7 +21,7 @@ from twinfleet.checker.options import REDUCTIONS, Semantics
 from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_CONTRACT_BREACH, EXIT_FAILED
 
 if TYPE_CHECKING:
-    from twinfleet.checker.check import CheckResult
+    from twinfleet.checker.driver import CheckResult
     from twinfleet.checker.outcome import SearchStatistics
 
 
@@ -134,8 +134,8 @@ def check_command(args: argparse.Namespace) -> int:
     if args.scenario is None and args.resume is None:
         print("twinfleet check: give a scenario file, or --resume CHECKPOINT", file=sys.stderr)
         return EXIT_BAD_INPUT
-    from twinfleet.checker.check import CheckOptions, check
     from twinfleet.checker.diagnosis import ContractBreachError
+    from twinfleet.checker.driver import CheckOptions, check
 
     stem = Path(args.scenario or args.resume).stem
     trace_out = args.trace_out or str(Path("out") / f"{stem}.trace.json")
@@ -180,7 +180,7 @@ def _report(result: CheckResult, *, as_json: bool) -> None:
 
 def replay_command(args: argparse.Namespace) -> int:
     """Run `replay` for parsed arguments; return the exit code."""
-    from twinfleet.checker.check import system_for_trace
+    from twinfleet.checker.driver import system_for_trace
     from twinfleet.checker.trace import NondeterminismError, replay
     from twinfleet.runtime.contract.tracefile import load_trace
 

@@ -27,7 +27,7 @@ replay). Two cheap checks run in every search, by default:
   and after each run (`ScopeWatch`): a counter a handler bumps but only another
   handler reads changes nothing in a re-execution, yet it is state.
 
-Both report a `Failure` of a contract kind (`CONTRACT_KINDS`); `checker.check`
+Both report a `Failure` of a contract kind (`CONTRACT_KINDS`); `checker.driver`
 turns it into the verdict "contract breach" (exit code 4), never a property
 violation. `describe_difference` says what differed between two runs, and
 `breach_line` is the one-line report naming node, handler, what happened and

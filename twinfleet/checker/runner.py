@@ -28,7 +28,7 @@ import re
 from collections.abc import Sequence
 from typing import Any, final
 
-from twinfleet.checker.choices import ChoiceMismatch, Chooser, PrefixChooser
+from twinfleet.checker.choices import ChoiceMismatch, ExploringChooser, PrefixChooser
 from twinfleet.checker.diagnosis import (
     CONTRACT_KINDS,
     FIX_CONTEXT,
@@ -104,7 +104,7 @@ class Runner:
 
     # ---------------------------------------------------------------- runs
 
-    def run(self, ev: Event, data: bytes, chooser: Chooser) -> Variant:
+    def run(self, ev: Event, data: bytes, chooser: ExploringChooser) -> Variant:
         """Run `ev`'s handler on node state `data` (verified unless `verify` is off)."""
         return self._checked(ev, data, chooser)
 
@@ -118,7 +118,7 @@ class Runner:
         failure = Failure(FailureKind.DEADLINE, names[ev.target], ev.method, message)
         return Variant((), (), data, (), failure)
 
-    def start(self, j: int, data: bytes, now: int, chooser: Chooser) -> Variant:
+    def start(self, j: int, data: bytes, now: int, chooser: ExploringChooser) -> Variant:
         """Node `j` started at `now` from state `data` (also its restart after a crash
         fault): the first firing of each periodic timer, then every `@on_start` run in
         declaration order (until one fails)."""
@@ -137,7 +137,7 @@ class Runner:
         return Variant(tuple(chooser.indices), tuple(chooser.options), data, tuple(events),
                        failure, tuple(logs), tuple(faults), tuple(branches))
 
-    def _checked(self, ev: Event, data: bytes, chooser: Chooser) -> Variant:
+    def _checked(self, ev: Event, data: bytes, chooser: ExploringChooser) -> Variant:
         """`_exec`, then (with `verify`) once more from the same state with the same
         answers: a difference is a contract breach (checker.diagnosis)."""
         first = len(chooser.indices)  # start handlers share one chooser
@@ -165,7 +165,7 @@ class Runner:
             self._current[i] = data
         return node
 
-    def _exec(self, ev: Event, data: bytes, chooser: Chooser) -> Variant:
+    def _exec(self, ev: Event, data: bytes, chooser: ExploringChooser) -> Variant:
         """Run `ev`'s handler on node state `data`: its new state, new events and failure."""
         i = ev.target
         node = self._load(i, data)
@@ -250,7 +250,7 @@ class Runner:
 
     # ------------------------------------------------------------- effects
 
-    def _effects(self, ev: Event, effects: Sequence[Any], reply: Any, chooser: Chooser
+    def _effects(self, ev: Event, effects: Sequence[Any], reply: Any, chooser: ExploringChooser
                  ) -> tuple[list[Event], Failure | None, list[Log], list[str]]:
         """The events a handler's effects create, in order (the rules of one transition)."""
         i, now, topology = ev.target, ev.due, self.topology
@@ -297,7 +297,7 @@ class Runner:
         self.hashed += len(out)
         return out, failure, logs, faults
 
-    def _copies(self, name: str, j: int, chooser: Chooser, faults: list[str]) -> int:
+    def _copies(self, name: str, j: int, chooser: ExploringChooser, faults: list[str]) -> int:
         """How many copies of one message on `name` to node `j` arrive (fault branches)."""
         n, fault = self.rules.copies(name, chooser, j)
         if fault:
@@ -306,7 +306,7 @@ class Runner:
 
     def _message(self, now: int, name: str, kind: EventKind, target: int, method: str,
                  sender: int, args: tuple[Any, ...], priority: int, reply_to: str,
-                 chooser: Chooser) -> Event:
+                 chooser: ExploringChooser) -> Event:
         """A message on topic/service `name`, with its latency branch and deadline."""
         due, deadline = self.rules.delivery(now, name, chooser)
         return Event(due, kind, target, method, sender, args, priority, reply_to,
@@ -320,7 +320,7 @@ def _comparable(v: Variant, first: int) -> tuple[Any, ...]:
     return v.state, [(e.sk, e.deadline) for e in v.events], failure, v.choices[first:]
 
 
-def _failed(chooser: Chooser, data: bytes, kind: FailureKind, node: str, method: str,
+def _failed(chooser: ExploringChooser, data: bytes, kind: FailureKind, node: str, method: str,
             message: str, traceback: str = "") -> Variant:
     return Variant(tuple(chooser.indices), tuple(chooser.options), data, (),
                    Failure(kind, node, method, message, traceback))

@@ -101,7 +101,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, final
 
-from twinfleet.checker.choices import Chooser
+from twinfleet.checker.choices import ExploringChooser
 from twinfleet.checker.faults import DROP, DUPLICATE, CheckSettings
 from twinfleet.checker.options import Semantics
 from twinfleet.checker.world import Event
@@ -238,7 +238,7 @@ class Rules:
 
     # ------------------------------------------------------------ Rule 5
 
-    def delivery(self, now: int, name: str, chooser: Chooser) -> tuple[int, int | None]:
+    def delivery(self, now: int, name: str, chooser: ExploringChooser) -> tuple[int, int | None]:
         """(due time, deadline or None) of a message on `name` sent at `now`; a latency
         range makes the due time a branch of `chooser`."""
         due = now
@@ -250,7 +250,7 @@ class Rules:
         limit = settings.deadline_for(name) if settings.has_deadlines else None
         return due, None if limit is None else now + limit
 
-    def copies(self, name: str, chooser: Chooser, target: int = -1) -> tuple[int, str]:
+    def copies(self, name: str, chooser: ExploringChooser, target: int = -1) -> tuple[int, str]:
         """How many copies of one message on `name` to node `target` arrive (a branch of
         `chooser` when `name` may be dropped or duplicated, or is BEST_EFFORT for `target`,
         Rule 6), and the fault taken ("" for none)."""
@@ -266,7 +266,7 @@ class Rules:
             return 2, "duplicated"
         return 1, ""
 
-    def no_server(self, chooser: Chooser) -> str:
+    def no_server(self, chooser: ExploringChooser) -> str:
         """Rule 5: the reason a call to a service nobody serves fails with, a branch of
         `chooser`: live, Zenoh finalises such a query early ("no server") or only at its
         timeout ("timeout"), depending on timing; either way at the call's timeout here."""

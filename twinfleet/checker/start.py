@@ -14,7 +14,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, Any, Protocol
 
-from twinfleet.checker.choices import Chooser, PrefixChooser
+from twinfleet.checker.choices import ExploringChooser, PrefixChooser
 from twinfleet.checker.diagnosis import FIX_HIDDEN
 from twinfleet.checker.transition import Failure, Step, Transition
 from twinfleet.checker.world import ENVIRONMENT, Event
@@ -37,7 +37,7 @@ class System(Protocol):
     names: Sequence[str]
 
     def initial_world(self, choices: tuple[int, ...] = (), *,
-                      chooser: Chooser | None = None) -> Transition: ...
+                      chooser: ExploringChooser | None = None) -> Transition: ...
 
 
 def initial_transitions(system: System) -> list[Transition]:
@@ -55,7 +55,7 @@ def initial_transitions(system: System) -> list[Transition]:
 
 
 def initial_world(system: System, worlds: WorldBuilder, choices: tuple[int, ...] = (), *,
-                  chooser: Chooser | None = None) -> Transition:
+                  chooser: ExploringChooser | None = None) -> Transition:
     """The initial world reached with the start-handler `choices` (or `chooser`)."""
     chooser = chooser if chooser is not None else PrefixChooser(choices)
     rules, runner = system.rules, system.runner

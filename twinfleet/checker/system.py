@@ -52,7 +52,7 @@ from typing import TYPE_CHECKING, Any, final
 from twinfleet.checker import start
 from twinfleet.checker.builder import WorldBuilder
 from twinfleet.checker.cache import GenerationCache
-from twinfleet.checker.choices import Chooser, PrefixChooser
+from twinfleet.checker.choices import ExploringChooser, PrefixChooser
 from twinfleet.checker.faults import parse_settings
 from twinfleet.checker.options import Semantics
 from twinfleet.checker.publications import Publications
@@ -166,7 +166,7 @@ class System:
         return start.initial_transitions(self)
 
     def initial_world(self, choices: tuple[int, ...] = (), *,
-                      chooser: Chooser | None = None) -> Transition:
+                      chooser: ExploringChooser | None = None) -> Transition:
         """The initial world reached with the start-handler `choices` (or `chooser`)."""
         return start.initial_world(self, self._worlds, choices, chooser=chooser)
 
@@ -179,7 +179,7 @@ class System:
         acts += [Drop(i) for i in self.rules.droppable(world.events)]
         return acts
 
-    def step(self, world: World, action: Action, chooser: Chooser) -> Transition:
+    def step(self, world: World, action: Action, chooser: ExploringChooser) -> Transition:
         """Take `action` in `world`, `chooser` answering its choice points: the next world."""
         return self._apply(world, action, self._variant(world, action, chooser))
 
@@ -213,7 +213,7 @@ class System:
 
     # ------------------------------------------------------------ variants
 
-    def _variant(self, world: World, action: Action, chooser: Chooser) -> Variant:
+    def _variant(self, world: World, action: Action, chooser: ExploringChooser) -> Variant:
         """What taking `action` in `world` with `chooser` does, independent of the world."""
         if isinstance(action, Drop):  # nothing runs (`_apply_drop` does the dropping)
             return Variant((), (), world.states[world.events[action.index].target])
