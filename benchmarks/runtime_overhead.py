@@ -70,10 +70,10 @@ import zenoh  # noqa: E402
 
 from twinfleet import Context, Node, every, handler, message, on_start, subscribe  # noqa: E402
 from twinfleet.runtime.contract.messages import decode  # noqa: E402
-from twinfleet.runtime.contract.names import key_expr  # noqa: E402
 from twinfleet.runtime.contract.node import QoS  # noqa: E402
 from twinfleet.runtime.fleet.launcher import free_port  # noqa: E402
 from twinfleet.runtime.host.clock import FleetClock  # noqa: E402
+from twinfleet.runtime.host.keys import topic_key  # noqa: E402
 from twinfleet.runtime.host.node_host import NodeHost  # noqa: E402
 from twinfleet.runtime.host.zenoh_transport import Handoff, ZenohTransport, zenoh_config  # noqa: E402
 
@@ -405,10 +405,10 @@ class Probe:
     def __init__(self, inner: ZenohTransport, raw: RawPing | None = None,
                  on_loop: RawPing | None = None, flood_s: float = 0.0) -> None:
         self.inner, self.raw, self.on_loop, self.flood_s = inner, raw, on_loop, flood_s
-        self.ping_key = key_expr(FLEET, "/bench/ping")
-        self.yield_key = key_expr(FLEET, "/bench/yield")
-        self.flood_key = key_expr(FLEET, "/bench/flood")
-        self.done_key = key_expr(FLEET, "/bench/flood_done")
+        self.ping_key = topic_key(FLEET, "/bench/ping")
+        self.yield_key = topic_key(FLEET, "/bench/yield")
+        self.flood_key = topic_key(FLEET, "/bench/flood")
+        self.done_key = topic_key(FLEET, "/bench/flood_done")
         self.stamps: list[tuple[int, bytes]] = []
         self.first_ns = 0
         self.flood_spans: list[tuple[int, int]] = []

@@ -42,10 +42,10 @@ from twinfleet.checker.driver import CheckOptions, CheckResult
 from twinfleet.checker.driver import check as _check
 from twinfleet.checker.outcome import BREACH, HOLDS, VIOLATED
 from twinfleet.runtime.contract.messages import DecodeError, decode, encode
-from twinfleet.runtime.contract.names import key_expr
 from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.contract.tracefile import write_trace
 from twinfleet.runtime.fleet.launcher import FleetResult, run_fleet
+from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.scenario.scenario_file import write_scenario
 from twinfleet.runtime.scenario.spec import NodeEntry, PropertyConfig, Scenario
 
@@ -232,7 +232,7 @@ class LiveFleet:
         if topic not in self._heard:
             self._heard[topic] = []
             self._waiters[topic] = []
-            self._fleet.transport.subscribe(key_expr(self.name, topic), self._deliver(topic),
+            self._fleet.transport.subscribe(topic_key(self.name, topic), self._deliver(topic),
                                             QOS_DEFAULT)
         return self._heard[topic]
 
@@ -278,7 +278,7 @@ class LiveFleet:
 
     def publish(self, topic: str, msg: Any) -> None:
         """Publish `msg` on `topic` (absolute name) into the fleet, as node "test"."""
-        self._fleet.transport.put(key_expr(self.name, topic), encode(msg, sender="test"),
+        self._fleet.transport.put(topic_key(self.name, topic), encode(msg, sender="test"),
                                   QOS_DEFAULT)
 
 

@@ -34,18 +34,17 @@ zenoh = pytest.importorskip("zenoh")
 
 from tests.integration.reliability_nodes import AddReply, AddRequest, Tick  # noqa: E402
 from twinfleet.runtime.contract.messages import decode, encode  # noqa: E402
-from twinfleet.runtime.contract.names import key_expr  # noqa: E402
 from twinfleet.runtime.core.guard import Admission, Rejected, check_message  # noqa: E402
 from twinfleet.runtime.fleet.launcher import free_port  # noqa: E402
-from twinfleet.runtime.fleet.node_main import stats_key  # noqa: E402
+from twinfleet.runtime.host.keys import KeyKind, node_key, topic_key  # noqa: E402
 from twinfleet.runtime.host.zenoh_transport import zenoh_config  # noqa: E402
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(150)]
 
 ROOT = Path(__file__).resolve().parents[2]
 FLEET = "fuzz"
-TICKS = key_expr(FLEET, "/fuzz/ticks")
-ADD = key_expr(FLEET, "/fuzz/add")
+TICKS = topic_key(FLEET, "/fuzz/ticks")
+ADD = topic_key(FLEET, "/fuzz/add")
 CALL_TIMEOUT_S = 5.0
 SCENARIO = """\
 name: fuzz
@@ -129,7 +128,7 @@ class Target:
     expected: Counter[str] = field(default_factory=Counter)
 
     def stats(self) -> dict[str, int]:
-        for reply in self.session.get(stats_key(FLEET, "target"), timeout=2.0):
+        for reply in self.session.get(node_key(FLEET, KeyKind.STATS, "target"), timeout=2.0):
             if reply.ok is not None:
                 return msgpack.unpackb(reply.ok.payload.to_bytes())
         raise AssertionError(f"no statistics from the node:\n{self.output()}")

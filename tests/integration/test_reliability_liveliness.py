@@ -33,11 +33,11 @@ from itest_support import (
 )
 
 from twinfleet.runtime.contract.messages import String, encode
-from twinfleet.runtime.contract.names import key_expr
 from twinfleet.runtime.core.guard import sign
 from twinfleet.runtime.fleet.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, format_result, run_fleet
 from twinfleet.runtime.fleet.run_record import read_run_record
+from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
 from twinfleet.runtime.scenario.spec import load_scenario
 
@@ -90,7 +90,7 @@ def request_shutdown(endpoint: str, fleet: str) -> None:
     auth = registry_auth(endpoint)
     with zenoh.open(zenoh_config(connect=[endpoint],
                                  settings=login_settings(auth, write=True))) as session:
-        key = key_expr(fleet, SHUTDOWN_TOPIC)
+        key = topic_key(fleet, SHUTDOWN_TOPIC)
         pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         deadline = time.monotonic() + 5
         while not pub.matching_status.matching and time.monotonic() < deadline:

@@ -30,11 +30,11 @@ from twinfleet import (
     subscribe,
 )
 from twinfleet.runtime.contract.messages import NodeAlive, Violation, decode, encode
-from twinfleet.runtime.contract.names import key_expr
 from twinfleet.runtime.contract.node import QOS_DEFAULT, QOS_LATCHED
 from twinfleet.runtime.core.choosers import derive_seed
 from twinfleet.runtime.core.node_core import MAX_GAP
 from twinfleet.runtime.host.clock import ManualClock
+from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.node_host import NodeHost
 from twinfleet.runtime.host.transport import LoopbackTransport
 
@@ -85,7 +85,7 @@ def test_simultaneous_messages_run_by_priority_then_arrival() -> None:
         await h.start(node)
         raw = await h.raw()
         for topic, value in (("/low", 1), ("/high", 2), ("/low", 3), ("/high", 4)):
-            raw.put(key_expr(FLEET, topic), encode(Num(value), seq=value), QOS_DEFAULT)
+            raw.put(topic_key(FLEET, topic), encode(Num(value), seq=value), QOS_DEFAULT)
         await settle(*h.hosts)
         await h.stop()
         return [event for _, event in node.state.seen[1:]]
@@ -136,7 +136,7 @@ def test_call_timeout_is_a_clock_timer() -> None:
     async def body() -> tuple[list[Any], list[Any]]:
         h = Harness()
         mute = await h.raw()
-        mute.serve(key_expr(FLEET, "/double"), lambda payload, respond: None)  # never answers
+        mute.serve(topic_key(FLEET, "/double"), lambda payload, respond: None)  # never answers
         asker = Asker("asker", AskerParams(timeout_ms=200))
         await h.start(asker)
         before = list(asker.state.seen)
@@ -173,12 +173,12 @@ def test_handler_exception_is_logged_counted_published_and_node_keeps_serving() 
         h = Harness()
         violations: list[Violation] = []
         raw = await h.raw()
-        raw.subscribe(key_expr(FLEET, "/violations"),
+        raw.subscribe(topic_key(FLEET, "/violations"),
                       lambda k, p: violations.append(decode(p).msg), QOS_DEFAULT)
         node = Fragile("fragile")
         host = await h.start(node)
         for seq, value in enumerate((2, 3, 4), start=1):
-            raw.put(key_expr(FLEET, "/nums"), encode(Num(value), seq=seq), QOS_DEFAULT)
+            raw.put(topic_key(FLEET, "/nums"), encode(Num(value), seq=seq), QOS_DEFAULT)
         await settle(*h.hosts)
         await h.stop()
         return node.state.seen, host.statistics(), violations, h.out.getvalue()
@@ -196,7 +196,7 @@ def test_stop_on_error_stops_the_host() -> None:
         node = Fragile("fragile")
         host = await h.start(node, stop_on_error=True)
         for seq, value in enumerate((3, 4), start=1):
-            raw.put(key_expr(FLEET, "/nums"), encode(Num(value), seq=seq), QOS_DEFAULT)
+            raw.put(topic_key(FLEET, "/nums"), encode(Num(value), seq=seq), QOS_DEFAULT)
         await asyncio.wait_for(h.tasks[0], 5)  # run() returns by itself
         return host.failed, node.state.seen
 
@@ -210,7 +210,7 @@ def test_fail_effect_is_counted_and_published() -> None:
         h = Harness()
         violations: list[Any] = []
         raw = await h.raw()
-        raw.subscribe(key_expr(FLEET, "/violations"),
+        raw.subscribe(topic_key(FLEET, "/violations"),
                       lambda k, p: violations.append(decode(p).msg), QOS_DEFAULT)
         server = await h.start(Doubler("doubler"))
         asker = Asker("asker", AskerParams(value=13))
@@ -229,9 +229,9 @@ def test_undecodable_payload_is_counted_and_dropped() -> None:
         raw = await h.raw()
         node = Fragile("fragile")
         host = await h.start(node)
-        raw.put(key_expr(FLEET, "/nums"), b"\xc1 not msgpack", QOS_DEFAULT)
-        raw.put(key_expr(FLEET, "/nums"), encode(String("wrong type?")), QOS_DEFAULT)
-        raw.put(key_expr(FLEET, "/nums"), encode(Num(8), seq=3), QOS_DEFAULT)
+        raw.put(topic_key(FLEET, "/nums"), b"\xc1 not msgpack", QOS_DEFAULT)
+        raw.put(topic_key(FLEET, "/nums"), encode(String("wrong type?")), QOS_DEFAULT)
+        raw.put(topic_key(FLEET, "/nums"), encode(Num(8), seq=3), QOS_DEFAULT)
         await settle(*h.hosts)
         await h.stop()
         return node.state.seen, host.statistics()
@@ -248,7 +248,7 @@ def test_sequence_gaps_are_counted_per_sender() -> None:
         raw = await h.raw()
         host = await h.start(Fragile("fragile"))
         for sender, seq in (("a", 1), ("b", 1), ("a", 2), ("a", 5), ("b", 2), ("a", 6)):
-            raw.put(key_expr(FLEET, "/nums"), encode(Num(2), seq=seq, sender=sender), QOS_DEFAULT)
+            raw.put(topic_key(FLEET, "/nums"), encode(Num(2), seq=seq, sender=sender), QOS_DEFAULT)
         await settle(*h.hosts)
         await h.stop()
         return host.statistics().gaps
@@ -262,7 +262,7 @@ def test_a_forged_sequence_leap_is_not_counted_as_lost_messages() -> None:
         raw = await h.raw()
         host = await h.start(Fragile("fragile"))
         for seq in (1, 2, 4, 2 + MAX_GAP * 1000, 3 + MAX_GAP * 1000, 6 + MAX_GAP * 1000):
-            raw.put(key_expr(FLEET, "/nums"), encode(Num(2), seq=seq, sender="a"), QOS_DEFAULT)
+            raw.put(topic_key(FLEET, "/nums"), encode(Num(2), seq=seq, sender="a"), QOS_DEFAULT)
         await settle(*h.hosts)
         await h.stop()
         stats = host.statistics()
@@ -380,11 +380,11 @@ def test_keep_last_drops_the_oldest_waiting_messages_and_counts_them() -> None:
         node = Shallow("shallow")
         host = await h.start(node)
         for seq in range(1, 11):  # ten arrive before the host gets to run any of them
-            raw.put(key_expr(FLEET, "/nums"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
+            raw.put(topic_key(FLEET, "/nums"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
         for seq in range(1, 4):
-            raw.put(key_expr(FLEET, "/other"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
+            raw.put(topic_key(FLEET, "/other"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
         await settle(*h.hosts)
-        raw.put(key_expr(FLEET, "/nums"), encode(Num(11), seq=11, sender="a"), QOS_DEFAULT)
+        raw.put(topic_key(FLEET, "/nums"), encode(Num(11), seq=11, sender="a"), QOS_DEFAULT)
         await settle(*h.hosts)
         await h.stop()
         return node.state.seen, host.statistics()
@@ -405,7 +405,7 @@ def test_keep_last_loses_nothing_when_the_host_keeps_up() -> None:
         node = Shallow("shallow")
         host = await h.start(node)
         for seq in range(1, 21):
-            raw.put(key_expr(FLEET, "/nums"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
+            raw.put(topic_key(FLEET, "/nums"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
             if seq % 3 == 0:
                 await settle(*h.hosts)
         await settle(*h.hosts)
@@ -438,7 +438,7 @@ def test_best_effort_gaps_are_counted_as_drops_not_as_gaps() -> None:
         raw = await h.raw()
         host = await h.start(Shallow("shallow"))
         for seq in (1, 2, 5, 6, 9):
-            raw.put(key_expr(FLEET, "/other"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
+            raw.put(topic_key(FLEET, "/other"), encode(Num(seq), seq=seq, sender="a"), QOS_DEFAULT)
             await settle(*h.hosts)
         await h.stop()
         return host.statistics()
@@ -466,14 +466,14 @@ def test_unencodable_effects_and_replies_are_handler_errors_not_crashes() -> Non
         host = await h.start(Overflower("overflower"))
         violations: list[Any] = []
         out_seqs: list[int] = []
-        raw.subscribe(key_expr(FLEET, "/violations"),
+        raw.subscribe(topic_key(FLEET, "/violations"),
                       lambda k, p: violations.append(decode(p).msg), QOS_DEFAULT)
-        raw.subscribe(key_expr(FLEET, "/out"), lambda k, p: out_seqs.append(decode(p).seq),
+        raw.subscribe(topic_key(FLEET, "/out"), lambda k, p: out_seqs.append(decode(p).seq),
                       QOS_DEFAULT)
-        raw.put(key_expr(FLEET, "/nums"), encode(Num(1), seq=1), QOS_DEFAULT)
+        raw.put(topic_key(FLEET, "/nums"), encode(Num(1), seq=1), QOS_DEFAULT)
         asker = Asker("asker")
         await h.start(asker)
-        raw.put(key_expr(FLEET, "/nums"), encode(Num(0), seq=2), QOS_DEFAULT)  # still serving
+        raw.put(topic_key(FLEET, "/nums"), encode(Num(0), seq=2), QOS_DEFAULT)  # still serving
         await settle(*h.hosts)
         await h.stop()
         return asker.state.seen, host.statistics(), violations, out_seqs

@@ -23,12 +23,12 @@ from tests.runtime.hosts import (
 )
 from twinfleet import CallError, Context, Node, every, handler, on_start, subscribe
 from twinfleet.runtime.contract.messages import encode
-from twinfleet.runtime.contract.names import key_expr
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.core.eventlog import EVENTS_FORMAT, EventLog, payload_digest
 from twinfleet.runtime.host.clock import ManualClock
+from twinfleet.runtime.host.keys import KeyKind, node_key, topic_key
 from twinfleet.runtime.host.node_host import NodeHost
-from twinfleet.runtime.host.replay_gate import LogicalClock, gate_key
+from twinfleet.runtime.host.replay_gate import LogicalClock
 from twinfleet.runtime.host.transport import LoopbackBus, LoopbackTransport
 
 
@@ -70,7 +70,7 @@ def test_the_event_log_names_each_kind_of_event(tmp_path: Path) -> None:
         await h.start(Asker("asker"), events=logs["asker"])
         await h.start(Asker("lonely", AskerParams(service="/missing")), events=logs["lonely"])
         raw = await h.raw()
-        raw.put(key_expr(FLEET, "/nums"), encode(Num(5), seq=1, sender="x"), QOS_DEFAULT)
+        raw.put(topic_key(FLEET, "/nums"), encode(Num(5), seq=1, sender="x"), QOS_DEFAULT)
         await settle(*h.hosts)
         await h.advance(100)
         await h.stop()
@@ -97,7 +97,7 @@ def test_the_event_log_names_each_kind_of_event(tmp_path: Path) -> None:
 
 async def _grant(transport: LoopbackTransport, node: str, **grant: Any) -> dict[str, Any]:
     done: asyncio.Future[tuple[bytes | None, str]] = asyncio.get_running_loop().create_future()
-    transport.query(gate_key(FLEET, node), msgpack.packb(grant), 5_000.0,
+    transport.query(node_key(FLEET, KeyKind.REPLAY, node), msgpack.packb(grant), 5_000.0,
                     lambda reply, reason: done.done() or done.set_result((reply, reason)))
     reply, reason = await done
     assert reply is not None, reason
@@ -126,7 +126,7 @@ def test_a_gated_host_runs_only_what_is_granted_and_waits_for_what_is_in_flight(
         for _ in range(50):
             await asyncio.sleep(0)
         assert not waiting.done() and node.state.seen == []
-        coordinator.put(key_expr(FLEET, "/nums"), encode(Num(5), seq=1, sender="x"), QOS_DEFAULT)
+        coordinator.put(topic_key(FLEET, "/nums"), encode(Num(5), seq=1, sender="x"), QOS_DEFAULT)
         answers.append(await waiting)
         answers.append(await _grant(coordinator, "ticker", kind="periodic", handler="tick",
                                     sender="ticker", args=payload_digest(()), t=100))

@@ -11,11 +11,11 @@ from typing import Any
 import pytest
 
 from twinfleet.runtime.contract.node import QOS_DEFAULT, QOS_LATCHED
+from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key
 from twinfleet.runtime.host.transport import (
     LoopbackBus,
     LoopbackTransport,
     Transport,
-    graph_key,
     key_matches,
 )
 
@@ -90,7 +90,7 @@ async def opened(make: Factory, n: int) -> AsyncIterator[list[Transport]]:
 async def ready(watcher: Transport, owner: Transport, name: str) -> None:
     """Wait until `watcher` sees a token that `owner` declares after its other declarations."""
     seen: set[str] = set()
-    token = graph_key("conf", "node", name)
+    token = node_key("conf", KeyKind.NODE, name)
     watcher.watch(token, lambda key, alive: seen.add(key) if alive else seen.discard(key))
     owner.announce(token)
     await eventually(lambda: token in seen)
@@ -148,10 +148,10 @@ def test_liveliness_tokens_appear_and_disappear(make: Factory) -> None:
     async def body() -> None:
         async with opened(make, 1) as (watcher,):
             first = await make()
-            first.announce(graph_key("conf", "node", "early"))
+            first.announce(node_key("conf", KeyKind.NODE, "early"))
             events: list[tuple[str, bool]] = []
-            watcher.watch(graph_key("conf", "node", "*"), lambda k, a: events.append((k, a)))
-            early = graph_key("conf", "node", "early")
+            watcher.watch(kind_expr("conf", KeyKind.NODE), lambda k, a: events.append((k, a)))
+            early = node_key("conf", KeyKind.NODE, "early")
             await eventually(lambda: (early, True) in events)
             await first.close()
             await eventually(lambda: (early, False) in events)

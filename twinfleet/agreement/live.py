@@ -34,9 +34,9 @@ from twinfleet.nodes.mapfile import load_map
 from twinfleet.nodes.msgs import Collision, RobotStatus
 from twinfleet.nodes.report import FleetReport
 from twinfleet.runtime.contract.messages import encode
-from twinfleet.runtime.contract.names import key_expr
 from twinfleet.runtime.fleet.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, free_port, run_fleet
+from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
 from twinfleet.runtime.scenario.spec import Scenario, load_scenario
 
@@ -273,7 +273,7 @@ async def _stop_when_decided(decided: asyncio.Event, fleet: asyncio.Task[Any], e
     try:
         payload = encode(String(f"outcome decided: {why[0]}"), sender="experiment")
         for _ in range(20):  # repeat until the launcher has heard it
-            transport.put(key_expr(fleet_name, SHUTDOWN_TOPIC), payload, QOS_DEFAULT)
+            transport.put(topic_key(fleet_name, SHUTDOWN_TOPIC), payload, QOS_DEFAULT)
             await asyncio.wait([fleet], timeout=0.5)
             if fleet.done():
                 return

@@ -64,13 +64,12 @@ from twinfleet.checker.trace import NondeterminismError, recorded_step, replay_s
 from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import DecodeError, decode
-from twinfleet.runtime.contract.names import key_expr
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.contract.tracefile import TraceError, load_trace
 from twinfleet.runtime.core.eventlog import payload_digest, state_digest, summarise
 from twinfleet.runtime.fleet.launcher import Fleet, format_result, run_fleet
-from twinfleet.runtime.host.replay_gate import gate_key
-from twinfleet.runtime.host.transport import Transport, graph_key, parse_graph_key
+from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key, parse_node_key, topic_key
+from twinfleet.runtime.host.transport import Transport
 from twinfleet.runtime.scenario.spec import Scenario
 
 COLLISIONS_TOPIC = "/collisions"
@@ -302,8 +301,8 @@ class Coordinator:
         """Wait for the nodes, grant every event, check the end; return the end reason."""
         self.transport = transport
         name = self.plan.scenario.fleet
-        transport.subscribe(key_expr(name, COLLISIONS_TOPIC), self._on_collision, QOS_DEFAULT)
-        transport.watch(graph_key(name, "node", "*"), self._on_alive)
+        transport.subscribe(topic_key(name, COLLISIONS_TOPIC), self._on_collision, QOS_DEFAULT)
+        transport.watch(kind_expr(name, KeyKind.NODE), self._on_alive)
         started = begin = time.monotonic()
         try:
             await self._wait_alive()
@@ -323,7 +322,7 @@ class Coordinator:
         return f"live replay done: {self.result.granted} events granted"
 
     def _on_alive(self, key: str, alive: bool) -> None:
-        node = parse_graph_key(key)[2]
+        node = parse_node_key(key, KeyKind.NODE).node
         (self.alive.add if alive else self.alive.discard)(node)
         self._changed.set()
 
@@ -380,7 +379,7 @@ class Coordinator:
 
     async def _ask(self, grant: Grant) -> dict[str, Any]:
         transport, payload = self.transport, grant.payload()
-        key = gate_key(self.plan.scenario.fleet, grant.node)
+        key = node_key(self.plan.scenario.fleet, KeyKind.REPLAY, grant.node)
         for _ in range(100):  # the queryable may not be routed yet just after the token
             reply, reason = await _query(transport, key, payload, self.step_timeout_s)
             if reply is not None:

@@ -1,9 +1,9 @@
 """Name resolution as in ROS 2: relative names live in the node's namespace.
 
 `resolve("scan", "/r2")` is `/r2/scan`; `resolve("/map", "/r2")` is `/map`;
-`resolve("~/status", "/r2", "r2")` is `/r2/r2/status`. `key_expr` turns a fully
-qualified name into the Zenoh key expression `twinfleet/<fleet>/<name>`.
-Pure functions: both the live transport and the checker use them.
+`resolve("~/status", "/r2", "r2")` is `/r2/r2/status`. Pure functions: both the
+live host and the checker use them. A name's Zenoh key expression is a
+transport concern, built by the host (`runtime.host.keys.topic_key`).
 """
 
 from __future__ import annotations
@@ -11,7 +11,6 @@ from __future__ import annotations
 import functools
 import re
 
-KEY_PREFIX = "twinfleet"
 _TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
 
@@ -57,16 +56,3 @@ def resolve(name: str, namespace: str | None = "", node_name: str | None = None)
         validate_token(part, "name")
     return full
 
-
-def key_expr(fleet: str, fq_name: str) -> str:
-    """Zenoh key expression of a fully qualified name: `twinfleet/<fleet>/<name>`."""
-    validate_token(fleet, "fleet")
-    return f"{KEY_PREFIX}/{fleet}{fq_name}"
-
-
-def name_of_key(fleet: str, key: str) -> str:
-    """Inverse of `key_expr`: the fully qualified name of a data key."""
-    prefix = f"{KEY_PREFIX}/{fleet}"
-    if not key.startswith(prefix + "/"):
-        raise InvalidName(f"key {key!r} is not in fleet {fleet!r}")
-    return key[len(prefix):]

@@ -4,8 +4,9 @@ A `StateReporter` is an observer of the node core (`runtime.core.node_core.Obser
 like the event log. After each handler it snapshots the node's state
 (`runtime.contract.snapshot`, the bytes the checker stores) and, when the state
 changed or the handler failed (it raised, or called ``ctx.fail``), publishes
-one `StateReport` on the fleet-internal key ``twinfleet/<fleet>/@state/<node>``
-(reliable, congestion control BLOCK). A handler that changed nothing and
+one `StateReport` through the `put` it was given: the node process publishes
+them on its fleet-internal ``@state`` key (`runtime.host.keys.KeyKind.STATE`;
+reliable, congestion control BLOCK). A handler that changed nothing and
 failed nothing costs one snapshot and one bytes comparison. With
 ``states=False`` (no property reads the node) only failures are reported.
 
@@ -24,16 +25,10 @@ from typing import Any, final
 import msgpack
 
 from twinfleet.runtime.contract.context import Fail
-from twinfleet.runtime.contract.names import KEY_PREFIX
 from twinfleet.runtime.contract.snapshot import snapshot
 from twinfleet.runtime.core.node_core import Handled
 
 _PACK = msgpack.Packer(use_bin_type=True).pack  # one packer: `packb` builds one per call
-
-
-def state_key(fleet: str, node: str) -> str:
-    """The key a node's state reports go to (``*`` for every node)."""
-    return f"{KEY_PREFIX}/{fleet}/@state/{node}"
 
 
 @final
@@ -92,7 +87,7 @@ class StateReporter:
 
     Args:
         node: the node whose state is reported.
-        put: publishes one payload on the node's `state_key`.
+        put: publishes one payload on the node's ``@state`` key.
         states: report states (False: only failures).
     """
 

@@ -11,7 +11,7 @@ scenario says ``respawn: true``, and otherwise ends the run as failed.
 The run ends at the timeout, when a node publishes a `String` on
 ``/twinfleet/shutdown``, when every node has exited, when a node fails, or on
 SIGINT/SIGTERM. Fleet time 0: once every node's liveliness token is seen, the
-launcher declares the fleet's epoch as a token (`transport.epoch_key`); the
+launcher declares the fleet's epoch as a token (`keys.epoch_key`); the
 nodes (``--fleet-epoch``) wait for it and run `@on_start` at time 0, as the
 checker does, a respawned one (``--restarted``) at its restart time.
 Shutdown escalates SIGINT → SIGTERM → SIGKILL per process;
@@ -57,18 +57,23 @@ import msgpack
 import yaml
 
 from twinfleet.runtime.contract.messages import DecodeError, decode
-from twinfleet.runtime.contract.names import key_expr
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.core.eventlog import EVENTS_FORMAT, with_restarts
 from twinfleet.runtime.core.guard import Rejected, check_message, payload_limit
-from twinfleet.runtime.core.state_report import decode_report, state_key
+from twinfleet.runtime.core.state_report import decode_report
 from twinfleet.runtime.fleet import fleetauth, registry
 from twinfleet.runtime.fleet.connection import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from twinfleet.runtime.fleet.live_verdict import HOLDS, LiveMonitor, RunEnd, Verdict
-from twinfleet.runtime.fleet.node_main import LIMIT_ENV, PARENT_ENV, stats_key
+from twinfleet.runtime.fleet.node_main import LIMIT_ENV, PARENT_ENV
 from twinfleet.runtime.fleet.run_record import RunRecord, versions
 from twinfleet.runtime.host.introspect import param_arguments
-from twinfleet.runtime.host.transport import epoch_key, graph_key, parse_graph_key
+from twinfleet.runtime.host.keys import (
+    KeyKind,
+    epoch_key,
+    kind_expr,
+    parse_node_key,
+    topic_key,
+)
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
 from twinfleet.runtime.scenario.scenario_file import write_scenario
 from twinfleet.runtime.scenario.spec import NodeConfig, Scenario
@@ -276,19 +281,19 @@ class Fleet:
         self.transport = ZenohTransport(conf, key=self.creds.key, limit=self.limit)
         await self.transport.open()
         fleet = self.scenario.fleet
-        self.transport.subscribe(key_expr(fleet, SHUTDOWN_TOPIC), self._on_shutdown, QOS_DEFAULT)
+        self.transport.subscribe(topic_key(fleet, SHUTDOWN_TOPIC), self._on_shutdown, QOS_DEFAULT)
         for topic in self.scenario.live.summary_topics:
-            self.transport.subscribe(key_expr(fleet, topic), self._summary(topic), QOS_DEFAULT)
+            self.transport.subscribe(topic_key(fleet, topic), self._summary(topic), QOS_DEFAULT)
         for topic in self.report.topics() if self.report is not None else ():
-            self.transport.subscribe(key_expr(fleet, topic), self._reported(topic), QOS_DEFAULT)
+            self.transport.subscribe(topic_key(fleet, topic), self._reported(topic), QOS_DEFAULT)
         if self.monitor is not None:
-            self.transport.subscribe(state_key(fleet, "*"), self._on_state, QOS_DEFAULT)
+            self.transport.subscribe(kind_expr(fleet, KeyKind.STATE), self._on_state,
+                                    QOS_DEFAULT)
 
     def _on_state(self, key: str, payload: bytes) -> None:
         assert self.monitor is not None
-        node = key.rsplit("/", 1)[-1]
         try:
-            report = decode_report(node, payload)
+            report = decode_report(parse_node_key(key, KeyKind.STATE).node, payload)
         except ValueError as exc:
             self.log(f"ignored a malformed state report on {key}: {exc}")
             return
@@ -381,13 +386,13 @@ class Fleet:
 
         def on_node(key: str, alive: bool) -> None:
             if alive and unseen:
-                unseen.discard(parse_graph_key(key)[2])
+                unseen.discard(parse_node_key(key, KeyKind.NODE).node)
                 if not unseen:
                     self.epoch_ns = time.time_ns()
                     transport.announce(epoch_key(fleet, self.epoch_ns))
                     self.all_alive.set()
 
-        transport.watch(graph_key(fleet, "node", "*"), on_node)
+        transport.watch(kind_expr(fleet, KeyKind.NODE), on_node)
 
     async def _supervise(self, proc: _NodeProcess) -> None:
         while True:
@@ -423,14 +428,14 @@ class Fleet:
         """Each running node's `HostStatistics`, read from its statistics queryable."""
         if self.transport is None or self.transport.session is None:
             return {}
-        key = stats_key(self.scenario.fleet, "*")
+        key = kind_expr(self.scenario.fleet, KeyKind.STATS)
 
         def query() -> dict[str, Any]:
             found: dict[str, Any] = {}
             for reply in self.transport.session.get(key, timeout=timeout_s):  # type: ignore[union-attr]
                 if reply.ok is not None:
-                    node = str(reply.ok.key_expr).rsplit("/", 1)[-1]
-                    with contextlib.suppress(Exception):
+                    with contextlib.suppress(Exception):  # a malformed key or payload
+                        node = parse_node_key(str(reply.ok.key_expr), KeyKind.STATS).node
                         found[node] = msgpack.unpackb(reply.ok.payload.to_bytes())
             return found
 
@@ -593,11 +598,11 @@ async def alive_names(fleet: Fleet, timeout_s: float = 1.0) -> list[str]:
     """Names of `fleet`'s nodes whose liveliness tokens the router holds now."""
     if fleet.transport is None or fleet.transport.session is None:
         return []
-    key = graph_key(fleet.scenario.fleet, "node", "*")
+    key = kind_expr(fleet.scenario.fleet, KeyKind.NODE)
     session = fleet.transport.session
 
     def query() -> list[str]:
-        return [parse_graph_key(str(r.ok.key_expr))[2]
+        return [parse_node_key(str(r.ok.key_expr), KeyKind.NODE).node
                 for r in session.liveliness().get(key, timeout=timeout_s) if r.ok is not None]
 
     return sorted(set(await asyncio.to_thread(query)))

@@ -32,16 +32,16 @@ from collections.abc import Sequence
 
 import msgpack
 
-from twinfleet.runtime.contract.names import KEY_PREFIX
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.core.eventlog import EventLog
-from twinfleet.runtime.core.state_report import StateReporter, state_key
+from twinfleet.runtime.core.state_report import StateReporter
 from twinfleet.runtime.fleet.fleetauth import node_secrets
 from twinfleet.runtime.host.clock import Clock, FleetClock
 from twinfleet.runtime.host.introspect import PARAM_FLAG, load_with_params, serve_info
+from twinfleet.runtime.host.keys import KeyKind, node_key
 from twinfleet.runtime.host.node_host import NodeHost
 from twinfleet.runtime.host.replay_gate import LogicalClock
-from twinfleet.runtime.host.schemas import registered_schemas, types_key
+from twinfleet.runtime.host.schemas import registered_schemas
 from twinfleet.runtime.host.transport import Respond
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
 from twinfleet.runtime.scenario.spec import Scenario, ScenarioError
@@ -61,11 +61,6 @@ def die_with_parent() -> None:
         return  # not Linux: rely on the launcher's shutdown
     if expected is not None and os.getppid() != int(expected):
         sys.exit(0)  # the launcher died before prctl took effect
-
-
-def stats_key(fleet: str, node: str) -> str:
-    """Key of the statistics queryable of a node process."""
-    return f"{KEY_PREFIX}/{fleet}/@stats/{node}"
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -158,15 +153,15 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
     def serve_stats(_payload: bytes, respond: Respond) -> None:
         respond(msgpack.packb(dataclasses.asdict(host.statistics())), "")
 
-    transport.serve(stats_key(scenario.fleet, node.name), serve_stats)
+    transport.serve(node_key(scenario.fleet, KeyKind.STATS, node.name), serve_stats)
     if args.monitor is not None:
-        put = transport.publisher(state_key(scenario.fleet, node.name), QOS_DEFAULT)
+        put = transport.publisher(node_key(scenario.fleet, KeyKind.STATE, node.name), QOS_DEFAULT)
         host.core.observe(StateReporter(node, put, states=args.monitor == "states"))
 
     def serve_types(_payload: bytes, respond: Respond) -> None:
         respond(json.dumps(registered_schemas()).encode(), "")
 
-    transport.serve(types_key(scenario.fleet, node.name), serve_types)
+    transport.serve(node_key(scenario.fleet, KeyKind.TYPES, node.name), serve_types)
     serve_info(transport, scenario.fleet, node, cfg.class_path)
     try:
         await host.run()

@@ -6,6 +6,7 @@ Imports the core, the scenario and the contract.
 __all__ = [
     "clock",
     "introspect",
+    "keys",
     "node_host",
     "readiness",
     "replay_gate",

@@ -1,8 +1,8 @@
 """What a node process tells monitors about itself, and launch-time parameter overrides.
 
-Every node process serves ``twinfleet/<fleet>/@info/<node>`` (`info_key`): a
-msgpack map built once from the scenario entry and the node class's declared
-handlers (`node_description`)::
+Every node process serves ``twinfleet/<fleet>/@info/<node>``
+(`runtime.host.keys.KeyKind.INFO`): a msgpack map built once from the scenario
+entry and the node class's declared handlers (`node_description`)::
 
     {"name", "namespace", "class", "pid",
      "params":        {name: value},            # the node's Params, overrides applied
@@ -39,16 +39,11 @@ from typing import Any
 import yaml
 
 from twinfleet.runtime.contract.messages import type_name_of
-from twinfleet.runtime.contract.names import KEY_PREFIX
 from twinfleet.runtime.contract.node import HandlerSpec, NodeSpec, QoS
 from twinfleet.runtime.core.guard import expected_type
+from twinfleet.runtime.host.keys import KeyKind, node_key, topic_in_fleet
 
 PARAM_FLAG = "--param"
-
-
-def info_key(fleet: str, node: str) -> str:
-    """Key of the queryable through which a node process describes itself."""
-    return f"{KEY_PREFIX}/{fleet}/@info/{node}"
 
 
 def qos_dict(qos: QoS) -> dict[str, Any]:
@@ -87,7 +82,7 @@ def service_types(node: Any, spec: HandlerSpec) -> list[str]:
 
 
 def node_description(node: Any, class_path: str) -> dict[str, Any]:
-    """What `info_key` serves for a built node object (module docstring)."""
+    """What a node's ``@info`` queryable serves for a built node object (module docstring)."""
     spec = NodeSpec.of(type(node))
     params = node.params
     values = ({f.name: plain_value(getattr(params, f.name)) for f in dataclasses.fields(params)}
@@ -112,8 +107,8 @@ def node_description(node: Any, class_path: str) -> dict[str, Any]:
 
 
 def serve_info(transport: Any, fleet: str, node: Any, class_path: str) -> None:
-    """Serve `node_description` on `info_key` through a `Transport`, with ``publications``:
-    topic → message type of every topic the node has published on so far.
+    """Serve `node_description` on the node's ``@info`` key through a `Transport`, with
+    ``publications``: topic → message type of every topic the node has published on so far.
 
     Call it before the host first publishes: it wraps `transport.publisher` so that the
     first payload of each topic records its envelope type (one dict lookup per message).
@@ -121,13 +116,13 @@ def serve_info(transport: Any, fleet: str, node: Any, class_path: str) -> None:
     import msgpack
 
     base = node_description(node, class_path)
-    prefix = f"{KEY_PREFIX}/{fleet}"
     published: dict[str, str] = {}
     make_publisher = transport.publisher
 
     def publisher(key: str, qos: QoS) -> Any:
         put = make_publisher(key, qos)
-        topic = key[len(prefix):] if key.startswith(prefix + "/") else key
+        where = topic_in_fleet(fleet, key)
+        topic = key if where is None else where.topic
 
         def put_and_note(payload: bytes) -> None:
             if topic not in published:
@@ -140,7 +135,8 @@ def serve_info(transport: Any, fleet: str, node: Any, class_path: str) -> None:
     def respond_info(_request: bytes, respond: Any) -> None:
         respond(msgpack.packb({**base, "publications": dict(published)}, use_bin_type=True), "")
 
-    transport.serve(info_key(fleet, node.name), respond_info)
+    transport.serve(node_key(fleet, KeyKind.INFO, node.name), respond_info)
+
 
 
 def _envelope_type(payload: bytes) -> str:

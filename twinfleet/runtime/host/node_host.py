@@ -44,22 +44,16 @@ from collections.abc import Callable, Sequence
 from typing import TextIO, final
 
 from twinfleet.runtime.contract.messages import DecodeError
-from twinfleet.runtime.contract.names import key_expr
 from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.core.guard import Rejected
 from twinfleet.runtime.core.node_core import HostStatistics, NodeCore
 from twinfleet.runtime.core.outbox import Answer, Line, Output, Put, Query, Stop
 from twinfleet.runtime.host.clock import Clock, TimerHandle
+from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key, parse_node_key, topic_key
 from twinfleet.runtime.host.readiness import Readiness
-from twinfleet.runtime.host.replay_gate import LogicalClock, ReplayGate, gate_key
-from twinfleet.runtime.host.transport import (
-    Respond,
-    Transport,
-    epoch_key,
-    graph_key,
-    parse_graph_key,
-)
+from twinfleet.runtime.host.replay_gate import LogicalClock, ReplayGate
+from twinfleet.runtime.host.transport import Respond, Transport
 
 _DRAIN_BATCH = 256  # handlers per loop callback before yielding to I/O
 _DROP_LINES = 20  # log lines about dropped samples before they are only counted
@@ -83,7 +77,7 @@ class NodeHost:
         gated: run only events granted by a replay coordinator (needs a `LogicalClock`).
         stall_ms: the floor of the stall threshold (`NodeCore`: timers released later than
             max(stall_ms, twice the shortest timer period) count as stalls; None: never).
-        fleet_epoch: also wait for the launcher's epoch token (`transport.epoch_key`) and
+        fleet_epoch: also wait for the launcher's epoch token (`keys.epoch_key`) and
             take it as fleet time 0: `@on_start` then runs at time 0, as in the checker
             (a `restarted` node runs it at the time it restarted).
         restarted: this process replaces one of the node that died (a respawn).
@@ -182,17 +176,17 @@ class NodeHost:
             after_burst(self._flush)
             self._flushes_bursts = True
         if self._gate is not None:  # before the node token: the coordinator waits for that
-            t.serve(gate_key(fleet, node.name), self._gate.on_request)
+            t.serve(node_key(fleet, KeyKind.REPLAY, node.name), self._gate.on_request)
         for spec, topic in self.core.topics():
-            t.subscribe(key_expr(fleet, topic), self._deliver(spec.method), spec.qos)
-            t.announce(graph_key(fleet, "sub", node.name, topic))
+            t.subscribe(topic_key(fleet, topic), self._deliver(spec.method), spec.qos)
+            t.announce(node_key(fleet, KeyKind.SUB, node.name, topic))
         for method, name in self.core.services.items():
-            t.serve(key_expr(fleet, name), self._serve(method))
-            t.announce(graph_key(fleet, "srv", node.name, name))
+            t.serve(topic_key(fleet, name), self._serve(method))
+            t.announce(node_key(fleet, KeyKind.SRV, node.name, name))
         if self.fleet_epoch:
-            t.watch(epoch_key(fleet), self.readiness.epoch)
-        t.watch(graph_key(fleet, "node", "*"), self._on_liveliness)
-        t.announce(graph_key(fleet, "node", node.name))
+            t.watch(kind_expr(fleet, KeyKind.EPOCH), self.readiness.epoch)
+        t.watch(kind_expr(fleet, KeyKind.NODE), self._on_liveliness)
+        t.announce(node_key(fleet, KeyKind.NODE, node.name))
 
     # ---------------------------------------------------------------- arrivals
 
@@ -227,7 +221,7 @@ class NodeHost:
             self._wake_soon()
 
     def _on_liveliness(self, key: str, alive: bool) -> None:
-        name = parse_graph_key(key)[2]
+        name = parse_node_key(key, KeyKind.NODE).node
         self.readiness.node(name, alive)
         if self.core.receive_liveliness(name, alive, self.clock.now_ms()):
             self._wake_soon()
@@ -293,7 +287,7 @@ class NodeHost:
             match out:
                 case Query():
                     wall_ms = self.clock.real_seconds(out.timeout_ms) * 1000.0 + 500.0
-                    self.transport.query(key_expr(self.fleet, out.service), out.payload, wall_ms,
+                    self.transport.query(topic_key(self.fleet, out.service), out.payload, wall_ms,
                                          functools.partial(self._on_reply, out.call))
                 case Answer(responder=respond, payload=payload, reason=reason):
                     respond(payload, reason)
@@ -305,8 +299,8 @@ class NodeHost:
 
     def _publisher(self, topic: str) -> Callable[[bytes], None]:
         qos = self.publications.get(topic, QOS_DEFAULT)
-        put = self._puts[topic] = self.transport.publisher(key_expr(self.fleet, topic), qos)
-        self.transport.announce(graph_key(self.fleet, "pub", self.node.name, topic))
+        put = self._puts[topic] = self.transport.publisher(topic_key(self.fleet, topic), qos)
+        self.transport.announce(node_key(self.fleet, KeyKind.PUB, self.node.name, topic))
         return put
 
     def _line(self, text: str, *, err: bool = False) -> None:

@@ -16,6 +16,8 @@ import asyncio
 from collections.abc import Sequence
 from typing import Any, final
 
+from twinfleet.runtime.host.keys import epoch_of
+
 
 @final
 class Readiness:
@@ -44,9 +46,9 @@ class Readiness:
         self._wake()
 
     def epoch(self, key: str, alive: bool) -> None:
-        """The launcher's epoch token (`transport.epoch_key`) appeared."""
+        """The launcher's epoch token (`keys.epoch_key`) appeared."""
         if alive:
-            self.epoch_ns = int(key.rsplit("/", 1)[1])
+            self.epoch_ns = epoch_of(key)
             self._wake()
 
     def stop(self) -> None:

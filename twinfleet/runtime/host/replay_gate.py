@@ -4,11 +4,11 @@ A gated node (``node_main --gate``) runs on a `LogicalClock` over a
 `runtime.core.node_core.NodeCore` that holds every message it receives (no KEEP_LAST)
 and every timer it arms; nothing runs by itself. The coordinator
 (`twinfleet.agreement.live_replay`) grants one event at a time over the
-queryable `gate_key(fleet, node)`: the gate finds it among the core's
-`pending()` entries — waiting for it if it is still in flight — sets the
-logical time, runs it with `NodeCore.run` and the grant's `ctx.choose`
-answers, has the host perform the outputs, and answers with the new state
-digest and what the handler published. The gate drives the core through its
+node's ``@replay`` queryable (`runtime.host.keys.KeyKind.REPLAY`): the gate
+finds it among the core's `pending()` entries — waiting for it if it is still
+in flight — sets the logical time, runs it with `NodeCore.run` and the grant's
+`ctx.choose` answers, has the host perform the outputs, and answers with the
+new state digest and what the handler published. The gate drives the core through its
 public methods and observes it (`handled`) to learn what the handler did.
 
 Wire protocol. A grant is a msgpack map naming the event (``kind``, ``handler``,
@@ -29,7 +29,6 @@ import msgpack
 
 from twinfleet.runtime.contract.context import Publish
 from twinfleet.runtime.contract.messages import type_name_of
-from twinfleet.runtime.contract.names import KEY_PREFIX
 from twinfleet.runtime.core.choosers import RecordingChooser
 from twinfleet.runtime.core.entries import Entry
 from twinfleet.runtime.core.eventlog import node_state_digest, payload_digest, summarise
@@ -40,11 +39,6 @@ from twinfleet.runtime.host.transport import Respond
 
 GATED_CALL_WALL_S = 600.0  # a gated call waits for its grant, not for a timeout
 _GRANT_KEYS = ("kind", "handler", "sender", "args", "t")
-
-
-def gate_key(fleet: str, node: str) -> str:
-    """Key of a gated node's replay queryable (an `@` chunk: data subscribers never see it)."""
-    return f"{KEY_PREFIX}/{fleet}/@replay/{node}"
 
 
 @final

@@ -1,9 +1,9 @@
 """JSON Schemas of twinfleet messages, from the message dataclasses' type hints.
 
 Used by the recorder (one schema per message type in an MCAP file) and served
-by every node process on ``twinfleet/<fleet>/@types/<node>`` (`types_key`), so
-a tool that joins a running fleet learns the exact schemas of message classes
-it has not imported.
+by every node process on ``twinfleet/<fleet>/@types/<node>``
+(`runtime.host.keys.KeyKind.TYPES`), so a tool that joins a running fleet
+learns the exact schemas of message classes it has not imported.
 """
 
 from __future__ import annotations
@@ -15,7 +15,6 @@ from collections.abc import Mapping
 from typing import Any
 
 from twinfleet.runtime.contract.messages import is_message, registered_types
-from twinfleet.runtime.contract.names import KEY_PREFIX
 
 ENVELOPE_FIELDS = {"stamp_ms": {"type": "integer", "description": "ms since the fleet's start"},
                    "seq": {"type": "integer", "description": "per-publisher sequence number"},
@@ -88,11 +87,6 @@ def _value_schema(value: Any) -> dict[str, Any]:
     if isinstance(value, Mapping):
         return {"type": "object", "properties": {str(k): _value_schema(v) for k, v in value.items()}}
     return {}
-
-
-def types_key(fleet: str, node: str) -> str:
-    """Key of the queryable through which a node process serves its message schemas."""
-    return f"{KEY_PREFIX}/{fleet}/@types/{node}"
 
 
 def registered_schemas() -> dict[str, dict[str, Any]]:

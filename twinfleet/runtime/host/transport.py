@@ -9,16 +9,8 @@ thread. `ZenohTransport` (twinfleet/runtime/host/zenoh_transport.py) is the live
 `LoopbackBus`, with the same asynchronous delivery (nothing is delivered
 inside the call that sent it).
 
-Graph keys (liveliness tokens) let monitors find the fleet without any
-registry; `graph_key` builds them:
-
-    twinfleet/<fleet>/@node/<node>                 one per running node
-    twinfleet/<fleet>/@pub/<node>/<topic path>     node publishes on /<topic path>
-    twinfleet/<fleet>/@sub/<node>/<topic path>     node subscribes to /<topic path>
-    twinfleet/<fleet>/@srv/<node>/<service path>   node serves /<service path>
-
-`@` chunks are verbatim in Zenoh: `twinfleet/<fleet>/**` never matches them, so
-data subscribers do not see graph keys.
+Graph keys (liveliness tokens, `runtime.host.keys.node_key`) let monitors find
+the fleet without any registry.
 """
 
 from __future__ import annotations
@@ -31,7 +23,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Protocol, final
 
-from twinfleet.runtime.contract.names import KEY_PREFIX
 from twinfleet.runtime.contract.node import QoS
 
 Deliver = Callable[[str, bytes], None]
@@ -39,32 +30,6 @@ Respond = Callable[[bytes | None, str], None]  # (reply payload, "") or (None, e
 OnRequest = Callable[[bytes, Respond], None]
 OnDone = Callable[[bytes | None, str], None]  # reply payload, or None and a reason
 OnChange = Callable[[str, bool], None]  # token key, alive
-
-GRAPH_KINDS = ("node", "pub", "sub", "srv")
-
-
-def graph_key(fleet: str, kind: str, node: str, name: str = "") -> str:
-    """Liveliness key of a node (`kind="node"`) or of one of its topics/services."""
-    if kind not in GRAPH_KINDS:
-        raise ValueError(f"graph kind must be one of {GRAPH_KINDS}, got {kind!r}")
-    key = f"{KEY_PREFIX}/{fleet}/@{kind}/{node}"
-    return key + name if name else key
-
-
-def epoch_key(fleet: str, epoch_ns: int | None = None) -> str:
-    """Liveliness key by which a launcher tells its nodes the fleet's time 0 (`epoch_ns`,
-    as `time.time_ns()`), declared once every node is alive; None: the key expression
-    that matches it."""
-    return f"{KEY_PREFIX}/{fleet}/@epoch/{'*' if epoch_ns is None else epoch_ns}"
-
-
-def parse_graph_key(key: str) -> tuple[str, str, str, str]:
-    """Inverse of `graph_key`: (fleet, kind, node, name) with name '' for node tokens."""
-    parts = key.split("/")
-    if len(parts) < 4 or parts[0] != KEY_PREFIX or not parts[2].startswith("@"):
-        raise ValueError(f"not a twinfleet graph key: {key!r}")
-    name = "/" + "/".join(parts[4:]) if len(parts) > 4 else ""
-    return parts[1], parts[2][1:], parts[3], name
 
 
 class Transport(Protocol):

@@ -23,6 +23,7 @@ import zenoh
 
 from twinfleet.runtime.core.guard import signer
 from twinfleet.runtime.fleet.connection import CommandError, Connection
+from twinfleet.runtime.host.keys import topic_expr
 from twinfleet.runtime.tools.monitor import graph as g
 from twinfleet.runtime.tools.monitor.graph_verbs import (
     POLL_S,
@@ -78,7 +79,7 @@ def topic_echo(conn: Connection, topic: str, *, out: TextIO, count: int | None =
         where = pick(conn, graph, topic, "topic")
         latched = g.latched_topics(g.node_infos(session, where[0], timeout_s))
         samples: deque[bytes] = deque()
-        sub = g.subscribe(session, g.data_key(*where), lambda s: samples.append(
+        sub = g.subscribe(session, topic_expr(*where), lambda s: samples.append(
             s.payload.to_bytes()), history=True)
         try:
             _check_echo_topic(conn, graph, where, latched, wait, timeout_s, err, samples)
@@ -159,7 +160,7 @@ def topic_hz(conn: Connection, topic: str, *, out: TextIO, window: int = 100,
         graph = graph_of(session, conn, timeout_s)
         where = pick(conn, graph, topic, "topic")
         known_topic(conn, graph, where)
-        sub = session.declare_subscriber(g.data_key(*where),
+        sub = session.declare_subscriber(topic_expr(*where),
                                          lambda _s: arrivals.append(time.monotonic()))
         next_report = time.monotonic() + every_s
         try:
@@ -204,7 +205,7 @@ def topic_pub(conn: Connection, topic: str, type_name: str, data: dict[str, Any]
     type_name = checked_type(type_name)
     with open_session(conn, write=True) as session:
         fields = _payload_fields(type_name, data, _known_schemas(session, conn.fleet, timeout_s))
-        key = g.data_key(conn.fleet, topic)
+        key = topic_expr(conn.fleet, topic)
         tag = signer(conn.auth.key, key)  # the fleet's nodes take only signed samples
         pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         deadline = time.monotonic() + wait_matched_s
@@ -236,7 +237,7 @@ def service_call(conn: Connection, service: str, type_name: str, data: dict[str,
     with open_session(conn, write=True) as session:
         fields = _payload_fields(type_name, data, _known_schemas(session, conn.fleet,
                                                                  discovery_s))
-        key, payload = g.data_key(conn.fleet, service), envelope(type_name, fields)
+        key, payload = topic_expr(conn.fleet, service), envelope(type_name, fields)
         replies = list(session.get(key, payload=payload, timeout=timeout_s,
                                    attachment=signer(conn.auth.key, key)(payload)))
     for reply in replies:

@@ -3,8 +3,8 @@
 What the monitors (`runtime.tools.monitor.graph_verbs`) and the Foxglove bridge know about a
 fleet comes from four sources, all served by the node processes themselves:
 
-* liveliness tokens (`runtime.host.transport.graph_key`): who runs, publishes,
-  subscribes and serves;
+* liveliness tokens (`runtime.host.keys`, ``@node``, ``@pub``, ``@sub``, ``@srv``):
+  who runs, publishes, subscribes and serves;
 * ``@info/<node>`` (`runtime.host.introspect`): class, parameters, declared QoS;
 * ``@types/<node>`` (`runtime.host.schemas`): the JSON Schemas of the message
   types each process knows;
@@ -29,10 +29,17 @@ import msgpack
 import zenoh
 from zenoh import ext
 
-from twinfleet.runtime.contract.names import KEY_PREFIX
-from twinfleet.runtime.host.introspect import info_key
-from twinfleet.runtime.host.schemas import types_key
-from twinfleet.runtime.host.transport import graph_key, parse_graph_key
+from twinfleet.runtime.host.keys import (
+    ANY,
+    InvalidKey,
+    KeyKind,
+    NodeKey,
+    kind_expr,
+    node_key,
+    parse_node_key,
+    topic_expr,
+    topic_in_fleet,
+)
 
 _POLL_S = 0.02
 
@@ -72,19 +79,27 @@ def liveliness_keys(session: zenoh.Session, key_expr: str, timeout_s: float) -> 
 def read_graph(session: zenoh.Session, fleet: str, timeout_s: float) -> Graph:
     """The graph of `fleet` (``*``: every fleet behind the router)."""
     graph = Graph()
-    tables = {"pub": graph.publishers, "sub": graph.subscribers, "srv": graph.servers}
-    for kind in ("node", "pub", "sub", "srv"):
-        pattern = graph_key(fleet, kind, "*") + ("/**" if kind != "node" else "")
-        for key in liveliness_keys(session, pattern, timeout_s):
-            entry_fleet, _, node, name = parse_graph_key(key)
-            if kind == "node":
-                graph.nodes.append((entry_fleet, node))
+    tables = {KeyKind.PUB: graph.publishers, KeyKind.SUB: graph.subscribers,
+              KeyKind.SRV: graph.servers}
+    for kind in (KeyKind.NODE, *tables):
+        for token in _tokens(session, kind_expr(fleet, kind), kind, timeout_s):
+            if kind is KeyKind.NODE:
+                graph.nodes.append((token.fleet, token.node))
             else:
-                tables[kind].setdefault((entry_fleet, name), []).append(node)
+                tables[kind].setdefault((token.fleet, token.name), []).append(token.node)
     for table in tables.values():
         for who in table.values():
             who.sort()
     return graph
+
+
+def _tokens(session: zenoh.Session, key: str, kind: KeyKind, timeout_s: float) -> list[NodeKey]:
+    """The liveliness tokens of `kind` matching `key`, parsed; malformed ones are skipped."""
+    found = []
+    for token in liveliness_keys(session, key, timeout_s):
+        with contextlib.suppress(InvalidKey):
+            found.append(parse_node_key(token, kind))
+    return found
 
 
 def _query(session: zenoh.Session, key: str, timeout_s: float) -> list[tuple[str, bytes]]:
@@ -95,21 +110,22 @@ def _query(session: zenoh.Session, key: str, timeout_s: float) -> list[tuple[str
 def node_infos(session: zenoh.Session, fleet: str, timeout_s: float,
                node: str = "*") -> dict[tuple[str, str], dict[str, Any]]:
     """(fleet, node) → the node's self-description (`runtime.host.introspect.node_description`)."""
-    found = {}
-    for key, payload in _query(session, info_key(fleet, node), timeout_s):
-        parts = key.split("/")
-        with contextlib.suppress(ValueError, TypeError):
-            found[(parts[1], parts[3])] = msgpack.unpackb(payload, raw=False)
-    return found
+    return _node_replies(session, node_key(fleet, KeyKind.INFO, node), KeyKind.INFO, timeout_s)
 
 
 def node_stats(session: zenoh.Session, fleet: str, timeout_s: float) -> dict[tuple[str, str], Any]:
     """(fleet, node) → the node's counters (`@stats`, `runtime.host.node_host.HostStatistics`)."""
+    return _node_replies(session, kind_expr(fleet, KeyKind.STATS), KeyKind.STATS, timeout_s)
+
+
+def _node_replies(session: zenoh.Session, key: str, kind: KeyKind, timeout_s: float
+                  ) -> dict[tuple[str, str], Any]:
+    """(fleet, node) → the msgpack reply of each node's `kind` queryable matching `key`."""
     found = {}
-    for key, payload in _query(session, f"{KEY_PREFIX}/{fleet}/@stats/*", timeout_s):
-        parts = key.split("/")
-        with contextlib.suppress(ValueError, TypeError):
-            found[(parts[1], parts[3])] = msgpack.unpackb(payload, raw=False)
+    for reply_key, payload in _query(session, key, timeout_s):
+        with contextlib.suppress(ValueError, TypeError):  # InvalidKey is a ValueError
+            where = parse_node_key(reply_key, kind)
+            found[(where.fleet, where.node)] = msgpack.unpackb(payload, raw=False)
     return found
 
 
@@ -117,11 +133,11 @@ def served_schemas(session: zenoh.Session, fleet: str, timeout_s: float
                    ) -> dict[str, tuple[dict[str, Any], list[str]]]:
     """Type name → (data schema, the nodes that serve it), from every ``@types`` queryable."""
     found: dict[str, tuple[dict[str, Any], list[str]]] = {}
-    for key, payload in _query(session, types_key(fleet, "*"), timeout_s):
-        node = key.rsplit("/", 1)[-1]
+    for key, payload in _query(session, kind_expr(fleet, KeyKind.TYPES), timeout_s):
         try:
+            node = parse_node_key(key, KeyKind.TYPES).node
             schemas = json.loads(payload)
-        except ValueError:
+        except ValueError:  # InvalidKey is one too
             continue
         for name, schema in schemas.items() if isinstance(schemas, dict) else ():
             found.setdefault(name, (schema, []))[1].append(node)
@@ -137,11 +153,6 @@ def latched_topics(infos: dict[tuple[str, str], dict[str, Any]]) -> set[tuple[st
                 if isinstance(qos, dict) and qos.get("durability") == "transient_local":
                     latched.add((fleet, topic))
     return latched
-
-
-def data_key(fleet: str, name: str) -> str:
-    """Key expression of topic or service `name` (fully qualified) in `fleet` (may be `*`)."""
-    return f"{KEY_PREFIX}/{fleet}{name if name.startswith('/') else '/' + name}"
 
 
 def subscribe(session: zenoh.Session, key: str, callback: Any, *, history: bool) -> Any:
@@ -174,14 +185,14 @@ def sample_types(session: zenoh.Session, fleet: str, topics: Iterable[tuple[str,
         return seen
 
     def on_sample(sample: zenoh.Sample) -> None:
-        parts = str(sample.key_expr).split("/", 2)
-        where = (parts[1], "/" + parts[2]) if len(parts) == 3 else None
+        parsed = topic_in_fleet(ANY, str(sample.key_expr))
+        where = None if parsed is None else (parsed.fleet, parsed.topic)
         if where in wanted and where not in seen:
             kind = envelope_type(sample.payload.to_bytes())
             if kind is not None:
                 seen[where] = kind
 
-    subs = [subscribe(session, data_key(f, t), on_sample, history=(f, t) in latched)
+    subs = [subscribe(session, topic_expr(f, t), on_sample, history=(f, t) in latched)
             for f, t in sorted(wanted)]
     try:
         deadline = time.monotonic() + timeout_s

@@ -31,8 +31,8 @@ from typing import Any, final
 import zenoh
 from zenoh import ext
 
-from twinfleet.runtime.contract.names import KEY_PREFIX
 from twinfleet.runtime.fleet.fleetauth import MonitorAuth, login_settings, registry_auth
+from twinfleet.runtime.host.keys import fleet_topics, topic_expr, topic_in_fleet
 from twinfleet.runtime.host.zenoh_transport import Handoff, zenoh_config
 
 LATCHED_TOPICS = ("/map",)
@@ -101,19 +101,18 @@ class FleetTap:
             await asyncio.to_thread(prepare, self.session)
         self._handoff = Handoff(asyncio.get_running_loop())
         push = self._handoff.push
-        prefix = f"{KEY_PREFIX}/{self.fleet}"
 
         def on_sample(sample: zenoh.Sample) -> None:
             push(self._pass, str(sample.key_expr), sample.payload.to_bytes())
 
-        self._entities.append(self.session.declare_subscriber(f"{prefix}/**", on_sample))
+        self._entities.append(self.session.declare_subscriber(fleet_topics(self.fleet), on_sample))
         history = ext.HistoryConfig(detect_late_publishers=True, max_samples=1)
         for topic in self.latched:
             self._advanced.append(ext.declare_advanced_subscriber(
-                self.session, prefix + topic, on_sample, history=history))
+                self.session, topic_expr(self.fleet, topic), on_sample, history=history))
 
     def _pass(self, key: str, payload: bytes) -> None:
-        if "/" + key.split("/", 2)[-1] in self.latched:
+        if self._latched(key):
             digest, now = hashlib.blake2b(payload, digest_size=16).digest(), time.monotonic()
             seen = self._seen.setdefault(key, deque(maxlen=_SEEN_PER_KEY))
             if any(d == digest and now - t < DUPLICATE_WINDOW_S for d, t in seen):
@@ -121,6 +120,10 @@ class FleetTap:
                 return
             seen.append((digest, now))
         self.deliver(key, payload)
+
+    def _latched(self, key: str) -> bool:
+        where = topic_in_fleet(self.fleet, key)
+        return where is not None and where.topic in self.latched
 
     @property
     def is_open(self) -> bool:

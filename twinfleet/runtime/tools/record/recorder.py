@@ -48,8 +48,8 @@ import msgpack
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
-from twinfleet.runtime.contract.names import KEY_PREFIX
-from twinfleet.runtime.host.schemas import message_schema, types_key
+from twinfleet.runtime.host.keys import ANY, KeyKind, kind_expr, topic_expr, topic_in_fleet
+from twinfleet.runtime.host.schemas import message_schema
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
 from twinfleet.runtime.tools.monitor.tap import LATCHED_TOPICS, FleetTap, tap_config
 
@@ -120,8 +120,8 @@ class McapRecorder:
 
     def write(self, key: str, payload: bytes) -> None:
         """Record one sample of `key` received now."""
-        parts = key.split("/", 2)
-        if self.failed is not None or len(parts) < 3 or parts[0] != KEY_PREFIX:
+        where = topic_in_fleet(ANY, key)
+        if self.failed is not None or where is None:
             return
         try:
             env = msgpack.unpackb(payload, raw=False, strict_map_key=False)
@@ -135,7 +135,7 @@ class McapRecorder:
         self._last_ns = now
 
         def add() -> None:
-            channel = self._channel(key, parts[1], "/" + parts[2], type_name, env)
+            channel = self._channel(key, where.fleet, where.topic, type_name, env)
             self._writer.add_message(channel, log_time=now, data=payload, publish_time=now,
                                      sequence=self.messages)
 
@@ -255,7 +255,7 @@ def fleet_schemas(session: Any, fleet: str, timeout_s: float = 1.0) -> dict[str,
     found: dict[str, dict[str, Any]] = {}
     if session is None:
         return found
-    for reply in session.get(types_key(fleet, "*"), timeout=timeout_s):
+    for reply in session.get(kind_expr(fleet, KeyKind.TYPES), timeout=timeout_s):
         if reply.ok is not None:
             with contextlib.suppress(ValueError, TypeError):  # a node of another version
                 found.update(json.loads(reply.ok.payload.to_bytes()))
@@ -292,7 +292,7 @@ def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
             if channel.message_encoding != "msgpack":
                 raise ValueError(f"{path}: channel {channel.topic} is {channel.message_encoding}-"
                                  "encoded (an exported copy?); play needs the msgpack recording")
-            key = f"{KEY_PREFIX}/{fleet}{channel.topic}" if fleet else channel.metadata.get("key")
+            key = topic_expr(fleet, channel.topic) if fleet else channel.metadata.get("key")
             if not key:
                 raise ValueError(f"{path}: channel {channel.topic} has no 'key' metadata; "
                                  "give the fleet to publish into")

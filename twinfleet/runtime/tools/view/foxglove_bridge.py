@@ -30,10 +30,10 @@ from typing import Any, TextIO, final
 import foxglove
 import msgpack
 
+from twinfleet.runtime.host.keys import topic_in_fleet
 from twinfleet.runtime.host.schemas import message_schema
 from twinfleet.runtime.tools.record.mcap_export import json_schema, message_json
 from twinfleet.runtime.tools.view.foxglove_scene import MAP_TOPIC, ROBOTS_TOPIC, FoxgloveScene
-from twinfleet.runtime.tools.view.viewstate import in_fleet
 
 RESEND_DELAY_S = 0.05
 DEFAULT_PORT = 8765  # what Foxglove's "Open connection" proposes  # let the server finish a subscription before re-sending to it
@@ -72,10 +72,11 @@ class FoxgloveBridge:
         if self._waiting is not None:
             self._waiting.append((key, payload))
             return
-        where = in_fleet(self.fleet, key)
+        where = topic_in_fleet(self.fleet, key)
         if where is None:
             return
-        self.fleet, topic = where  # '*' locks onto the first fleet whose data arrives
+        # '*' locks onto the first fleet whose data arrives
+        self.fleet, topic = where.fleet, where.topic
         try:
             env = msgpack.unpackb(payload, raw=False, strict_map_key=False)
         except Exception:  # msgpack raises several unrelated types

@@ -29,8 +29,8 @@ from typing import Any, final
 
 import msgpack
 
-from twinfleet.runtime.contract.names import KEY_PREFIX
 from twinfleet.runtime.contract.tracefile import load_trace
+from twinfleet.runtime.host.keys import topic_in_fleet
 
 MAX_TRAIL = 20_000
 MAX_LOG = 500
@@ -63,20 +63,6 @@ def read_envelope(payload: bytes) -> dict[str, Any] | None:
             or not isinstance(env.get("data"), dict):
         return None
     return jsonable(env)
-
-
-def split_key(key: str) -> tuple[str, str] | None:
-    """``twinfleet/<fleet>/<name>`` → (fleet, "/<name>"), or None for other keys."""
-    parts = key.split("/", 2)
-    if len(parts) < 3 or parts[0] != KEY_PREFIX:
-        return None
-    return parts[1], "/" + parts[2]
-
-
-def in_fleet(wanted: str, key: str) -> tuple[str, str] | None:
-    """`split_key` of a key of fleet `wanted` (``*``: of any fleet), else None."""
-    where = split_key(key)
-    return where if where is not None and wanted in ("*", where[0]) else None
 
 
 @final
@@ -139,10 +125,10 @@ class LiveState:
 
     def on_sample(self, key: str, payload: bytes) -> None:
         """Fold one sample of key `twinfleet/<fleet>/<topic>` into the state."""
-        where = in_fleet(self.fleet, key)
+        where = topic_in_fleet(self.fleet, key)
         if where is None:
             return
-        fleet, topic = where
+        fleet, topic = where.fleet, where.topic
         if self.fleet == "*":  # the first fleet whose data arrives is the one shown
             self.fleet = fleet
             self._dirty_top.add("fleet")
