@@ -32,7 +32,7 @@ def _runs(scenario: str, verify: bool) -> tuple[int, int]:
     """Handler runs (re-executions included) and re-executions of one search."""
     loaded = load(scenario)
     props = PropertySet.from_scenario(loaded)
-    system = System(loaded, monitors=props, verify=verify)
+    system = System(loaded, properties=props, verify=verify)
     Search(system, props).run("bfs")
     return system.runner.handler_runs, system.runner.reruns
 

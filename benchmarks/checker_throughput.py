@@ -174,7 +174,7 @@ def child(args: argparse.Namespace) -> None:
         kwargs["transition_cache"] = args.store != "compact-nocache"
     if semantics:
         kwargs["semantics"] = semantics
-    system = System(scenario, monitors=props, **kwargs)
+    system = System(scenario, properties=props, **kwargs)
     system.initial()
     gc.collect()
     rss0 = _rss_now_mb()

@@ -63,7 +63,7 @@ def run_once(path: str, mode: str) -> tuple[int, int, float]:
     """(states, transitions, seconds) of one BFS of `path` in `mode`."""
     scenario = load(path)
     props = PropertySet.from_scenario(scenario)
-    system = System(scenario, monitors=props)
+    system = System(scenario, properties=props)
     reduction = {"none": None, "bookkeeping": BookkeepingOnly, "por": Reduction}[mode]
     search = Search(system, props, handle_sigint=False,
                     reduction=None if reduction is None else reduction(system, props))

@@ -64,7 +64,7 @@ def test_params_instances_class_paths_and_property_mappings_mix() -> None:
                               properties=[{"name": "b", "kind": "invariant",
                                            "expr": "ping.sent <= 2"}])
     assert scenario.node("ping").params == PingParams(rounds=2)
-    assert System(scenario, monitors=PropertySet.from_scenario(scenario)).names == ("ping", "pong")
+    assert System(scenario, properties=PropertySet.from_scenario(scenario)).names == ("ping", "pong")
     result = check(scenario)
     # Two rounds: ping, pong, ping, pong, then nothing: 5 worlds, 4 steps (as test_counts).
     assert result.status == "holds"

@@ -45,7 +45,7 @@ def test_c2c_collides_in_the_paper_profile_and_the_trace_replays(tmp_path):
     assert (result.statistics.states, result.rmc_transitions) == (1_636, 3_645)
     scenario = load(result.trace["scenario"], profile=result.trace["profile"])
     system = System(scenario, semantics=result.trace["semantics"],
-                    monitors=PropertySet.from_scenario(scenario))
+                    properties=PropertySet.from_scenario(scenario))
     assert replay(system, result.trace).confirmed
 
 

@@ -62,5 +62,5 @@ def replay_confirms(result: CheckResult, *, debug_state: bool = False) -> bool:
     trace = result.trace
     scenario_ = load(trace["scenario"], semantics=trace["semantics"])
     props = PropertySet.from_scenario(scenario_)
-    system = System(scenario_, debug_state=debug_state, monitors=props)
+    system = System(scenario_, debug_state=debug_state, properties=props)
     return replay(system, trace, props).confirmed

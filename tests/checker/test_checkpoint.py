@@ -101,7 +101,7 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
 
     scen = load(path)
     props = PropertySet.from_scenario(scen)
-    search = Search(System(scen, monitors=props), props, progress=interrupt, progress_interval=0,
+    search = Search(System(scen, properties=props), props, progress=interrupt, progress_interval=0,
                     checkpoint=ckpt, checkpoint_meta={})
     outcome = search.run("bfs")
     assert outcome.reason == "interrupted (Ctrl-C)"
@@ -110,7 +110,7 @@ def test_ctrl_c_saves_a_checkpoint_that_resumes(tmp_path):
     # The meta-less checkpoint was written by the API; resume it through the API too.
     from twinfleet.checker.checkpoint import load as load_checkpoint
 
-    again = Search(System(scen, monitors=props), props)
+    again = Search(System(scen, properties=props), props)
     again.restore(load_checkpoint(ckpt))
     done = again.run("bfs").statistics
     assert (done.states, done.transitions, done.depth) == (

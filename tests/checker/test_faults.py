@@ -267,7 +267,7 @@ def test_bad_settings_are_scenario_errors(tmp_path, check, match):
     nodes = [node("client", "Client"), node("adder", "Adder")]
     path = scenario(tmp_path, nodes, name="bad", **check)
     with pytest.raises(ScenarioError, match=match):
-        System(load(path), monitors=PropertySet.from_scenario(load(path)))
+        System(load(path), properties=PropertySet.from_scenario(load(path)))
 
 
 def test_invariant_may_use_comprehensions_over_node_states(tmp_path):

@@ -28,7 +28,7 @@ MODELS = {
 def _system(path):
     scen = load(path)
     props = PropertySet.from_scenario(scen)
-    return System(scen, monitors=props), props
+    return System(scen, properties=props), props
 
 
 @pytest.mark.parametrize("model", sorted(MODELS))

@@ -168,7 +168,7 @@ def test_store_holds_far_fewer_bytes_per_state_than_the_exact_store(tmp_path):
     props = PropertySet.from_scenario(scen)
     stats = {}
     for exact in (False, True):
-        search = Search(System(scen, monitors=props, exact_states=exact), props)
+        search = Search(System(scen, properties=props, exact_states=exact), props)
         search.limits = type(search.limits)(max_states=20_000)
         stats[exact] = search.run("bfs").statistics
     assert stats[False].states == stats[True].states == 20_000

@@ -194,7 +194,7 @@ def test_replay_detects_divergence(tmp_path):
     scen = load(trace["scenario"])
     props = PropertySet.from_scenario(scen)
     with pytest.raises(NondeterminismError, match=r"step 2 \(door.on_cmd\)"):
-        replay(System(scen, monitors=props), trace, props)
+        replay(System(scen, properties=props), trace, props)
     # The written file is the same trace.
     on_disk = json.loads(Path(result.trace_path).read_text())
     assert on_disk["format"] == "twinfleet-trace/1"

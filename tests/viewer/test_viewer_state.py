@@ -194,7 +194,7 @@ def test_cli_of_view_record_play(tmp_path, capsys, monkeypatch):
     monkeypatch.delenv("TWINFLEET_CONNECT", raising=False)
     assert main(["record", "-o", str(tmp_path / "x.mcap")]) == 2
     assert "needs a SCENARIO" in capsys.readouterr().err
-    assert main(["record", "launch/c1a.yaml", "--connect", "tcp/127.0.0.1:1", "-o", "x.mcap"]) == 2
+    assert main(["record", "twinfleet/launch/c1a.yaml", "--connect", "tcp/127.0.0.1:1", "-o", "x.mcap"]) == 2
     assert "not both" in capsys.readouterr().err
     assert main(["play", str(tmp_path / "missing.mcap")]) == 2
     assert main(["view", "--trace", str(tmp_path / "missing.json"), "--port", "0"]) == 2

@@ -1,10 +1,10 @@
-"""Building worlds: canonical event order, property monitors, and the search key.
+"""Building worlds: canonical event order, `within` obligations, and the search key.
 
 A `System` builds every world through one `WorldBuilder`. Node states arrive
 interned (`checker.runner`), so the builder hashes each distinct node state
 once and keys a world by its parts' 64-bit content hashes (`World.key`,
 `checker.world.fast_key`); with `exact` it keys worlds by their 128-bit digest
-instead. Worlds carry the `within` monitors still pending on their path
+instead. Worlds carry the `within` obligations still pending on their path
 (`checker.properties.PropertySet.update`).
 """
 
@@ -27,13 +27,13 @@ class WorldBuilder:
 
     Args:
         reader: what property expressions read node states through (the system).
-        monitors: the property monitors worlds carry, or None.
+        properties: the properties whose `within` obligations worlds carry, or None.
         exact: key worlds by their 128-bit digest (`World.digest`).
     """
 
-    def __init__(self, reader: States, monitors: PropertySet | None, *, exact: bool) -> None:
+    def __init__(self, reader: States, properties: PropertySet | None, *, exact: bool) -> None:
         self.reader = reader
-        self.monitors = monitors
+        self.properties = properties
         self.exact = exact
         self._hashes: dict[bytes, bytes] = {}
         self.hashed = 0  # node-state content hashes computed: for the collision bound
@@ -45,20 +45,20 @@ class WorldBuilder:
               parent: World | None, crashes: int = 0) -> World:
         """The world with node `states` and `pending` events at `now`, after `parent`."""
         events = sort_events(pending)
-        monitors: tuple[str, ...] = ()
-        if self.monitors is not None:
-            monitors = self.monitors.update(self.reader, parent, now, states, events)
+        obligations: tuple[str, ...] = ()
+        if self.properties is not None:
+            obligations = self.properties.update(self.reader, parent, now, states, events)
         if self.exact:
-            digest = world_digest(states, events, monitors, crashes)
-            return World(now, states, events, monitors, crashes=crashes, key=digest,
+            digest = world_digest(states, events, obligations, crashes)
+            return World(now, states, events, obligations, crashes=crashes, key=digest,
                          digest=digest)
         hashes = self._hashes
         parts = []
         for s in states:
             h = hashes.get(s)
             parts.append(h if h is not None else self._hash_state(s))
-        return World(now, states, events, monitors, crashes=crashes,
-                     key=fast_key(parts, events, monitors, crashes))
+        return World(now, states, events, obligations, crashes=crashes,
+                     key=fast_key(parts, events, obligations, crashes))
 
     def _hash_state(self, data: bytes) -> bytes:
         if len(self._hashes) >= _HASH_LIMIT:

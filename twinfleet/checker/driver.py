@@ -194,7 +194,7 @@ def system_for_trace(trace: Mapping[str, Any]) -> tuple[System, PropertySet]:
     latency = trace.get("latency")
     system = System(scenario, latency=tuple(latency) if latency else None,
                     global_priority=trace.get("global_priority"),
-                    debug_state=bool(trace.get("debug_state")), monitors=props,
+                    debug_state=bool(trace.get("debug_state")), properties=props,
                     check_determinism=bool(trace.get("check_determinism")))
     return system, props
 
@@ -231,7 +231,7 @@ def check(scenario: str | Path | Scenario | None,
     props = PropertySet.from_scenario(scenario)
     warnings = [str(w) for w in lint_scenario(scenario)]
     flags = {key: meta.get(key, getattr(options, key)) for key in _SEARCH_FLAGS}
-    system = System(scenario, monitors=props, **flags)
+    system = System(scenario, properties=props, **flags)
     strategy = meta.get("strategy") or options.search or scenario.check.search
     if strategy not in SEARCHES:
         raise ScenarioError(f"search: expected {', '.join(SEARCHES)}, got {strategy!r}")

@@ -22,7 +22,7 @@ limit an evaluation still running when it expires raises
   across time.
 - `within`: on every path `expr` holds at some world whose time is at most
   `within_ms`. Each world carries the names of the `within` properties not yet
-  met on its path (`World.monitors`); it is violated in a world where one is
+  met on its path (`World.obligations`); it is violated in a world where one is
   still pending and the next event is later than `within_ms` (or none is).
 
 Besides the named properties, a search always reports handler failures, and
@@ -221,8 +221,8 @@ class PropertySet:
 
     def update(self, system: States, parent: World | None, now: int,
                states: tuple[bytes, ...], events: tuple[Event, ...]) -> tuple[str, ...]:
-        """The `within` monitors still pending in a new world (those whose expr is still false)."""
-        pending = parent.monitors if parent is not None else tuple(p.name for p in self.within)
+        """The `within` obligations still pending in a new world (those whose expr is still false)."""
+        pending = parent.obligations if parent is not None else tuple(p.name for p in self.within)
         if not pending:
             return ()
         keep = []
@@ -244,7 +244,7 @@ class PropertySet:
             if not prop.expr.holds(system, world.states, world.now):
                 return PropertyViolation(prop.name, prop.kind,
                                  f"invariant {prop.expr.source!r} is false at t={world.now} ms")
-        for name in world.monitors:
+        for name in world.obligations:
             prop = self._within_by_name[name]
             nxt = world.next_time
             if nxt is None or prop.within_ms is None or nxt > prop.within_ms:

@@ -101,7 +101,8 @@ class System:
         latency: (min, max) delivery delay branches; default `check.latency`.
         global_priority: rebeca's `@globalPriority`; default `check.global_priority`.
         debug_state: detect handlers that change node attributes other than `state`.
-        monitors: property monitors (`checker.properties.PropertySet`) kept in worlds.
+        properties: the properties (`checker.properties.PropertySet`) whose `within`
+            obligations worlds carry.
         exact_states: key worlds by their 128-bit digest (`World.digest`).
         check_determinism: verify every transition, not only new handler runs (turns the
             transition cache off).
@@ -112,7 +113,7 @@ class System:
 
     def __init__(self, scenario: Scenario, *, semantics: Semantics | str | None = None,
                  latency: tuple[int, int] | None = None, global_priority: bool | None = None,
-                 debug_state: bool = False, monitors: PropertySet | None = None,
+                 debug_state: bool = False, properties: PropertySet | None = None,
                  exact_states: bool = False, check_determinism: bool = False,
                  transition_cache: bool = True, verify: bool = True) -> None:
         self.scenario = scenario
@@ -137,13 +138,13 @@ class System:
         self.debug_state = debug_state
         self.check_determinism = check_determinism
         self.exact_states = exact_states
-        self.monitors = monitors
+        self.properties = properties
         self.runner = Runner(self.topology, self.rules, debug_state=debug_state,
                              verify=verify or check_determinism)
         self._memo: GenerationCache[list[Variant]] | None = (
             GenerationCache(_MEMO_LIMIT)
             if transition_cache and not debug_state and not check_determinism else None)
-        self._worlds = WorldBuilder(self, monitors, exact=exact_states)
+        self._worlds = WorldBuilder(self, properties, exact=exact_states)
         self._world = self._worlds.world
         self._decoded: dict[bytes, Any] = {}
         #: zero-delay sends seen in every handler run computed (`checker.reduction`)

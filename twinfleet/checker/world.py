@@ -21,7 +21,7 @@ A world has two identities with the same meaning:
   `--exact-states` uses it as the key (then a false merge needs a 128-bit
   collision).
 
-Beyond node states and due times the identity holds the `within` monitors
+Beyond node states and due times the identity holds the `within` obligations
 still pending, the crash count when crash faults are on, and, per event,
 whether it will miss its deadline (see `Event.late`).
 """
@@ -152,38 +152,38 @@ class Event:
 
 @final
 class World:
-    """An immutable global state: node states, pending events, property monitors.
+    """An immutable global state: node states, pending events, open `within` obligations.
 
     Attributes:
         now: logical time of the event that produced this world (0 initially).
         states: per node (in scenario order) the snapshot bytes of its state.
         events: pending events, sorted by `Event.sort_key`.
-        monitors: names of `within` properties not yet satisfied on this path.
+        obligations: names of `within` properties not yet satisfied on this path.
         crashes: crash faults injected on the path to this world.
         key: the identity the search stores (see the module docstring).
     """
 
-    __slots__ = ("_digest", "crashes", "events", "key", "monitors", "now", "states")
+    __slots__ = ("_digest", "crashes", "events", "key", "obligations", "now", "states")
 
     def __init__(self, now: int, states: tuple[bytes, ...], events: tuple[Event, ...],
-                 monitors: tuple[str, ...] = (), *, crashes: int = 0,
+                 obligations: tuple[str, ...] = (), *, crashes: int = 0,
                  key: int | bytes | None = None, digest: bytes | None = None) -> None:
         self.now = now
         self.states = states
         self.events = events
-        self.monitors = monitors
+        self.obligations = obligations
         self.crashes = crashes
         self._digest = digest
         if key is None:
             hashes = [hashlib.blake2b(s, digest_size=8).digest() for s in states]
-            key = fast_key(hashes, events, monitors, crashes)
+            key = fast_key(hashes, events, obligations, crashes)
         self.key = key
 
     @property
     def digest(self) -> bytes:
         """16-byte identity over the full canonical encoding (computed on first use)."""
         if self._digest is None:
-            self._digest = world_digest(self.states, self.events, self.monitors, self.crashes)
+            self._digest = world_digest(self.states, self.events, self.obligations, self.crashes)
         return self._digest
 
     @property
@@ -200,10 +200,10 @@ class World:
         return f"World(now={self.now}, events={len(self.events)}, digest={self.digest.hex()[:12]})"
 
     def __getstate__(self) -> tuple[Any, ...]:
-        return (self.now, self.states, self.events, self.monitors, self.crashes, self.key)
+        return (self.now, self.states, self.events, self.obligations, self.crashes, self.key)
 
     def __setstate__(self, state: tuple[Any, ...]) -> None:
-        self.now, self.states, self.events, self.monitors, self.crashes, self.key = state
+        self.now, self.states, self.events, self.obligations, self.crashes, self.key = state
         self._digest = None
 
 
@@ -226,7 +226,7 @@ def event_key(kind: EventKind, target: int, method: str, sender: int, reply_to: 
 
 
 def world_digest(states: tuple[bytes, ...], events: tuple[Event, ...],
-                 monitors: tuple[str, ...], crashes: int = 0) -> bytes:
+                 obligations: tuple[str, ...], crashes: int = 0) -> bytes:
     """The exact (128-bit) time-shifted identity of a world (see the module docstring).
 
     While a `within` monitor is pending the absolute t* is part of the identity,
@@ -235,28 +235,28 @@ def world_digest(states: tuple[bytes, ...], events: tuple[Event, ...],
     base = events[0].due if events else 0
     timed = [(e.due - base, e.rank, e.key, True) if e.sk[3] else (e.due - base, e.rank, e.key)
              for e in events]
-    doc: list[Any] = [list(states), timed, list(monitors), base if monitors else 0]
+    doc: list[Any] = [list(states), timed, list(obligations), base if obligations else 0]
     if crashes:
         doc.append(crashes)
     packed = msgpack.packb(doc, use_bin_type=True)
     return hashlib.blake2b(packed, digest_size=16).digest()
 
 
-def fast_key(state_hashes: list[bytes], events: tuple[Event, ...], monitors: tuple[str, ...],
+def fast_key(state_hashes: list[bytes], events: tuple[Event, ...], obligations: tuple[str, ...],
              crashes: int = 0) -> int:
     """The 64-bit search key of a world from its node states' 8-byte content hashes.
 
     Layout hashed: node hashes, event hashes (canonical order), then int64s
-    [len(events), crashes, t* if monitors else 0, due offsets..., ranks...],
+    [len(events), crashes, t* if obligations else 0, due offsets..., ranks...],
     then the monitor names. Fixed-width parts make the layout unambiguous.
     """
     base = events[0].due if events else 0
-    nums = [len(events), crashes, base if monitors else 0]
+    nums = [len(events), crashes, base if obligations else 0]
     nums += [e.due - base for e in events]
     nums += [e.rank for e in events]
     parts = [*state_hashes, *[e._ident or e.ident() for e in events], array("q", nums).tobytes()]
-    if monitors:
-        parts.append("\0".join(monitors).encode())
+    if obligations:
+        parts.append("\0".join(obligations).encode())
     digest = hashlib.blake2b(b"".join(parts), digest_size=8).digest()
     return int.from_bytes(digest, "little")
 
