@@ -22,7 +22,14 @@ from twinfleet.runtime.contract.messages import DecodeError, NodeAlive, Violatio
 from twinfleet.runtime.core.choosers import RecordingChooser
 from twinfleet.runtime.core.entries import Entry
 from twinfleet.runtime.core.node_core import MAX_GAP, Handled, NodeCore
-from twinfleet.runtime.core.outbox import Answer, Line, Output, Put, Query, Stop
+from twinfleet.runtime.core.outbox import (
+    CallOutput,
+    LogOutput,
+    Output,
+    PublishOutput,
+    ReplyOutput,
+    StopOutput,
+)
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -211,16 +218,16 @@ def test_a_request_runs_its_service_and_answers_through_its_responder():
     responder = object()
     assert core.receive_request("double", encode(Num(21), sender="c"), responder, 3) == ()
     (answer,) = drain(core, 3)
-    assert isinstance(answer, Answer) and answer.responder is responder
+    assert isinstance(answer, ReplyOutput) and answer.responder is responder
     assert answer.payload is not None and decode(answer.payload).msg == Num(42)
 
 
 def test_a_service_that_raises_answers_a_server_error_and_reports_it():
     core = started(Doubler("d"))
     out = [] if core.receive_request("double", encode(Num(-1)), "r", 0) else drain(core, 0)
-    lines = [o for o in out if isinstance(o, Line)]
-    (put,) = [o for o in out if isinstance(o, Put)]
-    assert out[-1] == Answer("r", None, "server error: ValueError: negative")
+    lines = [o for o in out if isinstance(o, LogOutput)]
+    (put,) = [o for o in out if isinstance(o, PublishOutput)]
+    assert out[-1] == ReplyOutput("r", None, "server error: ValueError: negative")
     assert lines[0].err and lines[0].text.startswith("error in handler d.double: ValueError")
     assert (put.topic, decode(put.payload).msg) == (
         "/violations", Violation("d", "double", "ValueError: negative"))
@@ -230,14 +237,14 @@ def test_a_service_that_raises_answers_a_server_error_and_reports_it():
 def test_an_undecodable_request_is_answered_at_once():
     core = started(Doubler("d"))
     line, answer = core.receive_request("double", b"junk", "r", 0)
-    assert isinstance(line, Line) and line.err
+    assert isinstance(line, LogOutput) and line.err
     assert answer.reason.startswith("server error: undecodable request")
     assert not core.has_ready()
 
 
-def _call(core: NodeCore) -> Query:
+def _call(core: NodeCore) -> CallOutput:
     (query,) = drain(core, 10)
-    assert isinstance(query, Query) and query.service == "/double" and query.timeout_ms == 200
+    assert isinstance(query, CallOutput) and query.service == "/double" and query.timeout_ms == 200
     assert decode(query.payload).msg == Num(21)
     return query
 
@@ -287,7 +294,7 @@ def test_a_handler_exception_is_reported_and_the_next_entries_still_run():
     receive(sample(-1, seq=1), 1)
     receive(sample(3, seq=2), 1)
     out = drain(core, 1)
-    assert [type(o) for o in out] == [Line, Line, Put]  # error, traceback, violation
+    assert [type(o) for o in out] == [LogOutput, LogOutput, PublishOutput]  # error, traceback, violation
     assert decode(out[2].payload).msg == Violation("busy", "on_high", "ValueError: negative")
     assert node.state.seen[-1] == (1, "high 3")
     assert core.statistics().handler_errors == 1
@@ -321,7 +328,7 @@ def test_a_state_that_cannot_be_copied_is_the_handlers_failure_and_rolled_back()
     core.receiver("on_high")(sample(1), 1)
     out = drain(core, 1)
     assert node.state.seen == []
-    assert not any(isinstance(o, Put) and o.topic.endswith("/out") for o in out)
+    assert not any(isinstance(o, PublishOutput) and o.topic.endswith("/out") for o in out)
     assert core.statistics().handler_errors == 1
 
 
@@ -341,14 +348,14 @@ def test_stop_on_error_adds_a_stop_output():
     core = started(Faulty("busy"), stop_on_error=True)
     core.receiver("on_high")(sample(-1), 1)
     out = drain(core, 1)
-    assert isinstance(out[-1], Stop) and "negative" in out[-1].reason
+    assert isinstance(out[-1], StopOutput) and "negative" in out[-1].reason
 
 
 def test_fail_is_counted_logged_and_published():
     core = started(Faulty("busy"))
     core.receiver("on_high")(sample(13), 2)
     line, put = drain(core, 2)
-    assert line == Line("t=2 FAIL unlucky", err=True)
+    assert line == LogOutput("t=2 FAIL unlucky", err=True)
     assert decode(put.payload).msg == Violation("busy", "", "unlucky")
     assert core.statistics().failures == 1
 
@@ -360,7 +367,7 @@ def test_an_unencodable_publish_is_a_handler_error_that_takes_no_sequence_number
     receive(sample(7, seq=2), 2)
     out = drain(core, 2)
     assert out[0].text.startswith("error in handler busy.on_high: effect failed")
-    (put,) = [o for o in out if isinstance(o, Put) and o.topic == "/out"]
+    (put,) = [o for o in out if isinstance(o, PublishOutput) and o.topic == "/out"]
     assert decode(put.payload).seq == 1
 
 

@@ -44,13 +44,13 @@ and never touches a socket:
    `runtime.contract.dispatch.invoke`; `run(entry, now, chooser)` runs any pending
    entry out of order (the replay gate's way in). Both return the handler's
    effects as *outputs* (`runtime.core.outbox`), values the driver performs in
-   order before it asks for the next handler: `Put` (an
-   envelope with the topic's next sequence number), `Query` (a service call,
-   whose answer comes back through `receive_reply`), `Answer` (the reply to
-   the request that ran), `Line` (a log line), `Stop` (``stop_on_error`` after
+   order before it asks for the next handler: `PublishOutput` (an
+   envelope with the topic's next sequence number), `CallOutput` (a service call,
+   whose answer comes back through `receive_reply`), `ReplyOutput` (the reply to
+   the request that ran), `LogOutput` (a log line), `StopOutput` (``stop_on_error`` after
    a failure). `After` and `Call` arm due entries inside the core.
 6. Failures. A handler exception, a service reply that is not a message, an
-   effect that cannot be encoded: counted, reported as `Line`s, published as a
+   effect that cannot be encoded: counted, reported as `LogOutput`s, published as a
    `Violation` on /violations, answered "server error: ..." to a caller. A
    handler that raises (or a service that returns a non-message) did not
    complete: its effects are cleared and `self.state` is put back as it was
@@ -89,7 +89,7 @@ from twinfleet.runtime.core.choosers import RecordingChooser, SeededChooser, der
 from twinfleet.runtime.core.due import DueEntries
 from twinfleet.runtime.core.entries import Entry
 from twinfleet.runtime.core.guard import Admission, Rejected, check_message, expected_type
-from twinfleet.runtime.core.outbox import Answer, Line, Outbox, Output
+from twinfleet.runtime.core.outbox import LogOutput, Outbox, Output, ReplyOutput
 
 MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is not a loss
 _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
@@ -291,7 +291,7 @@ class NodeCore:
     Args:
         node: the node object (its `state` is changed by its handlers).
         seed: fleet seed; `ctx.choose` draws from `derive_seed(seed, node.name)`.
-        stop_on_error: add a `Stop` output after the first handler failure.
+        stop_on_error: add a `StopOutput` output after the first handler failure.
         keep_last: bound each subscription's waiting messages by its QoS depth
             (the replay gate holds every message until it is granted: False).
         stall_ms: the floor of the stall threshold: a timed entry released later than
@@ -358,7 +358,7 @@ class NodeCore:
 
     def receive_request(self, method: str, payload: bytes, responder: Any,
                         arrival_ms: int) -> Sequence[Output]:
-        """A request for service handler `method`; `responder` is handed back in its `Answer`.
+        """A request for service handler `method`; `responder` is handed back in its `ReplyOutput`.
 
         Returns the outputs of a request that cannot run (undecodable): a line and the answer.
         """
@@ -368,12 +368,12 @@ class NodeCore:
             check_message(msg)
         except Rejected as exc:
             self._n[exc.counter] += 1
-            return (Line(f"rejected request for {self.services[method]}: {exc}", err=True),
-                    Answer(responder, None, f"server error: rejected request ({exc})"))
+            return (LogOutput(f"rejected request for {self.services[method]}: {exc}", err=True),
+                    ReplyOutput(responder, None, f"server error: rejected request ({exc})"))
         except Exception as exc:  # DecodeError (anything else would be a codec bug)
             self._n["undecodable"] += 1
-            return (Line(f"undecodable request for {self.services[method]}: {exc}", err=True),
-                    Answer(responder, None, f"server error: undecodable request ({exc})"))
+            return (LogOutput(f"undecodable request for {self.services[method]}: {exc}", err=True),
+                    ReplyOutput(responder, None, f"server error: undecodable request ({exc})"))
         self._push(arrival_ms, self.due.priority(method),
                    Entry(EventKind.REQUEST, method, (msg,), sender, self.services[method], seq,
                          stamp, responder=responder))
@@ -381,7 +381,7 @@ class NodeCore:
 
     def receive_reply(self, call: int, payload: bytes | None, reason: str,
                       arrival_ms: int) -> bool:
-        """The answer to `Query` `call`: a reply payload, or None and why there is none.
+        """The answer to `CallOutput` `call`: a reply payload, or None and why there is none.
 
         A CallError (no answer, or an undecodable one) runs the reply handler as a
         TIMEOUT event. Returns False when the call is already over (it timed out).

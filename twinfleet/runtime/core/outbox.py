@@ -1,9 +1,10 @@
 """A node core's outputs, and the `Outbox` that turns what a handler did into them.
 
-Outputs are values the driver performs in order (`runtime.host.node_host.NodeHost.perform`
-live): `Put` (an encoded envelope on a topic), `Query` (a service call whose
-answer goes back to `NodeCore.receive_reply`), `Answer` (the reply to the
-request that ran), `Line` (a log line), `Stop` (``stop_on_error`` after a
+Outputs are values the driver performs in order, each named after the effect it
+carries out (`contract.context`: `Publish`, `Call`, `Log`), plus the reply and the stop (`runtime.host.node_host.NodeHost.perform`
+live): `PublishOutput` (an encoded envelope on a topic), `CallOutput` (a service call whose
+answer goes back to `NodeCore.receive_reply`), `ReplyOutput` (the reply to the
+request that ran), `LogOutput` (a log line), `StopOutput` (``stop_on_error`` after a
 failure). The `Outbox` numbers each topic's envelopes (a per-publisher
 sequence number that receivers check for gaps; a message that cannot be
 encoded takes no number), arms the due entries of `ctx.after` and `ctx.call`,
@@ -28,8 +29,8 @@ from twinfleet.runtime.core.entries import Entry
 VIOLATIONS_TOPIC: Final = "/violations"
 
 
-class Put(NamedTuple):
-    """Put `payload` (an encoded envelope) on the absolute `topic`.
+class PublishOutput(NamedTuple):
+    """Publish `payload` (an encoded envelope) on the absolute `topic`.
 
     A NamedTuple, not a frozen dataclass like the other outputs: one is built per
     published message, and a tuple is built in half the time.
@@ -40,7 +41,7 @@ class Put(NamedTuple):
 
 
 @dataclass(frozen=True, slots=True)
-class Query:
+class CallOutput:
     """Ask the server of `service`; hand its answer to `NodeCore.receive_reply(call, ...)`."""
 
     call: int
@@ -50,8 +51,8 @@ class Query:
 
 
 @dataclass(frozen=True, slots=True)
-class Answer:
-    """Answer the request that ran through `responder`: a payload, or None and a reason."""
+class ReplyOutput:
+    """Reply to the request that ran through `responder`: a payload, or None and a reason."""
 
     responder: Any
     payload: bytes | None
@@ -59,7 +60,7 @@ class Answer:
 
 
 @dataclass(frozen=True, slots=True)
-class Line:
+class LogOutput:
     """A log line (`err`: a warning or an error)."""
 
     text: str
@@ -67,16 +68,16 @@ class Line:
 
 
 @dataclass(frozen=True, slots=True)
-class Stop:
+class StopOutput:
     """Stop the node: a handler failed under ``stop_on_error``."""
 
     reason: str
 
 
-Output = Put | Query | Answer | Line | Stop
+Output = PublishOutput | CallOutput | ReplyOutput | LogOutput | StopOutput
 
-# `Put((topic, payload))` without the Python-level `__new__` a NamedTuple has: the hot path.
-_put: Final = functools.partial(tuple.__new__, Put)
+# `PublishOutput((topic, payload))`, without the Python-level `__new__` a NamedTuple has: the hot path.
+_put: Final = functools.partial(tuple.__new__, PublishOutput)
 
 
 
@@ -93,7 +94,7 @@ class Outbox:
         name: the node's name, the sender of everything it sends.
         due: the node's due entries: `ctx.after` arms a timer there, `ctx.call` a timeout.
         counters: the core's counters; ``published``, ``failures`` and ``errors`` count here.
-        stop_on_error: end a failure's outputs with a `Stop`.
+        stop_on_error: end a failure's outputs with a `StopOutput`.
     """
 
     def __init__(self, name: str, due: DueEntries, counters: dict[str, int], *,
@@ -124,33 +125,33 @@ class Outbox:
                             n["period"] = delay
                     case Fail(reason=reason):
                         n["failures"] += 1
-                        out.append(Line(f"t={now} FAIL {reason}", err=True))
+                        out.append(LogOutput(f"t={now} FAIL {reason}", err=True))
                         self.translate(_violation(name, "", reason), now, method, out)
                     case Log(event=event, fields=fields):
                         text = " ".join(f"{k}={v!r}" for k, v in fields)
-                        out.append(Line(f"t={now} {event}" + (f" {text}" if text else "")))
+                        out.append(LogOutput(f"t={now} {event}" + (f" {text}" if text else "")))
         except Exception as exc:  # e.g. a message msgpack cannot encode (an int ≥ 2**64)
             return HandlerError(name, method, f"effect failed: {exc!r}")
         return None
 
-    def _query(self, call: Call, now: int) -> Query:
+    def _query(self, call: Call, now: int) -> CallOutput:
         cid = self.due.open_call(call, now)
         payload = encode(call.request, stamp_ms=now, sender=self.name)
-        return Query(cid, call.service, payload, call.timeout_ms)
+        return CallOutput(cid, call.service, payload, call.timeout_ms)
 
     def report(self, error: HandlerError, args: tuple[Any, ...], now: int,
                out: list[Output]) -> None:
-        """A failed handler: count it, log it, publish a `Violation` (and `Stop` if asked)."""
+        """A failed handler: count it, log it, publish a `Violation` (and `StopOutput` if asked)."""
         self._n["errors"] += 1
         detail = ", ".join(repr(a)[:120] for a in args)
-        out.append(Line(f"error in handler {error} (args: {detail})", err=True))
+        out.append(LogOutput(f"error in handler {error} (args: {detail})", err=True))
         if error.traceback:
-            out.append(Line(error.traceback.rstrip(), err=True))
+            out.append(LogOutput(error.traceback.rstrip(), err=True))
         self.translate(_violation(error.node, error.handler, error.message), now, error.handler,
                         out)
         if self.stop_on_error:
-            out.append(Line("stopping: live.stop_on_error is set", err=True))
-            out.append(Stop(f"{error}"))
+            out.append(LogOutput("stopping: live.stop_on_error is set", err=True))
+            out.append(StopOutput(f"{error}"))
 
     def finish(self, method: str, args: tuple[Any, ...], reply: Any, error: HandlerError | None,
                responder: Any, now: int, out: list[Output]) -> HandlerError | None:
@@ -164,6 +165,6 @@ class Outbox:
         if error is not None:
             self.report(error, args, now, out)
         if responder is not None:
-            out.append(Answer(responder, payload, "") if error is None
-                       else Answer(responder, None, f"server error: {error.message}"))
+            out.append(ReplyOutput(responder, payload, "") if error is None
+                       else ReplyOutput(responder, None, f"server error: {error.message}"))
         return error

@@ -8,9 +8,9 @@ only connects it to the world:
   liveliness tokens) and hands the core every arrival with its fleet time:
   samples, requests, replies (or why there is none), liveliness changes;
 * it runs the core's ready handlers on the loop, one at a time, and performs
-  their outputs in order: a `Put` on the topic's publisher (fetched once per
-  topic), a `Query` over the transport (its answer goes back to the core), an
-  `Answer` to a request, a `Line` on ``out``, a `Stop`;
+  their outputs in order: a `PublishOutput` on the topic's publisher (fetched once per
+  topic), a `CallOutput` over the transport (its answer goes back to the core),
+  a `ReplyOutput` to a request, a `LogOutput` on ``out``, a `StopOutput`;
 * it sleeps until the core's next due time (`ctx.after`, `@every`, call
   timeouts) with one clock timer, re-armed when that time changes, so timers
   scale with ``--time-scale`` and a `ManualClock` drives them in tests.
@@ -48,7 +48,14 @@ from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.core.guard import Rejected
 from twinfleet.runtime.core.node_core import HostStatistics, NodeCore
-from twinfleet.runtime.core.outbox import Answer, Line, Output, Put, Query, Stop
+from twinfleet.runtime.core.outbox import (
+    CallOutput,
+    LogOutput,
+    Output,
+    PublishOutput,
+    ReplyOutput,
+    StopOutput,
+)
 from twinfleet.runtime.host.clock import Clock, TimerHandle
 from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key, parse_node_key, topic_key
 from twinfleet.runtime.host.readiness import Readiness
@@ -280,20 +287,20 @@ class NodeHost:
         """Carry out a handler's outputs, in the order the core gave them."""
         puts = self._puts
         for out in outputs:
-            if type(out) is Put:  # by far the most frequent: no pattern matching
+            if type(out) is PublishOutput:  # by far the most frequent: no pattern matching
                 put = puts.get(out.topic) or self._publisher(out.topic)
                 put(out.payload)
                 continue
             match out:
-                case Query():
+                case CallOutput():
                     wall_ms = self.clock.real_seconds(out.timeout_ms) * 1000.0 + 500.0
                     self.transport.query(topic_key(self.fleet, out.service), out.payload, wall_ms,
                                          functools.partial(self._on_reply, out.call))
-                case Answer(responder=respond, payload=payload, reason=reason):
+                case ReplyOutput(responder=respond, payload=payload, reason=reason):
                     respond(payload, reason)
-                case Line(text=text, err=err):
+                case LogOutput(text=text, err=err):
                     self._line(text, err=err)
-                case Stop():
+                case StopOutput():
                     self.failed = True
                     self.stop()
 
