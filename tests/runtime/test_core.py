@@ -20,7 +20,7 @@ from twinfleet import (
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import DecodeError, NodeAlive, Violation, decode, encode
 from twinfleet.runtime.core.choosers import RecordingChooser
-from twinfleet.runtime.core.entries import Entry
+from twinfleet.runtime.core.events import Event
 from twinfleet.runtime.core.node_core import MAX_GAP, Handled, NodeCore
 from twinfleet.runtime.core.outbox import (
     CallOutput,
@@ -429,13 +429,13 @@ def test_run_takes_timers_before_they_are_due_and_a_taken_tick_re_arms():
 
 
 def test_entries_are_named_and_frozen():
-    entry = Entry(EventKind.DELIVERY, "on_num", (Num(1),), "a", "/nums", 3, 7)
+    entry = Event(EventKind.DELIVERY, "on_num", (Num(1),), "a", "/nums", 3, 7)
     with pytest.raises(AttributeError):
         entry.seq = 4  # type: ignore[misc]
-    assert entry != Entry(EventKind.DELIVERY, "on_num", (Num(1),), "a", "/nums", 3, 7)  # identity
+    assert entry != Event(EventKind.DELIVERY, "on_num", (Num(1),), "a", "/nums", 3, 7)  # identity
 
 
-@pytest.mark.parametrize("module", ["node_core", "due", "entries", "choosers", "outbox"])
+@pytest.mark.parametrize("module", ["node_core", "due", "events", "choosers", "outbox"])
 def test_the_core_knows_no_asyncio_and_does_no_io(module):
     tree = ast.parse((ROOT / "twinfleet" / "runtime" / "core" / f"{module}.py").read_text())
     names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}

@@ -6,7 +6,7 @@ Imports only the contract.
 __all__ = [
     "choosers",
     "due",
-    "entries",
+    "events",
     "eventlog",
     "guard",
     "node_core",

@@ -1,6 +1,6 @@
 """`DueEntries`: a node core's timed entries — `ctx.after` timers, `@every` ticks, call timeouts.
 
-Each is an `Entry` with a due time in fleet ms, kept in a heap ordered by
+Each is an `Event` with a due time in fleet ms, kept in a heap ordered by
 (due, arming order). The core's driver asks `next_due()` and has the due ones
 moved to the inbox; an entry leaves the heap when it falls due or when the
 replay gate takes it, and then
@@ -23,7 +23,7 @@ from twinfleet.runtime.contract.context import Call
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import CallError
 from twinfleet.runtime.contract.node import HandlerSpec, Node
-from twinfleet.runtime.core.entries import Entry
+from twinfleet.runtime.core.events import Event
 
 
 def first_due(period: int, phase: int, now_ms: int) -> int:
@@ -43,7 +43,7 @@ class DueEntries:
         self.name = node.name
         self.node = node
         self.counter = itertools.count()  # also numbers the core's inbox entries and calls
-        self._heap: list[tuple[int, int, int, Entry]] = []  # (due, n, priority, entry)
+        self._heap: list[tuple[int, int, int, Event]] = []  # (due, n, priority, entry)
         self._calls: dict[int, Call] = {}
         self._priorities = {s.method: s.priority for s in node.spec().handlers}
         self._periods: dict[str, tuple[int, int]] = {}  # @every method -> (period, phase)
@@ -57,10 +57,10 @@ class DueEntries:
         for spec in specs:
             period = self.node.period_ms(spec)
             self._periods[spec.method] = (period, spec.phase_ms)
-            self.arm(Entry(EventKind.PERIODIC, spec.method, (), self.name,
+            self.arm(Event(EventKind.PERIODIC, spec.method, (), self.name,
                            due=first_due(period, spec.phase_ms, now_ms)))
 
-    def arm(self, entry: Entry) -> None:
+    def arm(self, entry: Event) -> None:
         """Add a timed entry (its `due` set)."""
         assert entry.due is not None
         heapq.heappush(self._heap, (entry.due, next(self.counter), self.priority(entry.handler),
@@ -70,7 +70,7 @@ class DueEntries:
         """Register a call made at `now_ms` and arm its TIMEOUT; return the call's id."""
         cid = next(self.counter)
         self._calls[cid] = call
-        self.arm(Entry(EventKind.TIMEOUT, call.reply_to, (CallError(call.service, "timeout"),),
+        self.arm(Event(EventKind.TIMEOUT, call.reply_to, (CallError(call.service, "timeout"),),
                        self.name, call.service, due=now_ms + call.timeout_ms, call=cid))
         return cid
 
@@ -85,7 +85,7 @@ class DueEntries:
             heapq.heappop(heap)
         return heap[0][0] if heap else None
 
-    def pop_due(self, now_ms: int) -> list[tuple[int, int, Entry]]:
+    def pop_due(self, now_ms: int) -> list[tuple[int, int, Event]]:
         """Remove the entries due by `now_ms`: (due, priority, entry), in due order."""
         heap, out = self._heap, []
         while heap and heap[0][0] <= now_ms:
@@ -94,7 +94,7 @@ class DueEntries:
                 out.append((due, priority, entry))
         return out
 
-    def take(self, entry: Entry, now_ms: int) -> bool:
+    def take(self, entry: Event, now_ms: int) -> bool:
         """Remove `entry` before it falls due (the replay gate); False if it is not here."""
         for i, key in enumerate(self._heap):
             if key[3] is entry:
@@ -103,7 +103,7 @@ class DueEntries:
                 return self._leave(entry, now_ms)
         return False
 
-    def entries(self) -> list[Entry]:
+    def entries(self) -> list[Event]:
         """The live entries, in the order they would run: by due time, then priority."""
         keys = sorted(self._heap, key=lambda key: (key[0], key[2], key[1]))
         return [key[3] for key in keys if not self._void(key[3])]
@@ -112,10 +112,10 @@ class DueEntries:
         """How many `ctx.after` timers and `@every` ticks are armed (call timeouts aside)."""
         return sum(1 for key in self._heap if key[3].kind is not EventKind.TIMEOUT)
 
-    def _void(self, entry: Entry) -> bool:
+    def _void(self, entry: Event) -> bool:
         return entry.kind is EventKind.TIMEOUT and entry.call not in self._calls
 
-    def _leave(self, entry: Entry, now_ms: int) -> bool:
+    def _leave(self, entry: Event, now_ms: int) -> bool:
         """An entry leaves the heap to run: end its call, or arm the next tick."""
         if entry.kind is EventKind.TIMEOUT:
             return self._calls.pop(entry.call, None) is not None  # type: ignore[arg-type]
@@ -124,5 +124,5 @@ class DueEntries:
             due = entry.due + period
             if due + period <= now_ms:  # far behind (suspended process): skip missed periods
                 due = first_due(period, phase, now_ms)
-            self.arm(Entry(EventKind.PERIODIC, entry.handler, (), self.name, due=due))
+            self.arm(Event(EventKind.PERIODIC, entry.handler, (), self.name, due=due))
         return True

@@ -62,7 +62,7 @@ and never touches a socket:
 7. Observers. After each handler the core calls ``handled(record)`` on its
    observers, as trio calls its Instruments: the event log and the replay gate
    observe the core, they are not modes of it. Without observers a delivery
-   builds no `Entry` and no record: a sample costs a `decode_fields`, a gap
+   builds no `Event` and no record: a sample costs a `decode_fields`, a gap
    check, a deque append and a heap push of a plain tuple.
 """
 
@@ -87,7 +87,7 @@ from twinfleet.runtime.contract.messages import (
 from twinfleet.runtime.contract.node import LIVELINESS_TOPIC, HandlerSpec, Node, Reliability
 from twinfleet.runtime.core.choosers import RecordingChooser, SeededChooser, derive_seed
 from twinfleet.runtime.core.due import DueEntries
-from twinfleet.runtime.core.entries import Entry
+from twinfleet.runtime.core.events import Event
 from twinfleet.runtime.core.guard import Admission, Rejected, check_message, expected_type
 from twinfleet.runtime.core.outbox import LogOutput, Outbox, Output, ReplyOutput
 
@@ -112,7 +112,7 @@ class Handled:
     """What one handler run did, as observers see it (the node's state is already the new one)."""
 
     node: Node
-    entry: Entry
+    entry: Event
     now: int  # the time the handler saw
     effects: tuple[Effect, ...]  # as recorded; empty when the handler raised
     choices: tuple[int, ...]  # answers to ctx.choose (choice points with several options)
@@ -195,9 +195,9 @@ class _Subscription:
         self.lossless = reliable  # RELIABLE declares that every message matters
         self.waiting: deque[_Sample] = deque(maxlen=max(1, spec.qos.depth) if keep_last else None)
 
-    def entry(self, sample: _Sample) -> Entry:
+    def entry(self, sample: _Sample) -> Event:
         msg, stamp, seq, sender = sample
-        return Entry(EventKind.DELIVERY, self.method, (msg,), sender, self.topic, seq, stamp)
+        return Event(EventKind.DELIVERY, self.method, (msg,), sender, self.topic, seq, stamp)
 
     def receiver(self, n: dict[str, int], counter: Iterator[int],
                  inbox: list[tuple[int, int, int, Any]], last_seq: dict[str, int]) -> Receive:
@@ -240,7 +240,7 @@ class _Subscription:
 
         return receive
 
-    def take(self, entry: Entry, inbox: list[tuple[int, int, int, Any]]) -> bool:
+    def take(self, entry: Event, inbox: list[tuple[int, int, int, Any]]) -> bool:
         """Remove the sample `entry` was made of, and one inbox slot; False if not waiting."""
         k = next((i for i, (msg, _, seq, sender) in enumerate(self.waiting)
                   if msg is entry.args[0] and (seq, sender) == (entry.seq, entry.sender)), None)
@@ -305,7 +305,7 @@ class NodeCore:
         self.stall_ms = stall_ms
         self.due = DueEntries(node)
         self._random = SeededChooser(derive_seed(seed, node.name))
-        self._inbox: list[tuple[int, int, int, Entry | _Subscription]] = []
+        self._inbox: list[tuple[int, int, int, Event | _Subscription]] = []
         self._counter = self.due.counter
         self._last_seq: dict[str, dict[str, int]] = {}  # topic -> sender -> last seq
         self._observers: list[Observer] = []
@@ -337,7 +337,7 @@ class NodeCore:
         """Queue the `@on_start` handlers ahead of all that arrived, and arm the `@every` ticks."""
         name = self.node.name
         for spec in self.spec.of_kind("start"):
-            self._push(_BEFORE_ALL, spec.priority, Entry(EventKind.START, spec.method, (), name,
+            self._push(_BEFORE_ALL, spec.priority, Event(EventKind.START, spec.method, (), name,
                                                          due=now_ms))
         every = self.spec.of_kind("every")
         self.due.start(every, now_ms)
@@ -375,7 +375,7 @@ class NodeCore:
             return (LogOutput(f"undecodable request for {self.services[method]}: {exc}", err=True),
                     ReplyOutput(responder, None, f"server error: undecodable request ({exc})"))
         self._push(arrival_ms, self.due.priority(method),
-                   Entry(EventKind.REQUEST, method, (msg,), sender, self.services[method], seq,
+                   Event(EventKind.REQUEST, method, (msg,), sender, self.services[method], seq,
                          stamp, responder=responder))
         return _NOTHING
 
@@ -398,11 +398,11 @@ class NodeCore:
                 error = CallError(service, f"server error: undecodable reply ({exc})")
             else:
                 self._push(arrival_ms, self.due.priority(reply_to),
-                           Entry(EventKind.REPLY, reply_to, (msg,), sender, service, seq, stamp))
+                           Event(EventKind.REPLY, reply_to, (msg,), sender, service, seq, stamp))
                 return True
         # a CallError comes from the caller's own side
         self._push(arrival_ms, self.due.priority(reply_to),
-                   Entry(EventKind.TIMEOUT, reply_to, (error,), self.node.name, service))
+                   Event(EventKind.TIMEOUT, reply_to, (error,), self.node.name, service))
         return True
 
     def receive_liveliness(self, node: str, alive: bool, arrival_ms: int) -> bool:
@@ -411,7 +411,7 @@ class NodeCore:
         spec = self._liveliness
         if spec is None:
             return False
-        self._push(arrival_ms, spec.priority, Entry(EventKind.LIVELINESS, spec.method,
+        self._push(arrival_ms, spec.priority, Event(EventKind.LIVELINESS, spec.method,
                                                     (NodeAlive(node, alive),), node,
                                                     LIVELINESS_TOPIC))
         return True
@@ -451,7 +451,7 @@ class NodeCore:
         """Whether an inbox entry waits to run."""
         return bool(self._inbox)
 
-    def _push(self, arrival_ms: int, priority: int, entry: Entry) -> None:
+    def _push(self, arrival_ms: int, priority: int, entry: Event) -> None:
         heapq.heappush(self._inbox, (arrival_ms, priority, next(self._counter), entry))
 
     # ---------------------------------------------------------------- running
@@ -464,14 +464,14 @@ class NodeCore:
         work = heapq.heappop(inbox)[3]
         if type(work) is _Subscription:
             sample = work.waiting.popleft()
-            if not self._observers:  # the hot path: no Entry, no record
+            if not self._observers:  # the hot path: no Event, no record
                 return self._execute(work.method, (sample[0],), now_ms, self._random, None)[0]
             return self._run(work.entry(sample), now_ms, None)
         if work.due is not None and work.kind in _TIMED:
             now_ms = work.due
         return self._run(work, now_ms, None)
 
-    def run(self, entry: Entry, now_ms: int, chooser: Chooser | None = None) -> Sequence[Output]:
+    def run(self, entry: Event, now_ms: int, chooser: Chooser | None = None) -> Sequence[Output]:
         """Take `entry` (one of `pending()`) out of turn and run it at `now_ms`.
 
         Raises:
@@ -480,9 +480,9 @@ class NodeCore:
         self._take(entry, now_ms)
         return self._run(entry, now_ms, chooser)
 
-    def pending(self) -> list[Entry]:
+    def pending(self) -> list[Event]:
         """Every entry held, in the order they would run: the inbox's, then the due ones."""
-        ready: list[Entry] = []
+        ready: list[Event] = []
         served: dict[_Subscription, int] = {}
         for *_, work in sorted(self._inbox):  # n is unique: tuples never compare their work
             if type(work) is _Subscription:
@@ -492,7 +492,7 @@ class NodeCore:
                 ready.append(work)
         return ready + self.due.entries()
 
-    def _take(self, entry: Entry, now_ms: int) -> None:
+    def _take(self, entry: Event, now_ms: int) -> None:
         inbox = self._inbox
         sub = self._subs.get(entry.handler) if entry.kind is EventKind.DELIVERY else None
         if sub is not None and sub.take(entry, inbox):
@@ -506,7 +506,7 @@ class NodeCore:
         if not self.due.take(entry, now_ms):
             raise ValueError(f"{self.node.name}: {entry.kind} {entry.handler} is not pending")
 
-    def _run(self, entry: Entry, now: int, chooser: Chooser | None) -> Sequence[Output]:
+    def _run(self, entry: Event, now: int, chooser: Chooser | None) -> Sequence[Output]:
         observers = self._observers
         if not observers:
             return self._execute(entry.handler, entry.args, now, chooser or self._random,

@@ -24,7 +24,7 @@ from twinfleet.runtime.contract.dispatch import HandlerError
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import Violation, encode
 from twinfleet.runtime.core.due import DueEntries
-from twinfleet.runtime.core.entries import Entry
+from twinfleet.runtime.core.events import Event
 
 VIOLATIONS_TOPIC: Final = "/violations"
 
@@ -120,7 +120,7 @@ class Outbox:
                     case Call():
                         out.append(self._query(effect, now))
                     case After(delay_ms=delay, handler=handler, args=args):
-                        self.due.arm(Entry(EventKind.TIMER, handler, args, name, due=now + delay))
+                        self.due.arm(Event(EventKind.TIMER, handler, args, name, due=now + delay))
                         if 0 < delay < (n["period"] or delay + 1):  # the stall threshold's base
                             n["period"] = delay
                     case Fail(reason=reason):

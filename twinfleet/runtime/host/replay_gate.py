@@ -30,8 +30,8 @@ import msgpack
 from twinfleet.runtime.contract.context import Publish
 from twinfleet.runtime.contract.messages import type_name_of
 from twinfleet.runtime.core.choosers import RecordingChooser
-from twinfleet.runtime.core.entries import Entry
 from twinfleet.runtime.core.eventlog import node_state_digest, payload_digest, summarise
+from twinfleet.runtime.core.events import Event
 from twinfleet.runtime.core.node_core import Handled, NodeCore
 from twinfleet.runtime.core.outbox import Output
 from twinfleet.runtime.host.clock import TimerHandle
@@ -68,13 +68,13 @@ class LogicalClock:
         return GATED_CALL_WALL_S
 
 
-def describe(entry: Entry) -> dict[str, Any]:
+def describe(entry: Event) -> dict[str, Any]:
     """A pending entry as the coordinator's status request shows it."""
     return {"kind": str(entry.kind), "handler": entry.handler, "sender": entry.sender,
             "args": payload_digest(entry.args), "summary": summarise(entry.args)}
 
 
-def matches(entry: Entry, grant: dict[str, Any]) -> bool:
+def matches(entry: Event, grant: dict[str, Any]) -> bool:
     """Whether `entry` is the event `grant` names (the argument digest is computed last)."""
     return (entry.handler == grant["handler"] and entry.kind == grant["kind"]
             and entry.sender == grant["sender"] and payload_digest(entry.args) == grant["args"])

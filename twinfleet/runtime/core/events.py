@@ -1,4 +1,9 @@
-"""`Entry`: one event waiting to run on a live node, named by its `EventKind`."""
+"""`Event`: one event waiting to run on a live node, named by its `EventKind`.
+
+The live form of the concept the checker calls `checker.world.Event` too: the same kind,
+handler, arguments and sender, with what a live node needs besides (sequence number,
+stamp, the way back to a caller); the checker's carries what identifies a world instead.
+"""
 
 from __future__ import annotations
 
@@ -9,7 +14,7 @@ from twinfleet.runtime.contract.kinds import EventKind
 
 
 @dataclass(frozen=True, slots=True, eq=False)  # identity: two equal messages are two events
-class Entry:
+class Event:
     """What runs (kind, handler, args) and where it came from.
 
     Attributes:
