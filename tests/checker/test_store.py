@@ -20,7 +20,7 @@ from hypothesis import strategies as st
 from tests.checker.helpers import node, run, scenario
 from twinfleet.checker import PropertySet, Search, System
 from twinfleet.checker.driver import load
-from twinfleet.checker.graph import find_lasso
+from twinfleet.checker.paths import find_lasso
 from twinfleet.checker.store import DigestTable, EdgeStore, StateStore
 from twinfleet.checker.world import World
 

@@ -10,7 +10,7 @@ initial worlds, actions, the step function; handler outcomes cached),
 `topology` (the node graph), `runner` (running one handler), `faults`
 (optional `check:` settings: latency, deadlines, queue bounds,
 drop/duplicate/crash faults), `store` (visited states: 64-bit digest table,
-parents, edges), `graph` (paths, lassos), `outcome` (limits, statistics,
+parents, edges), `paths` (paths, lassos), `outcome` (limits, statistics,
 counterexamples, verdicts), `search` (BFS/DFS), `walks` (random walks),
 `checkpoint` (save and resume a search), `properties`, `trace`, `check`,
 `commands`, `options` (the named choices an argument parser offers).

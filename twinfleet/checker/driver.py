@@ -253,7 +253,7 @@ def check(scenario: str | Path | Scenario | None,
     seed = options.seed if options.seed is not None else scenario.seed
     try:
         outcome = search.run(strategy, walks=options.walks, seed=seed)
-    except ContractBreachError as exc:  # found while rebuilding a path (checker.graph)
+    except ContractBreachError as exc:  # found while rebuilding a path (checker.paths)
         return _breach_result(scenario, system, strategy, props, str(exc), search, warnings)
     if outcome.violation is not None and (breach := _breach_of(system, outcome.violation)):
         return _breach_result(scenario, system, strategy, props, breach, search, warnings)

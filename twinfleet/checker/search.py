@@ -33,7 +33,6 @@ from functools import partial
 from typing import Any, final
 
 from twinfleet.checker import checkpoint
-from twinfleet.checker.graph import lasso_counterexample, steps_along
 from twinfleet.checker.outcome import (
     HOLDS,
     INTERRUPTED,
@@ -50,6 +49,7 @@ from twinfleet.checker.outcome import (
     Stop,
     peak_rss_mb,
 )
+from twinfleet.checker.paths import lasso_counterexample, steps_along
 from twinfleet.checker.properties import Property, PropertySet, PropertyViolation
 from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.store import StateStore

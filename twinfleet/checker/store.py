@@ -10,7 +10,7 @@ States get integer ids in discovery order. Per id the store keeps:
 - its parent id (int32, -1 for initial worlds) for shortest/first-found paths;
   a path of ids is turned back into steps by re-running each world's
   successors and taking the one whose key maps to the next id
-  (`checker.graph.steps_along`), so no step is stored;
+  (`checker.paths.steps_along`), so no step is stored;
 - one byte "nothing pending" and one byte per `eventually` property
   ("its expression holds here");
 - when `eventually` properties are checked, its successors' ids, deduplicated,
