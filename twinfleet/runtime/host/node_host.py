@@ -48,8 +48,9 @@ from twinfleet.runtime.contract.names import key_expr
 from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.core.guard import Rejected
-from twinfleet.runtime.core.node_core import HostStatistics, NodeCore
+from twinfleet.runtime.core.node_core import NodeCore
 from twinfleet.runtime.core.outbox import Answer, Line, Output, Put, Query, Stop
+from twinfleet.runtime.core.statistics import NodeStatistics
 from twinfleet.runtime.host.clock import Clock, TimerHandle
 from twinfleet.runtime.host.readiness import Readiness
 from twinfleet.runtime.host.replay_gate import LogicalClock, ReplayGate, gate_key
@@ -163,11 +164,13 @@ class NodeHost:
             self._stop.set()
         self.readiness.stop()
 
-    def statistics(self) -> HostStatistics:
-        """Counters since start, as a frozen record."""
-        transport_stats = getattr(self.transport, "statistics", None)
-        below = transport_stats() if callable(transport_stats) else {}
-        return self.core.statistics(below)
+    def statistics(self) -> NodeStatistics:
+        """Counters since start, the transport's below the core included, as a frozen record."""
+        transport_stats = getattr(self.transport, "statistics", None)  # test doubles may lack it
+        if not callable(transport_stats):
+            return self.core.statistics()
+        below = transport_stats()
+        return self.core.statistics(dropped_overflow=below.overflow, refused=below.refused)
 
     def idle(self) -> bool:
         """True when nothing can run now: no handler is ready and no drain is scheduled (a

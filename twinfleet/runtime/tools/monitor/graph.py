@@ -30,6 +30,9 @@ import zenoh
 from zenoh import ext
 
 from twinfleet.runtime.contract.names import KEY_PREFIX
+from twinfleet.runtime.contract.node import Durability
+from twinfleet.runtime.core.statistics import NodeStatistics, StatisticsError
+from twinfleet.runtime.fleet.node_main import read_statistics, stats_key
 from twinfleet.runtime.host.introspect import info_key
 from twinfleet.runtime.host.schemas import types_key
 from twinfleet.runtime.host.transport import graph_key, parse_graph_key
@@ -103,13 +106,17 @@ def node_infos(session: zenoh.Session, fleet: str, timeout_s: float,
     return found
 
 
-def node_stats(session: zenoh.Session, fleet: str, timeout_s: float) -> dict[tuple[str, str], Any]:
-    """(fleet, node) → the node's counters (`@stats`, `runtime.host.node_host.HostStatistics`)."""
-    found = {}
-    for key, payload in _query(session, f"{KEY_PREFIX}/{fleet}/@stats/*", timeout_s):
+def node_stats(session: zenoh.Session, fleet: str, timeout_s: float
+               ) -> dict[tuple[str, str], NodeStatistics | StatisticsError]:
+    """(fleet, node) → the node's counters (`@stats`), or why they could not be read (a
+    node of another twinfleet version: `NodeStatistics.from_dict` is strict)."""
+    found: dict[tuple[str, str], NodeStatistics | StatisticsError] = {}
+    for key, payload in _query(session, stats_key(fleet, "*"), timeout_s):
         parts = key.split("/")
-        with contextlib.suppress(ValueError, TypeError):
-            found[(parts[1], parts[3])] = msgpack.unpackb(payload, raw=False)
+        try:
+            found[(parts[1], parts[3])] = read_statistics(payload)
+        except StatisticsError as exc:
+            found[(parts[1], parts[3])] = exc
     return found
 
 
@@ -128,13 +135,16 @@ def served_schemas(session: zenoh.Session, fleet: str, timeout_s: float
     return found
 
 
+_LATCHED = Durability.TRANSIENT_LOCAL.value  # as `introspect` writes a QoS's durability
+
+
 def latched_topics(infos: dict[tuple[str, str], dict[str, Any]]) -> set[tuple[str, str]]:
     """(fleet, topic) of every topic that some node declares transient-local."""
     latched = set()
     for (fleet, _), info in infos.items():
         for table in ("publication_qos", "subscriptions"):
             for topic, qos in (info.get(table) or {}).items():
-                if isinstance(qos, dict) and qos.get("durability") == "transient_local":
+                if isinstance(qos, dict) and qos.get("durability") == _LATCHED:
                     latched.add((fleet, topic))
     return latched
 
