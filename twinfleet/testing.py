@@ -40,7 +40,7 @@ from typing import Any, TextIO, final
 from twinfleet.checker.diagnosis import ContractBreachError
 from twinfleet.checker.driver import CheckOptions, CheckResult
 from twinfleet.checker.driver import check as _check
-from twinfleet.checker.outcome import BREACH, HOLDS, VIOLATED
+from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.contract.messages import DecodeError, decode, encode
 from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.contract.tracefile import write_trace
@@ -108,8 +108,9 @@ class CheckReport:
     """What `check` found.
 
     Attributes:
-        verdict: "holds", "violated", "unknown" (a limit stopped the search) or
-            "contract breach" (a node breaks the node contract: no verdict).
+        verdict: a `Status` (a string enum): "holds", "violated", "unknown" (a limit
+            stopped the search) or "contract breach" (a node breaks the node contract:
+            no verdict).
         property: the violated property's name (None unless violated).
         message: what was violated, or the breach's one-line diagnosis.
         states, transitions: distinct worlds and steps explored.
@@ -119,7 +120,7 @@ class CheckReport:
         result: the checker's full `CheckResult` (None for a breach found at load).
     """
 
-    verdict: str
+    verdict: Status
     property: str | None
     message: str
     states: int = 0
@@ -133,17 +134,17 @@ class CheckReport:
     @property
     def holds(self) -> bool:
         """True when every property holds (exhaustively)."""
-        return self.verdict == HOLDS
+        return self.verdict is Status.HOLDS
 
     @property
     def violated(self) -> bool:
         """True when a property is violated (then `trace` shows how)."""
-        return self.verdict == VIOLATED
+        return self.verdict is Status.VIOLATED
 
     @property
     def breach(self) -> bool:
         """True when a node breaks the node contract (`message` says where and how)."""
-        return self.verdict == BREACH
+        return self.verdict is Status.BREACH
 
     def explain(self) -> str:
         """The verdict, the counts and, on a violation, every step of the trace."""
@@ -189,11 +190,11 @@ def check(scenario: Scenario | str | Path, **options: Any) -> CheckReport:
     try:
         result = _check(scenario, CheckOptions(**options))
     except ContractBreachError as exc:  # an initial state that cannot be encoded
-        return CheckReport(BREACH, None, str(exc), scenario=built)
+        return CheckReport(Status.BREACH, None, str(exc), scenario=built)
     s = result.statistics
     violation = result.violation
     message = (result.breach or (violation.message if violation else "") or
-               ("every property holds" if result.status == HOLDS else result.reason))
+               ("every property holds" if result.status is Status.HOLDS else result.reason))
     return CheckReport(result.status, violation.property if violation else None, message,
                        s.states, s.transitions, s.elapsed_s, result.trace, result.warnings,
                        result, built)

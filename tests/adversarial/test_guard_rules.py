@@ -19,6 +19,7 @@ from twinfleet.runtime.core.guard import (
     sign,
     signer,
 )
+from twinfleet.runtime.core.statistics import Rejection
 from twinfleet.runtime.fleet.fleetauth import FleetCredentials, listen_problem, loopback_only
 
 
@@ -39,7 +40,7 @@ def test_a_tag_binds_key_expression_and_payload() -> None:
 def test_a_cell_that_is_not_two_integers_is_invalid(cell) -> None:
     with pytest.raises(Rejected) as info:
         check_message(RobotPose("r1", cell, 0, 1))
-    assert info.value.counter == "rejected_invalid" and "RobotPose.cell" in str(info.value)
+    assert info.value.reason is Rejection.INVALID and "RobotPose.cell" in str(info.value)
 
 
 def test_valid_messages_pass_and_nested_tuples_are_checked() -> None:
@@ -59,7 +60,7 @@ def test_the_handler_annotation_names_the_only_type_it_takes() -> None:
     admit = Admission(ObstacleScan)
     with pytest.raises(Rejected) as info:
         admit(RobotPose("r1", (1, 2), 0, 0))
-    assert info.value.counter == "rejected_wrong_type"
+    assert info.value.reason is Rejection.WRONG_TYPE
     admit(ObstacleScan("r1", ()))
     Admission(None)(Tick("s", 1))  # no annotation: any registered type
 

@@ -39,7 +39,7 @@ from hypothesis import strategies as st
 from tests.checker.helpers import replay_confirms
 from tests.checker.program_systems import systems, write_scenario
 from twinfleet.checker import CheckOptions, CheckResult, check
-from twinfleet.checker.search import HOLDS, UNKNOWN, VIOLATED
+from twinfleet.runtime.contract.kinds import Status
 
 MAX_STATES = 3_000
 EXAMPLES = int(os.environ.get("TWINFLEET_DIFFERENTIAL_EXAMPLES", "300"))
@@ -64,7 +64,7 @@ class Outcome:
     @property
     def safety(self) -> bool:
         """True for a violation found on a path or terminal world (not a lasso search)."""
-        return self.status == VIOLATED and self.result.violation is not None and \
+        return self.status is Status.VIOLATED and self.result.violation is not None and \
             self.result.violation.kind not in ("eventually",)
 
 
@@ -72,7 +72,7 @@ def outcome(path: Path, **options: Any) -> Outcome:
     """Check `path` with `options` (CheckOptions fields); discard the example at the state limit."""
     options.setdefault("trace_out", str(path.with_suffix(f".{options.get('search', 'bfs')}.json")))
     result = check(path, CheckOptions(max_states=MAX_STATES, **options))
-    if result.status == UNKNOWN:
+    if result.status is Status.UNKNOWN:
         event("limit hit")
         assume(False)
     v = result.violation
@@ -104,7 +104,7 @@ def test_bfs_and_dfs_agree_and_counterexamples_replay(workdir: Path, doc: dict[s
     _size_event(bfs.states)
     event(f"verdict {bfs.status}")
     assert bfs.status == dfs.status
-    if bfs.status == HOLDS:
+    if bfs.status is Status.HOLDS:
         assert (bfs.states, bfs.transitions) == (dfs.states, dfs.transitions)
         return
     if bfs.safety and dfs.safety:
@@ -167,8 +167,8 @@ def _reduced_equals_full(workdir: Path, doc: dict[str, Any], search: str) -> Non
             event(f"reduction relied on {name}")
     if "goals not rising" in reduced.result.reduction:
         event("a goal fell")
-    if ran == "por" and reduced.status == HOLDS:
+    if ran == "por" and reduced.status is Status.HOLDS:
         event("fewer states" if reduced.states < full.states else "as many states")
         assert reduced.states <= full.states
-    if reduced.status == VIOLATED:
+    if reduced.status is Status.VIOLATED:
         assert replay_confirms(reduced.result), reduced.result.summary()

@@ -89,7 +89,7 @@ def expect_sample(payload: bytes) -> str:
     try:
         Admission(Tick)(msg)
     except Rejected as exc:
-        return exc.counter
+        return exc.reason.counter
     try:
         msg.n - msg.n + 1  # the handler's body
         return "ok"
@@ -106,7 +106,7 @@ def expect_call(payload: bytes) -> tuple[str, Any]:
     try:
         check_message(req)
     except Rejected as exc:
-        return exc.counter, None
+        return exc.reason.counter, None
     try:
         total = req.a + req.b
         encode(AddReply(total))

@@ -33,10 +33,11 @@ from twinfleet.runtime.contract.messages import NodeAlive, Violation, decode, en
 from twinfleet.runtime.contract.node import QOS_DEFAULT, QOS_LATCHED
 from twinfleet.runtime.core.choosers import derive_seed
 from twinfleet.runtime.core.node_core import MAX_GAP
+from twinfleet.runtime.core.statistics import Rejection
 from twinfleet.runtime.host.clock import ManualClock
 from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.node_host import NodeHost
-from twinfleet.runtime.host.transport import LoopbackTransport
+from twinfleet.runtime.host.transport import LoopbackTransport, TransportStatistics
 
 
 class Fragile(Node):
@@ -419,8 +420,9 @@ def test_keep_last_loses_nothing_when_the_host_keeps_up() -> None:
 
 def test_statistics_report_the_transport_overflow() -> None:
     class Overflowing(LoopbackTransport):
-        def statistics(self) -> dict[str, int]:
-            return {"wakeups": 1, "overflow": 5}
+        def statistics(self) -> TransportStatistics:
+            return TransportStatistics(wakeups=1, overflow=5,
+                                       refused={Rejection.FORGED: 2, Rejection.OVERSIZE: 1})
 
     async def body() -> Any:
         h = Harness()
@@ -429,7 +431,9 @@ def test_statistics_report_the_transport_overflow() -> None:
         host = NodeHost(Shallow("s"), transport, h.clock, seed=1, fleet=FLEET, out=h.out)
         return host.statistics()
 
-    assert run(body()).dropped_overflow == 5
+    stats = run(body())
+    assert stats.dropped_overflow == 5
+    assert (stats.rejected[Rejection.FORGED], stats.rejected[Rejection.OVERSIZE]) == (2, 1)
 
 
 def test_best_effort_gaps_are_counted_as_drops_not_as_gaps() -> None:

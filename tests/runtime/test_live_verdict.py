@@ -9,19 +9,12 @@ import pytest
 
 from tests.adversarial.verdict_nodes import Counter, Flooder
 from tests.runtime.hosts import Num, Shallow
+from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.contract.messages import encode
 from twinfleet.runtime.core.node_core import NodeCore
 from twinfleet.runtime.core.state_report import StateReport, StateReporter, decode_report
-from twinfleet.runtime.fleet.live_verdict import (
-    ERROR,
-    HOLDS,
-    INCONCLUSIVE,
-    INTERRUPTED,
-    VIOLATED,
-    LiveMonitor,
-    RunEnd,
-    stall_floor_ms,
-)
+from twinfleet.runtime.core.statistics import NodeStatistics, Rejection
+from twinfleet.runtime.fleet.live_verdict import LiveMonitor, RunEnd, stall_floor_ms
 from twinfleet.runtime.scenario.spec import NodeEntry, Scenario
 
 pytestmark = pytest.mark.timeout(30)
@@ -64,7 +57,7 @@ class Fleet:
                 self.monitor.on_report(decode_report(name, payload))
 
     def verdict(self, **end: Any):
-        stats: dict[str, dict[str, int]] = {n: {} for n in self.cores}  # nothing lost
+        stats = {n: NodeStatistics() for n in self.cores}  # nothing lost
         return self.monitor.verdict(RunEnd(end.pop("reason", "timeout"), statistics=stats, **end))
 
 
@@ -72,7 +65,7 @@ def test_an_invariant_violated_names_the_property_the_event_and_the_states():
     fleet = Fleet(scenario({"name": "small", "kind": "invariant", "expr": "counter.count < 3"}))
     fleet.run(300)
     v = fleet.verdict()
-    assert (v.status, v.property_name, v.exit_code) == (VIOLATED, "small", 1)
+    assert (v.status, v.property_name, v.exit_code) == (Status.VIOLATED, "small", 1)
     assert "invariant 'counter.count < 3' is false at t=150 ms" in v.summary  # fleet time: 3rd tick
     assert "after periodic → counter.tick" in v.details[0]
     assert v.details[1] == "counter: CountState(count=3)"
@@ -82,7 +75,7 @@ def test_a_handler_failure_violates_the_scenarios_no_failure_property():
     fleet = Fleet(scenario({"name": "clean", "kind": "no_failure"}, fail_at=2))
     fleet.run(200)
     v = fleet.verdict()
-    assert (v.status, v.property_name) == (VIOLATED, "clean")
+    assert (v.status, v.property_name) == (Status.VIOLATED, "clean")
     assert "counter.tick: ValueError: count reached 2" in v.summary
     # rolled back, the state stays where the handler raised, so every later tick raises again
     assert fleet.monitor.failures == {"counter": 3}
@@ -98,13 +91,13 @@ def judged(*props: dict[str, Any], until_ms: int = 300):
 @pytest.mark.parametrize(("props", "status", "said"), [
     ([{"name": "e", "kind": "eventually", "expr": "other.count >= 2"},
       {"name": "w", "kind": "within", "expr": "counter.count >= 2", "within_ms": 200}],
-     HOLDS, "e, w, no_failure hold"),
+     Status.HOLDS, "e, w, no_failure hold"),
     ([{"name": "w", "kind": "within", "expr": "counter.count >= 5", "within_ms": 100}],
-     VIOLATED, "w violated: 'counter.count >= 5' did not hold within 100 ms"),
+     Status.VIOLATED, "w violated: 'counter.count >= 5' did not hold within 100 ms"),
     ([{"name": "e", "kind": "eventually", "expr": "other.count > 99"}],
-     VIOLATED, "e violated: 'other.count > 99' never held before the run ended"),
+     Status.VIOLATED, "e violated: 'other.count > 99' never held before the run ended"),
     ([{"name": "w", "kind": "within", "expr": "counter.count > 99", "within_ms": 10_000}],
-     INCONCLUSIVE, "before w's within_ms 10000 had passed"),
+     Status.INCONCLUSIVE, "before w's within_ms 10000 had passed"),
 ])
 def test_eventually_and_within_hold_or_fail_at_the_end(props, status, said):
     v = judged(*props)
@@ -115,54 +108,91 @@ def test_a_lost_state_report_makes_the_verdict_inconclusive():
     fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
     fleet.run(300, drop=3)
     v = fleet.verdict()
-    assert (v.status, v.exit_code) == (INCONCLUSIVE, 3)
+    assert (v.status, v.exit_code) == (Status.INCONCLUSIVE, 3)
     assert "lost 1 state reports" in v.summary
 
 
-@pytest.mark.parametrize(("stats", "said"), [
-    ({"rejected_forged": 10}, "counter rejected 10 samples (rejected_forged)"),
-    ({"rejected_some_future_reason": 1}, "(rejected_some_future_reason)"),
-    ({"dropped_overflow": 30101}, "dropped 30101 samples at the transport hand-off"),
-    ({"dropped_lossless": 48}, "RELIABLE (lossless) subscription"),
-    ({"gaps": 2}, "lost 2 samples on reliable topics"),
-    ({"stalls": 3, "max_lateness_ms": 5012, "stall_threshold_ms": 200},
+# One case per counter the verdict judges: each alone makes a run inconclusive.
+LOSSY: list[tuple[NodeStatistics, str]] = [
+    (NodeStatistics(rejected={Rejection.FORGED: 10}),
+     "counter rejected 10 samples (rejected_forged)"),
+    (NodeStatistics(rejected={Rejection.INVALID: 2}),
+     "counter rejected 2 samples (rejected_invalid)"),
+    (NodeStatistics(rejected={Rejection.OVERSIZE: 1}),
+     "counter rejected 1 samples (rejected_oversize)"),
+    (NodeStatistics(rejected={Rejection.WRONG_TYPE: 4}),
+     "counter rejected 4 samples (rejected_wrong_type)"),
+    (NodeStatistics(dropped_overflow=30101), "dropped 30101 samples at the transport hand-off"),
+    (NodeStatistics(dropped_lossless=48), "RELIABLE (lossless) subscription"),
+    (NodeStatistics(gaps=2), "lost 2 samples on reliable topics"),
+    (NodeStatistics(stalls=3, max_lateness_ms=5012, stall_threshold_ms=200),
      "fell behind its timers by up to 5012 ms (3 timers later than its stall threshold of 200"),
-])
+]
+
+
+@pytest.mark.parametrize(("stats", "said"), LOSSY)
 def test_final_statistics_that_show_lost_input_make_it_inconclusive(stats, said):
     fleet = Fleet(scenario({"name": "small", "kind": "invariant", "expr": "counter.count < 3"}))
     fleet.run(300)
-    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"counter": stats, "other": {}}))
-    assert v.status == INCONCLUSIVE and said in v.summary, v
+    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"counter": stats,
+                                                            "other": NodeStatistics()}))
+    assert v.status == Status.INCONCLUSIVE and said in v.summary, v
     assert any("seen, but not conclusive: small violated" in d for d in v.details)
+
+
+def test_every_rejection_reason_is_judged():
+    """A reason added to `Rejection` is judged without a change to the verdict."""
+    judged = {said.rsplit("(", 1)[-1].rstrip(")") for stats, said in LOSSY if "rejected" in said}
+    assert judged == {reason.counter for reason in Rejection}
+
+
+def test_statistics_that_count_no_loss_leave_the_verdict_alone():
+    fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
+    fleet.run(300)
+    busy = NodeStatistics(received=40, handled=40, published=12, dropped_keep_last=3,
+                          dropped_best_effort=2, sequence_jumps=1, max_lateness_ms=30,
+                          stall_threshold_ms=200)
+    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"counter": busy, "other": busy}))
+    assert v.status == Status.HOLDS, v
+
+
+def test_statistics_the_launcher_could_not_read_make_it_inconclusive():
+    fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
+    fleet.run(100)
+    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"other": NodeStatistics()},
+                                     running=("counter", "other"),
+                                     unreadable={"counter": "unknown counters 'lost'"}))
+    assert v.status == Status.INCONCLUSIVE, v
+    assert "counter sent statistics the launcher cannot read (unknown counters 'lost')" in v.summary
 
 
 def test_a_running_node_that_does_not_answer_for_its_statistics_is_inconclusive():
     fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
     fleet.run(100)
-    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"other": {}},
+    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"other": NodeStatistics()},
                                      running=("counter", "other")))
-    assert v.status == INCONCLUSIVE and "counter did not answer" in v.summary
+    assert v.status == Status.INCONCLUSIVE and "counter did not answer" in v.summary
 
 
 def test_interrupted_unless_something_was_violated_first():
     ok = Fleet(scenario({"name": "e", "kind": "eventually", "expr": "counter.count > 99"}))
     ok.run(100)
-    assert ok.verdict(reason="SIGINT received", interrupted=True).status == INTERRUPTED
+    assert ok.verdict(reason="SIGINT received", interrupted=True).status == Status.INTERRUPTED
     bad = Fleet(scenario({"name": "small", "kind": "invariant", "expr": "counter.count < 1"}))
     bad.run(100)
-    assert bad.verdict(reason="SIGINT received", interrupted=True).status == VIOLATED
+    assert bad.verdict(reason="SIGINT received", interrupted=True).status == Status.VIOLATED
 
 
 def test_a_property_that_raises_is_a_scenario_error_and_a_slow_one_is_not_judged():
     raises = Fleet(scenario({"name": "bad", "kind": "invariant", "expr": "counter.nope > 0"}))
     raises.run(100)
     v = raises.verdict()
-    assert (v.status, v.exit_code) == (ERROR, 2) and "'counter.nope > 0' raised" in v.summary
+    assert (v.status, v.exit_code) == (Status.ERROR, 2) and "'counter.nope > 0' raised" in v.summary
     slow = Fleet(scenario({"name": "slow", "kind": "invariant",
                            "expr": "counter.count + sum(range(10**12)) > 0"}), budget_s=0.05)
     slow.run(50)
     v = slow.verdict()
-    assert v.status == INCONCLUSIVE and "took longer than 0.05 s" in v.summary
+    assert v.status == Status.INCONCLUSIVE and "took longer than 0.05 s" in v.summary
 
 
 def test_reports_only_when_the_state_changed_or_a_handler_failed():
@@ -212,16 +242,18 @@ def test_reports_of_strangers_are_ignored_and_a_broken_state_is_inconclusive():
     fleet.run(100)
     stranger = StateReport("intruder", 1, 0, "start", "x", "", "", "boom", None)
     fleet.monitor.on_report(stranger)
-    assert fleet.monitor.strangers == 1 and fleet.verdict().status == HOLDS
+    assert fleet.monitor.strangers == 1 and fleet.verdict().status == Status.HOLDS
     broken = StateReport("other", 99, 200, "periodic", "tick", "other", "", None, b"\xc1")
     fleet.monitor.on_report(broken)
     v = fleet.verdict()
-    assert v.status == INCONCLUSIVE and "undecodable state" in " ".join([v.summary, *v.details])
+    assert v.status == Status.INCONCLUSIVE
+    assert "undecodable state" in " ".join([v.summary, *v.details])
 
 
 def test_an_invariant_false_in_the_initial_states_is_violated_at_once():
     monitor = LiveMonitor(scenario({"name": "started", "kind": "invariant",
                                     "expr": "counter.count > 0"}))
-    v = monitor.verdict(RunEnd("timeout", statistics={"counter": {}, "other": {}}))
-    assert (v.status, v.property_name) == (VIOLATED, "started")
+    v = monitor.verdict(RunEnd("timeout", statistics={"counter": NodeStatistics(),
+                                                      "other": NodeStatistics()}))
+    assert (v.status, v.property_name) == (Status.VIOLATED, "started")
     assert "false in the initial states" in v.summary and "in the initial states" in v.details[0]

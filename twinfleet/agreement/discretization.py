@@ -31,6 +31,7 @@ from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.nodes.mapfile import load_map, save_map
 from twinfleet.nodes.motion import check_cell_size_rule, check_scan_rate_rule, hop_time_ms
 from twinfleet.nodes.profile import profile_named
+from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.scenario.spec import load_scenario
 
 
@@ -168,7 +169,7 @@ class StudyResult:
     scenario: str
     semantics: str
     profile: str
-    status: str
+    status: Status
     detail: str
     states: int
     transitions: int

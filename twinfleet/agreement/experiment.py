@@ -36,7 +36,8 @@ from twinfleet.agreement.table import CheckCell, LiveSummary, Row, csv_record, t
 from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, robot_names, summarise
 from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.checker.options import Semantics
-from twinfleet.checker.outcome import SearchStatistics
+from twinfleet.checker.outcome import INTERRUPTED_REASON, SearchStatistics
+from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.scenario.spec import Scenario, ScenarioError, load_scenario
 
 SEMANTICS = (Semantics.ROS, Semantics.REBECA)
@@ -180,7 +181,7 @@ def _checks(exp: Experiment, row: Row, path: str | Path, progress: Callable[[str
         progress(f"{row.case} {sem}: {cell.result}, {s.states:,} states, {s.transitions:,} "
                  f"transitions (RMC-style {result.rmc_transitions:,}) in {s.elapsed_s:.1f} s"
                  + (f"; trace {result.trace_path}" if result.trace_path else ""))
-        if result.status == "unknown" and result.reason.startswith("interrupted"):
+        if result.status is Status.UNKNOWN and result.reason.startswith(INTERRUPTED_REASON):
             raise _Interrupted
 
 

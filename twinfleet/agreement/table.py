@@ -16,8 +16,7 @@ from dataclasses import dataclass, field
 from typing import final
 
 from twinfleet.agreement.paper import PaperRow
-
-HOLDS, VIOLATED, UNKNOWN = "holds", "violated", "unknown"
+from twinfleet.runtime.contract.kinds import Status
 
 
 @final
@@ -27,7 +26,7 @@ class CheckCell:
 
     Attributes:
         semantics: the checker semantics (a `checker.semantics.Semantics` value).
-        status: "holds", "violated" or "unknown".
+        status: the checker's `Status`: holds, violated or unknown.
         detail: the violated property, or why there is no answer.
         states: distinct states.
         transitions: transitions (handler runs, revisits included).
@@ -37,7 +36,7 @@ class CheckCell:
     """
 
     semantics: str
-    status: str
+    status: Status
     detail: str
     states: int
     transitions: int
@@ -45,12 +44,16 @@ class CheckCell:
     time_s: float
     trace: str | None = None
 
+    def __post_init__(self) -> None:
+        # A cell read back from a CSV or JSON file carries the status's text.
+        object.__setattr__(self, "status", Status(self.status))
+
     @property
     def result(self) -> str:
         """The paper's wording: "satisfied", "violated: <property>", "unknown: <why>"."""
-        if self.status == HOLDS:
+        if self.status is Status.HOLDS:
             return "satisfied"
-        if self.status == VIOLATED:
+        if self.status is Status.VIOLATED:
             return f"violated: {self.detail}"
         return f"unknown: {self.detail}"
 
@@ -157,9 +160,9 @@ class Row:
         if check is None or live is None or live.runs == 0:
             return "-"
         seen = live.collision_runs
-        if check.status == UNKNOWN:
+        if check.status is Status.UNKNOWN:
             return f"no verdict; live collisions in {seen}/{live.runs}"
-        if check.status == HOLDS:
+        if check.status is Status.HOLDS:
             if seen:
                 return f"CONTRADICTION: live collision in {seen}/{live.runs}, checker says none"
             if live.unarrived_runs:

@@ -31,19 +31,13 @@ from twinfleet.checker.diagnosis import (
     ContractBreachError,
     breach_line,
 )
-from twinfleet.checker.outcome import BREACH, HOLDS, VIOLATED, Limits, SearchStatistics
+from twinfleet.checker.outcome import Limits, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.reduction import describe, plan
 from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
-from twinfleet.runtime.contract.kinds import (
-    EXIT_BAD_INPUT,
-    EXIT_CONTRACT_BREACH,
-    EXIT_FAILED,
-    EXIT_OK,
-    FailureKind,
-)
+from twinfleet.runtime.contract.kinds import FailureKind, Status
 from twinfleet.runtime.contract.node import NodeSpec
 from twinfleet.runtime.contract.tracefile import write_trace
 from twinfleet.runtime.scenario.config import SEARCHES, CheckConfig
@@ -85,7 +79,7 @@ class CheckResult:
     scenario: str
     semantics: str
     search: str
-    status: str
+    status: Status
     reason: str
     properties: list[str]
     statistics: SearchStatistics
@@ -107,8 +101,7 @@ class CheckResult:
     @property
     def exit_code(self) -> int:
         """0 holds, 1 violated, 2 no answer, 4 a node breaks the node contract."""
-        return {HOLDS: EXIT_OK, VIOLATED: EXIT_FAILED,
-                BREACH: EXIT_CONTRACT_BREACH}.get(self.status, EXIT_BAD_INPUT)
+        return self.status.exit_code
 
     def to_json(self) -> dict[str, Any]:
         """A JSON-ready record of the result."""
@@ -136,11 +129,11 @@ class CheckResult:
     def summary(self) -> str:
         """A human-readable summary, several lines."""
         s = self.statistics
-        if self.status == HOLDS:
+        if self.status is Status.HOLDS:
             verdict = "HOLDS: every property holds"
-        elif self.status == BREACH:
+        elif self.status is Status.BREACH:
             verdict = f"CONTRACT BREACH (no verdict): {self.breach}"
-        elif self.status == VIOLATED and self.violation is not None:
+        elif self.status is Status.VIOLATED and self.violation is not None:
             verdict = f"VIOLATED {self.violation.property}: {self.violation.message}"
         else:
             verdict = f"UNKNOWN: {self.reason}"
@@ -311,7 +304,7 @@ def _breach_result(scenario: Scenario, system: System, strategy: str, props: Pro
                    breach: str, search: Search, warnings: list[str]) -> CheckResult:
     """The result of a search stopped by a node that breaks the contract (exit 4): no
     verdict, and no trace, since a breach is not a path the nodes would take again."""
-    return CheckResult(scenario.source, system.semantics.value, strategy, BREACH,
+    return CheckResult(scenario.source, system.semantics.value, strategy, Status.BREACH,
                        "a node breaks the node contract", _property_names(system, props),
                        search.statistics(), breach=breach, warnings=warnings)
 

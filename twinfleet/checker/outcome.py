@@ -21,10 +21,10 @@ from typing import Any, final
 
 from twinfleet.checker.properties import PropertyViolation
 from twinfleet.checker.transition import Step
+from twinfleet.runtime.contract.kinds import Status
 
-HOLDS, VIOLATED, UNKNOWN = "holds", "violated", "unknown"
-BREACH = "contract breach"  # a node breaks the node contract: no verdict (checker.diagnosis)
-INTERRUPTED = "interrupted (Ctrl-C)"
+# Why a search stopped on Ctrl-C (its status is then `Status.UNKNOWN`).
+INTERRUPTED_REASON = "interrupted (Ctrl-C)"
 
 
 @final
@@ -106,7 +106,7 @@ class Counterexample:
 class Outcome:
     """What a search concluded."""
 
-    status: str  # HOLDS, VIOLATED or UNKNOWN
+    status: Status  # HOLDS, VIOLATED or UNKNOWN
     reason: str
     statistics: SearchStatistics
     violation: PropertyViolation | None = None
@@ -182,7 +182,7 @@ class Guard:
         """Between two expansions: raise `Stop` on Ctrl-C or the time limit; report."""
         now = time.monotonic()
         if self._sigint:
-            raise Stop(INTERRUPTED)
+            raise Stop(INTERRUPTED_REASON)
         limit = self.limits.max_time_s
         if limit is not None and now - self.started >= limit:
             raise Stop(f"max-time {limit:g} s reached before the search finished")
@@ -191,7 +191,7 @@ class Guard:
             try:
                 self._progress(statistics())
             except KeyboardInterrupt:
-                raise Stop(INTERRUPTED) from None
+                raise Stop(INTERRUPTED_REASON) from None
 
     def count_states(self, states: int) -> None:
         """After a new state: raise `Stop` when the state limit is reached."""

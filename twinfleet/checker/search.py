@@ -34,11 +34,8 @@ from typing import Any, final
 
 from twinfleet.checker import checkpoint
 from twinfleet.checker.outcome import (
-    HOLDS,
-    INTERRUPTED,
+    INTERRUPTED_REASON,
     NO_LIMITS,
-    UNKNOWN,
-    VIOLATED,
     Counterexample,
     Counters,
     Found,
@@ -57,10 +54,11 @@ from twinfleet.checker.system import System
 from twinfleet.checker.transition import Transition
 from twinfleet.checker.walks import RandomWalks
 from twinfleet.checker.world import World
+from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.scenario.property_eval import Overtime, time_limit
 
-__all__ = ["HOLDS", "UNKNOWN", "VIOLATED", "Counterexample", "Limits", "Outcome", "Search",
-           "SearchStatistics", "bfs", "dfs", "peak_rss_mb", "random_walk"]
+__all__ = ["Counterexample", "Limits", "Outcome", "Search", "SearchStatistics", "bfs", "dfs",
+           "peak_rss_mb", "random_walk"]
 
 _GRACE_S = 0.25  # after max-time, before a property still running is interrupted
 _FORGET_EVERY = 512  # expansions between two `System.forget_before` calls (at least)
@@ -153,18 +151,18 @@ class Search:
                 self._lifo = strategy == "dfs"
                 self._explore_until_stable()
                 if self._pruned:
-                    return self._outcome(UNKNOWN, f"max-depth {self.limits.max_depth} reached "
-                                         "before the search finished")
+                    return self._outcome(Status.UNKNOWN, f"max-depth {self.limits.max_depth} "
+                                         "reached before the search finished")
                 for prop in self.properties.eventually:
                     self._lasso(prop)
-                return self._outcome(HOLDS, "every property holds")
+                return self._outcome(Status.HOLDS, "every property holds")
             except Found as found:
-                return self._outcome(VIOLATED, found.violation.property, found.violation,
+                return self._outcome(Status.VIOLATED, found.violation.property, found.violation,
                                      found.counterexample)
             except Stop as stop:
                 return self._stopped(stop.reason, clean=True)
             except KeyboardInterrupt:  # a second Ctrl-C: anywhere, maybe inside the store
-                return self._stopped(INTERRUPTED, clean=False)
+                return self._stopped(INTERRUPTED_REASON, clean=False)
             except Overtime as exc:  # inside an expression: the expansion is half done
                 return self._stopped(f"max-time {limit:g} s reached while evaluating the "
                                      f"property {exc}", clean=False)
@@ -189,11 +187,11 @@ class Search:
         if clean and self._checkpoint is not None and self._strategy != "random":
             self.save(self._checkpoint)
             saved = self._checkpoint
-        outcome = self._outcome(UNKNOWN, reason)
+        outcome = self._outcome(Status.UNKNOWN, reason)
         outcome.checkpoint = saved
         return outcome
 
-    def _outcome(self, status: str, reason: str, violation: PropertyViolation | None = None,
+    def _outcome(self, status: Status, reason: str, violation: PropertyViolation | None = None,
                  counterexample: Counterexample | None = None) -> Outcome:
         return Outcome(status, reason, self.statistics(), violation, counterexample)
 
@@ -365,8 +363,8 @@ class Search:
         max_depth = self.limits.max_depth or 1000
         RandomWalks(self.system, self.properties, self.store, self.counters, self.guard,
                     self.statistics).run(walks, seed, max_depth)
-        return self._outcome(UNKNOWN, f"random search is not exhaustive: no violation in {walks} "
-                             f"walks of at most {max_depth} steps (seed {seed})")
+        return self._outcome(Status.UNKNOWN, f"random search is not exhaustive: no violation in "
+                             f"{walks} walks of at most {max_depth} steps (seed {seed})")
 
 
 def bfs(system: System, properties: PropertySet, limits: Limits = NO_LIMITS,

@@ -150,8 +150,8 @@ class MapServer(Node):
     def _test_collisions(self, ctx: Context, i: int) -> None:
         st = self.state
         for j, other in enumerate(st.cells):
-            if j == i or (other == UNKNOWN and self.profile.name != "rebeca"):
-                continue  # the model also tests robots it has not heard from (§7.2)
+            if j == i or (other == UNKNOWN and not self.profile.collide_unheard):
+                continue
             if shadows_intersect(st.cells[i], st.dirs[i], other, st.dirs[j], self.dims, self.profile):
                 a, b = self.params.robots[i], self.params.robots[j]
                 st.collisions += 1

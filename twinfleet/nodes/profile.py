@@ -41,6 +41,11 @@ class Profile:
             that are not static obstacles (other robots) to a whole robot width, so
             robots in the neighbouring lane stop instead of brushing past (the
             model's point-sized band lets diagonal neighbours overlap).
+        report_arrival_pose: a robot that arrives publishes its (stopped) pose before
+            its "arrived" status; the model never reports stopping (§11 M7).
+        collide_unheard: the map server's collision test includes robots it has not
+            heard from yet, at the unknown cell, as the model does (§7.2); the fixed
+            profile skips them.
     """
 
     name: str
@@ -55,6 +60,8 @@ class Profile:
     validate_backoff: bool
     track_front_obstacle: bool
     robot_aware_stop: bool
+    report_arrival_pose: bool
+    collide_unheard: bool
 
     def round(self, x: float) -> int:
         """Round ``x`` to an int by this profile's rule.
@@ -93,6 +100,8 @@ REBECA = Profile(
     validate_backoff=False,
     track_front_obstacle=True,
     robot_aware_stop=False,
+    report_arrival_pose=False,
+    collide_unheard=True,
 )
 
 FIXED = Profile(
@@ -108,6 +117,8 @@ FIXED = Profile(
     validate_backoff=True,
     track_front_obstacle=False,
     robot_aware_stop=True,
+    report_arrival_pose=True,
+    collide_unheard=False,
 )
 
 PROFILES: dict[str, Profile] = {p.name: p for p in (FIXED, REBECA)}

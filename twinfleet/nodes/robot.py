@@ -204,8 +204,7 @@ class Robot(Node):
             self._request_path(ctx, st.targets[-1])
             return
         st.done = True
-        if self.profile.name != "rebeca":
-            # The model never reports stopping (§11 M7); the fixed profile does.
+        if self.profile.report_arrival_pose:
             self._report_pose(ctx)
         self._report_status(ctx, "arrived")
 

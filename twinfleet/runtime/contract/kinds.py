@@ -1,11 +1,14 @@
-"""The contract's vocabulary: what kind of event a handler runs for, and what kind of failure.
+"""The contract's vocabulary: what kind of event a handler runs for, what kind of failure,
+and how a check or a run came out.
 
 One `EventKind` names an event the same way in the node contract, both drivers
 (the live node core and the checker), the live event log, checker traces and
-`twinfleet.agreement`. One `FailureKind` names why a handler run failed. Both
-are `StrEnum`s, so their values are the strings written to logs and traces.
-The exit codes of every command are here too: the checker's results and the
-CLI's commands give the same answers the same numbers.
+`twinfleet.agreement`. One `FailureKind` names why a handler run failed. One
+`Status` names a verdict for the checker, the live verdict and the experiment
+table. All are `StrEnum`s, so their values are the strings written to logs,
+traces and JSON. The exit codes of every command are here too: the checker's
+results and the CLI's commands give the same answers the same numbers
+(`Status.exit_code`).
 """
 
 from __future__ import annotations
@@ -56,3 +59,30 @@ class FailureKind(StrEnum):
     NONDETERMINISM = "nondeterminism"  # the same handler run twice did different things
     CHOICE_MISMATCH = "choice mismatch"  # a forced ctx.choose answer this run does not offer
     CONTRACT = "contract misuse"  # a lambda as a timer, state that cannot be encoded, a clock read
+
+
+@unique
+class Status(StrEnum):
+    """How a property check or a live run came out; the value is the word printed and
+    written to JSON. The checker answers HOLDS, VIOLATED, UNKNOWN or BREACH; a live run
+    HOLDS, VIOLATED, ERROR, INCONCLUSIVE or INTERRUPTED."""
+
+    HOLDS = "holds"  # every property holds (the checker: in every interleaving)
+    VIOLATED = "violated"  # a property is violated (or, live, a node process failed)
+    UNKNOWN = "unknown"  # the checker stopped before a verdict (a limit, Ctrl-C)
+    BREACH = "contract breach"  # a node breaks the node contract: no verdict
+    ERROR = "error"  # a property raised: a scenario mistake
+    INCONCLUSIVE = "inconclusive"  # the live run cannot back a verdict (it says why)
+    INTERRUPTED = "interrupted"  # the live run was stopped (a signal) before a verdict
+
+    @property
+    def exit_code(self) -> int:
+        """The command's exit code for this outcome."""
+        return _EXIT_CODES[self]
+
+
+_EXIT_CODES: Final = {
+    Status.HOLDS: EXIT_OK, Status.VIOLATED: EXIT_FAILED, Status.UNKNOWN: EXIT_BAD_INPUT,
+    Status.BREACH: EXIT_CONTRACT_BREACH, Status.ERROR: EXIT_BAD_INPUT,
+    Status.INCONCLUSIVE: EXIT_INCONCLUSIVE, Status.INTERRUPTED: EXIT_INTERRUPTED,
+}

@@ -37,6 +37,7 @@ from collections.abc import Callable, Mapping
 from typing import Any, Final, final
 
 from twinfleet.runtime.contract.messages import DecodeError
+from twinfleet.runtime.core.statistics import Rejection
 
 KEY_ENV: Final = "TWINFLEET_FLEET_KEY"
 TAG_BYTES: Final = 16
@@ -47,11 +48,11 @@ Check = Callable[[Any], None]
 
 
 class Rejected(DecodeError):
-    """A decoded sample that does not fit its topic; `counter` names the statistic."""
+    """A decoded sample that does not fit its topic; `reason` says which counter it goes to."""
 
-    def __init__(self, counter: str, reason: str) -> None:
-        super().__init__(reason)
-        self.counter = counter
+    def __init__(self, reason: Rejection, text: str) -> None:
+        super().__init__(text)
+        self.reason = reason
 
 
 # ------------------------------------------------------------------ the fleet key
@@ -116,7 +117,7 @@ _VALIDATORS: dict[type, Check] = {}
 
 
 def validator(cls: type) -> Check:
-    """A function that raises `Rejected` ("rejected_invalid") unless a `cls` instance's fields
+    """A function that raises `Rejected` (`Rejection.INVALID`) unless a `cls` instance's fields
     fit their annotations (cached per class; a field with an annotation it cannot read
     is not checked)."""
     check = _VALIDATORS.get(cls)
@@ -146,18 +147,18 @@ def _message_check(cls: type) -> Check:
 
     def check(msg: Any) -> None:
         if type(msg) is not cls:
-            raise Rejected("rejected_invalid", f"{name}: expected a message, got {msg!r:.60}")
+            raise Rejected(Rejection.INVALID, f"{name}: expected a message, got {msg!r:.60}")
         for field, field_check in checks:
             try:
                 field_check(getattr(msg, field))
             except Rejected as exc:
-                raise Rejected("rejected_invalid", f"{name}.{field}: {exc}") from None
+                raise Rejected(Rejection.INVALID, f"{name}.{field}: {exc}") from None
 
     return check
 
 
 def _bad(value: Any, what: str) -> Rejected:
-    return Rejected("rejected_invalid", f"expected {what}, got {value!r:.60}")
+    return Rejected(Rejection.INVALID, f"expected {what}, got {value!r:.60}")
 
 
 def _check_for(hint: Any) -> Check:
@@ -266,7 +267,7 @@ class Admission:
         """Raise `Rejected` for a message of the wrong type or with invalid fields."""
         expected = self.expected
         if expected is not None and type(msg) is not expected:
-            raise Rejected("rejected_wrong_type",
+            raise Rejected(Rejection.WRONG_TYPE,
                            f"{getattr(type(msg), '__message_type__', type(msg).__name__)} where "
                            f"{expected.__message_type__} is expected")  # type: ignore[attr-defined]
         check_message(msg)

@@ -90,6 +90,7 @@ from twinfleet.runtime.core.due import DueEntries
 from twinfleet.runtime.core.events import Event
 from twinfleet.runtime.core.guard import Admission, Rejected, check_message, expected_type
 from twinfleet.runtime.core.outbox import LogOutput, Outbox, Output, ReplyOutput
+from twinfleet.runtime.core.statistics import NodeStatistics, Rejection
 
 MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is not a loss
 _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
@@ -99,12 +100,12 @@ _TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOU
                            EventKind.START})
 _COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "published",
                     "handled", "keep_last", "best_effort", "seq_jumps", "lossless", "stalls",
-                    "max_late", "period", "rejected_invalid", "rejected_wrong_type")
+                    "max_late", "period")
 _NOTHING: Final[tuple[()]] = ()
 _PICKLE: Final = pickle.HIGHEST_PROTOCOL  # rollback copies never leave the process
 
 
-# ------------------------------------------------------------------ observers and statistics
+# ------------------------------------------------------------------ observers
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,55 +127,6 @@ class Observer(Protocol):
     def handled(self, record: Handled) -> None:
         """Called after each handler, before its outputs are performed."""
         ...
-
-
-@dataclass(frozen=True, slots=True)
-class HostStatistics:
-    """A snapshot of a node's counters."""
-
-    received: int
-    dropped_undecodable: int
-    handler_errors: int
-    failures: int
-    gaps: int
-    inbox_depth: int
-    timers_pending: int
-    published: int
-    handled: int
-    dropped_keep_last: int = 0
-    dropped_overflow: int = 0
-    dropped_best_effort: int = 0
-    sequence_jumps: int = 0  # sequence numbers that leapt by more than MAX_GAP (not counted as gaps)
-    dropped_lossless: int = 0  # KEEP_LAST drops on RELIABLE subscriptions (part of dropped_keep_last)
-    stalls: int = 0  # timed entries released later than the stall threshold after their due time
-    max_lateness_ms: int = 0  # the latest a timed entry was released after its due time
-    stall_threshold_ms: int = 0  # the threshold: twice the shortest timer period, or the floor
-    # Samples refused before any handler (runtime.core.guard): unsigned or wrongly signed,
-    # larger than the topic's limit, fields that do not fit the type, a type the handler
-    # does not take. Any of them > 0 makes a verdict INCONCLUSIVE (the prefix is the rule).
-    rejected_forged: int = 0
-    rejected_invalid: int = 0
-    rejected_oversize: int = 0
-    rejected_wrong_type: int = 0
-
-    @classmethod
-    def of(cls, n: dict[str, int], inbox_depth: int, timers_pending: int,
-           stall_threshold_ms: int = 0,
-           transport: Mapping[str, int] | None = None) -> HostStatistics:
-        """The record of a core's counters `n` (`transport`: what the transport dropped at
-        its hand-off, ``overflow``, and refused, ``forged`` and ``oversize``)."""
-        below = transport or {}
-        return cls(received=n["received"], dropped_undecodable=n["undecodable"],
-                   handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
-                   inbox_depth=inbox_depth, timers_pending=timers_pending,
-                   published=n["published"], handled=n["handled"],
-                   dropped_keep_last=n["keep_last"], dropped_overflow=below.get("overflow", 0),
-                   dropped_best_effort=n["best_effort"], sequence_jumps=n["seq_jumps"],
-                   dropped_lossless=n["lossless"], stalls=n["stalls"],
-                   max_lateness_ms=n["max_late"], stall_threshold_ms=stall_threshold_ms,
-                   rejected_forged=below.get("forged", 0), rejected_oversize=below.get("oversize", 0),
-                   rejected_invalid=n["rejected_invalid"],
-                   rejected_wrong_type=n["rejected_wrong_type"])
 
 
 # A received sample as `decode_fields` returns it: (msg, stamp_ms, seq, sender).
@@ -199,10 +151,11 @@ class _Subscription:
         msg, stamp, seq, sender = sample
         return Event(EventKind.DELIVERY, self.method, (msg,), sender, self.topic, seq, stamp)
 
-    def receiver(self, n: dict[str, int], counter: Iterator[int],
+    def receiver(self, n: dict[str, int], rejected: dict[Rejection, int], counter: Iterator[int],
                  inbox: list[tuple[int, int, int, Any]], last_seq: dict[str, int]) -> Receive:
-        """`NodeCore.receiver` of this subscription: counters `n`, the core's tie-breaking
-        `counter` and `inbox`, and the last sequence number per sender of its topic."""
+        """`NodeCore.receiver` of this subscription: counters `n` and `rejected`, the core's
+        tie-breaking `counter` and `inbox`, and the last sequence number per sender of its
+        topic."""
         # Everything is bound once here: one sample costs a decode, a gap check, a deque
         # append and a heap push, with no attribute chains.
         sub, push = self, heapq.heappush
@@ -219,7 +172,7 @@ class _Subscription:
             try:  # before the gap check: a refused sample leaves no trace in the core
                 admit(sample[0])
             except Rejected as exc:
-                n[exc.counter] += 1
+                rejected[exc.reason] += 1
                 raise
             seq, sender = sample[2], sample[3]
             last = last_seq.get(sender)
@@ -310,6 +263,7 @@ class NodeCore:
         self._last_seq: dict[str, dict[str, int]] = {}  # topic -> sender -> last seq
         self._observers: list[Observer] = []
         self._n = dict.fromkeys(_COUNTERS, 0)
+        self._rejected = dict.fromkeys(Rejection, 0)  # the core's own: invalid, wrong type
         self._outbox = Outbox(node.name, self.due, self._n, stop_on_error=stop_on_error)
         self._subs: dict[str, _Subscription] = {}
         self._liveliness: HandlerSpec | None = None
@@ -354,7 +308,7 @@ class NodeCore:
         """
         sub = self._subs[method]
         last_seq = self._last_seq.setdefault(sub.topic, {})  # shared by one topic's subscriptions
-        return sub.receiver(self._n, self._counter, self._inbox, last_seq)
+        return sub.receiver(self._n, self._rejected, self._counter, self._inbox, last_seq)
 
     def receive_request(self, method: str, payload: bytes, responder: Any,
                         arrival_ms: int) -> Sequence[Output]:
@@ -367,7 +321,7 @@ class NodeCore:
             msg, stamp, seq, sender = decode_fields(payload)
             check_message(msg)
         except Rejected as exc:
-            self._n[exc.counter] += 1
+            self._rejected[exc.reason] += 1
             return (LogOutput(f"rejected request for {self.services[method]}: {exc}", err=True),
                     ReplyOutput(responder, None, f"server error: rejected request ({exc})"))
         except Exception as exc:  # DecodeError (anything else would be a codec bug)
@@ -545,9 +499,20 @@ class NodeCore:
         error = self._outbox.finish(method, args, reply, error, responder, now, out)
         return out, effects, error
 
-    def statistics(self, transport: Mapping[str, int] | None = None) -> HostStatistics:
-        """Counters since start, as a frozen record (`transport`: the transport's counters,
-        `Transport.statistics`)."""
-        return HostStatistics.of(self._n, len(self._inbox), self.due.timers(),
-                                 self.stall_threshold() if self.stall_ms is not None else 0,
-                                 transport)
+    def statistics(self, *, dropped_overflow: int = 0,
+                   refused: Mapping[Rejection, int] | None = None) -> NodeStatistics:
+        """Counters since start, as a frozen record. The driver adds what its transport
+        counted below the core: samples its hand-off dropped (`dropped_overflow`) and the
+        ones it refused before decoding (`refused`: forged, oversize)."""
+        n, below = self._n, refused or {}
+        rejected = {r: self._rejected[r] + below.get(r, 0) for r in Rejection}
+        return NodeStatistics(
+            received=n["received"], dropped_undecodable=n["undecodable"],
+            handler_errors=n["errors"], failures=n["failures"], gaps=n["gaps"],
+            inbox_depth=len(self._inbox), timers_pending=self.due.timers(),
+            published=n["published"], handled=n["handled"], dropped_keep_last=n["keep_last"],
+            dropped_overflow=dropped_overflow, dropped_best_effort=n["best_effort"],
+            sequence_jumps=n["seq_jumps"], dropped_lossless=n["lossless"], stalls=n["stalls"],
+            max_lateness_ms=n["max_late"],
+            stall_threshold_ms=self.stall_threshold() if self.stall_ms is not None else 0,
+            rejected=rejected)

@@ -56,15 +56,17 @@ from typing import Any, TextIO, final
 import msgpack
 import yaml
 
+from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.contract.messages import DecodeError, decode
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.core.eventlog import EVENTS_FORMAT, with_restarts
 from twinfleet.runtime.core.guard import Rejected, check_message, payload_limit
 from twinfleet.runtime.core.state_report import decode_report
+from twinfleet.runtime.core.statistics import NodeStatistics, Rejection, StatisticsError
 from twinfleet.runtime.fleet import fleetauth, registry
 from twinfleet.runtime.fleet.connection import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-from twinfleet.runtime.fleet.live_verdict import HOLDS, LiveMonitor, RunEnd, Verdict
-from twinfleet.runtime.fleet.node_main import LIMIT_ENV, PARENT_ENV
+from twinfleet.runtime.fleet.live_verdict import RESULT_WORDS, LiveMonitor, RunEnd, Verdict
+from twinfleet.runtime.fleet.node_main import LIMIT_ENV, PARENT_ENV, read_statistics
 from twinfleet.runtime.fleet.run_record import RunRecord, versions
 from twinfleet.runtime.host.introspect import param_arguments
 from twinfleet.runtime.host.keys import (
@@ -134,7 +136,7 @@ class FleetResult:
         """True when no node failed and the live verdict (`runtime.fleet.live_verdict`) holds;
         without one (``monitor=False``), when the scenario's report (if any) says so."""
         if self.verdict is not None:
-            return self.ok and self.verdict.status == HOLDS
+            return self.ok and self.verdict.status is Status.HOLDS
         return self.ok and (self.report is None or self.report.passed())
 
     @property
@@ -253,7 +255,8 @@ class Fleet:
         self.failed: list[str] = []
         self.report = load_report(scenario)
         self.monitor = LiveMonitor(scenario, time_scale=time_scale) if monitor else None
-        self.statistics: dict[str, Any] = {}
+        self.statistics: dict[str, NodeStatistics] = {}
+        self.unreadable_statistics: dict[str, str] = {}  # node -> why `from_dict` refused them
         self.invalid = 0  # report samples refused by `guard.check_message`
         self._finishing = False
         self.scenario, self._private_dir = launchable(scenario, keep_scenario_beside)
@@ -299,11 +302,12 @@ class Fleet:
             return
         self.monitor.on_report(report)
 
-    def refusals(self) -> dict[str, int]:
+    def refusals(self) -> dict[Rejection, int]:
         """What the launcher's own subscriptions (report, shutdown) refused, by reason."""
-        below = self.transport.statistics() if self.transport is not None else {}
-        return {"forged": below.get("forged", 0), "oversize": below.get("oversize", 0),
-                "invalid": self.invalid}
+        refused = self.transport.statistics().refused if self.transport is not None else {}
+        return {Rejection.FORGED: refused.get(Rejection.FORGED, 0),
+                Rejection.OVERSIZE: refused.get(Rejection.OVERSIZE, 0),
+                Rejection.INVALID: self.invalid}
 
     def node_secrets(self) -> dict[str, str]:
         """The environment a node process gets: fleet key, login (embedded router), limit."""
@@ -424,20 +428,28 @@ class Fleet:
                 self.end("all nodes exited")
             return
 
-    async def node_statistics(self, timeout_s: float = 0.5) -> dict[str, Any]:
-        """Each running node's `HostStatistics`, read from its statistics queryable."""
+    async def node_statistics(self, timeout_s: float = 0.5
+                              ) -> tuple[dict[str, NodeStatistics], dict[str, str]]:
+        """Each running node's `NodeStatistics`, read from its statistics queryable, and
+        why the nodes whose answers could not be read were refused (node -> reason)."""
         if self.transport is None or self.transport.session is None:
-            return {}
+            return {}, {}
         key = kind_expr(self.scenario.fleet, KeyKind.STATS)
 
-        def query() -> dict[str, Any]:
-            found: dict[str, Any] = {}
+        def query() -> tuple[dict[str, NodeStatistics], dict[str, str]]:
+            found: dict[str, NodeStatistics] = {}
+            unreadable: dict[str, str] = {}
             for reply in self.transport.session.get(key, timeout=timeout_s):  # type: ignore[union-attr]
                 if reply.ok is not None:
-                    with contextlib.suppress(Exception):  # a malformed key or payload
+                    try:
                         node = parse_node_key(str(reply.ok.key_expr), KeyKind.STATS).node
-                        found[node] = msgpack.unpackb(reply.ok.payload.to_bytes())
-            return found
+                    except ValueError:  # InvalidKey: not a node's statistics key
+                        continue
+                    try:
+                        found[node] = read_statistics(reply.ok.payload.to_bytes())
+                    except StatisticsError as exc:
+                        unreadable[node] = str(exc)
+            return found, unreadable
 
         return await asyncio.to_thread(query)
 
@@ -645,14 +657,17 @@ async def _final_statistics(fleet: Fleet, record: RunRecord | None, reason: str)
     """Ask the nodes for their counters (the verdict and the run record read them) and say
     what the launcher's own subscriptions refused."""
     if record is not None or fleet.monitor is not None:
-        fleet.statistics = await fleet.node_statistics(_STATS_TIMEOUT_S)
+        fleet.statistics, fleet.unreadable_statistics = await fleet.node_statistics(
+            _STATS_TIMEOUT_S)
+    for node, why in fleet.unreadable_statistics.items():
+        fleet.log(f"could not read the statistics of {node}: {why}")
     refused = {k: v for k, v in fleet.refusals().items() if v}
     if refused:
         fleet.log("refused samples on the report and shutdown topics: "
                   + ", ".join(f"{k} {v}" for k, v in refused.items()))
     if record is not None:
         record.write("end", reason=reason)
-        record.write("node_stats", stats=fleet.statistics)
+        record.write("node_stats", stats={n: s.to_dict() for n, s in fleet.statistics.items()})
 
 
 def _merge_logged(parts: Path, path: str, fleet: Fleet) -> None:
@@ -681,10 +696,11 @@ def _verdict(fleet: Fleet, reason: str, running: Sequence[str],
     """The live verdict of the run (None without a monitor)."""
     if fleet.monitor is None:
         return None
-    stats = fleet.transport.statistics() if fleet.transport is not None else {}
+    dropped = fleet.transport.statistics().overflow if fleet.transport is not None else 0
     end = RunEnd(reason, interrupted=_interrupted(reason),
                  failed={n: codes.get(n) for n in fleet.failed}, statistics=fleet.statistics,
-                 running=tuple(running), dropped_reports=stats.get("overflow", 0))
+                 running=tuple(running), dropped_reports=dropped,
+                 unreadable=fleet.unreadable_statistics)
     return fleet.monitor.verdict(end)
 
 
@@ -804,7 +820,8 @@ def format_result(result: FleetResult) -> list[str]:
     if result.report is not None:
         lines += result.report.render().splitlines()
         if result.verdict is None:
-            lines.append("result: " + ("PASSED" if result.passed else "FAILED"))
+            status = Status.HOLDS if result.passed else Status.VIOLATED
+            lines.append(f"result: {RESULT_WORDS[status]}")
     if result.verdict is not None:
         lines += result.verdict.lines()
     return lines

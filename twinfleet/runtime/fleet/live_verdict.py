@@ -31,20 +31,21 @@ latency (tens of µs here against handler periods of ms).
 Honest verdicts. A run whose nodes lost samples a verdict depends on says so:
 `Verdict` is INCONCLUSIVE (exit 3) when a node's final statistics show a
 transport hand-off overflow, sequence gaps on reliable topics, KEEP_LAST drops
-on a RELIABLE (lossless) subscription, any ``rejected_*`` counter above zero,
-or timers released later than the node's stall threshold (`runtime.core.node_core`:
-twice its shortest timer period — `@every` or a positive `ctx.after` delay,
-the scan period for the map server — so a node that late has missed a whole
-tick, e.g. a robot that moved without a scan; never below `stall_floor_ms`,
-100 ms of wall time); or when state reports were
-lost, a running node did not answer for its statistics, or a property took
-longer than its evaluation budget. Such a run is inconclusive even when a
-property was seen violated (listed in the details): a robot that teleported
+on a RELIABLE (lossless) subscription, a sample refused for any `Rejection`
+reason, or timers released later than the node's stall threshold
+(`runtime.core.node_core`: twice its shortest timer period — `@every` or a
+positive `ctx.after` delay, the scan period for the map server — so a node
+that late has missed a whole tick, e.g. a robot that moved without a scan;
+never below `stall_floor_ms`, 100 ms of wall time); or when state reports
+were lost, a running node did not answer for its statistics or sent ones
+that cannot be read (`NodeStatistics.from_dict` refused them), or a property
+took longer than its evaluation budget. Such a run is inconclusive even when
+a property was seen violated (listed in the details): a robot that teleported
 after a stall collides because of the stall, not of its code.
 
-Result (`Verdict.status` and exit code, `runtime.contract.kinds`): ``holds`` 0,
-``violated`` 1 (the property named), ``error`` 2 (a property raised: a
-scenario mistake, as `check` says), ``inconclusive`` 3, ``interrupted`` 130.
+Result (`Verdict.status`, a `runtime.contract.kinds.Status`, and its exit code):
+``holds`` 0, ``violated`` 1 (the property named), ``error`` 2 (a property raised:
+a scenario mistake, as `check` says), ``inconclusive`` 3, ``interrupted`` 130.
 """
 
 from __future__ import annotations
@@ -54,15 +55,10 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final, final
 
+from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.contract.snapshot import restore
 from twinfleet.runtime.core.state_report import StateReport
-from twinfleet.runtime.fleet.connection import (
-    EXIT_BAD_INPUT,
-    EXIT_FAILED,
-    EXIT_INCONCLUSIVE,
-    EXIT_INTERRUPTED,
-    EXIT_OK,
-)
+from twinfleet.runtime.core.statistics import NodeStatistics
 from twinfleet.runtime.scenario.property_eval import (
     Expression,
     Overtime,
@@ -71,10 +67,9 @@ from twinfleet.runtime.scenario.property_eval import (
 )
 from twinfleet.runtime.scenario.spec import PropertyConfig, Scenario
 
-HOLDS, VIOLATED, ERROR, INCONCLUSIVE, INTERRUPTED = (
-    "holds", "violated", "error", "inconclusive", "interrupted")
-EXIT_CODES: Final = {HOLDS: EXIT_OK, VIOLATED: EXIT_FAILED, ERROR: EXIT_BAD_INPUT,
-                     INCONCLUSIVE: EXIT_INCONCLUSIVE, INTERRUPTED: EXIT_INTERRUPTED}
+# The launcher's result line says these words (tests and users read them).
+RESULT_WORDS: Final = {Status.HOLDS: "PASSED", Status.VIOLATED: "FAILED", Status.ERROR: "ERROR",
+                       Status.INCONCLUSIVE: "INCONCLUSIVE", Status.INTERRUPTED: "interrupted"}
 EVAL_BUDGET_S: Final = 1.0  # wall seconds one evaluation may take in the launcher
 STALL_FLOOR_WALL_MS: Final = 100  # a stall threshold is never below this much wall time
 _STATE_CHARS: Final = 300  # of each node's state in a violation's description
@@ -85,7 +80,7 @@ _STATE_CHARS: Final = 300  # of each node's state in a violation's description
 class Verdict:
     """How a live run stands against its scenario's properties."""
 
-    status: str  # HOLDS, VIOLATED, ERROR, INCONCLUSIVE or INTERRUPTED
+    status: Status  # HOLDS, VIOLATED, ERROR, INCONCLUSIVE or INTERRUPTED
     summary: str  # one line: what decided it
     details: tuple[str, ...] = ()  # the violation's states and event, the reasons, ...
     property_name: str | None = None  # the property violated
@@ -93,13 +88,12 @@ class Verdict:
     @property
     def exit_code(self) -> int:
         """The command's exit code for this verdict (`runtime.contract.kinds`)."""
-        return EXIT_CODES[self.status]
+        return self.status.exit_code
 
     def lines(self) -> list[str]:
         """The result line and its details, for the launcher's summary."""
-        word = {HOLDS: "PASSED", VIOLATED: "FAILED", ERROR: "ERROR",
-                INCONCLUSIVE: "INCONCLUSIVE", INTERRUPTED: "interrupted"}[self.status]
-        return [f"result: {word} ({self.summary})", *(f"  {d}" for d in self.details)]
+        return [f"result: {RESULT_WORDS[self.status]} ({self.summary})",
+                *(f"  {d}" for d in self.details)]
 
 
 @dataclass(slots=True)
@@ -121,8 +115,10 @@ class RunEnd:
     reason: str
     interrupted: bool = False
     failed: Mapping[str, int | None] = field(default_factory=dict)  # node -> exit code
-    statistics: Mapping[str, Mapping[str, Any]] = field(default_factory=dict)
+    statistics: Mapping[str, NodeStatistics] = field(default_factory=dict)
     running: Sequence[str] = ()  # nodes that were running when the statistics were asked
+    # node -> why its statistics could not be read (`NodeStatistics.from_dict` refused them)
+    unreadable: Mapping[str, str] = field(default_factory=dict)
     dropped_reports: int = 0  # state reports the launcher's own hand-off dropped
 
 
@@ -133,28 +129,27 @@ def stall_floor_ms(time_scale: float = 1.0) -> int:
     return math.ceil(STALL_FLOOR_WALL_MS * time_scale)
 
 
-def statistics_reasons(node: str, stats: Mapping[str, Any]) -> list[str]:
+def statistics_reasons(node: str, stats: NodeStatistics) -> list[str]:
     """Why `node`'s final statistics make a verdict inconclusive (empty: they do not).
 
-    Any ``rejected_*`` counter counts (input the node refused: forged, invalid,
-    oversize, of the wrong type), whatever its name.
+    Every `Rejection` reason counts (input the node refused: forged, invalid,
+    oversize, of the wrong type), one reason line each.
     """
     reasons = []
-    if stats.get("dropped_overflow", 0):
-        reasons.append(f"{node} dropped {stats['dropped_overflow']} samples at the transport "
+    if stats.dropped_overflow:
+        reasons.append(f"{node} dropped {stats.dropped_overflow} samples at the transport "
                        "hand-off (its loop fell behind)")
-    if stats.get("gaps", 0):
-        reasons.append(f"{node} lost {stats['gaps']} samples on reliable topics (sequence gaps)")
-    if stats.get("dropped_lossless", 0):
-        reasons.append(f"{node} dropped {stats['dropped_lossless']} samples from the KEEP_LAST "
+    if stats.gaps:
+        reasons.append(f"{node} lost {stats.gaps} samples on reliable topics (sequence gaps)")
+    if stats.dropped_lossless:
+        reasons.append(f"{node} dropped {stats.dropped_lossless} samples from the KEEP_LAST "
                        "queue of a RELIABLE (lossless) subscription")
-    for key in sorted(k for k in stats if k.startswith("rejected_")):
-        if stats[key]:
-            reasons.append(f"{node} rejected {stats[key]} samples ({key})")
-    if stats.get("stalls", 0):
-        reasons.append(f"{node} fell behind its timers by up to {stats.get('max_lateness_ms')} ms "
-                       f"({stats['stalls']} timers later than its stall threshold of "
-                       f"{stats.get('stall_threshold_ms')} ms: it stalled)")
+    reasons += [f"{node} rejected {count} samples ({reason.counter})"
+                for reason, count in stats.rejected.items() if count]
+    if stats.stalls:
+        reasons.append(f"{node} fell behind its timers by up to {stats.max_lateness_ms} ms "
+                       f"({stats.stalls} timers later than its stall threshold of "
+                       f"{stats.stall_threshold_ms} ms: it stalled)")
     return reasons
 
 
@@ -297,46 +292,50 @@ class LiveMonitor:
         reasons (which also void a violation: it may come from the lost samples or the
         stall, not from the code); violations; an interruption; what never held; else holds."""
         if self.errors:
-            return Verdict(ERROR, self.errors[0], tuple(self.errors[1:]))
+            return Verdict(Status.ERROR, self.errors[0], tuple(self.errors[1:]))
         if end.failed:  # a process that died is a fact of the run, lost samples or not
             nodes = ", ".join(f"{n} (exit code {c})" for n, c in end.failed.items())
-            return Verdict(VIOLATED, f"node failed: {nodes}")
+            return Verdict(Status.VIOLATED, f"node failed: {nodes}")
         reasons = self.inconclusive_reasons(end)
         seen = tuple(f"seen, but not conclusive: {v[1]}" for v in self.violations)
         if reasons and (self.violations or not end.interrupted):
-            return Verdict(INCONCLUSIVE, reasons[0], tuple(reasons[1:]) + seen + self._unjudged())
+            return Verdict(Status.INCONCLUSIVE, reasons[0],
+                           tuple(reasons[1:]) + seen + self._unjudged())
         if self.violations:
             name, summary, details = self.violations[0]
             more = tuple(f"also violated: {v[0]}" for v in self.violations[1:])
-            return Verdict(VIOLATED, summary, details + more + self._unjudged(), name)
+            return Verdict(Status.VIOLATED, summary, details + more + self._unjudged(), name)
         if end.interrupted:
-            return Verdict(INTERRUPTED, end.reason)
+            return Verdict(Status.INTERRUPTED, end.reason)
         unmet = [w for w in self.watches if w.cfg.kind in ("eventually", "within") and not w.held]
         early = [w for w in unmet if w.cfg.kind == "within" and self.now <= (w.cfg.within_ms or 0)]
         if early:  # neither held nor past its deadline: the run was too short to judge it
             w = early[0]
-            return Verdict(INCONCLUSIVE, f"the run ended at t={self.now} ms, before {w.cfg.name}'s "
-                           f"within_ms {w.cfg.within_ms} had passed", self._unjudged())
+            return Verdict(Status.INCONCLUSIVE, f"the run ended at t={self.now} ms, before "
+                           f"{w.cfg.name}'s within_ms {w.cfg.within_ms} had passed",
+                           self._unjudged())
         if unmet:
             w = unmet[0]
             assert w.expr is not None
-            return Verdict(VIOLATED, f"{w.cfg.name} violated: {w.expr.source!r} never held "
-                           f"before the run ended ({end.reason})", self._unjudged(), w.cfg.name)
+            return Verdict(Status.VIOLATED, f"{w.cfg.name} violated: {w.expr.source!r} never "
+                           f"held before the run ended ({end.reason})", self._unjudged(),
+                           w.cfg.name)
         judged = [w.cfg.name for w in self.watches if w.cfg.kind in ("invariant", "eventually",
                                                                     "within")]
         text = ", ".join([*judged, self.failure_name]) + " hold"
-        return Verdict(HOLDS, text, self._unjudged())
+        return Verdict(Status.HOLDS, text, self._unjudged())
 
     def inconclusive_reasons(self, end: RunEnd) -> list[str]:
         """Why the run cannot back a verdict (module docstring); empty when it can."""
         reasons = [w.broken for w in self.watches if w.broken not in (None, "decided", "error")]
         for node in self.names:
-            stats = end.statistics.get(node)
-            if stats is None:
-                if node in end.running:
-                    reasons.append(f"{node} did not answer for its statistics")
-                continue
-            reasons += statistics_reasons(node, stats)
+            if node in end.statistics:
+                reasons += statistics_reasons(node, end.statistics[node])
+            elif node in end.unreadable:
+                reasons.append(f"{node} sent statistics the launcher cannot read "
+                               f"({end.unreadable[node]})")
+            elif node in end.running:
+                reasons.append(f"{node} did not answer for its statistics")
         reasons += [f"{n} lost {k} state reports" for n, k in sorted(self.lost.items())]
         reasons += self.undecodable[:1]
         if end.dropped_reports:

@@ -7,7 +7,8 @@ watchdog so a hung close cannot keep the process alive. Exit code 0, 1 when
 the node stopped on a handler error (``live.stop_on_error``), 2 on bad input.
 
 The process also serves its statistics on ``twinfleet/<fleet>/@stats/<node>``
-(a msgpack map), which `twinfleet node list --stats` reads, and the JSON
+(`NodeStatistics.to_dict` as a msgpack map), which the launcher and `twinfleet node
+list --stats` read back with `NodeStatistics.from_dict`, and the JSON
 Schemas of the message classes it knows on ``twinfleet/<fleet>/@types/<node>``
 (a JSON map type name → schema), which `twinfleet record --connect` reads.
 
@@ -22,7 +23,6 @@ from __future__ import annotations
 import argparse
 import asyncio
 import ctypes
-import dataclasses
 import faulthandler
 import json
 import os
@@ -35,6 +35,7 @@ import msgpack
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.core.state_report import StateReporter
+from twinfleet.runtime.core.statistics import NodeStatistics, StatisticsError
 from twinfleet.runtime.fleet.fleetauth import node_secrets
 from twinfleet.runtime.host.clock import Clock, FleetClock
 from twinfleet.runtime.host.introspect import PARAM_FLAG, load_with_params, serve_info
@@ -61,6 +62,24 @@ def die_with_parent() -> None:
         return  # not Linux: rely on the launcher's shutdown
     if expected is not None and os.getppid() != int(expected):
         sys.exit(0)  # the launcher died before prctl took effect
+
+
+def statistics_payload(stats: NodeStatistics) -> bytes:
+    """The answer of the statistics queryable: `NodeStatistics.to_dict` as msgpack."""
+    return msgpack.packb(stats.to_dict())
+
+
+def read_statistics(payload: bytes) -> NodeStatistics:
+    """A statistics queryable's answer (`statistics_payload`) as a record.
+
+    Raises:
+        StatisticsError: not a msgpack map, or not the counters of this version.
+    """
+    try:
+        data = msgpack.unpackb(payload, raw=False)
+    except Exception as exc:  # msgpack raises several unrelated types for bad input
+        raise StatisticsError(f"node statistics: not a msgpack map ({exc})") from None
+    return NodeStatistics.from_dict(data)
 
 
 def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
@@ -151,7 +170,7 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
         return 0
 
     def serve_stats(_payload: bytes, respond: Respond) -> None:
-        respond(msgpack.packb(dataclasses.asdict(host.statistics())), "")
+        respond(statistics_payload(host.statistics()), "")
 
     transport.serve(node_key(scenario.fleet, KeyKind.STATS, node.name), serve_stats)
     if args.monitor is not None:
@@ -171,9 +190,7 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
         faulthandler.cancel_dump_traceback_later()
         if events is not None:
             events.close()
-    stats = host.statistics()
-    fields = " ".join(f"{k}={v}" for k, v in dataclasses.asdict(stats).items())
-    print(f"stopped: {fields}", file=sys.stderr, flush=True)
+    print(f"stopped: {host.statistics().line()}", file=sys.stderr, flush=True)
     return 1 if host.failed else 0
 
 

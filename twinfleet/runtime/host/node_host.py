@@ -47,7 +47,7 @@ from twinfleet.runtime.contract.messages import DecodeError
 from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.core.guard import Rejected
-from twinfleet.runtime.core.node_core import HostStatistics, NodeCore
+from twinfleet.runtime.core.node_core import NodeCore
 from twinfleet.runtime.core.outbox import (
     CallOutput,
     LogOutput,
@@ -56,6 +56,7 @@ from twinfleet.runtime.core.outbox import (
     ReplyOutput,
     StopOutput,
 )
+from twinfleet.runtime.core.statistics import NodeStatistics
 from twinfleet.runtime.host.clock import Clock, TimerHandle
 from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key, parse_node_key, topic_key
 from twinfleet.runtime.host.readiness import Readiness
@@ -164,11 +165,13 @@ class NodeHost:
             self._stop.set()
         self.readiness.stop()
 
-    def statistics(self) -> HostStatistics:
-        """Counters since start, as a frozen record."""
-        transport_stats = getattr(self.transport, "statistics", None)
-        below = transport_stats() if callable(transport_stats) else {}
-        return self.core.statistics(below)
+    def statistics(self) -> NodeStatistics:
+        """Counters since start, the transport's below the core included, as a frozen record."""
+        transport_stats = getattr(self.transport, "statistics", None)  # test doubles may lack it
+        if not callable(transport_stats):
+            return self.core.statistics()
+        below = transport_stats()
+        return self.core.statistics(dropped_overflow=below.overflow, refused=below.refused)
 
     def idle(self) -> bool:
         """True when nothing can run now: no handler is ready and no drain is scheduled (a

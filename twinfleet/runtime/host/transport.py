@@ -19,17 +19,35 @@ import asyncio
 import functools
 import itertools
 from collections import defaultdict, deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol, final
 
-from twinfleet.runtime.contract.node import QoS
+from twinfleet.runtime.contract.node import Durability, QoS
+from twinfleet.runtime.core.statistics import Rejection
 
 Deliver = Callable[[str, bytes], None]
 Respond = Callable[[bytes | None, str], None]  # (reply payload, "") or (None, error reason)
 OnRequest = Callable[[bytes, Respond], None]
 OnDone = Callable[[bytes | None, str], None]  # reply payload, or None and a reason
 OnChange = Callable[[str, bool], None]  # token key, alive
+
+@final
+@dataclass(frozen=True, slots=True)
+class TransportStatistics:
+    """A transport's counters since it opened.
+
+    Attributes:
+        wakeups: loop wake-ups used to hand samples over (one per burst).
+        overflow: samples a bounded hand-off to the loop dropped (the loop fell behind).
+        refused: samples and requests refused before decoding, per reason (a live
+            transport counts `Rejection.FORGED` and `Rejection.OVERSIZE`).
+    """
+
+    wakeups: int = 0
+    overflow: int = 0
+    refused: Mapping[Rejection, int] = field(default_factory=dict)
+
 
 
 class Transport(Protocol):
@@ -74,8 +92,8 @@ class Transport(Protocol):
         """Undeclare everything and disconnect."""
         ...
 
-    def statistics(self) -> dict[str, int]:
-        """Transport counters; ``overflow``: samples dropped by a bounded hand-off to the loop."""
+    def statistics(self) -> TransportStatistics:
+        """The transport's counters (`TransportStatistics`)."""
         ...
 
 
@@ -135,7 +153,7 @@ class LoopbackTransport:
     def subscribe(self, key: str, deliver: Deliver, qos: QoS) -> None:
         """Register a subscriber; latched subscriptions receive the cached samples first."""
         self.bus.subscribers.append((self, key, deliver, qos))
-        if qos.durability.value == "transient_local":
+        if qos.durability is Durability.TRANSIENT_LOCAL:
             for cached_key, samples in self.bus.latched.items():
                 if key_matches(key, cached_key):
                     for payload in list(samples)[-qos.depth:]:
@@ -148,7 +166,7 @@ class LoopbackTransport:
     def put(self, key: str, payload: bytes, qos: QoS) -> None:
         """Deliver `payload` to every matching subscriber on the next loop iterations."""
         self.sent[key] += 1
-        if qos.durability.value == "transient_local":
+        if qos.durability is Durability.TRANSIENT_LOCAL:
             self.bus.latched.setdefault(key, deque(maxlen=max(1, qos.depth))).append(payload)
         for _, pattern, deliver, _ in list(self.bus.subscribers):
             if key_matches(pattern, key):
@@ -193,9 +211,9 @@ class LoopbackTransport:
             if key_matches(key_expr, token):
                 self.loop.call_soon(on_change, token, True)
 
-    def statistics(self) -> dict[str, int]:
-        """Delivery is unbounded in memory: nothing is ever dropped."""
-        return {"wakeups": 0, "overflow": 0}
+    def statistics(self) -> TransportStatistics:
+        """Delivery is unbounded in memory and unsigned: nothing is ever dropped or refused."""
+        return TransportStatistics()
 
     async def close(self) -> None:
         """Remove this transport's entities; its tokens disappear for the watchers."""

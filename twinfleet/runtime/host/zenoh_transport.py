@@ -10,7 +10,7 @@ method ever runs on a Zenoh thread.
 Bounded hand-off. Samples wait in that deque only until the loop drains it;
 if the loop stalls (a long handler, a suspended process), at most
 ``max_pending`` samples wait and later ones are dropped and counted
-(``statistics()["overflow"]``) rather than blocking Zenoh's thread. Queries,
+(``statistics().overflow``) rather than blocking Zenoh's thread. Queries,
 replies and liveliness changes are never dropped (they are rare, and losing
 one would hang a caller or hide a node). Per-subscription KEEP_LAST depth is
 the node core's job, after decoding (see `runtime.core.node_core`).
@@ -26,8 +26,8 @@ keys under ``scouting/multicast`` and ``transport/shared_memory`` are refused.
 Guard (`runtime.core.guard`, README "Trust model"). With a fleet key, every put
 and query carries a signature as its attachment, and a sample (or a service
 request) without a valid one is dropped on Zenoh's thread before it is copied
-and counted (``statistics()["forged"]``); a sample above the payload limit is
-dropped first (``"oversize"``). Both tests are cheaper than the hand-off they
+and counted (``statistics().refused``, `Rejection.FORGED`); a sample above the payload
+limit is dropped first (`Rejection.OVERSIZE`). Both tests are cheaper than the hand-off they
 spare a flood.
 
 QoS mapping. Reliable topics publish with congestion control BLOCK,
@@ -59,7 +59,14 @@ from zenoh import ext
 
 from twinfleet.runtime.contract.node import Durability, QoS, Reliability
 from twinfleet.runtime.core.guard import authentic, sign, signer
-from twinfleet.runtime.host.transport import Deliver, OnChange, OnDone, OnRequest
+from twinfleet.runtime.core.statistics import Rejection
+from twinfleet.runtime.host.transport import (
+    Deliver,
+    OnChange,
+    OnDone,
+    OnRequest,
+    TransportStatistics,
+)
 
 OVERRIDE_ENV = "TWINFLEET_ZENOH_CONFIG_OVERRIDE"
 _LOCKED = ("scouting/multicast", "transport/shared_memory")
@@ -190,9 +197,9 @@ class ZenohTransport:
         config: a config from `zenoh_config`.
         max_pending: samples allowed to wait for the loop before new ones are dropped.
         key: the fleet key (`runtime.core.guard`): sign what is published and queried, drop
-            (and count as ``forged``) samples and requests without a valid tag.
-        limit: payload bytes a sample may have (larger: dropped, counted as ``oversize``);
-            `limits` sets it per key expression.
+            (and count as `Rejection.FORGED`) samples and requests without a valid tag.
+        limit: payload bytes a sample may have (larger: dropped, counted as
+            `Rejection.OVERSIZE`); `limits` sets it per key expression.
     """
 
     def __init__(self, config: zenoh.Config, *, max_pending: int = DEFAULT_MAX_PENDING,
@@ -201,7 +208,7 @@ class ZenohTransport:
         self.config = config
         self.max_pending = max_pending
         self.key, self.limit, self.limits = key, limit, dict(limits or {})
-        self._refused = {"forged": 0, "oversize": 0}
+        self._refused = {Rejection.FORGED: 0, Rejection.OVERSIZE: 0}
         self.session: zenoh.Session | None = None
         self._handoff: Handoff | None = None
         self._publishers: dict[str, Any] = {}
@@ -261,13 +268,13 @@ class ZenohTransport:
 
         def on_sample(sample: zenoh.Sample) -> None:
             if len(sample.payload) > limit:
-                refused["oversize"] += 1
+                refused[Rejection.OVERSIZE] += 1
                 return
             payload, where = sample.payload.to_bytes(), str(sample.key_expr)
             if fleet_key is not None:
                 tag = sample.attachment
                 if not authentic(fleet_key, where, payload, tag and tag.to_bytes()):
-                    refused["forged"] += 1
+                    refused[Rejection.FORGED] += 1
                     return
             offer(deliver, where, payload)
 
@@ -277,7 +284,7 @@ class ZenohTransport:
         """Declare a queryable; each query is answered on the loop and then finalised.
 
         With a fleet key, a request to a service without a valid tag is answered
-        "server error: unauthenticated request" at once and counted as ``forged``.
+        "server error: unauthenticated request" at once and counted as `Rejection.FORGED`.
         """
         push, refused = self._h.push, self._refused
         # "@" queryables (statistics, types, info) are read-only views monitors may ask
@@ -288,7 +295,7 @@ class ZenohTransport:
             tag = query.attachment
             if fleet_key is not None and not authentic(fleet_key, key, payload,
                                                        tag and tag.to_bytes()):
-                refused["forged"] += 1
+                refused[Rejection.FORGED] += 1
                 push(self._refuse, query)
                 return
             push(self._answer, key, query, payload, on_request)
@@ -397,12 +404,12 @@ class ZenohTransport:
         """
         self._h.after_drain.append(fn)
 
-    def statistics(self) -> dict[str, int]:
+    def statistics(self) -> TransportStatistics:
         """Loop wake-ups used so far (one per burst), samples dropped by the bounded hand-off,
-        and samples and requests refused as ``forged`` or ``oversize``."""
+        and samples and requests refused as forged or oversize."""
         h = self._handoff
-        return {"wakeups": h.wakeups if h else 0, "overflow": h.overflow if h else 0,
-                **self._refused}
+        return TransportStatistics(wakeups=h.wakeups if h else 0,
+                                   overflow=h.overflow if h else 0, refused=dict(self._refused))
 
     async def close(self) -> None:
         """Undeclare (advanced entities first), then close the session, on the loop thread."""

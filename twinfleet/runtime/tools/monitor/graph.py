@@ -29,6 +29,9 @@ import msgpack
 import zenoh
 from zenoh import ext
 
+from twinfleet.runtime.contract.node import Durability
+from twinfleet.runtime.core.statistics import NodeStatistics, StatisticsError
+from twinfleet.runtime.fleet.node_main import read_statistics
 from twinfleet.runtime.host.keys import (
     ANY,
     InvalidKey,
@@ -113,9 +116,21 @@ def node_infos(session: zenoh.Session, fleet: str, timeout_s: float,
     return _node_replies(session, node_key(fleet, KeyKind.INFO, node), KeyKind.INFO, timeout_s)
 
 
-def node_stats(session: zenoh.Session, fleet: str, timeout_s: float) -> dict[tuple[str, str], Any]:
-    """(fleet, node) → the node's counters (`@stats`, `runtime.host.node_host.HostStatistics`)."""
-    return _node_replies(session, kind_expr(fleet, KeyKind.STATS), KeyKind.STATS, timeout_s)
+def node_stats(session: zenoh.Session, fleet: str, timeout_s: float
+               ) -> dict[tuple[str, str], NodeStatistics | StatisticsError]:
+    """(fleet, node) → the node's counters (`@stats`), or why they could not be read (a
+    node of another twinfleet version: `NodeStatistics.from_dict` is strict)."""
+    found: dict[tuple[str, str], NodeStatistics | StatisticsError] = {}
+    for reply_key, payload in _query(session, kind_expr(fleet, KeyKind.STATS), timeout_s):
+        try:
+            where = parse_node_key(reply_key, KeyKind.STATS)
+        except ValueError:  # InvalidKey: not a node's statistics key
+            continue
+        try:
+            found[(where.fleet, where.node)] = read_statistics(payload)
+        except StatisticsError as exc:
+            found[(where.fleet, where.node)] = exc
+    return found
 
 
 def _node_replies(session: zenoh.Session, key: str, kind: KeyKind, timeout_s: float
@@ -144,13 +159,16 @@ def served_schemas(session: zenoh.Session, fleet: str, timeout_s: float
     return found
 
 
+_LATCHED = Durability.TRANSIENT_LOCAL.value  # as `introspect` writes a QoS's durability
+
+
 def latched_topics(infos: dict[tuple[str, str], dict[str, Any]]) -> set[tuple[str, str]]:
     """(fleet, topic) of every topic that some node declares transient-local."""
     latched = set()
     for (fleet, _), info in infos.items():
         for table in ("publication_qos", "subscriptions"):
             for topic, qos in (info.get(table) or {}).items():
-                if isinstance(qos, dict) and qos.get("durability") == "transient_local":
+                if isinstance(qos, dict) and qos.get("durability") == _LATCHED:
                     latched.add((fleet, topic))
     return latched
 

@@ -24,6 +24,7 @@ import yaml
 import zenoh
 
 from twinfleet.runtime.contract.messages import registered_types
+from twinfleet.runtime.core.statistics import NodeStatistics
 from twinfleet.runtime.fleet.connection import (
     CommandError,
     Connection,
@@ -96,8 +97,10 @@ def node_list(conn: Connection, *, out: TextIO, stats: bool = False,
     for fleet, name in sorted(graph.nodes):
         line = _shown(conn, fleet, "/" + name)
         extra = counters.get((fleet, name))
-        if extra:
-            line += "  " + " ".join(f"{k}={v}" for k, v in extra.items())
+        if isinstance(extra, NodeStatistics):
+            line += "  " + extra.line()
+        elif extra is not None:
+            line += f"  (unreadable statistics: {extra})"
         print(line, file=out)
     out.flush()
     return 0

@@ -48,6 +48,7 @@ import msgpack
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from twinfleet.runtime.contract.node import Durability
 from twinfleet.runtime.host.keys import ANY, KeyKind, kind_expr, topic_expr, topic_in_fleet
 from twinfleet.runtime.host.schemas import message_schema
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
@@ -154,7 +155,8 @@ class McapRecorder:
                               indent=1).encode()
             schema = self._writer.register_schema(type_name, "jsonschema", text)
             self._schemas[type_name] = schema
-        durability = "transient_local" if topic in self.latched else "volatile"
+        durability = (Durability.TRANSIENT_LOCAL if topic in self.latched
+                      else Durability.VOLATILE).value
         channel = self._writer.register_channel(topic, "msgpack", schema, {
             "key": key, "fleet": fleet, "durability": durability})
         self._channels[(key, type_name)] = channel
@@ -296,7 +298,7 @@ def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
             if not key:
                 raise ValueError(f"{path}: channel {channel.topic} has no 'key' metadata; "
                                  "give the fleet to publish into")
-            if channel.metadata.get("durability") == "transient_local":
+            if channel.metadata.get("durability") == Durability.TRANSIENT_LOCAL.value:
                 pub = ext.declare_advanced_publisher(session, key, cache=ext.CacheConfig(1),
                                                      publisher_detection=True)
             else:
