@@ -74,7 +74,7 @@ def test_checker_only_with_runs_0(tmp_path):
 
 def test_register_adds_experiment_without_loading_the_live_runtime():
     code = ("import argparse, sys\n"
-            "from agreement.commands import register\n"
+            "from twinfleet.agreement.commands import register\n"
             "p = argparse.ArgumentParser(prog='twinfleet')\n"
             "register(p.add_subparsers(dest='command'))\n"
             "a = p.parse_args(['experiment', 'twinfleet/launch/c1a.yaml', '--runs', '3'])\n"
