@@ -188,7 +188,8 @@ def replay_command(args: argparse.Namespace) -> int:
         trace = load_trace(args.trace)
         system, props = system_for_trace(trace)
         result = replay(system, trace, props)
-    except (*bad_input_errors(), NondeterminismError) as exc:
+    # mypy reads no exception types out of a starred tuple (they are all Exception classes)
+    except (*bad_input_errors(), NondeterminismError) as exc:  # type: ignore[misc]
         print(f"twinfleet replay: {args.trace}: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except (KeyError, TypeError, ValueError, IndexError) as exc:  # fits no node of the scenario

@@ -326,6 +326,7 @@ def _scenario(scenario: Path | Scenario | None, options: CheckOptions,
     profile = meta.get("profile", options.profile)
     semantics = meta.get("semantics", options.semantics)
     if not isinstance(scenario, Scenario):
+        assert scenario is not None  # check() refuses a missing scenario file first
         return load(scenario, profile=profile, semantics=semantics)
     if profile is not None and profile != scenario.profile:
         raise ScenarioError(f"{scenario.source}: the profile of a scenario built in Python is "

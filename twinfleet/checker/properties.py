@@ -110,7 +110,7 @@ class Expr:
 
     def holds(self, system: States, states: Sequence[bytes], now: int) -> bool:
         """Evaluate on node states (snapshot bytes, in scenario order) at time `now`."""
-        key = tuple([states[i] for i in self.reads])
+        key: tuple[Any, ...] = tuple([states[i] for i in self.reads])
         if self.uses_now:
             key = (*key, now)
         cache = self._cache

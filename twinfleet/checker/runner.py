@@ -124,7 +124,10 @@ class Runner:
         declaration order (until one fails)."""
         topology = self.topology
         events = list(topology.periodic(j, now))
-        failure, logs, faults, branches = None, [], [], []
+        failure: Failure | None = None
+        logs: list[Log] = []
+        faults: list[str] = []
+        branches: list[int] = []
         for spec in topology.starts(j):
             v = self._checked(topology.start_event(j, spec, now), data, chooser)
             data, failure = v.state, v.failure
@@ -183,7 +186,7 @@ class Runner:
         if probe is not None and probe.calls:
             return _failed(chooser, data, FailureKind.CONTRACT, node.name, ev.method,
                            environment_message(probe.calls))
-        if scope is not None and (stray := scope.changed(held)):
+        if scope is not None and held is not None and (stray := scope.changed(held)):
             return _failed(chooser, data, FailureKind.STATE_OUTSIDE, node.name, ev.method,
                            f"it changed {', '.join(stray)}, outside self.state; fix: "
                            f"{FIX_STATE}")

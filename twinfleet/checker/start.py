@@ -25,6 +25,7 @@ if TYPE_CHECKING:
     from twinfleet.checker.runner import Runner
     from twinfleet.checker.semantics import Rules
     from twinfleet.checker.topology import Topology
+    from twinfleet.runtime.contract.context import Log
 
 
 class System(Protocol):
@@ -33,8 +34,11 @@ class System(Protocol):
     rules: Rules
     runner: Runner
     topology: Topology
-    nodes: Sequence[Any]
-    names: Sequence[str]
+
+    @property
+    def nodes(self) -> Sequence[Any]: ...
+    @property
+    def names(self) -> Sequence[str]: ...
 
     def initial_world(self, choices: tuple[int, ...] = (), *,
                       chooser: ExploringChooser | None = None) -> Transition: ...
@@ -63,7 +67,10 @@ def initial_world(system: System, worlds: WorldBuilder, choices: tuple[int, ...]
     pending: list[Event] = []
     for ev in system.topology.started():  # before the start handlers' events: Zenoh
         rules.add(pending, ev)            # announces a node before it runs anything
-    failure, logs, faults, branches = None, [], [], []
+    failure: Failure | None = None
+    logs: list[Log] = []
+    faults: list[str] = []
+    branches: list[int] = []
     i = 0
     for i in range(len(system.nodes)):
         v = runner.start(i, states[i], 0, chooser)

@@ -60,7 +60,7 @@ class DigestTable:
 
     def _alloc(self, capacity: int) -> None:
         self._slots = np.zeros(capacity, dtype=np.int32)
-        self._sv = memoryview(self._slots)
+        self._sv = self._slots.data  # a memoryview (numpy types memoryview(array) only for 3.12+)
         self._mask = capacity - 1
         self._limit = int(capacity * _MAX_LOAD)
 
@@ -126,7 +126,7 @@ class DigestTable:
         """Append an empty block of keys (and its memoryview); return it."""
         block = np.zeros(_BLOCK, dtype=np.uint64)
         self._blocks.append(block)
-        self._bv.append(memoryview(block))
+        self._bv.append(block.data)
         return block
 
     def keys(self) -> np.ndarray:
@@ -147,7 +147,7 @@ class DigestTable:
         if "ids" in state:  # an older checkpoint: a table of keys (0 = empty) and ids
             used = keys != 0
             keys = keys[used][np.argsort(state["ids"][used], kind="stable")]
-        self.__init__(state.get("capacity", len(state["keys"])))  # type: ignore[misc]
+        self.__init__(state.get("capacity", len(state["keys"])))
         for start in range(0, len(keys), _BLOCK):
             chunk = keys[start:start + _BLOCK]
             self._new_block()[:len(chunk)] = chunk

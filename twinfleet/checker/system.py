@@ -129,7 +129,8 @@ class System:
         if global_priority is None:
             global_priority = scenario.check.global_priority
         try:
-            self.rules = Rules(semantics or scenario.semantics,
+            # Rules converts a str (and rejects an unknown one with a readable error).
+            self.rules = Rules(semantics or scenario.semantics,  # type: ignore[arg-type]
                                tuple(cfg.priority for cfg in scenario.nodes),
                                bool(global_priority), self.settings, self.topology.depths,
                                frozenset(self.topology.lossy))
@@ -197,7 +198,7 @@ class System:
         events, states = world.events, world.states
         apply, memo = self._apply, self._memo
         for index in self.rules.enabled(events) if enabled is None else enabled:
-            action = _RUN_EVENTS[index] if index < _SHARED else RunEvent(index)
+            action: Action = _RUN_EVENTS[index] if index < _SHARED else RunEvent(index)
             ev = events[index]
             found = None
             if memo is not None and not ev.sk[3]:

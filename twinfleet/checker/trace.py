@@ -240,8 +240,8 @@ def _confirm(system: System, props: PropertySet, trace: Mapping[str, Any], world
              last: Transition) -> tuple[bool, str]:
     name, kind = trace["property"]["name"], trace["property"]["kind"]
     if last.failure is not None:
-        violation = props.check_failure(last.failure)
-        return violation.property == name, violation.message
+        failed = props.check_failure(last.failure)
+        return failed.property == name, failed.message
     if kind == "eventually":
         return _confirm_eventually(system, props, trace, worlds, name)
     violation = props.check_world(system, worlds[-1])

@@ -147,7 +147,7 @@ class Event:
                 self.priority, self.reply_to, self.rank, self.key, self.deadline)
 
     def __setstate__(self, state: tuple[Any, ...]) -> None:
-        self.__init__(*state)  # type: ignore[misc]
+        self.__init__(*state)
 
 
 @final

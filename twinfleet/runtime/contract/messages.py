@@ -18,7 +18,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import Any, TypeVar, dataclass_transform
 
 import msgpack
 
@@ -31,6 +31,9 @@ class DecodeError(ValueError):
     """A payload is not a valid twinfleet envelope or message."""
 
 
+# dataclass_transform tells type checkers that `@message(...)` makes a frozen dataclass, so the
+# generated __init__ (and frozenness) are checked at every construction.
+@dataclass_transform(frozen_default=True)
 def message(type_name: str) -> Callable[[type[T]], type[T]]:
     """Class decorator: make a frozen dataclass and register it under `type_name`."""
 

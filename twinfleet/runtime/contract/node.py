@@ -267,7 +267,7 @@ class Node:
         state: the only value handlers change; the drivers snapshot and restore it.
     """
 
-    Params: ClassVar[type] = NoParams
+    Params: ClassVar[type[Any]] = NoParams
     publications: ClassVar[Mapping[str, QoS]] = {}
 
     def __init__(self, name: str, params: Any = None, *, namespace: str | None = None) -> None:

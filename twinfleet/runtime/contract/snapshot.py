@@ -52,7 +52,7 @@ def _default(obj: Any) -> msgpack.ExtType:
     raise SnapshotError(f"cannot snapshot a value of type {type(obj).__name__}: {obj!r:.80}")
 
 
-class _SortedItems(tuple):
+class _SortedItems(tuple[tuple[Any, Any], ...]):
     """A dict's items in canonical order (msgpack would keep insertion order)."""
 
 
@@ -107,7 +107,7 @@ def _plain_hint(hint: Any) -> bool:
 
 
 @cache
-def _class_named(path: str) -> type:
+def _class_named(path: str) -> Any:  # a class, by its module:qualname
     module, _, qualname = path.partition(":")
     obj: Any = importlib.import_module(module)
     for part in qualname.split("."):

@@ -26,7 +26,7 @@ from __future__ import annotations
 import hashlib
 import json
 from collections.abc import Sequence
-from typing import TYPE_CHECKING, Any, Final, final
+from typing import TYPE_CHECKING, Any, Final
 
 import msgpack
 import numpy as np
@@ -83,7 +83,6 @@ def summarise(args: Sequence[Any], limit: int = 160) -> str:
     return text if len(text) <= limit else text[:limit - 3] + "..."
 
 
-@final
 def with_restarts(records: Sequence[dict[str, Any]]) -> tuple[list[dict[str, Any]], int]:
     """One node's event records across its processes (module docstring) and how many
     restarts there were; header records are left out."""

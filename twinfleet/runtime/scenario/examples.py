@@ -70,7 +70,7 @@ def _copy_map(map_source: Path, target_dir: Path) -> list[tuple[Path, bool]]:
     """Copy a map YAML and the image it names; keep copies already there (one map often
     serves several scenarios)."""
     text = map_source.read_text()
-    files = [(map_source, text)]
+    files: list[tuple[Path, str | None]] = [(map_source, text)]
     image_rel = _key_value(text, "image")
     if image_rel is not None:
         image = (map_source.parent / image_rel).resolve()

@@ -29,7 +29,7 @@ import functools
 import inspect
 import sys
 import textwrap
-from collections.abc import Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import final
@@ -105,6 +105,7 @@ def _module_warnings(tree: ast.Module, path: str) -> Iterator[LintWarning]:
         for name in names:
             top = name.split(".")[0]
             if name in _RISKY_NAMES or (top in RISKY_MODULES and name == top):
+                assert isinstance(item, ast.stmt | ast.expr)  # an import or an attribute
                 what = RISKY_MODULES.get(top, "randomness (use ctx.choose)")
                 yield LintWarning(f"{path}:{item.lineno}",
                                   f"imports {name}: {what}; a handler that uses it breaks the "
@@ -132,7 +133,8 @@ def lint_topics(nodes: Sequence[tuple[str, str, type[Node]]]) -> list[LintWarnin
                 served.add(full)
         for topic in [*spec.publications, *getattr(cls, "tool_topics", ())]:
             published.append((_resolved(topic, namespace, name) or topic, name, "declared"))
-        for kind, pattern, where in _uses(cls):
+        # A class is hashable: mypy reads Node.__hash__ (an instance method) as the class's.
+        for kind, pattern, where in _uses(cls):  # type: ignore[arg-type]
             full = pattern if "*" in pattern else _resolved(pattern, namespace, name)
             target = published if kind == "publish" else called
             target.append((full or pattern, name, where))
@@ -177,7 +179,7 @@ def _fleet_topic(topic: str) -> bool:
     return any(fnmatch.fnmatchcase(topic, p) for p in _FLEET_TOPICS)
 
 
-def _close(name: str, known: object) -> str:
+def _close(name: str, known: Iterable[str]) -> str:
     match = difflib.get_close_matches(name, [k for k in known if "*" not in k], n=1, cutoff=0.8)
     return f" (did you mean {match[0]}?)" if match else ""
 
@@ -219,7 +221,8 @@ def _pattern(arg: ast.expr) -> str:
     if isinstance(arg, ast.Constant) and isinstance(arg.value, str):
         return arg.value
     if isinstance(arg, ast.JoinedStr):
-        return "".join(v.value if isinstance(v, ast.Constant) else "*" for v in arg.values)
+        return "".join(v.value if isinstance(v, ast.Constant) and isinstance(v.value, str) else "*"
+                       for v in arg.values)
     return "*"
 
 

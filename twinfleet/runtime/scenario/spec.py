@@ -113,8 +113,9 @@ class NodeEntry:
 
     def as_mapping(self) -> dict[str, Any]:
         """The YAML shape of this entry."""
-        entry = {"name": self.name, "class": self.cls, "namespace": self.namespace,
-                 "priority": self.priority, "respawn": self.respawn}
+        entry: dict[str, Any] = {"name": self.name, "class": self.cls,
+                                 "namespace": self.namespace, "priority": self.priority,
+                                 "respawn": self.respawn}
         if self.params is not None:
             entry["params"] = dict(self.params) if isinstance(self.params, Mapping) else self.params
         return entry
