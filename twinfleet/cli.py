@@ -39,9 +39,9 @@ tools (node, topic, service, param, interface, bag), and checks the very same no
 exhaustively: the checker explores every interleaving of messages, timers and choices
 and proves a property or returns the trace that breaks it.
 
-  twinfleet launch launch/demo.yaml   run a scenario live (monitor it from another shell:
+  twinfleet launch demo               run a scenario live (monitor it from another shell:
   twinfleet node list                 the running fleet is found without --connect)
-  twinfleet check launch/c1a.yaml     explore every interleaving
+  twinfleet check c1a                 explore every interleaving
   twinfleet view                      watch it in a browser (`twinfleet foxglove`: in Foxglove)
 
 Every command has --help."""
