@@ -32,7 +32,7 @@ from twinfleet.runtime.host.zenoh_transport import zenoh_config
 
 SCENARIO = """\
 name: {name}
-map: {root}/maps/map50.yaml
+map: {root}/twinfleet/maps/map50.yaml
 profile: fixed
 seed: 1
 params: {{scan_rate_ms: 100}}

@@ -98,8 +98,8 @@ def test_bad_scenario_and_map_files_end_in_one_line(tmp_path) -> None:
     broken_map = tmp_path / "broken.yaml"
     broken_map.write_text("image: nowhere.pgm\nresolution: x\n")
     cases = {"syntax.yaml": "name: [unclosed\n",
-             "nomap.yaml": good.replace(f"{ROOT}/maps/map50.yaml", "missing.yaml"),
-             "badmap.yaml": good.replace(f"{ROOT}/maps/map50.yaml", str(broken_map)),
+             "nomap.yaml": good.replace(f"{ROOT}/twinfleet/maps/map50.yaml", "missing.yaml"),
+             "badmap.yaml": good.replace(f"{ROOT}/twinfleet/maps/map50.yaml", str(broken_map)),
              "binary.yaml": None}
     for name, text in cases.items():
         path = tmp_path / name

@@ -16,7 +16,7 @@ import pytest
 
 from twinfleet.checker.check import CheckOptions, check
 
-LAUNCH = Path(__file__).resolve().parents[2] / "launch"
+LAUNCH = Path(__file__).resolve().parents[2] / "twinfleet" / "launch"
 INFINITE = {"demo"}  # no verdict either way (see the module docstring)
 SCENARIOS = sorted(p for p in LAUNCH.glob("*.yaml") if p.stem not in INFINITE)
 

@@ -68,7 +68,7 @@ def test_a_robot_collision_is_the_no_collision_invariant_violated(tmp_path):
     # headon: two robots swap ends of a narrow corridor and collide within seconds
     text = (ROOT / "twinfleet" / "launch" / "headon.yaml").read_text()
     path = tmp_path / "headon.yaml"
-    path.write_text(text.replace("../maps/", f"{ROOT / 'maps'}/"))
+    path.write_text(text.replace("../maps/", f"{ROOT / 'twinfleet' / 'maps'}/"))
     out = expect(run_launch(path, "--time-scale", "4", "--timeout", "8"), 1,
                  "result: FAILED (no_collision violated: invariant 'map_server.collisions == 0'",
                  "after delivery on /poses from r")

@@ -10,7 +10,7 @@ from twinfleet.nodes.grid import inflate_one_pass
 from twinfleet.nodes.mapfile import OccupancyMap, load_map
 from twinfleet.nodes.profile import REBECA
 
-MAPS = Path(__file__).resolve().parents[2] / "maps"
+MAPS = Path(__file__).resolve().parents[2] / "twinfleet" / "maps"
 
 
 @pytest.fixture(scope="session")

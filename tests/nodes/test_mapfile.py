@@ -9,7 +9,7 @@ import pytest
 from twinfleet.nodes.mapfile import MapError, load_map, pgm_bytes, read_pgm, save_map
 from twinfleet.nodes.profile import FIXED, REBECA
 
-MAPS = Path(__file__).resolve().parents[2] / "maps"
+MAPS = Path(__file__).resolve().parents[2] / "twinfleet" / "maps"
 
 
 def test_map50(map50):

@@ -11,7 +11,7 @@ from twinfleet.nodes.mapgen import corridor_map, lane_row, lanes_map, random_map
 from twinfleet.nodes.planning import generate_path
 from twinfleet.nodes.profile import FIXED, REBECA
 
-MAPS = Path(__file__).resolve().parents[2] / "maps"
+MAPS = Path(__file__).resolve().parents[2] / "twinfleet" / "maps"
 
 
 def test_random_map_deterministic_and_free_border():

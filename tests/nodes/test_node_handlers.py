@@ -13,7 +13,7 @@ from twinfleet.runtime.contract.context import After, Call, Context, Publish
 from twinfleet.runtime.contract.dispatch import run_handler
 from twinfleet.runtime.contract.messages import CallError
 
-MAP50 = str(FsPath(__file__).resolve().parents[2] / "maps" / "map50.yaml")
+MAP50 = str(FsPath(__file__).resolve().parents[2] / "twinfleet" / "maps" / "map50.yaml")
 ROBOTS = ("r1", "r2", "r3", "r4", "r5")
 
 

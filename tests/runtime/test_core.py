@@ -428,9 +428,9 @@ def test_entries_are_named_and_frozen():
     assert entry != Entry(EventKind.DELIVERY, "on_num", (Num(1),), "a", "/nums", 3, 7)  # identity
 
 
-@pytest.mark.parametrize("module", ["core", "due", "entries", "choosers", "outbox"])
+@pytest.mark.parametrize("module", ["node_core", "due", "entries", "choosers", "outbox"])
 def test_the_core_knows_no_asyncio_and_does_no_io(module):
-    tree = ast.parse((ROOT / "runtime" / f"{module}.py").read_text())
+    tree = ast.parse((ROOT / "twinfleet" / "runtime" / "core" / f"{module}.py").read_text())
     names = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
     names |= {n.module or "" for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
     banned = {"asyncio", "zenoh", "socket", "threading", "time", "twinfleet.runtime.host.clock",
