@@ -1,15 +1,24 @@
-"""The installed wheel, as a new user gets it: one `twinfleet` package, shipped examples by name.
+"""Installed twinfleet, as a new user gets it: one `twinfleet` package, shipped examples by name.
 
-Builds the wheel from a copy of this checkout (pip, with build isolation: setuptools
-comes from the package index), installs it without `-e` into a fresh venv, and works
-from an empty temporary directory that holds a user package called `nodes`.
+The wheel: built from a copy of this checkout (pip, with build isolation: setuptools
+comes from the package index), installed without `-e` into a fresh venv, and used from
+an empty temporary directory that holds a user package called `nodes`.
 
-The venv gets the third-party dependencies as links to the distributions this
+Each kind of install (`installed`: the wheel, the sdist built by `python -m build
+--sdist` and installed by pip, and `pip install -e` of a copy of the checkout), from a
+temporary directory: `twinfleet --version`, shipped examples checked by name, the
+package data read where the code reads it (maps, launch files, the viewer's static/),
+the installed package's files equal to the checkout's, no top-level `runtime`,
+`nodes`, `checker` (or any other sub-package name) importable, and a user's project
+with its own packages of those names checked and launched (tests/integration/user_project.py).
+The sdist holds the package with its data and nothing else (MANIFEST.in).
+
+The venvs get the third-party dependencies as links to the distributions this
 interpreter already has (each distribution's own files and dist-info, found from
 twinfleet's requirements; no `.pth` file, so nothing of this environment's editable
 twinfleet install comes along), and `pip check` confirms they satisfy every declared
-requirement of the wheel. Installing them from the index instead takes ~25 s more
-and needs the network for more than the build.
+requirement of twinfleet. Installing them from the index instead takes ~25 s more
+and needs the network for more than the builds.
 """
 
 from __future__ import annotations
@@ -19,12 +28,16 @@ import os
 import shutil
 import subprocess
 import sys
+import tarfile
+import tomllib
+from dataclasses import dataclass
 from importlib.metadata import distribution
 from pathlib import Path
 
 import pytest
 
 from tests.integration.itest_support import kill_all, poll, processes_mentioning
+from tests.integration.user_project import expected_modules, logged_modules, write_project
 from tests.support import ROOT
 
 try:
@@ -35,6 +48,9 @@ except ImportError:  # pip always has it
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(240)]
 
 LAYERS = ("runtime", "checker", "nodes", "agreement")
+#: Every sub-package of twinfleet: none of them may be importable as a top-level module.
+SUBPACKAGES = tuple(sorted(p.parent.name for p in (ROOT / "twinfleet").glob("*/__init__.py")))
+VERSION = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["version"]
 _NOT_SOURCE = shutil.ignore_patterns(".git", "out", "build", "dist", "*.egg-info", "__pycache__",
                                      ".pytest_cache", ".ruff_cache", ".venv", "*.pyc")
 
@@ -82,23 +98,94 @@ def link_dependencies(site: Path) -> None:
                 (site / top).symlink_to(base / top)
 
 
+def new_venv(path: Path) -> Path:
+    """A venv at `path` (no pip) holding links to twinfleet's installed dependencies."""
+    ok(run([sys.executable, "-m", "venv", "--without-pip", str(path)], path.parent))
+    (site,) = path.glob("lib/python*/site-packages")
+    link_dependencies(site)
+    return path
+
+
+def pip_into(env: Path, *args: str, cwd: Path) -> None:
+    """`pip install --no-deps ARGS` into `env` (this interpreter's pip), then `pip check`."""
+    pip = [sys.executable, "-m", "pip", "--python", str(env / "bin" / "python")]
+    ok(run([*pip, "install", "-q", "--no-deps", *args], cwd, timeout=180))
+    ok(run([*pip, "check"], cwd))
+
+
 @pytest.fixture(scope="module")
-def venv(tmp_path_factory: pytest.TempPathFactory) -> Path:
+def source(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A copy of this checkout's source (no caches, builds or VCS data): what is built."""
+    source = tmp_path_factory.mktemp("source") / "twinfleet"
+    shutil.copytree(ROOT, source, ignore=_NOT_SOURCE, symlinks=True)
+    return source
+
+
+@pytest.fixture(scope="module")
+def venv(tmp_path_factory: pytest.TempPathFactory, source: Path) -> Path:
     """A fresh venv with the wheel of this checkout installed (not editable)."""
     tmp = tmp_path_factory.mktemp("wheel")
-    source = tmp / "source"
-    shutil.copytree(ROOT, source, ignore=_NOT_SOURCE, symlinks=True)
     ok(run([sys.executable, "-m", "pip", "wheel", "--no-deps", "-q", "-w", str(tmp / "dist"),
             str(source)], tmp, timeout=180))
     (wheel,) = (tmp / "dist").glob("twinfleet-*.whl")
-    env = tmp / "venv"
-    ok(run([sys.executable, "-m", "venv", "--without-pip", str(env)], tmp))
-    (site,) = env.glob("lib/python*/site-packages")
-    link_dependencies(site)
-    pip = [sys.executable, "-m", "pip", "--python", str(env / "bin" / "python")]
-    ok(run([*pip, "install", "-q", "--no-deps", "--no-index", str(wheel)], tmp))
-    ok(run([*pip, "check"], tmp))
+    env = new_venv(tmp / "venv")
+    pip_into(env, "--no-index", str(wheel), cwd=tmp)
     return env
+
+
+@pytest.fixture(scope="module")
+def sdist(tmp_path_factory: pytest.TempPathFactory, source: Path) -> Path:
+    """The sdist of this checkout, built by `python -m build --sdist` (build isolation:
+    setuptools comes from the package index, as for the wheel)."""
+    pytest.importorskip("build", reason="`build` (a test extra) builds the sdist")
+    dist = tmp_path_factory.mktemp("sdist")
+    ok(run([sys.executable, "-m", "build", "--sdist", "--outdir", str(dist), str(source)], dist,
+           timeout=180))
+    (built,) = dist.glob("twinfleet-*.tar.gz")
+    return built
+
+
+@pytest.fixture(scope="module")
+def sdist_venv(tmp_path_factory: pytest.TempPathFactory, sdist: Path) -> Path:
+    """A fresh venv with the sdist installed (pip builds its wheel from the sdist alone)."""
+    tmp = tmp_path_factory.mktemp("sdist-venv")
+    env = new_venv(tmp / "venv")
+    pip_into(env, str(sdist), cwd=tmp)
+    return env
+
+
+@pytest.fixture(scope="module")
+def editable_venv(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A fresh venv with an editable install (`pip install -e`) of a copy of this checkout."""
+    tmp = tmp_path_factory.mktemp("editable")
+    shutil.copytree(ROOT, tmp / "checkout", ignore=_NOT_SOURCE, symlinks=True)
+    env = new_venv(tmp / "venv")
+    pip_into(env, "-e", str(tmp / "checkout"), cwd=tmp)
+    return env
+
+
+@dataclass(frozen=True)
+class Install:
+    """A venv with twinfleet installed one way, and where its `twinfleet` package must be."""
+
+    kind: str
+    env: Path
+    package: Path
+
+    def bin(self, name: str) -> str:
+        return str(self.env / "bin" / name)
+
+
+@pytest.fixture(scope="module", params=["wheel", "sdist", "editable"])
+def installed(request: pytest.FixtureRequest) -> Install:
+    """Each kind of install in turn (module-scoped: one venv of each kind per test run)."""
+    env = request.getfixturevalue("venv" if request.param == "wheel" else f"{request.param}_venv")
+    if request.param == "editable":
+        package = env.parent / "checkout" / "twinfleet"
+    else:
+        (site,) = env.glob("lib/python*/site-packages")
+        package = site / "twinfleet"
+    return Install(request.param, env, package)
 
 
 @pytest.fixture
@@ -177,3 +264,121 @@ def test_launch_a_shipped_scenario_by_name(venv: Path, workdir: Path) -> None:
     for node in ("map_server", "r1", "r2", "r3", "r4", "r5"):
         assert f"[launcher]   {node}: exit code 0 (ok)" in out, out
     assert not (workdir / "nodes" / "IMPORTED").exists()
+
+
+def package_files(package: Path) -> list[str]:
+    """The files of a `twinfleet` package folder, relative to it (no caches)."""
+    return sorted(str(p.relative_to(package)) for p in package.rglob("*")
+                  if p.is_file() and "__pycache__" not in p.parts and p.suffix != ".pyc")
+
+
+#: Run in an installed venv: where `twinfleet` is, the package data that the viewer, the
+#: map server and `examples` read, and what each sub-package name imports at top level.
+PROBE = """
+import importlib, importlib.resources, json, sys
+import twinfleet
+from twinfleet.runtime.tools.view.viewer import STATIC_DIR
+from twinfleet.runtime.scenario.examples import shipped_scenarios
+data = {p: sorted(f.name for f in importlib.resources.files(p).iterdir() if f.is_file()
+                  and not f.name.endswith(".py"))
+        for p in ("twinfleet.maps", "twinfleet.launch")}
+data["static"] = sorted(f.name for f in (importlib.resources.files(
+    "twinfleet.runtime.tools.view") / "static").iterdir())
+data["STATIC_DIR"] = sorted(f.name for f in STATIC_DIR.iterdir())
+tops = {}
+for name in sys.argv[1:]:
+    try:
+        module = importlib.import_module(name)
+    except ModuleNotFoundError as exc:
+        tops[name] = None if exc.name == name else repr(exc)
+    else:
+        tops[name] = getattr(module, "__file__", None) or repr(module)
+print(json.dumps({"twinfleet": twinfleet.__file__, "data": data, "tops": tops,
+                  "shipped": sorted(shipped_scenarios())}))
+"""
+
+
+@pytest.fixture
+def empty(tmp_path: Path) -> Path:
+    """An empty working directory."""
+    path = tmp_path / "empty"
+    path.mkdir()
+    return path
+
+
+def test_the_sdist_holds_the_package_and_its_data_and_nothing_else(sdist: Path,
+                                                                   source: Path) -> None:
+    with tarfile.open(sdist) as tar:
+        names = [m.name for m in tar.getmembers() if m.isfile()]
+    root = f"twinfleet-{VERSION}/"
+    assert all(n.startswith(root) for n in names), names
+    names = [n.removeprefix(root) for n in names]
+    tops = {n.split("/")[0] for n in names}
+    assert tops == {"MANIFEST.in", "PKG-INFO", "README.md", "pyproject.toml", "setup.cfg",
+                    "twinfleet", "twinfleet.egg-info"}, tops
+    shipped = sorted(n.removeprefix("twinfleet/") for n in names if n.startswith("twinfleet/"))
+    assert shipped == package_files(source / "twinfleet")
+    for data in ("maps/map50.pgm", "maps/map50.yaml", "maps/corridor12.pgm",
+                 "launch/c1a.yaml", "runtime/tools/view/static/index.html",
+                 "runtime/tools/view/static/viewer.js"):
+        assert data in shipped, data
+
+
+def test_each_install_has_one_package_with_all_its_files(installed: Install, empty: Path) -> None:
+    assert ok(run([installed.bin("twinfleet"), "--version"], empty)).strip() == (
+        f"twinfleet {VERSION}")
+    probe = json.loads(ok(run([installed.bin("python"), "-c", PROBE, *SUBPACKAGES], empty)))
+    assert probe["twinfleet"] == str(installed.package / "__init__.py")
+    assert probe["tops"] == dict.fromkeys(SUBPACKAGES), probe["tops"]  # none importable
+    checkout = ROOT / "twinfleet"
+    assert probe["data"] == {
+        "twinfleet.maps": sorted(p.name for p in (checkout / "maps").iterdir()
+                                 if p.suffix in (".pgm", ".yaml")),
+        "twinfleet.launch": sorted(p.name for p in (checkout / "launch").glob("*.yaml")),
+        "static": sorted(p.name for p in (checkout / "runtime/tools/view/static").iterdir()),
+        "STATIC_DIR": sorted(p.name for p in (checkout / "runtime/tools/view/static").iterdir()),
+    }
+    assert probe["shipped"] == sorted(p.stem for p in (checkout / "launch").glob("*.yaml"))
+    assert package_files(installed.package) == package_files(checkout)
+
+
+def test_each_install_checks_shipped_examples(installed: Install, empty: Path) -> None:
+    from twinfleet.checker import check
+
+    bounded = run([installed.bin("twinfleet"), "check", "c1a", "--max-states", "50", "--json"],
+                  empty)
+    out = json.loads(bounded.stdout)
+    assert bounded.returncode == 2, bounded.stderr  # no answer within 50 states
+    assert (out["verdict"], out["states"]) == ("unknown", 50), out
+    assert out["scenario"] == str(installed.package / "launch" / "c1a.yaml")
+
+    expected = check(ROOT / "twinfleet" / "launch" / "headon.yaml")  # violated: they collide
+    full = run([installed.bin("twinfleet"), "check", "headon", "--json"], empty)
+    out = json.loads(full.stdout)
+    assert (full.returncode, out["verdict"], out["violation"]["property"]) == (
+        1, "violated", "no_collision"), full.stdout + full.stderr
+    assert (out["states"], out["rmc_transitions"]) == (expected.statistics.states,
+                                                       expected.rmc_transitions)
+
+
+def test_each_install_runs_a_users_nodes_runtime_checker_packages(installed: Install,
+                                                                  tmp_path: Path) -> None:
+    scenario = write_project(tmp_path / "proj")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    relative = os.path.relpath(scenario, elsewhere)
+    checked = run([installed.bin("twinfleet"), "check", relative], elsewhere)
+    assert "verdict: HOLDS: every property holds" in ok(checked), checked.stdout
+    try:
+        launched = run([installed.bin("python"), "-m", "twinfleet", "launch", relative,
+                        "--timeout", "2"], elsewhere, timeout=60)
+    finally:  # node processes name the scenario by its absolute path
+        poll(lambda: not processes_mentioning(str(scenario)), 10)
+        leftovers = processes_mentioning(str(scenario))
+        kill_all(leftovers)
+    out = ok(launched)
+    assert not leftovers
+    assert ("[launcher] result: PASSED (user_classes, user_modules, started, all_heard, "
+            "no_failure hold)") in out, out
+    want = expected_modules(tmp_path / "proj")
+    assert logged_modules(out) == {"pinger": (want, ()), "listener": (want, ())}, out

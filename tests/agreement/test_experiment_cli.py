@@ -26,7 +26,7 @@ def _run(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
 @pytest.mark.timeout(60)
 def test_experiment_on_headon_writes_markdown_and_csv(tmp_path):
     started = time.monotonic()
-    proc = _run("experiment", "twinfleet/launch/headon.yaml", "--runs", "2", "--time-scale", "10",
+    proc = _run("experiment", "headon", "--runs", "2", "--time-scale", "10",
                 "--out", str(tmp_path))
     elapsed = time.monotonic() - started
     assert proc.returncode in (0, 1), proc.stderr
@@ -35,7 +35,7 @@ def test_experiment_on_headon_writes_markdown_and_csv(tmp_path):
     head = "| " + " | ".join(markdown_header(both)) + " |"
     assert head in proc.stdout  # the table is printed too
     md = (tmp_path / "experiment.md").read_text()
-    assert "twinfleet experiment twinfleet/launch/headon.yaml --runs 2 --time-scale 10" in md
+    assert "twinfleet experiment headon --runs 2 --time-scale 10" in md
     assert head in md
     (row,) = list(csv.DictReader((tmp_path / "experiment.csv").open()))
     assert list(row) == columns(both)
@@ -55,14 +55,14 @@ def test_experiment_on_headon_writes_markdown_and_csv(tmp_path):
 
 
 def test_bad_arguments_exit_2(tmp_path):
-    proc = _run("experiment", "twinfleet/launch/headon.yaml", "--jobs", "2", "--out", str(tmp_path))
+    proc = _run("experiment", "headon", "--jobs", "2", "--out", str(tmp_path))
     assert proc.returncode == 2 and "--jobs" in proc.stderr
-    proc = _run("twinfleet/launch/demo.yaml", "--runs", "0", "--out", str(tmp_path))
+    proc = _run("demo", "--runs", "0", "--out", str(tmp_path))
     assert proc.returncode == 2 and "map server" in proc.stderr
 
 
 def test_checker_only_with_runs_0(tmp_path):
-    proc = _run("twinfleet/launch/headon.yaml", "--runs", "0", "--semantics", "ros", "--out",
+    proc = _run("headon", "--runs", "0", "--semantics", "ros", "--out",
                 str(tmp_path))
     assert proc.returncode == 0, proc.stderr
     (row,) = list(csv.DictReader((tmp_path / "experiment.csv").open()))
@@ -90,7 +90,7 @@ def test_register_adds_experiment_without_loading_the_live_runtime():
 def test_ctrl_c_stops_and_still_writes_what_was_done(tmp_path):
     import signal
 
-    proc = subprocess.Popen([sys.executable, "-m", "twinfleet.agreement", "twinfleet/launch/headon.yaml", "--runs",
+    proc = subprocess.Popen([sys.executable, "-m", "twinfleet.agreement", "headon", "--runs",
                              "5", "--time-scale", "1", "--semantics", "ros", "--out",
                              str(tmp_path)], cwd=ROOT, text=True, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE,
