@@ -67,7 +67,7 @@ from twinfleet.runtime.fleet.connection import EXIT_FAILED, EXIT_INTERRUPTED, EX
 from twinfleet.runtime.fleet.live_verdict import HOLDS, LiveMonitor, RunEnd, Verdict
 from twinfleet.runtime.fleet.node_main import LIMIT_ENV, PARENT_ENV, stats_key
 from twinfleet.runtime.fleet.run_record import RunRecord, versions
-from twinfleet.runtime.host.introspect import param_arguments
+from twinfleet.runtime.host.introspect import fleet_description, fleet_key, param_arguments
 from twinfleet.runtime.host.transport import epoch_key, graph_key, parse_graph_key
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
 from twinfleet.runtime.scenario.scenario_file import write_scenario
@@ -276,6 +276,7 @@ class Fleet:
         self.transport = ZenohTransport(conf, key=self.creds.key, limit=self.limit)
         await self.transport.open()
         fleet = self.scenario.fleet
+        self._describe(fleet)
         self.transport.subscribe(key_expr(fleet, SHUTDOWN_TOPIC), self._on_shutdown, QOS_DEFAULT)
         for topic in self.scenario.live.summary_topics:
             self.transport.subscribe(key_expr(fleet, topic), self._summary(topic), QOS_DEFAULT)
@@ -283,6 +284,14 @@ class Fleet:
             self.transport.subscribe(key_expr(fleet, topic), self._reported(topic), QOS_DEFAULT)
         if self.monitor is not None:
             self.transport.subscribe(state_key(fleet, "*"), self._on_state, QOS_DEFAULT)
+
+    def _describe(self, fleet: str) -> None:
+        """Serve the fleet's description (its scene, its latched topics) to viewers that find
+        the fleet only over Zenoh (`runtime.host.introspect.fleet_key`); served before any
+        node starts, so a viewer woken by a node's first sample finds it."""
+        assert self.transport is not None
+        description = msgpack.packb(fleet_description(self.scenario), use_bin_type=True)
+        self.transport.serve(fleet_key(fleet), lambda _request, respond: respond(description, ""))
 
     def _on_state(self, key: str, payload: bytes) -> None:
         assert self.monitor is not None

@@ -1,11 +1,13 @@
 """Reading a running fleet's graph over one Zenoh session: nodes, topics, services, types.
 
 What the monitors (`runtime.tools.monitor.graph_verbs`) and the Foxglove bridge know about a
-fleet comes from four sources, all served by the node processes themselves:
+fleet comes from these sources, all served by the fleet's own processes:
 
 * liveliness tokens (`runtime.host.transport.graph_key`): who runs, publishes,
   subscribes and serves;
 * ``@info/<node>`` (`runtime.host.introspect`): class, parameters, declared QoS;
+* ``@fleet`` (`runtime.host.introspect.fleet_key`, served by the launcher): the
+  fleet's scene and latched topics;
 * ``@types/<node>`` (`runtime.host.schemas`): the JSON Schemas of the message
   types each process knows;
 * the samples themselves: a topic's type is the ``type`` of its envelopes
@@ -30,7 +32,7 @@ import zenoh
 from zenoh import ext
 
 from twinfleet.runtime.contract.names import KEY_PREFIX
-from twinfleet.runtime.host.introspect import info_key
+from twinfleet.runtime.host.introspect import fleet_key, info_key
 from twinfleet.runtime.host.schemas import types_key
 from twinfleet.runtime.host.transport import graph_key, parse_graph_key
 
@@ -103,6 +105,17 @@ def node_infos(session: zenoh.Session, fleet: str, timeout_s: float,
     return found
 
 
+def fleet_infos(session: zenoh.Session, fleet: str, timeout_s: float) -> dict[str, dict[str, Any]]:
+    """fleet → its description (`runtime.host.introspect.fleet_description`): scene, latched."""
+    found = {}
+    for key, payload in _query(session, fleet_key(fleet), timeout_s):
+        with contextlib.suppress(ValueError, TypeError):
+            doc = msgpack.unpackb(payload, raw=False)
+            if isinstance(doc, dict):
+                found[key.split("/")[1]] = doc
+    return found
+
+
 def node_stats(session: zenoh.Session, fleet: str, timeout_s: float) -> dict[tuple[str, str], Any]:
     """(fleet, node) → the node's counters (`@stats`, `runtime.host.node_host.HostStatistics`)."""
     found = {}
@@ -146,7 +159,7 @@ def data_key(fleet: str, name: str) -> str:
 
 def subscribe(session: zenoh.Session, key: str, callback: Any, *, history: bool) -> Any:
     """A subscriber on `key`; with `history`, an advanced one that also gets the latched
-    samples that publishers keep (transient-local topics: ``/map``)."""
+    samples that publishers keep (transient-local topics)."""
     if not history:
         return session.declare_subscriber(key, callback)
     return ext.declare_advanced_subscriber(
