@@ -44,6 +44,21 @@ def test_every_shipped_scenario_loads(path):
     assert scenario.nodes
 
 
+def test_robot_scenarios_name_the_robot_scene_and_others_none():
+    named = {p.stem: load_scenario(p).scene for p in SHIPPED}
+    assert named.pop("demo") is None
+    assert set(named.values()) == {"twinfleet.nodes.scene:RobotScene"}
+
+
+def test_a_scene_is_kept_when_a_scenario_is_written_for_node_processes(tmp_path):
+    from twinfleet.runtime.scenario.scenario_file import write_scenario
+    from twinfleet.runtime.scenario.spec import Scenario
+
+    built = Scenario.build("t", GOOD["nodes"], map_path=GOOD["map"],
+                           scene="twinfleet.nodes.scene:RobotScene")
+    assert write_scenario(built, tmp_path / "t.yaml").scene == built.scene
+
+
 def test_good_scenario_builds_typed_parameters(tmp_path):
     scenario = load_scenario(write(tmp_path, GOOD))
     r1 = scenario.node("r1")
@@ -117,6 +132,15 @@ def mutate(path: str, value):
         ("live", {"report": "nodes.report"}, r"live\.report: expected 'module:factory'"),
         ("live", {"report": "no.such:factory"}, r"live\.report: unknown report factory"),
         ("live", {"summary_topics": "/poses"}, r"live\.summary_topics: expected a list of names"),
+        ("scene", 3, r"scene: expected a str"),
+        ("scene", "twinfleet.nodes.scene", r"scene: expected 'module:Scene'"),
+        ("scene", "twinfleet.nodes.scene:NoScene", r"scene: unknown scene"),
+        ("scene", "twinfleet.nodes.scene:point", r"scene: twinfleet\.nodes\.scene:point\(\) raised "
+                                                  r"TypeError"),
+        ("scene", "twinfleet.nodes.msgs:Path", r"scene: twinfleet\.nodes\.msgs:Path\(\) raised"),
+        ("scene", "twinfleet.nodes.scene:HALF_M", r"scene: twinfleet\.nodes\.scene:HALF_M is a "
+                                                   r"float, not a scene class"),
+        ("scene", "builtins:dict", r"scene: builtins:dict\(\) made a dict, not a scene"),
     ],
 )
 def test_bad_scenario_names_file_key_and_rule(tmp_path, path, value, expected):

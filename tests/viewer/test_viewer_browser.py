@@ -77,12 +77,13 @@ def test_viewer_shows_the_live_c1a_fleet_moving(cli, browser_page):
     assert page.get_attribute("#world", "data-map") == "50x50"
     assert page.get_attribute("#world", "data-robots") == "5"
     first = _assert_drawn(page, ROBOTS)
-    start_cells = {name: seen["cell"] for name, seen in first["robots"].items()}
+    start_places = {name: seen["place"] for name, seen in first["robots"].items()}
     # A viewer opened before the launch keeps every trail from the robot's start cell on
-    # (nothing evicted, and no false restart from the map server's lagging clock on scans)
+    # (nothing evicted, and no false restart from the map server's lagging clock on scans);
+    # the page holds places in cells: the centre of cell (row, col) is (col + 0.5, row + 0.5)
     trails = page.evaluate("() => Object.fromEntries(Object.entries(twinfleetView.robots).map("
                            "([n, r]) => [n, [r.trail.start, r.trail.items[0]]]))")
-    assert trails == {n: [0, list(c)] for n, c in SCENARIO_STARTS.items()}
+    assert trails == {n: [0, [c[1] + 0.5, c[0] + 0.5]] for n, c in SCENARIO_STARTS.items()}
     # Zoom (out, so that the whole map stays on the canvas) and pan: the map and the robots
     # are drawn where the page's transform puts them.
     page.evaluate("() => { twinfleetView.zoomAt([0, 0], 0.8); twinfleetView.pan[0] += 40; "
@@ -95,7 +96,7 @@ def test_viewer_shows_the_live_c1a_fleet_moving(cli, browser_page):
     page.wait_for_function(
         """(start) => Object.entries(start).every(([n, c]) => {
              const p = twinfleetView.positions[n]; return p && (p[0] !== c[0] || p[1] !== c[1]); })""",
-        arg=start_cells)
+        arg=start_places)
     all_moved_s = time.monotonic() - launched
     _assert_drawn(page, ROBOTS)
 
@@ -145,7 +146,7 @@ def test_viewer_steps_through_a_checker_trace(cli, browser_page, tmp_path):
     page.click("#first")
     assert page.evaluate("() => twinfleetView.step") == 0
     page.wait_for_function("() => JSON.stringify(twinfleetView.positions) === "
-                           "'{\"r1\":[5,1],\"r2\":[5,10]}'")  # the starts, once drawn
+                           "'{\"r1\":[1.5,5.5],\"r2\":[10.5,5.5]}'")  # starts (5, 1), (5, 10)
     for _ in range(steps // 2):
         page.keyboard.press("ArrowRight")
     assert page.evaluate("() => twinfleetView.step") == steps // 2

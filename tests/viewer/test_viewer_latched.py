@@ -20,6 +20,7 @@ from viewer_support import ROOT, free_port, get_json, poll
 
 from twinfleet.runtime.fleet.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
+from twinfleet.runtime.scenario.scenes import load_scene
 from twinfleet.runtime.scenario.spec import load_scenario
 from twinfleet.runtime.tools.view.viewstate import start_map
 
@@ -61,9 +62,10 @@ def test_late_viewer_receives_the_latched_map(cli):
         state = poll(lambda: (s := get_json(url + "api/state")) and s["map"] and s, 15,
                      "the late viewer to receive /map")
         print(f"late viewer had the map {time.monotonic() - joined:.2f} s after it started")
-        expected = start_map(load_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml"))
+        scenario = load_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml")
+        expected = start_map(scenario, load_scene(scenario.scene))
         assert (state["map"]["width"], state["map"]["height"]) == (50, 50)
-        assert base64.b64decode(state["map"]["data"]) == base64.b64decode(expected["data"])
+        assert base64.b64decode(state["map"]["cells"]) == base64.b64decode(expected["cells"])
         assert state["stats"]["topics"]["/map"] == 1  # history and live copies counted once
         snapshot = asyncio.run(_websocket_snapshot(url))
         assert snapshot["kind"] == "snapshot" and snapshot["map"] == state["map"]

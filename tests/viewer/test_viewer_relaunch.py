@@ -63,7 +63,8 @@ def _launch(scenario: Path, endpoint: str) -> None:
 def test_a_viewer_follows_the_fleet_launched_again(cli, tmp_path):
     (tmp_path / "walkers.py").write_text(WALKERS.format(steps=STEPS))
     scenario = tmp_path / "walk.yaml"
-    scenario.write_text("name: walk\nnodes:\n" + "".join(
+    # the walkers publish the robot case's poses: the robot scene draws them
+    scenario.write_text("name: walk\nscene: twinfleet.nodes.scene:RobotScene\nnodes:\n" + "".join(
         f'  - {{name: w{i}, class: "walkers:Walker", params: {{row: {i}}}}}\n'
         for i in (1, 2, 3)) + "live: {timeout_s: 3}\n")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
@@ -80,8 +81,8 @@ def test_a_viewer_follows_the_fleet_launched_again(cli, tmp_path):
                 f"run {run}: the viewer counted {seen} poses, not {3 * STEPS * run}; link "
                 f"{state.get('link')}, trails {_trails(state)}")
             time.sleep(0.1)
-    assert _trails(get_json(url)) == {f"w{i}": [[i, c] for c in range(1, STEPS + 1)]
-                                      for i in (1, 2, 3)}
+    assert _trails(get_json(url)) == {f"w{i}": [[c + 0.5, i + 0.5] for c in range(1, STEPS + 1)]
+                                      for i in (1, 2, 3)}  # cells (i, c) by their centres
 
 
 def _poses(state: dict | None) -> int | None:

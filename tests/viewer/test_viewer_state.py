@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
 from pathlib import Path
 
 import msgpack
@@ -20,6 +21,7 @@ from twinfleet.nodes.msgs import (
     RobotPose,
     RobotStatus,
 )
+from twinfleet.nodes.scene import RobotScene
 from twinfleet.runtime.contract.messages import String, encode
 from twinfleet.runtime.tools.record.recorder import McapRecorder, message_schema
 from twinfleet.runtime.tools.view.viewer import make_app
@@ -34,7 +36,7 @@ def feed(state: LiveState, topic: str, msg: object, fleet: str = "f", seq: int =
 
 
 def test_live_state_folds_messages_and_hands_out_changes_once():
-    state = LiveState("*")
+    state = LiveState("*", RobotScene())
     feed(state, "/map", GRID)
     feed(state, "/poses", RobotPose("r2", (1, 1), 2, 1))
     feed(state, "/poses", RobotPose("r1", (0, 0), 2, 1))
@@ -44,9 +46,12 @@ def test_live_state_folds_messages_and_hands_out_changes_once():
     first = state.take_update()
     assert first["fleet"] == "f" and first["map"]["width"] == 3
     assert first["order"] == ["r1", "r2"]
-    assert first["robots"]["r1"]["scan"] == [[0, 2]]
-    assert first["robots"]["r1"]["status"]["mode"] == "moving"
-    assert first["robots"]["r1"]["trail"] == {"start": 0, "items": [[0, 0]]}
+    assert state.snapshot()["columns"] == ["mode", "cell", "goal", "waits", "failures", "arrived"]
+    assert first["robots"]["r1"]["scan"] == [[2.5, 0.5]]  # cell (0, 2)'s centre, in cells
+    assert first["robots"]["r1"]["row"] == {"mode": "moving", "cell": "(0,0)", "goal": "(1,2)",
+                                            "waits": "1", "failures": "0", "arrived": "no"}
+    assert first["robots"]["r1"]["goal"] == [2.5, 1.5]
+    assert first["robots"]["r1"]["trail"] == {"start": 0, "items": [[0.5, 0.5]]}
     assert state.take_update() is None
     feed(state, "/map", GRID)  # the same sample again (a latched copy): not re-sent
     assert state.take_update() is None
@@ -55,14 +60,17 @@ def test_live_state_folds_messages_and_hands_out_changes_once():
     feed(state, "/collisions", Collision("r1", "r2", (0, 1), (1, 1), 60))
     feed(state, "/twinfleet/shutdown", String("all robots arrived"))
     second = state.take_update()
-    assert second["robots"] == {"r1": {"pose": second["robots"]["r1"]["pose"],
-                                       "trail": {"start": 1, "items": [[0, 1]]}}}
+    assert second["robots"] == {"r1": {"body": second["robots"]["r1"]["body"],
+                                       "row": second["robots"]["r1"]["row"],
+                                       "trail": {"start": 1, "items": [[1.5, 0.5]]}}}
+    assert second["robots"]["r1"]["body"] == {"x": 1.5, "y": 0.5, "theta": 0.0, "half_m": 0.22}
     assert second["order"] == ["r2", "r1"]  # the map server's order wins
     assert second["collisions"] == {"start": 0, "items": [
-        {"robot_a": "r1", "robot_b": "r2", "cell_a": [0, 1], "cell_b": [1, 1], "time_ms": 60}]}
+        {"points": [[1.5, 0.5], [1.5, 1.5]], "label": "t=60 ms r1(0,1) × r2(1,1)",
+         "caption": "r1 × r2 at t=60 ms"}]}
     assert second["ended"] == "all robots arrived"
     snap = state.snapshot()
-    assert snap["robots"]["r1"]["trail"]["items"] == [[0, 0], [0, 1]]
+    assert snap["robots"]["r1"]["trail"]["items"] == [[0.5, 0.5], [1.5, 0.5]]
     assert snap["stats"]["topics"]["/poses"] == 3 and "r9" not in snap["robots"]
     # every topic, whatever its type, with its latest message: the page's topic list
     assert snap["topics"]["/poses"]["type"] == "twinfleet_msgs/RobotPose"
@@ -73,21 +81,21 @@ def test_live_state_folds_messages_and_hands_out_changes_once():
 
 
 def test_live_state_restarts_a_robot_when_the_fleet_is_launched_again():
-    state = LiveState("f")
+    state = LiveState("f", RobotScene())
     for stamp, cell in ((4000, (0, 0)), (4100, (0, 1)), (4200, (0, 2))):
         state.on_sample("twinfleet/f/poses", encode(RobotPose("r1", cell, 2, 1), stamp_ms=stamp))
     state.on_sample("twinfleet/f/twinfleet/shutdown", encode(String("all robots arrived")))
     assert state.take_update()["ended"] == "all robots arrived"
     state.on_sample("twinfleet/f/poses", encode(RobotPose("r1", (5, 5), 2, 1), stamp_ms=50))
     update = state.take_update()
-    assert update["robots"]["r1"]["trail"] == {"start": 0, "items": [[5, 5]]}
+    assert update["robots"]["r1"]["trail"] == {"start": 0, "items": [[5.5, 5.5]]}
     assert update["ended"] is None
 
 
 def test_live_state_compares_stamps_per_sender_not_across_senders():
     """The map server publishes the robots' scans on its own clock, which lags theirs when it
     is busy: a scan stamped seconds behind r1's last pose is not a new run."""
-    state = LiveState("f")
+    state = LiveState("f", RobotScene())
     pose = encode(RobotPose("r1", (0, 0), 2, 1), stamp_ms=4000, sender="r1")
     state.on_sample("twinfleet/f/poses", pose)
     state.on_sample("twinfleet/f/r1/status", encode(RobotStatus("r1", "moving", (0, 0), (3, 3),
@@ -96,14 +104,38 @@ def test_live_state_compares_stamps_per_sender_not_across_senders():
                                                   sender="map_server"))
     update = state.take_update()
     assert "reset" not in update["robots"]["r1"]
-    assert update["robots"]["r1"]["status"]["mode"] == "moving"
-    assert state.snapshot()["robots"]["r1"]["trail"]["items"] == [[0, 0]]
+    assert update["robots"]["r1"]["row"]["mode"] == "moving"
+    assert state.snapshot()["robots"]["r1"]["trail"]["items"] == [[0.5, 0.5]]
     # the same sender going back is a new run: the page is told to drop the old status
     state.on_sample("twinfleet/f/poses", encode(RobotPose("r1", (5, 5), 2, 1), stamp_ms=50,
                                                 sender="r1"))
     update = state.take_update()
-    assert update["robots"]["r1"]["reset"] is True and "status" not in update["robots"]["r1"]
-    assert state.snapshot()["robots"]["r1"]["trail"]["items"] == [[5, 5]]
+    assert update["robots"]["r1"]["reset"] is True
+    assert update["robots"]["r1"]["row"] == {"cell": "(5,5)", "arrived": "no"}  # no old mode
+    assert state.snapshot()["robots"]["r1"]["trail"]["items"] == [[5.5, 5.5]]
+
+
+def test_live_state_without_a_scene_lists_topics_and_draws_nothing():
+    state = LiveState("f")
+    feed(state, "/map", GRID)
+    feed(state, "/poses", RobotPose("r1", (0, 0), 2, 1))
+    snap = state.snapshot()
+    assert snap["map"] is None and snap["robots"] == {} and snap["columns"] == []
+    assert snap["topics"]["/poses"]["type"] == "twinfleet_msgs/RobotPose"
+
+
+def test_live_state_draws_what_arrived_before_its_scene_was_known():
+    state = LiveState("f", scene_known=False)
+    feed(state, "/map", GRID)
+    feed(state, "/poses", RobotPose("r1", (0, 0), 2, 1), seq=1)
+    feed(state, "/poses", RobotPose("r1", (0, 1), 2, 1), seq=2)
+    assert state.snapshot()["robots"] == {} and state.snapshot()["stats"]["messages"] == 3
+    state.set_scene(RobotScene())
+    update = state.take_update()
+    assert update["map"]["width"] == 3 and update["columns"][0] == "mode"
+    assert update["robots"]["r1"]["trail"] == {"start": 0, "items": [[0.5, 0.5], [1.5, 0.5]]}
+    feed(state, "/poses", RobotPose("r1", (1, 1), 2, 1), seq=3)
+    assert state.take_update()["robots"]["r1"]["body"]["y"] == 1.5
 
 
 def test_live_state_ignores_garbage():
@@ -116,7 +148,7 @@ def test_live_state_ignores_garbage():
 
 def test_web_app_serves_page_state_and_websocket_updates():
     async def scenario() -> None:
-        state = LiveState("f")
+        state = LiveState("f", RobotScene())
         feed(state, "/map", GRID)
         app = make_app(state=state, info={"fleet": "f"})
         async with test_utils.TestClient(test_utils.TestServer(app)) as client:
@@ -133,7 +165,8 @@ def test_web_app_serves_page_state_and_websocket_updates():
             update = await ws.receive_json(timeout=5)
             while "r1" not in update["robots"]:  # an earlier flush may carry the map
                 update = await ws.receive_json(timeout=5)
-            assert update["kind"] == "update" and update["robots"]["r1"]["pose"]["cell"] == [1, 2]
+            body = update["robots"]["r1"]["body"]
+            assert update["kind"] == "update" and (body["x"], body["y"]) == (2.5, 1.5)
             await ws.close()
 
     asyncio.run(scenario())
@@ -146,10 +179,17 @@ def test_trace_document_has_map_robots_and_steps(tmp_path):
     assert check(ROOT / "twinfleet" / "launch" / "headon.yaml", CheckOptions(trace_out=str(trace))).status == "violated"
     doc = trace_document(trace)
     raw = json.loads(trace.read_text())
-    assert [r["name"] for r in doc["robots"]] == ["r1", "r2"]
-    assert doc["robots"][0]["start"] == [5, 1] and doc["robots"][0]["goal"] == [5, 10]
+    first = doc["frames"][0]
+    assert first["order"] == ["r1", "r2"] and doc["columns"][0] == "mode"
+    # start (5, 1) and goal (5, 10) of r1, as the centres of those cells
+    assert first["robots"]["r1"]["start"] == [1.5, 5.5] and first["robots"]["r1"]["goal"] == [10.5, 5.5]
+    assert first["robots"]["r1"]["row"]["mode"] == "planning"
     assert (doc["map"]["width"], doc["map"]["height"]) == (12, 12)
     assert len(doc["steps"]) == len(raw["steps"]) and doc["message"] == raw["message"]
+    assert len(doc["frames"]) == len(raw["steps"]) + 1
+    marks = doc["frames"][-1]["collisions"]  # headon ends in a collision: at both robots' cells
+    assert len(marks) == 1 and re.fullmatch(r"\(\d+,\d+\) × \(\d+,\d+\)", marks[0]["label"])
+    assert all("collisions" not in f for f in doc["frames"][1:-1])  # none before
     bad = tmp_path / "bad.json"
     bad.write_text('{"format": "other"}')
     with pytest.raises(ValueError, match="not a twinfleet-trace/1 trace"):
@@ -171,7 +211,7 @@ def test_schema_of_a_registered_type_and_of_an_unknown_one():
 
 def test_recorder_writes_channels_schemas_and_increasing_log_times(tmp_path):
     path = tmp_path / "x.mcap"
-    rec = McapRecorder(path.open("wb"))
+    rec = McapRecorder(path.open("wb"), latched=("/map",))
     payloads = [encode(RobotPose("r1", (0, i), 2, 1), seq=i + 1) for i in range(50)]
     for p in payloads:
         rec.write("twinfleet/f/poses", p)

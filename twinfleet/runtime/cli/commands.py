@@ -471,7 +471,7 @@ def _interface_parser(sub: argparse._SubParsersAction) -> None:
     made = _verbs(sub, "interface", "list message types and show their fields", cmd_interface, {
         "list": ("list the message types known here and to the running fleet", []),
         "show": ("show the fields of a message type",
-                 [("type", {"help": "type name, e.g. twinfleet_msgs/RobotPose or "
+                 [("type", {"help": "type name, e.g. std_msgs/String or "
                                     "std_msgs/msg/String"})])})
     for p in made.values():
         p.add_argument("--module", action="append", default=[], metavar="MODULE",

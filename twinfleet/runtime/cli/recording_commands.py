@@ -133,13 +133,14 @@ def cmd_export(args: argparse.Namespace) -> int:
 
     try:
         check_readable(args.file)
-        count = export_json(args.file, args.output)
+        done = export_json(args.file, args.output)
     except (ValueError, OSError, McapError, RecordingError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    print(f"wrote {args.output}: {count} messages, JSON-encoded, and their Foxglove view "
-          "(/foxglove/map, /foxglove/robots, /foxglove/<robot>/scan, /foxglove/collisions)",
-          flush=True)
+    view = ("and their Foxglove view (/foxglove/map, /foxglove/robots, /foxglove/<robot>/scan, "
+            "/foxglove/collisions)" if done.scene else
+            "without a Foxglove view (the recording names no scene)")
+    print(f"wrote {args.output}: {done.messages} messages, JSON-encoded, {view}", flush=True)
     return 0
 
 

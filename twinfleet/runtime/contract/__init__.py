@@ -10,6 +10,7 @@ __all__ = [
     "messages",
     "names",
     "node",
+    "scene",
     "snapshot",
     "tracefile",
 ]

@@ -68,10 +68,11 @@ from twinfleet.runtime.fleet.connection import EXIT_FAILED, EXIT_INTERRUPTED, EX
 from twinfleet.runtime.fleet.live_verdict import RESULT_WORDS, LiveMonitor, RunEnd, Verdict
 from twinfleet.runtime.fleet.node_main import LIMIT_ENV, PARENT_ENV, read_statistics
 from twinfleet.runtime.fleet.run_record import RunRecord, versions
-from twinfleet.runtime.host.introspect import param_arguments
+from twinfleet.runtime.host.introspect import fleet_description, param_arguments
 from twinfleet.runtime.host.keys import (
     KeyKind,
     epoch_key,
+    fleet_key,
     kind_expr,
     parse_node_key,
     topic_key,
@@ -284,6 +285,7 @@ class Fleet:
         self.transport = ZenohTransport(conf, key=self.creds.key, limit=self.limit)
         await self.transport.open()
         fleet = self.scenario.fleet
+        self._describe(fleet)
         self.transport.subscribe(topic_key(fleet, SHUTDOWN_TOPIC), self._on_shutdown, QOS_DEFAULT)
         for topic in self.scenario.live.summary_topics:
             self.transport.subscribe(topic_key(fleet, topic), self._summary(topic), QOS_DEFAULT)
@@ -292,6 +294,14 @@ class Fleet:
         if self.monitor is not None:
             self.transport.subscribe(kind_expr(fleet, KeyKind.STATE), self._on_state,
                                     QOS_DEFAULT)
+
+    def _describe(self, fleet: str) -> None:
+        """Serve the fleet's description (its scene, its latched topics) to viewers that find
+        the fleet only over Zenoh (`runtime.host.keys.fleet_key`); served before any
+        node starts, so a viewer woken by a node's first sample finds it."""
+        assert self.transport is not None
+        description = msgpack.packb(fleet_description(self.scenario), use_bin_type=True)
+        self.transport.serve(fleet_key(fleet), lambda _request, respond: respond(description, ""))
 
     def _on_state(self, key: str, payload: bytes) -> None:
         assert self.monitor is not None

@@ -1,4 +1,4 @@
-"""What a node process tells monitors about itself, and launch-time parameter overrides.
+"""What a node process and a fleet tell monitors about themselves; launch-time overrides.
 
 Every node process serves ``twinfleet/<fleet>/@info/<node>``
 (`runtime.host.keys.KeyKind.INFO`): a msgpack map built once from the scenario
@@ -6,10 +6,11 @@ entry and the node class's declared handlers (`node_description`)::
 
     {"name", "namespace", "class", "pid",
      "params":        {name: value},            # the node's Params, overrides applied
-     "subscriptions": {"/r1/scan": qos}, "services": ["/generate_path"],
-     "service_types": {"/generate_path": ["twinfleet_msgs/PathRequest", "twinfleet_msgs/Path"]},
+     "subscriptions": {"/listener/chatter": qos}, "services": ["/add_two_ints"],
+     "service_types": {"/add_two_ints": ["example_interfaces/AddTwoInts_Request",
+                                         "example_interfaces/AddTwoInts_Response"]},
      "timers": [{"handler", "period_ms"}], "publication_qos": {"/map": qos},
-     "publications":  {"/poses": "twinfleet_msgs/RobotPose"}}   # published so far
+     "publications":  {"/chatter": "std_msgs/String"}}   # published so far
 
 with ``qos = {"reliability", "durability", "depth"}``. `twinfleet node info`,
 `topic info`, `service list -t|type` and `param list|get` read it (a
@@ -18,6 +19,14 @@ where it has none); what a node *publishes* is only
 known once it publishes (its ``@pub`` liveliness token and ``publications``,
 which records the envelope type of each topic's first message), and its QoS
 is ``publication_qos`` or the default.
+
+The fleet as a whole is described on ``twinfleet/<fleet>/@fleet`` (`fleet_key`)
+by its launcher, and by `twinfleet play` for a recording: a msgpack map
+``{"scene": "module:Name" | None, "latched": [topic, ...]}`` (`fleet_description`):
+the scenario's scene (`runtime.contract.scene`) and the topics its nodes declare
+transient-local. A viewer that finds the fleet only over Zenoh asks it there,
+once the fleet's first sample arrives, so that it learns how to draw the fleet
+and which topics to ask history of.
 
 Overrides. ``twinfleet launch SCENARIO r1.speed:=0.4`` (or ``--param
 r1.speed=0.4``) sets parameter `speed` of node r1; ``scan_rate_ms:=50``
@@ -39,11 +48,30 @@ from typing import Any
 import yaml
 
 from twinfleet.runtime.contract.messages import type_name_of
-from twinfleet.runtime.contract.node import HandlerSpec, NodeSpec, QoS
+from twinfleet.runtime.contract.names import resolve
+from twinfleet.runtime.contract.node import Durability, HandlerSpec, NodeSpec, QoS
 from twinfleet.runtime.core.guard import expected_type
 from twinfleet.runtime.host.keys import KeyKind, node_key, topic_in_fleet
 
 PARAM_FLAG = "--param"
+
+
+def fleet_description(scenario: Any) -> dict[str, Any]:
+    """What `fleet_key` serves for a scenario: its scene and its latched topics."""
+    return {"scene": scenario.scene, "latched": latched_topics(scenario)}
+
+
+def latched_topics(scenario: Any) -> list[str]:
+    """The topics that the scenario's node classes publish or subscribe transient-local,
+    by fully qualified name: what a late joiner gets only from history."""
+    found: set[str] = set()
+    for cfg in scenario.nodes:
+        spec = NodeSpec.of(cfg.cls)
+        declared = [*spec.publications.items(),
+                    *((s.name or "", s.qos) for s in spec.of_kind("subscribe"))]
+        found.update(resolve(name, cfg.namespace, cfg.name) for name, qos in declared
+                     if name and qos.durability is Durability.TRANSIENT_LOCAL)
+    return sorted(found)
 
 
 def qos_dict(qos: QoS) -> dict[str, Any]:

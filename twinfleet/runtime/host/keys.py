@@ -19,6 +19,8 @@ Two families of keys share the prefix ``twinfleet/<fleet>``:
     twinfleet/<fleet>/@types/<node>                queryable: JSON Schemas of its messages
     twinfleet/<fleet>/@state/<node>                publication: state reports to the launcher
     twinfleet/<fleet>/@replay/<node>               queryable: a gated node's replay gate
+    twinfleet/<fleet>/@fleet/<server>              queryable: the fleet described (scene,
+                                                   latched topics) by its launcher or player
 
   `node_key` builds them, `kind_expr` matches every key of one kind, `NodeKey`
   is what parsing one gives.
@@ -57,6 +59,7 @@ class KeyKind(enum.Enum):
     TYPES = "types"
     STATE = "state"
     REPLAY = "replay"
+    FLEET = "fleet"
 
     @property
     def named(self) -> bool:
@@ -127,6 +130,12 @@ def node_key(fleet: str, kind: KeyKind, node: str, name: str = "") -> str:
 def kind_expr(fleet: str, kind: KeyKind) -> str:
     """Key expression matching every node key of `kind` in `fleet` (``*``: every fleet)."""
     return f"{KEY_PREFIX}/{fleet}/@{kind.value}/{ANY}" + ("/**" if kind.named else "")
+
+
+def fleet_key(fleet: str, server: str = "launcher") -> str:
+    """The queryable through which the process that runs a fleet (`server`: the launcher,
+    or the player of a recording) describes it (`runtime.host.introspect.fleet_description`)."""
+    return node_key(fleet, KeyKind.FLEET, server)
 
 
 def epoch_key(fleet: str, epoch_ns: int) -> str:

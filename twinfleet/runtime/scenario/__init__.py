@@ -10,5 +10,6 @@ __all__ = [
     "params",
     "property_eval",
     "scenario_file",
+    "scenes",
     "spec",
 ]

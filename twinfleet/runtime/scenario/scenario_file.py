@@ -51,6 +51,8 @@ def to_document(scenario: Scenario) -> dict[str, Any]:
                            "semantics": scenario.semantics, "seed": scenario.seed}
     if scenario.map_path is not None:
         doc["map"] = str(scenario.map_path)
+    if scenario.scene is not None:
+        doc["scene"] = scenario.scene
     doc["nodes"] = [_node(i, cfg, scenario.source) for i, cfg in enumerate(scenario.nodes)]
     doc["properties"] = [{k: v for k, v in dataclasses.asdict(p).items() if v is not None}
                          for p in scenario.properties]

@@ -8,6 +8,7 @@ YAML layout (every key but `nodes` optional)::
     profile: fixed                 # robot behaviour: fixed | rebeca
     semantics: ros                 # checker message rules: ros | rebeca
     seed: 1                        # live randomness (ctx.choose)
+    scene: twinfleet.nodes.scene:RobotScene   # how viewers draw the fleet (runtime.contract.scene)
     params: {scan_rate_ms: 100}    # merged into every node whose Params has the field
     nodes:
       - name: r1
@@ -30,6 +31,10 @@ YAML layout (every key but `nodes` optional)::
         crash: {nodes: [r1], max: 1, durable: []}   # crash-and-restart branches
     live: {timeout_s: 120, stop_on_error: false, time_scale: 1.0,
            report: "twinfleet.nodes.report:report_for"}  # factory(scenario) -> report, see launcher
+
+`scene:` names a `runtime.contract.scene.Scene` by import name, checked as
+node classes are (`runtime.scenario.scenes.load_scene`); a fleet without one
+is shown by the viewers as its topics only.
 
 `check:` and `live:` become `runtime.scenario.config.CheckConfig` / `LiveConfig`.
 `load_scenario` accepts a path or the name of a shipped example
@@ -76,13 +81,14 @@ from twinfleet.runtime.scenario.config import (
 from twinfleet.runtime.scenario.examples import shipped_scenarios
 from twinfleet.runtime.scenario.params import build_params
 from twinfleet.runtime.scenario.property_eval import ExpressionError, parse_expression
+from twinfleet.runtime.scenario.scenes import SceneError, load_scene
 
 PROFILES = ("fixed", "rebeca")
 SEMANTICS = ("ros", "rebeca")
 PROPERTY_KINDS = ("invariant", "no_failure", "deadlock", "quiescence", "eventually", "within")
 MAX_NODES = 100  # default of live.max_nodes: each node is one OS process live
 _TOP_KEYS = {"name", "fleet", "description", "map", "profile", "semantics", "seed", "params",
-             "nodes", "properties", "check", "live"}
+             "nodes", "properties", "check", "live", "scene"}
 _NODE_KEYS = {"name", "class", "namespace", "priority", "respawn", "params"}
 _PROPERTY_KEYS = {"name", "kind", "expr", "within_ms"}
 
@@ -168,6 +174,7 @@ class Scenario:
     properties: tuple[PropertyConfig, ...]
     check: CheckConfig = field(default_factory=CheckConfig)
     live: LiveConfig = field(default_factory=LiveConfig)
+    scene: str | None = None  # import name of the fleet's `Scene`, for viewers
 
     @property
     def source(self) -> str:
@@ -189,7 +196,7 @@ class Scenario:
               map_path: str | Path | None = None, profile: str = PROFILES[0],
               semantics: str = SEMANTICS[0], seed: int = 0,
               params: Mapping[str, Any] | None = None, fleet: str | None = None,
-              description: str = "") -> Scenario:
+              description: str = "", scene: str | None = None) -> Scenario:
         """A scenario from Python values, checked as a file is (`map_path` relative to the
         working directory); the keywords are the YAML keys."""
         doc: dict[str, Any] = {"name": name, "nodes": list(nodes), "properties": list(properties),
@@ -200,6 +207,8 @@ class Scenario:
             doc["map"] = str(map_path)
         if fleet is not None:
             doc["fleet"] = fleet
+        if scene is not None:
+            doc["scene"] = scene
         return parse_scenario(doc, None)
 
 
@@ -339,7 +348,18 @@ def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
                     description=_get(doc, "description", str, err, default=""),
                     map_path=map_path, profile=profile, semantics=semantics,
                     seed=_get(doc, "seed", int, err, default=0), nodes=nodes,
-                    properties=props, check=check, live=live)
+                    properties=props, check=check, live=live, scene=_scene(doc, err))
+
+
+def _scene(doc: Mapping[str, Any], err: _Errors) -> str | None:
+    """The scene's import name, checked to make a scene (it is built once, cheaply)."""
+    name = _get(doc, "scene", str, err, default=None)
+    if name is not None:
+        try:
+            load_scene(name)
+        except SceneError as exc:
+            err.fail("scene", str(exc))
+    return name
 
 
 def _checked(parse: typing.Callable[..., Any], err: _Errors, *args: Any) -> Any:

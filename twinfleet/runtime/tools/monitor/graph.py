@@ -1,11 +1,13 @@
 """Reading a running fleet's graph over one Zenoh session: nodes, topics, services, types.
 
 What the monitors (`runtime.tools.monitor.graph_verbs`) and the Foxglove bridge know about a
-fleet comes from four sources, all served by the node processes themselves:
+fleet comes from these sources, all served by the fleet's own processes:
 
 * liveliness tokens (`runtime.host.keys`, ``@node``, ``@pub``, ``@sub``, ``@srv``):
   who runs, publishes, subscribes and serves;
 * ``@info/<node>`` (`runtime.host.introspect`): class, parameters, declared QoS;
+* ``@fleet`` (`runtime.host.keys.fleet_key`, served by the launcher): the
+  fleet's scene and latched topics;
 * ``@types/<node>`` (`runtime.host.schemas`): the JSON Schemas of the message
   types each process knows;
 * the samples themselves: a topic's type is the ``type`` of its envelopes
@@ -133,6 +135,18 @@ def node_stats(session: zenoh.Session, fleet: str, timeout_s: float
     return found
 
 
+def fleet_infos(session: zenoh.Session, fleet: str, timeout_s: float) -> dict[str, dict[str, Any]]:
+    """fleet → its description (`runtime.host.introspect.fleet_description`): scene, latched."""
+    found = {}
+    for key, payload in _query(session, kind_expr(fleet, KeyKind.FLEET), timeout_s):
+        with contextlib.suppress(ValueError, TypeError):  # InvalidKey is a ValueError
+            where = parse_node_key(key, KeyKind.FLEET)
+            doc = msgpack.unpackb(payload, raw=False)
+            if isinstance(doc, dict):
+                found[where.fleet] = doc
+    return found
+
+
 def _node_replies(session: zenoh.Session, key: str, kind: KeyKind, timeout_s: float
                   ) -> dict[tuple[str, str], Any]:
     """(fleet, node) → the msgpack reply of each node's `kind` queryable matching `key`."""
@@ -175,7 +189,7 @@ def latched_topics(infos: dict[tuple[str, str], dict[str, Any]]) -> set[tuple[st
 
 def subscribe(session: zenoh.Session, key: str, callback: Any, *, history: bool) -> Any:
     """A subscriber on `key`; with `history`, an advanced one that also gets the latched
-    samples that publishers keep (transient-local topics: ``/map``)."""
+    samples that publishers keep (transient-local topics)."""
     if not history:
         return session.declare_subscriber(key, callback)
     return ext.declare_advanced_subscriber(

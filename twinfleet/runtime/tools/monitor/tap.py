@@ -1,11 +1,14 @@
 """FleetTap: one Zenoh session that hears every topic of a fleet, for the viewer and the recorder.
 
 It subscribes to ``twinfleet/<fleet>/**`` and, with an advanced subscriber
-with history and late-publisher detection, to each latched topic (``/map``),
-so a tap that joins after the map was published still receives it. A latched
-sample then arrives on both subscribers; the tap passes it on once (the same
-bytes again within 10 s are a copy; later, e.g. the next run's identical map,
-they are a new sample). Samples cross from Zenoh's threads to the loop
+with history and late-publisher detection, to each latched topic, so a tap
+that joins after a latched sample was published still receives it. The
+latched topics are given, or added once known (`add_latched`: a viewer learns
+them from the fleet's description, `runtime.host.keys.fleet_key`). A
+latched sample then arrives on both subscribers; the tap passes it on once
+(the same bytes again within 10 s are a copy, also when the live copy came
+before the topic was known as latched; later, e.g. the next run's identical
+map, they are a new sample). Samples cross from Zenoh's threads to the loop
 through `Handoff` (one wake-up per burst) and reach `deliver(key, payload)` on
 the loop, in arrival order.
 
@@ -35,7 +38,6 @@ from twinfleet.runtime.fleet.fleetauth import MonitorAuth, login_settings, regis
 from twinfleet.runtime.host.keys import fleet_topics, topic_expr, topic_in_fleet
 from twinfleet.runtime.host.zenoh_transport import Handoff, zenoh_config
 
-LATCHED_TOPICS = ("/map",)
 RECONNECT = "{period_init_ms: 100, period_max_ms: 500, period_increase_factor: 1.5}"
 RETRY_S = 0.25
 DUPLICATE_WINDOW_S = 10.0  # history and live copies of one latched sample arrive well within
@@ -68,7 +70,7 @@ class FleetTap:
     """
 
     def __init__(self, make_config: Callable[[], zenoh.Config], fleet: str, deliver: Deliver, *,
-                 latched: Sequence[str] = LATCHED_TOPICS, retry: bool = True) -> None:
+                 latched: Sequence[str] = (), retry: bool = True) -> None:
         self.make_config, self.fleet, self.deliver = make_config, fleet, deliver
         self.latched, self.retry = tuple(latched), retry
         self.session: zenoh.Session | None = None
@@ -77,6 +79,7 @@ class FleetTap:
         self._advanced: list[Any] = []
         self._handoff: Handoff | None = None
         self._seen: dict[str, deque[tuple[bytes, float]]] = {}
+        self._recent: dict[str, tuple[bytes, float]] = {}  # key → its last payload, arrival
         self._stopped = False
         self._config = ""  # the text of the config the session was opened with
 
@@ -100,19 +103,45 @@ class FleetTap:
         if prepare is not None:
             await asyncio.to_thread(prepare, self.session)
         self._handoff = Handoff(asyncio.get_running_loop())
-        push = self._handoff.push
-
-        def on_sample(sample: zenoh.Sample) -> None:
-            push(self._pass, str(sample.key_expr), sample.payload.to_bytes())
-
-        self._entities.append(self.session.declare_subscriber(fleet_topics(self.fleet), on_sample))
-        history = ext.HistoryConfig(detect_late_publishers=True, max_samples=1)
+        self._entities.append(self.session.declare_subscriber(
+            fleet_topics(self.fleet), self._on_sample))
         for topic in self.latched:
-            self._advanced.append(ext.declare_advanced_subscriber(
-                self.session, topic_expr(self.fleet, topic), on_sample, history=history))
+            self._declare_latched(topic)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        """On a Zenoh thread: hand the sample to the loop."""
+        handoff = self._handoff  # one read: a reopen may replace it meanwhile
+        if handoff is not None:
+            handoff.push(self._pass, str(sample.key_expr), sample.payload.to_bytes())
+
+    def _declare_latched(self, topic: str) -> None:
+        assert self.session is not None
+        history = ext.HistoryConfig(detect_late_publishers=True, max_samples=1)
+        self._advanced.append(ext.declare_advanced_subscriber(
+            self.session, topic_expr(self.fleet, topic), self._on_sample, history=history))
+
+    def add_latched(self, topics: Sequence[str]) -> None:
+        """Treat `topics` as latched from now on (call on the loop): ask their history, and
+        take a history copy of a sample already passed on for the copy it is."""
+        for topic in topics:
+            if topic in self.latched:
+                continue
+            self.latched = (*self.latched, topic)
+            for key, (payload, when) in self._recent.items():
+                where = topic_in_fleet(self.fleet, key)
+                if where is not None and where.topic == topic:
+                    self._remember(key, payload, when)
+            if self.is_open:
+                self._declare_latched(topic)
+
+    def _remember(self, key: str, payload: bytes, when: float) -> None:
+        digest = hashlib.blake2b(payload, digest_size=16).digest()
+        self._seen.setdefault(key, deque(maxlen=_SEEN_PER_KEY)).append((digest, when))
 
     def _pass(self, key: str, payload: bytes) -> None:
-        if self._latched(key):
+        if not self._latched(key):
+            self._recent[key] = (payload, time.monotonic())
+        else:
             digest, now = hashlib.blake2b(payload, digest_size=16).digest(), time.monotonic()
             seen = self._seen.setdefault(key, deque(maxlen=_SEEN_PER_KEY))
             if any(d == digest and now - t < DUPLICATE_WINDOW_S for d, t in seen):

@@ -14,14 +14,18 @@ Beside those JSON copies the export writes Foxglove's well-known messages
 ``foxglove.SceneUpdate``, ``foxglove.PointCloud``) on ``/foxglove/...``
 channels, logged at the time of the sample they come from: the same channels
 the live bridge (`twinfleet foxglove`) serves, so Foxglove's 3D panel draws a
-recording as it draws a live fleet. ``twinfleet record`` keeps only the raw
-envelopes (what `play` needs); the Foxglove view is derived, and so exported.
+recording as it draws a live fleet. What is drawn comes from the scene the
+recording names (metadata ``twinfleet``, key ``scene``: `runtime.contract.scene`);
+a recording without one gets the JSON copies only. ``twinfleet record`` keeps
+only the raw envelopes (what `play` needs); the Foxglove view is derived, and
+so exported.
 """
 
 from __future__ import annotations
 
 import base64
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -29,9 +33,19 @@ import msgpack
 from mcap.reader import make_reader
 from mcap.writer import Writer
 
+from twinfleet.runtime.scenario.scenes import SceneError, load_scene
 from twinfleet.runtime.tools.view.viewstate import jsonable
 
 FOXGLOVE_CHANNELS_KEY = "foxglove"  # metadata of a derived channel: what it was made from
+
+
+@dataclass(frozen=True)
+class Exported:
+    """What `export_json` wrote: the copied messages, and the scene that drew the Foxglove
+    channels (None: the recording names none, or Foxglove channels were not asked for)."""
+
+    messages: int
+    scene: str | None
 
 
 def json_schema(schema: Any) -> Any:
@@ -58,16 +72,16 @@ def message_json(payload: bytes) -> bytes:
     return json.dumps(jsonable(value), separators=(",", ":"), allow_nan=True).encode()
 
 
-def export_json(source: str | Path, target: str | Path, *, foxglove: bool = True) -> int:
+def export_json(source: str | Path, target: str | Path, *, foxglove: bool = True) -> Exported:
     """Write `target`: a JSON-encoded copy of the msgpack MCAP `source` and (with `foxglove`)
-    its Foxglove channels (module docstring).
+    its Foxglove channels, drawn by the scene it names (module docstring).
 
     Returns:
-        The number of copied messages (the Foxglove ones are not counted).
+        The number of copied messages (the Foxglove ones are not counted) and the scene.
 
     Raises:
-        ValueError: `source` and `target` are the same file, or `source` holds a
-            channel that is neither msgpack nor JSON.
+        ValueError: `source` and `target` are the same file, `source` holds a channel
+            that is neither msgpack nor JSON, or its scene cannot be loaded.
         OSError: a file cannot be read or written.
     """
     if Path(source).resolve() == Path(target).resolve():
@@ -76,11 +90,14 @@ def export_json(source: str | Path, target: str | Path, *, foxglove: bool = True
         reader = make_reader(src)
         writer = Writer(dst)
         writer.start(profile="", library="twinfleet export")
-        for name, values in _metadata(reader):
+        metadata = _metadata(reader)
+        for name, values in metadata:
             writer.add_metadata(name, values)
         schemas: dict[int, int] = {}
         channels: dict[int, int] = {}
-        derived = _FoxgloveChannels(writer) if foxglove else None
+        scene = next((v["scene"] for n, v in metadata if n == "twinfleet" and v.get("scene")),
+                     None) if foxglove else None
+        derived = _FoxgloveChannels(writer, _load(scene)) if scene else None
         count = 0
         for schema, channel, message in reader.iter_messages(log_time_order=True):
             if channel.id not in channels:
@@ -90,34 +107,57 @@ def export_json(source: str | Path, target: str | Path, *, foxglove: bool = True
                                publish_time=message.publish_time, sequence=message.sequence)
             count += 1
             if derived is not None:
-                derived.add(channel.topic, _envelope(channel.message_encoding, message.data),
-                            message.log_time)
+                derived.add(channel.topic, _envelope(schema, channel.message_encoding,
+                                                     message.data), message.log_time)
         writer.finish()
-    return count
+    return Exported(count, scene)
 
 
-def _envelope(encoding: str, data: bytes) -> Any:
-    """A recorded message as the decoded envelope (a JSON copy's grid bytes decoded again)."""
+def _load(scene: str) -> Any:
+    """The scene a recording names; a `ValueError` (the command's one-line error) if it
+    cannot be loaded here."""
+    try:
+        return load_scene(scene)
+    except SceneError as exc:
+        raise ValueError(f"the recording names scene {scene}, which cannot be loaded here: "
+                         f"{exc}") from None
+
+
+def _envelope(schema: Any, encoding: str, data: bytes) -> Any:
+    """A recorded message as the decoded envelope: a JSON copy's bytes fields (base64 text,
+    as its schema says) decoded again, as msgpack gives them."""
     try:
         if encoding == "msgpack":
             return msgpack.unpackb(data, raw=False, strict_map_key=False)
         env = json.loads(data)
+        doc = json.loads(schema.data) if schema is not None else {}
     except Exception:  # msgpack and json raise several unrelated types
         return None
-    inner = env.get("data") if isinstance(env, dict) else None
-    if isinstance(inner, dict) and isinstance(inner.get("data"), str) \
-            and env.get("type") == "twinfleet_msgs/OccupancyGrid":
-        env["data"] = {**inner, "data": base64.b64decode(inner["data"])}
-    return env
+    return _bytes_again(env, doc)
+
+
+def _bytes_again(value: Any, schema: Any) -> Any:
+    """`value` with the strings its JSON Schema marks ``contentEncoding: base64`` decoded."""
+    if not isinstance(schema, dict):
+        return value
+    if schema.get("contentEncoding") == "base64" and isinstance(value, str):
+        try:
+            return base64.b64decode(value, validate=True)
+        except ValueError:
+            return value
+    fields = schema.get("properties")
+    if isinstance(value, dict) and isinstance(fields, dict):
+        return {k: _bytes_again(v, fields.get(k)) for k, v in value.items()}
+    return value
 
 
 class _FoxgloveChannels:
     """The ``/foxglove/...`` channels of an export, written with the recording's writer."""
 
-    def __init__(self, writer: Writer) -> None:
+    def __init__(self, writer: Writer, scene: Any) -> None:
         from twinfleet.runtime.tools.view.foxglove_scene import FoxgloveScene
 
-        self.writer, self.scene = writer, FoxgloveScene()
+        self.writer, self.scene = writer, FoxgloveScene(scene)
         self.schemas: dict[str, int] = {}
         self.channels: dict[str, int] = {}
         self.written = 0

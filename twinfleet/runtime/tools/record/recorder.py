@@ -3,18 +3,21 @@
 File layout (MCAP, written with the `mcap` package, zstd chunks, full index):
 
 * one **schema** per message type: name = the envelope's type name (e.g.
-  ``twinfleet_msgs/RobotPose``), encoding ``jsonschema``, data = a JSON Schema
+  ``std_msgs/String``), encoding ``jsonschema``, data = a JSON Schema
   of the envelope ``{type, stamp_ms, seq, sender, data}`` whose ``data`` lists
   the dataclass fields of the registered message class (`runtime.host.schemas`;
   joining a running fleet, the schemas its node processes serve; inferred
   from the first sample, and said so, when neither knows the type);
 * one **channel** per topic key (and type): topic = the fully qualified name
   (``/r1/scan``), message encoding ``msgpack``, metadata ``key`` (the Zenoh
-  key), ``fleet`` and ``durability`` (``transient_local`` for ``/map``);
+  key), ``fleet`` and ``durability`` (``transient_local`` for the topics the
+  fleet's nodes declare so: `runtime.host.introspect.latched_topics`);
 * **messages**: the raw envelope bytes as received; log time = receive time
   (ns since the Unix epoch, made strictly increasing so that log-time order
   is arrival order), publish time = log time, sequence = arrival index.
-* one metadata record ``twinfleet`` (fleet, scenario, time scale, seed).
+* one metadata record ``twinfleet`` (fleet, scenario, time scale, seed, and
+  ``scene``, the import name of the fleet's scene when it names one: how
+  `twinfleet export` draws the recording, and what `play` tells viewers).
 
 Crash safety. Messages are written in chunks as they come: the chunk in
 progress is closed and flushed to the file at least every `FLUSH_S` seconds
@@ -28,9 +31,12 @@ is cut back to its last complete chunk (readable after `bag repair`), and
 `record_scenario` makes the recorder's session the fleet's router and then
 launches the fleet with `run_fleet(connect=...)`, so the recorder is subscribed
 before the first node starts. `record_live` joins a running fleet and asks its
-nodes for their message schemas (`fleet_schemas`).
+nodes for their message schemas (`fleet_schemas`) and the fleet for its
+description (scene, latched topics: `runtime.host.keys.fleet_key`).
 `play` re-publishes the messages in log-time order at the recorded pace
-divided by `rate`, latched topics through advanced publishers.
+divided by `rate`, latched topics through advanced publishers, and describes
+each fleet it plays as its launcher did (from the recording), so that viewers
+draw it.
 """
 
 from __future__ import annotations
@@ -49,10 +55,19 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from twinfleet.runtime.contract.node import Durability
-from twinfleet.runtime.host.keys import ANY, KeyKind, kind_expr, topic_expr, topic_in_fleet
+from twinfleet.runtime.host.introspect import latched_topics
+from twinfleet.runtime.host.keys import (
+    ANY,
+    KeyKind,
+    fleet_key,
+    kind_expr,
+    topic_expr,
+    topic_in_fleet,
+)
 from twinfleet.runtime.host.schemas import message_schema
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
-from twinfleet.runtime.tools.monitor.tap import LATCHED_TOPICS, FleetTap, tap_config
+from twinfleet.runtime.tools.monitor.graph import fleet_infos
+from twinfleet.runtime.tools.monitor.tap import FleetTap, tap_config
 
 DRAIN_S = 0.3
 LINGER_S = 0.5
@@ -67,7 +82,7 @@ class McapRecorder:
         latched: fully qualified names recorded with durability ``transient_local``.
     """
 
-    def __init__(self, stream: BinaryIO, *, latched: tuple[str, ...] = LATCHED_TOPICS,
+    def __init__(self, stream: BinaryIO, *, latched: tuple[str, ...] = (),
                  on_failure: Callable[[str], None] | None = None) -> None:
         self.known_schemas: dict[str, dict[str, Any]] = {}  # data schemas the fleet served
         self._stream = stream
@@ -186,13 +201,15 @@ async def record_scenario(scenario: Any, path: str | Path, *, time_scale: float 
 
     endpoint = listen or f"tcp/127.0.0.1:{free_port()}"
     failed = asyncio.Event()
+    latched = tuple(latched_topics(scenario))
     recorder = McapRecorder(open(path, "wb"),  # noqa: SIM115 - closed by recorder.close()
-                            on_failure=lambda _why: failed.set())
+                            latched=latched, on_failure=lambda _why: failed.set())
     recorder.metadata({"fleet": scenario.fleet, "scenario": scenario.path,
                        "seed": scenario.seed if seed is None else seed,
-                       "time_scale": time_scale or scenario.live.time_scale})
+                       "time_scale": time_scale or scenario.live.time_scale,
+                       **({"scene": scenario.scene} if scenario.scene else {})})
     tap = FleetTap(lambda: zenoh_config(listen=[endpoint], mode="router"), scenario.fleet,
-                   recorder.write, retry=False)
+                   recorder.write, latched=latched, retry=False)
     flusher: asyncio.Task[None] | None = None
     try:
         await tap.open()
@@ -234,13 +251,22 @@ async def record_live(connect: str, fleet: str, path: str | Path, *,
             asyncio.get_running_loop().add_signal_handler(sig, stop.set)
     recorder = McapRecorder(open(path, "wb"),  # noqa: SIM115 - closed by recorder.close()
                             on_failure=lambda _why: stop.set())
-    recorder.metadata({"fleet": fleet, "connect": connect})
     tap = FleetTap(lambda: tap_config(connect, auth), fleet, recorder.write,
                    retry=False)
+    described: dict[str, Any] = {}
+
+    def prepare(session: Any) -> None:
+        """What must be known before the first sample is recorded: a sample recorded before
+        its schema would get a guessed one, and one of a latched topic its durability."""
+        recorder.known_schemas.update(fleet_schemas(session, fleet))
+        described.update(_one_description(fleet_infos(session, fleet, 1.0)))
+        recorder.latched = tap.latched = described["latched"]
+
     try:
-        # the schemas first: a sample recorded before them would get a guessed one
-        await tap.open(prepare=lambda session: recorder.known_schemas.update(
-            fleet_schemas(session, fleet)))
+        await tap.open(prepare=prepare)
+        # written before the first sample: the tap delivers on the loop, after this returns
+        scene = described.get("scene")
+        recorder.metadata({"fleet": fleet, "connect": connect, **({"scene": scene} if scene else {})})
         waiter = asyncio.ensure_future(stop.wait())
         flusher = asyncio.create_task(_flush_until(recorder, stop))
         await asyncio.wait([waiter], timeout=duration_s)
@@ -250,6 +276,15 @@ async def record_live(connect: str, fleet: str, path: str | Path, *,
         await tap.close()
         recorder.close()
     return recorder
+
+
+def _one_description(infos: Mapping[str, Any]) -> dict[str, Any]:
+    """What a recording of the fleets that answered `infos` says: every latched topic, and
+    the scene they name if they name one between them (else None)."""
+    scenes = {i.get("scene") for i in infos.values() if isinstance(i.get("scene"), str)}
+    latched = sorted({t for i in infos.values() for t in i.get("latched") or ()
+                      if isinstance(t, str)})
+    return {"scene": scenes.pop() if len(scenes) == 1 else None, "latched": tuple(latched)}
 
 
 def fleet_schemas(session: Any, fleet: str, timeout_s: float = 1.0) -> dict[str, dict[str, Any]]:
@@ -262,6 +297,32 @@ def fleet_schemas(session: Any, fleet: str, timeout_s: float = 1.0) -> dict[str,
             with contextlib.suppress(ValueError, TypeError):  # a node of another version
                 found.update(json.loads(reply.ok.payload.to_bytes()))
     return found
+
+
+def _describe_fleets(session: Any, reader: Any, summary: Any, fleet: str | None) -> list[Any]:
+    """Serve, for each fleet a recording holds, the description its launcher served
+    (`runtime.host.keys.fleet_key`): the recorded scene and the latched channels."""
+    recorded = next((dict(m.metadata) for m in reader.iter_metadata() if m.name == "twinfleet"), {})
+    latched: dict[str, set[str]] = {}
+    for channel in (summary.channels.values() if summary else ()):
+        name = fleet or channel.metadata.get("fleet")
+        if name:
+            topics = latched.setdefault(name, set())
+            if channel.metadata.get("durability") == "transient_local":
+                topics.add(channel.topic)
+    queryables = []
+    for name, topics in latched.items():
+        payload = msgpack.packb({"scene": recorded.get("scene"), "latched": sorted(topics)},
+                                use_bin_type=True)
+        queryables.append(session.declare_queryable(fleet_key(name, "play"), _replier(name, payload)))
+    return queryables
+
+
+def _replier(fleet: str, payload: bytes) -> Callable[[Any], None]:
+    def reply(query: Any) -> None:
+        with query:  # finalised at once: the asker does not wait for its timeout
+            query.reply(fleet_key(fleet, "play"), payload)
+    return reply
 
 
 def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
@@ -308,6 +369,7 @@ def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
 
         for channel in (summary.channels.values() if summary else ()):
             publisher(channel)
+        described = _describe_fleets(session, reader, summary, fleet)
         deadline = time.monotonic() + wait_s
         while time.monotonic() < deadline and not any(
                 getattr(p, "matching_status", None) and p.matching_status.matching for p in pubs.values()):
@@ -323,8 +385,8 @@ def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
                 count += 1
             time.sleep(linger_s)
         finally:
-            for pub in pubs.values():
-                pub.undeclare()
+            for entity in [*pubs.values(), *described]:
+                entity.undeclare()
     print(f"played {count} messages on {len(pubs)} topics in {time.monotonic() - started:.1f} s",
           file=out, flush=True)
     return 0 if count else 2

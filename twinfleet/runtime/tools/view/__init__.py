@@ -4,6 +4,7 @@
 __all__ = [
     "foxglove_bridge",
     "foxglove_scene",
+    "scene_finder",
     "viewer",
     "viewstate",
 ]

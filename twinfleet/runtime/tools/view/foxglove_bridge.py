@@ -1,17 +1,23 @@
 """`twinfleet foxglove`: a live fleet in Foxglove, through the official `foxglove-sdk` server.
 
-One Zenoh session (`runtime.tools.monitor.tap.FleetTap`, latched ``/map`` with history)
-hears every topic of the fleet; each sample goes, on the loop, to a
-`FoxgloveBridge`, which logs it on a Foxglove WebSocket server
-(``foxglove.start_server``, protocol ``foxglove.websocket.v1``) twice:
+One Zenoh session (`runtime.tools.monitor.tap.FleetTap`) hears every topic of
+the fleet; each sample goes, on the loop, to a `FoxgloveBridge`, which logs it
+on a Foxglove WebSocket server (``foxglove.start_server``, protocol
+``foxglove.websocket.v1``) twice:
 
 * as itself, on a channel of the same topic name, JSON-encoded with the JSON
   Schema of its type (bytes as base64: `runtime.tools.record.mcap_export.message_json`),
   so the Raw Messages and Plot panels work for any node's topics;
-* as Foxglove's well-known messages (`runtime.tools.view.foxglove_scene`): the map as a
-  ``foxglove.Grid``, the robots as ``foxglove.SceneUpdate`` entities, scans as
-  ``foxglove.PointCloud``, collisions as red markers, protobuf-encoded, all in
-  frame ``map``, so the 3D panel draws the fleet with no configuration.
+* as Foxglove's well-known messages (`runtime.tools.view.foxglove_scene`) of what
+  the fleet's scene draws: the map as a ``foxglove.Grid``, the bodies as
+  ``foxglove.SceneUpdate`` entities, scans as ``foxglove.PointCloud``,
+  collisions as red markers, protobuf-encoded, all in frame ``map``, so the 3D
+  panel draws the fleet with no configuration.
+
+The scene and the latched topics (heard with history) are learned from the
+fleet when its first sample arrives (`runtime.tools.view.scene_finder`); the
+samples that arrive meanwhile are drawn then. A fleet without a scene gets
+its JSON channels only.
 
 A client that subscribes late gets the latest map, every robot and the last
 message of each latched topic again at once (the SDK keeps no history).
@@ -24,19 +30,22 @@ from __future__ import annotations
 import asyncio
 import sys
 import time
+from collections import deque
 from collections.abc import Callable, Mapping
 from typing import Any, TextIO, final
 
 import foxglove
 import msgpack
 
+from twinfleet.runtime.contract.scene import Scene
 from twinfleet.runtime.host.keys import topic_in_fleet
 from twinfleet.runtime.host.schemas import message_schema
 from twinfleet.runtime.tools.record.mcap_export import json_schema, message_json
 from twinfleet.runtime.tools.view.foxglove_scene import MAP_TOPIC, ROBOTS_TOPIC, FoxgloveScene
 
-RESEND_DELAY_S = 0.05
-DEFAULT_PORT = 8765  # what Foxglove's "Open connection" proposes  # let the server finish a subscription before re-sending to it
+RESEND_DELAY_S = 0.05  # let the server finish a subscription before re-sending to it
+DEFAULT_PORT = 8765  # what Foxglove's "Open connection" proposes
+MAX_WAITING = 20_000  # samples kept for drawing while the scene is not known yet
 
 
 @final
@@ -47,17 +56,21 @@ class FoxgloveBridge:
         context: the SDK context the WebSocket server (or an MCAP writer) sinks.
         fleet: the fleet to show; ``*`` takes the first fleet whose data arrives.
         latched: fully qualified names of transient-local topics (re-sent to late clients).
+        scene: how the fleet is drawn, if known now (else `set_scene` says it later).
     """
 
     def __init__(self, context: foxglove.Context, fleet: str = "*",
-                 latched: tuple[str, ...] = ("/map",)) -> None:
+                 latched: tuple[str, ...] = (), scene: Scene | None = None) -> None:
         self.context, self.fleet, self.latched = context, fleet, latched
-        self.scene = FoxgloveScene()
+        self.view = FoxgloveScene(scene) if scene is not None else None
         self.known_schemas: dict[str, dict[str, Any]] = {}
         self.channels: dict[str, foxglove.Channel] = {}
-        self.last: dict[str, bytes] = {}  # latched topics: last JSON copy
+        self.last: dict[str, bytes] = {}  # every topic's last JSON copy (latched ones re-sent)
         self.logged: dict[str, int] = {}
         self._waiting: list[tuple[str, bytes]] | None = []  # until the schemas are known
+        # until the scene is known: what to draw then
+        self._undrawn: deque[tuple[str, Mapping[str, Any], int]] | None = (
+            None if scene is not None else deque(maxlen=MAX_WAITING))
 
     def start(self, schemas: Mapping[str, dict[str, Any]]) -> None:
         """Take the data schemas the fleet's nodes serve, then log what waited for them."""
@@ -65,6 +78,15 @@ class FoxgloveBridge:
         waiting, self._waiting = self._waiting or [], None
         for key, payload in waiting:
             self.on_sample(key, payload)
+
+    def set_scene(self, scene: Scene | None, latched: tuple[str, ...] = ()) -> None:
+        """Draw with `scene` from now on (None: draw nothing), and draw what waited for it;
+        `latched` adds to the topics re-sent to late clients."""
+        self.latched = (*self.latched, *(t for t in latched if t not in self.latched))
+        self.view = FoxgloveScene(scene) if scene is not None else None
+        undrawn, self._undrawn = self._undrawn or (), None
+        for topic, env, when in undrawn:
+            self._draw(topic, env, when)
 
     def on_sample(self, key: str, payload: bytes) -> None:
         """One raw sample of key ``twinfleet/<fleet>/<topic>`` (call on the loop); samples
@@ -87,9 +109,15 @@ class FoxgloveBridge:
         copy = message_json(payload)
         self._json_channel(topic, env).log(copy, log_time=now)
         self._count(topic)
-        if topic in self.latched:
-            self.last[topic] = copy
-        for fox_topic, msg in self.scene.feed(topic, env, now):
+        self.last[topic] = copy
+        if self._undrawn is not None:
+            self._undrawn.append((topic, env, now))
+        else:
+            self._draw(topic, env, now)
+
+    def _draw(self, topic: str, env: Mapping[str, Any], now: int) -> None:
+        """Log the Foxglove messages that the scene draws of one envelope."""
+        for fox_topic, msg in self.view.feed(topic, env, now) if self.view is not None else ():
             self._typed_channel(fox_topic, msg).log(msg.encode(), log_time=now)
             self._count(fox_topic)
 
@@ -116,15 +144,15 @@ class FoxgloveBridge:
     def resend(self, topic: str) -> None:
         """Log again what a late subscriber of `topic` needs: the map, the robots, a latched
         topic's last message."""
-        now = time.time_ns()
-        if topic == MAP_TOPIC and self.scene.grid is not None:
-            self.channels[topic].log(self.scene.grid.encode(), log_time=now)
-        elif topic == ROBOTS_TOPIC and self.scene.poses:
+        now, view = time.time_ns(), self.view
+        if topic == MAP_TOPIC and view is not None and view.grid is not None:
+            self.channels[topic].log(view.grid.encode(), log_time=now)
+        elif topic == ROBOTS_TOPIC and view is not None and view.poses:
             from foxglove.messages import SceneUpdate
 
-            entities = [self.scene._entity(r, now) for r in self.scene.order]  # noqa: SLF001
+            entities = [view._entity(r, now) for r in view.order if r in view.poses]  # noqa: SLF001
             self.channels[topic].log(SceneUpdate(entities=entities).encode(), log_time=now)
-        elif topic in self.last:
+        elif topic in self.last and topic in self.latched:
             self.channels[topic].log(self.last[topic], log_time=now)
 
 
@@ -149,6 +177,7 @@ async def serve_foxglove(endpoint: str, fleet: str, *, port: int | None = None,
     `ready` gets the port)."""
     from twinfleet.runtime.tools.monitor.tap import FleetTap, tap_config
     from twinfleet.runtime.tools.record.recorder import fleet_schemas
+    from twinfleet.runtime.tools.view.scene_finder import SceneFinder
 
     context = foxglove.Context()
     bridge = FoxgloveBridge(context, fleet)
@@ -164,8 +193,13 @@ async def serve_foxglove(endpoint: str, fleet: str, *, port: int | None = None,
         if port is not None:
             raise
         server = start(0)  # Foxglove's usual port is taken (by `twinfleet view`?): any other
-    tap = FleetTap(lambda: tap_config(endpoint), fleet,
-                   bridge.on_sample, retry=True)
+
+    def deliver(key: str, payload: bytes) -> None:
+        finder.seen(key)
+        bridge.on_sample(key, payload)
+
+    tap = FleetTap(lambda: tap_config(endpoint), fleet, deliver, retry=True)
+    finder = SceneFinder(tap, lambda scene: bridge.set_scene(scene, tap.latched), out=out)
     try:
         opening = asyncio.ensure_future(tap.open())
         print(f"[foxglove] fleet {fleet!r} via {endpoint}: in Foxglove, open connection "
@@ -179,6 +213,7 @@ async def serve_foxglove(endpoint: str, fleet: str, *, port: int | None = None,
             await stopping
     finally:
         tap.stop()
+        await finder.close()
         await tap.close()
         server.stop()
 

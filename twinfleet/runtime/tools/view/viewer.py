@@ -10,9 +10,11 @@ An aiohttp application served on 127.0.0.1 only:
 
 Live mode. A `runtime.tools.monitor.tap.FleetTap` opens one Zenoh client session (retrying
 until the router is up, so the viewer may start before `twinfleet launch`) and
-hears every topic of the fleet, the latched ``/map`` with history, so a viewer
-that joins late still gets the map. Samples are folded into a `LiveState` on
-the loop; a flush task sends the changes to every page every 50 ms.
+hears every topic of the fleet. Samples are folded into a `LiveState` on the
+loop; a flush task sends the changes to every page every 50 ms. The fleet's
+first sample makes a `runtime.tools.view.scene_finder.SceneFinder` ask the
+fleet how it is drawn (its scene) and which topics are latched, which the tap
+then hears with history, so a viewer that joins late still gets the map.
 
 Without --connect, the viewer takes the fleet from the fleet registry
 (`runtime.fleet.registry`), and if none runs yet it waits for one to be launched.
@@ -46,10 +48,12 @@ _TRACE = web.AppKey("trace", object)  # trace document | None
 _INFO = web.AppKey("info", dict)
 _SOCKETS = web.AppKey("sockets", weakref.WeakSet)
 _TAP = web.AppKey("tap", object)  # FleetTap | None
+_FINDER = web.AppKey("finder", object)  # SceneFinder | None
 
 
 def make_app(*, state: LiveState | None = None, trace: dict[str, Any] | None = None,
-             info: dict[str, Any] | None = None, tap: Any = None) -> web.Application:
+             info: dict[str, Any] | None = None, tap: Any = None,
+             finder: Any = None) -> web.Application:
     """The aiohttp application: the page, its script, the JSON API and the websocket.
 
     Args:
@@ -57,9 +61,10 @@ def make_app(*, state: LiveState | None = None, trace: dict[str, Any] | None = N
         trace: trace mode: the document from `trace_document`.
         info: extra fields of /api/info.
         tap: live mode: the `FleetTap` feeding `state`; opened and closed with the app.
+        finder: live mode: the `SceneFinder` using `tap`; its question ends before the tap.
     """
     app = web.Application()
-    app[_STATE], app[_TRACE], app[_TAP] = state, trace, tap
+    app[_STATE], app[_TRACE], app[_TAP], app[_FINDER] = state, trace, tap, finder
     app[_INFO] = {"mode": "trace" if trace is not None else "live", **(info or {})}
     app[_SOCKETS] = weakref.WeakSet()
     app.router.add_get("/", _index)
@@ -85,6 +90,8 @@ async def _live(app: web.Application) -> AsyncIterator[None]:
         tap.stop()
     tasks[0].cancel()
     await asyncio.gather(*tasks, return_exceptions=True)  # open() ends after one attempt
+    if app[_FINDER] is not None:
+        await app[_FINDER].close()
     if tap is not None:
         await tap.close()
 
@@ -177,11 +184,18 @@ async def serve(*, connect: str | None, fleet: str = "*", port: int = 0,
         app = make_app(trace=trace_document(trace_path), info={"trace": trace_path})
     else:
         from twinfleet.runtime.tools.monitor.tap import FleetTap, tap_config
+        from twinfleet.runtime.tools.view.scene_finder import SceneFinder
 
-        state = LiveState(fleet)
+        state = LiveState(fleet, scene_known=False)
+
+        def deliver(key: str, payload: bytes) -> None:
+            finder.seen(key)
+            state.on_sample(key, payload)
+
         make_config = (lambda: tap_config(connect)) if connect else _registry_config(fleet)
-        tap = FleetTap(make_config, fleet, state.on_sample)
-        app = make_app(state=state, tap=tap, info={
+        tap = FleetTap(make_config, fleet, deliver)
+        finder = SceneFinder(tap, state.set_scene, out=out)
+        app = make_app(state=state, tap=tap, finder=finder, info={
             "fleet": fleet, "connect": connect or "the fleet registry (waiting for a launch)"})
     runner = web.AppRunner(app, access_log=None, handle_signals=False)
     await runner.setup()

@@ -3,12 +3,18 @@
 // fleet with an inspector of its latest message, whatever the nodes are. No build step, no
 // dependencies. Everything the page knows is in window.twinfleetView (tests and the console
 // read it; view.probe() samples pixels).
+//
+// The page knows no message type: the server sends what the fleet's scene draws
+// (twinfleet/runtime/contract/scene.py), by kind. The map is a grid; each body (robot) has
+// a body (place x, y in cells, heading theta, half_m), a table row (the scene's columns), a
+// scan, a path, a start and a goal, all optional, and a trail of its places; collisions are
+// points with a label. Places are in cells: the centre of cell (row r, column c) is
+// (c + 0.5, r + 0.5).
 "use strict";
 (() => {
   const PALETTE = [[220, 40, 40], [40, 90, 220], [30, 160, 60], [240, 140, 20], [150, 60, 190],
-    [0, 170, 170], [200, 0, 120], [120, 120, 0]];  // twinfleet/nodes/render.py's colours
-  const NB = [[1, 0], [1, 1], [0, 1], [-1, 1], [-1, 0], [-1, -1], [0, -1], [1, -1]];
-  const HALF_M = 0.22;  // robot half size incl. margin, metres (twinfleet/nodes/render.py's default)
+    [0, 170, 170], [200, 0, 120], [120, 120, 0]];  // the colours of the fleet's bodies, in order
+  const FIELDS = ["body", "row", "scan", "path", "goal", "start"];  // a body's drawn fields
   const $ = (id) => document.getElementById(id);
   const canvas = $("world");
   const g = canvas.getContext("2d", { willReadFrequently: true });
@@ -19,22 +25,24 @@
     collisions: emptyLog(), violations: emptyLog(), fleetStatus: null, ended: null,
     stats: null, selected: null, frames: 0, firstFrameMs: null, drawnRobots: [],
     positions: {}, messages: 0, trace: null, step: 0, playing: false,
-    zoom: 1, pan: [0, 0], topics: {}, inspected: null,
+    zoom: 1, pan: [0, 0], topics: {}, inspected: null, columns: [],
   };
-  let mapCanvas = null, drawPending = false, traceStates = [], traceTrails = [], timer = null;
+  let mapCanvas = null, drawPending = false, traceStates = [], traceFrames = [], traceTrails = [],
+    timer = null;
 
   const colourOf = (name) => PALETTE[Math.max(0, view.order.indexOf(name)) % PALETTE.length];
   const rgb = (c, a = 1) => `rgba(${c[0]},${c[1]},${c[2]},${a})`;
   const light = (c) => c.map((v) => Math.round(v + (255 - v) * 0.55));
-  const centre = (cell) => [(cell[1] + 0.5) * view.cellPx, (cell[0] + 0.5) * view.cellPx];
-  const cellText = (c) => (c ? `(${c[0]},${c[1]})` : "–");
+  const centre = (p) => [p[0] * view.cellPx, p[1] * view.cellPx];
+  const samePlace = (a, b) => a[0] === b[0] && a[1] === b[1];
+  const escape = (t) => String(t).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" })[c]);
 
   function setMap(map) {
     view.map = map;
     view.mapDrawn = false;
     mapCanvas = null;
     if (!map) return;
-    const raw = atob(map.data), w = map.width, h = map.height;
+    const raw = atob(map.cells), w = map.width, h = map.height;
     view.cellPx = Math.max(3, Math.min(48, Math.floor(700 / Math.max(w, h))));
     canvas.width = w * view.cellPx;
     canvas.height = h * view.cellPx;
@@ -42,7 +50,7 @@
     mapCanvas.width = w; mapCanvas.height = h;
     const mg = mapCanvas.getContext("2d"), img = mg.createImageData(w, h);
     for (let i = 0; i < w * h; i++) {
-      const v = raw.charCodeAt(i);  // int8 on the wire: 100 occupied, 0 free, 255 (-1) unknown
+      const v = raw.charCodeAt(i);  // 100 occupied, 0 free, 255 (-1 as int8) unknown
       const shade = v === 255 ? 200 : v >= 50 ? 60 : 255;
       img.data.set([shade, shade, shade, 255], i * 4);
     }
@@ -50,11 +58,10 @@
     view.map.occupied = (r, c) => { const v = raw.charCodeAt(r * w + c); return v >= 50 && v !== 255; };
   }
 
-  function robotRect(cell, dir) {
-    const [dr, dc] = NB[((dir % 8) + 8) % 8], n = Math.hypot(dr, dc);
-    const u = [dc / n, dr / n], v = [-u[1], u[0]];
-    const res = view.map ? view.map.resolution || 0.255 : 0.255;
-    const half = (HALF_M / res) * view.cellPx, [cx, cy] = centre(cell);
+  function robotRect(body) {  // the footprint square, turned to the heading
+    const u = [Math.cos(body.theta), Math.sin(body.theta)], v = [-u[1], u[0]];
+    const res = view.map ? view.map.resolution || 1 : 1;
+    const half = (body.half_m / res) * view.cellPx, [cx, cy] = centre([body.x, body.y]);
     const corners = [[1, 1], [1, -1], [-1, -1], [-1, 1]].map(([a, b]) =>
       [cx + a * half * u[0] + b * half * v[0], cy + a * half * u[1] + b * half * v[1]]);
     return { cx, cy, u, half, corners };
@@ -66,14 +73,14 @@
     if (close) g.closePath();
   }
 
-  function cross(cell, colour, r) {
-    const [x, y] = centre(cell);
+  function cross(point, colour, r) {
+    const [x, y] = centre(point);
     g.strokeStyle = rgb(colour); g.lineWidth = 2;
     poly([[x - r, y - r], [x + r, y + r]]); g.stroke();
     poly([[x - r, y + r], [x + r, y - r]]); g.stroke();
   }
 
-  function robotCell(r) { return r.pose ? r.pose.cell : r.status ? r.status.cell : null; }
+  function placeOf(r) { return r.body ? [r.body.x, r.body.y] : null; }
 
   function noMapText() {
     if (view.mode === "trace") {
@@ -81,7 +88,7 @@
         : "loading trace…";
     }
     const n = Object.keys(view.topics).length;
-    return n ? `no /map on fleet ${view.fleet}: its ${n} topic${n > 1 ? "s are" : " is"} listed on the right`
+    return n ? `no map on fleet ${view.fleet}: its ${n} topic${n > 1 ? "s are" : " is"} listed on the right`
       : "waiting for the fleet's messages…";
   }
 
@@ -100,12 +107,12 @@
     view.mapDrawn = true;
     const px = view.cellPx, names = view.order.filter((n) => view.robots[n]);
     for (const name of names) {
-      const r = view.robots[name], c = colourOf(name), here = robotCell(r);
+      const r = view.robots[name], c = colourOf(name), here = placeOf(r);
       g.lineWidth = 2; g.strokeStyle = rgb(light(c));
       if (r.trail && r.trail.items.length > 1) { poly(r.trail.items.map(centre)); g.stroke(); }
       if (r.path && r.path.length && here) {
         // A live plan still holds the waypoints already passed: draw from the robot on.
-        const at = r.path.findIndex((p) => p[0] === here[0] && p[1] === here[1]);
+        const at = r.path.findIndex((p) => samePlace(p, here));
         const ahead = r.path.slice(at + 1);
         g.setLineDash([4, 3]); g.strokeStyle = rgb(c, 0.8);
         if (ahead.length) { poly([here, ...ahead].map(centre)); g.stroke(); }
@@ -115,20 +122,19 @@
         const [sx, sy] = centre(r.start);
         g.strokeStyle = rgb(c); g.beginPath(); g.arc(sx, sy, px * 0.45, 0, 2 * Math.PI); g.stroke();
       }
-      const goal = r.goal || (r.status && r.status.goal);
-      if (goal) cross(goal, c, px * 0.45);
+      if (r.goal) cross(r.goal, c, px * 0.45);
     }
     const sel = view.selected && view.robots[view.selected];
-    if (sel && sel.scan && robotCell(sel)) {
-      const [x0, y0] = centre(robotCell(sel));
+    if (sel && sel.scan && placeOf(sel)) {
+      const [x0, y0] = centre(placeOf(sel));
       g.strokeStyle = rgb(colourOf(view.selected), 0.6); g.lineWidth = 1;
       for (const hit of sel.scan) { poly([[x0, y0], centre(hit)]); g.stroke(); }
     }
     const drawn = [];
     for (const name of names) {
-      const r = view.robots[name], cell = robotCell(r);
-      if (!cell) continue;
-      const rect = robotRect(cell, r.pose ? r.pose.direction : 2);
+      const r = view.robots[name], here = placeOf(r);
+      if (!here) continue;
+      const rect = robotRect(r.body);
       g.fillStyle = rgb(colourOf(name)); g.strokeStyle = "#000"; g.lineWidth = 1;
       poly(rect.corners, true); g.fill(); g.stroke();
       g.lineWidth = 2;
@@ -137,22 +143,19 @@
       g.fillStyle = "#000"; g.font = "10px sans-serif";
       g.fillText(name, rect.cx + rect.half + 2, rect.cy - rect.half - 1);
       drawn.push(name);
-      view.positions[name] = [cell[0], cell[1]];
+      view.positions[name] = here;
     }
     g.strokeStyle = "rgb(255,0,0)"; g.lineWidth = 3;
     for (const hit of collisionMarks()) {
-      for (const cell of hit) { const [x, y] = centre(cell); g.beginPath(); g.arc(x, y, px * 1.1, 0, 2 * Math.PI); g.stroke(); }
-      poly(hit.map(centre)); g.stroke();
+      for (const p of hit.points) { const [x, y] = centre(p); g.beginPath(); g.arc(x, y, px * 1.1, 0, 2 * Math.PI); g.stroke(); }
+      poly(hit.points.map(centre)); g.stroke();
     }
     finishFrame(drawn);
   }
 
-  function collisionMarks() {
-    if (view.mode !== "trace") return view.collisions.items.slice(-20).map((c) => [c.cell_a, c.cell_b]);
-    const server = Object.values(traceStates[view.step] || {}).find((s) => s && "collided" in s);
-    if (!server || !server.collisions || !server.collided.length) return [];
-    return server.collided.slice(-1).map((pair) => pair.map((n) => robotCell(view.robots[n] || {}))
-      .filter(Boolean)).filter((cells) => cells.length);
+  function collisionMarks() {  // the collisions drawn now: a live fleet's last 20, a trace step's
+    if (view.mode !== "trace") return view.collisions.items.slice(-20);
+    return (traceFrames[view.step] || { collisions: [] }).collisions;
   }
 
   function finishFrame(drawn) {
@@ -178,18 +181,16 @@
       const { width: w, height: h } = view.map;
       for (let i = 0; i < w * h && !out.map; i++) {
         const r = Math.floor(i / w), c = i % w;
-        if (view.map.occupied(r, c)) out.map = { cell: [r, c], pixel: px(...centre([r, c])), expected: [60, 60, 60] };
+        if (view.map.occupied(r, c)) out.map = { cell: [r, c], pixel: px(...centre([c + 0.5, r + 0.5])), expected: [60, 60, 60] };
       }
     }
     for (const name of view.drawnRobots) {
-      const r = view.robots[name], rect = robotRect(robotCell(r), r.pose ? r.pose.direction : 2);
+      const r = view.robots[name], rect = robotRect(r.body);
       const x = rect.cx - rect.u[0] * rect.half * 0.5, y = rect.cy - rect.u[1] * rect.half * 0.5;
-      out.robots[name] = { cell: robotCell(r), pixel: px(x, y), expected: colourOf(name) };
+      out.robots[name] = { place: placeOf(r), pixel: px(x, y), expected: colourOf(name) };
     }
     return out;
   };
-
-  const escape = (t) => String(t).replace(/[&<>"]/g, (c) => ({ "&": "&amp;", "<": "&lt;", ">": "&gt;", '"': "&quot;" })[c]);
 
   function shortJson(value) {  // long strings (a map's base64 bytes) shortened for reading
     return JSON.stringify(value, (k, v) => (typeof v === "string" && v.length > 300
@@ -210,17 +211,16 @@
   }
 
   function renderPanel() {
+    const head = ["", "robot", ...view.columns].map((t) => `<th>${escape(t)}</th>`).join("");
+    if ($("robot-columns").innerHTML !== head) $("robot-columns").innerHTML = head;
     const rows = view.order.filter((n) => view.robots[n]).map((name) => {
-      const r = view.robots[name], s = r.status || {}, c = colourOf(name);
-      const arrived = s.mode === "arrived" || (r.pose && r.pose.done);
-      return `<tr class="robot${name === view.selected ? " selected" : ""}" data-robot="${name}">` +
-        `<td><span class="swatch" style="background:${rgb(c)}"></span></td><td>${name}</td>` +
-        `<td>${s.mode || "–"}</td><td>${cellText(robotCell(r))}</td><td>${cellText(s.goal || r.goal)}</td>` +
-        `<td>${s.waits ?? "–"}</td><td>${s.failures ?? "–"}</td><td>${arrived ? "yes" : "no"}</td></tr>`;
+      const r = view.robots[name], row = r.row || {}, c = colourOf(name);
+      return `<tr class="robot${name === view.selected ? " selected" : ""}" data-robot="${escape(name)}">` +
+        `<td><span class="swatch" style="background:${rgb(c)}"></span></td><td>${escape(name)}</td>` +
+        view.columns.map((k) => `<td>${escape(row[k] ?? "–")}</td>`).join("") + "</tr>";
     });
     $("robots").innerHTML = rows.join("");
-    const marks = view.mode === "trace" ? collisionMarks().map((m) => m.map(cellText).join(" × "))
-      : view.collisions.items.map((c) => `t=${c.time_ms} ms ${c.robot_a}${cellText(c.cell_a)} × ${c.robot_b}${cellText(c.cell_b)}`);
+    const marks = (view.mode === "trace" ? collisionMarks() : view.collisions.items).map((c) => c.label);
     $("collision-count").textContent = String(view.mode === "trace" ? marks.length : view.collisions.start + marks.length);
     $("collisions").textContent = marks.join("\n");
     if (view.mode === "live") {
@@ -291,6 +291,7 @@
   function applyLive(msg) {
     const fresh = msg.kind === "snapshot";
     if (fresh) { view.robots = {}; view.collisions = emptyLog(); view.violations = emptyLog(); view.topics = {}; }
+    if (msg.columns) view.columns = msg.columns;
     for (const [t, e] of Object.entries(msg.topics || {})) view.topics[t] = e;
     if ("fleet" in msg) {
       view.fleet = msg.fleet;
@@ -301,13 +302,13 @@
     for (const [name, e] of Object.entries(msg.robots || {})) {
       if (e.reset) delete view.robots[name];  // a new run: nothing of the last one stays
       const r = view.robots[name] || (view.robots[name] = { trail: emptyLog() });
-      for (const k of ["pose", "status", "scan", "path"]) if (k in e) r[k] = e[k];
+      for (const k of FIELDS) if (k in e) r[k] = e[k];
       if (e.trail) applyLog(r.trail, e.trail);
       if (!view.order.includes(name)) view.order = [...view.order, name];
     }
     if (msg.collisions) applyLog(view.collisions, msg.collisions);
     if (msg.violations) applyLog(view.violations, msg.violations);
-    for (const k of ["fleet_status", "ended", "link", "stats"]) if (k in msg) view[k === "fleet_status" ? "fleetStatus" : k] = msg[k];
+    for (const k of ["ended", "link", "stats"]) if (k in msg) view[k] = msg[k];
     view.messages += 1;
     scheduleDraw();
   }
@@ -319,30 +320,30 @@
     ws.onclose = () => { view.wsOpen = false; view.link = { session: false, router: false }; scheduleDraw(); setTimeout(connect, 1000); };
   }
 
-  // ---- trace mode ----
-  function modeOf(st) {
-    if (st.done) return "arrived";
-    if (st.stuck) return "stuck";
-    if (st.waiting) return "waiting";
-    return st.moves && st.move_idx < st.moves.length ? "moving" : "planning";
-  }
-
+  // ---- trace mode: doc.frames[k] is what the scene draws after step k, as its changes ----
   function loadTrace(doc) {
     view.trace = doc;
+    view.columns = doc.columns;
     setMap(doc.map);
-    view.order = doc.robots.map((r) => r.name);
     traceStates = [doc.initial];
-    const trail = Object.fromEntries(doc.robots.map((r) => [r.name, [doc.initial[r.name].cell]]));
-    traceTrails = [Object.fromEntries(view.order.map((n) => [n, 1]))];
     for (const step of doc.steps) {
-      const states = { ...traceStates[traceStates.length - 1], ...(step.changed || {}) };
-      traceStates.push(states);
-      for (const n of view.order) {
-        const t = trail[n], c = states[n].cell;
-        if (c[0] !== t[t.length - 1][0] || c[1] !== t[t.length - 1][1]) t.push(c);
-      }
-      traceTrails.push(Object.fromEntries(view.order.map((n) => [n, trail[n].length])));
+      traceStates.push({ ...traceStates[traceStates.length - 1], ...(step.changed || {}) });
     }
+    traceFrames = [];
+    let frame = { order: [], robots: {}, collisions: [] };
+    for (const change of doc.frames) {
+      frame = { order: change.order || frame.order, robots: { ...frame.robots, ...change.robots },
+        collisions: change.collisions || frame.collisions };
+      traceFrames.push(frame);
+    }
+    const trail = {};  // each body's places, each new one once
+    traceTrails = traceFrames.map((f) => {
+      for (const [n, r] of Object.entries(f.robots)) {
+        const t = trail[n] || (trail[n] = []), here = placeOf(r);
+        if (here && (!t.length || !samePlace(t[t.length - 1], here))) t.push(here);
+      }
+      return Object.fromEntries(Object.entries(trail).map(([n, t]) => [n, t.length]));
+    });
     view.traceTrail = trail;
     $("trace-title").textContent = `${doc.scenario}: ${doc.message || "trace"}`;
     $("step-range").max = String(doc.steps.length);
@@ -353,15 +354,12 @@
   function showStep(k) {
     const doc = view.trace;
     view.step = Math.max(0, Math.min(doc.steps.length, k));
-    const states = traceStates[view.step];
-    for (const r of doc.robots) {
-      const st = states[r.name];
-      view.robots[r.name] = {
-        pose: { cell: st.cell, direction: st.dir, done: st.done }, start: r.start, goal: r.goal,
-        status: { mode: modeOf(st), cell: st.cell, goal: r.goal, waits: st.waits, failures: st.failures },
-        scan: st.obstacles || [], path: (st.moves || []).slice(st.move_idx || 0),
-        trail: { start: 0, items: view.traceTrail[r.name].slice(0, traceTrails[view.step][r.name]) },
-      };
+    const frame = traceFrames[view.step];
+    view.order = frame.order;
+    view.robots = {};
+    for (const [name, r] of Object.entries(frame.robots)) {
+      const seen = traceTrails[view.step][name] || 0;
+      view.robots[name] = { ...r, trail: { start: 0, items: view.traceTrail[name].slice(0, seen) } };
     }
     $("step-range").value = String(view.step);
     $("step-label").textContent = `step ${view.step}/${doc.steps.length}`;

@@ -1,0 +1,50 @@
+"""Source rules that imports do not show: the framework does not know the case study by name.
+
+`twinfleet/runtime/` draws, records and lists any fleet; what the robot case
+study publishes is known to `twinfleet/nodes/` (its scene,
+`twinfleet/nodes/scene.py`) and named by its scenarios. So no file under
+`twinfleet/runtime/`, the viewer's page and script included, may spell the
+package of the case study's message types (``twinfleet_msgs/``, read from
+`twinfleet.nodes.msgs` so that a renamed package is still caught).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+import twinfleet.nodes.msgs as case_study_msgs
+
+pytestmark = pytest.mark.timeout(60)
+
+ROOT = Path(__file__).resolve().parents[1]
+RUNTIME = ROOT / "twinfleet" / "runtime"
+
+
+def _case_study_packages() -> set[str]:
+    """``<package>/`` of every message type the case study defines."""
+    names = [getattr(v, "__message_type__", None) for v in vars(case_study_msgs).values()]
+    return {n.split("/")[0] + "/" for n in names if isinstance(n, str)}
+
+
+def _runtime_files() -> list[Path]:
+    return sorted(p for p in RUNTIME.rglob("*")
+                  if p.is_file() and "__pycache__" not in p.parts)
+
+
+def test_the_rule_reads_every_kind_of_runtime_file():
+    names = {p.relative_to(RUNTIME).as_posix() for p in _runtime_files()}
+    assert {"tools/view/static/viewer.js", "tools/view/static/index.html",
+            "tools/view/viewstate.py"} <= names
+    assert _case_study_packages() == {"twinfleet_msgs/"}
+
+
+def test_the_runtime_names_no_message_type_of_the_case_study():
+    packages = [p.encode() for p in _case_study_packages()]
+    hits = []
+    for path in _runtime_files():
+        for number, line in enumerate(path.read_bytes().splitlines(), 1):
+            if any(package in line for package in packages):
+                hits.append(f"{path.relative_to(ROOT)}:{number}: {line.decode(errors='replace')}")
+    assert hits == [], "the case study's message types, named in the framework:\n" + "\n".join(hits)
