@@ -1,4 +1,4 @@
-"""The partial-order reduction (issue 12): exact reduced counts of hand-counted models,
+"""The partial-order reduction (docs/reduction.md): exact reduced counts of hand-counted models,
 where it turns itself off and how the result says which reduction ran.
 
 Notation as in tests/checker/test_counts.py: a world is "what is done {pending}".
