@@ -303,7 +303,7 @@ def _install_signals(loop: asyncio.AbstractEventLoop, fleet: Fleet) -> list[int]
     there alone); return the signals to give back."""
     if threading.current_thread() is not threading.main_thread():
         return []
-    sigs = [signal.SIGINT, signal.SIGTERM]
+    sigs: list[int] = [signal.SIGINT, signal.SIGTERM]
     for sig in sigs:
         loop.add_signal_handler(sig, fleet.end, f"{signal.Signals(sig).name} received")
     return sigs
