@@ -1,6 +1,6 @@
 """How the checker scales with the fleet: independent lanes, crossing fleets, the paper cases.
 
-Issue 12 (partial-order reduction). Three sets of scenarios, each run by
+With and without the partial-order reduction (docs/reduction.md). Three sets of scenarios, each run by
 `twinfleet check --json` in a fresh child process (so "peak MB" is that run's
 own peak RSS) with a per-run time limit:
 

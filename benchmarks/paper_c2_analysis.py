@@ -5,7 +5,7 @@ For each paper case in the `rebeca` profile and `rebeca` semantics
 property, a *separation* invariant on the map server's tracked cells:
 "no two robots within Chebyshev distance k", for k = 0, 1, 2. The smallest k
 that is violated is the closest approach over every reachable state (robots are
-0.4 m on 0.255 m cells, so distance ≤ 1 means physical overlap, REFERENCE §7.2).
+0.4 m on 0.255 m cells, so distance ≤ 1 means physical overlap, docs/robots.md §7).
 C2a's collision, which RMC and the paper report too, comes at a closest approach
 of two cells: the model's shadow box of a diagonal heading is a 0.62 m segment
 that reaches into a robot two cells away.

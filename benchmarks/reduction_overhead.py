@@ -1,4 +1,4 @@
-"""What the partial-order reduction's bookkeeping costs per transition (issue 12).
+"""What the partial-order reduction's bookkeeping costs per transition (docs/reduction.md).
 
 "Reduced transitions/s over unreduced transitions/s" mixes two things: the
 reduction's own work per world (the closure, visibility, the cycle proviso,

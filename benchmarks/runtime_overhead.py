@@ -12,12 +12,12 @@ are stable. Same application payloads (64 B, 4 KiB) for all:
 
 * ``raw`` — plain zenoh-python: the echo side re-puts each ping from its
   subscriber callback; the ping side puts, then blocks on a FIFO channel
-  `recv()` for the pong (RUNTIME-NOTES §6 a). Floods go to a callback that
+  `recv()` for the pong (no loop at all). Floods go to a callback that
   checks sequence numbers.
 * ``asyncio`` — raw zenoh-python whose callbacks hand each sample to an
   asyncio loop with `runtime.host.zenoh_transport.Handoff` (what `ZenohTransport`
   does) and act there: the floor of any runtime that runs handlers on a loop,
-  as DESIGN.md §3 requires. Not a target, a reference.
+  as twinfleet's host does (docs/design.md §2). Not a target, a reference.
 * ``twinfleet`` — a `NodeHost` per process over `ZenohTransport`, running
   real node classes (`PingNode`, `EchoNode` below): every message goes
   encode → put → Zenoh → hand-off → decode → inbox → `run_handler` → effects.

@@ -46,6 +46,14 @@ RULES: dict[str, set[str]] = {
     "maps": set(), "launch": set(),  # package data: shipped maps and scenarios
     "top": {"api", "fleet", "tools", *_BELOW_HOST, "cli", "checker", "agreement", "nodes", "top"},
 }
+#: `tools/` groups three wings of its own (tests/test_sizes.py measures each alone): the
+#: monitors lie below the recordings and the viewers, which use each other (the Foxglove
+#: export draws with the viewers' scene; the Foxglove bridge encodes as the export does).
+TOOLS_RULES: dict[str, set[str]] = {
+    "monitor": set(),
+    "record": {"monitor", "view"},
+    "view": {"monitor", "record"},
+}
 IO = {"asyncio", "zenoh", "aiohttp", "mcap", "foxglove"}
 PURE: dict[str, set[str]] = {
     "contract": IO, "scenario": IO, "core": IO, "checker": IO,
@@ -139,6 +147,27 @@ def test_layer_imports_only_what_lies_below_it(layer):
                 bad.append(f"{path.relative_to(ROOT)} imports {name}")
             elif top in ("runtime", "checker", "nodes", "agreement"):
                 bad.append(f"{path.relative_to(ROOT)} imports {name}: use twinfleet.{name}")
+    assert bad == []
+
+
+def _tools_wing(module: str) -> str | None:
+    parts = module.split(".")
+    return parts[3] if parts[1:3] == ["runtime", "tools"] and len(parts) > 3 else None
+
+
+def test_tools_wings_import_only_what_their_rule_allows():
+    folders = {p.name for p in (PACKAGE / "runtime" / "tools").iterdir()
+               if (p / "__init__.py").exists()}
+    assert folders == set(TOOLS_RULES)
+    bad = []
+    for module, path in SOURCES.items():
+        wing = _tools_wing(module)
+        if wing is None:
+            continue
+        for name in sorted(_imported(path)):
+            other = _tools_wing(name)
+            if other is not None and other != wing and other not in TOOLS_RULES[wing]:
+                bad.append(f"{path.relative_to(ROOT)} imports {name} ({other})")
     assert bad == []
 
 

@@ -23,7 +23,7 @@ def run(name: str, **options):
 @pytest.mark.parametrize(
     ("name", "states", "rmc_transitions"),
     [
-        # RMC on the model, this machine (../shared/rmc/README.md): exactly these.
+        # RMC on the model, this machine (docs/results.md): exactly these.
         ("c1a_rebeca", 18_527, 43_077),  # paper Table 4: 19,264 / 43,814 (paper - RMC = 737)
         ("c1b_rebeca", 19_823, 46_137),  # paper: 20,554 / 46,868 (731)
         ("c1c_rebeca", 15_107, 35_002),  # paper: 15,747 / 35,642 (640)

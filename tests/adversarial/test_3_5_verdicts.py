@@ -1,4 +1,4 @@
-"""Honest verdicts (issue 15, failures 3 and 5): a run whose nodes dropped samples a verdict
+"""Honest verdicts (docs/design.md §5): a run whose nodes dropped samples a verdict
 depends on, or whose node stalled behind its timers, is INCONCLUSIVE (exit 3) with the reason,
 never PASSED. Each test starts its own fleet on loopback with bounded traffic."""
 

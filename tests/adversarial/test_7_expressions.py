@@ -1,4 +1,4 @@
-"""Safe property expressions (issue 15, failure 7): a scenario's properties are checked at
+"""Safe property expressions (docs/design.md §5): a scenario's properties are checked at
 load against a small language, so code in them never runs, with one line naming the
 property (exit 2) for `check` and `launch` alike; and `--max-time` holds inside a slow one."""
 

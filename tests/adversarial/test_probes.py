@@ -1,4 +1,4 @@
-"""The probes of issue 15 that the live fleet already withstood, kept so it goes on doing so:
+"""Hostile input the live fleet withstands, kept so that it goes on doing so:
 garbage bytes, deep nesting, bad service requests, kill -9 of a robot or of the launcher,
 bad scenario and map files. Each runs against its own fleet on loopback, bounded traffic."""
 

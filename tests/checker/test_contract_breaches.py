@@ -1,4 +1,4 @@
-"""A user's mistake gets a diagnosis, never a crash (issue 13, section 2).
+"""A user's mistake gets a diagnosis, never a crash (docs/design.md §3).
 
 Each case is a node from tests/checker/mistakes.py that breaks the node contract the
 way users' first nodes do. `twinfleet check` must end with exit code 4 and one line

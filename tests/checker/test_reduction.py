@@ -1,4 +1,4 @@
-"""The partial-order reduction (issue 12): exact reduced counts of hand-counted models,
+"""The partial-order reduction (docs/reduction.md): exact reduced counts of hand-counted models,
 where it turns itself off and how the result says which reduction ran.
 
 Notation as in tests/checker/test_counts.py: a world is "what is done {pending}".
@@ -11,7 +11,6 @@ import json
 import pytest
 
 from tests.checker.helpers import counts, node, replay_confirms, run, scenario
-from twinfleet.checker import reduction
 from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.cli import main
 
@@ -119,21 +118,6 @@ def test_unknown_reduction_is_bad_input(tmp_path):
     path = scenario(tmp_path, [node("f1", "Flagger")])
     with pytest.raises(ValueError, match="unknown reduction 'fast'"):
         check(path, CheckOptions(reduction="fast"))
-
-
-def test_the_rules_it_was_checked_against_are_the_rules_that_run():
-    # A changed enabling or effect rule (twinfleet/checker/semantics.py, Runner._effects) may make
-    # events dependent that the closure treats as independent: review twinfleet/checker/reduction.py
-    # for the new rule, then update RULES_FINGERPRINT.
-    assert reduction.rules_fingerprint() == reduction.RULES_FINGERPRINT
-
-
-def test_changed_rules_turn_it_off(tmp_path, monkeypatch):
-    monkeypatch.setattr(reduction, "RULES_FINGERPRINT", "0" * 16)
-    result = run(scenario(tmp_path, [node("f1", "Flagger"), node("f2", "Flagger")]),
-                 reduction=None)
-    assert result.reduction.startswith("none (the enabling rules changed")
-    assert counts(result) == (4, 4, 5)
 
 
 @pytest.mark.parametrize(("reduction", "expected"), [

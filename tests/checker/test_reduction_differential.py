@@ -1,4 +1,4 @@
-"""Differential tests on generated node systems (issue 12).
+"""Differential tests on generated node systems.
 
 Hypothesis draws small random systems of program nodes
 (`tests/checker/program_systems.py`) and checks each several ways that must
@@ -15,7 +15,7 @@ example is discarded with `assume` (it shows as "limit hit" in
 `--hypothesis-show-statistics`); it is rare by construction (measured: 0-2 %
 of examples; about 3 % of the systems have a zero-time cycle, 95 % at most 100
 states). Derandomized, so CI runs the same examples: 300 systems (and 100
-crowded ones) for the reduction (issue 12), 100 for BFS against DFS, 30 for
+crowded ones) for the reduction, 100 for BFS against DFS, 30 for
 the transition cache (about 100 s of CPU on the 2-core VM); a longer random run:
 
     TWINFLEET_DIFFERENTIAL_EXAMPLES=3000 TWINFLEET_DIFFERENTIAL_RANDOM=1 \\
@@ -134,7 +134,7 @@ def test_transition_cache_changes_nothing(workdir: Path, doc: dict[str, Any], se
 @given(doc=systems(), search=st.sampled_from(["bfs", "dfs"]))
 def test_reduction_keeps_the_verdict_and_its_counterexamples_replay(
         workdir: Path, doc: dict[str, Any], search: str) -> None:
-    # The partial-order reduction (issue 12) on every generated system, asked for explicitly
+    # The partial-order reduction on every generated system, asked for explicitly
     # (under rebeca it is off by default): the same verdict as the full search; a reduced
     # search visits a subset of the reachable worlds; its counterexamples replay and violate.
     _reduced_equals_full(workdir, doc, search)

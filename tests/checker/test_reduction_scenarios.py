@@ -1,5 +1,5 @@
 """Every shipped scenario under both semantics: the verdict with the partial-order
-reduction equals the verdict without (issue 12).
+reduction equals the verdict without (docs/reduction.md).
 
 Slow (about two minutes on the 2-core VM): each scenario is searched twice. Under
 `rebeca` the paper cases set node-instance priorities (Rule 4), which the

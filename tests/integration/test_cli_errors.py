@@ -1,4 +1,4 @@
-"""Issue 14, acceptance 2: every CLI error is one line naming what and where, exit 2, no traceback.
+"""Every CLI error is one line naming what and where, exit 2, no traceback.
 
 One test per error class: a bad file, a bad payload, a dead endpoint, a busy
 endpoint, a missing fleet, a corrupt or truncated recording. The payload

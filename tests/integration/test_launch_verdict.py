@@ -1,4 +1,4 @@
-"""`twinfleet launch` judges the scenario's properties live (issue 13, point 3): a user's
+"""`twinfleet launch` judges the scenario's properties live (docs/design.md §5): a user's
 invariant that fails, a handler that raises, Ctrl-C, and a run where everything holds."""
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""Issue 14, acceptance 1 and 3: the ROS 2 verbs against live fleets, found without --connect.
+"""The ROS 2 verbs against live fleets, found without --connect.
 
 Each test module run has its own fleet registry (a private XDG_RUNTIME_DIR,
 as a desktop session gives every user); the launcher registers its fleet
@@ -67,7 +67,7 @@ def ok(result: subprocess.CompletedProcess[str]) -> str:
 
 
 def test_node_list_and_echo_poses_without_connect(runtime_dir, c1a):
-    # Acceptance 1: one fleet running, no --connect, no TWINFLEET_* variable.
+    # One fleet running: found with no --connect and no TWINFLEET_* variable.
     assert ok(tf(runtime_dir, "node", "list")).split() == ["/map_server", *(f"/{r}" for r in ROBOTS)]
     [pose] = [d for d in yaml.safe_load_all(ok(tf(runtime_dir, "topic", "echo", "/poses", "--once"))) if d]
     assert pose["type"] == "twinfleet_msgs/RobotPose" and pose["data"]["robot"] in ROBOTS

@@ -80,7 +80,7 @@ def test_hop_when_the_way_is_clear_and_wait_when_blocked():
     out = run(r, "update_moving_status", True)
     assert r.state.cell == (6, 5)
     assert of_type(out.effects, After) == [After(511, "update_moving_status", (True,))]
-    run(r, "on_scan", ObstacleScan("r1", ((8, 5),)))  # two cells ahead blocks (REFERENCE §5.2)
+    run(r, "on_scan", ObstacleScan("r1", ((8, 5),)))  # two cells ahead blocks (docs/robots.md §4)
     run(r, "update_moving_status", True)
     assert r.state.cell == (6, 5)
     assert r.state.waiting and r.state.waits == 1
@@ -158,7 +158,7 @@ def test_initial_plan_of_r1_is_the_golden_path():
     out = run(ms, "generate_path", PathRequest("r1", (5, 5), (45, 45)), reply=True)
     cells = out.reply.cells
     assert cells[:3] == ((6, 6), (7, 7), (8, 8))
-    assert cells[-1] == (45, 45) and len(cells) == 41  # RMC's plan (REFERENCE §4.5, corrected)
+    assert cells[-1] == (45, 45) and len(cells) == 41  # RMC's plan (docs/robots.md §3)
 
 
 @pytest.mark.parametrize(("profile", "offset"), [("rebeca", (1, 1)), ("fixed", (1, 0))])

@@ -20,7 +20,7 @@ from twinfleet.nodes.planning import (
 from twinfleet.nodes.profile import FIXED, REBECA
 
 #: The initial plans RMC computes on the model (its robots' `moves` after the first
-#: `onNewPath` at t = 0; REFERENCE.md §4.5 as corrected): waypoints, start excluded.
+#: `onNewPath` at t = 0; docs/robots.md §3): waypoints, start excluded.
 RMC_PLANS = {
     "r1": ((5, 5), (45, 45), "6,6 7,7 8,8 9,9 10,10 11,11 12,12 13,13 14,14 15,15 16,16 18,16 "
            "20,16 22,16 24,16 25,16 26,17 27,18 28,19 29,20 30,21 30,23 30,25 30,27 31,28 32,29 "
@@ -59,8 +59,8 @@ def test_initial_plans_are_rmcs(occ50, inflated50, robot):
 
 
 def test_full_inflation_gives_other_plans_for_r1_and_r5(occ50):
-    # Why the hand-derived plans of the first REFERENCE §4.5 were wrong: they used an
-    # ordinary 8-neighbour dilation, the model's expandObstacles keeps only one side.
+    # An ordinary 8-neighbour dilation plans r1 and r5 differently from the model, whose
+    # expandObstacles keeps only the marks towards lower rows and columns (docs/robots.md §3).
     full = inflate(occ50)
     for robot in RMC_PLANS:
         start, goal, plan = RMC_PLANS[robot]

@@ -21,7 +21,7 @@ from twinfleet.nodes.scan import (
 
 
 def brute_model_scan(occ, cell, d, others):
-    """Scalar re-statement of REFERENCE §5.1, beam by beam."""
+    """Scalar re-statement of the model's scan (docs/robots.md §4), beam by beam."""
     rows, cols = occ.shape
     grid = occ.copy()
     for ox, oy in others:
@@ -180,7 +180,7 @@ def test_clearance_none_and_lateral_band():
 
 
 def test_stepwise_float_quirks():
-    # REFERENCE §5.2 item 4: from (5, 5) one cell E or NE gives 0, W or SW gives 1.
+    # The model's floating point (docs/robots.md §4): from (5, 5) one cell E or NE gives 0, W or SW 1.
     want = {0: 0, 1: 0, 4: 1, 5: 1}
     for d, n in want.items():
         ob = [(5 + NB[d][0], 5 + NB[d][1])]

@@ -1,8 +1,7 @@
 """Reader for the Rebeca model checker's counterexample traces (`*.rmc-trace.jsonl.gz`).
 
 The traces are RMC's own output on the paper's public model, compacted from its
-XML report (source and build: `../shared/rmc/README.md`; copies in
-`tests/data/rmc/`). Line 1 is a header; then states and the transitions taken
+XML report (the build and the cases: `tests/data/rmc/README.md`). Line 1 is a header; then states and the transitions taken
 from them alternate. A state names every rebec's variables (the model's names)
 and queue; cells are encoded by the model's `xy2idx` (see `decode_cell`).
 

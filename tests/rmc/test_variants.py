@@ -1,9 +1,8 @@
 """More cases than the paper's six: our `rebeca` system against RMC on variants of the model.
 
-Each variant edits only what `../shared/rmc/build/mkcase.py` edits in the model's
-`main` (speed, max wait, instance priority per robot, `LASERSCAN_RATE`). RMC's
-figures: C2a and C2c at scan 100 from `../shared/rmc/README.md`; the others from
-RMC built and run with that folder's recipe during issue #16 (docs/results.md).
+Each variant changes only what a case of the model's `main` sets (speed, max wait,
+instance priority per robot, `LASERSCAN_RATE`). The RMC figures below come from RMC run
+on the model so edited, with the build `tests/data/rmc/README.md` names (docs/results.md).
 Exhaustive cases are compared with our breadth-first counts (order-free);
 violating cases with our search in RMC's order (`tests/rmc/rmc_order.py`).
 """
@@ -23,7 +22,7 @@ from twinfleet.checker.driver import CheckOptions, check
 pytestmark = pytest.mark.timeout(300)
 
 ROOT = Path(__file__).resolve().parents[2]
-#: The model's HEAD `main` (REFERENCE §9.2 "other configurations").
+#: The `main` of the model's latest version: not a paper case (speed, max wait, priority).
 HEAD_MAIN = ((0.6, 1500, 3), (0.7, 2000, 6), (0.7, 2500, 5), (0.7, 3000, 4), (0.4, 1500, 2))
 
 

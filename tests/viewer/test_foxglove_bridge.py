@@ -1,4 +1,4 @@
-"""Issue 14, acceptance 4: `twinfleet foxglove` serves a live C1a over the Foxglove WebSocket
+"""`twinfleet foxglove` serves a live C1a over the Foxglove WebSocket
 protocol, and a protocol client decodes the map grid, robot entities and a scan.
 
 The client speaks the Foxglove WebSocket protocol itself (aiohttp's WebSocket

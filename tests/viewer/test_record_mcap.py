@@ -1,4 +1,4 @@
-"""Issue 5, acceptance 3: record a C1a run to MCAP, read it back, play it to `topic echo`.
+"""Record a C1a run to MCAP, read it back, play it to `topic echo`.
 
 One recording (C1a at time scale 10, the recorder as the fleet's router) is
 shared by the module. The file must open with the `mcap` reader, hold one
@@ -157,7 +157,7 @@ def test_export_writes_json_that_foxglove_can_decode(recording, tmp_path):
 
 
 def _assert_foxglove_channels(rows: list[tuple]) -> None:
-    """Issue 14, acceptance 4: an export opened with the `mcap` reader has Foxglove's
+    """An export opened with the `mcap` reader has Foxglove's
     well-known schemas on its derived channels, and the messages decode with them."""
     from foxglove_support import decode_protobuf
 

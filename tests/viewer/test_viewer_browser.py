@@ -1,4 +1,4 @@
-"""Issue 5, acceptance 2: `twinfleet view` in headless Debian chromium, live and on a trace.
+"""`twinfleet view` in headless Debian chromium, live and on a trace.
 
 The viewer starts first and waits for the router; then C1a is launched at time
 scale 10 on the same loopback endpoint. The page must draw the 50x50 map and
@@ -157,7 +157,7 @@ def test_viewer_steps_through_a_checker_trace(cli, browser_page, tmp_path):
 
 
 def test_viewer_lists_and_inspects_the_topics_of_a_non_robot_fleet(cli, browser_page):
-    # Issue 14, acceptance 5: the demo fleet (talker, listener, adder, caller) has no map and
+    # A fleet that is not the robots: the demo (talker, listener, adder, caller) has no map and
     # no robot; the viewer starts before it, without --connect, and finds it in the registry.
     url = _start_viewer(cli)
     page = browser_page

@@ -1,4 +1,4 @@
-"""The latched /map reaches a viewer that joins a running fleet late (issue 5).
+"""The latched /map reaches a viewer that joins a running fleet late.
 
 C1a runs at time scale 1 (a minute of fleet time, stopped by the fixture).
 Once the map server's first scan is seen, the map was published already; only

@@ -1,4 +1,4 @@
-"""The paper's own figures: Tables 4 and 5 of Trinh et al. (REFERENCE.md §9.2).
+"""The paper's own figures: Tables 4 and 5 of Trinh et al. (docs/robots.md §8).
 
 One `PaperRow` per case, keyed by scenario name (`c1a` … `c2c`); the
 `_rebeca` variants of the launch files (same case, the model's profile and

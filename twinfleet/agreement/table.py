@@ -146,7 +146,7 @@ class Row:
 
     @property
     def parameters(self) -> str:
-        """Per robot "speed/max wait" as in REFERENCE §9.2: ".5/1500 .7/2000 …"."""
+        """Per robot "speed/max wait" as the paper's tables give them: ".5/1500 .7/2000 …"."""
         return " ".join(f"{_speed(v)}/{w}" for _, v, w in self.robots)
 
     def reference_check(self) -> CheckCell | None:

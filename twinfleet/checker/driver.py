@@ -6,8 +6,7 @@ random walks found nothing, which proves nothing), 4 a node breaks the node
 contract (`checker.diagnosis`: no verdict, one line naming node, handler,
 what differed and the fix, in `CheckResult.breach`). Bad input raises before
 a result exists (`ScenarioError`, `PropertyError`, `NodeDefinitionError`).
-The search always stops at the first violation (RMC does the same, R11), so
-the scenario key `check.stop_at_first` is accepted but has no other value.
+The search stops at the first violation, as RMC's does.
 
 `CheckOptions.checkpoint` saves the search to a file every
 `checkpoint_every_s` seconds and when it stops early (a limit, Ctrl-C);

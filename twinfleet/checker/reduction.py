@@ -51,8 +51,6 @@ run (`why_off`), and the checker says so.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import inspect
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Final, final
@@ -79,27 +77,9 @@ _KNOWN_SETTINGS: Final = frozenset({"latency", "topic_latency", "deadline_defaul
 _KNOWN_RULES: Final = frozenset({"semantics", "node_priorities", "global_priority",
                                  "settings", "depths", "lossy", "fifo", "has_latency",
                                  "_ranges", "_shallowest"})
-
-#: The source of the code that decides what is enabled and what a transition does to the
-#: pending events, as this module's closure was checked against it. A change there (a new
-#: rule: KEEP_LAST dropping pending deliveries, a new kind of fault) may make events
-#: dependent that the closure treats as independent, so it turns the reduction off until
-#: the closure has been reviewed for it and the fingerprint updated (`rules_fingerprint`).
-RULES_FINGERPRINT: Final = "f4b23a6c3e3b9449"  # reviewed for Rule 6 (KEEP_LAST, BEST_EFFORT) and no-server branches
-
-
-def rules_fingerprint() -> str:
-    """16 hex digits of SHA-256 over the source of the enabling and effect rules."""
-    from twinfleet.checker import runner, semantics, system  # noqa: PLC0415 (only when planned)
-
-    rules = semantics.Rules
-    functions = (rules.enabled, rules._across_nodes, rules.add, rules.remove, rules.delivery,
-                 rules.copies, rules.crashable, rules.droppable, semantics._earliest_sent,
-                 runner.Runner._effects, system.System._apply, system.System._apply_crash)
-    digest = hashlib.sha256()
-    for fn in functions:
-        digest.update(inspect.getsource(fn).encode())
-    return digest.hexdigest()[:16]
+# The code of the enabling and effect rules the closure was argued for is pinned by
+# tests/checker/test_reduction_rules.py: a change there fails that test until the closure
+# has been reviewed for it (docs/reduction.md §5).
 
 
 def default_reduction(semantics: Semantics | str) -> str:
@@ -123,9 +103,6 @@ def why_off(rules: Rules, properties: PropertySet, visibility: Visibility,
 
 
 def _unknown_rule(rules: Rules) -> str | None:
-    if rules_fingerprint() != RULES_FINGERPRINT:
-        return ("the enabling rules changed since the reduction was checked against them "
-                "(twinfleet/checker/reduction.py: RULES_FINGERPRINT)")
     for f in dataclasses.fields(rules):
         if f.name not in _KNOWN_RULES:
             return f"rule {f.name} is not covered"

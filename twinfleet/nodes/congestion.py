@@ -1,4 +1,4 @@
-"""Congestion resolution: the back-off of Algorithm 2 as the model does it (REFERENCE §6.4).
+"""Congestion resolution: the back-off of Algorithm 2 as the model does it (docs/robots.md §6).
 
 These functions only enumerate the options; the robot picks one through
 ``ctx.choose`` so that the checker branches over all of them.
@@ -39,7 +39,7 @@ class BackoffOption:
 
 
 def selection_sort_desc(records: Sequence[tuple[int, int]]) -> list[tuple[int, int]]:
-    """The model's unstable selection sort by the second field, descending (§6.4 step 2).
+    """The model's unstable selection sort by the second field, descending.
 
     For each position p, the first record among p.. with the strictly largest
     key is swapped into p.
@@ -77,7 +77,8 @@ def backoff_candidates(
 
 
 def clamp_target(cell: Cell, rows: int, cols: int, margin: int = 1) -> Cell:
-    """Clamp a target into [margin, size−1−margin] per axis, as ``setTarget`` does (§6.2)."""
+    """Clamp a target into [margin, size−1−margin] per axis, as the model's ``setTarget``
+    does (docs/robots.md §6)."""
     return (
         min(max(cell[0], margin), rows - 1 - margin),
         min(max(cell[1], margin), cols - 1 - margin),
@@ -118,7 +119,7 @@ def backoff_options(
     ``rebeca``: all 4 × 5 alternatives, repeats included (they are distinct
     transitions in the model). With ``validate_backoff``: drop targets that are
     off the map (before clamping), inside the inflated static map, or the
-    robot's own cell (a zero-step back-off always fails to plan, §11 M5), and
+    robot's own cell (a zero-step back-off always fails to plan), and
     drop repeated targets. The result may then be empty.
     """
     rows, cols = static_inflated.shape

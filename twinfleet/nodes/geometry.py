@@ -1,7 +1,7 @@
-"""Collision ("shadow") tests between two robots (REFERENCE §7.2).
+"""Collision ("shadow") tests between two robots (docs/robots.md §7).
 
 ``corner_box`` is the model's test: an axis-aligned box spanned by two rotated
-corners, and a strict corner-inside-box check (misses many real overlaps, §11 M1).
+corners, and a strict corner-inside-box check (misses many real overlaps).
 ``sat`` is the exact overlap test of two oriented rectangles by the separating
 axis theorem.
 """
@@ -97,7 +97,7 @@ def shadows_intersect(
         a_cell, a_dir: pose of robot a.
         b_cell, b_dir: pose of robot b.
         dims: fleet dimensions.
-        profile: ``corner_box`` (model, §7.2) or ``sat`` (exact).
+        profile: ``corner_box`` (model) or ``sat`` (exact).
     """
     a = dims.length / 2 + dims.collision_margin
     b = dims.width / 2 + dims.collision_margin

@@ -1,4 +1,4 @@
-"""Grid geometry shared by planning, scan, collision and motion (REFERENCE.md §3).
+"""Grid geometry shared by planning, scan, collision and motion (docs/robots.md §2).
 
 Cells are ``(x, y)`` = (PGM row, PGM column). Directions 0..7 run
 counter-clockwise from +x in 45° steps; odd directions are diagonal. The
@@ -37,7 +37,7 @@ def is_diagonal(d: int) -> bool:
 
 
 def direction_between(a: Cell, b: Cell) -> int:
-    """Sign direction from ``a`` towards ``b`` (8-way, §4.4).
+    """Sign direction from ``a`` towards ``b`` (8-way, docs/robots.md §3).
 
     Raises:
         ValueError: ``a == b`` (no direction).
@@ -78,7 +78,8 @@ def cell_centre(cell: Cell, res: float) -> tuple[float, float]:
 def world_to_cell(
     x: float, y: float, res: float, origin: tuple[float, float] = (0.0, 0.0)
 ) -> Cell:
-    """Model-frame metres to a cell: floor((p − origin)/R) (paper §3.3)."""
+    """Model-frame metres to a cell: floor((p − origin)/R), the paper's conversion
+    (docs/robots.md §2)."""
     return (math.floor((x - origin[0]) / res), math.floor((y - origin[1]) / res))
 
 
@@ -107,7 +108,7 @@ def dir_to_heading(d: int) -> float:
 
 
 def inflate(occ: np.ndarray, cells: int = 1) -> np.ndarray:
-    """8-neighbour dilation, ``cells`` times, no wrap-around at the borders (§3.4).
+    """8-neighbour dilation, ``cells`` times, no wrap-around at the borders (docs/robots.md §3).
 
     Args:
         occ: bool grid (rows, cols).
@@ -136,8 +137,7 @@ def inflate_one_pass(occ: np.ndarray) -> np.ndarray:
     overwritten again; only marks from obstacles visited later survive. A free
     cell (i, j) therefore ends up blocked iff one of (i, j+1), (i+1, j−1),
     (i+1, j), (i+1, j+1) is occupied: obstacles grow towards lower rows and
-    columns only (REBECA's initial plans of r1 and r5 depend on it, REFERENCE
-    §4.5 as corrected).
+    columns only (REBECA's initial plans of r1 and r5 depend on it, docs/robots.md §3).
 
     Args:
         occ: bool grid (rows, cols).
@@ -156,7 +156,7 @@ def inflate_one_pass(occ: np.ndarray) -> np.ndarray:
 
 @dataclass(frozen=True, slots=True)
 class Dims:
-    """Physical constants of a fleet (REFERENCE §9.1 defaults).
+    """Physical constants of a fleet (defaults: docs/robots.md §8).
 
     Attributes:
         res: cell size R in metres.

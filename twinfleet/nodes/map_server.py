@@ -1,6 +1,6 @@
 """The map server node: map, path service, simulated LIDAR, tracking, collision detection.
 
-Message structure follows the paper's model (REFERENCE.md §2.1) so that the
+Message structure follows the paper's model (docs/robots.md §1) so that the
 checker's `rebeca` semantics sees the same events: one self-timer per robot
 re-arming every scan period (priority 1), the path service (priority 3) and
 pose reports (priority 5). Robots never talk to each other.
@@ -38,7 +38,7 @@ SHUTDOWN_TOPIC = "/twinfleet/shutdown"
 
 @dataclass(frozen=True)
 class MapServerParams:
-    """Parameters of the map server (REFERENCE.md §9.1 defaults)."""
+    """Parameters of the map server (defaults: docs/robots.md §8)."""
 
     map: str
     robots: tuple[str, ...]
@@ -117,7 +117,8 @@ class MapServer(Node):
     # Commutes: it reads the state and changes nothing, and each reply goes to its caller.
     @service("/generate_path", priority=3, commutes=True)
     def generate_path(self, ctx: Context, req: PathRequest) -> Path:
-        """Plan on the static map inflated by one cell plus the other robots (REFERENCE §3.4, §4)."""
+        """Plan on the static map inflated by one cell plus the other robots
+        (docs/robots.md §3)."""
         i = self.index.get(req.robot, -1)
         st = self.state
         others = [OtherRobot(st.cells[j], st.dirs[j], st.velocities[j])

@@ -18,7 +18,7 @@ import yaml
 from twinfleet.nodes.grid import inflate, inflate_one_pass
 from twinfleet.nodes.profile import Profile, profile_named
 
-#: Model threshold: occupied iff gray < 204 (= 0.8 · 255), REFERENCE §3.1.
+#: Model threshold: occupied iff gray < 204 (= 0.8 · 255), docs/robots.md §2.
 MODEL_FREE_GRAY = 204
 
 

@@ -1,4 +1,4 @@
-"""Movement arithmetic of the robot (REFERENCE §6.1, §6.3, §6.6).
+"""Movement arithmetic of the robot (docs/robots.md §5).
 
 All times are integer milliseconds, rounded by the profile's rule
 (``round_m`` for the model, which adds one on exact integers).
@@ -29,7 +29,7 @@ def rotation_time_ms(
 ) -> int:
     """Time to turn between two headings.
 
-    The model turns by |Δdir| without wrap-around (7→0 costs 7 steps, §11 M8);
+    The model turns by |Δdir| without wrap-around (7→0 costs 7 steps);
     the fixed profile takes the shorter way round.
 
     Args:
@@ -50,7 +50,7 @@ def cells_per_second(speed_mps: float, res: float, profile: Profile) -> int:
 
 
 def max_waiting_rounds(maxwait_ms: int, scan_ms: int, profile: Profile) -> int:
-    """Blocked evaluations before a back-off: round(maxwait/scan period) (§6.1)."""
+    """Blocked evaluations before a back-off: round(maxwait/scan period) (docs/robots.md §6)."""
     if scan_ms <= 0:
         raise ValueError(f"scan period must be positive, got {scan_ms}")
     return profile.round(maxwait_ms / scan_ms)

@@ -1,6 +1,6 @@
 """Messages of the robot system.
 
-Cells are (row, column) pairs of the occupancy grid (REFERENCE.md §1 item 4);
+Cells are (row, column) pairs of the occupancy grid (docs/robots.md §2);
 directions are 0..7 counter-clockwise, 45° apart (0 = +row).
 """
 

@@ -1,4 +1,4 @@
-"""Path planning of the map server (REFERENCE §3.4, §4).
+"""Path planning of the map server (docs/robots.md §3).
 
 The planning grid is the inflated static map plus the other robots (cell, gap
 rule, look-ahead), with the requester's neighbours freed. The model's A*
@@ -70,7 +70,7 @@ def planning_grid(
     dims: Dims,
     profile: Profile,
 ) -> np.ndarray:
-    """Grid for one path request (§3.4).
+    """Grid for one path request (docs/robots.md §3).
 
     Args:
         static_inflated: static occupancy dilated once by the profile's rule (precomputed by
@@ -125,7 +125,8 @@ def _walk_back(parent: dict[Cell, Cell], goal: Cell) -> list[Cell]:
 
 
 def _astar_model(grid: np.ndarray, start: Cell, goal: Cell) -> SearchResult:
-    """The model's A*: 7 neighbours, insertion-ordered open list, first discovery (§4.1)."""
+    """The model's A*: 7 neighbours, insertion-ordered open list, first discovery
+    (docs/robots.md §3)."""
     rows, cols = grid.shape
     blocked = grid.tolist()  # nested lists index faster than numpy scalars
     g: dict[Cell, float] = {start: 0.0}
@@ -232,7 +233,7 @@ def generate_path(grid: np.ndarray, start: Cell, goal: Cell, profile: Profile) -
 
 
 def remove_zigzags(path: Sequence[Cell]) -> list[Cell]:
-    """The model's zig-zag removal (§4.2 item 2); the start is never output.
+    """The model's zig-zag removal (docs/robots.md §3); the start is never output.
 
     With P[1..n] the raw path, P[i] is dropped when 3 ≤ i ≤ n−1, P[i−1] was not
     dropped, and P[i] is one orthogonal step from both P[i−1] and P[i+1].
@@ -260,11 +261,11 @@ def _pure(a: Cell, b: Cell) -> bool:
 
 
 def consolidate_waypoints(start: Cell, waypoints: Sequence[Cell]) -> list[Cell]:
-    """Collapse straight runs of waypoints to their end point (§4.2 item 3).
+    """Collapse straight runs of waypoints to their end point (docs/robots.md §3).
 
     A waypoint is replaced by the next one when both legs (from the previous
     kept point, and onwards) are straight 8-way segments in the same
-    direction, so the sign-direction walk of §4.4 still lands on every
+    direction, so the sign-direction walk (docs/robots.md §3) still lands on every
     remaining waypoint. Directions are taken from the previous *kept* point
     (the C++ code takes them from the last raw point).
     """
@@ -291,7 +292,7 @@ def plan_waypoints(
 
     Returns:
         The waypoints (start excluded); empty on failure and when start == goal
-        (§4.2 item 5).
+        (docs/robots.md §3).
     """
     path = generate_path(grid, start, goal, profile)
     if not path:

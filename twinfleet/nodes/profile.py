@@ -1,8 +1,8 @@
 """Behaviour profiles: every switch between the paper's model and the intended behaviour.
 
-REFERENCE.md §12 lists the knobs. ``REBECA`` reproduces the Timed Rebeca model
-(MODEL HEAD) bit for bit where that matters; ``FIXED`` is the corrected,
-intended behaviour and the default.
+`Profile` has one attribute per knob (docs/robots.md §9). ``REBECA`` reproduces the Timed
+Rebeca model bit for bit where that matters; ``FIXED`` is the corrected, intended
+behaviour and the default.
 """
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ from typing import Literal
 
 @dataclass(frozen=True, slots=True)
 class Profile:
-    """All behaviour switches of the robot system (REFERENCE.md §12).
+    """All behaviour switches of the robot system.
 
     Attributes:
         name: profile name as written in scenario files.
@@ -27,10 +27,10 @@ class Profile:
             marks towards lower rows and columns) or ``"full"`` (8-neighbour dilation).
         occupancy: ``"gray204"`` (occupied iff gray < 204) or ``"ros_trinary"``
             (ROS map_server thresholds from the YAML, unknown counts as occupied).
-        scan_mode: ``"model"`` (§5.1 exactly) or ``"exact"`` (centre origin,
-            -90..+90 every increment, exact trig).
-        collision: ``"corner_box"`` (strict two-corner box test, §7.2) or ``"sat"``
-            (exact oriented rectangles with margin).
+        scan_mode: ``"model"`` (the model's scan exactly, docs/robots.md §4) or ``"exact"``
+            (centre origin, -90..+90 every increment, exact trig).
+        collision: ``"corner_box"`` (strict two-corner box test, docs/robots.md §7) or
+            ``"sat"`` (exact oriented rectangles with margin).
         rotation: ``"model"`` (125·|Δ|+1, no wrap) or ``"shortest"``.
         validate_backoff: drop back-off candidates whose target is off-map or blocked.
         track_front_obstacle: keep the model's informational ``front_obstacle`` (free hops
@@ -42,9 +42,9 @@ class Profile:
             robots in the neighbouring lane stop instead of brushing past (the
             model's point-sized band lets diagonal neighbours overlap).
         report_arrival_pose: a robot that arrives publishes its (stopped) pose before
-            its "arrived" status; the model never reports stopping (§11 M7).
+            its "arrived" status; the model never reports arriving (docs/robots.md §5).
         collide_unheard: the map server's collision test includes robots it has not
-            heard from yet, at the unknown cell, as the model does (§7.2); the fixed
+            heard from yet, at the unknown cell, as the model does (docs/robots.md §7); the fixed
             profile skips them.
     """
 

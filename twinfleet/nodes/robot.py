@@ -1,6 +1,6 @@
 """The robot node: Algorithms 1–3 of the paper as the Timed Rebeca model runs them.
 
-Loops (REFERENCE.md §2.3): the *motion loop* `update_moving_status` re-arms
+Loops (docs/robots.md §1): the *motion loop* `update_moving_status` re-arms
 itself after each rotation or hop; while waiting, each scan delivery
 re-evaluates at once (the *waiting loop*); after `max_waiting_rounds` blocked
 evaluations the robot backs off to a cell picked by `ctx.choose` and re-plans.
@@ -41,7 +41,7 @@ MAX_FAILURES = 2  # a third failed plan leaves the robot stuck (the model's live
 
 @dataclass(frozen=True)
 class RobotParams:
-    """Parameters of one robot (REFERENCE.md §9)."""
+    """Parameters of one robot (defaults: docs/robots.md §8)."""
 
     map: str
     start: tuple[int, int]
@@ -138,7 +138,7 @@ class Robot(Node):
 
     @handler(priority=10)
     def on_path(self, ctx: Context, reply: Path | CallError) -> None:
-        """A new plan: follow it, or count a failure and back off (REFERENCE §6.5)."""
+        """A new plan: follow it, or count a failure and back off (docs/robots.md §6)."""
         st = self.state
         self._stop(flush=True)
         cells = reply.cells if isinstance(reply, Path) else ()
@@ -159,7 +159,7 @@ class Robot(Node):
 
     @handler(priority=1)
     def update_moving_status(self, ctx: Context, move_next: bool) -> None:
-        """The decision step: re-plan, rotate, hop or wait (REFERENCE §6.3)."""
+        """The decision step: re-plan, rotate, hop or wait (docs/robots.md §5)."""
         st = self.state
         if st.move_idx >= len(st.moves):
             self._moves_exhausted(ctx)
@@ -236,7 +236,7 @@ class Robot(Node):
 
     def _wait(self, ctx: Context) -> None:
         st = self.state
-        st.velocity = 0  # not reported: the map server keeps the last speed (§6.3 B4)
+        st.velocity = 0  # not reported: the map server keeps the last speed (docs/robots.md §5)
         if not st.waiting:
             self._report_status(ctx, "waiting")
         st.waiting = True

@@ -1,4 +1,4 @@
-"""Laser scan (REFERENCE §5.1) and the robot's use of it (§5.2).
+"""Laser scan and the robot's use of it (docs/robots.md §4).
 
 A scan returns the *cells* of the first obstacle hit by each beam. The model
 mode reproduces the Timed Rebeca model exactly (corner origin, 92 beams at
@@ -51,7 +51,7 @@ class ScanTables:
 
 
 def _model_trig(angle_deg: int) -> tuple[float, float]:
-    # The model reads a table rounded to 4 decimals by PHP (§5.3).
+    # The model reads cos and sin from a table rounded to 4 decimals (docs/robots.md §4).
     rad = math.radians(angle_deg % 360)
     return round(math.cos(rad), 4), round(math.sin(rad), 4)
 
@@ -195,7 +195,7 @@ def frontal_clearance(
     robot_width: float,
     safe_margin: float,
 ) -> float:
-    """Distance (m) to the nearest obstacle centre ahead in direction ``d`` (§5.2).
+    """Distance (m) to the nearest obstacle centre ahead in direction ``d`` (docs/robots.md §4).
 
     Obstacles count when forward > 0 and |lateral| ≤ max(W/2, steplen/2) + margin.
     The arithmetic follows the model's operation order so that its floating
@@ -226,7 +226,8 @@ def stepwise_free(
     robot_width: float,
     safe_margin: float,
 ) -> int:
-    """Free hops before the nearest obstacle in ``d``: trunc(f/steplen), 9999 if none (§5.2)."""
+    """Free hops before the nearest obstacle in ``d``: trunc(f/steplen), 9999 if none
+    (docs/robots.md §4)."""
     f = frontal_clearance(robot_cell, d, obstacle_cells, res, robot_width, safe_margin)
     if f == NO_OBSTACLE:
         return int(NO_OBSTACLE)
@@ -241,7 +242,7 @@ def stop_threshold(d: int, dims: Dims) -> float:
 
 def can_hop(robot_cell: Cell, d: int, obstacles: Sequence[Cell], dims: Dims,
             robots: Sequence[Cell] = ()) -> bool:
-    """True if the robot may hop one cell in direction ``d`` (§6.3 B2/B3).
+    """True if the robot may hop one cell in direction ``d`` (the stop check, docs/robots.md §4).
 
     ``obstacles`` are point-sized (the model's ±(W/2 + margin) band); ``robots``
     are cells known to hold another robot, tested with a band one robot width

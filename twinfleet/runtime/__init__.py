@@ -8,10 +8,10 @@
     tools/     monitors (ROS 2-style verbs), recordings, the web viewer and the Foxglove bridge
     cli/       the runtime's commands
 
-Each wing imports only the wings below it (tests/test_layering.py reads the rule from
-`WING_RULES` there): contract nothing of ours; scenario and core the contract; host core
-and scenario; fleet host; tools fleet; cli anything. The contract, scenario and core load
-neither asyncio nor Zenoh, so the checker can use them.
+Each wing imports only the wings below it (tests/test_layering.py: `RULES`): contract
+nothing of ours; scenario and core the contract; host core and scenario; fleet host; tools
+fleet; cli anything. The contract, scenario and core load neither asyncio nor Zenoh, so the
+checker can use them. `tools/` groups three wings (monitor, record, view: `TOOLS_RULES`).
 """
 
 __all__ = [

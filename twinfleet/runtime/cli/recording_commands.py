@@ -145,7 +145,15 @@ def cmd_export(args: argparse.Namespace) -> int:
 
 
 def register(sub: argparse._SubParsersAction) -> None:
-    """Add `record`, `play` and `export` to the `twinfleet` subcommands."""
+    """Add `record`, `play`, `bag` and `export` to the `twinfleet` subcommands."""
+    _add_record(sub)
+    _add_play(sub)
+    _add_bag(sub)
+    _add_export(sub)
+
+
+def _add_record(sub: argparse._SubParsersAction) -> None:
+    """`twinfleet record [SCENARIO] -o FILE`."""
     r = sub.add_parser("record", help="record every fleet topic to an MCAP file")
     r.add_argument("scenario", nargs="?", default=None,
                    help="scenario YAML to launch and record (omit to record a running fleet "
@@ -173,6 +181,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "a SCENARIO imports its nodes' messages itself, and with --connect the "
                         "running nodes serve theirs; needed only for types no node knows)")
     r.set_defaults(func=cmd_record)
+
+
+def _add_play(sub: argparse._SubParsersAction) -> None:
+    """`twinfleet play FILE`."""
     p = sub.add_parser("play", help="re-publish an MCAP recording onto Zenoh")
     p.add_argument("file", help="MCAP file written by `twinfleet record`")
     p.add_argument("--rate", type=float, default=1.0, metavar="K",
@@ -187,6 +199,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.description = ("Re-publish a recording at its recorded pace. Without --connect, play is "
                      "its own Zenoh router on a free port and registers the recorded fleet, so "
                      "`twinfleet topic echo /poses` (or view, foxglove) finds it.")
+
+
+def _add_bag(sub: argparse._SubParsersAction) -> None:
+    """`twinfleet bag info FILE` and `twinfleet bag repair FILE`."""
     bag = sub.add_parser("bag", help="inspect recordings (ros2 bag style)")
     bs = bag.add_subparsers(dest="action", required=True, metavar="ACTION")
     bi = bs.add_parser("info", help="summarise a recording: duration, messages per topic, schemas",
@@ -202,6 +218,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                   "a second, so at most the last half second is lost.",
                   ("MCAP file, e.g. run.mcap", "write the repaired copy here (default: replace "
                    "FILE)"), required=False)
+
+
+def _add_export(sub: argparse._SubParsersAction) -> None:
+    """`twinfleet export FILE -o OUT`."""
     _file_command(sub, "export", cmd_export,
                   "write a copy of a recording that Foxglove draws as it is",
                   "Copy an MCAP file written by `twinfleet record` with every message as JSON "

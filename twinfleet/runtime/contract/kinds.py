@@ -42,7 +42,8 @@ class EventKind(StrEnum):
 
     @property
     def is_message(self) -> bool:
-        """True for events another node sent: they keep per-sender order (DESIGN.md §4)."""
+        """True for events another node sent: they keep per-sender order (Rule 3 of
+        `checker.semantics`; docs/design.md §3)."""
         return self in _MESSAGES
 
 

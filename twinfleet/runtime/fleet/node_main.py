@@ -32,7 +32,7 @@ from collections.abc import Sequence
 
 import msgpack
 
-from twinfleet.runtime.contract.node import QOS_DEFAULT
+from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.core.state_report import StateReporter
 from twinfleet.runtime.core.statistics import NodeStatistics, StatisticsError
@@ -45,7 +45,7 @@ from twinfleet.runtime.host.replay_gate import LogicalClock
 from twinfleet.runtime.host.schemas import registered_schemas
 from twinfleet.runtime.host.transport import Respond
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
-from twinfleet.runtime.scenario.spec import Scenario, ScenarioError
+from twinfleet.runtime.scenario.spec import NodeConfig, Scenario, ScenarioError
 
 _PR_SET_PDEATHSIG = 1
 PARENT_ENV = "TWINFLEET_LAUNCHER_PID"
@@ -130,31 +130,70 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
     node = cfg.instantiate()
     live = scenario.live
     time_scale = args.time_scale if args.time_scale is not None else live.time_scale
-    stop_on_error = bool(args.stop_on_error if args.stop_on_error is not None
-                         else live.stop_on_error)
     clock: Clock = LogicalClock() if args.gate else FleetClock(args.epoch_ns, time_scale)
     try:
-        login, key = node_secrets()
-        limit = int(os.environ[LIMIT_ENV]) if os.environ.get(LIMIT_ENV) else None
-        settings = login.settings() if login else {}
-        if limit is not None:  # Zenoh itself refuses larger frames (the router does too)
-            settings["transport/link/rx/max_message_size"] = limit + 1024
-        config = zenoh_config(connect=[args.connect], settings=settings)
+        transport = _transport(args)
     except ValueError as exc:  # a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE or secret
         print(f"error: {exc}", file=sys.stderr)
         return 2
-    transport = ZenohTransport(config, key=key, limit=limit)
-    peers = () if args.no_wait else tuple(n.name for n in scenario.nodes)
     seed = args.seed if args.seed is not None else scenario.seed
-    events = None
-    if args.record_events:
-        events = EventLog(args.record_events, node=node.name, scenario=str(scenario.path),
-                          seed=seed, time_scale=time_scale, epoch_ns=getattr(clock, "epoch_ns", None),
-                          gated=bool(args.gate))
-    host = NodeHost(node, transport, clock, seed=seed, fleet=scenario.fleet,
+    events = _event_log(args, scenario, node.name, seed, time_scale, clock)
+    host = _host(args, scenario, node, transport, clock, seed, events)
+    stopping = _stop_on_signals(host)
+    await transport.open()
+    if stopping.is_set():
+        await transport.close()
+        return 0
+    _serve(args, scenario, cfg, host, transport)
+    try:
+        await host.run()
+    finally:
+        faulthandler.dump_traceback_later(args.close_timeout, exit=True)
+        await transport.close()
+        faulthandler.cancel_dump_traceback_later()
+        if events is not None:
+            events.close()
+    print(f"stopped: {host.statistics().line()}", file=sys.stderr, flush=True)
+    return 1 if host.failed else 0
+
+
+def _transport(args: argparse.Namespace) -> ZenohTransport:
+    """The node's Zenoh transport: a client of ``--connect`` with the login and payload
+    limit the launcher put in the environment; ValueError for a bad secret or override."""
+    login, key = node_secrets()
+    limit = int(os.environ[LIMIT_ENV]) if os.environ.get(LIMIT_ENV) else None
+    settings = login.settings() if login else {}
+    if limit is not None:  # Zenoh itself refuses larger frames (the router does too)
+        settings["transport/link/rx/max_message_size"] = limit + 1024
+    config = zenoh_config(connect=[args.connect], settings=settings)
+    return ZenohTransport(config, key=key, limit=limit)
+
+
+def _event_log(args: argparse.Namespace, scenario: Scenario, name: str, seed: int,
+               time_scale: float, clock: Clock) -> EventLog | None:
+    """The event log ``--record-events`` asks for, or None."""
+    if not args.record_events:
+        return None
+    return EventLog(args.record_events, node=name, scenario=str(scenario.path),
+                    seed=seed, time_scale=time_scale, epoch_ns=getattr(clock, "epoch_ns", None),
+                    gated=bool(args.gate))
+
+
+def _host(args: argparse.Namespace, scenario: Scenario, node: Node, transport: ZenohTransport,
+          clock: Clock, seed: int, events: EventLog | None) -> NodeHost:
+    """The node's host loop as the command line and the scenario's live settings say."""
+    stop_on_error = bool(args.stop_on_error if args.stop_on_error is not None
+                         else scenario.live.stop_on_error)
+    peers = () if args.no_wait else tuple(n.name for n in scenario.nodes)
+    return NodeHost(node, transport, clock, seed=seed, fleet=scenario.fleet,
                     stop_on_error=stop_on_error, wait_for=peers, events=events,
                     gated=bool(args.gate), stall_ms=args.stall_ms,
                     fleet_epoch=args.fleet_epoch and not args.gate, restarted=args.restarted)
+
+
+def _stop_on_signals(host: NodeHost) -> asyncio.Event:
+    """Stop `host` on SIGINT or SIGTERM; the event tells a signal that came before the
+    session was open."""
     stopping = asyncio.Event()
 
     def on_signal() -> None:
@@ -164,10 +203,14 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, on_signal)
-    await transport.open()
-    if stopping.is_set():
-        await transport.close()
-        return 0
+    return stopping
+
+
+def _serve(args: argparse.Namespace, scenario: Scenario, cfg: NodeConfig, host: NodeHost,
+           transport: ZenohTransport) -> None:
+    """Declare what the process answers besides the node's own services: its statistics,
+    its message schemas and its description, and (``--monitor``) its state reports."""
+    node = host.node
 
     def serve_stats(_payload: bytes, respond: Respond) -> None:
         respond(statistics_payload(host.statistics()), "")
@@ -182,16 +225,6 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
 
     transport.serve(node_key(scenario.fleet, KeyKind.TYPES, node.name), serve_types)
     serve_info(transport, scenario.fleet, node, cfg.class_path)
-    try:
-        await host.run()
-    finally:
-        faulthandler.dump_traceback_later(args.close_timeout, exit=True)
-        await transport.close()
-        faulthandler.cancel_dump_traceback_later()
-        if events is not None:
-            events.close()
-    print(f"stopped: {host.statistics().line()}", file=sys.stderr, flush=True)
-    return 1 if host.failed else 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -34,7 +34,7 @@ import stat
 import tempfile
 import time
 from collections.abc import Mapping, Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -198,10 +198,3 @@ def find_fleet(fleet: str = "*", entries: Sequence[FleetEntry] | None = None) ->
                             "--fleet NAME" + (" (or --connect EP)" if twice else ""))
     raise RegistryError(f"{len(matching)} fleets named {fleet!r} are running: {names}; choose "
                         "one with --connect EP")
-
-
-def entry_dict(entry: FleetEntry) -> dict[str, Any]:
-    """An entry as JSON-ready values (for `--json` output and tests)."""
-    doc = asdict(entry)
-    doc["path"] = str(entry.path) if entry.path else None
-    return doc

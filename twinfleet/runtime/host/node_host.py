@@ -15,7 +15,7 @@ only connects it to the world:
   timeouts) with one clock timer, re-armed when that time changes, so timers
   scale with ``--time-scale`` and a `ManualClock` drives them in tests.
 
-Thread hand-off (DESIGN.md §3). Transports call back on the loop; Zenoh's
+Thread hand-off (docs/design.md §2). Transports call back on the loop; Zenoh's
 threads only append to the transport's hand-off deque. With a transport that
 calls back after each burst of samples (`after_burst`), deliveries schedule no
 loop callback: the burst's handlers run in the same loop iteration. Other
@@ -29,7 +29,7 @@ also waits for the launcher's epoch token and takes it as the clock's time 0:
 what arrived before keeps its order (`NodeCore.shift_arrivals`) and the start
 handlers run at time 0 (a ``restarted`` node's at the time it restarted).
 
-Event log and replay gate (issue 6): ``events=EventLog(...)`` makes the log an
+Event log and replay gate: ``events=EventLog(...)`` makes the log an
 observer of the core; ``gated=True`` puts a `ReplayGate` in charge (it needs a
 `LogicalClock`): the core holds every message, nothing drains by itself, and
 whatever arrives makes the gate look for the event its waiting grant names.

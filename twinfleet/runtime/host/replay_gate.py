@@ -1,4 +1,4 @@
-"""The replay gate of a live node: only the events a replay coordinator grants run (issue 6).
+"""The replay gate of a live node: only the events a replay coordinator grants run.
 
 A gated node (``node_main --gate``) runs on a `LogicalClock` over a
 `runtime.core.node_core.NodeCore` that holds every message it receives (no KEEP_LAST)

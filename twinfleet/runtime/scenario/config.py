@@ -105,7 +105,6 @@ class CheckConfig:
     max_states: int | None = None
     max_depth: int | None = None
     max_time_s: float | None = None
-    stop_at_first: bool = True
     global_priority: bool = False
     latency: PerName[Range] = PerName()
     deadline_ms: PerName[int] = PerName()
@@ -119,8 +118,7 @@ class CheckConfig:
         for name in ("max_states", "max_depth"):
             _optional(self, "check", name, _count)
         _optional(self, "check", "max_time_s", _seconds)
-        for name in ("stop_at_first", "global_priority"):
-            _bool(f"check.{name}", getattr(self, name))
+        _bool("check.global_priority", self.global_priority)
         _set(self, "latency", _per_name("check.latency", self.latency, _range))
         _set(self, "deadline_ms", _per_name("check.deadline_ms", self.deadline_ms, _ms))
         _set(self, "queue_bound", _per_name("check.queue_bound", self.queue_bound, _bound))

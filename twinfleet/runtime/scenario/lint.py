@@ -7,7 +7,7 @@ errors (the checker's contract checks, `checker.diagnosis`, are what decide):
 - **Imports.** A node module that imports `random`, `time`, `datetime`,
   `threading`, `secrets`, `uuid`, `asyncio`, `socket`, `multiprocessing`, or
   uses `os.urandom` or `numpy.random`, or a node method with a `global` statement, is named with file
-  and line: a handler that uses them breaks the node contract (DESIGN.md §2).
+  and line: a handler that uses them breaks the node contract (docs/design.md §7, contract breach).
 - **Topics and services.** Topics a node publishes (literal names of
   ``ctx.publish``; an f-string is a pattern, ``f"/{robot}/scan"`` matches
   ``/r1/scan``; any other expression could be anything) that no node of the

@@ -22,7 +22,6 @@ from __future__ import annotations
 import contextlib
 import json
 import time
-from collections import defaultdict
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import Any
@@ -249,11 +248,3 @@ def topic_types(session: zenoh.Session, fleet: str, topics: Iterable[tuple[str, 
     rest = [t for t in wanted if t not in found]
     found.update(sample_types(session, fleet, rest, timeout_s, latched_topics(infos)))
     return found
-
-
-def group_by_type(types: dict[tuple[str, str], str]) -> dict[str, list[tuple[str, str]]]:
-    """Type name → the (fleet, topic)s that carry it."""
-    out: dict[str, list[tuple[str, str]]] = defaultdict(list)
-    for where, kind in sorted(types.items()):
-        out[kind].append(where)
-    return dict(out)

@@ -342,51 +342,91 @@ def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
     Returns 0, or 2 when the file holds no twinfleet messages.
     """
     import zenoh
-    from zenoh import ext
 
     if not rate > 0:
         raise ValueError(f"rate must be > 0, got {rate}")
     with open(path, "rb") as stream, zenoh.open(make_config()) as session:
         reader = make_reader(stream)
         summary = reader.get_summary()
-        pubs: dict[int, Any] = {}
-
-        def publisher(channel: Any) -> Any:
-            if channel.message_encoding != "msgpack":
-                raise ValueError(f"{path}: channel {channel.topic} is {channel.message_encoding}-"
-                                 "encoded (an exported copy?); play needs the msgpack recording")
-            key = topic_expr(fleet, channel.topic) if fleet else channel.metadata.get("key")
-            if not key:
-                raise ValueError(f"{path}: channel {channel.topic} has no 'key' metadata; "
-                                 "give the fleet to publish into")
-            if channel.metadata.get("durability") == Durability.TRANSIENT_LOCAL.value:
-                pub = ext.declare_advanced_publisher(session, key, cache=ext.CacheConfig(1),
-                                                     publisher_detection=True)
-            else:
-                pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
-            pubs[channel.id] = pub
-            return pub
-
+        pubs = _Publishers(session, path, fleet)
         for channel in (summary.channels.values() if summary else ()):
-            publisher(channel)
+            pubs.declare(channel)
         described = _describe_fleets(session, reader, summary, fleet)
-        deadline = time.monotonic() + wait_s
-        while time.monotonic() < deadline and not any(
-                getattr(p, "matching_status", None) and p.matching_status.matching for p in pubs.values()):
-            time.sleep(0.02)
-        count, started, first = 0, time.monotonic(), None
+        pubs.wait_for_subscriber(wait_s)
+        started = time.monotonic()
         try:
-            for _schema, channel, message in reader.iter_messages(log_time_order=True):
-                first = message.log_time if first is None else first
-                delay = started + (message.log_time - first) / 1e9 / rate - time.monotonic()
-                if delay > 0:
-                    time.sleep(delay)
-                (pubs.get(channel.id) or publisher(channel)).put(message.data)
-                count += 1
+            count = _publish_paced(reader, pubs, rate, started)
             time.sleep(linger_s)
         finally:
-            for entity in [*pubs.values(), *described]:
+            pubs.undeclare()
+            for entity in described:
                 entity.undeclare()
     print(f"played {count} messages on {len(pubs)} topics in {time.monotonic() - started:.1f} s",
           file=out, flush=True)
     return 0 if count else 2
+
+
+def _publish_paced(reader: Any, pubs: _Publishers, rate: float, started: float) -> int:
+    """Publish the messages of `reader` in log-time order, each at its recorded offset from
+    the first divided by `rate` after `started`; return how many."""
+    count, first = 0, None
+    for _schema, channel, message in reader.iter_messages(log_time_order=True):
+        first = message.log_time if first is None else first
+        delay = started + (message.log_time - first) / 1e9 / rate - time.monotonic()
+        if delay > 0:
+            time.sleep(delay)
+        pubs.of(channel).put(message.data)
+        count += 1
+    return count
+
+
+@final
+class _Publishers:
+    """One Zenoh publisher per recorded channel, declared on `play`'s session."""
+
+    def __init__(self, session: Any, path: str | Path, fleet: str | None) -> None:
+        self.session, self.path, self.fleet = session, path, fleet
+        self._pubs: dict[int, Any] = {}
+
+    def __len__(self) -> int:
+        return len(self._pubs)
+
+    def declare(self, channel: Any) -> Any:
+        """The publisher of `channel`: on its recorded key, or on its topic in `fleet`;
+        latched topics through an advanced publisher, so late subscribers get the last."""
+        import zenoh
+        from zenoh import ext
+
+        path, fleet, session = self.path, self.fleet, self.session
+        if channel.message_encoding != "msgpack":
+            raise ValueError(f"{path}: channel {channel.topic} is {channel.message_encoding}-"
+                             "encoded (an exported copy?); play needs the msgpack recording")
+        key = topic_expr(fleet, channel.topic) if fleet else channel.metadata.get("key")
+        if not key:
+            raise ValueError(f"{path}: channel {channel.topic} has no 'key' metadata; "
+                             "give the fleet to publish into")
+        if channel.metadata.get("durability") == Durability.TRANSIENT_LOCAL.value:
+            pub = ext.declare_advanced_publisher(session, key, cache=ext.CacheConfig(1),
+                                                 publisher_detection=True)
+        else:
+            pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
+        self._pubs[channel.id] = pub
+        return pub
+
+    def of(self, channel: Any) -> Any:
+        """The publisher of `channel`, declared on first use if the summary had no such channel."""
+        return self._pubs.get(channel.id) or self.declare(channel)
+
+    def wait_for_subscriber(self, wait_s: float) -> None:
+        """Wait up to `wait_s` for some publisher to match a subscriber (the first messages
+        would otherwise go nowhere)."""
+        deadline = time.monotonic() + wait_s
+        while time.monotonic() < deadline and not any(
+                getattr(p, "matching_status", None) and p.matching_status.matching
+                for p in self._pubs.values()):
+            time.sleep(0.02)
+
+    def undeclare(self) -> None:
+        """Undeclare every publisher."""
+        for pub in self._pubs.values():
+            pub.undeclare()

@@ -1,0 +1,117 @@
+"""How a run of the fleet ended: `FleetResult`, its summary lines and its run-record summary."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Any
+
+from twinfleet.runtime.contract.kinds import Status
+from twinfleet.runtime.fleet.connection import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from twinfleet.runtime.fleet.live_verdict import RESULT_WORDS, Verdict
+from twinfleet.runtime.fleet.run_record import RunRecord
+
+
+@dataclass(frozen=True)
+class FleetResult:
+    """How a run ended.
+
+    Attributes:
+        fleet: the fleet name (Zenoh key prefix `twinfleet/<fleet>`).
+        endpoint: the router endpoint the nodes connected to.
+        reason: why the run ended ("timeout after 5 s", "shutdown requested by ...", ...).
+        exit_codes: last exit code of every node (negative: killed by that signal).
+        failed: nodes that failed (non-zero exit, or had to be killed).
+        restarts: respawn count per node.
+        last_messages: last message seen on each `live.summary_topics` topic.
+        duration_s: wall time of the run.
+        report: the scenario's run report (`live.report`), if any.
+        verdict: the live verdict on the scenario's properties (None: not monitored).
+        handler_failures: handler failures per node, from the state reports.
+    """
+
+    fleet: str
+    endpoint: str
+    reason: str
+    exit_codes: Mapping[str, int | None]
+    failed: tuple[str, ...]
+    restarts: Mapping[str, int] = field(default_factory=dict)
+    last_messages: Mapping[str, Any] = field(default_factory=dict)
+    duration_s: float = 0.0
+    report: Any = None
+    verdict: Verdict | None = None
+    handler_failures: Mapping[str, int] = field(default_factory=dict)
+    state_reports: int = 0  # state reports the monitor received
+
+    @property
+    def ok(self) -> bool:
+        """True when no node failed."""
+        return not self.failed
+
+    @property
+    def passed(self) -> bool:
+        """True when no node failed and the live verdict (`runtime.fleet.live_verdict`) holds;
+        without one (``monitor=False``), when the scenario's report (if any) says so."""
+        if self.verdict is not None:
+            return self.ok and self.verdict.status is Status.HOLDS
+        return self.ok and (self.report is None or self.report.passed())
+
+    @property
+    def interrupted(self) -> bool:
+        """True when the run ended on SIGINT or SIGTERM (Ctrl-C, a stop request)."""
+        return ended_by_signal(self.reason)
+
+    @property
+    def exit_code(self) -> int:
+        """0 passed, 1 violated or a node failed, 2 a property raised, 3 inconclusive,
+        130 interrupted (`runtime.fleet.connection`)."""
+        if self.verdict is not None:
+            return self.verdict.exit_code
+        if self.interrupted:
+            return EXIT_INTERRUPTED
+        return EXIT_OK if self.passed else EXIT_FAILED
+
+
+def ended_by_signal(reason: str) -> bool:
+    """Whether a run's end `reason` is a signal the launcher turned into an end
+    (`launcher.run_fleet`, ``handle_signals``)."""
+    return reason.startswith(("SIGINT", "SIGTERM"))
+
+
+def format_result(result: FleetResult) -> list[str]:
+    """Human-readable summary lines of a run."""
+    lines = [f"run ended after {result.duration_s:.1f} s: {result.reason}"]
+    for name, code in result.exit_codes.items():
+        failures = result.handler_failures.get(name, 0)
+        status = "FAILED" if name in result.failed else (
+            f"FAILED: {failures} handler failures" if failures else "ok")
+        extra = f", restarts {result.restarts[name]}" if result.restarts.get(name) else ""
+        lines.append(f"  {name}: exit code {code} ({status}{extra})")
+    for topic, msg in result.last_messages.items():
+        lines.append(f"  last on {topic}: {msg}")
+    if result.report is not None:
+        lines += result.report.render().splitlines()
+        if result.verdict is None:
+            status = Status.HOLDS if result.passed else Status.VIOLATED
+            lines.append(f"result: {RESULT_WORDS[status]}")
+    if result.verdict is not None:
+        lines += result.verdict.lines()
+    return lines
+
+
+def record_summary(record: RunRecord, result: FleetResult) -> None:
+    """The run record's ``summary`` line (`runtime.fleet.run_record`)."""
+    report = None
+    if result.report is not None:
+        report = {"passed": result.report.passed(), "text": result.report.render(),
+                  "data": result.report}
+    verdict = None
+    if result.verdict is not None:
+        v = result.verdict
+        verdict = {"status": v.status, "summary": v.summary, "details": list(v.details),
+                   "property": v.property_name, "exit_code": v.exit_code}
+    record.write("summary", ok=result.ok, passed=result.passed, verdict=verdict,
+                 reason=result.reason,
+                 exit_codes=result.exit_codes, failed=result.failed, restarts=result.restarts,
+                 duration_s=round(result.duration_s, 3), last_messages=result.last_messages,
+                 report=report)
