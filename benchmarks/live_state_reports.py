@@ -4,7 +4,7 @@ Each pair runs the shipped C1a scenario twice in this process (`run_fleet`, an
 embedded router and six node processes over Zenoh on loopback), once with the
 live monitor (every node publishes a state report after each handler that
 changed its state; the launcher evaluates the properties) and once without
-(``monitor=False``), alternating which goes first. Measured per run: CPU
+(``judge=False``), alternating which goes first. Measured per run: CPU
 seconds of the node processes (`RUSAGE_CHILDREN`, they are reaped inside the
 run), CPU seconds of the launcher (`RUSAGE_SELF`: the monitor's decoding and
 evaluation), wall seconds, state reports received, and r5's arrival (fleet s;
@@ -47,7 +47,7 @@ def one_run(scenario_path: str, time_scale: float, monitor: bool) -> dict[str, A
     children, own, wall = (_cpu(resource.RUSAGE_CHILDREN), _cpu(resource.RUSAGE_SELF),
                            time.monotonic())
     result = asyncio.run(run_fleet(scenario, time_scale=time_scale, timeout_s=120,
-                                   out=io.StringIO(), handle_signals=False, monitor=monitor))
+                                   out=io.StringIO(), handle_signals=False, judge=monitor))
     report = result.report
     r5 = report.records["r5"].arrival_ms if report is not None else None
     return {"nodes_cpu_s": _cpu(resource.RUSAGE_CHILDREN) - children,

@@ -1,4 +1,9 @@
-"""Source rules that imports do not show: the framework does not know the case study by name.
+"""Source rules that imports do not show.
+
+- The framework does not know the case study by name (below).
+- The fleet reads node statistics by field, never `stats.get(`.
+- Production never reads its own source (`inspect.getsource(` only under tests/).
+- Key expressions are built only in `runtime/host/keys.py` (tests/runtime/test_keys.py).
 
 `twinfleet/runtime/` draws, records and lists any fleet; what the robot case
 study publishes is known to `twinfleet/nodes/` (its scene,
@@ -48,3 +53,32 @@ def test_the_runtime_names_no_message_type_of_the_case_study():
             if any(package in line for package in packages):
                 hits.append(f"{path.relative_to(ROOT)}:{number}: {line.decode(errors='replace')}")
     assert hits == [], "the case study's message types, named in the framework:\n" + "\n".join(hits)
+
+
+def _python_sources(folder: Path) -> list[Path]:
+    return sorted(p for p in folder.rglob("*.py") if "__pycache__" not in p.parts)
+
+
+def _lines_with(text: str, folder: Path) -> list[str]:
+    return [f"{path}:{number}: {line.strip()}"
+            for path in _python_sources(folder)
+            for number, line in enumerate(path.read_text().splitlines(), 1) if text in line]
+
+
+def test_node_statistics_are_read_by_field_in_the_fleet():
+    """The live verdict and the launcher read `NodeStatistics` fields; a renamed counter is
+    then a type error, not a silent zero."""
+    assert _lines_with("stats.get(", RUNTIME / "fleet") == []
+
+
+def test_production_never_reads_its_own_source():
+    """The reduction's rules fingerprint is a test (tests/checker/test_reduction_rules.py);
+    an install without sources works. (The load-time lint reads the *user's* node source
+    with `inspect.getsourcelines`, which is its job.)"""
+    assert _lines_with("inspect.getsource(", ROOT / "twinfleet") == []
+
+
+def test_the_rules_catch_what_they_look_for(tmp_path):
+    (tmp_path / "m.py").write_text("x = stats.get('gaps', 0)\ny = inspect.getsource(f)\n")
+    assert len(_lines_with("stats.get(", tmp_path)) == 1
+    assert len(_lines_with("inspect.getsource(", tmp_path)) == 1

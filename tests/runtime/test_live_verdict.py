@@ -1,5 +1,5 @@
 """The live verdict without a fleet: state reports from real node cores, judged by a
-`LiveMonitor`; the core's lossless-drop and stall counters; the verdict's precedence."""
+`LiveJudge`; the core's lossless-drop and stall counters; the verdict's precedence."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ from twinfleet.runtime.contract.messages import encode
 from twinfleet.runtime.core.node_core import NodeCore
 from twinfleet.runtime.core.state_report import StateReport, StateReporter, decode_report
 from twinfleet.runtime.core.statistics import NodeStatistics, Rejection
-from twinfleet.runtime.fleet.live_verdict import LiveMonitor, RunEnd, stall_floor_ms
+from twinfleet.runtime.fleet.live_verdict import LiveJudge, RunEnd, stall_floor_ms
 from twinfleet.runtime.scenario.spec import NodeEntry, Scenario
 
 pytestmark = pytest.mark.timeout(30)
@@ -29,11 +29,11 @@ class Fleet:
     """Node cores whose state reports go straight to a monitor (as the launcher's do)."""
 
     def __init__(self, sc: Scenario, **monitor: Any) -> None:
-        self.monitor = LiveMonitor(sc, **monitor)
+        self.judge = LiveJudge(sc, **monitor)
         self.cores = {}
         for cfg in sc.nodes:
             node = cfg.instantiate()
-            core = NodeCore(node, seed=1, stall_ms=self.monitor.stall_ms)
+            core = NodeCore(node, seed=1, stall_ms=self.judge.stall_ms)
             core.observe(StateReporter(node, self._put(node.name)))
             self.cores[node.name] = core
         self.wire: list[tuple[str, bytes]] = []
@@ -54,11 +54,11 @@ class Fleet:
                     pass
         for i, (name, payload) in enumerate(self.wire):
             if i != drop:
-                self.monitor.on_report(decode_report(name, payload))
+                self.judge.on_report(decode_report(name, payload))
 
     def verdict(self, **end: Any):
         stats = {n: NodeStatistics() for n in self.cores}  # nothing lost
-        return self.monitor.verdict(RunEnd(end.pop("reason", "timeout"), statistics=stats, **end))
+        return self.judge.verdict(RunEnd(end.pop("reason", "timeout"), statistics=stats, **end))
 
 
 def test_an_invariant_violated_names_the_property_the_event_and_the_states():
@@ -78,7 +78,7 @@ def test_a_handler_failure_violates_the_scenarios_no_failure_property():
     assert (v.status, v.property_name) == (Status.VIOLATED, "clean")
     assert "counter.tick: ValueError: count reached 2" in v.summary
     # rolled back, the state stays where the handler raised, so every later tick raises again
-    assert fleet.monitor.failures == {"counter": 3}
+    assert fleet.judge.failures == {"counter": 3}
 
 
 def judged(*props: dict[str, Any], until_ms: int = 300):
@@ -134,7 +134,7 @@ LOSSY: list[tuple[NodeStatistics, str]] = [
 def test_final_statistics_that_show_lost_input_make_it_inconclusive(stats, said):
     fleet = Fleet(scenario({"name": "small", "kind": "invariant", "expr": "counter.count < 3"}))
     fleet.run(300)
-    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"counter": stats,
+    v = fleet.judge.verdict(RunEnd("timeout", statistics={"counter": stats,
                                                             "other": NodeStatistics()}))
     assert v.status == Status.INCONCLUSIVE and said in v.summary, v
     assert any("seen, but not conclusive: small violated" in d for d in v.details)
@@ -152,14 +152,14 @@ def test_statistics_that_count_no_loss_leave_the_verdict_alone():
     busy = NodeStatistics(received=40, handled=40, published=12, dropped_keep_last=3,
                           dropped_best_effort=2, sequence_jumps=1, max_lateness_ms=30,
                           stall_threshold_ms=200)
-    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"counter": busy, "other": busy}))
+    v = fleet.judge.verdict(RunEnd("timeout", statistics={"counter": busy, "other": busy}))
     assert v.status == Status.HOLDS, v
 
 
 def test_statistics_the_launcher_could_not_read_make_it_inconclusive():
     fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
     fleet.run(100)
-    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"other": NodeStatistics()},
+    v = fleet.judge.verdict(RunEnd("timeout", statistics={"other": NodeStatistics()},
                                      running=("counter", "other"),
                                      unreadable={"counter": "unknown counters 'lost'"}))
     assert v.status == Status.INCONCLUSIVE, v
@@ -169,7 +169,7 @@ def test_statistics_the_launcher_could_not_read_make_it_inconclusive():
 def test_a_running_node_that_does_not_answer_for_its_statistics_is_inconclusive():
     fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
     fleet.run(100)
-    v = fleet.monitor.verdict(RunEnd("timeout", statistics={"other": NodeStatistics()},
+    v = fleet.judge.verdict(RunEnd("timeout", statistics={"other": NodeStatistics()},
                                      running=("counter", "other")))
     assert v.status == Status.INCONCLUSIVE and "counter did not answer" in v.summary
 
@@ -200,7 +200,7 @@ def test_reports_only_when_the_state_changed_or_a_handler_failed():
     fleet.run(200)
     # ticks at 50..200 change each counter: 4 reports per node, none for unchanged states
     assert [n for n, _ in fleet.wire].count("counter") == 4
-    assert fleet.monitor.reads() == {"counter"}
+    assert fleet.judge.reads() == {"counter"}
 
 
 def test_the_core_counts_lossless_drops_apart_and_stalls_against_its_threshold():
@@ -241,17 +241,17 @@ def test_reports_of_strangers_are_ignored_and_a_broken_state_is_inconclusive():
     fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
     fleet.run(100)
     stranger = StateReport("intruder", 1, 0, "start", "x", "", "", "boom", None)
-    fleet.monitor.on_report(stranger)
-    assert fleet.monitor.strangers == 1 and fleet.verdict().status == Status.HOLDS
+    fleet.judge.on_report(stranger)
+    assert fleet.judge.strangers == 1 and fleet.verdict().status == Status.HOLDS
     broken = StateReport("other", 99, 200, "periodic", "tick", "other", "", None, b"\xc1")
-    fleet.monitor.on_report(broken)
+    fleet.judge.on_report(broken)
     v = fleet.verdict()
     assert v.status == Status.INCONCLUSIVE
     assert "undecodable state" in " ".join([v.summary, *v.details])
 
 
 def test_an_invariant_false_in_the_initial_states_is_violated_at_once():
-    monitor = LiveMonitor(scenario({"name": "started", "kind": "invariant",
+    monitor = LiveJudge(scenario({"name": "started", "kind": "invariant",
                                     "expr": "counter.count > 0"}))
     v = monitor.verdict(RunEnd("timeout", statistics={"counter": NodeStatistics(),
                                                       "other": NodeStatistics()}))

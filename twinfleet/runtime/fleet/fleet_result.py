@@ -51,7 +51,7 @@ class FleetResult:
     @property
     def passed(self) -> bool:
         """True when no node failed and the live verdict (`runtime.fleet.live_verdict`) holds;
-        without one (``monitor=False``), when the scenario's report (if any) says so."""
+        without one (``judge=False``), when the scenario's report (if any) says so."""
         if self.verdict is not None:
             return self.ok and self.verdict.status is Status.HOLDS
         return self.ok and (self.report is None or self.report.passed())

@@ -72,7 +72,7 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     run_record: str | None = None, record_events: str | None = None,
                     node_args: Sequence[str] = (), params: Sequence[str] = (),
                     driver: Callable[[Fleet], Awaitable[str]] | None = None,
-                    monitor: bool = True,
+                    judge: bool = True,
                     auth: fleetauth.MonitorAuth | None = None) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
@@ -94,7 +94,7 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             scenario must already be loaded with them (`introspect.load_with_params`).
         driver: a coroutine function run with the fleet once its nodes started; the run
             ends with the reason it returns (an exception it raises is re-raised).
-        monitor: judge the scenario's properties live (`runtime.fleet.live_verdict`; the
+        judge: judge the scenario's properties live (`runtime.fleet.live_verdict`; the
             result's `verdict`); False: no state reports (the result follows exits and
             the report only).
         auth: with `connect`, the joined fleet's key and logins (default: this machine's
@@ -108,7 +108,7 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
                   out=out, record=record, node_args=[*node_args, *param_arguments(params)],
                   events_dir=fresh_parts_dir(record_events) if record_events else None,
-                  keep_scenario_beside=record_events or run_record, monitor=monitor, auth=auth)
+                  keep_scenario_beside=record_events or run_record, judge=judge, auth=auth)
     started = time.monotonic()
     async with _Launch(fleet, record_events, handle_signals) as launch:
         reason, running = await launch.until_end(timeout_s, params, driver)
@@ -238,7 +238,7 @@ async def _until_end(fleet: Fleet, timeout_s: float | None) -> str:
 async def _final_statistics(fleet: Fleet, record: RunRecord | None, reason: str) -> None:
     """Ask the nodes for their counters (the verdict and the run record read them) and say
     what the launcher's own subscriptions refused."""
-    if record is not None or fleet.monitor is not None:
+    if record is not None or fleet.judge is not None:
         fleet.statistics, fleet.unreadable_statistics = await fleet.node_statistics(
             _STATS_TIMEOUT_S)
     for node, why in fleet.unreadable_statistics.items():
@@ -255,27 +255,27 @@ async def _final_statistics(fleet: Fleet, record: RunRecord | None, reason: str)
 def _result(fleet: Fleet, reason: str, running: Sequence[str], duration_s: float) -> FleetResult:
     """How the run ended, from the fleet after its shutdown."""
     codes = {name: p.exit_code for name, p in fleet.processes.items()}
-    monitor = fleet.monitor
+    judge = fleet.judge
     return FleetResult(fleet=fleet.scenario.fleet, endpoint=fleet.endpoint, reason=reason,
                        exit_codes=codes, failed=tuple(fleet.failed),
                        restarts={n: p.restarts for n, p in fleet.processes.items()},
                        last_messages=dict(fleet.last_messages), duration_s=duration_s,
                        report=fleet.report, verdict=_verdict(fleet, reason, running, codes),
-                       handler_failures=dict(monitor.failures) if monitor else {},
-                       state_reports=monitor.reports if monitor else 0)
+                       handler_failures=dict(judge.failures) if judge else {},
+                       state_reports=judge.reports if judge else 0)
 
 
 def _verdict(fleet: Fleet, reason: str, running: Sequence[str],
              codes: Mapping[str, int | None]) -> Verdict | None:
-    """The live verdict of the run (None without a monitor)."""
-    if fleet.monitor is None:
+    """The live verdict of the run (None when the run is not judged)."""
+    if fleet.judge is None:
         return None
     dropped = fleet.transport.statistics().overflow if fleet.transport is not None else 0
     end = RunEnd(reason, interrupted=ended_by_signal(reason),
                  failed={n: codes.get(n) for n in fleet.failed}, statistics=fleet.statistics,
                  running=tuple(running), dropped_reports=dropped,
                  unreadable=fleet.unreadable_statistics)
-    return fleet.monitor.verdict(end)
+    return fleet.judge.verdict(end)
 
 
 def _register(fleet: Fleet, params: Sequence[str]) -> Path | None:

@@ -37,7 +37,7 @@ from twinfleet.runtime.core.guard import Rejected, check_message, payload_limit
 from twinfleet.runtime.core.state_report import decode_report
 from twinfleet.runtime.core.statistics import NodeStatistics, Rejection, StatisticsError
 from twinfleet.runtime.fleet import fleetauth
-from twinfleet.runtime.fleet.live_verdict import LiveMonitor
+from twinfleet.runtime.fleet.live_verdict import LiveJudge
 from twinfleet.runtime.fleet.node_main import LIMIT_ENV, read_statistics
 from twinfleet.runtime.fleet.node_process import NODE_PROCESS_FLAGS, NodeProcess, emit, stop_all
 from twinfleet.runtime.fleet.run_record import RunRecord
@@ -74,7 +74,7 @@ class Fleet:
                  connect: str | None, listen: str | None, out: TextIO,
                  record: RunRecord | None = None, node_args: Sequence[str] = (),
                  events_dir: Path | None = None, keep_scenario_beside: str | None = None,
-                 monitor: bool = True, auth: fleetauth.MonitorAuth | None = None) -> None:
+                 judge: bool = True, auth: fleetauth.MonitorAuth | None = None) -> None:
         self.time_scale, self.seed, self.out = time_scale, seed, out
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
@@ -102,7 +102,7 @@ class Fleet:
         self.shutting_down = False
         self.failed: list[str] = []
         self.report = load_report(scenario)
-        self.monitor = LiveMonitor(scenario, time_scale=time_scale) if monitor else None
+        self.judge = LiveJudge(scenario, time_scale=time_scale) if judge else None
         self.statistics: dict[str, NodeStatistics] = {}
         self.unreadable_statistics: dict[str, str] = {}  # node -> why `from_dict` refused them
         self.invalid = 0  # report samples refused by `guard.check_message`
@@ -138,7 +138,7 @@ class Fleet:
             self.transport.subscribe(topic_key(fleet, topic), self._summary(topic), QOS_DEFAULT)
         for topic in self.report.topics() if self.report is not None else ():
             self.transport.subscribe(topic_key(fleet, topic), self._reported(topic), QOS_DEFAULT)
-        if self.monitor is not None:
+        if self.judge is not None:
             self.transport.subscribe(kind_expr(fleet, KeyKind.STATE), self._on_state,
                                     QOS_DEFAULT)
 
@@ -151,13 +151,13 @@ class Fleet:
         self.transport.serve(fleet_key(fleet), lambda _request, respond: respond(description, ""))
 
     def _on_state(self, key: str, payload: bytes) -> None:
-        assert self.monitor is not None
+        assert self.judge is not None
         try:
             report = decode_report(parse_node_key(key, KeyKind.STATE).node, payload)
         except ValueError as exc:
             self.log(f"ignored a malformed state report on {key}: {exc}")
             return
-        self.monitor.on_report(report)
+        self.judge.on_report(report)
 
     def refusals(self) -> dict[Rejection, int]:
         """What the launcher's own subscriptions (report, shutdown) refused, by reason."""
@@ -219,10 +219,10 @@ class Fleet:
                 "--node", cfg.name, "--connect", self.endpoint, "--epoch-ns", str(self.epoch_ns),
                 "--time-scale", repr(self.time_scale), "--seed", str(self.seed),
                 "--fleet-epoch", *self.node_args]
-        if self.monitor is not None:
-            states = cfg.name in self.monitor.reads()
-            argv += ["--monitor", "states" if states else "failures",
-                     "--stall-ms", str(self.monitor.stall_ms)]
+        if self.judge is not None:
+            states = cfg.name in self.judge.reads()
+            argv += ["--report", "states" if states else "failures",
+                     "--stall-ms", str(self.judge.stall_ms)]
         if self.events_dir is not None:
             argv += ["--record-events", str(self.events_dir / f"{cfg.name}.jsonl")]
         return argv

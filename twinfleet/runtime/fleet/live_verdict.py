@@ -2,7 +2,7 @@
 
 Theory of operation. Every node reports its state after each handler that
 changed it or failed (`runtime.core.state_report`); the launcher feeds the reports
-to a `LiveMonitor`, which keeps the last reported state of every node (it
+to a `LiveJudge`, which keeps the last reported state of every node (it
 starts from the initial states, built here from the scenario as the checker
 builds them) and evaluates the properties on that view in the order reports
 arrive — the same expressions, in the same safe language, as the checker
@@ -158,7 +158,7 @@ def _after(report: StateReport | None) -> str:
 
 
 @final
-class LiveMonitor:
+class LiveJudge:
     """Judges a scenario's properties on state reports (module docstring).
 
     Args:

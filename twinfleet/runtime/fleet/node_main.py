@@ -112,7 +112,7 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                    help="override the scenario's behaviour profile, as `check --profile` does")
     p.add_argument(PARAM_FLAG, action="append", default=[], metavar="[NODE.]NAME=VALUE",
                    help="parameter override, as `twinfleet launch --param` (repeatable)")
-    p.add_argument("--monitor", choices=("states", "failures"), default=None,
+    p.add_argument("--report", choices=("states", "failures"), default=None,
                    help="publish a state report after each handler that changed the state or "
                         "failed (states), or only after failures (failures), for the launcher's "
                         "live verdict (runtime.core.state_report)")
@@ -209,16 +209,16 @@ def _stop_on_signals(host: NodeHost) -> asyncio.Event:
 def _serve(args: argparse.Namespace, scenario: Scenario, cfg: NodeConfig, host: NodeHost,
            transport: ZenohTransport) -> None:
     """Declare what the process answers besides the node's own services: its statistics,
-    its message schemas and its description, and (``--monitor``) its state reports."""
+    its message schemas and its description, and (``--report``) its state reports."""
     node = host.node
 
     def serve_stats(_payload: bytes, respond: Respond) -> None:
         respond(statistics_payload(host.statistics()), "")
 
     transport.serve(node_key(scenario.fleet, KeyKind.STATS, node.name), serve_stats)
-    if args.monitor is not None:
+    if args.report is not None:
         put = transport.publisher(node_key(scenario.fleet, KeyKind.STATE, node.name), QOS_DEFAULT)
-        host.core.observe(StateReporter(node, put, states=args.monitor == "states"))
+        host.core.observe(StateReporter(node, put, states=args.report == "states"))
 
     def serve_types(_payload: bytes, respond: Respond) -> None:
         respond(json.dumps(registered_schemas()).encode(), "")
