@@ -223,6 +223,23 @@ def test_a_lasso_goes_round_its_cycle_again_on_gated_hosts(tmp_path):
     assert result.granted == len(thrice.starts) + 13
 
 
+def test_a_node_the_trace_never_runs_is_compared_by_its_initial_state(tmp_path):
+    """A bystander that no step runs (no start handler, nothing it hears is sent) ends in its
+    initial state, live as in the checker: the final states still match."""
+    from tests.checker.helpers import node, scenario
+
+    path = scenario(tmp_path, [node("server", "BallServer"), node("returner", "BallReturner"),
+                               node("bystander", "Summer")],
+                    name="watched", properties=[{"name": "someone_scores", "kind": "eventually",
+                                                 "expr": "server.scored"}])
+    out = tmp_path / "watched.trace.json"
+    assert check(path, CheckOptions(trace_out=str(out))).violation is not None
+    p = plan(out)
+    assert "bystander" not in {g.node for g in (*p.starts, *p.steps)}
+    result = asyncio.run(asyncio.wait_for(replay_in_process(p, tmp_path / "ev"), 60))
+    assert result.divergence is None and result.final_states_match
+
+
 @pytest.mark.slow
 @pytest.mark.timeout(120)
 def test_replay_live_command_runs_a_lasso_cycle_on_real_processes(tmp_path, capsys, reap_nodes):

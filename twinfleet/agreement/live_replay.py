@@ -116,6 +116,8 @@ class Plan:
     collisions: list[tuple[str, str, str]]  # (step, "ra,rb", cells text) from the trace's logs
     file_profile: str = ""  # the profile the scenario file itself names
     cycles: int = 0  # extra rounds of a lasso's cycle appended to the trace's steps
+    #: each node's state digest before any grant: a node the trace never runs keeps it
+    initial_digests: dict[str, str] = field(default_factory=dict)
 
 
 @final
@@ -221,11 +223,12 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
         cycles = 0
     steps, world = _step_grants(system, init.world, records, str(trace_path))
     final = {name: state_digest(world.states[i]) for i, name in enumerate(system.names)}
+    initial = {name: state_digest(init.world.states[i]) for i, name in enumerate(system.names)}
     collisions = [(str(rec["index"]), str(log.get("robots")), str(log.get("cells")))
                   for rec in trace["steps"] for log in rec.get("logs", ())
                   if log.get("event") == "collision"]
     return Plan(str(trace_path), trace, scenario, starts, steps, final, collisions,
-                load(trace["scenario"]).profile, cycles)
+                load(trace["scenario"]).profile, cycles, initial)
 
 
 def _step_grants(system: System, world: World, records: Sequence[Mapping[str, Any]],
@@ -289,7 +292,7 @@ class Coordinator:
         self.step_timeout_s, self.ready_timeout_s = step_timeout_s, ready_timeout_s
         self.alive: set[str] = set()
         self.transport: Transport | None = None
-        self.digests: dict[str, str] = {}
+        self.digests: dict[str, str] = dict(plan.initial_digests)
         self._changed = asyncio.Event()
 
     async def __call__(self, fleet: Fleet) -> str:
