@@ -107,12 +107,12 @@ def test_viewer_shows_the_live_c1a_fleet_moving(cli, browser_page):
 
     try:
         page.wait_for_function("""() => twinfleetView.ended !== null && Object.values(twinfleetView.robots)
-                                  .every(r => r.status && r.status.mode === 'arrived')""", timeout=40_000)
+                                  .every(r => r.row && r.row.mode === 'arrived')""", timeout=40_000)
     except Exception:  # say what the page had instead
         seen = page.evaluate("() => [twinfleetView.ended, Object.fromEntries(Object.entries("
-                             "twinfleetView.robots).map(([n, r]) => [n, r.status]))]")
+                             "twinfleetView.robots).map(([n, r]) => [n, r.row]))]")
         state = get_json(url + "api/state") or {}
-        server = {n: r.get("status") for n, r in state.get("robots", {}).items()}
+        server = {n: r.get("row") for n, r in state.get("robots", {}).items()}
         pytest.fail(f"the page did not show the end with every robot arrived: {seen}; "
                     f"the viewer's state: {state.get('ended')}, {server}")
     page.evaluate("() => twinfleetView.draw()")
