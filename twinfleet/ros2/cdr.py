@@ -10,6 +10,12 @@ RIHS01 hash (`typehash`). A field missing from a dict takes ROS's zero value
 (0, "", empty sequence, a zero nested message), as a default-constructed ROS 2
 message has.
 
+A ``byte`` (IDL octet, 0..255) is a second place where rosbags differs from
+rosidl: rosbags packs and reads a single ``byte`` field as a signed int8, so
+255 cannot be written and 0xFF reads as -1. The bytes on the wire are the
+same; `RosTypes` converts at the seam, so ``byte`` values are 0..255 as in
+rclpy (tests/ros2/test_cdr_rclpy.py).
+
 Decoding is also where untrusted input is checked (`decode(..., strict=True)`):
 the CDR must parse to the end, and no float may be NaN or infinite.
 """
@@ -114,15 +120,17 @@ class RosTypes:
 
     def _plain(self, message: Any) -> dict[str, Any]:
         defs = self.store.fielddefs[message.__msgtype__][1]
-        return {name: self._plain_value(getattr(message, name)) for name, _ in defs}
+        return {name: self._plain_value(getattr(message, name), desc) for name, desc in defs}
 
-    def _plain_value(self, value: Any) -> Any:
+    def _plain_value(self, value: Any, desc: Any) -> Any:
         if hasattr(value, "__msgtype__"):
             return self._plain(value)
         if isinstance(value, np.ndarray):
             return value.tolist()
         if isinstance(value, list):
-            return [self._plain_value(v) for v in value]
+            return [self._plain_value(v, desc[1][0]) for v in value]
+        if desc[0] == Nodetype.BASE and desc[1][0] == "byte":
+            return value & 0xFF  # rosbags reads a byte as signed (module docstring)
         return value
 
 
@@ -153,7 +161,7 @@ def _scalar(base: str, value: Any, where: str) -> Any:
     info = np.iinfo(_NUMPY[base])
     if not info.min <= value <= info.max:
         raise MessageError(f"{where}: {value} is out of range for {base}")
-    return value
+    return value - 256 if base == "byte" and value > 127 else value  # rosbags packs it signed
 
 
 def _first_not_finite(value: Any, where: str) -> str | None:

@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any, TextIO
 
 import msgpack
+import yaml
 from mcap.reader import make_reader
 from rosbags.interfaces import (
     Connection,
@@ -136,10 +137,12 @@ def is_rosbag2(path: str | Path) -> bool:
 
 def print_bag_info(path: str | Path, out: TextIO) -> None:
     """``ros2 bag info``-style text of a rosbag2 folder, read with rosbags' reader."""
+    info = yaml.safe_load((Path(path) / "metadata.yaml").read_text())
+    info = info.get("rosbag2_bagfile_information", {}) if isinstance(info, dict) else {}
     with Reader(Path(path)) as reader:
         duration = max(0, reader.end_time - reader.start_time) / 1e9 if reader.message_count else 0
-        lines = [f"Files:             {', '.join(p.name for p in reader.paths)}",
-                 f"Storage id:        {reader.metadata['storage_identifier']}",
+        lines = [f"Files:             {', '.join(info.get('relative_file_paths') or [])}",
+                 f"Storage id:        {info.get('storage_identifier', '?')}",
                  f"Duration:          {duration:.3f} s",
                  f"Messages:          {reader.message_count}",
                  f"Topic information: {len(reader.connections)} topics"]
