@@ -4,7 +4,9 @@ Every source file belongs to one layer, read from its folder under `twinfleet/`:
 
 - `runtime/<wing>/` for each wing of the runtime (`contract`, `scenario`, `core`, `host`,
   `fleet`, `tools`, `cli`);
-- `checker/`, `agreement/`, `nodes/`;
+- `checker/`, `agreement/`, `nodes/`, `ros2/` (the ROS 2 bridge, beside the runtime: it
+  speaks rmw_zenoh's protocol through the runtime's tools, and only it imports the ROS
+  field's libraries, `ROS_LIBRARIES`, so the default install needs none of them);
 - `twinfleet/__init__.py` (the node API, which re-exports the contract);
 - the command line (`twinfleet/cli.py`, `twinfleet/__main__.py`) and the testing API
   (`twinfleet/testing.py`) on top.
@@ -38,13 +40,15 @@ RULES: dict[str, set[str]] = {
     "host": {"core", "scenario", "contract"},
     "fleet": _BELOW_HOST,
     "tools": {"fleet", *_BELOW_HOST},
-    "cli": {"api", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes"},
+    "cli": {"api", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes", "ros2"},
     "checker": {"api", "contract", "scenario"},
     "nodes": {"api", "contract"},
     "agreement": {"api", "fleet", "tools", *_BELOW_HOST, "checker", "nodes"},
+    "ros2": {"api", "fleet", "tools", *_BELOW_HOST},
     "runtime": set(),  # runtime/__init__.py: names its wings, imports none
     "maps": set(), "launch": set(),  # package data: shipped maps and scenarios
-    "top": {"api", "fleet", "tools", *_BELOW_HOST, "cli", "checker", "agreement", "nodes", "top"},
+    "top": {"api", "fleet", "tools", *_BELOW_HOST, "cli", "checker", "agreement", "nodes", "ros2",
+            "top"},
 }
 #: `tools/` groups three wings of its own (tests/test_sizes.py measures each alone): the
 #: monitors lie below the recordings and the viewers, which use each other (the Foxglove
@@ -55,6 +59,8 @@ TOOLS_RULES: dict[str, set[str]] = {
     "view": {"monitor", "record"},
 }
 IO = {"asyncio", "zenoh", "aiohttp", "mcap", "foxglove"}
+#: the ROS field's libraries (the `ros2` extra): imported by the `ros2` layer only
+ROS_LIBRARIES = {"rosbags", "mcap_ros2", "zenoh_ros2_sdk", "rclpy"}
 PURE: dict[str, set[str]] = {
     "contract": IO, "scenario": IO, "core": IO, "checker": IO,
     "nodes": {"random", "time", "asyncio", "threading", "socket", "zenoh"},
@@ -143,6 +149,8 @@ def test_layer_imports_only_what_lies_below_it(layer):
                 other = _layer(target) if target in SOURCES else None
                 if other is not None and other != layer and other not in RULES[layer]:
                     bad.append(f"{path.relative_to(ROOT)} imports {name} ({other})")
+            elif top in ROS_LIBRARIES and layer != "ros2":
+                bad.append(f"{path.relative_to(ROOT)} imports {name}: only twinfleet.ros2 may")
             elif top in PURE.get(layer, ()):
                 bad.append(f"{path.relative_to(ROOT)} imports {name}")
             elif top in ("runtime", "checker", "nodes", "agreement"):

@@ -85,6 +85,8 @@ class RobotScene:
     """The robot case study's `runtime.contract.scene.Scene` (module docstring)."""
 
     columns = COLUMNS
+    #: what the fleet is in ROS 2 (`twinfleet ros2 bridge`, `twinfleet export --ros2`)
+    ros2 = "twinfleet.nodes.ros2_mapping:RobotRos2Mapping"
 
     def __init__(self) -> None:
         self._by_type: dict[str, Callable[[str, Mapping[str, Any]], list[draw.Drawing]]] = {

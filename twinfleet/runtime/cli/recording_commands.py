@@ -13,6 +13,7 @@ import argparse
 import asyncio
 import os
 import sys
+from pathlib import Path
 from typing import Any
 
 from twinfleet.runtime.fleet.connection import (
@@ -111,6 +112,9 @@ def cmd_bag(args: argparse.Namespace) -> int:
     """`twinfleet bag info FILE` and `twinfleet bag repair FILE [-o OUT]`."""
     from twinfleet.runtime.tools.record.bag import RecordingError, print_info, read_summary, repair
 
+    if args.action == "info" and Path(args.file).is_dir():
+        from twinfleet.ros2.commands import rosbag2_info
+        return rosbag2_info(args.file)
     try:
         if args.action == "repair":
             count, out = repair(args.file, getattr(args, "output", None))
@@ -131,6 +135,9 @@ def cmd_export(args: argparse.Namespace) -> int:
     from twinfleet.runtime.tools.record.bag import RecordingError, check_readable
     from twinfleet.runtime.tools.record.mcap_export import export_json
 
+    if args.ros2:
+        from twinfleet.ros2.commands import export_rosbag2_command
+        return export_rosbag2_command(args)
     try:
         check_readable(args.file)
         done = export_json(args.file, args.output)
@@ -208,7 +215,8 @@ def _add_bag(sub: argparse._SubParsersAction) -> None:
     bi = bs.add_parser("info", help="summarise a recording: duration, messages per topic, schemas",
                        description="Summarise an MCAP recording: duration, start and end, "
                                    "message count per topic and type, schemas.")
-    bi.add_argument("file", help="MCAP file, e.g. run.mcap")
+    bi.add_argument("file", help="MCAP file, e.g. run.mcap, or a rosbag2 folder "
+                                 "(`twinfleet export --ros2`)")
     bi.set_defaults(func=cmd_bag)
     _file_command(bs, "repair", cmd_bag,
                   "make a recording cut short (recorder killed, disk full) complete again",
@@ -230,7 +238,15 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
                   "collisions, foxglove.PointCloud scans), so Foxglove's 3D panel draws it with "
                   "no configuration. `twinfleet play` needs the original (msgpack) recording.",
                   ("MCAP file written by `twinfleet record`",
-                   "JSON-encoded MCAP file to write, e.g. run.json.mcap"), required=True)
+                   "JSON-encoded MCAP file to write, e.g. run.json.mcap; with --ros2 the "
+                   "rosbag2 folder to create, e.g. run_bag/"), required=True)
+    export = sub.choices["export"]
+    export.add_argument("--ros2", action="store_true",
+                        help="write a rosbag2 folder instead (metadata.yaml + MCAP, ROS 2 standard "
+                             "types in CDR) for `ros2 bag info/play`; needs twinfleet[ros2]")
+    export.add_argument("--mapping", default=None, metavar="MODULE:NAME",
+                        help="with --ros2: the fleet's ROS 2 mapping (default: the one the "
+                             "recording's scene names)")
 
 
 def _file_command(parent: argparse._SubParsersAction, name: str, func: Any, text: str,

@@ -1,0 +1,72 @@
+"""What a fleet's messages are in ROS 2: the mapping a fleet names, and how it is found.
+
+A mapping is an object with (duck-typed, so that a case study writes it with
+the node contract only, as it writes its scene):
+
+* ``latched``: the ROS topics to publish transient-local (late joiners get the
+  last sample: ``/map``);
+* ``outbound(topic, type_name, data, stamp_ms)``: the ROS 2 messages one fleet
+  message becomes, as (ROS topic, ``pkg/msg/Name``, fields) triples; none for
+  a message it does not map.
+
+It is named by import name (``module:Name``, a class made with no arguments);
+the default is the one the fleet's scene names in its ``ros2`` attribute
+(``RobotScene.ros2``), so the shipped robot scenarios need no option.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol, runtime_checkable
+
+Output = tuple[str, str, dict[str, Any]]
+
+
+class MappingError(ValueError):
+    """A mapping name that does not name a mapping; the text says why."""
+
+
+@runtime_checkable
+class Ros2Mapping(Protocol):
+    """How one kind of fleet looks in ROS 2 (module docstring)."""
+
+    latched: frozenset[str]
+
+    def outbound(self, topic: str, type_name: str, data: Mapping[str, Any],
+                 stamp_ms: int) -> Sequence[Output]:
+        """The ROS 2 messages one fleet message becomes."""
+        ...
+
+
+def load_mapping(name: str) -> Ros2Mapping:
+    """A new mapping of the kind `name` (``module:Name``) names.
+
+    Raises:
+        MappingError: the name is malformed, does not import, or does not make a mapping.
+    """
+    module_name, _, attr = name.partition(":")
+    if not module_name or not attr:
+        raise MappingError(f"expected 'module:Mapping', got {name!r}")
+    try:
+        made = getattr(importlib.import_module(module_name), attr)()
+    except (ImportError, AttributeError) as exc:
+        raise MappingError(f"unknown ROS 2 mapping {name!r} ({exc})") from None
+    except Exception as exc:  # the user's module or constructor: say what it raised
+        raise MappingError(f"{name}: {type(exc).__name__}: {exc}") from None
+    if not isinstance(made, Ros2Mapping):
+        raise MappingError(f"{name}() made a {type(made).__name__}, not a ROS 2 mapping "
+                           "(one with latched and outbound)")
+    return made
+
+
+def mapping_of_scene(scene: str | None) -> str | None:
+    """The mapping a scene (``module:Name``) names in its ``ros2`` attribute, if any."""
+    if not scene:
+        return None
+    module_name, _, attr = scene.partition(":")
+    try:
+        value = getattr(getattr(importlib.import_module(module_name), attr), "ros2", None)
+    except Exception:  # a scene that cannot be loaded names no mapping
+        return None
+    return value if isinstance(value, str) else None
