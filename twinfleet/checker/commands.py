@@ -136,7 +136,7 @@ def _progress(stats: SearchStatistics) -> None:
 def check_command(args: argparse.Namespace) -> int:
     """Run `check` for parsed arguments; return the exit code."""
     if args.statistical:
-        return statistical_command(args)
+        return statistical_command(args, bad_input_errors())
     if args.scenario is None and args.resume is None:
         print("twinfleet check: give a scenario file, or --resume CHECKPOINT", file=sys.stderr)
         return EXIT_BAD_INPUT

@@ -81,9 +81,10 @@ def _progress(result: StatisticalResult) -> None:
           file=sys.stderr, end="" if tty else "\n", flush=True)
 
 
-def statistical_command(args: argparse.Namespace) -> int:
-    """Run `check --statistical` for parsed arguments; return the exit code."""
-    from twinfleet.checker.commands import bad_input_errors
+def statistical_command(args: argparse.Namespace,
+                        bad_input: tuple[type[Exception], ...]) -> int:
+    """Run `check --statistical` for parsed arguments; return the exit code (`bad_input`:
+    the errors that mean bad input, exit 2)."""
     from twinfleet.checker.simulate import ContractBreach
     from twinfleet.checker.statistical import StatisticalOptions, check_statistical
     from twinfleet.checker.timing import TimingError
@@ -102,7 +103,7 @@ def statistical_command(args: argparse.Namespace) -> int:
         semantics=args.semantics, progress=None if quiet else _progress)
     try:
         result = check_statistical(args.scenario, options)
-    except (*bad_input_errors(), TimingError) as exc:  # type: ignore[misc]
+    except (*bad_input, TimingError) as exc:  # type: ignore[misc]
         print(f"twinfleet check: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     except ValueError as exc:  # the SPRT's parameters
