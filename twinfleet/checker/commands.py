@@ -17,8 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twinfleet.checker.options import REDUCTIONS, Semantics
-from twinfleet.checker.statistical_commands import add_statistical_arguments, statistical_command
+from twinfleet.checker.options import REDUCTIONS, Semantics, add_statistical_arguments
 from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_CONTRACT_BREACH, EXIT_FAILED
 
 if TYPE_CHECKING:
@@ -136,6 +135,8 @@ def _progress(stats: SearchStatistics) -> None:
 def check_command(args: argparse.Namespace) -> int:
     """Run `check` for parsed arguments; return the exit code."""
     if args.statistical:
+        from twinfleet.checker.statistical_commands import statistical_command
+
         return statistical_command(args, bad_input_errors())
     if args.scenario is None and args.resume is None:
         print("twinfleet check: give a scenario file, or --resume CHECKPOINT", file=sys.stderr)
