@@ -4,7 +4,7 @@
                                                                   (twinfleet.runtime.cli.commands)
     twinfleet render                                              (twinfleet.runtime.cli.render)
     twinfleet check                                               (twinfleet.checker.commands)
-    twinfleet replay|validate|experiment                          (twinfleet.agreement.commands)
+    twinfleet replay|validate|experiment|calibrate                (twinfleet.agreement.commands)
 
 This module sits above every layer; each layer's `register(subparsers)` adds
 its own commands and imports its engines only when a command runs.

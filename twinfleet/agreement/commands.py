@@ -38,6 +38,39 @@ def register(subparsers: Any) -> None:
     _experiment_parser(subparsers)
     _validate_parser(subparsers)
     _replay_parser(subparsers)
+    _calibrate_parser(subparsers)
+
+
+def _calibrate_parser(subparsers: Any) -> None:
+    p = subparsers.add_parser(
+        "calibrate", help="fit a timing model (latency, timer lateness) from live event logs",
+        description="Fit a timing model from event logs written by `twinfleet launch "
+        "--record-events`: per topic or service the delivery latency (handling time minus "
+        "send stamp, fleet ms), pooled as the default, and timer lateness; the machine and "
+        "the time scale are recorded. `twinfleet check --timing FILE` uses it (exit 2: bad "
+        "input).")
+    p.add_argument("events", nargs="+", help="event log files (JSON lines)")
+    p.add_argument("-o", "--output", default="timing.yaml",
+                   help="the timing model file to write (default timing.yaml)")
+    p.add_argument("--min-samples", type=int, default=30,
+                   help="a channel with fewer latencies is covered by the default "
+                   "histogram only (default 30)")
+    p.set_defaults(func=calibrate_command)
+
+
+def calibrate_command(args: argparse.Namespace) -> int:
+    """Run `calibrate`; return the exit code."""
+    from twinfleet.agreement.calibrate import calibrate
+    from twinfleet.checker.timing import TimingError, save_timing
+
+    try:
+        model = calibrate(args.events, min_samples=args.min_samples)
+    except TimingError as exc:
+        print(f"twinfleet calibrate: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    save_timing(model, args.output)
+    print(f"{args.output}: {model.describe()} ({model.default.samples:,} latencies)")
+    return EXIT_OK
 
 
 def _experiment_parser(subparsers: Any) -> None:

@@ -12,9 +12,21 @@ from __future__ import annotations
 
 import random
 from collections.abc import Sequence
+from dataclasses import dataclass
 from typing import Protocol, final
 
 from twinfleet.runtime.contract.context import Chooser
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class LatencySite:
+    """What a latency branch decides: the delay of one message on `channel` (a topic or
+    service), `low + index` ms. Exhaustive choosers ignore it; a chooser that samples
+    from a timing model (`checker.sampling`) weighs the indices by it."""
+
+    channel: str
+    low: int
 
 
 class ExploringChooser(Chooser, Protocol):
@@ -32,8 +44,8 @@ class ExploringChooser(Chooser, Protocol):
         """An index in range(n) for a handler's choice point."""
         ...
 
-    def branch(self, n: int) -> int:
-        """An index in range(n) for one of the checker's branches."""
+    def branch(self, n: int, site: LatencySite | None = None) -> int:
+        """An index in range(n) for one of the checker's branches (`site`: a latency's)."""
         ...
 
 
@@ -65,7 +77,9 @@ class PrefixChooser:
         self.options.append(n)
         return index
 
-    branch = choose  # the checker's own branches (latency, faults) are choice points too
+    def branch(self, n: int, site: LatencySite | None = None) -> int:
+        """The checker's own branches (latency, faults) are choice points too."""
+        return self.choose(n)
 
     def next_prefix(self) -> tuple[int, ...] | None:
         """The prefix of the next variant after this run, or None if this was the last."""
@@ -108,7 +122,7 @@ class SplitChooser:
         """The recorded answer of this handler choice point (0 past the record)."""
         return self._answer(n, self._answers, self.handler_indices, self.handler_options)
 
-    def branch(self, n: int) -> int:
+    def branch(self, n: int, site: LatencySite | None = None) -> int:
         """The forced index of this branch of the checker (0 past the prefix)."""
         return self._answer(n, self._prefix, self.branch_indices, self.branch_options)
 
@@ -149,7 +163,9 @@ class RandomChooser:
         self.options.append(n)
         return index
 
-    branch = choose
+    def branch(self, n: int, site: LatencySite | None = None) -> int:
+        """A uniform index for one of the checker's branches."""
+        return self.choose(n)
 
 
 class ChoiceMismatch(ValueError):

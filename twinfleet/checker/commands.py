@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twinfleet.checker.options import REDUCTIONS, Semantics
+from twinfleet.checker.options import REDUCTIONS, Semantics, add_statistical_arguments
 from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_CONTRACT_BREACH, EXIT_FAILED
 
 if TYPE_CHECKING:
@@ -30,11 +30,13 @@ def bad_input_errors() -> tuple[type[Exception], ...]:
     a running command asks."""
     from twinfleet.checker.checkpoint import CheckpointError
     from twinfleet.checker.properties import PropertyError
+    from twinfleet.checker.timing import TimingError
     from twinfleet.runtime.contract.node import NodeDefinitionError
     from twinfleet.runtime.contract.tracefile import TraceError
     from twinfleet.runtime.scenario.spec import ScenarioError
 
-    return (ScenarioError, PropertyError, NodeDefinitionError, TraceError, CheckpointError)
+    return (ScenarioError, PropertyError, NodeDefinitionError, TraceError, CheckpointError,
+            TimingError)
 
 
 def register(subparsers: Any) -> None:
@@ -105,6 +107,7 @@ def register(subparsers: Any) -> None:
                    "unless --checkpoint names another file); FILE is a pickle, trusted like "
                    "code (see --checkpoint)")
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
+    add_statistical_arguments(p)
     p.set_defaults(func=check_command)
 
 
@@ -131,6 +134,10 @@ def _progress(stats: SearchStatistics) -> None:
 
 def check_command(args: argparse.Namespace) -> int:
     """Run `check` for parsed arguments; return the exit code."""
+    if args.statistical:
+        from twinfleet.checker.statistical_commands import statistical_command
+
+        return statistical_command(args, bad_input_errors())
     if args.scenario is None and args.resume is None:
         print("twinfleet check: give a scenario file, or --resume CHECKPOINT", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -147,7 +154,7 @@ def check_command(args: argparse.Namespace) -> int:
                            check_determinism=args.check_determinism, verify=args.verify,
                            transition_cache=not args.no_transition_cache,
                            checkpoint=args.checkpoint, checkpoint_every_s=args.checkpoint_every,
-                           resume=args.resume, reduction=args.reduction,
+                           resume=args.resume, reduction=args.reduction, timing=args.timing,
                            progress=None if args.quiet or args.json else _progress)
     try:
         result = check(args.scenario, options)

@@ -67,6 +67,7 @@ class CheckOptions:
     checkpoint_every_s: float = 300.0
     resume: str | None = None
     reduction: str | None = None
+    timing: str | None = None  # a timing model whose bounds are the latency ranges
     progress: Callable[[SearchStatistics], None] | None = field(default=None, compare=False)
 
 
@@ -184,7 +185,9 @@ def system_for_trace(trace: Mapping[str, Any]) -> tuple[System, PropertySet]:
                     semantics=trace.get("semantics"))
     props = PropertySet.from_scenario(scenario)
     latency = trace.get("latency")
+    per_name = tuple((name, (span[0], span[1])) for name, span in trace.get("topic_latency") or ())
     system = System(scenario, latency=tuple(latency) if latency else None,
+                    topic_latency=per_name,
                     global_priority=trace.get("global_priority"),
                     debug_state=bool(trace.get("debug_state")), properties=props,
                     check_determinism=bool(trace.get("check_determinism")))
@@ -223,7 +226,7 @@ def check(scenario: str | Path | Scenario | None,
     props = PropertySet.from_scenario(scenario)
     warnings = [str(w) for w in lint_scenario(scenario)]
     flags = {key: meta.get(key, getattr(options, key)) for key in _SEARCH_FLAGS}
-    system = System(scenario, properties=props, **flags)
+    system = System(scenario, properties=props, **flags, **_timing_ranges(scenario, options))
     strategy = meta.get("strategy") or options.search or scenario.check.search
     if strategy not in SEARCHES:
         raise ScenarioError(f"search: expected {', '.join(SEARCHES)}, got {strategy!r}")
@@ -271,6 +274,19 @@ def check(scenario: str | Path | Scenario | None,
             write_trace(result.trace, options.trace_out)
             result.trace_path = options.trace_out
     return result
+
+
+def _timing_ranges(scenario: Scenario, options: CheckOptions) -> dict[str, Any]:
+    """`System` arguments that make a timing model's bounds the latency ranges (none
+    without `options.timing`)."""
+    if options.timing is None:
+        return {}
+    from twinfleet.checker.timing import load_timing
+
+    topology = System(scenario).topology
+    default, per = load_timing(options.timing).ranges(set(topology.subscribers)
+                                                      | set(topology.servers))
+    return {"latency": default, "topic_latency": per}
 
 
 def _property_names(system: System, props: PropertySet) -> list[str]:

@@ -182,7 +182,8 @@ def parse_faults(scenario: Scenario, topics: set[str], services: set[str]) -> tu
 
 
 def parse_settings(scenario: Scenario, topics: set[str], services: set[str], *,
-                   latency: tuple[int, int] | None | Sequence[int] = ()) -> CheckSettings:
+                   latency: tuple[int, int] | None | Sequence[int] = (),
+                   topic_latency: Sequence[tuple[str, tuple[int, int]]] = ()) -> CheckSettings:
     """Every optional setting, validated against the scenario's topics and services.
 
     Args:
@@ -191,10 +192,17 @@ def parse_settings(scenario: Scenario, topics: set[str], services: set[str], *,
         services: fully qualified names of served services.
         latency: an explicit global latency overriding `check.latency` (the
             default, an empty tuple, means "take the scenario's").
+        topic_latency: per topic or service ranges overriding the scenario's for those
+            names (a timing model's bounds, `checker.timing`).
     """
     default, per_topic = parse_latency(scenario, topics | services)
     if latency != ():
         default = None if latency is None else _range(tuple(latency))  # type: ignore[arg-type]
+    if topic_latency:
+        _names(scenario, "latency", (name for name, _ in topic_latency), topics | services,
+               _CHANNEL)
+        merged = dict(per_topic) | {name: _range(span) for name, span in topic_latency}
+        per_topic = tuple(sorted(merged.items()))
     deadline_default, deadlines = parse_deadlines(scenario, topics | services)
     drop, dup, crash = parse_faults(scenario, topics, services)
     return CheckSettings(default, per_topic, deadline_default, deadlines,

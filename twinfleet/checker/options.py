@@ -1,4 +1,5 @@
-"""The checker's named choices, light enough for argument parsers: message semantics, reductions.
+"""The checker's named choices, light enough for argument parsers: message semantics,
+reductions, and the options of statistical checking (`add_statistical_arguments`).
 
 Importing this module loads nothing else of the checker, so `twinfleet --help` and the
 commands' parsers can offer the choices without loading the search.
@@ -6,6 +7,7 @@ commands' parsers can offer the choices without loading the search.
 
 from __future__ import annotations
 
+import argparse
 from enum import StrEnum, unique
 from typing import Final
 
@@ -25,3 +27,57 @@ class Semantics(StrEnum):
 POR: Final = "por"  # the partial-order reduction (docs/reduction.md)
 NONE: Final = "none"  # every interleaving
 REDUCTIONS: Final = (POR, NONE)
+
+
+def _probability(text: str) -> float:
+    value = float(text)
+    if not 0 < value < 1:
+        raise argparse.ArgumentTypeError(f"expected a probability in (0, 1), got {text}")
+    return value
+
+
+def add_statistical_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the statistical-checking and timing-model options to the `check` parser."""
+    g = p.add_argument_group(
+        "statistical checking (--statistical)",
+        "Independent simulations in which every latency is drawn from a timing model and "
+        "every ctx.choose uniformly; reports per property the probability of a violation "
+        "within the horizon with a Clopper-Pearson interval. Exit 0: no violation seen "
+        "(with --assert-below: accepted), 1: a violation seen (refused), 2: bad input "
+        "(undecided), 4: a node breaks the node contract. The same --seed gives the same "
+        "answer with any --workers.")
+    g.add_argument("--statistical", action="store_true",
+                   help="estimate probabilities by simulation instead of exploring every "
+                   "interleaving")
+    g.add_argument("--timing", default=None, metavar="FILE",
+                   help="timing model (`twinfleet calibrate`; default: the loopback model "
+                   "shipped with twinfleet). Without --statistical, its latency bounds become "
+                   "the exhaustive search's latency ranges (every value a branch)")
+    g.add_argument("--simulations", type=int, default=None, metavar="N",
+                   help="at most N simulations (default 1000; unbounded with --precision "
+                   "or --assert-below, which stop by themselves)")
+    g.add_argument("--horizon-ms", type=int, default=None, metavar="MS",
+                   help="simulate up to this fleet time (default: live.timeout_s, else 60 s)")
+    g.add_argument("--max-steps", type=int, default=1_000_000,
+                   help="steps per simulation at most (default 1,000,000)")
+    g.add_argument("--confidence", type=_probability, default=0.95,
+                   help="confidence of the intervals (default 0.95)")
+    g.add_argument("--precision", type=float, default=None, metavar="H",
+                   help="stop once every interval's half-width is at most H")
+    g.add_argument("--assert-below", type=_probability, default=None, metavar="P",
+                   help="test 'P(some property violated) < P' by Wald's SPRT, stopping as "
+                   "soon as it decides")
+    g.add_argument("--indifference", type=_probability, default=None, metavar="D",
+                   help="SPRT indifference region [P-D, P] (default D = P/2)")
+    g.add_argument("--alpha", type=_probability, default=0.01,
+                   help="SPRT: probability of accepting although P(violation) >= P "
+                   "(default 0.01)")
+    g.add_argument("--beta", type=_probability, default=0.01,
+                   help="SPRT: probability of refusing although P(violation) <= P-D "
+                   "(default 0.01)")
+    g.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="local worker processes for the simulations (default 1)")
+    g.add_argument("--traces-out", default="out", metavar="DIR",
+                   help="directory for the traces of violating simulations (default out)")
+    g.add_argument("--max-traces", type=int, default=3,
+                   help="write at most this many violating simulations (default 3)")

@@ -101,7 +101,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, final
 
-from twinfleet.checker.choices import ExploringChooser
+from twinfleet.checker.choices import ExploringChooser, LatencySite
 from twinfleet.checker.faults import DROP, DUPLICATE, CheckSettings
 from twinfleet.checker.options import Semantics
 from twinfleet.checker.world import Event
@@ -245,7 +245,8 @@ class Rules:
         span = self._ranges.get(name, self.settings.latency)
         if span is not None:
             low, high = span
-            due = now + low + (chooser.branch(high - low + 1) if high > low else 0)
+            due = now + low + (chooser.branch(high - low + 1, LatencySite(name, low))
+                               if high > low else 0)
         settings = self.settings
         limit = settings.deadline_for(name) if settings.has_deadlines else None
         return due, None if limit is None else now + limit

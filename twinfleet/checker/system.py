@@ -99,6 +99,8 @@ class System:
         scenario: the parsed scenario.
         semantics: `Semantics.ROS` or `Semantics.REBECA`; default the scenario's.
         latency: (min, max) delivery delay branches; default `check.latency`.
+        topic_latency: (topic or service, (min, max)) ranges overriding the scenario's
+            for those names (a timing model's bounds, `checker.timing`).
         global_priority: rebeca's `@globalPriority`; default `check.global_priority`.
         debug_state: detect handlers that change node attributes other than `state`.
         properties: the properties (`checker.properties.PropertySet`) whose `within`
@@ -112,7 +114,9 @@ class System:
     """
 
     def __init__(self, scenario: Scenario, *, semantics: Semantics | str | None = None,
-                 latency: tuple[int, int] | None = None, global_priority: bool | None = None,
+                 latency: tuple[int, int] | None = None,
+                 topic_latency: tuple[tuple[str, tuple[int, int]], ...] = (),
+                 global_priority: bool | None = None,
                  debug_state: bool = False, properties: PropertySet | None = None,
                  exact_states: bool = False, check_determinism: bool = False,
                  transition_cache: bool = True, verify: bool = True) -> None:
@@ -123,7 +127,9 @@ class System:
         self.index = {name: i for i, name in enumerate(self.names)}
         self.settings = parse_settings(scenario, set(self.topology.subscribers),
                                        set(self.topology.servers),
-                                       latency=() if latency is None else latency)
+                                       latency=() if latency is None else latency,
+                                       topic_latency=topic_latency)
+        self.topic_latency = topic_latency
         if self.settings.crash is not None:
             self.topology.refuse_late_joiners(self.settings.crash.nodes, scenario.path)
         if global_priority is None:

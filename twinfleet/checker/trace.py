@@ -98,6 +98,7 @@ def build_trace(system: System, violation: PropertyViolation, path: Counterexamp
         "semantics": system.semantics.value,
         "profile": system.scenario.profile,
         "latency": list(system.rules.latency) if system.rules.latency else None,
+        "topic_latency": [[name, list(span)] for name, span in system.topic_latency] or None,
         "global_priority": system.rules.global_priority,
         "debug_state": system.debug_state,
         "check_determinism": system.check_determinism,

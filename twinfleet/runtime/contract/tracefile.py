@@ -52,6 +52,9 @@ _TOP: dict[str, Any] = {
     "semantics": lambda v: v in ("ros", "rebeca"),
     "profile": lambda v: v is None or isinstance(v, str),
     "latency": lambda v: v is None or (_ints(v) and len(v) == 2),
+    "topic_latency": lambda v: v is None or (isinstance(v, list) and all(
+        isinstance(e, list) and len(e) == 2 and isinstance(e[0], str) and _ints(e[1])
+        and len(e[1]) == 2 for e in v)),
     "global_priority": lambda v: v is None or isinstance(v, bool),
     "property": lambda v: isinstance(v, dict) and isinstance(v.get("name"), str)
     and isinstance(v.get("kind"), str),

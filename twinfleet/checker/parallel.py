@@ -1,0 +1,100 @@
+"""Where independent simulations run: the seam between statistical checking and an engine.
+
+`run_simulations(batch_fn, indices, workers)` runs `batch_fn` over contiguous
+slices of `indices` and returns every result in index order, whoever ran it:
+the caller aggregates in index order, so its answers do not depend on the
+number of workers. `batch_fn` must be picklable for more than one worker (a
+module-level callable object, such as `checker.statistical.SimulationJob`,
+that builds what it needs in the process that first calls it).
+
+Engines: `workers <= 1` runs in this process; more runs a
+`concurrent.futures.ProcessPoolExecutor` kept for the whole command
+(`ProcessEngine`). A distributed engine (the Ray cluster of `check --workers N
+--cluster ADDRESS`) plugs in by implementing `Engine.map` — send each slice to
+a worker as a task, return the slices' results in the order given — and being
+returned by `engine_for`; nothing else changes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
+from typing import Protocol, TypeVar, final
+
+R = TypeVar("R")
+BatchFn = Callable[[list[int]], list[R]]
+
+
+class Engine(Protocol):
+    """Runs batches of simulations; results per batch, in the order the batches were given."""
+
+    workers: int
+
+    def map(self, batch_fn: BatchFn[R], batches: Sequence[list[int]]) -> list[list[R]]:
+        """`batch_fn` applied to every batch."""
+        ...
+
+    def close(self) -> None:
+        """Release the engine's workers."""
+        ...
+
+
+@final
+class InProcess:
+    """Every batch in this process, one after another."""
+
+    workers = 1
+
+    def map(self, batch_fn: BatchFn[R], batches: Sequence[list[int]]) -> list[list[R]]:
+        """`batch_fn` applied to every batch, here."""
+        return [batch_fn(b) for b in batches]
+
+    def close(self) -> None:
+        """Nothing to release."""
+
+
+@final
+class ProcessEngine:
+    """Batches spread over `workers` local processes (kept until `close`)."""
+
+    def __init__(self, workers: int) -> None:
+        self.workers = workers
+        self._pool = ProcessPoolExecutor(max_workers=workers)
+
+    def map(self, batch_fn: BatchFn[R], batches: Sequence[list[int]]) -> list[list[R]]:
+        """`batch_fn` applied to every batch in the pool; results in batch order."""
+        return list(self._pool.map(batch_fn, batches))
+
+    def close(self) -> None:
+        """Stop the worker processes."""
+        self._pool.shutdown(cancel_futures=True)
+
+
+def engine_for(workers: int) -> Engine:
+    """The engine for `workers` local workers (1: this process)."""
+    return InProcess() if workers <= 1 else ProcessEngine(workers)
+
+
+def split(indices: Sequence[int], parts: int) -> list[list[int]]:
+    """`indices` cut into at most `parts` contiguous, nearly equal slices."""
+    parts = max(1, min(parts, len(indices)))
+    size, extra = divmod(len(indices), parts)
+    out, start = [], 0
+    for k in range(parts):
+        end = start + size + (1 if k < extra else 0)
+        out.append(list(indices[start:end]))
+        start = end
+    return [b for b in out if b]
+
+
+def run_simulations(batch_fn: BatchFn[R], indices: Sequence[int], workers: int | Engine,
+                    ) -> list[R]:
+    """Every result of `batch_fn` over `indices`, in index order (module docstring);
+    `workers` is a count (an engine is made and closed) or an engine kept by the caller."""
+    engine = engine_for(workers) if isinstance(workers, int) else workers
+    try:
+        return [r for batch in engine.map(batch_fn, split(indices, engine.workers))
+                for r in batch]
+    finally:
+        if isinstance(workers, int):
+            engine.close()

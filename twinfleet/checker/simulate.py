@@ -1,0 +1,155 @@
+"""One simulation of a `System` under a timing model: the unit of statistical checking.
+
+`Simulator.run(index)` starts from an initial world drawn by the start
+handlers' choices, then repeatedly takes one enabled event, drawn uniformly
+among those the rules enable (`System.actions`; KEEP_LAST drops and crash
+faults are not drawn: the model has no handler durations to make them
+likely), its `ctx.choose` answers and latencies drawn by a `SamplingChooser`,
+until nothing is pending, the next event lies beyond the horizon (fleet ms),
+or `max_steps` steps were taken. Every property is watched on the way: each
+invariant on its own, handler failures, `within`, queue bounds, deadlock and
+quiescence at an end with nothing pending; an `eventually` that held nowhere
+by the end is violated within the horizon. The simulation's generator is
+seeded from (seed, index) alone (`simulation_seed`), so simulation `i` is the
+same in any process and in any order.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import random
+from dataclasses import dataclass
+from typing import final
+
+from twinfleet.checker.diagnosis import CONTRACT_KINDS, breach_line
+from twinfleet.checker.outcome import Counterexample
+from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.sampling import SamplingChooser
+from twinfleet.checker.system import System
+from twinfleet.checker.timing import TimingModel
+from twinfleet.checker.transition import RunEvent, Step, Transition
+
+
+class ContractBreach(RuntimeError):
+    """A simulation met a node that breaks the node contract (exit 4, no estimate)."""
+
+
+def simulation_seed(seed: int, index: int) -> int:
+    """The seed of simulation `index` of a run seeded `seed` (independent of workers)."""
+    digest = hashlib.blake2b(f"{seed}:{index}".encode(), digest_size=8).digest()
+    return int.from_bytes(digest, "big")
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class Simulation:
+    """What one simulation found.
+
+    Attributes:
+        index: its index in the run.
+        violated: the properties violated, in the order first seen.
+        steps: steps taken; end_ms: the fleet time reached; ended: why it stopped
+            ("nothing pending", "horizon" or "step limit").
+        first: the first violation and the path to it (a `Counterexample`), or None;
+            `replayable` says whether `twinfleet replay` can confirm it (an `eventually`
+            cut by the horizon cannot be).
+    """
+
+    index: int
+    violated: tuple[str, ...]
+    steps: int
+    end_ms: int
+    ended: str
+    first: tuple[PropertyViolation, Counterexample] | None = None
+    replayable: bool = False
+
+
+@final
+class Simulator:
+    """Runs simulations of `system` (see the module docstring)."""
+
+    def __init__(self, system: System, properties: PropertySet, model: TimingModel, *,
+                 seed: int, horizon_ms: int, max_steps: int) -> None:
+        self.system, self.properties, self.model = system, properties, model
+        self.seed, self.horizon_ms, self.max_steps = seed, horizon_ms, max_steps
+        self._rest = PropertySet([p for p in properties.all if p.kind != "invariant"],
+                                 queue_bounds=properties.queue_bounds,
+                                 node_names=properties.node_names,
+                                 deadlines=properties.deadlines)
+        self._cumulative: dict[tuple[str, int, int], list[float]] = {}
+
+    def batch(self, indices: list[int]) -> list[Simulation]:
+        """Simulations `indices`, in that order."""
+        return [self.run(i) for i in indices]
+
+    def run(self, index: int) -> Simulation:
+        """Simulation `index`."""
+        rng = random.Random(simulation_seed(self.seed, index))
+        system = self.system
+        init = system.initial_world(chooser=self._chooser(rng))
+        seen: dict[str, tuple[PropertyViolation, int]] = {}
+        self._note(init, 0, seen)
+        world, steps = init.world, list[Step]()
+        never = {p.name: p for p in self.properties.eventually if not self._holds(p.name, world)}
+        ended = "step limit"
+        while len(steps) < self.max_steps:
+            nxt = world.next_time
+            if nxt is None:
+                ended = "nothing pending"
+                break
+            if nxt > self.horizon_ms:
+                ended = "horizon"
+                break
+            actions = [a for a in system.actions(world) if type(a) is RunEvent]
+            t = system.step(world, rng.choice(actions), self._chooser(rng))
+            steps.append(t.step)
+            world = t.world
+            self._note(t, len(steps), seen)
+            for name in [n for n in never if self._holds(n, world)]:
+                del never[name]
+        for name, prop in never.items():
+            shape = "terminal" if ended == "nothing pending" else "horizon"
+            source = prop.expr.source if prop.expr is not None else ""
+            seen.setdefault(name, (PropertyViolation(
+                name, prop.kind, f"{source!r} never held by t={world.now} ms "
+                f"({ended})", shape), len(steps)))
+        return self._result(index, init, steps, seen, world.now, ended)
+
+    def _chooser(self, rng: random.Random) -> SamplingChooser:
+        return SamplingChooser(rng, self.model, self._cumulative)
+
+    def _holds(self, name: str, world: object) -> bool:
+        prop = self.properties.eventually_named(name)
+        assert prop.expr is not None
+        return prop.expr.holds(self.system, world.states, world.now)  # type: ignore[attr-defined]
+
+    def _note(self, t: Transition, k: int, seen: dict[str, tuple[PropertyViolation, int]]) -> None:
+        """Record the properties first violated by the transition to step `k`."""
+        if t.failure is not None:
+            if t.failure.kind in CONTRACT_KINDS:
+                raise ContractBreach(breach_line(t.failure.kind, t.failure.node,
+                                                 t.failure.handler, t.failure.message))
+            violation = self.properties.check_failure(t.failure)
+            seen.setdefault(violation.property, (violation, k))
+        world, system = t.world, self.system
+        for prop in self.properties.invariants:
+            if prop.name not in seen:
+                assert prop.expr is not None
+                if not prop.expr.holds(system, world.states, world.now):
+                    seen[prop.name] = (PropertyViolation(
+                        prop.name, prop.kind,
+                        f"invariant {prop.expr.source!r} is false at t={world.now} ms"), k)
+        other = self._rest.check_world(system, world)
+        if other is not None:
+            seen.setdefault(other.property, (other, k))
+
+    def _result(self, index: int, init: Transition, steps: list[Step],
+                seen: dict[str, tuple[PropertyViolation, int]], end: int,
+                ended: str) -> Simulation:
+        if not seen:
+            return Simulation(index, (), len(steps), end, ended)
+        order = sorted(seen.items(), key=lambda item: item[1][1])
+        violation, k = order[0][1]
+        path = Counterexample(init.step.choices, tuple(steps[:k]))
+        return Simulation(index, tuple(name for name, _ in order), len(steps), end, ended,
+                          (violation, path), violation.shape != "horizon")

@@ -1,0 +1,239 @@
+"""Timing models: how long messages take and how late timers fire, as measured live.
+
+A `TimingModel` holds, in fleet milliseconds, an empirical distribution
+(`Histogram`) of delivery latency per topic or service (and a default for the
+rest), one of timer lateness, an optional loss probability per topic, and
+where it came from (the machine, the time scale of the runs, how many samples).
+`twinfleet calibrate` fits one from live event logs
+(`twinfleet.agreement.calibrate`); a model for loopback ships with the package
+(`default_timing`).
+
+Two uses. `twinfleet check --timing FILE` takes the model's *bounds* as the
+exhaustive search's latency ranges (every value a branch, as `check.latency`
+is); `twinfleet check --statistical` draws each latency from the model's
+*weights* (`checker.sampling`). Latencies are whole fleet ms, as the checker's
+clock is: a live latency of t - stamp ms (both whole fleet ms) is counted as is.
+
+File format (YAML, ``format: twinfleet-timing/1``)::
+
+    format: twinfleet-timing/1
+    machine: "Linux x86_64, 2 cores"     # where it was measured
+    time_scale: 1.0                      # fleet ms per wall ms of the runs
+    sources: [c1a.events.jsonl]
+    latency:
+      default: {values: [0, 1, 2], weights: [0.80, 0.15, 0.05], samples: 9000}
+      /poses: {values: [0, 1], weights: [0.9, 0.1], samples: 4000}
+    timer_lateness: {values: [0, 1], weights: [0.95, 0.05], samples: 2000}
+    loss: {/poses: 0.0}                  # optional
+
+`values` are distinct whole ms in increasing order, `weights` their
+probabilities (they must sum to 1 within 1e-3; they are renormalised).
+"""
+
+from __future__ import annotations
+
+import math
+from collections import Counter
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any, Final, final
+
+import yaml
+
+TIMING_FORMAT: Final = "twinfleet-timing/1"
+DEFAULT_MODEL: Final = "loopback.timing.yaml"
+
+
+class TimingError(ValueError):
+    """A timing model file is unreadable or malformed (one line, naming the file and key)."""
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class Histogram:
+    """An empirical distribution over whole milliseconds.
+
+    Attributes:
+        values: distinct values in increasing order (>= 0).
+        weights: the probability of each value (summing to 1).
+        samples: how many measurements it was fitted from (0: written by hand).
+    """
+
+    values: tuple[int, ...] = (0,)
+    weights: tuple[float, ...] = (1.0,)
+    samples: int = 0
+
+    def __post_init__(self) -> None:
+        if not self.values or len(self.values) != len(self.weights):
+            raise ValueError("values and weights must be non-empty and of equal length")
+        if any(v < 0 for v in self.values) or list(self.values) != sorted(set(self.values)):
+            raise ValueError("values must be distinct whole ms >= 0 in increasing order")
+        if any(w < 0 for w in self.weights) or abs(sum(self.weights) - 1.0) > 1e-6:
+            raise ValueError(f"weights must be >= 0 and sum to 1 (sum {sum(self.weights):.6f})")
+
+    @classmethod
+    def fit(cls, samples: Iterable[int]) -> Histogram:
+        """The empirical distribution of `samples` (negative values count as 0)."""
+        counts = Counter(max(0, int(s)) for s in samples)
+        total = sum(counts.values())
+        if not total:
+            return cls()
+        values = tuple(sorted(counts))
+        return cls(values, tuple(counts[v] / total for v in values), total)
+
+    @property
+    def bounds(self) -> tuple[int, int]:
+        """(smallest, largest) value."""
+        return self.values[0], self.values[-1]
+
+    @property
+    def mean(self) -> float:
+        """The expected value in ms."""
+        return math.fsum(v * w for v, w in zip(self.values, self.weights, strict=True))
+
+    def weights_over(self, low: int, n: int) -> tuple[float, ...]:
+        """The weight of each of `low`, ..., `low + n - 1`, renormalised over that range
+        (uniform when the model gives the range no weight)."""
+        own = dict(zip(self.values, self.weights, strict=True))
+        out = [own.get(low + k, 0.0) for k in range(n)]
+        total = math.fsum(out)
+        return tuple(w / total for w in out) if total > 0 else (1.0 / n,) * n
+
+    def quantile(self, q: float) -> int:
+        """The smallest value whose cumulative weight reaches `q`."""
+        acc = 0.0
+        for v, w in zip(self.values, self.weights, strict=True):
+            acc += w
+            if acc >= q - 1e-12:
+                return v
+        return self.values[-1]
+
+    def to_yaml(self) -> dict[str, Any]:
+        """The mapping the file format writes."""
+        return {"values": list(self.values), "weights": [round(w, 6) for w in self.weights],
+                "samples": self.samples}
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class TimingModel:
+    """Delivery latency per channel, timer lateness and loss (module docstring).
+
+    Attributes:
+        default: latency of a channel with no histogram of its own.
+        latency: (topic or service, histogram) pairs, sorted by name.
+        timer_lateness: how late timers (`ctx.after`, `@every`) fire.
+        loss: (topic, probability) pairs, sorted by name.
+        machine: where it was measured.
+        time_scale: the time scale of the runs it was fitted from (None: not measured).
+        sources: the event logs it was fitted from.
+    """
+
+    default: Histogram = Histogram()
+    latency: tuple[tuple[str, Histogram], ...] = ()
+    timer_lateness: Histogram = Histogram()
+    loss: tuple[tuple[str, float], ...] = ()
+    machine: str = ""
+    time_scale: float | None = None
+    sources: tuple[str, ...] = ()
+
+    def latency_of(self, channel: str) -> Histogram:
+        """The latency distribution of messages on `channel`."""
+        return dict(self.latency).get(channel, self.default)
+
+    def ranges(self, channels: Iterable[str]) -> tuple[tuple[int, int] | None,
+                                                      tuple[tuple[str, tuple[int, int]], ...]]:
+        """The model's bounds as a checker's latency ranges: (default range or None for
+        none, per-channel ranges of those of `channels` that have their own histogram)."""
+        low, high = self.default.bounds
+        default = None if high == 0 else (low, high)
+        known = set(channels)
+        return default, tuple((name, h.bounds) for name, h in self.latency if name in known)
+
+    def describe(self) -> str:
+        """One line: default latency bounds and mean, channels, lateness, machine, scale."""
+        low, high = self.default.bounds
+        scale = "unknown" if self.time_scale is None else f"{self.time_scale:g}"
+        return (f"latency {low}-{high} ms (mean {self.default.mean:.2f} ms; "
+                f"{len(self.latency)} channel(s) of their own), timer lateness "
+                f"{self.timer_lateness.bounds[0]}-{self.timer_lateness.bounds[1]} ms; "
+                f"measured on {self.machine or 'an unknown machine'} at time scale {scale}")
+
+    def to_yaml(self) -> dict[str, Any]:
+        """The mapping the file format writes."""
+        doc: dict[str, Any] = {
+            "format": TIMING_FORMAT, "machine": self.machine, "time_scale": self.time_scale,
+            "unit": "fleet ms", "sources": list(self.sources),
+            "latency": {"default": self.default.to_yaml(),
+                        **{name: h.to_yaml() for name, h in self.latency}},
+            "timer_lateness": self.timer_lateness.to_yaml()}
+        if self.loss:
+            doc["loss"] = dict(self.loss)
+        return doc
+
+
+def save_timing(model: TimingModel, path: str | Path) -> None:
+    """Write `model` as YAML, creating parent directories."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(yaml.safe_dump(model.to_yaml(), sort_keys=False, width=100,
+                                  default_flow_style=None))
+
+
+def load_timing(path: str | Path | None) -> TimingModel:
+    """Read a timing model file; None reads the loopback model shipped with the package."""
+    if path is None:
+        text = resources.files("twinfleet.checker").joinpath(DEFAULT_MODEL).read_text()
+        return parse_timing(yaml.safe_load(text), DEFAULT_MODEL)
+    try:
+        doc = yaml.safe_load(Path(path).read_text())
+    except (OSError, yaml.YAMLError) as exc:
+        raise TimingError(f"{path}: cannot read timing model: {exc}") from None
+    return parse_timing(doc, str(path))
+
+
+def default_timing() -> TimingModel:
+    """The loopback timing model that ships with the package."""
+    return load_timing(None)
+
+
+def parse_timing(doc: Any, where: str) -> TimingModel:
+    """A `TimingModel` from the decoded YAML of file `where` (errors name the key)."""
+    if not isinstance(doc, Mapping) or doc.get("format") != TIMING_FORMAT:
+        raise TimingError(f"{where}: not a {TIMING_FORMAT} file")
+    latency = doc.get("latency") or {}
+    if not isinstance(latency, Mapping):
+        raise TimingError(f"{where}: latency: expected a mapping of channel to histogram")
+    per = tuple(sorted((str(k), _histogram(v, where, f"latency.{k}"))
+                       for k, v in latency.items() if k != "default"))
+    default = _histogram(latency.get("default", {"values": [0], "weights": [1]}), where,
+                         "latency.default")
+    lateness = _histogram(doc.get("timer_lateness", {"values": [0], "weights": [1]}), where,
+                          "timer_lateness")
+    loss = doc.get("loss") or {}
+    if not isinstance(loss, Mapping) or not all(
+            isinstance(p, int | float) and 0 <= p <= 1 for p in loss.values()):
+        raise TimingError(f"{where}: loss: expected a mapping of topic to a probability")
+    scale = doc.get("time_scale")
+    if scale is not None and not (isinstance(scale, int | float) and scale > 0):
+        raise TimingError(f"{where}: time_scale: expected a positive number, got {scale!r}")
+    return TimingModel(default, per, lateness,
+                       tuple(sorted((str(k), float(v)) for k, v in loss.items())),
+                       str(doc.get("machine") or ""), None if scale is None else float(scale),
+                       tuple(str(s) for s in doc.get("sources") or ()))
+
+
+def _histogram(value: Any, where: str, key: str) -> Histogram:
+    if not isinstance(value, Mapping):
+        raise TimingError(f"{where}: {key}: expected {{values: [...], weights: [...]}}")
+    try:
+        values = tuple(int(v) for v in value["values"])
+        weights = tuple(float(w) for w in value["weights"])
+        total = sum(weights)
+        if abs(total - 1.0) <= 1e-3:  # the file rounds weights to 6 decimals
+            weights = tuple(w / total for w in weights)
+        return Histogram(values, weights, int(value.get("samples", 0)))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise TimingError(f"{where}: {key}: {exc}") from None
