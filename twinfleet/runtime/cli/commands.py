@@ -32,6 +32,7 @@ from twinfleet.runtime.fleet.connection import (
     import_modules,
     need_fleet,
 )
+from twinfleet.runtime.scenario.overrides import add_override_arguments, override_words
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,7 +52,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def cmd_launch(args: argparse.Namespace) -> int:
     """`twinfleet launch`: validate, run the fleet `--runs` times, print summaries."""
     from twinfleet.runtime.fleet.fleetauth import CredentialsError, listen_problem, read_credentials
-    from twinfleet.runtime.host.introspect import load_with_params
+    from twinfleet.runtime.scenario.overrides import load_with_params
+    from twinfleet.runtime.scenario.property_fields import check_property_fields
     from twinfleet.runtime.scenario.spec import ScenarioError
 
     params = launch_params(args)
@@ -64,6 +66,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         raise CommandError(str(exc)) from None
     try:
         scenario = load_with_params(args.scenario, params)
+        check_property_fields(scenario)  # a misspelt field stops here, before any process
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -150,11 +153,10 @@ def cmd_examples(args: argparse.Namespace) -> int:
 
 def launch_params(args: argparse.Namespace) -> list[str]:
     """The launch's parameter overrides: ``NAME:=VALUE`` words, then ``--param NAME=VALUE``."""
-    for word in args.overrides:
-        if ":=" not in word:
-            raise CommandError(f"launch: unexpected argument {word!r}; parameter overrides look "
-                               "like r1.speed:=0.4")
-    return [*args.overrides, *args.param]
+    try:
+        return override_words("launch", args.overrides, args.param)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
 
 
 def router_error(args: argparse.Namespace, exc: Exception) -> str:
@@ -319,12 +321,7 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                        "`interrupted` (130, Ctrl-C).")
     p.add_argument("scenario", help="scenario YAML file, or the name of a shipped example "
                                     "(twinfleet examples lists them)")
-    p.add_argument("overrides", nargs="*", metavar="[NODE.]NAME:=VALUE",
-                   help="parameter overrides, ROS 2 style: r1.speed:=0.4 sets r1's speed, "
-                        "scan_rate_ms:=50 every node's (values are YAML)")
-    p.add_argument("--param", action="append", default=[], metavar="[NODE.]NAME=VALUE",
-                   help="a parameter override, as NAME:=VALUE (repeatable); `twinfleet param "
-                        "get` shows the values in force")
+    add_override_arguments(p)
     p.add_argument("--time-scale", type=float, default=None, metavar="K",
                    help="run fleet time K times faster than wall time (default: live.time_scale or 1)")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
