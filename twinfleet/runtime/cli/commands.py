@@ -299,11 +299,15 @@ def cmd_foxglove(args: argparse.Namespace) -> int:
 
 
 def _foxglove_parser(sub: argparse._SubParsersAction) -> None:
-    text = ("serve the live fleet to Foxglove (WebSocket, foxglove.websocket.v1): the map as a "
-            "grid, robots as scene entities, scans as point clouds, every topic as JSON")
+    text = ("serve the live fleet to Foxglove (WebSocket, subprotocol foxglove.sdk.v1): the map "
+            "as a grid, robots as scene entities, scans as point clouds, every topic as JSON")
     p = sub.add_parser("foxglove", help=text, description=text[0].upper() + text[1:] + ". In "
                        "Foxglove: Open connection, ws://127.0.0.1:PORT; the 3D panel draws the "
-                       "fleet in frame 'map' with no configuration.")
+                       "fleet in frame 'map' with no configuration. The server is foxglove-sdk's, "
+                       "which accepts only the subprotocol name foxglove.sdk.v1 (offered by "
+                       "current Foxglove releases); a client that offers only the older name "
+                       "foxglove.websocket.v1 (older Foxglove and Lichtblick builds) is refused "
+                       "at the handshake (HTTP 400).")
     p.add_argument("--port", type=int, default=None, metavar="P",
                    help="TCP port on 127.0.0.1; 0 picks a free one (default: 8765, Foxglove's "
                         "usual one, or a free one when 8765 is taken: the URL is printed)")
