@@ -28,6 +28,7 @@ from twinfleet.runtime.fleet.connection import (
     CommandError,
     add_connection_arguments,
     add_message_arguments,
+    add_wait_arguments,
     connection,
     import_modules,
     need_fleet,
@@ -194,9 +195,10 @@ def cmd_topic(args: argparse.Namespace) -> int:
                                        wait=args.wait, timeout_s=wait)
     if args.action == "hz":
         return data_verbs.topic_hz(conn, args.topic, out=out, window=args.window,
-                                     duration_s=args.duration, timeout_s=wait)
+                                     duration_s=args.duration, timeout_s=wait, wait=args.wait)
     import_modules(args.module)
     need_fleet(args, conn)
+    data_verbs.refuse_other_type(conn, args.topic, args.type, force=args.force, timeout_s=wait)
     return data_verbs.topic_pub(conn, args.topic, args.type, parse_fields(args.data), out=out,
                                   rate_hz=args.rate, count=None if args.count == 0 else args.count,
                                   timeout_s=wait)
@@ -225,6 +227,8 @@ def cmd_service(args: argparse.Namespace) -> int:
                                     timeout_s=args.query_timeout)
     import_modules(args.module)
     need_fleet(args, conn)
+    data_verbs.refuse_other_type(conn, args.service, args.type, service=True, force=args.force,
+                                 timeout_s=args.query_timeout)
     return data_verbs.service_call(conn, args.service, args.type, parse_fields(args.data),
                                      out=sys.stdout, timeout_s=args.timeout,
                                      discovery_s=args.query_timeout)
@@ -312,6 +316,7 @@ def _foxglove_parser(sub: argparse._SubParsersAction) -> None:
                    help="TCP port on 127.0.0.1; 0 picks a free one (default: 8765, Foxglove's "
                         "usual one, or a free one when 8765 is taken: the URL is printed)")
     add_connection_arguments(p)
+    add_wait_arguments(p, "serve it once its router is found")
     p.set_defaults(func=cmd_foxglove)
 
 
@@ -393,14 +398,13 @@ def _topic_parser(sub: argparse._SubParsersAction) -> None:
                     help="print only this field, e.g. cell or data.cell.0 (envelope fields: "
                          "type, stamp_ms, seq, sender)")
     te.add_argument("--duration", type=float, default=None, metavar="S", help="exit after S seconds")
-    te.add_argument("--wait", action="store_true",
-                    help="wait for a publisher of a topic no node uses yet (default: exit 2 "
-                         "after the discovery timeout)")
+    add_wait_arguments(te, "for a publisher of a topic no node uses yet")
     th = _sub(ts, "hz", "print the rate of a topic every second")
     th.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
     th.add_argument("--window", type=int, default=100, metavar="N",
                     help="number of recent messages the rate is computed over (default: 100)")
     th.add_argument("--duration", type=float, default=None, metavar="S", help="exit after S seconds")
+    add_wait_arguments(th, "for a publisher of a topic no node uses yet")
     tp = _sub(ts, "pub", "publish a message on a topic (checked against its type first)")
     tp.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
     add_message_arguments(tp)

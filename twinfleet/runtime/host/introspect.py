@@ -7,6 +7,7 @@ entry and the node class's declared handlers (`node_description`)::
     {"name", "namespace", "class", "pid",
      "params":        {name: value},            # the node's Params, overrides applied
      "subscriptions": {"/listener/chatter": qos}, "services": ["/add_two_ints"],
+     "subscription_types": {"/listener/chatter": "std_msgs/String"},
      "service_types": {"/add_two_ints": ["example_interfaces/AddTwoInts_Request",
                                          "example_interfaces/AddTwoInts_Response"]},
      "timers": [{"handler", "period_ms"}], "publication_qos": {"/map": qos},
@@ -14,8 +15,9 @@ entry and the node class's declared handlers (`node_description`)::
 
 with ``qos = {"reliability", "durability", "depth"}``. `twinfleet node info`,
 `topic info`, `service list -t|type` and `param list|get` read it (a
-service's request and reply types come from its handler's annotations, "?"
-where it has none); what a node *publishes* is only
+service's request and reply types, and the type a subscription admits, come
+from the handler's annotations, "?" where it has none; `topic pub` and
+`service call` refuse another type by them); what a node *publishes* is only
 known once it publishes (its ``@pub`` liveliness token and ``publications``,
 which records the envelope type of each topic's first message), and its QoS
 is ``publication_qos`` or the default.
@@ -127,6 +129,9 @@ def node_description(node: Any, class_path: str) -> dict[str, Any]:
             "pid": os.getpid(), "params": values,
             "subscriptions": {node.resolve(s.name or ""): qos_dict(s.qos)
                               for s in spec.of_kind("subscribe")},
+            "subscription_types": {node.resolve(s.name or ""):
+                                   _type_name(expected_type(node, s.method))
+                                   for s in spec.of_kind("subscribe")},
             "services": [node.resolve(s.name or "") for s in spec.of_kind("service")],
             "service_types": {node.resolve(s.name or ""): service_types(node, s)
                               for s in spec.of_kind("service")},
