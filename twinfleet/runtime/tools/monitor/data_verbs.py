@@ -24,6 +24,7 @@ import msgpack
 import yaml
 import zenoh
 
+from twinfleet.runtime.contract.messages import registered_types
 from twinfleet.runtime.core.guard import signer
 from twinfleet.runtime.fleet.connection import CommandError, Connection
 from twinfleet.runtime.host.keys import topic_expr
@@ -287,9 +288,10 @@ def refuse_other_type(conn: Connection, name: str, type_name: str, *, service: b
     wanted = checked_type(type_name, service=service)
     with open_session(conn) as session:
         said = carried_types(g.node_infos(session, conn.fleet, timeout_s), name, service=service)
-    other = {kind: nodes for kind, nodes in said.items() if kind != wanted}
-    if not other:
-        return
+        other = {kind: nodes for kind, nodes in said.items() if kind != wanted}
+        if not other or (wanted not in registered_types() and wanted not in
+                         _known_schemas(session, conn.fleet, timeout_s)):
+            return  # a type no one knows: the message check says so, more precisely
     text = "; ".join(f"{kind} ({', '.join(nodes)})" for kind, nodes in other.items())
     what = "takes" if service else "carries"
     if not force:
