@@ -10,7 +10,7 @@ from PIL import Image
 
 from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.cli import main
-from twinfleet.nodes.render import robot_colour
+from twinfleet.nodes.render import LEGEND_PX, robot_colour
 
 ROOT = Path(__file__).resolve().parents[1]
 PX = 12
@@ -26,9 +26,16 @@ def test_render_scenario_png(tmp_path, capsys):
     out = tmp_path / "c1a.png"
     assert main(["render", str(ROOT / "twinfleet" / "launch" / "c1a.yaml"), "-o", str(out), "--scan-of", "r3"]) == 0
     arr = np.asarray(Image.open(out).convert("RGB"))
-    assert arr.shape == (50 * PX + 18, 50 * PX, 3)
+    assert arr.shape == (50 * PX + LEGEND_PX + 18, 50 * PX, 3)
+    legend = arr[50 * PX:50 * PX + LEGEND_PX]
     for i, start in enumerate([(5, 5), (5, 15), (5, 25), (5, 35), (5, 45)]):
         assert colour_near(arr, start, robot_colour(i))
+        assert np.all(legend == robot_colour(i), axis=-1).sum() >= 81  # its 9x9 swatch
+    # each robot's name is written beside it: dark text pixels right above its start cell
+    for r, c in [(5, 5), (5, 15), (5, 25), (5, 35), (5, 45)]:
+        label = arr[int((r - 1.6) * PX):int((r - 0.4) * PX),
+                    int((c + 1.45) * PX):int((c + 3) * PX)]  # clear of the body's outline
+        assert (label.sum(axis=-1) < 450).sum() > 5, (r, c)  # anti-aliased dark text
 
 
 @pytest.mark.slow
@@ -42,7 +49,7 @@ def test_render_c2a_counterexample_shows_the_colliding_pair(tmp_path):
     out = tmp_path / "c2a.png"
     assert main(["render", str(trace_path), "-o", str(out)]) == 0
     arr = np.asarray(Image.open(out).convert("RGB"))
-    assert arr.shape == (50 * PX + 18, 50 * PX, 3)
+    assert arr.shape == (50 * PX + LEGEND_PX + 18, 50 * PX, 3)
     for name in pair:
         index = int(name[1:]) - 1
         assert colour_near(arr, tuple(cells[name]), robot_colour(index)), name

@@ -183,9 +183,11 @@ def check(scenario: Scenario | str | Path, **options: Any) -> CheckReport:
     """Check a system (or a scenario file): every interleaving, every choice.
 
     `options` are `twinfleet.checker.CheckOptions` fields (``search="dfs"``,
-    ``max_states=...``, ``semantics=...``, ``verify=False``, ...); no trace file is
-    written (use `CheckReport.save_trace`)."""
+    ``max_states=...``, ``semantics=...``, ``verify=False``, ...; ``params=["r1.speed:=0.4"]``
+    overrides parameters as `twinfleet launch` does); no trace file is written (use
+    `CheckReport.save_trace`)."""
     options.setdefault("trace_out", None)
+    options["params"] = tuple(options.get("params", ()))
     built = scenario if isinstance(scenario, Scenario) else None
     try:
         result = _check(scenario, CheckOptions(**options))
@@ -286,16 +288,24 @@ class LiveFleet:
 @asynccontextmanager
 async def live_fleet(scenario: Scenario | str | Path, *, time_scale: float = 1.0,
                      timeout_s: float = 60.0, seed: int | None = None,
-                     out: TextIO | None = None) -> AsyncIterator[LiveFleet]:
+                     out: TextIO | None = None,
+                     params: Sequence[str] = ()) -> AsyncIterator[LiveFleet]:
     """Run the fleet of `scenario` while the block runs; stop it when the block ends
     (normally or by an exception: the processes are stopped either way).
 
     `timeout_s` bounds the whole run (wall seconds); lines of the launcher go to `out`
-    (default: stdout, which pytest captures and shows on failure)."""
-    if not isinstance(scenario, Scenario):
-        from twinfleet.runtime.scenario.spec import load_scenario
+    (default: stdout, which pytest captures and shows on failure); `params` are parameter
+    overrides of a scenario file, as `twinfleet launch` takes them (``"r1.speed:=0.4"``)."""
+    from twinfleet.runtime.scenario.property_fields import check_property_fields
 
-        scenario = load_scenario(scenario)
+    if not isinstance(scenario, Scenario):
+        from twinfleet.runtime.scenario.overrides import load_with_params
+
+        scenario = load_with_params(scenario, params)
+    elif params:
+        raise ValueError("params override a scenario file; a system built in Python takes "
+                         "its parameters when it is built")
+    check_property_fields(scenario)  # a misspelt field fails before any process starts
     loop = asyncio.get_running_loop()
     ready: asyncio.Future[LiveFleet] = loop.create_future()
     finished = asyncio.Event()
@@ -309,7 +319,7 @@ async def live_fleet(scenario: Scenario | str | Path, *, time_scale: float = 1.0
     kwargs = {} if out is None else {"out": out}
     runner = asyncio.create_task(run_fleet(scenario, time_scale=time_scale, timeout_s=timeout_s,
                                            seed=seed, handle_signals=False, driver=driver,
-                                           **kwargs))
+                                           params=list(params), **kwargs))
     await asyncio.wait({ready, runner}, return_when=asyncio.FIRST_COMPLETED)
     if not ready.done():
         result = await runner  # re-raises a launcher error

@@ -186,6 +186,23 @@ class LambdaTimer(_Base):
         ctx.after(10, lambda c: None)
 
 
+@dataclass(frozen=True)
+class Dock:
+    """A dataclass meant as a message, never registered with @message."""
+
+    slot: int
+
+
+class UnregisteredMessage(_Base):
+    """Publishes a dataclass that is not a registered message."""
+
+    tool_topics = ("/dock",)
+
+    @on_start
+    def begin(self, ctx: Context) -> None:
+        ctx.publish("/dock", Dock(1))
+
+
 class UnhashableArgs(_Base):
     """Passes a list as a timer argument."""
 

@@ -56,7 +56,7 @@ def test_bad_scenario_exit_2_without_traceback(tmp_path, capsys):
     wrong = scenario(tmp_path, [node("c", "Counter")], name="wrong", properties=[
         {"name": "p", "kind": "invariant", "expr": "c.nonexistent > 0"}])
     assert commands.main([str(wrong)]) == 2
-    assert "AttributeError" in capsys.readouterr().err
+    assert "has no field 'nonexistent'" in capsys.readouterr().err
     not_trace = tmp_path / "x.json"
     not_trace.write_text("{}")
     assert commands.main(["replay", str(not_trace)]) == 2

@@ -33,6 +33,8 @@ CASES = [
     ("Urandom", None, "n1", "begin (@on_start)", "os.urandom()"),
     ("NumpyRandom", None, "n1", "begin (@on_start)", "numpy.random.random()"),
     ("LambdaTimer", None, "n1", "begin (@on_start)", "never a lambda"),
+    ("UnregisteredMessage", None, "n1", "begin (@on_start)",
+     "needs a message, got Dock(slot=1); fix: register the class with @message("),
     ("UnhashableArgs", None, "n1", "begin (@on_start)", "must be hashable"),
     ("ObjectInState", None, "n1", "begin (@on_start)", "cannot be encoded"),
     ("FunctionInState", "Pinger", "n1", "on_hello (@subscribe)", "cannot be encoded"),

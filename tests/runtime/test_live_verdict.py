@@ -257,3 +257,14 @@ def test_an_invariant_false_in_the_initial_states_is_violated_at_once():
                                                       "other": NodeStatistics()}))
     assert (v.status, v.property_name) == (Status.VIOLATED, "started")
     assert "false in the initial states" in v.summary and "in the initial states" in v.details[0]
+
+
+def test_an_operators_refused_input_is_named_and_leaves_the_verdict_alone():
+    fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
+    fleet.run(300)
+    forced = NodeStatistics(rejected_external=2)
+    v = fleet.judge.verdict(RunEnd("timeout", statistics={"counter": forced,
+                                                            "other": NodeStatistics()}))
+    assert v.status == Status.HOLDS, v
+    assert v.details[-1] == ("external input: counter refused 2 samples an operator's "
+                             "command sent (e.g. `twinfleet topic pub --force`)")

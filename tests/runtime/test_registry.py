@@ -71,3 +71,33 @@ def test_a_directory_others_can_write_is_refused(home):
         running_fleets()
     register("c1a", "tcp/127.0.0.1:1")  # the launcher, owning it, takes it back to 0700
     assert stat.S_IMODE(home.stat().st_mode) == 0o700
+
+
+def test_wait_says_once_that_it_waits_and_gives_up_after_its_timeout(home, capsys):
+    from twinfleet.cli import main
+
+    for words in (["topic", "hz", "/chatter"], ["foxglove"], ["record", "-o", "x.mcap"]):
+        assert main([*words, "--wait", "--wait-timeout", "0.3"]) == 2
+        err = capsys.readouterr().err.strip().splitlines()
+        assert err[0] == "waiting for a fleet to be launched on this machine (up to 0.3 s)", err
+        assert len(err) == 2 and "no fleet was launched on this machine within 0.3 s" in err[1]
+
+
+def test_wait_finds_a_fleet_registered_while_it_waits(home):
+    import threading
+
+    from twinfleet.runtime.fleet.connection import connection
+    from twinfleet.runtime.fleet.registry import unregister
+
+    args = type("Args", (), {"connect": None, "fleet": "demo", "credentials": None,
+                             "wait": True, "wait_timeout": 10.0})()
+    paths = []
+    later = threading.Timer(0.3, lambda: paths.append(register("demo", "tcp/127.0.0.1:9")))
+    later.start()
+    try:
+        conn = connection(args)
+    finally:
+        later.join()
+        for path in paths:
+            unregister(path)
+    assert (conn.fleet, conn.endpoint, conn.found) == ("demo", "tcp/127.0.0.1:9", "registry")

@@ -12,6 +12,7 @@ from tests.runtime.hosts import Num, Shallow
 from twinfleet import message
 from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.contract.messages import encode
+from twinfleet.runtime.contract.names import OPERATOR_SENDER
 from twinfleet.runtime.core.guard import Rejected
 from twinfleet.runtime.core.node_core import NodeCore
 from twinfleet.runtime.core.statistics import (
@@ -40,8 +41,9 @@ BUSY = NodeStatistics(received=12, dropped_undecodable=1, handler_errors=2, fail
                                 Rejection.OVERSIZE: 19, Rejection.WRONG_TYPE: 20})
 
 # Counters the live verdict does not judge: what a healthy run also counts, or a
-# snapshot of the moment. Every other field must make a run inconclusive.
-NOT_JUDGED = {"received", "dropped_undecodable", "handler_errors", "failures", "inbox_depth",
+# snapshot of the moment, or input from outside the fleet (rejected_external: the verdict
+# names it in a detail line). Every other field must make a run inconclusive.
+NOT_JUDGED = {"rejected_external", "received", "dropped_undecodable", "handler_errors", "failures", "inbox_depth",
               "timers_pending", "published", "handled", "dropped_keep_last",
               "dropped_best_effort", "sequence_jumps", "max_lateness_ms", "stall_threshold_ms"}
 
@@ -146,3 +148,15 @@ def test_one_status_word_list_for_the_checker_and_the_live_verdict():
                             Status.ERROR: "ERROR", Status.INCONCLUSIVE: "INCONCLUSIVE",
                             Status.INTERRUPTED: "interrupted"}
     assert f"{Status.BREACH}" == "contract breach" and Status("holds") is Status.HOLDS
+
+
+def test_a_refused_sample_an_operator_sent_is_external_input_not_a_rejection():
+    core = NodeCore(Shallow("s"), seed=1)
+    core.start(0)
+    receive = core.receiver("on_num")
+    with pytest.raises(Rejected):  # `topic pub --force` of the wrong type: still refused
+        receive(encode(Word("x"), seq=1, sender=OPERATOR_SENDER), 0)
+    stats = core.statistics()
+    assert stats.rejected_external == 1
+    assert stats.rejected[Rejection.WRONG_TYPE] == 0
+    assert statistics_reasons("s", stats) == []

@@ -141,6 +141,7 @@ def test_viewer_steps_through_a_checker_trace(cli, browser_page, tmp_path):
     page.goto(url)
     page.wait_for_function("() => twinfleetView.trace && twinfleetView.mapDrawn")
     assert page.evaluate("() => twinfleetView.step") == steps  # opens on the violation
+    assert page.is_visible("#robots-panel") and page.is_visible("#collisions-panel")
     _assert_drawn(page, ["r1", "r2"])
     assert page.evaluate("() => twinfleetView.probe() && document.getElementById('collision-count').textContent") == "1"
     page.click("#first")
@@ -206,6 +207,8 @@ def test_viewer_steps_through_a_trace_of_a_users_fleet(cli, browser_page, tmp_pa
     states = page.text_content("#states")
     assert "talker:" in states and '"count":3' in states.replace(" ", ""), states
     assert "→" in page.text_content("#step-info")  # the violation's message
+    assert not page.is_visible("#robots-panel")  # no body drawn: no empty robot table
+    assert not page.is_visible("#collisions-panel")
     page.click("#first")
     assert "talker:" in page.text_content("#states") and page.evaluate("() => twinfleetView.step") == 0
     page.keyboard.press("ArrowRight")

@@ -245,3 +245,29 @@ def test_cli_of_view_record_play(tmp_path, capsys, monkeypatch):
             main([command, "--help"])
         text = capsys.readouterr().out
         assert all(flag in text for flag in flags), (command, text)
+
+
+def test_the_live_header_names_the_registry_without_a_frozen_waiting_word():
+    """Found through the registry, the page says so; whether the fleet is reached is the
+    link indicator's to say, so the header never reads "waiting" beside a running fleet."""
+    import io
+
+    import aiohttp
+
+    from twinfleet.runtime.tools.view.viewer import serve
+
+    async def scenario() -> dict:
+        stop, loop = asyncio.Event(), asyncio.get_running_loop()
+        ready: asyncio.Future[str] = loop.create_future()
+        task = asyncio.create_task(serve(connect=None, fleet="*", port=0, out=io.StringIO(),
+                                         ready=ready.set_result, stop=stop))
+        try:
+            url = await asyncio.wait_for(ready, 10)
+            async with aiohttp.ClientSession() as http, http.get(url + "api/info") as reply:
+                return await reply.json()
+        finally:
+            stop.set()
+            await asyncio.wait_for(task, 10)
+
+    info = asyncio.run(scenario())
+    assert info["connect"] == "the fleet registry", info

@@ -444,7 +444,8 @@ async def replay_live(trace_path: str | Path, *, out: TextIO = sys.stdout,
     profile = ("--profile", p.scenario.profile) if p.scenario.profile != p.file_profile else ()
     fleet = await run_fleet(p.scenario, timeout_s=timeout_s, out=out,
                             handle_signals=handle_signals, record_events=events,
-                            node_args=("--gate", *profile), driver=coordinator)
+                            node_args=("--gate", *profile), driver=coordinator,
+                            params=p.trace.get("params") or ())  # the overrides checked
     result.fleet_reason = fleet.reason
     for line in format_result(fleet):
         print(f"[launcher] {line}", file=out, flush=True)

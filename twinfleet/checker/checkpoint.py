@@ -15,23 +15,19 @@ search of neither version. The scenario file is checked by its hash.
 
 from __future__ import annotations
 
-import hashlib
 import os
 import pickle
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
+from twinfleet.runtime.contract.tracefile import file_sha256  # noqa: F401 (the checker's name for it)
+
 FORMAT = "twinfleet-checkpoint/2"
 
 
 class CheckpointError(ValueError):
     """A checkpoint file is unreadable, of another format, or does not fit the scenario."""
-
-
-def file_sha256(path: str | Path) -> str:
-    """Hex SHA-256 of a file's bytes."""
-    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
 
 
 def save(path: str | Path, meta: Mapping[str, Any], store: Any, frontier: list[Any],

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Any
 
 from twinfleet.checker.options import REDUCTIONS, Semantics, add_statistical_arguments
 from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_CONTRACT_BREACH, EXIT_FAILED
+from twinfleet.runtime.scenario.overrides import add_override_arguments, override_words
 
 if TYPE_CHECKING:
     from twinfleet.checker.driver import CheckResult
@@ -48,7 +49,9 @@ def register(subparsers: Any) -> None:
                               "outside self.state, state that cannot be encoded, a lambda as a "
                               "timer).")
     p.add_argument("scenario", nargs="?", default=None,
-                   help="scenario YAML file (optional with --resume)")
+                   help="scenario YAML file, or the name of a shipped example (optional "
+                        "with --resume)")
+    add_override_arguments(p)  # the same overrides as `launch`, validated the same way
     p.add_argument("--search", choices=("bfs", "dfs", "random"), default=None,
                    help="search order: bfs (shortest counterexample, default), dfs, or random walks")
     p.add_argument("--walks", type=int, default=100, help="number of random walks (--search random)")
@@ -141,6 +144,11 @@ def check_command(args: argparse.Namespace) -> int:
     if args.scenario is None and args.resume is None:
         print("twinfleet check: give a scenario file, or --resume CHECKPOINT", file=sys.stderr)
         return EXIT_BAD_INPUT
+    try:
+        params = tuple(override_words("check", args.overrides, args.param))
+    except ValueError as exc:
+        print(f"twinfleet {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
     from twinfleet.checker.diagnosis import ContractBreachError
     from twinfleet.checker.driver import CheckOptions, check
 
@@ -155,6 +163,7 @@ def check_command(args: argparse.Namespace) -> int:
                            transition_cache=not args.no_transition_cache,
                            checkpoint=args.checkpoint, checkpoint_every_s=args.checkpoint_every,
                            resume=args.resume, reduction=args.reduction, timing=args.timing,
+                           params=params,
                            progress=None if args.quiet or args.json else _progress)
     try:
         result = check(args.scenario, options)
@@ -193,6 +202,8 @@ def replay_command(args: argparse.Namespace) -> int:
 
     try:
         trace = load_trace(args.trace)
+        if trace.get("scenario_changed"):  # say so before a replay that may then diverge
+            print(f"twinfleet replay: warning: {trace['scenario_changed']}", file=sys.stderr)
         system, props = system_for_trace(trace)
         result = replay(system, trace, props)
     # mypy reads no exception types out of a starred tuple (they are all Exception classes)

@@ -17,7 +17,7 @@ with (the scenario file must be unchanged: its hash is recorded).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, final
@@ -41,7 +41,9 @@ from twinfleet.runtime.contract.node import NodeSpec
 from twinfleet.runtime.contract.tracefile import write_trace
 from twinfleet.runtime.scenario.config import SEARCHES, CheckConfig
 from twinfleet.runtime.scenario.lint import lint_scenario
-from twinfleet.runtime.scenario.spec import Scenario, ScenarioError, load_scenario, resolve_scenario
+from twinfleet.runtime.scenario.overrides import load_with_params
+from twinfleet.runtime.scenario.property_fields import check_property_fields
+from twinfleet.runtime.scenario.spec import Scenario, ScenarioError, resolve_scenario
 
 
 @final
@@ -68,6 +70,7 @@ class CheckOptions:
     resume: str | None = None
     reduction: str | None = None
     timing: str | None = None  # a timing model whose bounds are the latency ranges
+    params: tuple[str, ...] = ()  # parameter overrides, as `launch` takes them (r1.speed:=0.4)
     progress: Callable[[SearchStatistics], None] | None = field(default=None, compare=False)
 
 
@@ -92,6 +95,7 @@ class CheckResult:
     warnings: list[str] = field(default_factory=list)  # load-time lint (runtime.scenario.lint)
     reduction: str = "none"
     reduction_statistics: dict[str, int] | None = None
+    params: tuple[str, ...] = ()  # the parameter overrides checked with
 
     @property
     def rmc_transitions(self) -> int:
@@ -123,6 +127,7 @@ class CheckResult:
             "trace": self.trace_path,
             "trace_steps": None if self.trace is None else len(self.trace["steps"]),
             "reduction": self.reduction, "reduction_statistics": self.reduction_statistics,
+            "params": list(self.params),
             "exit_code": self.exit_code,
         }
 
@@ -138,7 +143,8 @@ class CheckResult:
         else:
             verdict = f"UNKNOWN: {self.reason}"
         lines = [f"twinfleet check {self.scenario} (semantics {self.semantics}, "
-                 f"search {self.search})",
+                 f"search {self.search})" + (f" with {' '.join(self.params)}"
+                                              if self.params else ""),
                  f"verdict: {verdict}",
                  "properties: " + "; ".join(self.properties),
                  f"states {s.states:,}  transitions {s.transitions:,} "
@@ -164,15 +170,16 @@ class CheckResult:
         return "\n".join(lines)
 
 
-def load(path: str | Path, *, profile: str | None = None,
-         semantics: str | None = None) -> Scenario:
-    """Load a scenario with optional profile/semantics overrides."""
+def load(path: str | Path, *, profile: str | None = None, semantics: str | None = None,
+         params: Sequence[str] = ()) -> Scenario:
+    """Load a scenario with optional profile/semantics overrides and parameter overrides
+    (``r1.speed:=0.4``, validated as `launch` validates them)."""
     overrides: dict[str, Any] = {}
     if profile is not None:
         overrides["profile"] = profile
     if semantics is not None:
         overrides["semantics"] = semantics
-    return load_scenario(path, overrides)
+    return load_with_params(path, params, overrides)
 
 
 def system_for_trace(trace: Mapping[str, Any]) -> tuple[System, PropertySet]:
@@ -182,7 +189,7 @@ def system_for_trace(trace: Mapping[str, Any]) -> tuple[System, PropertySet]:
         raise ScenarioError("the trace names no scenario file (its scenario was built in "
                             "Python): replay it with checker.replay(System(scenario), trace)")
     scenario = load(trace["scenario"], profile=trace.get("profile"),
-                    semantics=trace.get("semantics"))
+                    semantics=trace.get("semantics"), params=trace.get("params") or ())
     props = PropertySet.from_scenario(scenario)
     latency = trace.get("latency")
     per_name = tuple((name, (span[0], span[1])) for name, span in trace.get("topic_latency") or ())
@@ -223,6 +230,7 @@ def check(scenario: str | Path | Scenario | None,
     scenario = _scenario(scenario if isinstance(scenario, Scenario) else path, options, meta)
     if path is None and options.checkpoint is not None:
         raise ScenarioError(f"{scenario.source}: a checkpoint needs a scenario file")
+    check_property_fields(scenario)
     props = PropertySet.from_scenario(scenario)
     warnings = [str(w) for w in lint_scenario(scenario)]
     flags = {key: meta.get(key, getattr(options, key)) for key in _SEARCH_FLAGS}
@@ -238,7 +246,8 @@ def check(scenario: str | Path | Scenario | None,
     meta = {"scenario": None if path is None else str(path.resolve()),
             "sha256": None if path is None else ckpt.file_sha256(path),
             "semantics": system.semantics.value, "profile": scenario.profile,
-            "strategy": strategy, "reduction": reduction_name.split()[0], **flags}
+            "strategy": strategy, "reduction": reduction_name.split()[0],
+            "params": list(meta.get("params", options.params)), **flags}
     search = Search(system, props, limits_for(options, scenario.check), progress=options.progress,
                     checkpoint=options.checkpoint or options.resume,
                     checkpoint_every_s=options.checkpoint_every_s, checkpoint_meta=meta,
@@ -258,11 +267,12 @@ def check(scenario: str | Path | Scenario | None,
                          resumed_from=options.resume, warnings=warnings,
                          reduction=describe(reduction, reduction_name, strategy),
                          reduction_statistics=None if reduction is None else
-                         reduction.statistics())
+                         reduction.statistics(), params=tuple(meta["params"]))
     if outcome.violation is not None and outcome.counterexample is not None:
         try:
             result.trace = build_trace(system, outcome.violation, outcome.counterexample,
-                                       scenario_path=meta["scenario"], search=strategy)
+                                       scenario_path=meta["scenario"], search=strategy,
+                                       scenario_sha256=meta["sha256"], params=meta["params"])
         except IndexError:  # the path's events are not there when it runs again
             return _breach_result(scenario, system, strategy, props, breach_line(
                 FailureKind.NONDETERMINISM, "", "(unknown)", "the counterexample does not run "
@@ -340,9 +350,13 @@ def _scenario(scenario: Path | Scenario | None, options: CheckOptions,
     """The scenario to check, with the profile and semantics of the options or checkpoint."""
     profile = meta.get("profile", options.profile)
     semantics = meta.get("semantics", options.semantics)
+    params = meta.get("params", options.params)
     if not isinstance(scenario, Scenario):
         assert scenario is not None  # check() refuses a missing scenario file first
-        return load(scenario, profile=profile, semantics=semantics)
+        return load(scenario, profile=profile, semantics=semantics, params=params)
+    if params:
+        raise ScenarioError(f"{scenario.source}: the parameters of a scenario built in Python "
+                            "are given when it is built (Scenario.build(..., params=...))")
     if profile is not None and profile != scenario.profile:
         raise ScenarioError(f"{scenario.source}: the profile of a scenario built in Python is "
                             "chosen when it is built (Scenario.build(..., profile=...))")
@@ -360,6 +374,9 @@ def _resume_path(path: Path | None, options: CheckOptions,
         raise CheckpointError(f"{where}: its scenario {recorded} no longer exists")
     if ckpt.file_sha256(recorded) != meta["sha256"]:
         raise CheckpointError(f"{where}: {recorded} changed since the checkpoint was written")
+    if options.params and list(options.params) != meta.get("params", []):
+        raise CheckpointError(f"{where}: written with parameters {meta.get('params', [])}, "
+                              f"cannot resume with {list(options.params)}")
     for key, value in (("semantics", options.semantics), ("profile", options.profile),
                        ("strategy", options.search)):
         if value is not None and value != meta[key]:

@@ -225,7 +225,7 @@ class Runner:
         error = outcome.error
         if error is not None and error.contract:
             return (FailureKind.CONTRACT, node.name, ev.method,
-                    f"{error.message}; fix: {FIX_CONTEXT}")
+                    f"{error.message}; fix: {error.fix or FIX_CONTEXT}")
         if attributes is not None:
             now = vars(node)
             stray = sorted(k for k in attributes.keys() | now.keys()

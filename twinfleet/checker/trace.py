@@ -88,13 +88,19 @@ def _summary(args: Sequence[Any]) -> str:
 
 
 def build_trace(system: System, violation: PropertyViolation, path: Counterexample, *,
-                scenario_path: str, search: str = "bfs") -> dict[str, Any]:
-    """Re-execute the counterexample `path` and describe every step as a JSON-ready trace."""
+                scenario_path: str | None, search: str = "bfs",
+                scenario_sha256: str | None = None,
+                params: Sequence[str] = ()) -> dict[str, Any]:
+    """Re-execute the counterexample `path` and describe every step as a JSON-ready trace
+    (with the scenario's digest and the parameter overrides, so that `replay` finds and
+    loads the same configuration)."""
     init = system.initial_world(path.initial)
     world = init.world
     trace: dict[str, Any] = {
         "format": TRACE_FORMAT,
         "scenario": scenario_path,
+        "scenario_sha256": scenario_sha256,
+        "params": list(params),
         "semantics": system.semantics.value,
         "profile": system.scenario.profile,
         "latency": list(system.rules.latency) if system.rules.latency else None,

@@ -55,11 +55,17 @@ class FleetView:
     extra: Mapping[str, Any] = field(default_factory=dict)
 
 
+LEGEND_PX = 18  # the band under the map: each robot's colour and name, then the symbols
+LEGEND_SYMBOLS = "ring = start, cross = goal, line = plan, red ring = collision"
+
+
 def draw_world(view: FleetView, cell_px: int = 12) -> Image.Image:
-    """Render one moment of the fleet as an RGB image, `cell_px` pixels per cell."""
+    """Render one moment of the fleet as an RGB image, `cell_px` pixels per cell: the map,
+    each robot labelled with its name, then a legend band and the caption."""
     rows, cols = view.occupied.shape
     caption_px = 18 if view.caption else 0
-    img = Image.new("RGB", (cols * cell_px, rows * cell_px + caption_px), FREE)
+    legend_px = LEGEND_PX if view.robots else 0
+    img = Image.new("RGB", (cols * cell_px, rows * cell_px + legend_px + caption_px), FREE)
     pixels = np.where(view.occupied[..., None], OCCUPIED, FREE).astype(np.uint8)
     img.paste(Image.fromarray(np.repeat(np.repeat(pixels, cell_px, 0), cell_px, 1)), (0, 0))
     draw = ImageDraw.Draw(img)
@@ -79,9 +85,30 @@ def draw_world(view: FleetView, cell_px: int = 12) -> Image.Image:
             draw.line([_centre(robot.cell, cell_px), tip], fill=(0, 0, 0), width=2)
     if view.collision:
         _draw_collision(draw, view, cell_px)
+    _draw_labels(draw, view, cell_px)
+    if legend_px:
+        _draw_legend(draw, view, rows * cell_px)
     if view.caption:
-        draw.text((4, rows * cell_px + 3), view.caption, fill=(0, 0, 0))
+        draw.text((4, rows * cell_px + legend_px + 3), view.caption, fill=(0, 0, 0))
     return img
+
+
+def _draw_labels(draw: ImageDraw.ImageDraw, view: FleetView, cell_px: int) -> None:
+    """Each robot's name beside its body (at its start while it is not on the map)."""
+    for robot in view.robots:
+        x, y = _centre(robot.cell if robot.cell is not None else robot.start, cell_px)
+        draw.text((x + cell_px, y - cell_px * 1.6), robot.name, fill=(0, 0, 0),
+                  stroke_width=1, stroke_fill=FREE)
+
+
+def _draw_legend(draw: ImageDraw.ImageDraw, view: FleetView, top: int) -> None:
+    """A swatch and the name of every robot, then what the symbols mean."""
+    x = 4
+    for i, robot in enumerate(view.robots):
+        draw.rectangle([x, top + 4, x + 10, top + 14], fill=robot_colour(i), outline=(0, 0, 0))
+        draw.text((x + 14, top + 3), robot.name, fill=(0, 0, 0))
+        x += 20 + int(draw.textlength(robot.name))
+    draw.text((x + 8, top + 3), LEGEND_SYMBOLS, fill=(90, 90, 90))
 
 
 def _draw_plan(draw: ImageDraw.ImageDraw, robot: RobotView, colour: tuple[int, int, int],

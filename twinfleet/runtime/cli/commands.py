@@ -28,10 +28,12 @@ from twinfleet.runtime.fleet.connection import (
     CommandError,
     add_connection_arguments,
     add_message_arguments,
+    add_wait_arguments,
     connection,
     import_modules,
     need_fleet,
 )
+from twinfleet.runtime.scenario.overrides import add_override_arguments, override_words
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -51,7 +53,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 def cmd_launch(args: argparse.Namespace) -> int:
     """`twinfleet launch`: validate, run the fleet `--runs` times, print summaries."""
     from twinfleet.runtime.fleet.fleetauth import CredentialsError, listen_problem, read_credentials
-    from twinfleet.runtime.host.introspect import load_with_params
+    from twinfleet.runtime.scenario.overrides import load_with_params
+    from twinfleet.runtime.scenario.property_fields import check_property_fields
     from twinfleet.runtime.scenario.spec import ScenarioError
 
     params = launch_params(args)
@@ -64,6 +67,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         raise CommandError(str(exc)) from None
     try:
         scenario = load_with_params(args.scenario, params)
+        check_property_fields(scenario)  # a misspelt field stops here, before any process
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -150,11 +154,10 @@ def cmd_examples(args: argparse.Namespace) -> int:
 
 def launch_params(args: argparse.Namespace) -> list[str]:
     """The launch's parameter overrides: ``NAME:=VALUE`` words, then ``--param NAME=VALUE``."""
-    for word in args.overrides:
-        if ":=" not in word:
-            raise CommandError(f"launch: unexpected argument {word!r}; parameter overrides look "
-                               "like r1.speed:=0.4")
-    return [*args.overrides, *args.param]
+    try:
+        return override_words("launch", args.overrides, args.param)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
 
 
 def router_error(args: argparse.Namespace, exc: Exception) -> str:
@@ -192,9 +195,10 @@ def cmd_topic(args: argparse.Namespace) -> int:
                                        wait=args.wait, timeout_s=wait)
     if args.action == "hz":
         return data_verbs.topic_hz(conn, args.topic, out=out, window=args.window,
-                                     duration_s=args.duration, timeout_s=wait)
+                                     duration_s=args.duration, timeout_s=wait, wait=args.wait)
     import_modules(args.module)
     need_fleet(args, conn)
+    data_verbs.refuse_other_type(conn, args.topic, args.type, force=args.force, timeout_s=wait)
     return data_verbs.topic_pub(conn, args.topic, args.type, parse_fields(args.data), out=out,
                                   rate_hz=args.rate, count=None if args.count == 0 else args.count,
                                   timeout_s=wait)
@@ -223,6 +227,8 @@ def cmd_service(args: argparse.Namespace) -> int:
                                     timeout_s=args.query_timeout)
     import_modules(args.module)
     need_fleet(args, conn)
+    data_verbs.refuse_other_type(conn, args.service, args.type, service=True, force=args.force,
+                                 timeout_s=args.query_timeout)
     return data_verbs.service_call(conn, args.service, args.type, parse_fields(args.data),
                                      out=sys.stdout, timeout_s=args.timeout,
                                      discovery_s=args.query_timeout)
@@ -297,15 +303,20 @@ def cmd_foxglove(args: argparse.Namespace) -> int:
 
 
 def _foxglove_parser(sub: argparse._SubParsersAction) -> None:
-    text = ("serve the live fleet to Foxglove (WebSocket, foxglove.websocket.v1): the map as a "
-            "grid, robots as scene entities, scans as point clouds, every topic as JSON")
+    text = ("serve the live fleet to Foxglove (WebSocket, subprotocol foxglove.sdk.v1): the map "
+            "as a grid, robots as scene entities, scans as point clouds, every topic as JSON")
     p = sub.add_parser("foxglove", help=text, description=text[0].upper() + text[1:] + ". In "
                        "Foxglove: Open connection, ws://127.0.0.1:PORT; the 3D panel draws the "
-                       "fleet in frame 'map' with no configuration.")
+                       "fleet in frame 'map' with no configuration. The server is foxglove-sdk's, "
+                       "which accepts only the subprotocol name foxglove.sdk.v1 (offered by "
+                       "current Foxglove releases); a client that offers only the older name "
+                       "foxglove.websocket.v1 (older Foxglove and Lichtblick builds) is refused "
+                       "at the handshake (HTTP 400).")
     p.add_argument("--port", type=int, default=None, metavar="P",
                    help="TCP port on 127.0.0.1; 0 picks a free one (default: 8765, Foxglove's "
                         "usual one, or a free one when 8765 is taken: the URL is printed)")
     add_connection_arguments(p)
+    add_wait_arguments(p, "serve it once its router is found")
     p.set_defaults(func=cmd_foxglove)
 
 
@@ -319,12 +330,7 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                        "`interrupted` (130, Ctrl-C).")
     p.add_argument("scenario", help="scenario YAML file, or the name of a shipped example "
                                     "(twinfleet examples lists them)")
-    p.add_argument("overrides", nargs="*", metavar="[NODE.]NAME:=VALUE",
-                   help="parameter overrides, ROS 2 style: r1.speed:=0.4 sets r1's speed, "
-                        "scan_rate_ms:=50 every node's (values are YAML)")
-    p.add_argument("--param", action="append", default=[], metavar="[NODE.]NAME=VALUE",
-                   help="a parameter override, as NAME:=VALUE (repeatable); `twinfleet param "
-                        "get` shows the values in force")
+    add_override_arguments(p)
     p.add_argument("--time-scale", type=float, default=None, metavar="K",
                    help="run fleet time K times faster than wall time (default: live.time_scale or 1)")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
@@ -392,14 +398,13 @@ def _topic_parser(sub: argparse._SubParsersAction) -> None:
                     help="print only this field, e.g. cell or data.cell.0 (envelope fields: "
                          "type, stamp_ms, seq, sender)")
     te.add_argument("--duration", type=float, default=None, metavar="S", help="exit after S seconds")
-    te.add_argument("--wait", action="store_true",
-                    help="wait for a publisher of a topic no node uses yet (default: exit 2 "
-                         "after the discovery timeout)")
+    add_wait_arguments(te, "for a publisher of a topic no node uses yet")
     th = _sub(ts, "hz", "print the rate of a topic every second")
     th.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
     th.add_argument("--window", type=int, default=100, metavar="N",
                     help="number of recent messages the rate is computed over (default: 100)")
     th.add_argument("--duration", type=float, default=None, metavar="S", help="exit after S seconds")
+    add_wait_arguments(th, "for a publisher of a topic no node uses yet")
     tp = _sub(ts, "pub", "publish a message on a topic (checked against its type first)")
     tp.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
     add_message_arguments(tp)

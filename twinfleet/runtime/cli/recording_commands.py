@@ -19,6 +19,7 @@ from typing import Any
 from twinfleet.runtime.fleet.connection import (
     CommandError,
     add_connection_arguments,
+    add_wait_arguments,
     connection,
     import_modules,
 )
@@ -187,6 +188,7 @@ def _add_record(sub: argparse._SubParsersAction) -> None:
                    help="import MODULE first so its message classes give exact schemas (repeatable; "
                         "a SCENARIO imports its nodes' messages itself, and with --connect the "
                         "running nodes serve theirs; needed only for types no node knows)")
+    add_wait_arguments(r, "record it from its first message (without a SCENARIO)")
     r.set_defaults(func=cmd_record)
 
 

@@ -24,7 +24,16 @@ DEFAULT_CALL_TIMEOUT_MS = 2000
 
 
 class ContractError(TypeError):
-    """A handler used the context in a way the node contract forbids."""
+    """A handler used the context in a way the node contract forbids; `fix` says how to
+    mend it when the misuse says which (else the checker names the usual fix)."""
+
+    def __init__(self, text: str, fix: str = "") -> None:
+        super().__init__(text)
+        self.fix = fix
+
+
+FIX_MESSAGE = ('register the class with @message("pkg/Name") (a frozen dataclass): only '
+               "registered messages can be sent, since both ends must decode them")
 
 
 class Chooser(Protocol):
@@ -121,7 +130,8 @@ class Context:
     def publish(self, topic: str, msg: Any) -> None:
         """Publish a message; relative topics resolve in the node's namespace."""
         if not hasattr(type(msg), "__message_type__"):  # is_message, inlined: a hot path
-            raise ContractError(f"{self.node.name}: publish({topic!r}) needs a message, got {msg!r:.60}")
+            raise ContractError(f"{self.node.name}: publish({topic!r}) needs a message, got "
+                                f"{msg!r:.60}", FIX_MESSAGE)
         self.effects.append(Publish(self.node.resolve(topic), msg))
 
     def call(
@@ -134,7 +144,8 @@ class Context:
     ) -> None:
         """Call a service; `on_reply(ctx, reply)` later gets the reply or a CallError."""
         if not is_message(request):
-            raise ContractError(f"{self.node.name}: call({service!r}) needs a message request")
+            raise ContractError(f"{self.node.name}: call({service!r}) needs a message request, "
+                                f"got {request!r:.60}", FIX_MESSAGE)
         method = self._own_method(on_reply, "call")
         self.effects.append(Call(self.node.resolve(service), request, method, int(timeout_ms)))
 

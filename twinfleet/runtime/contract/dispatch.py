@@ -20,6 +20,7 @@ class HandlerError:
     message: str
     traceback: str = ""
     contract: bool = False  # a `ContractError`: the handler misused `ctx`
+    fix: str = ""  # how to mend that misuse, when the `ContractError` says
 
     def __str__(self) -> str:
         return f"{self.node}.{self.handler}: {self.message}"
@@ -51,7 +52,8 @@ def invoke(node: Node, method: str, ctx: Context, args: tuple[Any, ...] = (),
     except Exception as exc:
         ctx.effects.clear()
         return None, HandlerError(node.name, method, f"{type(exc).__name__}: {exc}",
-                                  traceback.format_exc(limit=8), isinstance(exc, ContractError))
+                                  traceback.format_exc(limit=8), isinstance(exc, ContractError),
+                                  exc.fix if isinstance(exc, ContractError) else "")
     if expects_reply and not is_message(reply):
         return None, HandlerError(node.name, method,
                                   f"service handler returned {reply!r:.60}, not a message")

@@ -13,6 +13,11 @@ import re
 
 _TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 
+#: The sender an operator's command (`twinfleet topic pub`, `service call`) writes into the
+#: envelopes it sends: a node tells input from outside the fleet by it (`NodeStatistics.
+#: rejected_external`), and a live verdict names such input instead of blaming the fleet.
+OPERATOR_SENDER = "twinfleet-cli"
+
 
 class InvalidName(ValueError):
     """A topic, service, node or namespace name breaks the naming rules."""

@@ -5,11 +5,23 @@ the violated property, the initial world and every step (see
 `twinfleet.checker.trace`, which builds and replays them). The file format
 lives here, in the contract layer, because the checker writes traces and the
 viewer, the renderer and live replay read them.
+
+Where the scenario is. A trace names its scenario file three ways: the
+absolute path it was checked from (``scenario``), the path relative to the
+trace file (``scenario_relative``, added by `write_trace`) and the file's
+SHA-256 (``scenario_sha256``). `load_trace` looks beside the trace first, so a
+project folder moved with its traces still replays, then at the absolute path;
+it rewrites ``scenario`` to the file found and, when that file's digest is not
+the recorded one, sets ``scenario_changed`` to a one-line note the commands
+print (the scenario was edited since the trace was written, so the replay may
+diverge). ``params`` lists the parameter overrides the trace was found with.
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
+import os
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -25,7 +37,32 @@ def write_trace(trace: Mapping[str, Any], path: str | Path) -> None:
     """Write a trace as indented JSON, creating parent directories."""
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
+    scenario = trace.get("scenario")
+    if isinstance(scenario, str):  # found again beside the trace after a move (module doc)
+        trace = {**trace, "scenario_relative": Path(os.path.relpath(
+            Path(scenario).resolve(), out.parent.resolve())).as_posix()}
     out.write_text(json.dumps(trace, indent=1) + "\n")
+
+
+def file_sha256(path: str | Path) -> str:
+    """The SHA-256 of a file's bytes, in hex."""
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def _locate_scenario(trace: dict[str, Any], path: Path) -> None:
+    """Point ``scenario`` at the file found (beside the trace first) and note a changed one."""
+    relative = trace.get("scenario_relative")
+    candidates = [path.resolve().parent / relative] if isinstance(relative, str) else []
+    candidates.append(Path(trace["scenario"]))
+    found = next((c for c in candidates if c.is_file()), None)
+    if found is None:
+        return  # loading the scenario says it is missing, naming the recorded path
+    found = found.resolve()
+    trace["scenario"] = str(found)
+    recorded = trace.get("scenario_sha256")
+    if isinstance(recorded, str) and file_sha256(found) != recorded:
+        trace["scenario_changed"] = (f"{found}: the scenario changed since the trace was "
+                                     "written (its SHA-256 differs); the replay may diverge")
 
 
 def load_trace(path: str | Path) -> dict[str, Any]:
@@ -40,6 +77,8 @@ def load_trace(path: str | Path) -> dict[str, Any]:
     problem = trace_problem(trace)
     if problem:
         raise TraceError(f"{path}: malformed trace: {problem}")
+    if isinstance(trace["scenario"], str):
+        _locate_scenario(trace, Path(path))
     return trace
 
 
@@ -48,7 +87,8 @@ def _ints(value: Any) -> bool:
 
 
 _TOP: dict[str, Any] = {
-    "scenario": lambda v: isinstance(v, str),
+    "scenario": lambda v: v is None or isinstance(v, str),
+    "params": lambda v: v is None or (isinstance(v, list) and all(isinstance(p, str) for p in v)),
     "semantics": lambda v: v in ("ros", "rebeca"),
     "profile": lambda v: v is None or isinstance(v, str),
     "latency": lambda v: v is None or (_ints(v) and len(v) == 2),

@@ -39,7 +39,8 @@ and never touches a socket:
    twice the node's shortest timer period, at least ``stall_ms`` (``stalls``).
    Before that, a decoded sample must be of the type its handler declares and
    have fields that fit it (`runtime.core.guard.Admission`); otherwise it is counted
-   (``rejected_wrong_type``, ``rejected_invalid``) and never queued.
+   (``rejected_wrong_type``, ``rejected_invalid``; ``rejected_external`` when an
+   operator's command sent it, `contract.names.OPERATOR_SENDER`) and never queued.
 5. Running. `run_next(now)` runs the first inbox entry's handler through
    `runtime.contract.dispatch.invoke`; `run(entry, now, chooser)` runs any pending
    entry out of order (the replay gate's way in). Both return the handler's
@@ -84,6 +85,7 @@ from twinfleet.runtime.contract.messages import (
     NodeAlive,
     decode_fields,
 )
+from twinfleet.runtime.contract.names import OPERATOR_SENDER
 from twinfleet.runtime.contract.node import LIVELINESS_TOPIC, HandlerSpec, Node, Reliability
 from twinfleet.runtime.core.choosers import RecordingChooser, SeededChooser, derive_seed
 from twinfleet.runtime.core.due import DueEntries
@@ -100,7 +102,7 @@ _TIMED: Final = frozenset({EventKind.TIMER, EventKind.PERIODIC, EventKind.TIMEOU
                            EventKind.START})
 _COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "published",
                     "handled", "keep_last", "best_effort", "seq_jumps", "lossless", "stalls",
-                    "max_late", "period")
+                    "max_late", "period", "external")
 _NOTHING: Final[tuple[()]] = ()
 _PICKLE: Final = pickle.HIGHEST_PROTOCOL  # rollback copies never leave the process
 
@@ -172,7 +174,10 @@ class _Subscription:
             try:  # before the gap check: a refused sample leaves no trace in the core
                 admit(sample[0])
             except Rejected as exc:
-                rejected[exc.reason] += 1
+                if sample[3] == OPERATOR_SENDER:  # an operator's input: named, not a loss
+                    n["external"] += 1
+                else:
+                    rejected[exc.reason] += 1
                 raise
             seq, sender = sample[2], sample[3]
             last = last_seq.get(sender)
@@ -515,4 +520,4 @@ class NodeCore:
             sequence_jumps=n["seq_jumps"], dropped_lossless=n["lossless"], stalls=n["stalls"],
             max_lateness_ms=n["max_late"],
             stall_threshold_ms=self.stall_threshold() if self.stall_ms is not None else 0,
-            rejected=rejected)
+            rejected_external=n["external"], rejected=rejected)

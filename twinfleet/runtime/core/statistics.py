@@ -74,6 +74,10 @@ class NodeStatistics:
         max_lateness_ms: the latest a timed entry was released after its due time.
         stall_threshold_ms: that threshold (0: stalls are not counted).
         rejected: samples refused before any handler, per reason (every reason present).
+        rejected_external: samples an operator's command sent (sender
+            `contract.names.OPERATOR_SENDER`, e.g. ``topic pub --force``) that the node
+            refused, for any reason; not in ``rejected``: input from outside the fleet,
+            not a loss of the fleet's own.
     """
 
     received: int = 0
@@ -93,6 +97,7 @@ class NodeStatistics:
     stalls: int = 0
     max_lateness_ms: int = 0
     stall_threshold_ms: int = 0
+    rejected_external: int = 0
     rejected: Mapping[Rejection, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

@@ -38,6 +38,7 @@ from twinfleet.runtime.fleet.fleetauth import (
 )
 
 DISCOVERY_S = 1.0
+WAIT_POLL_S = 0.1  # how often --wait looks at the fleet registry again
 
 
 class CommandError(Exception):
@@ -89,8 +90,46 @@ def add_connection_arguments(parser: argparse.ArgumentParser, *,
                            help="seconds to wait for discovery answers (default: %(default)s)")
 
 
+def add_wait_arguments(parser: argparse.ArgumentParser, what: str) -> None:
+    """Add --wait (wait for a fleet to be launched, and for `what`) and --wait-timeout."""
+    parser.add_argument("--wait", action="store_true",
+                        help="wait for a fleet to be launched when none runs yet (found in the "
+                        f"fleet registry; said once on stderr), and {what}; default: exit 2 "
+                        "at once")
+    parser.add_argument("--wait-timeout", type=float, default=None, metavar="S",
+                        help="with --wait, give up after S seconds (exit 2; default: wait "
+                             "until Ctrl-C)")
+
+
+def _await_fleet(fleet: str, timeout_s: float | None) -> Any:
+    """The registry entry of `fleet` (``*``: any), waiting until one is launched; says so
+    once on stderr. Raises `RegistryError` when `timeout_s` passes first."""
+    import sys
+    import time
+
+    from twinfleet.runtime.fleet.registry import RegistryError, find_fleet, running_fleets
+
+    deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    said = False
+    while True:
+        matching = [e for e in running_fleets() if fleet in ("*", e.fleet)]
+        if matching:
+            return find_fleet(fleet, matching)
+        if deadline is not None and time.monotonic() >= deadline:
+            raise RegistryError(f"no fleet{'' if fleet == '*' else f' named {fleet!r}'} was "
+                                f"launched on this machine within {timeout_s:g} s")
+        if not said:
+            print(f"waiting for {'a fleet' if fleet == '*' else f'fleet {fleet!r}'} to be "
+                  "launched on this machine" + (f" (up to {timeout_s:g} s)" if timeout_s
+                                                 is not None else " (Ctrl-C to stop)"),
+                  file=sys.stderr, flush=True)
+            said = True
+        time.sleep(WAIT_POLL_S)
+
+
 def connection(args: argparse.Namespace) -> Connection:
-    """The endpoint and fleet of a command's --connect/--fleet, or of the registry.
+    """The endpoint and fleet of a command's --connect/--fleet, or of the registry (with
+    ``--wait``, once a matching fleet is launched: `add_wait_arguments`).
 
     Raises:
         CommandError: no --connect and the registry has no single matching fleet.
@@ -106,7 +145,10 @@ def connection(args: argparse.Namespace) -> Connection:
             return Connection(args.connect, args.fleet, "--connect", auth)
         if endpoint and auth is not None:
             return Connection(endpoint, args.fleet, "--credentials", auth)
-        entry = find_fleet(args.fleet)
+        if getattr(args, "wait", False) is True:
+            entry = _await_fleet(args.fleet, getattr(args, "wait_timeout", None))
+        else:
+            entry = find_fleet(args.fleet)
         return Connection(entry.endpoint, entry.fleet, "registry", monitor_auth(entry.extra))
     except (RegistryError, CredentialsError) as exc:
         raise CommandError(str(exc)) from None
@@ -154,3 +196,7 @@ def add_message_arguments(p: argparse.ArgumentParser) -> None:
     p.add_argument("--module", action="append", default=[], metavar="MODULE",
                    help="import MODULE first so its message types are known here (repeatable; "
                         "types the fleet's nodes know are learned from them)")
+    p.add_argument("--force", action="store_true",
+                   help="send even when the fleet's nodes say the name carries another type "
+                        "(refused by default, naming both types); the nodes refuse the "
+                        "message, and a live verdict names it as external input")

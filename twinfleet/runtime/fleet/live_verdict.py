@@ -288,9 +288,21 @@ class LiveJudge:
     # ------------------------------------------------------------------ the verdict
 
     def verdict(self, end: RunEnd) -> Verdict:
-        """The run's result: a property that raised; a failed node process; inconclusive
-        reasons (which also void a violation: it may come from the lost samples or the
-        stall, not from the code); violations; an interruption; what never held; else holds."""
+        """The run's result (`_decide`), with a line naming each node's refused input from an
+        operator's command: external input, which neither voids nor decides the verdict."""
+        judged = self._decide(end)
+        external = tuple(f"external input: {node} refused {stats.rejected_external} samples "
+                         "an operator's command sent (e.g. `twinfleet topic pub --force`)"
+                         for node, stats in sorted(end.statistics.items())
+                         if stats.rejected_external)
+        return judged if not external else Verdict(judged.status, judged.summary,
+                                                   judged.details + external,
+                                                   judged.property_name)
+
+    def _decide(self, end: RunEnd) -> Verdict:
+        """A property that raised; a failed node process; inconclusive reasons (which also
+        void a violation: it may come from the lost samples or the stall, not from the
+        code); violations; an interruption; what never held; else holds."""
         if self.errors:
             return Verdict(Status.ERROR, self.errors[0], tuple(self.errors[1:]))
         if end.failed:  # a process that died is a fact of the run, lost samples or not

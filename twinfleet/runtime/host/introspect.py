@@ -7,6 +7,7 @@ entry and the node class's declared handlers (`node_description`)::
     {"name", "namespace", "class", "pid",
      "params":        {name: value},            # the node's Params, overrides applied
      "subscriptions": {"/listener/chatter": qos}, "services": ["/add_two_ints"],
+     "subscription_types": {"/listener/chatter": "std_msgs/String"},
      "service_types": {"/add_two_ints": ["example_interfaces/AddTwoInts_Request",
                                          "example_interfaces/AddTwoInts_Response"]},
      "timers": [{"handler", "period_ms"}], "publication_qos": {"/map": qos},
@@ -14,8 +15,9 @@ entry and the node class's declared handlers (`node_description`)::
 
 with ``qos = {"reliability", "durability", "depth"}``. `twinfleet node info`,
 `topic info`, `service list -t|type` and `param list|get` read it (a
-service's request and reply types come from its handler's annotations, "?"
-where it has none); what a node *publishes* is only
+service's request and reply types, and the type a subscription admits, come
+from the handler's annotations, "?" where it has none; `topic pub` and
+`service call` refuse another type by them); what a node *publishes* is only
 known once it publishes (its ``@pub`` liveliness token and ``publications``,
 which records the envelope type of each topic's first message), and its QoS
 is ``publication_qos`` or the default.
@@ -28,12 +30,10 @@ transient-local. A viewer that finds the fleet only over Zenoh asks it there,
 once the fleet's first sample arrives, so that it learns how to draw the fleet
 and which topics to ask history of.
 
-Overrides. ``twinfleet launch SCENARIO r1.speed:=0.4`` (or ``--param
-r1.speed=0.4``) sets parameter `speed` of node r1; ``scan_rate_ms:=50``
-without a node sets the scenario's common ``params``. Values are YAML
-(``0.4``, ``[5, 5]``, ``true``). The launcher validates them by loading the
-scenario with them (`load_with_params`) and hands the same ``--param``
-arguments to every node process, which loads its scenario the same way.
+Overrides (``r1.speed:=0.4``) are parsed and validated by
+`runtime.scenario.overrides`, shared with `check`; the launcher hands the same
+``--param`` arguments to every node process (`param_arguments`), which loads
+its scenario with them the same way.
 """
 
 from __future__ import annotations
@@ -42,16 +42,19 @@ import dataclasses
 import os
 import typing
 from collections.abc import Mapping, Sequence
-from pathlib import Path
 from typing import Any
-
-import yaml
 
 from twinfleet.runtime.contract.messages import type_name_of
 from twinfleet.runtime.contract.names import resolve
 from twinfleet.runtime.contract.node import Durability, HandlerSpec, NodeSpec, QoS
 from twinfleet.runtime.core.guard import expected_type
 from twinfleet.runtime.host.keys import KeyKind, node_key, topic_in_fleet
+from twinfleet.runtime.scenario.overrides import (  # noqa: F401 (launch and node processes load here)
+    load_with_params,
+    overrides_doc,
+    parse_param,
+    scenario_common,
+)
 
 PARAM_FLAG = "--param"
 
@@ -126,6 +129,9 @@ def node_description(node: Any, class_path: str) -> dict[str, Any]:
             "pid": os.getpid(), "params": values,
             "subscriptions": {node.resolve(s.name or ""): qos_dict(s.qos)
                               for s in spec.of_kind("subscribe")},
+            "subscription_types": {node.resolve(s.name or ""):
+                                   _type_name(expected_type(node, s.method))
+                                   for s in spec.of_kind("subscribe")},
             "services": [node.resolve(s.name or "") for s in spec.of_kind("service")],
             "service_types": {node.resolve(s.name or ""): service_types(node, s)
                               for s in spec.of_kind("service")},
@@ -175,82 +181,6 @@ def _envelope_type(payload: bytes) -> str:
     except Exception:  # msgpack raises several unrelated types; never break a publish
         return "?"
     return kind if isinstance(kind, str) else "?"
-
-
-def parse_param(text: str) -> tuple[str | None, str, Any]:
-    """``r1.speed=0.4`` or ``r1.speed:=0.4`` → ("r1", "speed", 0.4); no node → (None, name, v).
-
-    Raises:
-        ValueError: not NAME=VALUE, or a value that is not YAML.
-    """
-    name, sep, raw = text.partition(":=") if ":=" in text else text.partition("=")
-    name = name.strip()
-    if not sep or not name or any(c.isspace() for c in name):
-        raise ValueError(f"parameter override {text!r}: expected [NODE.]NAME=VALUE, "
-                         "e.g. r1.speed=0.4")
-    try:
-        value = yaml.safe_load(raw) if raw.strip() else ""
-    except yaml.YAMLError as exc:
-        raise ValueError(f"parameter override {text!r}: the value is not YAML "
-                         f"({str(exc).splitlines()[0]})") from None
-    node, _, param = name.rpartition(".")
-    return (node or None), param, value
-
-
-def overrides_doc(path: Path, params: Sequence[str]) -> dict[str, Any]:
-    """The top-level keys (`nodes`, `params`) of scenario `path` with `params` applied.
-
-    Raises:
-        ValueError: a malformed override, or one naming a node the scenario does not have.
-    """
-    doc = yaml.safe_load(path.read_text())
-    nodes = [dict(n) if isinstance(n, dict) else n for n in doc.get("nodes") or []]
-    common = dict(doc.get("params") or {})
-    for text in params:
-        node, name, value = parse_param(text)
-        if node is None:
-            common[name] = value
-            continue
-        entry = next((n for n in nodes if isinstance(n, dict) and n.get("name") == node), None)
-        if entry is None:
-            names = ", ".join(str(n.get("name")) for n in nodes if isinstance(n, dict))
-            raise ValueError(f"parameter override {text!r}: {path} has no node {node!r} "
-                             f"(nodes: {names})")
-        entry["params"] = {**(entry.get("params") or {}), name: value}
-    out: dict[str, Any] = {"nodes": nodes}
-    if common:
-        out["params"] = common
-    return out
-
-
-def load_with_params(path: str | Path, params: Sequence[str] = (),
-                     overrides: Mapping[str, Any] | None = None) -> Any:
-    """`load_scenario(path, overrides)` with parameter overrides applied and validated.
-
-    Raises:
-        ScenarioError: the file or an override is invalid (the text names which).
-    """
-    from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
-
-    scenario = load_scenario(path, overrides)  # the file's own errors first, as they are
-    if not params:
-        return scenario
-    try:
-        doc = overrides_doc(Path(scenario.path), params)
-    except ValueError as exc:
-        raise ScenarioError(str(exc)) from None
-    fields = {f.name for cfg in scenario.nodes for f in dataclasses.fields(cfg.cls.Params)}
-    for name in (doc.get("params") or {}):
-        if name not in fields and name not in (scenario_common(scenario.path)):
-            raise ScenarioError(f"{scenario.path}: parameter override {name!r}: no node of the "
-                                "scenario has that parameter")
-    return load_scenario(scenario.path, {**(overrides or {}), **doc})
-
-
-def scenario_common(path: str | Path) -> dict[str, Any]:
-    """The common ``params`` of a scenario file, as written."""
-    doc = yaml.safe_load(Path(path).read_text())
-    return dict(doc.get("params") or {}) if isinstance(doc, dict) else {}
 
 
 def param_arguments(params: Sequence[str]) -> list[str]:

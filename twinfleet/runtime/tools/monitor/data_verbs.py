@@ -6,7 +6,10 @@ after the discovery timeout instead of being waited on silently. `echo` uses
 an advanced subscriber with history, so a latched topic (``/map``) prints its
 last sample however late the echo starts. `pub` and `call` check the message
 against its type first (`runtime.tools.monitor.payload`) and `pub` warns when no subscriber
-matches.
+matches. Before either sends, `refuse_other_type` compares the type with what the fleet's
+nodes say the name carries (``@info``: the types their subscriptions admit and their
+services take, the type of what they published) and refuses a mismatch, naming both types:
+a node would refuse the message, and a live verdict would count it as lost input.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import msgpack
 import yaml
 import zenoh
 
+from twinfleet.runtime.contract.messages import registered_types
 from twinfleet.runtime.core.guard import signer
 from twinfleet.runtime.fleet.connection import CommandError, Connection
 from twinfleet.runtime.host.keys import topic_expr
@@ -151,15 +155,21 @@ def rate_report(stamps: Sequence[float]) -> str | None:
 
 def topic_hz(conn: Connection, topic: str, *, out: TextIO, window: int = 100,
              duration_s: float | None = None, every_s: float = 1.0,
-             timeout_s: float = 1.0) -> int:
-    """Print the publishing rate of `topic` every `every_s` over the last `window` samples."""
+             timeout_s: float = 1.0, wait: bool = False, err: TextIO = sys.stderr) -> int:
+    """Print the publishing rate of `topic` every `every_s` over the last `window` samples
+    (`wait`: a topic no node uses yet is a warning, and the rate follows once it is used)."""
     stamps: deque[float] = deque(maxlen=max(2, window))
     deadline = None if duration_s is None else time.monotonic() + duration_s
     arrivals: deque[float] = deque()
     with open_session(conn) as session:
-        graph = graph_of(session, conn, timeout_s)
+        graph = graph_of(session, conn, timeout_s, warn=err if wait else None)
         where = pick(conn, graph, topic, "topic")
-        known_topic(conn, graph, where)
+        try:
+            known_topic(conn, graph, where)
+        except CommandError as exc:
+            if not wait:
+                raise
+            print(f"warning: {exc}; waiting for a publisher", file=err, flush=True)
         sub = session.declare_subscriber(topic_expr(*where),
                                          lambda _s: arrivals.append(time.monotonic()))
         next_report = time.monotonic() + every_s
@@ -251,3 +261,41 @@ def service_call(conn: Connection, service: str, type_name: str, data: dict[str,
                                                  if text == "Timeout" else text))
     raise CommandError(f"{service}: no server in fleet {conn.fleet!r} "
                        "(see `twinfleet service list`)")
+
+
+def carried_types(infos: dict[tuple[str, str], dict[str, Any]], name: str, *,
+                  service: bool = False) -> dict[str, list[str]]:
+    """type → the nodes that say `name` carries it (``@info``; "?" left out): the types
+    their subscriptions admit and they published, or the request type a service takes."""
+    said: dict[str, list[str]] = {}
+    for (_, node), info in sorted(infos.items()):
+        if service:
+            kinds = [(info.get("service_types") or {}).get(name, ["?"])[0]]
+        else:
+            kinds = [(info.get(table) or {}).get(name, "?")
+                     for table in ("subscription_types", "publications")]
+        for kind in dict.fromkeys(kinds):
+            if isinstance(kind, str) and kind != "?":
+                said.setdefault(kind, []).append(node)
+    return said
+
+
+def refuse_other_type(conn: Connection, name: str, type_name: str, *, service: bool = False,
+                      force: bool = False, timeout_s: float = 1.0, err: TextIO = sys.stderr
+                      ) -> None:
+    """Raise `CommandError` naming both types when the fleet's nodes say `name` carries a type
+    other than `type_name`; with `force`, warn and return (the caller sends anyway)."""
+    wanted = checked_type(type_name, service=service)
+    with open_session(conn) as session:
+        said = carried_types(g.node_infos(session, conn.fleet, timeout_s), name, service=service)
+        other = {kind: nodes for kind, nodes in said.items() if kind != wanted}
+        if not other or (wanted not in registered_types() and wanted not in
+                         _known_schemas(session, conn.fleet, timeout_s)):
+            return  # a type no one knows: the message check says so, more precisely
+    text = "; ".join(f"{kind} ({', '.join(nodes)})" for kind, nodes in other.items())
+    what = "takes" if service else "carries"
+    if not force:
+        raise CommandError(f"{name} {what} {text}, not {wanted}; give --force to send "
+                           f"{wanted} anyway")
+    print(f"warning: {name} {what} {text}, not {wanted}; sending it anyway (--force): the "
+          "nodes will refuse it", file=err, flush=True)

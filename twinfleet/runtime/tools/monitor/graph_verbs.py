@@ -16,6 +16,7 @@ the router); names are then shown as ``fleet:/name``.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, TextIO
@@ -36,6 +37,7 @@ from twinfleet.runtime.tools.monitor import graph as g
 from twinfleet.runtime.tools.monitor.payload import PayloadError, normalise_type
 
 POLL_S = 0.02
+SETTLE_S = 5.0  # with a warning to give instead of an error: how long nodes may take to appear
 
 
 @contextmanager
@@ -60,6 +62,10 @@ def graph_of(session: zenoh.Session, conn: Connection, timeout_s: float,
     """The fleet's graph; a fleet with no node is an error naming the fleets that are there
     (with `warn`, a warning line there instead)."""
     graph = g.read_graph(session, conn.fleet, timeout_s)
+    settle = time.monotonic() + SETTLE_S
+    while warn is not None and conn.fleet != "*" and not graph.nodes and \
+            time.monotonic() < settle:  # a fleet just launched: its nodes are starting
+        graph = g.read_graph(session, conn.fleet, timeout_s)
     if conn.fleet != "*" and not graph.nodes:
         there = g.read_graph(session, "*", timeout_s).fleets()
         text = (f"no node of fleet {conn.fleet!r} answers at {conn.endpoint} within "

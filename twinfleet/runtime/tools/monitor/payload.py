@@ -20,8 +20,7 @@ import msgpack
 import yaml
 
 from twinfleet.runtime.contract.messages import DecodeError, from_plain, registered_types, to_plain
-
-CLI_SENDER = "twinfleet-cli"
+from twinfleet.runtime.contract.names import OPERATOR_SENDER
 
 
 class PayloadError(ValueError):
@@ -166,4 +165,4 @@ def envelope(type_name: str, fields: Mapping[str, Any], *, seq: int = 0,
              stamp_ms: int = 0) -> bytes:
     """A msgpack envelope of already checked fields."""
     return msgpack.packb({"type": type_name, "stamp_ms": stamp_ms, "seq": seq,
-                          "sender": CLI_SENDER, "data": dict(fields)}, use_bin_type=True)
+                          "sender": OPERATOR_SENDER, "data": dict(fields)}, use_bin_type=True)

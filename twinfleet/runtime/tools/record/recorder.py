@@ -34,9 +34,10 @@ before the first node starts. `record_live` joins a running fleet and asks its
 nodes for their message schemas (`fleet_schemas`) and the fleet for its
 description (scene, latched topics: `runtime.host.keys.fleet_key`).
 `play` re-publishes the messages in log-time order at the recorded pace
-divided by `rate`, latched topics through advanced publishers, and describes
+divided by `rate`, latched topics through advanced publishers, describes
 each fleet it plays as its launcher did (from the recording), so that viewers
-draw it.
+draw it, and is a node ``play`` of that fleet (liveliness and ``@info``), so that
+every monitor finds the fleet as it finds a launched one.
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import os
 import sys
 import time
 from collections.abc import Callable, Mapping
@@ -61,6 +63,7 @@ from twinfleet.runtime.host.keys import (
     KeyKind,
     fleet_key,
     kind_expr,
+    node_key,
     topic_expr,
     topic_in_fleet,
 )
@@ -73,6 +76,7 @@ DRAIN_S = 0.3
 LINGER_S = 0.5
 FLUSH_S = 0.5  # the chunk in progress reaches the file at least this often (wall seconds)
 CHUNK_BYTES = 256 * 1024
+PLAYER = "play"  # the node name `play` has in the fleets it plays (`_announce`)
 @final
 class McapRecorder:
     """Writes raw envelopes to an MCAP file: a schema per type, a channel per topic key.
@@ -318,11 +322,37 @@ def _describe_fleets(session: Any, reader: Any, summary: Any, fleet: str | None)
     return queryables
 
 
-def _replier(fleet: str, payload: bytes) -> Callable[[Any], None]:
+def _replier(fleet: str, payload: bytes, key: str | None = None) -> Callable[[Any], None]:
     def reply(query: Any) -> None:
         with query:  # finalised at once: the asker does not wait for its timeout
-            query.reply(fleet_key(fleet, "play"), payload)
+            query.reply(key or fleet_key(fleet, "play"), payload)
     return reply
+
+
+def _announce(session: Any, summary: Any, fleet: str | None) -> list[Any]:
+    """Make `play` a node of each fleet it plays, as the monitors find nodes: a ``@node``
+    token for node `PLAYER`, a ``@pub`` token per topic it publishes, and ``@info`` naming
+    each topic's recorded type, so that `topic list -t`, `topic echo` and `node list` see
+    the played fleet as they see a launched one."""
+    played: dict[str, dict[str, str]] = {}  # fleet -> topic -> type
+    for channel in (summary.channels.values() if summary else ()):
+        name = fleet or channel.metadata.get("fleet")
+        schema = summary.schemas.get(channel.schema_id)
+        if name:
+            played.setdefault(name, {})[channel.topic] = schema.name if schema else "?"
+    entities: list[Any] = []
+    for name, topics in played.items():
+        tokens = [node_key(name, KeyKind.NODE, PLAYER),
+                  *(node_key(name, KeyKind.PUB, PLAYER, topic) for topic in sorted(topics))]
+        entities += [session.liveliness().declare_token(key) for key in tokens]
+        info = {"name": PLAYER, "namespace": "/", "class": "twinfleet play", "pid": os.getpid(),
+                "params": {}, "subscriptions": {}, "subscription_types": {}, "services": [],
+                "service_types": {}, "timers": [], "publication_qos": {},
+                "publications": dict(sorted(topics.items()))}
+        key = node_key(name, KeyKind.INFO, PLAYER)
+        entities.append(session.declare_queryable(key, _replier(name, msgpack.packb(
+            info, use_bin_type=True), key)))
+    return entities
 
 
 def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
@@ -352,6 +382,7 @@ def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
         for channel in (summary.channels.values() if summary else ()):
             pubs.declare(channel)
         described = _describe_fleets(session, reader, summary, fleet)
+        described += _announce(session, summary, fleet)
         pubs.wait_for_subscriber(wait_s)
         started = time.monotonic()
         try:

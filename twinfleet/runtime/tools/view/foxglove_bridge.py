@@ -2,8 +2,10 @@
 
 One Zenoh session (`runtime.tools.monitor.tap.FleetTap`) hears every topic of
 the fleet; each sample goes, on the loop, to a `FoxgloveBridge`, which logs it
-on a Foxglove WebSocket server (``foxglove.start_server``, protocol
-``foxglove.websocket.v1``) twice:
+on a Foxglove WebSocket server (``foxglove.start_server``; the Foxglove
+WebSocket protocol under the subprotocol name ``foxglove.sdk.v1``, the only
+name foxglove-sdk 0.30 accepts: a client offering only the older
+``foxglove.websocket.v1`` is refused at the handshake) twice:
 
 * as itself, on a channel of the same topic name, JSON-encoded with the JSON
   Schema of its type (bytes as base64: `runtime.tools.record.mcap_export.message_json`),

@@ -195,8 +195,10 @@ async def serve(*, connect: str | None, fleet: str = "*", port: int = 0,
         make_config = (lambda: tap_config(connect)) if connect else _registry_config(fleet)
         tap = FleetTap(make_config, fleet, deliver)
         finder = SceneFinder(tap, state.set_scene, out=out)
+        # The page's header says where the fleet is found; whether it is reached yet is the
+        # link indicator's to say (it follows the tap), not a word frozen at start-up.
         app = make_app(state=state, tap=tap, finder=finder, info={
-            "fleet": fleet, "connect": connect or "the fleet registry (waiting for a launch)"})
+            "fleet": fleet, "connect": connect or "the fleet registry"})
     runner = web.AppRunner(app, access_log=None, handle_signals=False)
     await runner.setup()
     try:

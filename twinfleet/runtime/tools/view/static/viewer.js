@@ -345,6 +345,11 @@
       return Object.fromEntries(Object.entries(trail).map(([n, t]) => [n, t.length]));
     });
     view.traceTrail = trail;
+    // A trace whose scene draws no body and no collision (a system without robots) shows
+    // its node states, not two panels that stay empty.
+    const drawn = traceFrames.some((f) => Object.keys(f.robots).length || f.collisions.length);
+    $("robots-panel").hidden = !drawn;
+    $("collisions-panel").hidden = !drawn;
     $("trace-title").textContent = `${doc.scenario}: ${doc.message || "trace"}`;
     $("step-range").max = String(doc.steps.length);
     $("mode").textContent = `trace ${doc.file} (${doc.steps.length} steps)`;

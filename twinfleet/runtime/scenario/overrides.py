@@ -1,0 +1,125 @@
+"""Parameter overrides, ROS 2 style: one syntax and one validation for every command.
+
+``r1.speed:=0.4`` (or ``--param r1.speed=0.4``) sets parameter `speed` of node
+r1; ``scan_rate_ms:=50`` without a node sets the scenario's common ``params``.
+Values are YAML (``0.4``, ``[5, 5]``, ``true``). `launch`, `check`, node
+processes and the pytest API (`twinfleet.testing`) all load a scenario with its
+overrides through `load_with_params`, so a bad override is the same one-line
+error everywhere and what is checked is what is launched. A trace records the
+overrides it was found with and `replay` applies them again.
+
+`add_override_arguments` defines the words and the flag on a command's parser
+without importing anything heavy (the parser of `check` must stay light).
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import yaml
+
+if TYPE_CHECKING:
+    from twinfleet.runtime.scenario.spec import Scenario
+
+
+def add_override_arguments(parser: argparse.ArgumentParser) -> None:
+    """Add the ``[NODE.]NAME:=VALUE`` words and ``--param`` to a command that takes a scenario."""
+    parser.add_argument("overrides", nargs="*", metavar="[NODE.]NAME:=VALUE",
+                        help="parameter overrides, ROS 2 style: r1.speed:=0.4 sets r1's speed, "
+                             "scan_rate_ms:=50 every node's (values are YAML)")
+    parser.add_argument("--param", action="append", default=[], metavar="[NODE.]NAME=VALUE",
+                        help="a parameter override, as NAME:=VALUE (repeatable); `twinfleet "
+                             "param get` shows the values in force in a running fleet")
+
+
+def override_words(command: str, words: Sequence[str], flags: Sequence[str]) -> list[str]:
+    """The overrides of a command line: ``NAME:=VALUE`` words, then ``--param`` values.
+
+    Raises:
+        ValueError: a word that is not an override (one line naming it).
+    """
+    for word in words:
+        if ":=" not in word:
+            raise ValueError(f"{command}: unexpected argument {word!r}; parameter overrides "
+                             "look like r1.speed:=0.4")
+    return [*words, *flags]
+
+
+def parse_param(text: str) -> tuple[str | None, str, Any]:
+    """``r1.speed=0.4`` or ``r1.speed:=0.4`` → ("r1", "speed", 0.4); no node → (None, name, v).
+
+    Raises:
+        ValueError: not NAME=VALUE, or a value that is not YAML.
+    """
+    name, sep, raw = text.partition(":=") if ":=" in text else text.partition("=")
+    name = name.strip()
+    if not sep or not name or any(c.isspace() for c in name):
+        raise ValueError(f"parameter override {text!r}: expected [NODE.]NAME=VALUE, "
+                         "e.g. r1.speed=0.4")
+    try:
+        value = yaml.safe_load(raw) if raw.strip() else ""
+    except yaml.YAMLError as exc:
+        raise ValueError(f"parameter override {text!r}: the value is not YAML "
+                         f"({str(exc).splitlines()[0]})") from None
+    node, _, param = name.rpartition(".")
+    return (node or None), param, value
+
+
+def overrides_doc(path: Path, params: Sequence[str]) -> dict[str, Any]:
+    """The top-level keys (`nodes`, `params`) of scenario `path` with `params` applied.
+
+    Raises:
+        ValueError: a malformed override, or one naming a node the scenario does not have.
+    """
+    doc = yaml.safe_load(path.read_text())
+    nodes = [dict(n) if isinstance(n, dict) else n for n in doc.get("nodes") or []]
+    common = dict(doc.get("params") or {})
+    for text in params:
+        node, name, value = parse_param(text)
+        if node is None:
+            common[name] = value
+            continue
+        entry = next((n for n in nodes if isinstance(n, dict) and n.get("name") == node), None)
+        if entry is None:
+            names = ", ".join(str(n.get("name")) for n in nodes if isinstance(n, dict))
+            raise ValueError(f"parameter override {text!r}: {path} has no node {node!r} "
+                             f"(nodes: {names})")
+        entry["params"] = {**(entry.get("params") or {}), name: value}
+    out: dict[str, Any] = {"nodes": nodes}
+    if common:
+        out["params"] = common
+    return out
+
+
+def load_with_params(path: str | Path, params: Sequence[str] = (),
+                     overrides: Mapping[str, Any] | None = None) -> Scenario:
+    """`load_scenario(path, overrides)` with parameter overrides applied and validated.
+
+    Raises:
+        ScenarioError: the file or an override is invalid (the text names which).
+    """
+    from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
+
+    scenario = load_scenario(path, overrides)  # the file's own errors first, as they are
+    if not params or scenario.path is None:
+        return scenario
+    try:
+        doc = overrides_doc(scenario.path, params)
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None
+    fields = {f.name for cfg in scenario.nodes for f in dataclasses.fields(cfg.cls.Params)}
+    for name in (doc.get("params") or {}):
+        if name not in fields and name not in (scenario_common(scenario.path)):
+            raise ScenarioError(f"{scenario.path}: parameter override {name!r}: no node of the "
+                                "scenario has that parameter")
+    return load_scenario(scenario.path, {**(overrides or {}), **doc})
+
+
+def scenario_common(path: str | Path) -> dict[str, Any]:
+    """The common ``params`` of a scenario file, as written."""
+    doc = yaml.safe_load(Path(path).read_text())
+    return dict(doc.get("params") or {}) if isinstance(doc, dict) else {}
