@@ -35,15 +35,17 @@ BUSY = NodeStatistics(received=12, dropped_undecodable=1, handler_errors=2, fail
                       inbox_depth=5, timers_pending=6, published=7, handled=8,
                       dropped_keep_last=9, dropped_overflow=10, dropped_best_effort=11,
                       sequence_jumps=12, dropped_lossless=13, stalls=14, max_lateness_ms=15,
-                      stall_threshold_ms=16,
+                      stall_threshold_ms=16, external_input=21,
                       rejected={Rejection.FORGED: 17, Rejection.INVALID: 18,
                                 Rejection.OVERSIZE: 19, Rejection.WRONG_TYPE: 20})
 
 # Counters the live verdict does not judge: what a healthy run also counts, or a
-# snapshot of the moment. Every other field must make a run inconclusive.
+# snapshot of the moment, or an input the verdict names in a detail line (external_input).
+# Every other field must make a run inconclusive.
 NOT_JUDGED = {"received", "dropped_undecodable", "handler_errors", "failures", "inbox_depth",
               "timers_pending", "published", "handled", "dropped_keep_last",
-              "dropped_best_effort", "sequence_jumps", "max_lateness_ms", "stall_threshold_ms"}
+              "dropped_best_effort", "sequence_jumps", "max_lateness_ms", "stall_threshold_ms",
+              "external_input"}
 
 
 def test_the_wire_form_reads_back_as_the_same_record():

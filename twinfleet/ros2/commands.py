@@ -1,4 +1,5 @@
-"""The ROS 2 commands: `export --ros2` and `bag info BAG/` (called by the runtime's commands).
+"""The ROS 2 commands: `ros2 bridge` (registered here), `export --ros2` and `bag info BAG/`
+(called by the runtime's commands), and the driver `launch --ros2` runs.
 
 Each imports the ROS field's libraries when it runs; without the ``ros2`` extra it
 says how to install them (exit 2).
@@ -7,9 +8,14 @@ says how to install them (exit 2).
 from __future__ import annotations
 
 import argparse
+import asyncio
+import signal
 import sys
+from collections.abc import Sequence
+from typing import Any
 
-from twinfleet.runtime.fleet.connection import CommandError
+from twinfleet.runtime.fleet.connection import CommandError, add_connection_arguments, connection
+from twinfleet.runtime.scenario.config import DEFAULT_ROS2_ROUTER, Ros2Config
 
 INSTALL_HINT = "the ROS 2 bridge needs its libraries: pip install 'twinfleet[ros2]'"
 
@@ -49,3 +55,70 @@ def rosbag2_info(path: str) -> int:
     except Exception as exc:  # rosbags raises its own errors for a damaged bag
         raise CommandError(f"{path}: {type(exc).__name__}: {exc}") from None
     return 0
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    """Add `twinfleet ros2 bridge`."""
+    ros2 = sub.add_parser("ros2", help="the fleet on a ROS 2 network (rmw_zenoh): the bridge")
+    actions = ros2.add_subparsers(dest="action", required=True, metavar="ACTION")
+    text = ("bridge a running fleet to ROS 2: each fleet node appears as a ROS 2 node of its "
+            "own name, its messages in standard ROS 2 types (docs/ros2.md), and routed ROS 2 "
+            "topics enter the fleet as external input")
+    p = actions.add_parser("bridge", help=text, description=text[0].upper() + text[1:] + ". "
+                           "Runs until Ctrl-C; prints its counters then.")
+    p.add_argument("--domain", type=int, default=0, metavar="N",
+                   help="ROS 2 domain id (ROS_DOMAIN_ID; default: %(default)s)")
+    p.add_argument("--router", default=DEFAULT_ROS2_ROUTER, metavar="EP",
+                   help="Zenoh endpoint of the ROS 2 network's router, rmw_zenohd's "
+                        "(default: %(default)s)")
+    p.add_argument("--inbound", action="append", default=[], metavar="/ROS_TOPIC=/FLEET_TOPIC",
+                   help="route a ROS 2 topic into a fleet topic, e.g. /goal_pose=/r1/goal "
+                        "(RViz's 2D Goal Pose to robot r1; repeatable); only a fleet launched "
+                        "with --ros2 takes it")
+    p.add_argument("--mapping", default=None, metavar="MODULE:NAME",
+                   help="the fleet's ROS 2 mapping (default: the one the fleet's scene names)")
+    add_connection_arguments(p, fleet_help="the fleet to bridge (the scenario's name)")
+    p.set_defaults(func=bridge_command)
+
+
+def bridge_command(args: argparse.Namespace) -> int:
+    """`twinfleet ros2 bridge --fleet NAME`."""
+    _need_libraries()
+    from twinfleet.ros2.bridge import parse_routes
+    from twinfleet.ros2.live import BridgeError, BridgeSettings, FleetBridge
+    from twinfleet.ros2.mapping import MappingError
+
+    conn = connection(args)
+    if conn.fleet == "*":
+        raise CommandError("ros2 bridge needs --fleet NAME (or $TWINFLEET_FLEET)")
+    try:
+        routes = parse_routes(args.inbound)
+        Ros2Config(domain=args.domain, router=args.router)
+    except ValueError as exc:
+        raise CommandError(str(exc)) from None
+    bridge = FleetBridge(BridgeSettings(conn.fleet, conn.endpoint, conn.auth, args.domain,
+                                        args.router, routes, args.mapping))
+
+    async def run() -> None:
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, bridge.stop.set)
+        await bridge.run()
+
+    try:
+        asyncio.run(run())
+    except (BridgeError, MappingError) as exc:
+        raise CommandError(f"ros2 bridge: {exc}") from None
+    return 0
+
+
+def launch_driver(config: Ros2Config | None, *, router: str | None = None) -> Any:
+    """The `run_fleet` driver of `launch --ros2`: the bridge with the scenario's ``ros2:``
+    settings (default ones without), `router` overriding the section's."""
+    _need_libraries()
+    from twinfleet.ros2 import live
+
+    config = config or Ros2Config()
+    routes: Sequence[tuple[str, str]] = config.inbound
+    return live.launch_driver(dict(routes), domain=config.domain,
+                              router=router or config.router, mapping=config.mapping)

@@ -74,6 +74,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
     import zenoh
 
     from twinfleet.runtime.fleet.launcher import FleetConflict, format_result, run_fleet
+    bridge = _ros2_driver(args, scenario)
 
     worst, passed = 0, 0
     for run in range(args.runs):
@@ -86,7 +87,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                            connect=args.connect, listen=args.listen,
                                            run_record=args.record_run,
                                            record_events=_events_path(args, run),
-                                           params=params, auth=auth))
+                                           params=params, auth=auth,
+                                           bridge=bridge is not None, driver=bridge))
         except FleetConflict as exc:
             raise CommandError(str(exc)) from None
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
@@ -104,6 +106,16 @@ def cmd_launch(args: argparse.Namespace) -> int:
         print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "
               f"{args.runs - passed}/{args.runs} failed", flush=True)
     return worst
+
+
+def _ros2_driver(args: argparse.Namespace, scenario: Any) -> Any:
+    """The ROS 2 bridge's driver for `run_fleet` when asked for (``--ros2``, a ``ros2:``
+    section), else None."""
+    if not (args.ros2 or args.ros2_router or scenario.ros2 is not None):
+        return None
+    from twinfleet.ros2.commands import launch_driver
+
+    return launch_driver(scenario.ros2, router=args.ros2_router)
 
 
 _SEVERITY = (0, 3, 2, 1, 130)  # ok < inconclusive < bad input < failed < interrupted
@@ -352,6 +364,13 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                    help="write every event each node dispatches to FILE as JSON lines (handler, "
                         "kind, sender, seq, stamp, choices, state digest), for `twinfleet "
                         "validate FILE SCENARIO`; with --runs N, FILE.1 ... FILE.N")
+    p.add_argument("--ros2", action="store_true",
+                   help="run the ROS 2 bridge beside the fleet (docs/ros2.md; also when the "
+                        "scenario has a ros2: section, whose domain, router and inbound topics "
+                        "it uses): the nodes take the bridge's input on their external topics")
+    p.add_argument("--ros2-router", default=None, metavar="EP",
+                   help="with --ros2: the ROS 2 network's router (default: the ros2: section's, "
+                        "else tcp/127.0.0.1:7447, rmw_zenohd's)")
     p.set_defaults(func=cmd_launch)
 
 
