@@ -117,6 +117,7 @@ def test_a_launched_fleet_is_a_citizen_of_a_ros2_network(tmp_path):
         assert topics["/map"] == ["nav_msgs/msg/OccupancyGrid"]
         assert topics["/r1/scan"] == ["sensor_msgs/msg/LaserScan"]
         assert topics["/tf"] == ["tf2_msgs/msg/TFMessage"]
+        assert topics["/fleet_status"] == ["twinfleet_msgs/msg/FleetStatus"]  # by its fields
         info = {e["topic"]: e for e in (events.get("info") for _ in range(3))}
         assert info["/map"]["publishers"] == ["map_server"]
         assert info["/r1/pose"]["publishers"] == ["r1"]

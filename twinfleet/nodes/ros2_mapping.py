@@ -109,6 +109,8 @@ class RobotRos2Mapping:
 
     #: ROS topics published transient-local (late joiners get the last sample)
     latched = frozenset({"/map"})
+    #: the fleet types mapped here (a bridge carries the others by their fields)
+    mapped_types = frozenset(map(_type, (OccupancyGrid, RobotPose, ObstacleScan, Path)))
 
     def __init__(self) -> None:
         self.frame: GridFrame | None = None

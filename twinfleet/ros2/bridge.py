@@ -32,6 +32,7 @@ import zenoh
 from zenoh import ext
 
 from twinfleet.ros2.graph import BridgeGraph, Declared, Inbound
+from twinfleet.ros2.interfaces import Interfaces
 from twinfleet.ros2.mapping import Ros2Mapping
 from twinfleet.ros2.wire import EntityKind
 from twinfleet.runtime.host.keys import ANY, topic_in_fleet
@@ -56,6 +57,8 @@ class RosSide:
         self.graph = BridgeGraph(domain, str(session.zid()))
         self.check = Inbound(self.graph.types)
         self.on_inbound = on_inbound
+        #: the types carried by their fields when the mapping makes nothing of a message
+        self.interfaces: Interfaces | None = None
         self.published = 0
         self._tokens: list[Any] = []
         self._publishers: dict[str, Any] = {}  # by endpoint token
@@ -81,8 +84,14 @@ class RosSide:
             return 0
         if not isinstance(env, dict) or not isinstance(env.get("data"), dict):
             return 0
-        outputs = self.mapping.outbound(where.topic, str(env.get("type")), env["data"],
-                                        int(env.get("stamp_ms") or 0))
+        type_name = str(env.get("type"))
+        outputs = list(self.mapping.outbound(where.topic, type_name, env["data"],
+                                             int(env.get("stamp_ms") or 0)))
+        by_fields = self.interfaces.ros_type(type_name) if self.interfaces else None
+        if by_fields is not None and type_name not in self.mapping.mapped_types and \
+                self.interfaces is not None:
+            with contextlib.suppress(KeyError, TypeError, ValueError):  # not of its type's shape
+                outputs = [(where.topic, by_fields, self.interfaces.fields(type_name, env["data"]))]
         sender = env.get("sender") if isinstance(env.get("sender"), str) else None
         for topic, ros_type, fields in outputs:
             self.publish(topic, ros_type, fields, owner=sender or None)

@@ -122,3 +122,30 @@ def launch_driver(config: Ros2Config | None, *, router: str | None = None) -> An
     routes: Sequence[tuple[str, str]] = config.inbound
     return live.launch_driver(dict(routes), domain=config.domain,
                               router=router or config.router, mapping=config.mapping)
+
+
+def interface_export_command(args: argparse.Namespace) -> int:
+    """`twinfleet interface export --ros2 DIR`."""
+    if not args.ros2:
+        raise CommandError("interface export writes a ROS 2 package: give --ros2")
+    _need_libraries()
+    from twinfleet.ros2.interfaces import InterfaceError, write_package
+    from twinfleet.ros2.live import fleet_interfaces
+    from twinfleet.runtime.fleet.connection import import_modules
+
+    import_modules(args.module or ["twinfleet.nodes.msgs"])
+    interfaces = fleet_interfaces()
+    try:
+        written = write_package(interfaces, args.package, args.dir)
+    except (InterfaceError, OSError) as exc:
+        raise CommandError(f"interface export: {exc}") from None
+    for name, why in sorted(interfaces.skipped.items()):
+        print(f"skipped {name}: {why}", file=sys.stderr)
+    messages = [p.stem for p in written if p.suffix == ".msg"]
+    print(f"wrote {written[0].parent.parent}: {len(messages)} messages "
+          f"({', '.join(messages)}); build it in a ROS 2 workspace with colcon build", flush=True)
+    for p in written:
+        if p.suffix == ".msg":
+            t = f"{args.package}/msg/{p.stem}"
+            print(f"  {t}  {interfaces.types.type_hash(t)}")
+    return 0

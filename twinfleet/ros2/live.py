@@ -31,7 +31,9 @@ import msgpack
 import zenoh
 
 from twinfleet.ros2.bridge import DEFAULT_ROUTER, RosSide, ros_config
+from twinfleet.ros2.cdr import RosTypes
 from twinfleet.ros2.graph import Inbound
+from twinfleet.ros2.interfaces import Interfaces, ros_name
 from twinfleet.ros2.mapping import (
     InboundMapping,
     MappingError,
@@ -39,7 +41,7 @@ from twinfleet.ros2.mapping import (
     load_mapping,
     mapping_of_scene,
 )
-from twinfleet.runtime.contract.messages import encode
+from twinfleet.runtime.contract.messages import encode, registered_types
 from twinfleet.runtime.core.guard import Rejected, check_message, sign
 from twinfleet.runtime.fleet.fleetauth import MonitorAuth
 from twinfleet.runtime.host.keys import (
@@ -55,6 +57,16 @@ from twinfleet.runtime.tools.monitor.tap import FleetTap, tap_config
 SENDER = "ros2_bridge"  # the envelope sender of what the bridge forwards into the fleet
 RETRY_S = 0.5
 QUERY_S = 1.0
+
+
+def fleet_interfaces(types: RosTypes | None = None) -> Interfaces:
+    """The by-fields ROS 2 interfaces of the message types this process knows: those of
+    the fleet's own packages (not the framework's ``twinfleet/`` types, not the types a
+    standard ROS 2 package already defines)."""
+    store = types or RosTypes()
+    classes = {name: cls for name, cls in registered_types().items()
+               if not name.startswith("twinfleet/") and not store.known(ros_name(name))}
+    return Interfaces(classes, store)
 
 
 class BridgeError(ValueError):
@@ -200,6 +212,7 @@ class FleetBridge:
         mapping = load_mapping(name)
         assert self._ros is not None
         self.side = RosSide(self._ros, mapping, domain=s.domain, on_inbound=self._on_inbound)
+        self.side.interfaces = fleet_interfaces(self.side.graph.types)
         for node in sorted(view.nodes):
             self.side.add_node(node)
         self._route(mapping, view)

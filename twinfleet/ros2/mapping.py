@@ -5,6 +5,8 @@ the node contract only, as it writes its scene):
 
 * ``latched``: the ROS topics to publish transient-local (late joiners get the
   last sample: ``/map``);
+* ``mapped_types``: the fleet message types it maps (the bridge carries every
+  other type by its fields: `interfaces`);
 * ``outbound(topic, type_name, data, stamp_ms)``: the ROS 2 messages one fleet
   message becomes, as (ROS topic, ``pkg/msg/Name``, fields) triples; none for
   a message it does not map.
@@ -37,6 +39,7 @@ class Ros2Mapping(Protocol):
     """How one kind of fleet looks in ROS 2 (module docstring)."""
 
     latched: frozenset[str]
+    mapped_types: frozenset[str]
 
     def outbound(self, topic: str, type_name: str, data: Mapping[str, Any],
                  stamp_ms: int) -> Sequence[Output]:
@@ -74,7 +77,7 @@ def load_mapping(name: str) -> Ros2Mapping:
         raise MappingError(f"{name}: {type(exc).__name__}: {exc}") from None
     if not isinstance(made, Ros2Mapping):
         raise MappingError(f"{name}() made a {type(made).__name__}, not a ROS 2 mapping "
-                           "(one with latched and outbound)")
+                           "(one with latched, mapped_types and outbound)")
     return made
 
 

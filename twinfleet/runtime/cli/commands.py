@@ -263,9 +263,14 @@ def cmd_param(args: argparse.Namespace) -> int:
 
 
 def cmd_interface(args: argparse.Namespace) -> int:
-    """`twinfleet interface list|show`: types of this process, and of the fleet when one runs."""
+    """`twinfleet interface list|show`: types of this process, and of the fleet when one runs;
+    `interface export --ros2 DIR`: a ROS 2 package of them (`twinfleet.ros2.interfaces`)."""
     from twinfleet.runtime.tools.monitor import graph_verbs
 
+    if args.action == "export":
+        from twinfleet.ros2.commands import interface_export_command
+
+        return interface_export_command(args)
     import_modules(args.module)
     try:
         conn = connection(args)
@@ -491,10 +496,20 @@ def _interface_parser(sub: argparse._SubParsersAction) -> None:
         "list": ("list the message types known here and to the running fleet", []),
         "show": ("show the fields of a message type",
                  [("type", {"help": "type name, e.g. std_msgs/String or "
-                                    "std_msgs/msg/String"})])})
+                                    "std_msgs/msg/String"})]),
+        "export": ("write the message types as a colcon-buildable ROS 2 interface package "
+                   "(--ros2), the types the ROS 2 bridge carries by their fields",
+                   [("dir", {"help": "directory to write the package folder into"})])})
     for p in made.values():
         p.add_argument("--module", action="append", default=[], metavar="MODULE",
-                       help="import MODULE first so its message types are known (repeatable)")
+                       help="import MODULE first so its message types are known (repeatable; "
+                            "export: default twinfleet.nodes.msgs)")
+    made["export"].add_argument("--ros2", action="store_true",
+                                help="a ROS 2 package (.msg files, package.xml, CMakeLists.txt; "
+                                     "the only export there is; needs twinfleet[ros2])")
+    made["export"].add_argument("--package", default="twinfleet_msgs",
+                                help="the package (and type prefix) to export (default: "
+                                     "%(default)s)")
 
 
 def _view_parser(sub: argparse._SubParsersAction) -> None:
