@@ -11,6 +11,8 @@ import argparse
 import asyncio
 import signal
 import sys
+from importlib import resources
+from pathlib import Path
 from collections.abc import Sequence
 from typing import Any
 
@@ -79,6 +81,22 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the fleet's ROS 2 mapping (default: the one the fleet's scene names)")
     add_connection_arguments(p, fleet_help="the fleet to bridge (the scenario's name)")
     p.set_defaults(func=bridge_command)
+    text = ("print the path of the shipped RViz2 config that shows a bridged robot fleet (map, "
+            "TF, each robot's pose, scan and plan; 2D Goal Pose on /goal_pose)")
+    rviz = actions.add_parser("rviz", help=text, description=text[0].upper() + text[1:] +
+                              ': rviz2 -d "$(twinfleet ros2 rviz)".')
+    rviz.set_defaults(func=rviz_command)
+
+
+def rviz_config() -> Path:
+    """The shipped RViz2 config file (package data)."""
+    return Path(str(resources.files("twinfleet.ros2") / "rviz" / "fleet.rviz"))
+
+
+def rviz_command(_args: argparse.Namespace) -> int:
+    """`twinfleet ros2 rviz`."""
+    print(rviz_config())
+    return 0
 
 
 def bridge_command(args: argparse.Namespace) -> int:

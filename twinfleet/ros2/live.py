@@ -297,7 +297,7 @@ class FleetBridge:
                 f"{forwarded}, dropped {sum(check.dropped.values())} ({dropped})")
 
     async def _close(self) -> None:
-        if self.side is not None:
+        if self.side is not None and self.ready.is_set():
             self._report_drops()
             self.say(self.summary())
         if self._watch is not None:
