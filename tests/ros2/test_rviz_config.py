@@ -10,7 +10,8 @@ from pathlib import Path
 import yaml
 
 from tests.support import ROOT
-from twinfleet.nodes.msgs import ObstacleScan, OccupancyGrid, Path as PlanMsg, RobotPose
+from twinfleet.nodes.msgs import ObstacleScan, OccupancyGrid, RobotPose
+from twinfleet.nodes.msgs import Path as PlanMsg
 from twinfleet.nodes.ros2_mapping import RobotRos2Mapping
 from twinfleet.ros2.commands import rviz_config
 from twinfleet.runtime.contract.messages import to_plain

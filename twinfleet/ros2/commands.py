@@ -11,9 +11,9 @@ import argparse
 import asyncio
 import signal
 import sys
+from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
-from collections.abc import Sequence
 from typing import Any
 
 from twinfleet.runtime.fleet.connection import CommandError, add_connection_arguments, connection
