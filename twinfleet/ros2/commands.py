@@ -16,7 +16,12 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from twinfleet.runtime.fleet.connection import CommandError, add_connection_arguments, connection
+from twinfleet.runtime.fleet.connection import (
+    CommandError,
+    Connection,
+    add_connection_arguments,
+    connection,
+)
 from twinfleet.runtime.scenario.config import DEFAULT_ROS2_ROUTER, Ros2Config
 
 INSTALL_HINT = "the ROS 2 bridge needs its libraries: pip install 'twinfleet[ros2]'"
@@ -167,3 +172,19 @@ def interface_export_command(args: argparse.Namespace) -> int:
             t = f"{args.package}/msg/{p.stem}"
             print(f"  {t}  {interfaces.types.type_hash(t)}")
     return 0
+
+
+def print_ros_graph(conn: Connection, domain: int, what: str, *, types: bool = False,
+                    verbose: bool = False, timeout_s: float = 1.0) -> None:
+    """Print the ROS 2 nodes (`what` = "nodes") or topics of `domain` behind the connection's
+    router (`node list` / `topic list` with ``--ros2-domain``)."""
+    import zenoh
+
+    from twinfleet.ros2.graph_list import graph_lines, ros_graph
+    from twinfleet.runtime.fleet.connection import zenoh_conf
+
+    with zenoh.open(zenoh_conf(conn.endpoint, conn.auth)) as session:
+        graph = ros_graph(session, domain, timeout_s)
+    for line in graph_lines(graph, what, types=types, verbose=verbose):
+        print(line)
+    sys.stdout.flush()

@@ -191,8 +191,10 @@ def cmd_topic(args: argparse.Namespace) -> int:
 
     conn, out, wait = connection(args), sys.stdout, args.query_timeout
     if args.action == "list":
-        return graph_verbs.topic_list(conn, out=out, verbose=args.verbose, types=args.show_types,
-                                  timeout_s=wait)
+        code = graph_verbs.topic_list(conn, out=out, verbose=args.verbose, types=args.show_types,
+                                      timeout_s=wait)
+        _ros2_graph(args, conn, "topics", types=args.show_types, verbose=args.verbose)
+        return code
     if args.action == "info":
         return graph_verbs.topic_info(conn, args.topic, out=out, verbose=args.verbose, timeout_s=wait)
     if args.action == "type":
@@ -247,8 +249,18 @@ def cmd_node(args: argparse.Namespace) -> int:
     conn = connection(args)
     if args.action == "info":
         return graph_verbs.node_info(conn, args.node, out=sys.stdout, timeout_s=args.query_timeout)
-    return graph_verbs.node_list(conn, out=sys.stdout, stats=args.stats,
-                             timeout_s=args.query_timeout)
+    code = graph_verbs.node_list(conn, out=sys.stdout, stats=args.stats,
+                                 timeout_s=args.query_timeout)
+    _ros2_graph(args, conn, "nodes")
+    return code
+
+
+def _ros2_graph(args: argparse.Namespace, conn: Any, what: str, **shown: bool) -> None:
+    """With ``--ros2-domain N``: the ROS 2 nodes or topics on the same Zenoh network too."""
+    if args.ros2_domain is not None:
+        from twinfleet.ros2.commands import print_ros_graph
+
+        print_ros_graph(conn, args.ros2_domain, what, timeout_s=args.query_timeout, **shown)
 
 
 def cmd_param(args: argparse.Namespace) -> int:
@@ -391,6 +403,14 @@ def _examples_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_examples)
 
 
+ROS2_DOMAIN = ("--ros2-domain",)
+ROS2_DOMAIN_OPTIONS: dict[str, Any] = {
+    "type": int, "default": None, "metavar": "N",
+    "help": "also list the ROS 2 (rmw_zenoh) nodes or topics of domain N behind the same "
+            "router, marked (ros2); e.g. --connect tcp/127.0.0.1:7447 for rmw_zenohd's "
+            "(needs twinfleet[ros2])"}
+
+
 def _sub(parent: argparse._SubParsersAction, name: str, text: str) -> argparse.ArgumentParser:
     return parent.add_parser(name, help=text, description=text[0].upper() + text[1:] + ".")
 
@@ -402,6 +422,7 @@ def _topic_parser(sub: argparse._SubParsersAction) -> None:
     tl.add_argument("-t", "--show-types", action="store_true",
                     help="also show each topic's message type (learned from its messages)")
     tl.add_argument("-v", "--verbose", action="store_true", help="show which nodes publish/subscribe")
+    tl.add_argument(*ROS2_DOMAIN, **ROS2_DOMAIN_OPTIONS)
     ti = _sub(ts, "info", "print a topic's type and its publisher and subscription counts")
     ti.add_argument("topic", help="fully qualified topic name, e.g. /poses")
     ti.add_argument("-v", "--verbose", action="store_true",
@@ -479,6 +500,7 @@ def _node_parser(sub: argparse._SubParsersAction) -> None:
                  [("node", {"help": "node name, e.g. r1 or /r1"})])})
     made["list"].add_argument("--stats", action="store_true",
                               help="also show each node's counters")
+    made["list"].add_argument(*ROS2_DOMAIN, **ROS2_DOMAIN_OPTIONS)
 
 
 def _param_parser(sub: argparse._SubParsersAction) -> None:
