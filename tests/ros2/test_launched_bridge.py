@@ -159,6 +159,10 @@ def test_a_launched_fleet_is_a_citizen_of_a_ros2_network(tmp_path):
                  attachment=gid)
         _wait(fleet_out, seen, lambda line: "dropped an inbound sample: outside the map" in line,
               "the goal outside the map dropped")
+        # the forwarded goal, heard back from the fleet, is not published to ROS 2 again
+        names = {str(r.ok.key_expr).split("/")[8]
+                 for r in mine.liveliness().get("@ros2_lv/0/**", timeout=1.0) if r.ok is not None}
+        assert "ros2_bridge" not in names and "r1" in names
     finally:
         if launcher.poll() is None:
             launcher.send_signal(signal.SIGINT)

@@ -255,10 +255,14 @@ class FleetBridge:
         if self.side is None:
             return
         if self.forwarder is not None and topic_in_fleet(self.settings.fleet, key) is not None:
-            with contextlib.suppress(Exception):  # only the stamp is read here
-                stamp = msgpack.unpackb(payload, raw=False).get("stamp_ms")
-                if isinstance(stamp, int):
-                    self.forwarder.now_ms = max(self.forwarder.now_ms, stamp)
+            env: Any = None
+            with contextlib.suppress(Exception):  # only the stamp and sender are read here
+                env = msgpack.unpackb(payload, raw=False)
+            if isinstance(env, dict):
+                if env.get("sender") == SENDER:
+                    return  # what the bridge forwarded comes back: it is ROS 2's already
+                if isinstance(env.get("stamp_ms"), int):
+                    self.forwarder.now_ms = max(self.forwarder.now_ms, env["stamp_ms"])
         self.side.deliver(key, payload)
 
     def _on_inbound(self, ros_topic: str, ros_type: str, fields: dict[str, Any]) -> None:
