@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import asyncio
+import dataclasses
 import signal
 import sys
 from collections.abc import Sequence
@@ -142,9 +143,14 @@ def launch_driver(config: Ros2Config | None, *, router: str | None = None) -> An
     from twinfleet.ros2 import live
 
     config = config or Ros2Config()
+    try:
+        if router is not None:
+            config = dataclasses.replace(config, router=router)
+    except ValueError as exc:  # ConfigError: says which setting
+        raise CommandError(f"--ros2-router: {exc}") from None
     routes: Sequence[tuple[str, str]] = config.inbound
-    return live.launch_driver(dict(routes), domain=config.domain,
-                              router=router or config.router, mapping=config.mapping)
+    return live.launch_driver(dict(routes), domain=config.domain, router=config.router,
+                              mapping=config.mapping)
 
 
 def interface_export_command(args: argparse.Namespace) -> int:
