@@ -1,6 +1,7 @@
-"""`twinfleet node list` / `topic list -t -v` with ``--ros2-domain``: ROS 2 nodes made by
-zenoh-ros2-sdk (not ours, its own process) behind a router on 127.0.0.1 are listed, marked
-(ros2), with their topics' types; another domain's are not."""
+"""`twinfleet node list` / `topic list -t -v` / `topic echo` with ``--ros2-domain``: ROS 2
+nodes made by zenoh-ros2-sdk (not ours, its own process) behind a router on 127.0.0.1 are
+listed, marked (ros2), with their topics' types, and what they publish is decoded; another
+domain's are not listed."""
 
 from __future__ import annotations
 
@@ -27,8 +28,19 @@ port = int(sys.argv[1])
 pub = ROS2Publisher("/chatter", "std_msgs/msg/String", node_name="talker", router_port=port)
 sub = ROS2Subscriber("/chatter", "std_msgs/msg/String", node_name="listener",
                      router_port=port, callback=lambda m: None)
+import threading
+stop = threading.Event()
+def talk():
+    i = 0
+    while not stop.wait(0.05):
+        pub.publish(data=f"hello {i}")
+        i += 1
+talker = threading.Thread(target=talk)
+talker.start()
 print("ready", flush=True)
 sys.stdin.read()
+stop.set()
+talker.join()
 sub.close()
 pub.close()
 """
@@ -52,6 +64,10 @@ def test_node_and_topic_list_show_ros2_nodes_on_the_same_network(capsys):
                 "  (ros2)") in out.splitlines()
         assert main(["node", "list", *ep, "--ros2-domain", "7"]) == 0
         assert "(ros2)" not in capsys.readouterr().out
+        assert main(["topic", "echo", "/chatter", *ep, "--ros2-domain", "0", "--count", "2",
+                     "--duration", "10"]) == 0
+        docs = [d for d in capsys.readouterr().out.split("---") if d.strip()]
+        assert len(docs) == 2 and all(d.strip().startswith("data: hello ") for d in docs)
     finally:
         peer.stdin.close()
         try:

@@ -194,3 +194,57 @@ def print_ros_graph(conn: Connection, domain: int, what: str, *, types: bool = F
     for line in graph_lines(graph, what, types=types, verbose=verbose):
         print(line)
     sys.stdout.flush()
+
+
+def ros_echo(conn: Connection, domain: int, topic: str, *, count: int | None = None,
+             duration_s: float | None = None) -> int:
+    """`twinfleet topic echo TOPIC --ros2-domain N`: each sample of a ROS 2 topic, its CDR
+    decoded by the type its key names, one YAML document each, until `count` or
+    `duration_s` (or Ctrl-C)."""
+    _need_libraries()
+    import queue
+    import time
+
+    import yaml
+    import zenoh
+
+    from twinfleet.ros2.cdr import MessageError
+    from twinfleet.ros2.live import fleet_interfaces
+    from twinfleet.ros2.wire import WireError, ros_type_name
+    from twinfleet.runtime.fleet.connection import zenoh_conf
+
+    types = fleet_interfaces().types  # standard types and the bridge's by-fields ones
+    samples: queue.Queue[tuple[str, bytes]] = queue.Queue()
+    expr = f"{domain}/{topic.strip('/')}/*/*"
+    end = time.monotonic() + duration_s if duration_s is not None else None
+    shown = 0
+    with zenoh.open(zenoh_conf(conn.endpoint, conn.auth)) as session:
+        session.declare_subscriber(expr, lambda s: samples.put((str(s.key_expr),
+                                                                s.payload.to_bytes())))
+        while (count is None or shown < count) and (end is None or time.monotonic() < end):
+            try:
+                key, payload = samples.get(timeout=0.2)
+            except queue.Empty:
+                continue
+            try:
+                ros_type = ros_type_name(key.split("/")[-2])
+                fields = types.decode(ros_type, payload)
+            except (WireError, MessageError, IndexError) as exc:
+                print(f"# {key}: not decodable here ({exc})", flush=True)
+                continue
+            print(yaml.safe_dump(_plain(fields), sort_keys=False) + "---", flush=True)
+            shown += 1
+    return 0
+
+
+def _plain(value: Any) -> Any:
+    """A decoded message as YAML-safe values (bytes as lists of numbers)."""
+    if isinstance(value, dict):
+        return {k: _plain(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_plain(v) for v in value]
+    if isinstance(value, bytes | bytearray):
+        return list(value)
+    if hasattr(value, "tolist"):  # a numpy array or scalar
+        return value.tolist()
+    return value

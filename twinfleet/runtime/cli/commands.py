@@ -199,6 +199,11 @@ def cmd_topic(args: argparse.Namespace) -> int:
         return graph_verbs.topic_info(conn, args.topic, out=out, verbose=args.verbose, timeout_s=wait)
     if args.action == "type":
         return graph_verbs.topic_type(conn, args.topic, out=out, timeout_s=wait)
+    if args.action == "echo" and args.ros2_domain is not None:
+        from twinfleet.ros2.commands import ros_echo
+
+        return ros_echo(conn, args.ros2_domain, args.topic, count=1 if args.once else args.count,
+                        duration_s=args.duration)
     if args.action == "echo":
         count = 1 if args.once else args.count
         return data_verbs.topic_echo(conn, args.topic, out=out, count=count,
@@ -440,6 +445,10 @@ def _topic_parser(sub: argparse._SubParsersAction) -> None:
     te.add_argument("--wait", action="store_true",
                     help="wait for a publisher of a topic no node uses yet (default: exit 2 "
                          "after the discovery timeout)")
+    te.add_argument("--ros2-domain", type=int, default=None, metavar="N",
+                    help="echo a ROS 2 (rmw_zenoh) topic of domain N behind the same router "
+                         "instead, decoding its CDR (standard types and the bridge's own; "
+                         "--field and --wait do not apply; needs twinfleet[ros2])")
     th = _sub(ts, "hz", "print the rate of a topic every second")
     th.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
     th.add_argument("--window", type=int, default=100, metavar="N",
