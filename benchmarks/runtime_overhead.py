@@ -44,6 +44,11 @@ Prints a table, one JSON line (``{"summary": ...}``), then a PASS/MISS verdict p
 payload size and target (twinfleet latency p50 ≤ 1.3× raw, throughput ≥ 0.7× raw),
 each next to the asyncio hand-off floor, which no runtime on a loop can beat.
 
+The anchor: when rclpy is installed (``ros-jazzy-rclpy``, ``ros-jazzy-rmw-fastrtps-cpp``
+from the package index), the same run then measures real ROS 2 with the same payloads
+(benchmarks/rclpy_anchor.py: its own process pair, rmw_fastrtps, reliable KEEP_LAST 1000)
+and prints twinfleet's figures as ratios of rclpy's (``--no-rclpy`` skips it).
+
     python benchmarks/runtime_overhead.py            # ~1 min: 4 pairs per size
     python benchmarks/runtime_overhead.py --quick    # ~20 s
 """
@@ -701,6 +706,27 @@ def parent_main(opts: argparse.Namespace) -> None:
                       "floods": opts.floods, "flood_s": opts.flood_s,
                       "wall_s": round(time.monotonic() - started, 1)}), flush=True)
     print_verdict(summary)
+    if not opts.no_rclpy:
+        print_rclpy_anchor(summary, sizes, opts)
+
+
+def print_rclpy_anchor(summary: dict[str, Any], sizes: list[int], opts: argparse.Namespace) -> None:
+    """rclpy's latency and flood rate with the same payloads, and twinfleet's as ratios of them."""
+    import rclpy_anchor
+
+    if not rclpy_anchor.available():
+        print("\nrclpy anchor: rclpy not installed (pip install ros-jazzy-rclpy "
+              "ros-jazzy-rmw-fastrtps-cpp), skipped")
+        return
+    print("\nrclpy anchor (Jazzy, rmw_fastrtps, reliable KEEP_LAST 1000; same payloads, this run):")
+    for size in sizes:
+        ros = rclpy_anchor.measure(size, rounds=opts.rounds, warmup=opts.warmup,
+                                   flood_s=opts.flood_s)
+        mine = summary[str(size)]["twinfleet"]
+        print(f"  {size:>5} B rclpy one-way p50 {ros['p50_us']:.0f} µs, flood received "
+              f"{ros['msg_per_s']:.0f} msg/s ({ros['received']} of {ros['sent']} sent); "
+              f"twinfleet p50 {mine['p50_us'] / ros['p50_us']:.2f}× rclpy's, throughput "
+              f"{mine['msg_per_s'] / max(ros['msg_per_s'], 1):.1f}× rclpy's", flush=True)
 
 
 def main() -> None:
@@ -716,6 +742,8 @@ def main() -> None:
                    help="uncounted floods of each implementation before the counted ones")
     p.add_argument("--flood-s", type=float, default=0.6, help="seconds per flood")
     p.add_argument("--child-timeout", type=float, default=40.0, help="seconds per process pair")
+    p.add_argument("--no-rclpy", action="store_true",
+                   help="skip the rclpy anchor (measured when rclpy is installed)")
     p.add_argument("--role", choices=("echo", "ping"), help=argparse.SUPPRESS)
     p.add_argument("--endpoint", help=argparse.SUPPRESS)
     p.add_argument("--size", type=int, default=64, help=argparse.SUPPRESS)

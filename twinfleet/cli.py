@@ -5,6 +5,7 @@
     twinfleet render                                              (twinfleet.runtime.cli.render)
     twinfleet check                                               (twinfleet.checker.commands)
     twinfleet replay|validate|experiment|calibrate                (twinfleet.agreement.commands)
+    twinfleet ros2 bridge                                         (twinfleet.ros2.commands)
 
 This module sits above every layer; each layer's `register(subparsers)` adds
 its own commands and imports its engines only when a command runs.
@@ -28,6 +29,7 @@ from collections.abc import Sequence
 
 from twinfleet.agreement import commands as agreement_commands
 from twinfleet.checker import commands as checker_commands
+from twinfleet.ros2 import commands as ros2_commands
 from twinfleet.runtime.cli import commands as runtime_commands
 from twinfleet.runtime.cli import render as render_command
 from twinfleet.runtime.fleet.connection import EXIT_BAD_INPUT, EXIT_INTERRUPTED, CommandError
@@ -72,6 +74,7 @@ def build_parser() -> argparse.ArgumentParser:
     render_command.register(sub)
     checker_commands.register(sub)
     agreement_commands.register(sub)
+    ros2_commands.register(sub)
     return parser
 
 

@@ -93,7 +93,7 @@ def test_an_independent_ros2_peer_sees_the_fleet_and_reaches_it(tmp_path):
         assert goals and goals[0][2]["pose"]["position"] == {"x": 1.5, "y": 2.5, "z": 0.0}
         # malformed samples on the same key: no attachment, garbage, NaN
         key = side.graph.endpoints[next(k for k in side.graph.endpoints
-                                        if k[1] == "/goal_pose")].key
+                                        if k[2] == "/goal_pose")].key
         session.put(key, b"\x00\x01\x00\x00\x01")
         session.put(key, b"junk", attachment=bytes(16) + b"\x10" + bytes(16))
         session.put(key, b"\x00\x01\x00\x00", attachment=bytes(33))  # GID length 0

@@ -156,6 +156,19 @@ def test_statistics_that_count_no_loss_leave_the_verdict_alone():
     assert v.status == Status.HOLDS, v
 
 
+def test_a_run_that_took_external_input_says_so_and_is_judged_as_any_other():
+    fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
+    fleet.run(300)
+    plain = fleet.judge.verdict(RunEnd("timeout", statistics={"counter": NodeStatistics(),
+                                                              "other": NodeStatistics()}))
+    assert not any("external input" in d for d in plain.details)
+    fed = NodeStatistics(received=3, handled=3, external_input=2)
+    v = fleet.judge.verdict(RunEnd("timeout", statistics={"counter": fed,
+                                                          "other": NodeStatistics()}))
+    assert v.status == Status.HOLDS and v.summary == plain.summary
+    assert v.details[-1].startswith("took external input") and "counter 2" in v.details[-1]
+
+
 def test_statistics_the_launcher_could_not_read_make_it_inconclusive():
     fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
     fleet.run(100)

@@ -36,14 +36,15 @@ BUSY = NodeStatistics(received=12, dropped_undecodable=1, handler_errors=2, fail
                       inbox_depth=5, timers_pending=6, published=7, handled=8,
                       dropped_keep_last=9, dropped_overflow=10, dropped_best_effort=11,
                       sequence_jumps=12, dropped_lossless=13, stalls=14, max_lateness_ms=15,
-                      stall_threshold_ms=16,
+                      stall_threshold_ms=16, external_input=21,
                       rejected={Rejection.FORGED: 17, Rejection.INVALID: 18,
                                 Rejection.OVERSIZE: 19, Rejection.WRONG_TYPE: 20})
 
 # Counters the live verdict does not judge: what a healthy run also counts, or a
-# snapshot of the moment, or input from outside the fleet (rejected_external: the verdict
-# names it in a detail line). Every other field must make a run inconclusive.
-NOT_JUDGED = {"rejected_external", "received", "dropped_undecodable", "handler_errors", "failures", "inbox_depth",
+# snapshot of the moment, or input from outside the fleet (rejected_external: an operator's
+# forced sample, refused; external_input: the bridge's, taken; the verdict names both in a
+# detail line). Every other field must make a run inconclusive.
+NOT_JUDGED = {"rejected_external", "external_input", "received", "dropped_undecodable", "handler_errors", "failures", "inbox_depth",
               "timers_pending", "published", "handled", "dropped_keep_last",
               "dropped_best_effort", "sequence_jumps", "max_lateness_ms", "stall_threshold_ms"}
 

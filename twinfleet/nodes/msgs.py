@@ -40,6 +40,14 @@ class PathRequest:
     final: bool = True
 
 
+@message("twinfleet_msgs/Goal")
+class Goal:
+    """A new final goal for one robot, on its ``goal`` topic (an operator's or a ROS 2 tool's,
+    through the bridge: no node of the shipped scenarios publishes it)."""
+
+    cell: Cell
+
+
 @message("twinfleet_msgs/Path")
 class Path:
     """Waypoints from the start (excluded) to the goal; empty when planning failed."""

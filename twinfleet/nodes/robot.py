@@ -32,7 +32,7 @@ from twinfleet.nodes.motion import (
     max_waiting_rounds,
     rotation_time_ms,
 )
-from twinfleet.nodes.msgs import ObstacleScan, Path, PathRequest, RobotPose, RobotStatus
+from twinfleet.nodes.msgs import Goal, ObstacleScan, Path, PathRequest, RobotPose, RobotStatus
 from twinfleet.nodes.profile import profile_named
 from twinfleet.nodes.scan import can_hop, stepwise_free
 
@@ -80,6 +80,7 @@ class RobotState:
     done: bool = False
     stuck: bool = False
     front_obstacle: int = 0  # the model's informational free hops ahead (profile switch)
+    goal: Cell | None = None  # a goal received on the goal topic; None: params.goal
 
 
 class Robot(Node):
@@ -87,6 +88,9 @@ class Robot(Node):
 
     Params = RobotParams
     tool_topics = ("status", "path")  # for viewers and the run report (runtime.scenario.lint)
+    #: topics fed from outside the fleet (a ROS 2 tool through the bridge), not by a node:
+    #: live, a sample signed with the bridge's key is accepted here only, and counted
+    external_topics = ("goal",)
 
     def configure(self) -> None:
         p = self.params
@@ -135,6 +139,23 @@ class Robot(Node):
         self._note_front_obstacle()
         if self.state.waiting:
             ctx.after(0, self.update_moving_status, True)
+
+    @subscribe("goal", priority=10)
+    def on_goal(self, ctx: Context, msg: Goal) -> None:
+        """A new final goal: forget the old plan and targets, plan to it (a free cell only).
+
+        No node of the checked scenarios publishes on ``goal``: unused, this handler adds
+        no event to the model."""
+        cell = (int(msg.cell[0]), int(msg.cell[1]))
+        if not in_bounds(cell, self.shape) or self.static[cell]:
+            return
+        st = self.state
+        st.goal, st.targets, st.done, st.stuck, st.failures = cell, (), False, False, 0
+        self._set_target(ctx, cell)
+
+    def final_goal(self) -> Cell:
+        """The goal the robot drives to: the last one received, else its parameter."""
+        return self.state.goal if self.state.goal is not None else tuple(self.params.goal)
 
     @handler(priority=10)
     def on_path(self, ctx: Context, reply: Path | CallError) -> None:
@@ -224,7 +245,7 @@ class Robot(Node):
         if in_bounds(nxt, self.shape):
             st.cell = nxt
             self._report_pose(ctx)
-            st.distance = distance_to_target(st.cell, tuple(self.params.goal), self.profile)
+            st.distance = distance_to_target(st.cell, self.final_goal(), self.profile)
             if st.cell == st.moves[st.move_idx]:
                 st.move_idx += 1
         was_waiting = st.waiting
@@ -289,5 +310,5 @@ class Robot(Node):
 
     def _report_status(self, ctx: Context, mode: str) -> None:
         st = self.state
-        ctx.publish("status", RobotStatus(self.name, mode, st.cell, tuple(self.params.goal),
+        ctx.publish("status", RobotStatus(self.name, mode, st.cell, self.final_goal(),
                                           st.waits, st.failures, ctx.now()))

@@ -12,6 +12,11 @@ framework encodes it::
     <robot>/scan   ObstacleScan   → /<robot>/scan      sensor_msgs/msg/LaserScan in <robot>/base_link
     /<robot>/path  Path           → /<robot>/plan      nav_msgs/msg/Path
 
+and one way in (`inbound`), for a bridge that routes a ROS 2 topic to a robot's
+``goal`` (``/goal_pose=/r1/goal``: RViz's "2D Goal Pose")::
+
+    geometry_msgs/msg/PoseStamped in frame map → <robot>/goal  Goal (the cell the point is in)
+
 Frames follow REP 103/105: ``map`` is the fixed frame, x along the grid's
 columns, y along its rows, z up; a robot's ``base_link`` faces its heading. A
 grid cell (row r, column c) is the square whose corner nearest the origin is
@@ -35,7 +40,7 @@ import math
 from collections.abc import Mapping, Sequence
 from typing import Any, final
 
-from twinfleet.nodes.msgs import ObstacleScan, OccupancyGrid, Path, RobotPose
+from twinfleet.nodes.msgs import Goal, ObstacleScan, OccupancyGrid, Path, RobotPose
 
 Fields = dict[str, Any]
 Output = tuple[str, str, Fields]
@@ -71,10 +76,25 @@ def heading(direction: int) -> float:
 class GridFrame:
     """Where the cells of the map lie in the ``map`` frame."""
 
-    def __init__(self, resolution: float, origin: Sequence[float]) -> None:
-        self.resolution = resolution
+    def __init__(self, resolution: float, origin: Sequence[float],
+                 shape: tuple[int, int] = (0, 0)) -> None:
+        self.resolution, self.shape = resolution, shape  # shape: rows, columns
         self.x0, self.y0, self.yaw0 = (float(origin[0]), float(origin[1]),
                                        float(origin[2]) if len(origin) > 2 else 0.0)
+
+    def cell_of(self, x: float, y: float) -> tuple[int, int]:
+        """The cell (row, column) a map-frame point lies in.
+
+        Raises:
+            ValueError: the point lies outside the grid.
+        """
+        c, s = math.cos(self.yaw0), math.sin(self.yaw0)
+        dx, dy = x - self.x0, y - self.y0
+        u, v = c * dx + s * dy, -s * dx + c * dy
+        row, col = math.floor(v / self.resolution), math.floor(u / self.resolution)
+        if not (0 <= row < self.shape[0] and 0 <= col < self.shape[1]):
+            raise ValueError("outside the map")
+        return (row, col)
 
     def centre(self, cell: Sequence[int]) -> tuple[float, float]:
         """The map-frame point at the centre of cell (row, column)."""
@@ -89,6 +109,8 @@ class RobotRos2Mapping:
 
     #: ROS topics published transient-local (late joiners get the last sample)
     latched = frozenset({"/map"})
+    #: the fleet types mapped here (a bridge carries the others by their fields)
+    mapped_types = frozenset(map(_type, (OccupancyGrid, RobotPose, ObstacleScan, Path)))
 
     def __init__(self) -> None:
         self.frame: GridFrame | None = None
@@ -108,13 +130,32 @@ class RobotRos2Mapping:
         except (KeyError, IndexError, TypeError, ValueError):  # a message of another shape
             return []
 
+    def inbound_type(self, fleet_topic: str) -> str | None:
+        """The ROS 2 type a fleet topic takes from ROS 2 (a robot's ``goal``), or None."""
+        return "geometry_msgs/msg/PoseStamped" if fleet_topic.endswith("/goal") else None
+
+    def inbound(self, fleet_topic: str, ros_type: str, fields: Mapping[str, Any]) -> Goal:
+        """The fleet message a checked ROS 2 message becomes on `fleet_topic`.
+
+        Raises:
+            ValueError: it cannot be one; the text is the reason it is counted under.
+        """
+        if self.inbound_type(fleet_topic) != ros_type:
+            raise ValueError("not an inbound topic")
+        if self.frame is None:
+            raise ValueError("no map yet")
+        if fields["header"]["frame_id"] not in ("map", "/map", ""):
+            raise ValueError("not in frame map")
+        position = fields["pose"]["position"]
+        return Goal(self.frame.cell_of(float(position["x"]), float(position["y"])))
+
     def _grid(self, _topic: str, data: Mapping[str, Any], ms: int) -> list[Output]:
         width, height, res = int(data["width"]), int(data["height"]), float(data["resolution"])
         origin = data["origin"]
         cells = bytes(data["data"])
         if len(cells) != width * height or res <= 0:
             return []
-        self.frame = GridFrame(res, origin)
+        self.frame = GridFrame(res, origin, (height, width))
         self.range_max = math.hypot(width, height) * res
         occupancy = bytes(v if v != UNKNOWN else 0xFF for v in cells)  # int8 -1 is 0xFF
         pose = {"position": {"x": self.frame.x0, "y": self.frame.y0, "z": 0.0},

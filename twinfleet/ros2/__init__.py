@@ -7,8 +7,13 @@ installed with the ``twinfleet[ros2]`` extra.
 
 Modules: `wire` (rmw_zenoh's keys, liveliness tokens, QoS strings, attachments,
 sans I/O), `typehash` (RIHS01), `cdr` (messages as plain values ↔ CDR),
-`mapping` (a fleet's ROS 2 mapping by import name), `rosbag` (recordings as
+`mapping` (a fleet's ROS 2 mapping by import name), `interfaces` (the other
+fleet types by their fields, and their package), `graph` (the bridge's ROS
+nodes and endpoints, inbound checks, sans I/O), `bridge` (the ROS 2 session),
+`live` (a running fleet bridged: `ros2 bridge`, `launch --ros2`), `graph_list`
+(the ROS 2 graph for `node list` / `topic list`), `rosbag` (recordings as
 rosbag2 folders), `commands` (the command line).
 """
 
-__all__ = ["cdr", "commands", "mapping", "rosbag", "typehash", "wire"]
+__all__ = ["bridge", "cdr", "commands", "graph", "graph_list", "interfaces", "live", "mapping",
+           "rosbag", "typehash", "wire"]

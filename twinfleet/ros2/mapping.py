@@ -5,9 +5,16 @@ the node contract only, as it writes its scene):
 
 * ``latched``: the ROS topics to publish transient-local (late joiners get the
   last sample: ``/map``);
+* ``mapped_types``: the fleet message types it maps (the bridge carries every
+  other type by its fields: `interfaces`);
 * ``outbound(topic, type_name, data, stamp_ms)``: the ROS 2 messages one fleet
   message becomes, as (ROS topic, ``pkg/msg/Name``, fields) triples; none for
   a message it does not map.
+
+A mapping that takes messages from ROS 2 into the fleet also has
+``inbound_type(fleet_topic)`` (the ROS 2 type that fleet topic takes, or None)
+and ``inbound(fleet_topic, ros_type, fields)`` (the fleet message, or
+ValueError with the reason it is dropped for): `InboundMapping`.
 
 It is named by import name (``module:Name``, a class made with no arguments);
 the default is the one the fleet's scene names in its ``ros2`` attribute
@@ -32,10 +39,24 @@ class Ros2Mapping(Protocol):
     """How one kind of fleet looks in ROS 2 (module docstring)."""
 
     latched: frozenset[str]
+    mapped_types: frozenset[str]
 
     def outbound(self, topic: str, type_name: str, data: Mapping[str, Any],
                  stamp_ms: int) -> Sequence[Output]:
         """The ROS 2 messages one fleet message becomes."""
+        ...
+
+
+@runtime_checkable
+class InboundMapping(Protocol):
+    """A mapping that also takes ROS 2 messages into the fleet (module docstring)."""
+
+    def inbound_type(self, fleet_topic: str) -> str | None:
+        """The ROS 2 type `fleet_topic` takes, or None."""
+        ...
+
+    def inbound(self, fleet_topic: str, ros_type: str, fields: Mapping[str, Any]) -> Any:
+        """The fleet message a checked ROS 2 message becomes (ValueError: why not)."""
         ...
 
 
@@ -56,7 +77,7 @@ def load_mapping(name: str) -> Ros2Mapping:
         raise MappingError(f"{name}: {type(exc).__name__}: {exc}") from None
     if not isinstance(made, Ros2Mapping):
         raise MappingError(f"{name}() made a {type(made).__name__}, not a ROS 2 mapping "
-                           "(one with latched and outbound)")
+                           "(one with latched, mapped_types and outbound)")
     return made
 
 

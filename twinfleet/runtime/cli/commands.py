@@ -78,6 +78,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
     import zenoh
 
     from twinfleet.runtime.fleet.launcher import FleetConflict, format_result, run_fleet
+    bridge = _ros2_driver(args, scenario)
 
     worst, passed = 0, 0
     for run in range(args.runs):
@@ -90,7 +91,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                            connect=args.connect, listen=args.listen,
                                            run_record=args.record_run,
                                            record_events=_events_path(args, run),
-                                           params=params, auth=auth))
+                                           params=params, auth=auth,
+                                           bridge=bridge is not None, driver=bridge))
         except FleetConflict as exc:
             raise CommandError(str(exc)) from None
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
@@ -108,6 +110,16 @@ def cmd_launch(args: argparse.Namespace) -> int:
         print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "
               f"{args.runs - passed}/{args.runs} failed", flush=True)
     return worst
+
+
+def _ros2_driver(args: argparse.Namespace, scenario: Any) -> Any:
+    """The ROS 2 bridge's driver for `run_fleet` when asked for (``--ros2``, a ``ros2:``
+    section), else None."""
+    if not (args.ros2 or args.ros2_router or scenario.ros2 is not None):
+        return None
+    from twinfleet.ros2.commands import launch_driver
+
+    return launch_driver(scenario.ros2, router=args.ros2_router)
 
 
 _SEVERITY = (0, 3, 2, 1, 130)  # ok < inconclusive < bad input < failed < interrupted
@@ -182,12 +194,19 @@ def cmd_topic(args: argparse.Namespace) -> int:
 
     conn, out, wait = connection(args), sys.stdout, args.query_timeout
     if args.action == "list":
-        return graph_verbs.topic_list(conn, out=out, verbose=args.verbose, types=args.show_types,
-                                  timeout_s=wait)
+        code = graph_verbs.topic_list(conn, out=out, verbose=args.verbose, types=args.show_types,
+                                      timeout_s=wait)
+        _ros2_graph(args, conn, "topics", types=args.show_types, verbose=args.verbose)
+        return code
     if args.action == "info":
         return graph_verbs.topic_info(conn, args.topic, out=out, verbose=args.verbose, timeout_s=wait)
     if args.action == "type":
         return graph_verbs.topic_type(conn, args.topic, out=out, timeout_s=wait)
+    if args.action == "echo" and args.ros2_domain is not None:
+        from twinfleet.ros2.commands import ros_echo
+
+        return ros_echo(conn, args.ros2_domain, args.topic, count=1 if args.once else args.count,
+                        duration_s=args.duration)
     if args.action == "echo":
         count = 1 if args.once else args.count
         return data_verbs.topic_echo(conn, args.topic, out=out, count=count,
@@ -241,8 +260,18 @@ def cmd_node(args: argparse.Namespace) -> int:
     conn = connection(args)
     if args.action == "info":
         return graph_verbs.node_info(conn, args.node, out=sys.stdout, timeout_s=args.query_timeout)
-    return graph_verbs.node_list(conn, out=sys.stdout, stats=args.stats,
-                             timeout_s=args.query_timeout)
+    code = graph_verbs.node_list(conn, out=sys.stdout, stats=args.stats,
+                                 timeout_s=args.query_timeout)
+    _ros2_graph(args, conn, "nodes")
+    return code
+
+
+def _ros2_graph(args: argparse.Namespace, conn: Any, what: str, **shown: bool) -> None:
+    """With ``--ros2-domain N``: the ROS 2 nodes or topics on the same Zenoh network too."""
+    if args.ros2_domain is not None:
+        from twinfleet.ros2.commands import print_ros_graph
+
+        print_ros_graph(conn, args.ros2_domain, what, timeout_s=args.query_timeout, **shown)
 
 
 def cmd_param(args: argparse.Namespace) -> int:
@@ -257,9 +286,14 @@ def cmd_param(args: argparse.Namespace) -> int:
 
 
 def cmd_interface(args: argparse.Namespace) -> int:
-    """`twinfleet interface list|show`: types of this process, and of the fleet when one runs."""
+    """`twinfleet interface list|show`: types of this process, and of the fleet when one runs;
+    `interface export --ros2 DIR`: a ROS 2 package of them (`twinfleet.ros2.interfaces`)."""
     from twinfleet.runtime.tools.monitor import graph_verbs
 
+    if args.action == "export":
+        from twinfleet.ros2.commands import interface_export_command
+
+        return interface_export_command(args)
     import_modules(args.module)
     try:
         conn = connection(args)
@@ -358,6 +392,13 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                    help="write every event each node dispatches to FILE as JSON lines (handler, "
                         "kind, sender, seq, stamp, choices, state digest), for `twinfleet "
                         "validate FILE SCENARIO`; with --runs N, FILE.1 ... FILE.N")
+    p.add_argument("--ros2", action="store_true",
+                   help="run the ROS 2 bridge beside the fleet (docs/ros2.md; also when the "
+                        "scenario has a ros2: section, whose domain, router and inbound topics "
+                        "it uses): the nodes take the bridge's input on their external topics")
+    p.add_argument("--ros2-router", default=None, metavar="EP",
+                   help="with --ros2: the ROS 2 network's router (default: the ros2: section's, "
+                        "else tcp/127.0.0.1:7447, rmw_zenohd's)")
     p.set_defaults(func=cmd_launch)
 
 
@@ -373,6 +414,14 @@ def _examples_parser(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=cmd_examples)
 
 
+ROS2_DOMAIN = ("--ros2-domain",)
+ROS2_DOMAIN_OPTIONS: dict[str, Any] = {
+    "type": int, "default": None, "metavar": "N",
+    "help": "also list the ROS 2 (rmw_zenoh) nodes or topics of domain N behind the same "
+            "router, marked (ros2); e.g. --connect tcp/127.0.0.1:7447 for rmw_zenohd's "
+            "(needs twinfleet[ros2])"}
+
+
 def _sub(parent: argparse._SubParsersAction, name: str, text: str) -> argparse.ArgumentParser:
     return parent.add_parser(name, help=text, description=text[0].upper() + text[1:] + ".")
 
@@ -384,6 +433,7 @@ def _topic_parser(sub: argparse._SubParsersAction) -> None:
     tl.add_argument("-t", "--show-types", action="store_true",
                     help="also show each topic's message type (learned from its messages)")
     tl.add_argument("-v", "--verbose", action="store_true", help="show which nodes publish/subscribe")
+    tl.add_argument(*ROS2_DOMAIN, **ROS2_DOMAIN_OPTIONS)
     ti = _sub(ts, "info", "print a topic's type and its publisher and subscription counts")
     ti.add_argument("topic", help="fully qualified topic name, e.g. /poses")
     ti.add_argument("-v", "--verbose", action="store_true",
@@ -399,6 +449,10 @@ def _topic_parser(sub: argparse._SubParsersAction) -> None:
                          "type, stamp_ms, seq, sender)")
     te.add_argument("--duration", type=float, default=None, metavar="S", help="exit after S seconds")
     add_wait_arguments(te, "for a publisher of a topic no node uses yet")
+    te.add_argument("--ros2-domain", type=int, default=None, metavar="N",
+                    help="echo a ROS 2 (rmw_zenoh) topic of domain N behind the same router "
+                         "instead, decoding its CDR (standard types and the bridge's own; "
+                         "--field and --wait do not apply; needs twinfleet[ros2])")
     th = _sub(ts, "hz", "print the rate of a topic every second")
     th.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
     th.add_argument("--window", type=int, default=100, metavar="N",
@@ -460,6 +514,7 @@ def _node_parser(sub: argparse._SubParsersAction) -> None:
                  [("node", {"help": "node name, e.g. r1 or /r1"})])})
     made["list"].add_argument("--stats", action="store_true",
                               help="also show each node's counters")
+    made["list"].add_argument(*ROS2_DOMAIN, **ROS2_DOMAIN_OPTIONS)
 
 
 def _param_parser(sub: argparse._SubParsersAction) -> None:
@@ -477,10 +532,20 @@ def _interface_parser(sub: argparse._SubParsersAction) -> None:
         "list": ("list the message types known here and to the running fleet", []),
         "show": ("show the fields of a message type",
                  [("type", {"help": "type name, e.g. std_msgs/String or "
-                                    "std_msgs/msg/String"})])})
+                                    "std_msgs/msg/String"})]),
+        "export": ("write the message types as a colcon-buildable ROS 2 interface package "
+                   "(--ros2), the types the ROS 2 bridge carries by their fields",
+                   [("dir", {"help": "directory to write the package folder into"})])})
     for p in made.values():
         p.add_argument("--module", action="append", default=[], metavar="MODULE",
-                       help="import MODULE first so its message types are known (repeatable)")
+                       help="import MODULE first so its message types are known (repeatable; "
+                            "export: default twinfleet.nodes.msgs)")
+    made["export"].add_argument("--ros2", action="store_true",
+                                help="a ROS 2 package (.msg files, package.xml, CMakeLists.txt; "
+                                     "the only export there is; needs twinfleet[ros2])")
+    made["export"].add_argument("--package", default="twinfleet_msgs",
+                                help="the package (and type prefix) to export (default: "
+                                     "%(default)s)")
 
 
 def _view_parser(sub: argparse._SubParsersAction) -> None:

@@ -12,6 +12,13 @@ being replayed as a ``/collisions``. A receiver with the key drops and counts
 decoded, so nothing an outsider publishes reaches a handler, the run report or
 the shutdown topic — whatever router the fleet runs on.
 
+External input. A fleet launched with a bridge to another system (``launch --ros2``)
+draws a second key, the *bridge key* (``TWINFLEET_BRIDGE_KEY``), which only the bridge
+signs with. A node accepts a sample signed with it only on the topics its class
+declares ``external_topics`` (a robot's ``goal``), and counts it (``external_input``):
+the bridge cannot pose as a fleet node (it does not sign with the fleet key, and its
+key opens no other topic), and the live verdict says the run took external input.
+
 Bounds. A sample larger than its topic's limit is dropped and counted
 (``rejected_oversize``) before it is copied or decoded; the default limit is
 sized to the largest legitimate message of the scenario (the occupancy grid),
@@ -40,6 +47,7 @@ from twinfleet.runtime.contract.messages import DecodeError
 from twinfleet.runtime.core.statistics import Rejection
 
 KEY_ENV: Final = "TWINFLEET_FLEET_KEY"
+BRIDGE_KEY_ENV: Final = "TWINFLEET_BRIDGE_KEY"
 TAG_BYTES: Final = 16
 DEFAULT_LIMIT: Final = 256 * 1024  # bytes: far above any pose, scan, path or status
 _SEP: Final = b"\0"
@@ -63,19 +71,20 @@ def new_key() -> bytes:
     return secrets.token_bytes(32)
 
 
-def key_from_env(env: Mapping[str, str] | None = None) -> bytes | None:
-    """The fleet key the launcher passed in the environment, or None (an unsigned fleet).
+def key_from_env(env: Mapping[str, str] | None = None, name: str = KEY_ENV) -> bytes | None:
+    """The fleet key (or, with `name` = `BRIDGE_KEY_ENV`, the bridge key) the launcher passed
+    in the environment, or None (an unsigned fleet; a fleet without a bridge).
 
     Raises:
         ValueError: the variable is set but is not hex.
     """
-    text = (os.environ if env is None else env).get(KEY_ENV, "")
+    text = (os.environ if env is None else env).get(name, "")
     if not text:
         return None
     try:
         return bytes.fromhex(text)
     except ValueError:
-        raise ValueError(f"{KEY_ENV} must be hex, got {len(text)} other characters") from None
+        raise ValueError(f"{name} must be hex, got {len(text)} other characters") from None
 
 
 def sign(key: bytes, key_expr: str, payload: bytes) -> bytes:

@@ -73,6 +73,8 @@ class NodeStatistics:
         stalls: timed entries released later than the stall threshold.
         max_lateness_ms: the latest a timed entry was released after its due time.
         stall_threshold_ms: that threshold (0: stalls are not counted).
+        external_input: samples accepted from outside the fleet (signed with the bridge key,
+            on a topic the node declares external: `runtime.core.guard`).
         rejected: samples refused before any handler, per reason (every reason present).
         rejected_external: samples an operator's command sent (sender
             `contract.names.OPERATOR_SENDER`, e.g. ``topic pub --force``) that the node
@@ -98,6 +100,7 @@ class NodeStatistics:
     max_lateness_ms: int = 0
     stall_threshold_ms: int = 0
     rejected_external: int = 0
+    external_input: int = 0
     rejected: Mapping[Rejection, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

@@ -15,6 +15,11 @@ On top of that, the fleet key (`runtime.core.guard`) signs every sample, so what
 node, the run report or the shutdown topic accepts comes from a holder of the
 key even on a router the launcher does not control (``--connect``).
 
+A fleet launched with a bridge to another system (``launch --ros2``) also draws a
+*bridge key* (`guard.BRIDGE_KEY_ENV`): its nodes accept a sample signed with it on
+their ``external_topics`` only, and count it; the bridge signs with it and never with
+the fleet key.
+
 Nodes get their secrets from the launcher in the environment (`ENV_USER`,
 `ENV_PASSWORD`, `guard.KEY_ENV`). Monitors get them from the fleet registry
 (owner-only, `runtime.fleet.registry`; `registry_extra`), or from ``--credentials
@@ -34,7 +39,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
-from twinfleet.runtime.core.guard import KEY_ENV, key_from_env, new_key
+from twinfleet.runtime.core.guard import BRIDGE_KEY_ENV, KEY_ENV, key_from_env, new_key
 
 ENV_USER: Final = "TWINFLEET_ZENOH_USER"
 ENV_PASSWORD: Final = "TWINFLEET_ZENOH_PASSWORD"
@@ -67,22 +72,30 @@ class FleetCredentials:
     key: bytes
     node: Login
     monitor: Login
+    bridge: bytes | None = None  # the bridge key, for a fleet that takes external input
 
     @classmethod
-    def fresh(cls) -> FleetCredentials:
-        """New random secrets."""
+    def fresh(cls, *, bridge: bool = False) -> FleetCredentials:
+        """New random secrets (and a bridge key, with `bridge`)."""
         return cls(new_key(), Login(NODE_USER, secrets.token_urlsafe(24)),
-                   Login(MONITOR_USER, secrets.token_urlsafe(24)))
+                   Login(MONITOR_USER, secrets.token_urlsafe(24)),
+                   new_key() if bridge else None)
 
     def node_env(self) -> dict[str, str]:
         """What a node process needs in its environment."""
-        return {KEY_ENV: self.key.hex(), ENV_USER: self.node.user,
-                ENV_PASSWORD: self.node.password}
+        env = {KEY_ENV: self.key.hex(), ENV_USER: self.node.user,
+               ENV_PASSWORD: self.node.password}
+        if self.bridge is not None:
+            env[BRIDGE_KEY_ENV] = self.bridge.hex()
+        return env
 
     def registry_extra(self) -> dict[str, Any]:
         """The ``auth`` entry of the fleet registry (owner-only file)."""
-        return {"auth": {"key": self.key.hex(), "operator": [self.node.user, self.node.password],
-                         "monitor": [self.monitor.user, self.monitor.password]}}
+        auth = {"key": self.key.hex(), "operator": [self.node.user, self.node.password],
+                "monitor": [self.monitor.user, self.monitor.password]}
+        if self.bridge is not None:
+            auth["bridge"] = self.bridge.hex()
+        return {"auth": auth}
 
 
 def router_settings(creds: FleetCredentials, directory: Path) -> dict[str, Any]:
@@ -138,6 +151,7 @@ class MonitorAuth:
     key: bytes | None = None
     operator: Login | None = None
     monitor: Login | None = None
+    bridge: bytes | None = None  # set when the fleet was launched to take external input
 
     def login(self, *, write: bool) -> Login | None:
         """The login for a command that publishes or calls (`write`) or only reads."""
@@ -157,9 +171,10 @@ def monitor_auth(extra: Mapping[str, Any]) -> MonitorAuth:
         key = bytes.fromhex(auth["key"]) if auth.get("key") else None
         operator = Login(*auth["operator"]) if auth.get("operator") else None
         monitor = Login(*auth["monitor"]) if auth.get("monitor") else None
+        bridge = bytes.fromhex(auth["bridge"]) if auth.get("bridge") else None
     except (TypeError, ValueError, KeyError) as exc:
         raise CredentialsError(f"fleet credentials: malformed auth entry ({exc})") from None
-    return MonitorAuth(key, operator, monitor)
+    return MonitorAuth(key, operator, monitor, bridge)
 
 
 def read_credentials(path: str) -> tuple[str | None, MonitorAuth]:

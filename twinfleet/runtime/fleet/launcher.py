@@ -73,7 +73,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     node_args: Sequence[str] = (), params: Sequence[str] = (),
                     driver: Callable[[Fleet], Awaitable[str]] | None = None,
                     judge: bool = True,
-                    auth: fleetauth.MonitorAuth | None = None) -> FleetResult:
+                    auth: fleetauth.MonitorAuth | None = None,
+                    bridge: bool = False) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
@@ -99,6 +100,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             the report only).
         auth: with `connect`, the joined fleet's key and logins (default: this machine's
             fleet registry entry for that endpoint, if any).
+        bridge: the fleet takes external input: a bridge key its nodes accept on their
+            ``external_topics`` (`runtime.core.guard`); the `driver` usually runs the bridge.
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
@@ -108,7 +111,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
                   out=out, record=record, node_args=[*node_args, *param_arguments(params)],
                   events_dir=fresh_parts_dir(record_events) if record_events else None,
-                  keep_scenario_beside=record_events or run_record, judge=judge, auth=auth)
+                  keep_scenario_beside=record_events or run_record, judge=judge, auth=auth,
+                  bridge=bridge)
     started = time.monotonic()
     async with _Launch(fleet, record_events, handle_signals) as launch:
         reason, running = await launch.until_end(timeout_s, params, driver)

@@ -74,19 +74,23 @@ class Fleet:
                  connect: str | None, listen: str | None, out: TextIO,
                  record: RunRecord | None = None, node_args: Sequence[str] = (),
                  events_dir: Path | None = None, keep_scenario_beside: str | None = None,
-                 judge: bool = True, auth: fleetauth.MonitorAuth | None = None) -> None:
+                 judge: bool = True, auth: fleetauth.MonitorAuth | None = None,
+                 bridge: bool = False) -> None:
         self.time_scale, self.seed, self.out = time_scale, seed, out
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
         self.connect = connect
         self.endpoint = connect or listen or f"tcp/127.0.0.1:{free_port()}"
-        self.creds = fleetauth.FleetCredentials.fresh()
+        # `bridge`: the fleet takes external input (a bridge key: `runtime.core.guard`)
+        self.creds = fleetauth.FleetCredentials.fresh(bridge=bridge)
         # Joining a router (--connect): the fleet there may span machines; its key and
         # operator login (this machine's registry, or --credentials FILE) make us a member.
         joined = (auth if auth is not None else fleetauth.registry_auth(connect)) if connect \
             else None
         if joined is not None and joined.key is not None:
-            self.creds = dataclasses.replace(self.creds, key=joined.key)
+            self.creds = dataclasses.replace(
+                self.creds, key=joined.key,
+                bridge=(joined.bridge or self.creds.bridge) if bridge else None)
         self.limit = scenario_payload_limit(scenario)
         self._auth_dir: Path | None = None
         self._login = joined.login(write=True) if joined is not None else None

@@ -43,6 +43,12 @@ took longer than its evaluation budget. Such a run is inconclusive even when
 a property was seen violated (listed in the details): a robot that teleported
 after a stall collides because of the stall, not of its code.
 
+External input. A fleet launched with a bridge (``launch --ros2``) may take samples
+from outside it on the topics its nodes declare external (a robot's goal from RViz:
+`runtime.core.guard`). They do not change how a run is judged — they are inputs, as a
+scenario's parameters are — but a verdict whose nodes counted any says so in a detail
+line (`external_input_line`): the run is then not one the checked model describes.
+
 Result (`Verdict.status`, a `runtime.contract.kinds.Status`, and its exit code):
 ``holds`` 0, ``violated`` 1 (the property named), ``error`` 2 (a property raised:
 a scenario mistake, as `check` says), ``inconclusive`` 3, ``interrupted`` 130.
@@ -50,6 +56,7 @@ a scenario mistake, as `check` says), ``inconclusive`` 3, ``interrupted`` 130.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -151,6 +158,16 @@ def statistics_reasons(node: str, stats: NodeStatistics) -> list[str]:
                        f"({stats.stalls} timers later than its stall threshold of "
                        f"{stats.stall_threshold_ms} ms: it stalled)")
     return reasons
+
+
+def external_input_line(statistics: Mapping[str, NodeStatistics]) -> str | None:
+    """The detail line of a run whose nodes took external input, or None."""
+    taken = [f"{node} {stats.external_input}" for node, stats in sorted(statistics.items())
+             if stats.external_input]
+    if not taken:
+        return None
+    return (f"took external input (samples from outside the fleet, through the bridge): "
+            f"{', '.join(taken)}; the checked model has no such input")
 
 
 def _after(report: StateReport | None) -> str:
@@ -288,21 +305,24 @@ class LiveJudge:
     # ------------------------------------------------------------------ the verdict
 
     def verdict(self, end: RunEnd) -> Verdict:
-        """The run's result (`_decide`), with a line naming each node's refused input from an
-        operator's command: external input, which neither voids nor decides the verdict."""
-        judged = self._decide(end)
-        external = tuple(f"external input: {node} refused {stats.rejected_external} samples "
-                         "an operator's command sent (e.g. `twinfleet topic pub --force`)"
-                         for node, stats in sorted(end.statistics.items())
-                         if stats.rejected_external)
-        return judged if not external else Verdict(judged.status, judged.summary,
-                                                   judged.details + external,
-                                                   judged.property_name)
+        """The run's result (`_decide`), with detail lines for input from outside the fleet,
+        which neither voids nor decides the verdict: samples an operator's command sent that
+        nodes refused, and samples the ROS 2 bridge brought in on declared external topics."""
+        decided = self._decide(end)
+        refused = tuple(f"external input: {node} refused {stats.rejected_external} samples "
+                        "an operator's command sent (e.g. `twinfleet topic pub --force`)"
+                        for node, stats in sorted(end.statistics.items())
+                        if stats.rejected_external)
+        taken = external_input_line(end.statistics)
+        lines = (*refused, *((taken,) if taken is not None else ()))
+        if not lines:
+            return decided
+        return dataclasses.replace(decided, details=(*decided.details, *lines))
 
     def _decide(self, end: RunEnd) -> Verdict:
-        """A property that raised; a failed node process; inconclusive reasons (which also
-        void a violation: it may come from the lost samples or the stall, not from the
-        code); violations; an interruption; what never held; else holds."""
+        """The run's result: a property that raised; a failed node process; inconclusive
+        reasons (which also void a violation: it may come from the lost samples or the
+        stall, not from the code); violations; an interruption; what never held; else holds."""
         if self.errors:
             return Verdict(Status.ERROR, self.errors[0], tuple(self.errors[1:]))
         if end.failed:  # a process that died is a fact of the run, lost samples or not

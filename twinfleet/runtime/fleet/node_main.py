@@ -34,12 +34,13 @@ import msgpack
 
 from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.core.eventlog import EventLog
+from twinfleet.runtime.core.guard import BRIDGE_KEY_ENV, key_from_env
 from twinfleet.runtime.core.state_report import StateReporter
 from twinfleet.runtime.core.statistics import NodeStatistics, StatisticsError
 from twinfleet.runtime.fleet.fleetauth import node_secrets
 from twinfleet.runtime.host.clock import Clock, FleetClock
 from twinfleet.runtime.host.introspect import PARAM_FLAG, load_with_params, serve_info
-from twinfleet.runtime.host.keys import KeyKind, node_key
+from twinfleet.runtime.host.keys import KeyKind, node_key, topic_key
 from twinfleet.runtime.host.node_host import NodeHost
 from twinfleet.runtime.host.replay_gate import LogicalClock
 from twinfleet.runtime.host.schemas import registered_schemas
@@ -132,7 +133,7 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
     time_scale = args.time_scale if args.time_scale is not None else live.time_scale
     clock: Clock = LogicalClock() if args.gate else FleetClock(args.epoch_ns, time_scale)
     try:
-        transport = _transport(args)
+        transport = _transport(args, external_keys(scenario.fleet, node))
     except ValueError as exc:  # a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE or secret
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -157,16 +158,25 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
     return 1 if host.failed else 0
 
 
-def _transport(args: argparse.Namespace) -> ZenohTransport:
-    """The node's Zenoh transport: a client of ``--connect`` with the login and payload
-    limit the launcher put in the environment; ValueError for a bad secret or override."""
+def external_keys(fleet: str, node: Node) -> frozenset[str]:
+    """The data keys of the topics `node` takes from outside the fleet (its class's
+    ``external_topics``: `runtime.core.guard`)."""
+    return frozenset(topic_key(fleet, node.resolve(t)) for t in getattr(node, "external_topics", ()))
+
+
+def _transport(args: argparse.Namespace, external: frozenset[str]) -> ZenohTransport:
+    """The node's Zenoh transport: a client of ``--connect`` with the login, payload limit
+    and bridge key the launcher put in the environment; ValueError for a bad secret or
+    override."""
     login, key = node_secrets()
+    bridge_key = key_from_env(name=BRIDGE_KEY_ENV)
     limit = int(os.environ[LIMIT_ENV]) if os.environ.get(LIMIT_ENV) else None
     settings = login.settings() if login else {}
     if limit is not None:  # Zenoh itself refuses larger frames (the router does too)
         settings["transport/link/rx/max_message_size"] = limit + 1024
     config = zenoh_config(connect=[args.connect], settings=settings)
-    return ZenohTransport(config, key=key, limit=limit)
+    return ZenohTransport(config, key=key, limit=limit, bridge_key=bridge_key,
+                          external=external if bridge_key is not None else frozenset())
 
 
 def _event_log(args: argparse.Namespace, scenario: Scenario, name: str, seed: int,

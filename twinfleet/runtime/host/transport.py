@@ -42,11 +42,13 @@ class TransportStatistics:
         overflow: samples a bounded hand-off to the loop dropped (the loop fell behind).
         refused: samples and requests refused before decoding, per reason (a live
             transport counts `Rejection.FORGED` and `Rejection.OVERSIZE`).
+        external: samples accepted with the bridge key instead of the fleet key.
     """
 
     wakeups: int = 0
     overflow: int = 0
     refused: Mapping[Rejection, int] = field(default_factory=dict)
+    external: int = 0
 
 
 

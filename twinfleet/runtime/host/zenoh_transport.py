@@ -28,7 +28,8 @@ and query carries a signature as its attachment, and a sample (or a service
 request) without a valid one is dropped on Zenoh's thread before it is copied
 and counted (``statistics().refused``, `Rejection.FORGED`); a sample above the payload
 limit is dropped first (`Rejection.OVERSIZE`). Both tests are cheaper than the hand-off they
-spare a flood.
+spare a flood. With a bridge key as well, a sample on one of the `external` keys that is
+signed with it instead is accepted and counted (``statistics().external``).
 
 QoS mapping. Reliable topics publish with congestion control BLOCK,
 best-effort ones with DROP. Transient-local ("latched") topics use
@@ -200,14 +201,20 @@ class ZenohTransport:
             (and count as `Rejection.FORGED`) samples and requests without a valid tag.
         limit: payload bytes a sample may have (larger: dropped, counted as
             `Rejection.OVERSIZE`); `limits` sets it per key expression.
+        bridge_key: the key a bridge to another system signs with (`runtime.core.guard`);
+            accepted, with `key`, only on the keys in `external`.
+        external: the data keys of the topics the node takes from outside the fleet.
     """
 
     def __init__(self, config: zenoh.Config, *, max_pending: int = DEFAULT_MAX_PENDING,
                  key: bytes | None = None, limit: int | None = None,
-                 limits: Mapping[str, int] | None = None) -> None:
+                 limits: Mapping[str, int] | None = None, bridge_key: bytes | None = None,
+                 external: frozenset[str] = frozenset()) -> None:
         self.config = config
         self.max_pending = max_pending
         self.key, self.limit, self.limits = key, limit, dict(limits or {})
+        self.bridge_key, self.external = bridge_key, external
+        self._external = [0]  # a list: the sample callbacks count into it on Zenoh's thread
         self._refused = {Rejection.FORGED: 0, Rejection.OVERSIZE: 0}
         self.session: zenoh.Session | None = None
         self._handoff: Handoff | None = None
@@ -265,6 +272,8 @@ class ZenohTransport:
         """
         offer, fleet_key, refused = self._h.offer, self.key, self._refused
         limit = self.limits.get(key, self.limit) or (1 << 62)
+        bridge_key = self.bridge_key if key in self.external else None
+        external = self._external
 
         def on_sample(sample: zenoh.Sample) -> None:
             if len(sample.payload) > limit:
@@ -272,10 +281,12 @@ class ZenohTransport:
                 return
             payload, where = sample.payload.to_bytes(), str(sample.key_expr)
             if fleet_key is not None:
-                tag = sample.attachment
-                if not authentic(fleet_key, where, payload, tag and tag.to_bytes()):
-                    refused[Rejection.FORGED] += 1
-                    return
+                tag = sample.attachment and sample.attachment.to_bytes()
+                if not authentic(fleet_key, where, payload, tag):
+                    if bridge_key is None or not authentic(bridge_key, where, payload, tag):
+                        refused[Rejection.FORGED] += 1
+                        return
+                    external[0] += 1
             offer(deliver, where, payload)
 
         return on_sample
@@ -406,10 +417,12 @@ class ZenohTransport:
 
     def statistics(self) -> TransportStatistics:
         """Loop wake-ups used so far (one per burst), samples dropped by the bounded hand-off,
-        and samples and requests refused as forged or oversize."""
+        samples and requests refused as forged or oversize, and samples taken with the
+        bridge key."""
         h = self._handoff
         return TransportStatistics(wakeups=h.wakeups if h else 0,
-                                   overflow=h.overflow if h else 0, refused=dict(self._refused))
+                                   overflow=h.overflow if h else 0, refused=dict(self._refused),
+                                   external=self._external[0])
 
     async def close(self) -> None:
         """Undeclare (advanced entities first), then close the session, on the loop thread."""

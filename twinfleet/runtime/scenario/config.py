@@ -152,6 +152,45 @@ class LiveConfig:
         _set(self, "summary_topics", _names("live.summary_topics", self.summary_topics))
 
 
+DEFAULT_ROS2_ROUTER = "tcp/127.0.0.1:7447"  # where rmw_zenohd listens
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class Ros2Config:
+    """`ros2:`, the ROS 2 bridge that `launch` runs beside the fleet (docs/ros2.md): the ROS 2
+    domain, the router of the ROS 2 network, the ROS 2 topics routed into fleet topics
+    (``{/goal_pose: /r1/goal}``) and the mapping (default: the one the scene names)."""
+
+    domain: int = 0
+    router: str = DEFAULT_ROS2_ROUTER
+    inbound: tuple[tuple[str, str], ...] = ()
+    mapping: str | None = None
+
+    def __post_init__(self) -> None:
+        if type(self.domain) is not int or not 0 <= self.domain <= 232:
+            raise ConfigError("ros2.domain", f"expected a ROS domain id 0..232, got {self.domain!r}")
+        if not isinstance(self.router, str) or "/" not in self.router:
+            raise ConfigError("ros2.router", f"expected a Zenoh endpoint such as "
+                                             f"{DEFAULT_ROS2_ROUTER}, got {self.router!r}")
+        if self.mapping is not None and (not isinstance(self.mapping, str)
+                                         or ":" not in self.mapping):
+            raise ConfigError("ros2.mapping", f"expected 'module:Mapping', got {self.mapping!r}")
+        raw: Any = self.inbound
+        pairs = list(raw.items()) if isinstance(raw, Mapping) else list(raw)
+        for pair in pairs:
+            if (not isinstance(pair, tuple | list) or len(pair) != 2
+                    or not all(isinstance(t, str) and t.startswith("/") for t in pair)):
+                raise ConfigError("ros2.inbound", "expected a mapping of ROS 2 topic to fleet "
+                                                  f"topic, e.g. {{/goal_pose: /r1/goal}}; got {raw!r}")
+        _set(self, "inbound", tuple((str(a), str(b)) for a, b in pairs))
+
+
+def ros2_config(raw: Any) -> Ros2Config:
+    """`ros2:` from its YAML mapping (or a `Ros2Config`, returned as it is)."""
+    return from_mapping(Ros2Config, {} if raw is None else raw, "ros2")
+
+
 def check_config(raw: Any) -> CheckConfig:
     """`check:` from its YAML mapping (or a `CheckConfig`, returned as it is)."""
     return from_mapping(CheckConfig, {} if raw is None else raw, "check")

@@ -15,8 +15,9 @@ errors (the checker's contract checks, `checker.diagnosis`, are what decide):
   services called that no node serves: ``/entr`` typed for ``/enter`` makes an
   invariant hold by accident. A close name is suggested. Topics published for
   tools outside the fleet (viewers, recorders, ``twinfleet topic echo``) are
-  declared on the node class as ``tool_topics = ("status", ...)``, and
-  fleet-internal topics (``/twinfleet/...``, ``/violations``, ``/_...``) are
+  declared on the node class as ``tool_topics = ("status", ...)``, topics fed
+  from outside the fleet (a ROS 2 tool through the bridge) as ``external_topics``,
+  and fleet-internal topics (``/twinfleet/...``, ``/violations``, ``/_...``) are
   never warned about.
 """
 
@@ -142,9 +143,11 @@ def lint_topics(nodes: Sequence[tuple[str, str, type[Node]]]) -> list[LintWarnin
     out = _once_per_line([w for topic, node, where in published
                           if where != "declared" and topic not in tools
                           for w in _unheard(topic, node, where, subscribed)])
+    external = {_resolved(t, ns, n) for n, ns, cls in nodes
+                for t in getattr(cls, "external_topics", ())}  # fed from outside the fleet
     for topic, node in subscribed.items():
         if not any(fnmatch.fnmatchcase(topic, p) for p, _, _ in published) and \
-                not _fleet_topic(topic):
+                not _fleet_topic(topic) and topic not in external:
             out.append(LintWarning(f"node {node}", f"subscribes to {topic} but no node "
                                    f"publishes on it{_close(topic, [p for p, _, _ in published])}"))
     for service, node, where in called:

@@ -31,12 +31,15 @@ YAML layout (every key but `nodes` optional)::
         crash: {nodes: [r1], max: 1, durable: []}   # crash-and-restart branches
     live: {timeout_s: 120, stop_on_error: false, time_scale: 1.0,
            report: "twinfleet.nodes.report:report_for"}  # factory(scenario) -> report, see launcher
+    ros2: {domain: 0, router: tcp/127.0.0.1:7447,       # launch runs the ROS 2 bridge too
+           inbound: {/goal_pose: /r1/goal}}            # ROS 2 topic -> fleet topic (docs/ros2.md)
 
 `scene:` names a `runtime.contract.scene.Scene` by import name, checked as
 node classes are (`runtime.scenario.scenes.load_scene`); a fleet without one
 is shown by the viewers as its topics only.
 
-`check:` and `live:` become `runtime.scenario.config.CheckConfig` / `LiveConfig`.
+`check:`, `live:` and `ros2:` become `runtime.scenario.config.CheckConfig` /
+`LiveConfig` / `Ros2Config`.
 `load_scenario` accepts a path or the name of a shipped example
 (`resolve_scenario`: ``c1a`` is ``launch/c1a.yaml`` of the installed package).
 
@@ -75,8 +78,10 @@ from twinfleet.runtime.scenario.config import (
     CheckConfig,
     ConfigError,
     LiveConfig,
+    Ros2Config,
     check_config,
     live_config,
+    ros2_config,
 )
 from twinfleet.runtime.scenario.examples import shipped_scenarios
 from twinfleet.runtime.scenario.params import build_params
@@ -88,7 +93,7 @@ SEMANTICS = ("ros", "rebeca")
 PROPERTY_KINDS = ("invariant", "no_failure", "deadlock", "quiescence", "eventually", "within")
 MAX_NODES = 100  # default of live.max_nodes: each node is one OS process live
 _TOP_KEYS = {"name", "fleet", "description", "map", "profile", "semantics", "seed", "params",
-             "nodes", "properties", "check", "live", "scene"}
+             "nodes", "properties", "check", "live", "scene", "ros2"}
 _NODE_KEYS = {"name", "class", "namespace", "priority", "respawn", "params"}
 _PROPERTY_KEYS = {"name", "kind", "expr", "within_ms"}
 
@@ -175,6 +180,7 @@ class Scenario:
     check: CheckConfig = field(default_factory=CheckConfig)
     live: LiveConfig = field(default_factory=LiveConfig)
     scene: str | None = None  # import name of the fleet's `Scene`, for viewers
+    ros2: Ros2Config | None = None  # the ROS 2 bridge `launch` runs beside the fleet
 
     @property
     def source(self) -> str:
@@ -348,7 +354,8 @@ def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
                     description=_get(doc, "description", str, err, default=""),
                     map_path=map_path, profile=profile, semantics=semantics,
                     seed=_get(doc, "seed", int, err, default=0), nodes=nodes,
-                    properties=props, check=check, live=live, scene=_scene(doc, err))
+                    properties=props, check=check, live=live, scene=_scene(doc, err),
+                    ros2=_checked(ros2_config, err, doc["ros2"]) if "ros2" in doc else None)
 
 
 def _scene(doc: Mapping[str, Any], err: _Errors) -> str | None:

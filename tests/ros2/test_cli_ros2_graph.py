@@ -1,0 +1,83 @@
+"""`twinfleet node list` / `topic list -t -v` / `topic echo` with ``--ros2-domain``: ROS 2
+nodes made by zenoh-ros2-sdk (not ours, its own process) behind a router on 127.0.0.1 are
+listed, marked (ros2), with their topics' types, and what they publish is decoded; another
+domain's are not listed."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+import zenoh
+
+from tests.support import child_env, pick_free_port
+from twinfleet.cli import main
+from twinfleet.ros2.graph_list import RosGraph
+from twinfleet.runtime.host.zenoh_transport import zenoh_config
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
+PEER = """
+import sys, time
+from pathlib import Path
+from zenoh_ros2_sdk.message_registry import get_registry
+from zenoh_ros2_sdk.publisher import ROS2Publisher
+from zenoh_ros2_sdk.subscriber import ROS2Subscriber
+get_registry(str(Path(sys.prefix) / "share"))
+port = int(sys.argv[1])
+pub = ROS2Publisher("/chatter", "std_msgs/msg/String", node_name="talker", router_port=port)
+sub = ROS2Subscriber("/chatter", "std_msgs/msg/String", node_name="listener",
+                     router_port=port, callback=lambda m: None)
+import threading
+stop = threading.Event()
+def talk():
+    i = 0
+    while not stop.wait(0.05):
+        pub.publish(data=f"hello {i}")
+        i += 1
+talker = threading.Thread(target=talk)
+talker.start()
+print("ready", flush=True)
+sys.stdin.read()
+stop.set()
+talker.join()
+sub.close()
+pub.close()
+"""
+
+
+def test_node_and_topic_list_show_ros2_nodes_on_the_same_network(capsys):
+    port = pick_free_port()
+    router = zenoh.open(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"], mode="router"))
+    env = dict(child_env(), ZENOH_CONFIG_OVERRIDE="scouting/multicast/enabled=false")
+    peer = subprocess.Popen([sys.executable, "-c", PEER, str(port)], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert peer.stdout.readline().strip() == "ready"
+        ep = ["--connect", f"tcp/127.0.0.1:{port}"]
+        assert main(["node", "list", *ep, "--ros2-domain", "0"]) == 0
+        nodes = capsys.readouterr().out.splitlines()
+        assert "/talker  (ros2)" in nodes and "/listener  (ros2)" in nodes
+        assert main(["topic", "list", "-t", "-v", *ep, "--ros2-domain", "0"]) == 0
+        out = capsys.readouterr().out
+        assert ("/chatter [std_msgs/msg/String]  [publishers: /talker; subscribers: /listener]"
+                "  (ros2)") in out.splitlines()
+        assert main(["node", "list", *ep, "--ros2-domain", "7"]) == 0
+        assert "(ros2)" not in capsys.readouterr().out
+        assert main(["topic", "echo", "/chatter", *ep, "--ros2-domain", "0", "--count", "2",
+                     "--duration", "10"]) == 0
+        docs = [d for d in capsys.readouterr().out.split("---") if d.strip()]
+        assert len(docs) == 2 and all(d.strip().startswith("data: hello ") for d in docs)
+    finally:
+        peer.stdin.close()
+        try:
+            peer.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            peer.kill()
+        router.close()
+
+
+def test_tokens_that_are_not_rmw_zenohs_are_skipped():
+    graph = RosGraph.of(["@ros2_lv/0/zid/1/1/NN/%/%/talker", "@ros2_lv/0/broken",
+                         "twinfleet/f/@node/r1"])
+    assert graph.nodes == {"/talker"} and not graph.types
