@@ -59,6 +59,9 @@ __all__ = [
 
 _STATS_TIMEOUT_S = 2.0  # for the nodes' final statistics (the live verdict reads them)
 _DRIVER_STOP_S = 5.0  # for a driver still running at the end to finish its cancellation
+#: wall seconds every node has to become alive (imports, session, liveliness) before a run
+#: ends as not started; the timeout counts from the epoch, after that
+STARTUP_S = 60.0
 
 
 class FleetConflict(ValueError):
@@ -73,7 +76,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     node_args: Sequence[str] = (), params: Sequence[str] = (),
                     driver: Callable[[Fleet], Awaitable[str]] | None = None,
                     judge: bool = True,
-                    auth: fleetauth.MonitorAuth | None = None) -> FleetResult:
+                    auth: fleetauth.MonitorAuth | None = None,
+                    startup_s: float = STARTUP_S) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
@@ -81,7 +85,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             `Scenario.build`: then written to a file for the node processes, see
             `live_fleet.launchable`).
         time_scale: fleet speed-up (default: scenario `live.time_scale`, else 1).
-        timeout_s: wall seconds before the run ends (default: `live.timeout_s`, else none).
+        timeout_s: wall seconds the run lasts once every node is alive (from the fleet's
+            epoch; default: `live.timeout_s`, else none).
         seed: fleet seed (default: the scenario's).
         connect: join this Zenoh router instead of embedding one.
         listen: endpoint of the embedded router (default: tcp/127.0.0.1:<free port>).
@@ -99,6 +104,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             the report only).
         auth: with `connect`, the joined fleet's key and logins (default: this machine's
             fleet registry entry for that endpoint, if any).
+        startup_s: wall seconds for every node to become alive; a run not up by then
+            (or stopped before) is INCONCLUSIVE, never a node's failure.
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
@@ -111,7 +118,7 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                   keep_scenario_beside=record_events or run_record, judge=judge, auth=auth)
     started = time.monotonic()
     async with _Launch(fleet, record_events, handle_signals) as launch:
-        reason, running = await launch.until_end(timeout_s, params, driver)
+        reason, running = await launch.until_end((startup_s, timeout_s), params, driver)
     result = _result(fleet, reason, running, time.monotonic() - started)
     if record is not None:
         record_summary(record, result)
@@ -136,13 +143,14 @@ class _Launch:
     async def __aenter__(self) -> _Launch:
         return self
 
-    async def until_end(self, timeout_s: float | None, params: Sequence[str],
+    async def until_end(self, limits: tuple[float, float | None], params: Sequence[str],
                         driver: Callable[[Fleet], Awaitable[str]] | None) -> tuple[str, list[str]]:
         """Open the fleet, register it, start its nodes (and the driver) and wait for the
-        end; return why the run ended and which nodes were still running then."""
+        end (`limits`: start-up and timeout seconds); return why the run ended and which
+        nodes were still running then."""
         fleet = self.fleet
         if fleet.record is not None:
-            _record_start(fleet.record, fleet, timeout_s=timeout_s)
+            _record_start(fleet.record, fleet, timeout_s=limits[1])
         await fleet.open()
         if fleet.connect:  # an embedded router is new: only a shared one can hold a twin fleet
             await refuse_twins(fleet)
@@ -155,7 +163,7 @@ class _Launch:
         if driver is not None:
             self.driving = asyncio.create_task(driver(fleet))
             self.driving.add_done_callback(lambda task: fleet.end(_driver_reason(task)))
-        reason = await _until_end(fleet, timeout_s)
+        reason = await _until_end(fleet, *limits)
         running = [name for name, p in fleet.processes.items() if p.running()]
         await _final_statistics(fleet, fleet.record, reason)
         return reason, running
@@ -224,9 +232,20 @@ def _record_start(record: RunRecord, fleet: Fleet, *, timeout_s: float | None) -
                         for c in scenario.nodes])
 
 
-async def _until_end(fleet: Fleet, timeout_s: float | None) -> str:
-    """Why the run ended: what `fleet.end` was told, or the timeout."""
+async def _until_end(fleet: Fleet, startup_s: float, timeout_s: float | None) -> str:
+    """Why the run ended: what `fleet.end` was told, the start-up limit (some node not alive
+    after `startup_s`), or the timeout, which counts from the epoch (every node alive): a
+    loaded machine's slow imports are not the run's time."""
     assert fleet.ended is not None
+    up: asyncio.Future[object] = asyncio.ensure_future(fleet.all_alive.wait())
+    ended: asyncio.Future[object] = fleet.ended
+    try:
+        await asyncio.wait([ended, up], timeout=startup_s,
+                           return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        up.cancel()
+    if not fleet.all_alive.is_set():
+        fleet.end(f"the fleet was not up after {startup_s:g} s")
     try:
         reason = await asyncio.wait_for(asyncio.shield(fleet.ended), timeout_s)
     except TimeoutError:
@@ -274,6 +293,7 @@ def _verdict(fleet: Fleet, reason: str, running: Sequence[str],
     end = RunEnd(reason, interrupted=ended_by_signal(reason),
                  failed={n: codes.get(n) for n in fleet.failed}, statistics=fleet.statistics,
                  running=tuple(running), dropped_reports=dropped,
+                 not_up=() if fleet.all_alive.is_set() else tuple(sorted(fleet.unseen)),
                  unreadable=fleet.unreadable_statistics)
     return fleet.judge.verdict(end)
 

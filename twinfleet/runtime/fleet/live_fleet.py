@@ -20,6 +20,7 @@ import contextlib
 import dataclasses
 import importlib
 import shutil
+import signal
 import socket
 import sys
 import tempfile
@@ -56,6 +57,8 @@ from twinfleet.runtime.scenario.spec import NodeConfig, Scenario
 
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"
 _RESPAWN_DELAY_S = 0.5
+#: exit codes of a process ended by the launcher's own stop signals: not a failure of the node
+_STOPPED = (-signal.SIGINT, -signal.SIGTERM, -signal.SIGKILL)
 _REPORT_GRACE_S = 0.5  # wall seconds between the report's "finished" and the end of the run
 
 
@@ -316,7 +319,7 @@ class Fleet:
         procs = list(self.processes.values())
         await stop_all(procs, self.log)
         for p in procs:
-            if p.final_code() not in (0, None) and p.cfg.name not in self.failed:
+            if p.final_code() not in (0, None, *_STOPPED) and p.cfg.name not in self.failed:
                 self.failed.append(p.cfg.name)
         if self.transport is not None:
             await self.transport.close()

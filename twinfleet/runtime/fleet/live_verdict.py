@@ -120,6 +120,7 @@ class RunEnd:
     # node -> why its statistics could not be read (`NodeStatistics.from_dict` refused them)
     unreadable: Mapping[str, str] = field(default_factory=dict)
     dropped_reports: int = 0  # state reports the launcher's own hand-off dropped
+    not_up: Sequence[str] = ()  # nodes not alive yet when the run ended (before the epoch)
 
 
 def stall_floor_ms(time_scale: float = 1.0) -> int:
@@ -328,13 +329,16 @@ class LiveJudge:
     def inconclusive_reasons(self, end: RunEnd) -> list[str]:
         """Why the run cannot back a verdict (module docstring); empty when it can."""
         reasons = [w.broken for w in self.watches if w.broken not in (None, "decided", "error")]
+        if end.not_up:
+            reasons.append(f"the run ended before the fleet was up ({end.reason}; not alive "
+                           f"yet: {', '.join(end.not_up)}): nothing ran to judge")
         for node in self.names:
             if node in end.statistics:
                 reasons += statistics_reasons(node, end.statistics[node])
             elif node in end.unreadable:
                 reasons.append(f"{node} sent statistics the launcher cannot read "
                                f"({end.unreadable[node]})")
-            elif node in end.running:
+            elif node in end.running and node not in end.not_up:
                 reasons.append(f"{node} did not answer for its statistics")
         reasons += [f"{n} lost {k} state reports" for n, k in sorted(self.lost.items())]
         reasons += self.undecodable[:1]

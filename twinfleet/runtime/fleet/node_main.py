@@ -18,7 +18,19 @@ node under a replay coordinator: logical time, and only granted events run
 (`runtime.host.replay_gate.ReplayGate`).
 """
 
+# ruff: noqa: E402 - the stop handlers go in before the slow imports (below)
 from __future__ import annotations
+
+import signal
+import sys
+
+if __name__ == "__main__":
+    # The launcher may stop the fleet while this process still imports (zenoh, the user's
+    # module: seconds on a loaded machine); it then leaves quietly, exit code 0, not with a
+    # KeyboardInterrupt traceback that reads like a failure. `main` keeps these handlers
+    # until the event loop installs its own.
+    for _sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(_sig, lambda *_: sys.exit(0))
 
 import argparse
 import asyncio
@@ -26,8 +38,6 @@ import ctypes
 import faulthandler
 import json
 import os
-import signal
-import sys
 from collections.abc import Sequence
 
 import msgpack
