@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from viewer_support import ROOT, child_env, free_port, get_json, poll
+from viewer_support import ROOT, api, child_env, free_port, get_json, poll, printed_url
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
@@ -69,8 +69,9 @@ def test_a_viewer_follows_the_fleet_launched_again(cli, tmp_path):
         for i in (1, 2, 3)) + "live: {timeout_s: 3}\n")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     port = free_port()
-    cli("view", "--port", str(port), "--connect", endpoint, "--fleet", "walk", log="viewer.log")
-    url = f"http://127.0.0.1:{port}/api/state"
+    viewer = cli("view", "--port", str(port), "--connect", endpoint, "--fleet", "walk",
+                 log="viewer.log")
+    url = api(printed_url(viewer.log), "api/state")
     poll(lambda: get_json(url), 15, "the viewer's HTTP server")
     for run in (1, 2):
         _launch(scenario, endpoint)

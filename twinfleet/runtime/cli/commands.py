@@ -271,15 +271,19 @@ def cmd_view(args: argparse.Namespace) -> int:
     """`twinfleet view`: serve the live viewer (or a trace) on 127.0.0.1."""
     from twinfleet.runtime.tools.view.viewer import run_viewer
 
-    connect, fleet = args.connect, args.fleet
-    if args.trace is None and not connect:
+    connect, fleet, auth = args.connect, args.fleet, None
+    if args.trace is None and args.credentials:  # a fleet of another machine: its secrets
+        conn = connection(args)
+        connect, fleet, auth = conn.endpoint, conn.fleet, conn.auth
+    elif args.trace is None and not connect:
         from twinfleet.runtime.fleet.registry import running_fleets
 
         if any(fleet in ("*", e.fleet) for e in running_fleets()):
             conn = connection(args)  # one fleet: that one; several: the one-line question
             connect, fleet = conn.endpoint, conn.fleet
     try:
-        return run_viewer(connect=connect, fleet=fleet, port=args.port, trace_path=args.trace)
+        return run_viewer(connect=connect, fleet=fleet, port=args.port, trace_path=args.trace,
+                          auth=auth, web=web_access(args))
     except (ValueError, KeyError, OSError) as exc:
         print(f"error: {exc}", file=sys.stderr)
         return 2
@@ -291,9 +295,33 @@ def cmd_foxglove(args: argparse.Namespace) -> int:
 
     conn = connection(args)
     try:
-        return run_foxglove(conn.endpoint, conn.fleet, port=args.port)
-    except RuntimeError as exc:  # the SDK's server could not bind the port
+        return run_foxglove(conn.endpoint, conn.fleet, port=args.port,
+                            auth=conn.auth if args.credentials else None,
+                            web=web_access(args, foxglove_app=args.allow_foxglove_app))
+    except (RuntimeError, OSError) as exc:  # the port is taken
         raise CommandError(f"foxglove: cannot serve on 127.0.0.1:{args.port}: {exc}") from None
+
+
+def web_access(args: argparse.Namespace, *, foxglove_app: bool = False) -> Any:
+    """Who a browser-facing command's server answers (`runtime.tools.view.web_guard`)."""
+    from twinfleet.runtime.tools.view.web_guard import FOXGLOVE_APP_ORIGIN, WebAccess
+
+    origins = [*args.allow_origin, *([FOXGLOVE_APP_ORIGIN] if foxglove_app else [])]
+    return WebAccess.allowing(args.allow_host, origins)
+
+
+def _add_web_arguments(p: argparse.ArgumentParser) -> None:
+    """--allow-host and --allow-origin of a browser-facing server."""
+    group = p.add_argument_group("browser access (the printed URL carries a per-run token; "
+                                 "requests without it, for another Host, or from a page of "
+                                 "another origin are refused)")
+    group.add_argument("--allow-host", action="append", default=[], metavar="NAME",
+                       help="also answer requests for Host NAME (default: 127.0.0.1, "
+                            "localhost and ::1 only; repeatable)")
+    group.add_argument("--allow-origin", action="append", default=[], metavar="ORIGIN",
+                       help="also accept WebSockets and requests from pages of ORIGIN, e.g. "
+                            "https://example.org (default: the server's own pages only; "
+                            "repeatable)")
 
 
 def _foxglove_parser(sub: argparse._SubParsersAction) -> None:
@@ -305,6 +333,11 @@ def _foxglove_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--port", type=int, default=None, metavar="P",
                    help="TCP port on 127.0.0.1; 0 picks a free one (default: 8765, Foxglove's "
                         "usual one, or a free one when 8765 is taken: the URL is printed)")
+    p.add_argument("--allow-foxglove-app", action="store_true",
+                   help="accept connections from Foxglove's web app (origin "
+                        "https://app.foxglove.dev); a refused client's line names its origin, "
+                        "for --allow-origin")
+    _add_web_arguments(p)
     add_connection_arguments(p)
     p.set_defaults(func=cmd_foxglove)
 
@@ -486,6 +519,7 @@ def _view_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--trace", default=None, metavar="FILE",
                    help="step through this checker trace JSON (from `twinfleet check --trace-out`) "
                         "instead of watching a live fleet")
+    _add_web_arguments(p)
     add_connection_arguments(p, fleet_help="fleet to show; '*' shows the first fleet whose data "
                              "arrives")
     p.set_defaults(func=cmd_view)

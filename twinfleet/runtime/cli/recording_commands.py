@@ -41,7 +41,7 @@ def cmd_record(args: argparse.Namespace) -> int:
             conn = _joined(args)
             result, rec = None, asyncio.run(recorder.record_live(
                 conn.endpoint, conn.fleet, args.output, duration_s=args.duration,
-                handle_signals=True, auth=conn.auth))
+                handle_signals=True, auth=conn.auth if args.credentials else None))
         else:
             result, rec = asyncio.run(recorder.record_scenario(
                 load_scenario(args.scenario), args.output, time_scale=args.time_scale,
@@ -169,6 +169,11 @@ def _add_record(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--fleet", default=os.environ.get("TWINFLEET_FLEET", "*"),
                    help="with --connect: the fleet to record, '*' for every fleet "
                         "(default: $TWINFLEET_FLEET or %(default)s)")
+    r.add_argument("--credentials", metavar="FILE",
+                   default=os.environ.get("TWINFLEET_CREDENTIALS"),
+                   help="with --connect: the fleet's credentials, a copy of its fleet registry "
+                        "entry (owner-only JSON; default: $TWINFLEET_CREDENTIALS, else this "
+                        "machine's registry, read again when the fleet is launched again)")
     r.add_argument("--time-scale", type=float, default=None, metavar="K",
                    help="with a SCENARIO: run fleet time K times faster (default: live.time_scale or 1)")
     r.add_argument("--seed", type=int, default=None,

@@ -32,6 +32,7 @@ from twinfleet.runtime.contract.kinds import (  # noqa: F401 (the commands' exit
 from twinfleet.runtime.fleet.fleetauth import (
     CredentialsError,
     MonitorAuth,
+    login_settings,
     monitor_auth,
     read_credentials,
     registry_auth,
@@ -118,10 +119,9 @@ def zenoh_conf(endpoint: str, auth: MonitorAuth | None = None, *,
     operator login when it publishes or calls, `write`, else the read-only one)."""
     from twinfleet.runtime.host.zenoh_transport import zenoh_config
 
-    login = auth.login(write=write) if auth is not None else None
     try:
         return zenoh_config(connect=[endpoint], mode="client",
-                            settings=login.settings() if login else None)
+                            settings=login_settings(auth, write=write) if auth else None)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
 

@@ -299,12 +299,20 @@ def _verdict(fleet: Fleet, reason: str, running: Sequence[str],
 
 
 def _register(fleet: Fleet, params: Sequence[str]) -> Path | None:
-    """Enter the fleet in the per-user registry (`runtime.fleet.registry`) so that monitors find it;
-    None (and a line saying why) when the registry cannot be written."""
+    """Enter the fleet in the per-user registry (`runtime.fleet.registry`) so that monitors find it,
+    with its router's TLS certificate and key beside it (owner-only); None (and a line saying
+    why) when the registry cannot be written."""
     try:
-        return registry.register(fleet.scenario.fleet, fleet.endpoint,
-                                 scenario=str(fleet.scenario.path), params={"overrides": list(params)},
-                                 extra=fleet.creds.registry_extra())
+        entry = registry.register(fleet.scenario.fleet, fleet.endpoint,
+                                  scenario=str(fleet.scenario.path),
+                                  params={"overrides": list(params)},
+                                  extra=fleet.creds.registry_extra())
+        if fleet.server_tls is not None:
+            registry.write_beside(entry, "server.pem",
+                                  fleet.server_tls.certificate + fleet.server_tls.key)
+            fleet.log(f"TLS: certificates made for this launch; other hosts join with "
+                      f"--connect {fleet.listen} --credentials FILE, FILE a copy of {entry}")
+        return entry
     except (OSError, registry.RegistryError) as exc:
         fleet.log(f"not registered for discovery ({exc}); monitors need --connect")
         return None

@@ -37,7 +37,7 @@ from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.core.guard import Rejected, check_message, payload_limit
 from twinfleet.runtime.core.state_report import decode_report
 from twinfleet.runtime.core.statistics import NodeStatistics, Rejection, StatisticsError
-from twinfleet.runtime.fleet import fleetauth
+from twinfleet.runtime.fleet import certs, fleetauth
 from twinfleet.runtime.fleet.live_verdict import LiveJudge
 from twinfleet.runtime.fleet.node_main import LIMIT_ENV, read_statistics
 from twinfleet.runtime.fleet.node_process import NODE_PROCESS_FLAGS, NodeProcess, emit, stop_all
@@ -82,14 +82,26 @@ class Fleet:
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
         self.connect = connect
-        self.endpoint = connect or listen or f"tcp/127.0.0.1:{free_port()}"
+        self.listen = listen or f"tcp/127.0.0.1:{free_port()}"
+        # where this machine's nodes and monitors reach the router (a wildcard listen address
+        # is not one a certificate can name)
+        self.endpoint = connect or local_endpoint(self.listen)
         self.creds = fleetauth.FleetCredentials.fresh()
+        #: the router's TLS certificate and key (an embedded router on tls/ or quic/)
+        self.server_tls: certs.Pem | None = None
+        if not connect and fleetauth.secure(self.listen):
+            authority = certs.fleet_authority(scenario.fleet)
+            self.server_tls = certs.server_certificate(
+                authority, certs.host_names(endpoint_host(self.listen)))
+            self.creds = dataclasses.replace(self.creds, tls_ca=authority.certificate)
         # Joining a router (--connect): the fleet there may span machines; its key and
         # operator login (this machine's registry, or --credentials FILE) make us a member.
         joined = (auth if auth is not None else fleetauth.registry_auth(connect)) if connect \
             else None
         if joined is not None and joined.key is not None:
             self.creds = dataclasses.replace(self.creds, key=joined.key)
+        if joined is not None and joined.tls_ca is not None:
+            self.creds = dataclasses.replace(self.creds, tls_ca=joined.tls_ca)
         self.limit = scenario_payload_limit(scenario)
         self._auth_dir: Path | None = None
         self._login = joined.login(write=True) if joined is not None else None
@@ -126,12 +138,16 @@ class Fleet:
         self.ended = asyncio.get_running_loop().create_future()
         if self.connect:  # someone else's router: its access control is theirs
             conf = zenoh_config(connect=[self.connect], mode="client",
-                                settings=self._login.settings() if self._login else None)
+                                settings={**(self._login.settings() if self._login else {}),
+                                          **fleetauth.tls_settings(self.creds.tls_ca)})
         else:
             self._auth_dir = fleetauth.private_dir()
             settings = fleetauth.router_settings(self.creds, self._auth_dir)
             settings["transport/link/rx/max_message_size"] = self.limit + 1024
-            conf = zenoh_config(listen=[self.endpoint], mode="router", settings=settings)
+            if self.server_tls is not None:
+                settings.update(fleetauth.router_tls_settings(self.server_tls.certificate,
+                                                              self.server_tls.key))
+            conf = zenoh_config(listen=[self.listen], mode="router", settings=settings)
         self.transport = ZenohTransport(conf, key=self.creds.key, limit=self.limit)
         await self.transport.open()
         fleet = self.scenario.fleet
@@ -326,6 +342,20 @@ class Fleet:
         if self._private_dir is not None:
             shutil.rmtree(self._private_dir, ignore_errors=True)
         fleetauth.remove_dir(self._auth_dir)
+
+
+def endpoint_host(endpoint: str) -> str:
+    """The host part of a Zenoh endpoint (``tls/10.0.0.1:7447`` → ``10.0.0.1``)."""
+    address = endpoint.split("#", 1)[0].partition("/")[2]
+    return address.rsplit(":", 1)[0]
+
+
+def local_endpoint(listen: str) -> str:
+    """The endpoint a process on this machine connects to for a router listening on `listen`:
+    the same, but for a wildcard address, which becomes the loopback one."""
+    host = endpoint_host(listen)
+    wildcard = {"0.0.0.0": "127.0.0.1", "[::]": "[::1]"}.get(host)
+    return listen.replace(host, wildcard, 1) if wildcard else listen
 
 
 def scenario_payload_limit(scenario: Scenario) -> int:

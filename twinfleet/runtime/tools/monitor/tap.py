@@ -40,6 +40,7 @@ from twinfleet.runtime.host.zenoh_transport import Handoff, zenoh_config
 
 RECONNECT = "{period_init_ms: 100, period_max_ms: 500, period_increase_factor: 1.5}"
 RETRY_S = 0.25
+FOLLOW_S = 1.0  # how often `follow_relaunches` looks at the link
 DUPLICATE_WINDOW_S = 10.0  # history and live copies of one latched sample arrive well within
 _SEEN_PER_KEY = 16
 
@@ -186,6 +187,11 @@ class FleetTap:
         await self.open()
         return True
 
+    @property
+    def stopped(self) -> bool:
+        """True once `stop` or `close` was called."""
+        return self._stopped
+
     async def close(self) -> None:
         """Undeclare (advanced subscribers first), then close the session, on the loop thread."""
         self._stopped = True
@@ -204,3 +210,19 @@ class FleetTap:
         if self.session is not None and not self.session.is_closed():
             self.session.close()
         self.session, self._handoff = None, None
+
+
+async def follow_relaunches(tap: FleetTap, period_s: float = FOLLOW_S) -> None:
+    """Keep `tap` on its fleet until cancelled: every `period_s`, a session that lost its
+    router is replaced when the fleet was launched again with new credentials
+    (`FleetTap.reopen_if_stale`; `make_config` must read them afresh, e.g. from the
+    registry), and a tap whose reopening failed (no router yet) tries again."""
+    while not tap.stopped:
+        await asyncio.sleep(period_s)
+        try:
+            if tap.is_open:
+                await tap.reopen_if_stale()
+            elif not tap.stopped:
+                await tap.open()
+        except (zenoh.ZError, LookupError):  # the new run's router is not up yet
+            continue

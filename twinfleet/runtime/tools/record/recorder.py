@@ -67,7 +67,7 @@ from twinfleet.runtime.host.keys import (
 from twinfleet.runtime.host.schemas import message_schema
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
 from twinfleet.runtime.tools.monitor.graph import fleet_infos
-from twinfleet.runtime.tools.monitor.tap import FleetTap, tap_config
+from twinfleet.runtime.tools.monitor.tap import FleetTap, follow_relaunches, tap_config
 
 DRAIN_S = 0.3
 LINGER_S = 0.5
@@ -242,7 +242,8 @@ async def record_live(connect: str, fleet: str, path: str | Path, *,
                       handle_signals: bool = False, auth: Any = None) -> McapRecorder:
     """Record a running fleet reached at `connect` for `duration_s` or until `stop` is set
     (with `handle_signals`, also until SIGINT/SIGTERM); `auth`: the fleet's logins
-    (`runtime.fleet.fleetauth.MonitorAuth`; default: this machine's registry)."""
+    (`runtime.fleet.fleetauth.MonitorAuth`; default: this machine's registry, read again when
+    the router goes away, so the recording follows a fleet launched again on `connect`)."""
     import signal
 
     stop = stop or asyncio.Event()
@@ -269,9 +270,11 @@ async def record_live(connect: str, fleet: str, path: str | Path, *,
         recorder.metadata({"fleet": fleet, "connect": connect, **({"scene": scene} if scene else {})})
         waiter = asyncio.ensure_future(stop.wait())
         flusher = asyncio.create_task(_flush_until(recorder, stop))
+        follower = asyncio.create_task(follow_relaunches(tap))
         await asyncio.wait([waiter], timeout=duration_s)
-        waiter.cancel()
-        flusher.cancel()
+        for task in (waiter, flusher, follower):
+            task.cancel()
+        await asyncio.gather(follower, return_exceptions=True)
     finally:
         await tap.close()
         recorder.close()
