@@ -86,7 +86,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                            connect=args.connect, listen=args.listen,
                                            run_record=args.record_run,
                                            record_events=_events_path(args, run),
-                                           params=params, auth=auth))
+                                           params=params, auth=auth,
+                                           accept_recorded=args.accept_recorded))
         except FleetConflict as exc:
             raise CommandError(str(exc)) from None
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
@@ -361,7 +362,9 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--time-scale", type=float, default=None, metavar="K",
                    help="run fleet time K times faster than wall time (default: live.time_scale or 1)")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
-                   help="end the run after S wall seconds (default: live.timeout_s, else never)")
+                   help="end the run S wall seconds after every node is alive (the fleet's "
+                        "epoch; default: live.timeout_s, else never); a fleet not up within "
+                        "60 s ends INCONCLUSIVE")
     p.add_argument("--seed", type=int, default=None, help="fleet seed (default: the scenario's)")
     p.add_argument("--runs", type=int, default=1, metavar="N",
                    help="run the fleet N times with seeds S, S+1, ... (default: 1)")
@@ -375,6 +378,10 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                    help="with --connect: join the fleet whose registry entry FILE is (copied "
                         "from the machine that launched it, owner-only): its key signs this "
                         "launch's nodes (default: this machine's registry entry for EP)")
+    p.add_argument("--accept-recorded", action="store_true",
+                   help="let the nodes take recorded input that `twinfleet play --into-fleet` "
+                        "injects (signed as recorded; the result then says so); without it "
+                        "they drop and count it (rejected_recorded)")
     p.add_argument("--insecure-listen", action="store_true",
                    help="allow --listen on a plain tcp/udp endpoint reachable from other "
                         "machines: the fleet's traffic then crosses the network unencrypted")

@@ -37,6 +37,8 @@ class Rejection(StrEnum):
     INVALID = "invalid"  # fields that do not fit the message type's annotations
     OVERSIZE = "oversize"  # larger than the topic's payload limit (the transport)
     WRONG_TYPE = "wrong_type"  # a message type the handler does not take
+    REPLAYED = "replayed"  # a signed sample let through before (its sender and number)
+    RECORDED = "recorded"  # recorded input (`play --into-fleet`) the fleet does not accept
 
     @property
     def counter(self) -> str:
@@ -73,6 +75,8 @@ class NodeStatistics:
         stalls: timed entries released later than the stall threshold.
         max_lateness_ms: the latest a timed entry was released after its due time.
         stall_threshold_ms: that threshold (0: stalls are not counted).
+        played: recorded samples let in (`play --into-fleet`, a fleet launched with
+            ``--accept-recorded``).
         rejected: samples refused before any handler, per reason (every reason present).
     """
 
@@ -93,6 +97,7 @@ class NodeStatistics:
     stalls: int = 0
     max_lateness_ms: int = 0
     stall_threshold_ms: int = 0
+    played: int = 0
     rejected: Mapping[Rejection, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

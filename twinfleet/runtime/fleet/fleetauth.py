@@ -46,6 +46,8 @@ ENV_USER: Final = "TWINFLEET_ZENOH_USER"
 ENV_PASSWORD: Final = "TWINFLEET_ZENOH_PASSWORD"
 ENV_TLS_CA: Final = "TWINFLEET_TLS_CA"  # the fleet authority's certificate, PEM
 SECURE_SCHEMES: Final = ("tls/", "quic/")
+#: set (to 1) for the nodes of a fleet launched to accept recorded input (``play --into-fleet``)
+ENV_ACCEPT_RECORDED: Final = "TWINFLEET_ACCEPT_RECORDED"
 NODE_USER: Final = "node"
 MONITOR_USER: Final = "monitor"
 _WRITES: Final = ["put", "delete", "reply", "declare_queryable", "liveliness_token"]
@@ -163,6 +165,11 @@ def node_login(env: Mapping[str, str] | None = None) -> Login | None:
 def node_secrets(env: Mapping[str, str] | None = None) -> tuple[Login | None, bytes | None]:
     """(login, fleet key) from a node process's environment."""
     return node_login(env), key_from_env(env)
+
+
+def accepts_recorded(env: Mapping[str, str] | None = None) -> bool:
+    """True when this node process's fleet was launched with ``--accept-recorded``."""
+    return (os.environ if env is None else env).get(ENV_ACCEPT_RECORDED) == "1"
 
 
 def node_tls(env: Mapping[str, str] | None = None) -> dict[str, Any]:

@@ -77,7 +77,7 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     driver: Callable[[Fleet], Awaitable[str]] | None = None,
                     judge: bool = True,
                     auth: fleetauth.MonitorAuth | None = None,
-                    startup_s: float = STARTUP_S) -> FleetResult:
+                    startup_s: float = STARTUP_S, accept_recorded: bool = False) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
@@ -106,6 +106,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             fleet registry entry for that endpoint, if any).
         startup_s: wall seconds for every node to become alive; a run not up by then
             (or stopped before) is INCONCLUSIVE, never a node's failure.
+        accept_recorded: the nodes let in recorded input signed by ``twinfleet play
+            --into-fleet`` (the verdict then says it was injected); otherwise they drop it.
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
@@ -115,7 +117,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
                   out=out, record=record, node_args=[*node_args, *param_arguments(params)],
                   events_dir=fresh_parts_dir(record_events) if record_events else None,
-                  keep_scenario_beside=record_events or run_record, judge=judge, auth=auth)
+                  keep_scenario_beside=record_events or run_record, judge=judge, auth=auth,
+                  accept_recorded=accept_recorded)
     started = time.monotonic()
     async with _Launch(fleet, record_events, handle_signals) as launch:
         reason, running = await launch.until_end((startup_s, timeout_s), params, driver)

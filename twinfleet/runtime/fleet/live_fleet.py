@@ -77,8 +77,10 @@ class Fleet:
                  connect: str | None, listen: str | None, out: TextIO,
                  record: RunRecord | None = None, node_args: Sequence[str] = (),
                  events_dir: Path | None = None, keep_scenario_beside: str | None = None,
-                 judge: bool = True, auth: fleetauth.MonitorAuth | None = None) -> None:
+                 judge: bool = True, auth: fleetauth.MonitorAuth | None = None,
+                 accept_recorded: bool = False) -> None:
         self.time_scale, self.seed, self.out = time_scale, seed, out
+        self.accept_recorded = accept_recorded
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
         self.connect = connect
@@ -181,9 +183,9 @@ class Fleet:
     def refusals(self) -> dict[Rejection, int]:
         """What the launcher's own subscriptions (report, shutdown) refused, by reason."""
         refused = self.transport.statistics().refused if self.transport is not None else {}
-        return {Rejection.FORGED: refused.get(Rejection.FORGED, 0),
-                Rejection.OVERSIZE: refused.get(Rejection.OVERSIZE, 0),
-                Rejection.INVALID: self.invalid}
+        return {**{reason: refused.get(reason, 0) for reason in (
+            Rejection.FORGED, Rejection.OVERSIZE, Rejection.REPLAYED, Rejection.RECORDED)},
+            Rejection.INVALID: self.invalid}
 
     def node_secrets(self) -> dict[str, str]:
         """The environment a node process gets: fleet key, login (embedded router), limit."""
@@ -194,6 +196,8 @@ class Fleet:
             if self._login is not None:
                 env.update({fleetauth.ENV_USER: self._login.user,
                             fleetauth.ENV_PASSWORD: self._login.password})
+        if self.accept_recorded:
+            env[fleetauth.ENV_ACCEPT_RECORDED] = "1"
         return {**env, LIMIT_ENV: str(self.limit)}
 
     def _on_shutdown(self, _key: str, payload: bytes) -> None:

@@ -50,6 +50,7 @@ a scenario mistake, as `check` says), ``inconclusive`` 3, ``interrupted`` 130.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -289,6 +290,18 @@ class LiveJudge:
     # ------------------------------------------------------------------ the verdict
 
     def verdict(self, end: RunEnd) -> Verdict:
+        """The run's result (`_result`); when recorded input was played into the fleet
+        (``play --into-fleet``, a fleet launched with ``--accept-recorded``), its first
+        detail says so: what the run shows was partly not the nodes' own doing."""
+        judged = self._result(end)
+        played = {n: s.played for n, s in end.statistics.items() if s.played}
+        if not played:
+            return judged
+        note = ("recorded input was injected (twinfleet play --into-fleet): "
+                + ", ".join(f"{n} took {k} recorded samples" for n, k in sorted(played.items())))
+        return dataclasses.replace(judged, details=(note, *judged.details))
+
+    def _result(self, end: RunEnd) -> Verdict:
         """The run's result: a property that raised; a failed node process; inconclusive
         reasons (which also void a violation: it may come from the lost samples or the
         stall, not from the code); violations; an interruption; what never held; else holds."""

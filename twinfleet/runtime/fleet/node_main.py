@@ -46,7 +46,7 @@ from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.core.state_report import StateReporter
 from twinfleet.runtime.core.statistics import NodeStatistics, StatisticsError
-from twinfleet.runtime.fleet.fleetauth import node_secrets, node_tls
+from twinfleet.runtime.fleet.fleetauth import accepts_recorded, node_secrets, node_tls
 from twinfleet.runtime.host.clock import Clock, FleetClock
 from twinfleet.runtime.host.introspect import PARAM_FLAG, load_with_params, serve_info
 from twinfleet.runtime.host.keys import KeyKind, node_key
@@ -176,7 +176,7 @@ def _transport(args: argparse.Namespace) -> ZenohTransport:
     if limit is not None:  # Zenoh itself refuses larger frames (the router does too)
         settings["transport/link/rx/max_message_size"] = limit + 1024
     config = zenoh_config(connect=[args.connect], settings=settings)
-    return ZenohTransport(config, key=key, limit=limit)
+    return ZenohTransport(config, key=key, limit=limit, accept_recorded=accepts_recorded())
 
 
 def _event_log(args: argparse.Namespace, scenario: Scenario, name: str, seed: int,

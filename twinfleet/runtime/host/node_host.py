@@ -171,7 +171,8 @@ class NodeHost:
         if not callable(transport_stats):
             return self.core.statistics()
         below = transport_stats()
-        return self.core.statistics(dropped_overflow=below.overflow, refused=below.refused)
+        return self.core.statistics(dropped_overflow=below.overflow, refused=below.refused,
+                                    played=below.played)
 
     def idle(self) -> bool:
         """True when nothing can run now: no handler is ready and no drain is scheduled (a

@@ -55,6 +55,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from twinfleet.runtime.contract.node import Durability
+from twinfleet.runtime.core.guard import Role, signer
 from twinfleet.runtime.host.introspect import latched_topics
 from twinfleet.runtime.host.keys import (
     ANY,
@@ -330,7 +331,7 @@ def _replier(fleet: str, payload: bytes) -> Callable[[Any], None]:
 
 def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
          fleet: str | None = None, out: TextIO = sys.stdout, wait_s: float = 2.0,
-         linger_s: float = LINGER_S) -> int:
+         linger_s: float = LINGER_S, key: bytes | None = None) -> int:
     """Publish every recorded message in log-time order, at the recorded pace divided by `rate`.
 
     Args:
@@ -341,6 +342,9 @@ def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
         out: where progress lines go.
         wait_s: wait up to this long for a subscriber to match before publishing.
         linger_s: keep the session open this long after the last message.
+        key: sign every message with this fleet key as recorded input
+            (`runtime.core.guard.Role.RECORDED`: ``play --into-fleet``); None: unsigned,
+            which a fleet with a key drops.
 
     Returns 0, or 2 when the file holds no twinfleet messages.
     """
@@ -351,7 +355,7 @@ def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
     with open(path, "rb") as stream, zenoh.open(make_config()) as session:
         reader = make_reader(stream)
         summary = reader.get_summary()
-        pubs = _Publishers(session, path, fleet)
+        pubs = _Publishers(session, path, fleet, key)
         for channel in (summary.channels.values() if summary else ()):
             pubs.declare(channel)
         described = _describe_fleets(session, reader, summary, fleet)
@@ -378,7 +382,7 @@ def _publish_paced(reader: Any, pubs: _Publishers, rate: float, started: float) 
         delay = started + (message.log_time - first) / 1e9 / rate - time.monotonic()
         if delay > 0:
             time.sleep(delay)
-        pubs.of(channel).put(message.data)
+        pubs.put(channel, message.data)
         count += 1
     return count
 
@@ -387,9 +391,11 @@ def _publish_paced(reader: Any, pubs: _Publishers, rate: float, started: float) 
 class _Publishers:
     """One Zenoh publisher per recorded channel, declared on `play`'s session."""
 
-    def __init__(self, session: Any, path: str | Path, fleet: str | None) -> None:
-        self.session, self.path, self.fleet = session, path, fleet
+    def __init__(self, session: Any, path: str | Path, fleet: str | None,
+                 key: bytes | None = None) -> None:
+        self.session, self.path, self.fleet, self.key = session, path, fleet, key
         self._pubs: dict[int, Any] = {}
+        self._tags: dict[int, Callable[[bytes], bytes | None]] = {}
 
     def __len__(self) -> int:
         return len(self._pubs)
@@ -414,7 +420,17 @@ class _Publishers:
         else:
             pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         self._pubs[channel.id] = pub
+        self._tags[channel.id] = signer(self.key, key, Role.RECORDED)
         return pub
+
+    def put(self, channel: Any, payload: bytes) -> None:
+        """Publish `payload` on `channel`'s publisher (signed as recorded, with a key)."""
+        pub = self.of(channel)
+        attachment = self._tags[channel.id](payload)
+        if attachment is None:
+            pub.put(payload)
+        else:
+            pub.put(payload, attachment=attachment)
 
     def of(self, channel: Any) -> Any:
         """The publisher of `channel`, declared on first use if the summary had no such channel."""
