@@ -43,7 +43,8 @@ BUSY = NodeStatistics(received=12, dropped_undecodable=1, handler_errors=2, fail
 # snapshot of the moment. Every other field must make a run inconclusive.
 NOT_JUDGED = {"received", "dropped_undecodable", "handler_errors", "failures", "inbox_depth",
               "timers_pending", "published", "handled", "dropped_keep_last",
-              "dropped_best_effort", "sequence_jumps", "max_lateness_ms", "stall_threshold_ms"}
+              "dropped_best_effort", "sequence_jumps", "max_lateness_ms", "stall_threshold_ms",
+              "played"}  # played: said in the verdict's details, never inconclusive
 
 
 def test_the_wire_form_reads_back_as_the_same_record():
@@ -103,7 +104,8 @@ def test_a_payload_that_is_not_msgpack_is_refused():
 def test_rejections_are_keyed_by_reason_and_always_complete():
     partial = NodeStatistics(rejected={Rejection.OVERSIZE: 2})
     assert dict(partial.rejected) == {Rejection.FORGED: 0, Rejection.INVALID: 0,
-                                      Rejection.OVERSIZE: 2, Rejection.WRONG_TYPE: 0}
+                                      Rejection.OVERSIZE: 2, Rejection.WRONG_TYPE: 0,
+                                      Rejection.REPLAYED: 0, Rejection.RECORDED: 0}
     with pytest.raises(TypeError):
         partial.rejected[Rejection.FORGED] = 1  # type: ignore[index]
     with pytest.raises(StatisticsError, match="Rejection members"):

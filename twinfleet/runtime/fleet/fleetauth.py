@@ -16,7 +16,7 @@ node, the run report or the shutdown topic accepts comes from a holder of the
 key even on a router the launcher does not control (``--connect``).
 
 A fleet that listens on ``tls/`` or ``quic/`` also has its own certificate authority
-(`runtime.fleet.certs`): the router presents a server certificate it signed, and every
+(`runtime.host.certs`): the router presents a server certificate it signed, and every
 client trusts that authority's certificate alone (`FleetCredentials.tls_ca`,
 `tls_settings`), so a client reaches this launch's router or nothing.
 

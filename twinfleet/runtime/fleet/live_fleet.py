@@ -37,11 +37,12 @@ from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.core.guard import Rejected, check_message, payload_limit
 from twinfleet.runtime.core.state_report import decode_report
 from twinfleet.runtime.core.statistics import NodeStatistics, Rejection, StatisticsError
-from twinfleet.runtime.fleet import certs, fleetauth
+from twinfleet.runtime.fleet import fleetauth
 from twinfleet.runtime.fleet.live_verdict import LiveJudge
 from twinfleet.runtime.fleet.node_main import LIMIT_ENV, read_statistics
 from twinfleet.runtime.fleet.node_process import NODE_PROCESS_FLAGS, NodeProcess, emit, stop_all
 from twinfleet.runtime.fleet.run_record import RunRecord
+from twinfleet.runtime.host import certs
 from twinfleet.runtime.host.introspect import fleet_description
 from twinfleet.runtime.host.keys import (
     KeyKind,

@@ -3,7 +3,7 @@
 The Foxglove SDK's server answers any WebSocket that reaches its port, and offers no hook
 to look at a connection's ``Host``, ``Origin`` or URL. So the SDK server listens on a free
 port of 127.0.0.1 behind this gate, over TLS with a throw-away certificate
-(`runtime.fleet.certs.self_signed`) that only the gate trusts: a web page that finds that
+(`runtime.host.certs.self_signed`) that only the gate trusts: a web page that finds that
 port cannot complete the handshake (a browser never lets a script accept an unknown
 certificate). The gate listens on the port the user connects to, applies
 `runtime.tools.view.web_guard` (Host, Origin, the per-run token of the printed URL), and
@@ -24,7 +24,7 @@ from typing import final
 import aiohttp
 from aiohttp import WSMsgType, web
 
-from twinfleet.runtime.fleet.certs import Pem, self_signed
+from twinfleet.runtime.host.certs import Pem, self_signed
 from twinfleet.runtime.tools.view.web_guard import WebAccess, guard_middleware
 
 
