@@ -94,7 +94,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
             print(f"error: {exc}", file=sys.stderr)
             return 2
         except (OSError, zenoh.ZError) as exc:  # e.g. a --listen port in use
-            raise CommandError(router_error(args, exc)) from None
+            raise CommandError(router_error(args, exc, auth)) from None
         for line in format_result(result):
             print(f"[launcher] {line}", flush=True)
         worst = _worse(worst, result.exit_code)
@@ -158,13 +158,14 @@ def launch_params(args: argparse.Namespace) -> list[str]:
     return [*args.overrides, *args.param]
 
 
-def router_error(args: argparse.Namespace, exc: Exception) -> str:
+def router_error(args: argparse.Namespace, exc: Exception, auth: Any = None) -> str:
     """One line for a router that cannot be opened or joined (e.g. a --listen port in use)."""
-    from twinfleet.runtime.fleet.connection import zenoh_error_text
+    from twinfleet.runtime.fleet.connection import unreachable_hint, zenoh_error_text
 
     where = f"--connect {args.connect}" if args.connect else (
         f"--listen {args.listen}" if args.listen else "the embedded router")
-    return f"cannot open {where}: {zenoh_error_text(exc)}"
+    hint = f" ({unreachable_hint(args.connect, auth)})" if args.connect else ""
+    return f"cannot open {where}: {zenoh_error_text(exc)}{hint}"
 
 
 def _events_path(args: argparse.Namespace, run: int) -> str | None:

@@ -36,6 +36,7 @@ from twinfleet.runtime.fleet.fleetauth import (
     monitor_auth,
     read_credentials,
     registry_auth,
+    secure,
 )
 
 DISCOVERY_S = 1.0
@@ -56,6 +57,19 @@ def zenoh_error_text(exc: BaseException) -> str:
     """A `zenoh.ZError` as one line, without the Rust source locations it carries."""
     text = _RUST_WHERE.sub("", str(exc)).strip()
     return " ".join(text.split()).rstrip(".!] ").replace("[", "")
+
+
+def unreachable_hint(endpoint: str, auth: MonitorAuth | None, *, registry: bool = False) -> str:
+    """What to check when the router at `endpoint` refused or did not answer (one clause)."""
+    if secure(endpoint) and (auth is None or auth.tls_ca is None):
+        return ("a tls/quic fleet is reached with its certificate authority: pass --credentials "
+                "FILE, a copy of its registry entry on the machine that launched it")
+    if secure(endpoint):
+        return ("is the fleet running there, and are the --credentials its current ones? A "
+                "relaunch makes new certificates, and the TLS handshake fails with another "
+                "launch's authority: copy its registry entry again")
+    return ("the fleet registry names it, but its launcher does not answer" if registry
+            else "is a fleet running there?")
 
 
 @dataclass(frozen=True)

@@ -28,6 +28,7 @@ from twinfleet.runtime.core.statistics import NodeStatistics
 from twinfleet.runtime.fleet.connection import (
     CommandError,
     Connection,
+    unreachable_hint,
     zenoh_conf,
     zenoh_error_text,
 )
@@ -45,8 +46,7 @@ def open_session(conn: Connection, *, write: bool = False) -> Iterator[zenoh.Ses
     try:
         session = zenoh.open(zenoh_conf(conn.endpoint, conn.auth, write=write))
     except zenoh.ZError as exc:
-        how = ("the fleet registry names it, but its launcher does not answer"
-               if conn.found == "registry" else "is a fleet running there?")
+        how = unreachable_hint(conn.endpoint, conn.auth, registry=conn.found == "registry")
         raise CommandError(f"cannot reach the Zenoh router at {conn.endpoint} ({how}): "
                            f"{zenoh_error_text(exc)}") from None
     try:
