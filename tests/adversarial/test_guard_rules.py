@@ -46,8 +46,8 @@ def test_a_stamp_numbers_a_senders_samples_and_cannot_be_altered() -> None:
     first, second = attach(b"a"), attach(b"a")
     one, two = opened(key, where, b"a", first), opened(key, where, b"a", second)
     assert one is not None and two is not None
-    assert (one.role, one.epoch, one.sequence) == (Role.MEMBER, two.epoch, 0) and two.sequence == 1
-    assert opened(key, where, b"a", signer(key, where)(b"a")).epoch != one.epoch  # per sender
+    assert (one.role, one.sender, one.sequence) == (Role.MEMBER, two.sender, 0) and two.sequence == 1
+    assert opened(key, where, b"a", signer(key, where)(b"a")).sender != one.sender  # per sender
     renumbered = first[:-1] + bytes([first[-1] + 5])  # a replay given a fresh number
     assert opened(key, where, b"a", renumbered) is None
     recorded = opened(key, where, b"a", signer(key, where, Role.RECORDED)(b"a"))
@@ -58,11 +58,11 @@ def test_a_stamp_numbers_a_senders_samples_and_cannot_be_altered() -> None:
 
 def test_the_replay_window_lets_each_number_through_once() -> None:
     window, where = ReplayWindow(), "twinfleet/f/poses"
-    stamp = lambda n, epoch=7: Stamp(Role.MEMBER, epoch, n)  # noqa: E731
+    stamp = lambda n, sender=7: Stamp(Role.MEMBER, sender, n)  # noqa: E731
     assert window.fresh(where, stamp(10))
     assert not window.fresh(where, stamp(10))  # the same sample again
     assert window.fresh(where, stamp(8)) and not window.fresh(where, stamp(8))  # late, once
-    assert window.fresh(where, stamp(10, epoch=8))  # another sender
+    assert window.fresh(where, stamp(10, sender=8))  # another sender
     assert window.fresh("twinfleet/f/other", stamp(10))  # another key expression
     assert window.fresh(where, stamp(10 + WINDOW))
     assert not window.fresh(where, stamp(9))  # now older than the window: refused

@@ -6,7 +6,7 @@ to its nodes in the environment (``TWINFLEET_FLEET_KEY``, hex; never on a
 command line, which other users can read in ``ps``) and to the owner's monitors
 through the owner-only fleet registry. Every sample a fleet member publishes
 carries, as its Zenoh attachment, a tag and a *stamp*: the stamp is the sender's
-role, its epoch (64 random bits drawn once per publisher) and a sequence number
+role, its sender id (64 random bits drawn once per publisher) and a sequence number
 (one more per sample); the tag is ``HMAC-SHA256(key, key_expr NUL stamp payload)``
 cut to 16 bytes. Binding the key expression stops a captured ``/r1/status``
 being replayed as a ``/collisions``. A receiver with the key drops and counts
@@ -16,10 +16,10 @@ the shutdown topic — whatever router the fleet runs on.
 
 Replays. A holder of a login (an insider, or a captured sample) could still send a
 signed sample again. Each subscription keeps a `ReplayWindow`: per (key expression,
-sender epoch), the highest sequence number seen and which of the `WINDOW` before it
+sender id), the highest sequence number seen and which of the `WINDOW` before it
 arrived; a sample whose number was seen, or is older than the window, is dropped and
 counted (``rejected_replayed``). The stamp is signed, so a replayed sample cannot be
-renumbered. A receiver that meets a sender's epoch for the first time takes its first
+renumbered. A receiver that meets a sender id for the first time takes its first
 sample as new (it cannot know what it missed), so one replay per sender may reach a
 receiver that joins after the sender started; never more, and never twice.
 
@@ -63,10 +63,10 @@ KEY_ENV: Final = "TWINFLEET_FLEET_KEY"
 TAG_BYTES: Final = 16
 DEFAULT_LIMIT: Final = 256 * 1024  # bytes: far above any pose, scan, path or status
 _SEP: Final = b"\0"
-_STAMP: Final = struct.Struct(">BQQ")  # role, sender epoch, sequence number
+_STAMP: Final = struct.Struct(">BQQ")  # role, sender id, sequence number
 ATTACHMENT_BYTES: Final = TAG_BYTES + _STAMP.size
 WINDOW: Final = 1024  # sequence numbers a `ReplayWindow` remembers per sender
-_SENDERS: Final = 4096  # sender epochs a `ReplayWindow` remembers (the oldest go first)
+_SENDERS: Final = 4096  # sender ids a `ReplayWindow` remembers (the oldest go first)
 
 
 @unique
@@ -81,7 +81,7 @@ class Stamp(NamedTuple):
     """The signed part of an attachment besides the payload: who sent it and its number."""
 
     role: Role
-    epoch: int
+    sender: int
     sequence: int
 
 Check = Callable[[Any], None]
@@ -124,7 +124,7 @@ def _tag(key: bytes, key_expr: bytes, stamp: bytes, payload: bytes) -> bytes:
 
 def sign(key: bytes, key_expr: str, payload: bytes, role: Role = Role.MEMBER) -> bytes:
     """The attachment of one sample on `key_expr` from a holder of `key`: a sender of its
-    own (a fresh epoch), number 0. A stream of samples takes a `signer`."""
+    own (a fresh sender id), number 0. A stream of samples takes a `signer`."""
     stamp = _STAMP.pack(role, secrets.randbits(64), 0)
     return _tag(key, key_expr.encode(), stamp, payload) + stamp
 
@@ -137,9 +137,9 @@ def opened(key: bytes, key_expr: str, payload: bytes, attachment: bytes | None) 
     tag, stamp = attachment[:TAG_BYTES], attachment[TAG_BYTES:]
     if not hmac.compare_digest(_tag(key, key_expr.encode(), stamp, payload), tag):
         return None
-    role, epoch, sequence = _STAMP.unpack(stamp)
+    role, sender, sequence = _STAMP.unpack(stamp)
     try:
-        return Stamp(Role(role), epoch, sequence)
+        return Stamp(Role(role), sender, sequence)
     except ValueError:  # a role this version does not know
         return None
 
@@ -151,16 +151,16 @@ def authentic(key: bytes, key_expr: str, payload: bytes, tag: bytes | None) -> b
 
 def signer(key: bytes | None, key_expr: str,
            role: Role = Role.MEMBER) -> Callable[[bytes], bytes | None]:
-    """A function payload → attachment for one sender on one key expression: one epoch,
+    """A function payload → attachment for one sender on one key expression: one sender id,
     numbers 0, 1, 2, ... (None without a key)."""
     if key is None:
         return lambda _payload: None
-    prefix, epoch = key_expr.encode() + _SEP, secrets.randbits(64)
+    prefix, sender = key_expr.encode() + _SEP, secrets.randbits(64)
     numbers = itertools.count()  # next() is atomic: publishers may share a signer
     pack = _STAMP.pack
 
     def attach(payload: bytes) -> bytes:
-        stamp = pack(role, epoch, next(numbers))
+        stamp = pack(role, sender, next(numbers))
         return hmac.digest(key, prefix + stamp + payload, "sha256")[:TAG_BYTES] + stamp
 
     return attach
@@ -168,7 +168,7 @@ def signer(key: bytes | None, key_expr: str,
 
 @final
 class ReplayWindow:
-    """Which (sender epoch, sequence number) pairs a subscription has let through, per key
+    """Which (sender id, sequence number) pairs a subscription has let through, per key
     expression (module docstring); thread-safe (Zenoh calls back on its threads)."""
 
     __slots__ = ("_lock", "_seen")
@@ -180,7 +180,7 @@ class ReplayWindow:
     def fresh(self, key_expr: str, stamp: Stamp) -> bool:
         """True, and remembered, the first time `stamp` comes on `key_expr`; False for a
         number seen before or older than `WINDOW` behind the sender's highest."""
-        sender, number = (key_expr, stamp.epoch), stamp.sequence
+        sender, number = (key_expr, stamp.sender), stamp.sequence
         with self._lock:
             state = self._seen.get(sender)
             if state is None:

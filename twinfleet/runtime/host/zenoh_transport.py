@@ -24,7 +24,7 @@ e.g. ``transport/link/tx/lease=1000`` to notice a cut link within a second;
 keys under ``scouting/multicast`` and ``transport/shared_memory`` are refused.
 
 Guard (`runtime.core.guard`, README "Trust model"). With a fleet key, every put
-and query carries a signature and a stamp (sender epoch, sequence number, role) as
+and query carries a signature and a stamp (sender id, sequence number, role) as
 its attachment, and a sample (or a service request) without a valid one is dropped
 on Zenoh's thread before it is copied and counted (``statistics().refused``,
 `Rejection.FORGED`); a sample above the payload limit is dropped first
