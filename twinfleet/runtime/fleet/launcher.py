@@ -38,7 +38,7 @@ from twinfleet.runtime.fleet.fleet_result import (
     format_result,
     record_summary,
 )
-from twinfleet.runtime.fleet.live_fleet import SHUTDOWN_TOPIC, Fleet, free_port
+from twinfleet.runtime.fleet.live_fleet import SHUTDOWN_TOPIC, Fleet, endpoint_host, free_port
 from twinfleet.runtime.fleet.live_verdict import RunEnd, Verdict
 from twinfleet.runtime.fleet.run_record import RunRecord, versions
 from twinfleet.runtime.host.introspect import param_arguments
@@ -314,11 +314,22 @@ def _register(fleet: Fleet, params: Sequence[str]) -> Path | None:
             registry.write_beside(entry, "server.pem",
                                   fleet.server_tls.certificate + fleet.server_tls.key)
             fleet.log(f"TLS: certificates made for this launch; other hosts join with "
-                      f"--connect {fleet.listen} --credentials FILE, FILE a copy of {entry}")
+                      f"{_remote_hint(fleet)} --credentials FILE, FILE a copy of {entry}")
         return entry
     except (OSError, registry.RegistryError) as exc:
         fleet.log(f"not registered for discovery ({exc}); monitors need --connect")
         return None
+
+
+def _remote_hint(fleet: Fleet) -> str:
+    """``--connect EP`` for another host: the listen endpoint, or for a wildcard address
+    the names its certificate carries."""
+    host = endpoint_host(fleet.listen)
+    if host not in ("0.0.0.0", "[::]"):
+        return f"--connect {fleet.listen}"
+    remote = [n for n in fleet.tls_names if n not in ("localhost", "127.0.0.1", "::1")]
+    return (f"--connect {fleet.listen.replace(host, 'HOST', 1)} (HOST: "
+            f"{', '.join(remote) or 'this machine'})")
 
 
 def _driver_reason(task: asyncio.Task[str]) -> str:

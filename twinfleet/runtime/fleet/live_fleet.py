@@ -92,10 +92,11 @@ class Fleet:
         self.creds = fleetauth.FleetCredentials.fresh()
         #: the router's TLS certificate and key (an embedded router on tls/ or quic/)
         self.server_tls: certs.Pem | None = None
+        self.tls_names: list[str] = []  # the names and addresses its certificate carries
         if not connect and fleetauth.secure(self.listen):
             authority = certs.fleet_authority(scenario.fleet)
-            self.server_tls = certs.server_certificate(
-                authority, certs.host_names(endpoint_host(self.listen)))
+            self.tls_names = certs.host_names(endpoint_host(self.listen))
+            self.server_tls = certs.server_certificate(authority, self.tls_names)
             self.creds = dataclasses.replace(self.creds, tls_ca=authority.certificate)
         # Joining a router (--connect): the fleet there may span machines; its key and
         # operator login (this machine's registry, or --credentials FILE) make us a member.
