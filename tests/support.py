@@ -11,7 +11,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
-# The fleet registry of every process a test starts (twinfleet/runtime/fleet/registry.py): one private
+# The fleet registry of every process a test starts (twinfleet/runtime/access/registry.py): one private
 # directory per test session, so test fleets never mix with a developer's own fleets or with
 # another test session's, and a test that finds "the running fleet" finds its own.
 RUNTIME_DIR = tempfile.mkdtemp(prefix="twinfleet-test-runtime-")

@@ -30,7 +30,7 @@ pytestmark = pytest.mark.timeout(60)
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "twinfleet"
-WINGS = ("contract", "scenario", "core", "host", "fleet", "tools", "cli")
+WINGS = ("contract", "scenario", "core", "host", "access", "fleet", "tools", "cli")
 _BELOW_HOST = {"host", "core", "scenario", "contract"}
 RULES: dict[str, set[str]] = {
     "api": {"contract"},
@@ -38,16 +38,17 @@ RULES: dict[str, set[str]] = {
     "scenario": {"contract"},
     "core": {"contract"},
     "host": {"core", "scenario", "contract"},
-    "fleet": _BELOW_HOST,
-    "tools": {"fleet", *_BELOW_HOST},
-    "cli": {"api", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes", "ros2"},
+    "access": _BELOW_HOST,
+    "fleet": {"access", *_BELOW_HOST},
+    "tools": {"fleet", "access", *_BELOW_HOST},
+    "cli": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes", "ros2"},
     "checker": {"api", "contract", "scenario"},
     "nodes": {"api", "contract"},
-    "agreement": {"api", "fleet", "tools", *_BELOW_HOST, "checker", "nodes"},
-    "ros2": {"api", "fleet", "tools", *_BELOW_HOST},
+    "agreement": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "nodes"},
+    "ros2": {"api", "access", "fleet", "tools", *_BELOW_HOST},
     "runtime": set(),  # runtime/__init__.py: names its wings, imports none
     "maps": set(), "launch": set(),  # package data: shipped maps and scenarios
-    "top": {"api", "fleet", "tools", *_BELOW_HOST, "cli", "checker", "agreement", "nodes", "ros2",
+    "top": {"api", "access", "fleet", "tools", *_BELOW_HOST, "cli", "checker", "agreement", "nodes", "ros2",
             "top"},
 }
 #: `tools/` groups three wings of its own (tests/test_sizes.py measures each alone): the

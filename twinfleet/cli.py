@@ -30,9 +30,9 @@ from collections.abc import Sequence
 from twinfleet.agreement import commands as agreement_commands
 from twinfleet.checker import commands as checker_commands
 from twinfleet.ros2 import commands as ros2_commands
+from twinfleet.runtime.access.connection import EXIT_BAD_INPUT, EXIT_INTERRUPTED, CommandError
 from twinfleet.runtime.cli import commands as runtime_commands
 from twinfleet.runtime.cli import render as render_command
-from twinfleet.runtime.fleet.connection import EXIT_BAD_INPUT, EXIT_INTERRUPTED, CommandError
 
 DESCRIPTION = """\
 twinfleet runs a fleet of robot nodes (or any nodes you write in Python) as separate
@@ -97,7 +97,7 @@ def main(argv: Sequence[str] | None = None) -> int:
 
 def error_line(exc: BaseException) -> str:
     """One line for an error that reached `main`, naming what and where."""
-    from twinfleet.runtime.fleet.connection import zenoh_error_text
+    from twinfleet.runtime.access.connection import zenoh_error_text
 
     if isinstance(exc, CommandError):
         return str(exc)

@@ -97,3 +97,54 @@ def test_max_time_holds_inside_a_slow_property(tmp_path):
     assert "max-time 1 s reached while evaluating the property" in run.stdout + run.stderr
     assert "properties[0] (sneaky)" in run.stdout
     assert elapsed < 15  # without the limit inside evaluation: hours
+
+
+def _search_reason(tmp_path, expr: str) -> str:
+    from twinfleet.checker import Limits, PropertySet, Search, System
+    from twinfleet.checker.driver import load
+
+    tmp_path.mkdir()
+    scen = load(_scenario(tmp_path, expr))
+    props = PropertySet.from_scenario(scen)
+    return Search(System(scen, properties=props), props, Limits(max_time_s=0.2)).run("bfs").reason
+
+
+@pytest.mark.parametrize("expr", ["sum(range(10**12)) > 0",
+                                  "all(True for _ in range(10**12) for _ in range(9))",
+                                  "len([a for a in range(10**6) for b in range(10**6)]) > 0"])
+def test_max_time_holds_in_a_worker_thread_with_the_same_message(tmp_path, expr):
+    import threading
+
+    main = _search_reason(tmp_path / "main", expr)
+    seen: list[str] = []
+    worker = threading.Thread(target=lambda: seen.append(_search_reason(tmp_path / "t", expr)),
+                              daemon=True)
+    started = time.monotonic()
+    worker.start()
+    worker.join(timeout=20)
+    assert not worker.is_alive(), "the property ran past its limit in a worker thread"
+    assert time.monotonic() - started < 10
+    assert [r.replace('/t/', '/main/') for r in seen] == [main]
+    assert "max-time 0.2 s reached while evaluating the property" in main
+    assert "(sneaky)" in main
+
+
+def test_time_limit_leaves_a_tracer_in_place_and_nests():
+    import sys as _sys
+
+    from twinfleet.runtime.scenario.property_eval import Overtime, parse_expression, time_limit
+
+    expr = parse_expression("sum(range(10**12)) > 0", [], "here")
+    calls: list[str] = []
+
+    def tracer(frame, event, arg):
+        calls.append(event)
+
+    _sys.settrace(tracer)
+    try:
+        with time_limit(60), time_limit(0.05), pytest.raises(Overtime, match="here: 'sum"):
+            expr.evaluate({})
+        assert _sys.gettrace() is tracer
+    finally:
+        _sys.settrace(None)
+    assert parse_expression("1 + 1 == 2", [], "x").evaluate({})  # no limit: plain eval

@@ -1,4 +1,4 @@
-"""The pure rules under the live checks (runtime.core.guard, runtime.fleet.fleetauth), without a fleet."""
+"""The pure rules under the live checks (runtime.core.guard, runtime.access.fleetauth), without a fleet."""
 
 from __future__ import annotations
 
@@ -8,31 +8,66 @@ import pytest
 
 from tests.integration.reliability_nodes import Tick
 from twinfleet.nodes.msgs import ObstacleScan, PathRequest, RobotPose
+from twinfleet.runtime.access.fleetauth import FleetCredentials, listen_problem, loopback_only
 from twinfleet.runtime.core.guard import (
     DEFAULT_LIMIT,
+    WINDOW,
     Admission,
     Rejected,
+    ReplayWindow,
+    Role,
+    Stamp,
     authentic,
     check_message,
     expected_type,
+    opened,
     payload_limit,
     sign,
     signer,
 )
 from twinfleet.runtime.core.statistics import Rejection
-from twinfleet.runtime.fleet.fleetauth import FleetCredentials, listen_problem, loopback_only
 
 
 def test_a_tag_binds_key_expression_and_payload() -> None:
     key, other = b"k" * 32, b"o" * 32
     tag = sign(key, "twinfleet/f/poses", b"abc")
     assert authentic(key, "twinfleet/f/poses", b"abc", tag)
-    assert signer(key, "twinfleet/f/poses")(b"abc") == tag
+    assert authentic(key, "twinfleet/f/poses", b"abc", signer(key, "twinfleet/f/poses")(b"abc"))
     assert not authentic(other, "twinfleet/f/poses", b"abc", tag)
     assert not authentic(key, "twinfleet/f/collisions", b"abc", tag)  # replayed elsewhere
     assert not authentic(key, "twinfleet/f/poses", b"abd", tag)
     assert not authentic(key, "twinfleet/f/poses", b"abc", None)
     assert signer(None, "x")(b"abc") is None
+
+
+def test_a_stamp_numbers_a_senders_samples_and_cannot_be_altered() -> None:
+    key, where = b"k" * 32, "twinfleet/f/poses"
+    attach = signer(key, where)
+    first, second = attach(b"a"), attach(b"a")
+    one, two = opened(key, where, b"a", first), opened(key, where, b"a", second)
+    assert one is not None and two is not None
+    assert (one.role, one.sender, one.sequence) == (Role.MEMBER, two.sender, 0) and two.sequence == 1
+    assert opened(key, where, b"a", signer(key, where)(b"a")).sender != one.sender  # per sender
+    renumbered = first[:-1] + bytes([first[-1] + 5])  # a replay given a fresh number
+    assert opened(key, where, b"a", renumbered) is None
+    recorded = opened(key, where, b"a", signer(key, where, Role.RECORDED)(b"a"))
+    assert recorded is not None and recorded.role is Role.RECORDED
+    as_member = signer(key, where, Role.RECORDED)(b"a")
+    assert opened(key, where, b"a", as_member[:16] + bytes([0]) + as_member[17:]) is None
+
+
+def test_the_replay_window_lets_each_number_through_once() -> None:
+    window, where = ReplayWindow(), "twinfleet/f/poses"
+    stamp = lambda n, sender=7: Stamp(Role.MEMBER, sender, n)  # noqa: E731
+    assert window.fresh(where, stamp(10))
+    assert not window.fresh(where, stamp(10))  # the same sample again
+    assert window.fresh(where, stamp(8)) and not window.fresh(where, stamp(8))  # late, once
+    assert window.fresh(where, stamp(10, sender=8))  # another sender
+    assert window.fresh("twinfleet/f/other", stamp(10))  # another key expression
+    assert window.fresh(where, stamp(10 + WINDOW))
+    assert not window.fresh(where, stamp(9))  # now older than the window: refused
+    assert window.fresh(where, stamp(11))  # inside the window, never seen
+    assert not window.fresh(where, stamp(11))
 
 
 @pytest.mark.parametrize("cell", [(math.nan, 1), (1, math.inf), ("a", "b"), (1, 2, 3), (True, 4),

@@ -138,7 +138,7 @@ def test_service_call_and_topic_pub_from_the_cli(demo: RunningFleet) -> None:
 
 
 PLAIN_SCRIPT = """
-import glob, hmac, json, os, sys, time, msgpack, zenoh
+import glob, hmac, json, os, struct, sys, time, msgpack, zenoh
 endpoint, fleet = sys.argv[1], sys.argv[2]
 # the fleet's credentials, from its (owner-only) registry entry
 entry = next(json.load(open(p)) for p in glob.glob(os.environ["XDG_RUNTIME_DIR"] + "/twinfleet/*.json")
@@ -162,8 +162,10 @@ with zenoh.open(conf) as session:
     while (len(got) < 3 or not pub.matching_status) and time.monotonic() < deadline:
         time.sleep(0.05)
     garbage, key = b"\\xc1 garbage from a raw client", f"twinfleet/{fleet}/chatter"
-    tag = hmac.digest(bytes.fromhex(auth["key"]), key.encode() + b"\\0" + garbage, "sha256")[:16]
-    pub.put(garbage, attachment=tag)  # signed: it passes the sender check, then fails to decode
+    stamp = struct.pack(">BQQ", 0, 12345, 0)  # role, sender id, sequence number
+    tag = hmac.digest(bytes.fromhex(auth["key"]), key.encode() + b"\\0" + stamp + garbage,
+                      "sha256")[:16]
+    pub.put(garbage, attachment=tag + stamp)  # signed: passes the sender check, fails to decode
     pub.undeclare()
     sub.undeclare()
 assert not any(m.split(".")[0] in ("runtime", "nodes", "checker") for m in sys.modules)

@@ -8,6 +8,11 @@ liveliness token within the Zenoh lease (1 s here, through
 ``TWINFLEET_ZENOH_CONFIG_OVERRIDE``), then brings the link up and shows the
 token and the traffic come back.
 
+A second test runs the same two hosts over TLS with certificates `launch` makes: host B
+joins with ``--credentials`` (a copy of host A's registry entry; each host has a fleet
+registry of its own, as two machines do), a monitor on host B lists the fleet, and a
+credentials file naming another certificate authority is refused with one line.
+
 Addresses are the test's own: ``10.231.<n>.1/30`` and ``.2/30`` exist only
 inside the two namespaces, which are deleted (with the veth pair) in a
 ``finally``. Needs root and iproute2; skipped with the reason otherwise.
@@ -15,6 +20,7 @@ inside the two namespaces, which are deleted (with the veth pair) in a
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import shutil
@@ -28,6 +34,8 @@ from pathlib import Path
 
 import pytest
 from itest_support import ROOT, child_env, kill_all, poll, processes_mentioning
+
+from twinfleet.runtime.host.certs import fleet_authority
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
@@ -102,11 +110,14 @@ def link() -> Iterator[Link]:
 class Launch:
     """A `twinfleet launch` inside a namespace, its output in a file."""
 
-    def __init__(self, tmp: Path, ns: str, name: str, text: str, *args: str) -> None:
+    def __init__(self, tmp: Path, ns: str, name: str, text: str, *args: str,
+                 runtime_dir: Path | None = None) -> None:
         self.scenario = tmp / f"{name}.yaml"
         self.scenario.write_text(text)
         self.log = tmp / f"{name}.log"
         env = child_env()
+        if runtime_dir is not None:  # another machine: a fleet registry of its own
+            env["TWINFLEET_RUNTIME_DIR"] = str(runtime_dir)
         env["TWINFLEET_ZENOH_CONFIG_OVERRIDE"] = (f"transport/link/tx/lease={LEASE_MS};"
                                                   "transport/link/tx/keep_alive=4")
         with self.log.open("w") as sink:
@@ -184,6 +195,76 @@ nodes:
             assert not processes_mentioning(str(launch.scenario))
         lost_on_the_way = re.search(r"^\[watcher\] stopped: .*\bgaps=(\d+)", host_b.output(), re.M)
         assert lost_on_the_way and int(lost_on_the_way.group(1)) > 0  # the cut shows as gaps
+    finally:
+        for launch in (host_b, host_a):
+            if launch is not None:
+                launch.stop()
+
+
+def own_registry(tmp: Path, name: str) -> Path:
+    """A fleet registry directory for one test host (owner-only, as the registry wants)."""
+    path = tmp / name
+    path.mkdir(mode=0o700)
+    return path
+
+
+def run_in(ns: str, runtime_dir: Path, *args: str) -> subprocess.CompletedProcess[str]:
+    """`python -m twinfleet ARGS` inside namespace `ns`, with that host's registry."""
+    env = child_env()
+    env["TWINFLEET_RUNTIME_DIR"] = str(runtime_dir)
+    return subprocess.run(["ip", "netns", "exec", ns, sys.executable, "-m", "twinfleet", *args],
+                          capture_output=True, text=True, timeout=30, env=env, cwd=ROOT,
+                          check=False)
+
+
+def test_a_fleet_over_tls_with_certificates_made_by_launch(tmp_path: Path, link: Link) -> None:
+    router = f"tls/{link.addr_a}:{PORT}"
+    registry_a, registry_b = own_registry(tmp_path, "reg_a"), own_registry(tmp_path, "reg_b")
+    host_a = Launch(tmp_path, link.ns_a, "tls_a", f"""\
+name: tls_a
+fleet: xtls
+nodes:
+  - {{name: talker, class: "{NODES}:Heartbeat", params: {{period_ms: 50}}}}
+""", "--listen", router, runtime_dir=registry_a)  # no --insecure-listen: tls/ needs none
+    host_b: Launch | None = None
+    try:
+        host_a.wait_line(r"^\[talker\] t=-?\d+ started", 30)
+        entry = re.search(r"--credentials FILE, FILE a copy of (\S+)", host_a.output())
+        assert entry, host_a.output()
+        credentials = tmp_path / "xtls-credentials.json"  # copied to host B, owner-only
+        credentials.write_bytes(Path(entry.group(1)).read_bytes())
+        credentials.chmod(0o600)
+        assert "tls_ca" in credentials.read_text()
+        server_pem = Path(entry.group(1)).with_suffix(".server.pem")
+        assert server_pem.stat().st_mode & 0o777 == 0o600  # the router's key: owner-only
+
+        host_b = Launch(tmp_path, link.ns_b, "tls_b", f"""\
+name: tls_b
+fleet: xtls
+nodes:
+  - {{name: watcher, class: "{NODES}:Watcher", params: {{watch: [talker]}}}}
+""", "--connect", router, "--credentials", str(credentials), runtime_dir=registry_b)
+        host_b.wait_line(r"^\[watcher\] t=\d+ alive node='talker'", 30)
+        host_b.wait_line(r"^\[watcher\] t=\d+ heard sender='talker'", 15, after_count=2)
+
+        listed = run_in(link.ns_b, registry_b, "node", "list", "--connect", router,
+                        "--credentials", str(credentials))  # a monitor on host B
+        assert listed.returncode == 0 and "xtls:/talker" in listed.stdout, listed
+
+        wrong = json.loads(credentials.read_text())
+        wrong["extra"]["auth"]["tls_ca"] = fleet_authority("elsewhere").certificate.decode()
+        wrong_file = tmp_path / "wrong-ca.json"
+        wrong_file.write_text(json.dumps(wrong))
+        wrong_file.chmod(0o600)
+        refused = run_in(link.ns_b, registry_b, "node", "list", "--connect", router,
+                         "--credentials", str(wrong_file))
+        lines = refused.stderr.strip().splitlines()
+        assert refused.returncode != 0 and len(lines) == 1, refused
+        assert "certificate" in lines[0] and "--credentials" in lines[0], lines[0]
+        assert "Traceback" not in refused.stderr
+        for launch in (host_b, host_a):
+            launch.stop()
+            assert launch.proc.returncode == 130, launch.output()
     finally:
         for launch in (host_b, host_a):
             if launch is not None:

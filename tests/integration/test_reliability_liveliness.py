@@ -32,9 +32,9 @@ from itest_support import (
     processes_mentioning,
 )
 
+from twinfleet.runtime.access.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.contract.messages import String, encode
 from twinfleet.runtime.core.guard import sign
-from twinfleet.runtime.fleet.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, format_result, run_fleet
 from twinfleet.runtime.fleet.run_record import read_run_record
 from twinfleet.runtime.host.keys import topic_key

@@ -28,9 +28,9 @@ from tests.support import child_env, pick_free_port
 from twinfleet.nodes.ros2_mapping import GridFrame
 from twinfleet.ros2.cdr import RosTypes
 from twinfleet.ros2.wire import data_key
+from twinfleet.runtime.access.fleetauth import monitor_auth
+from twinfleet.runtime.access.registry import find_fleet
 from twinfleet.runtime.contract.messages import decode
-from twinfleet.runtime.fleet.fleetauth import monitor_auth
-from twinfleet.runtime.fleet.registry import find_fleet
 from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
 from twinfleet.runtime.scenario.examples import copy_example

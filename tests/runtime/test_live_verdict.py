@@ -122,6 +122,10 @@ LOSSY: list[tuple[NodeStatistics, str]] = [
      "counter rejected 1 samples (rejected_oversize)"),
     (NodeStatistics(rejected={Rejection.WRONG_TYPE: 4}),
      "counter rejected 4 samples (rejected_wrong_type)"),
+    (NodeStatistics(rejected={Rejection.REPLAYED: 3}),
+     "counter rejected 3 samples (rejected_replayed)"),
+    (NodeStatistics(rejected={Rejection.RECORDED: 5}),
+     "counter rejected 5 samples (rejected_recorded)"),
     (NodeStatistics(dropped_overflow=30101), "dropped 30101 samples at the transport hand-off"),
     (NodeStatistics(dropped_lossless=48), "RELIABLE (lossless) subscription"),
     (NodeStatistics(gaps=2), "lost 2 samples on reliable topics"),
@@ -144,6 +148,16 @@ def test_every_rejection_reason_is_judged():
     """A reason added to `Rejection` is judged without a change to the verdict."""
     judged = {said.rsplit("(", 1)[-1].rstrip(")") for stats, said in LOSSY if "rejected" in said}
     assert judged == {reason.counter for reason in Rejection}
+
+
+def test_recorded_input_played_into_the_fleet_is_said_first():
+    fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
+    fleet.run(300)
+    v = fleet.judge.verdict(RunEnd("timeout", statistics={"counter": NodeStatistics(played=7),
+                                                            "other": NodeStatistics()}))
+    assert v.status == Status.HOLDS, v
+    assert v.details[0] == ("recorded input was injected (twinfleet play --into-fleet): "
+                            "counter took 7 recorded samples")
 
 
 def test_statistics_that_count_no_loss_leave_the_verdict_alone():

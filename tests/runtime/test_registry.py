@@ -10,8 +10,8 @@ import sys
 
 import pytest
 
-from twinfleet.runtime.fleet import registry
-from twinfleet.runtime.fleet.registry import RegistryError, find_fleet, register, running_fleets
+from twinfleet.runtime.access import registry
+from twinfleet.runtime.access.registry import RegistryError, find_fleet, register, running_fleets
 
 
 @pytest.fixture
@@ -86,8 +86,8 @@ def test_wait_says_once_that_it_waits_and_gives_up_after_its_timeout(home, capsy
 def test_wait_finds_a_fleet_registered_while_it_waits(home):
     import threading
 
-    from twinfleet.runtime.fleet.connection import connection
-    from twinfleet.runtime.fleet.registry import unregister
+    from twinfleet.runtime.access.connection import connection
+    from twinfleet.runtime.access.registry import unregister
 
     args = type("Args", (), {"connect": None, "fleet": "demo", "credentials": None,
                              "wait": True, "wait_timeout": 10.0})()

@@ -46,7 +46,8 @@ BUSY = NodeStatistics(received=12, dropped_undecodable=1, handler_errors=2, fail
 # detail line). Every other field must make a run inconclusive.
 NOT_JUDGED = {"rejected_external", "external_input", "received", "dropped_undecodable", "handler_errors", "failures", "inbox_depth",
               "timers_pending", "published", "handled", "dropped_keep_last",
-              "dropped_best_effort", "sequence_jumps", "max_lateness_ms", "stall_threshold_ms"}
+              "dropped_best_effort", "sequence_jumps", "max_lateness_ms", "stall_threshold_ms",
+              "played"}  # played: said in the verdict's details, never inconclusive
 
 
 def test_the_wire_form_reads_back_as_the_same_record():
@@ -59,10 +60,10 @@ def test_the_wire_form_keeps_the_printed_counter_names_in_order():
     wire = BUSY.to_dict()
     assert set(wire) == WIRE_NAMES
     assert list(wire)[:3] == ["received", "dropped_undecodable", "handler_errors"]
-    assert list(wire)[-4:] == ["rejected_forged", "rejected_invalid", "rejected_oversize",
-                               "rejected_wrong_type"]
+    assert list(wire)[-6:] == ["rejected_forged", "rejected_invalid", "rejected_oversize",
+                               "rejected_wrong_type", "rejected_replayed", "rejected_recorded"]
     assert BUSY.line().startswith("received=12 dropped_undecodable=1 handler_errors=2 ")
-    assert BUSY.line().endswith(" rejected_oversize=19 rejected_wrong_type=20")
+    assert " rejected_oversize=19 rejected_wrong_type=20 " in BUSY.line()
 
 
 def test_an_unknown_counter_is_refused_not_ignored():
@@ -106,7 +107,8 @@ def test_a_payload_that_is_not_msgpack_is_refused():
 def test_rejections_are_keyed_by_reason_and_always_complete():
     partial = NodeStatistics(rejected={Rejection.OVERSIZE: 2})
     assert dict(partial.rejected) == {Rejection.FORGED: 0, Rejection.INVALID: 0,
-                                      Rejection.OVERSIZE: 2, Rejection.WRONG_TYPE: 0}
+                                      Rejection.OVERSIZE: 2, Rejection.WRONG_TYPE: 0,
+                                      Rejection.REPLAYED: 0, Rejection.RECORDED: 0}
     with pytest.raises(TypeError):
         partial.rejected[Rejection.FORGED] = 1  # type: ignore[index]
     with pytest.raises(StatisticsError, match="Rejection members"):

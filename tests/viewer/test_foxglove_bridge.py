@@ -25,7 +25,7 @@ import time
 import aiohttp
 import pytest
 from foxglove_support import decode_protobuf
-from viewer_support import ROOT, free_port, poll
+from viewer_support import ROOT, free_port, poll, printed_url
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
@@ -106,7 +106,7 @@ def test_foxglove_protocol_client_gets_map_robots_and_scan_from_live_c1a(cli):
         cli("launch", str(ROOT / "twinfleet" / "launch" / "c1a.yaml"), "--time-scale", "10", "--listen",
             endpoint, log="fleet.log")
 
-    seen = asyncio.run(_collect(f"ws://127.0.0.1:{port}/", launch, 60))
+    seen = asyncio.run(_collect(printed_url(bridge.log), launch, 60))
     assert seen["grid"] is not None, bridge.log.read_text()
     grid = seen["grid"]
     assert grid.frame_id == "map" and grid.column_count == 50 and len(grid.data) == 2500
@@ -131,5 +131,5 @@ def test_a_late_foxglove_client_still_gets_the_map(cli):
     bridge = cli("foxglove", "--connect", endpoint, "--fleet", "c1a", "--port", str(port),
                  log="foxglove.log")
     poll(lambda: "open connection ws://" in bridge.log.read_text(), 20, "the Foxglove server")
-    seen = asyncio.run(_collect(f"ws://127.0.0.1:{port}/", lambda: None, 20))
+    seen = asyncio.run(_collect(printed_url(bridge.log), lambda: None, 20))
     assert seen["grid"] is not None and seen["grid"].column_count == 50

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import re
 
 import aiohttp
 import pytest
@@ -38,7 +39,8 @@ def test_each_subprotocol_name_against_the_bridge_and_its_help(cli):
     bridge = cli("foxglove", "--connect", f"tcp/127.0.0.1:{free_port()}", "--fleet", "nobody",
                  "--port", str(port), log="foxglove.log")
     poll(lambda: "open connection ws://" in bridge.log.read_text(), 20, "the Foxglove server")
-    url = f"ws://127.0.0.1:{port}/"
+    # the printed URL: the server answers only requests that carry its per-run token
+    url = re.search(r"ws://\S+", bridge.log.read_text()).group()
 
     chosen, first = asyncio.run(_handshake(url, [CURRENT]))
     assert chosen == CURRENT and isinstance(first, dict) and first["op"] == "serverInfo"

@@ -14,7 +14,7 @@ import time
 from pathlib import Path
 
 import pytest
-from viewer_support import ARTIFACTS, ROOT, free_port, get_json, poll
+from viewer_support import ARTIFACTS, ROOT, api, free_port, get_json, poll, printed_url
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(80)]
 
@@ -47,9 +47,9 @@ def browser_page(tmp_path):
 
 def _start_viewer(cli, *args: str) -> str:
     port = free_port()
-    cli("view", "--port", str(port), *args, log="viewer.log")
-    url = f"http://127.0.0.1:{port}/"
-    poll(lambda: get_json(url + "api/info"), 15, "the viewer's HTTP server")
+    viewer = cli("view", "--port", str(port), *args, log="viewer.log")
+    url = printed_url(viewer.log)  # the page opens with the URL the viewer printed (its token)
+    poll(lambda: get_json(api(url, "api/info")), 15, "the viewer's HTTP server")
     return url
 
 
@@ -111,7 +111,7 @@ def test_viewer_shows_the_live_c1a_fleet_moving(cli, browser_page):
     except Exception:  # say what the page had instead
         seen = page.evaluate("() => [twinfleetView.ended, Object.fromEntries(Object.entries("
                              "twinfleetView.robots).map(([n, r]) => [n, r.row]))]")
-        state = get_json(url + "api/state") or {}
+        state = get_json(api(url, "api/state")) or {}
         server = {n: r.get("row") for n, r in state.get("robots", {}).items()}
         pytest.fail(f"the page did not show the end with every robot arrived: {seen}; "
                     f"the viewer's state: {state.get('ended')}, {server}")

@@ -16,9 +16,9 @@ import time
 import aiohttp
 import pytest
 import zenoh
-from viewer_support import ROOT, free_port, get_json, poll
+from viewer_support import ROOT, api, free_port, get_json, poll, printed_url
 
-from twinfleet.runtime.fleet.fleetauth import login_settings, registry_auth
+from twinfleet.runtime.access.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
 from twinfleet.runtime.scenario.scenes import load_scene
 from twinfleet.runtime.scenario.spec import load_scenario
@@ -41,7 +41,7 @@ def _open_when_up(endpoint: str) -> zenoh.Session:
 
 
 async def _websocket_snapshot(url: str) -> dict:
-    async with aiohttp.ClientSession() as http, http.ws_connect(url + "ws") as ws:
+    async with aiohttp.ClientSession() as http, http.ws_connect(api(url, "ws")) as ws:
         return await asyncio.wait_for(ws.receive_json(), timeout=5)
 
 
@@ -57,9 +57,10 @@ def test_late_viewer_receives_the_latched_map(cli):
         subs.append(session.declare_subscriber("twinfleet/c1a/map", late_maps.append))
         port = free_port()
         joined = time.monotonic()
-        cli("view", "--connect", endpoint, "--fleet", "c1a", "--port", str(port), log="viewer.log")
-        url = f"http://127.0.0.1:{port}/"
-        state = poll(lambda: (s := get_json(url + "api/state")) and s["map"] and s, 15,
+        viewer = cli("view", "--connect", endpoint, "--fleet", "c1a", "--port", str(port),
+                     log="viewer.log")
+        url = printed_url(viewer.log)
+        state = poll(lambda: (s := get_json(api(url, "api/state"))) and s["map"] and s, 15,
                      "the late viewer to receive /map")
         print(f"late viewer had the map {time.monotonic() - joined:.2f} s after it started")
         scenario = load_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml")

@@ -1,4 +1,4 @@
-"""A viewer left open follows a fleet launched again on the same endpoint.
+"""A viewer (and a recording) left open follows a fleet launched again on the same endpoint.
 
 Each launch gives the fleet new credentials (README "Trust model"); the viewer's
 session, opened with the first run's read-only login, kept reconnecting with it
@@ -15,7 +15,7 @@ import time
 from pathlib import Path
 
 import pytest
-from viewer_support import ROOT, child_env, free_port, get_json, poll
+from viewer_support import ROOT, api, child_env, free_port, get_json, poll, printed_url
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
@@ -69,8 +69,9 @@ def test_a_viewer_follows_the_fleet_launched_again(cli, tmp_path):
         for i in (1, 2, 3)) + "live: {timeout_s: 3}\n")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     port = free_port()
-    cli("view", "--port", str(port), "--connect", endpoint, "--fleet", "walk", log="viewer.log")
-    url = f"http://127.0.0.1:{port}/api/state"
+    viewer = cli("view", "--port", str(port), "--connect", endpoint, "--fleet", "walk",
+                 log="viewer.log")
+    url = api(printed_url(viewer.log), "api/state")
     poll(lambda: get_json(url), 15, "the viewer's HTTP server")
     for run in (1, 2):
         _launch(scenario, endpoint)
@@ -91,3 +92,32 @@ def _poses(state: dict | None) -> int | None:
 
 def _trails(state: dict) -> dict[str, list]:
     return {name: robot["trail"]["items"] for name, robot in state.get("robots", {}).items()}
+
+
+def test_a_recording_follows_the_fleet_launched_again(cli, tmp_path):
+    import msgpack
+    from mcap.reader import make_reader
+
+    (tmp_path / "walkers.py").write_text(WALKERS.format(steps=STEPS))
+    scenario = tmp_path / "walk.yaml"
+    scenario.write_text("name: walk\nnodes:\n" + "".join(
+        f'  - {{name: w{i}, class: "walkers:Walker", params: {{row: {i}}}}}\n'
+        for i in (1, 2, 3)) + "live: {timeout_s: 3}\n")
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    first = cli("launch", str(scenario), "--listen", endpoint, log="first.log")
+    poll(lambda: first.log.read_text().count("started") >= 3, 30, "the first run's nodes")
+    out = tmp_path / "both.mcap"
+    recorder = cli("record", "--connect", endpoint, "--fleet", "walk", "-o", str(out),
+                   log="record.log")
+    poll(lambda: first.poll() is not None, 30, "the first run's end")
+    _launch(scenario, endpoint)  # new credentials, same endpoint
+    recorder.send_signal(2)
+    recorder.wait(timeout=20)
+    assert "wrote" in recorder.log.read_text(), recorder.log.read_text()
+    stamps = []
+    with out.open("rb") as f:
+        for _schema, channel, message in make_reader(f).iter_messages(log_time_order=True):
+            if channel.topic == "/poses":
+                stamps.append(msgpack.unpackb(message.data)["stamp_ms"])
+    restart = max(i for i in range(1, len(stamps)) if stamps[i] < stamps[i - 1] - 500)
+    assert len(stamps) - restart == 3 * STEPS, stamps  # every pose of the second run

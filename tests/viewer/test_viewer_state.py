@@ -11,6 +11,7 @@ import msgpack
 import pytest
 from aiohttp import test_utils
 from mcap.reader import make_reader
+from viewer_support import api
 
 from twinfleet.cli import main
 from twinfleet.nodes.msgs import (
@@ -263,7 +264,7 @@ def test_the_live_header_names_the_registry_without_a_frozen_waiting_word():
                                          ready=ready.set_result, stop=stop))
         try:
             url = await asyncio.wait_for(ready, 10)
-            async with aiohttp.ClientSession() as http, http.get(url + "api/info") as reply:
+            async with aiohttp.ClientSession() as http, http.get(api(url, "api/info")) as reply:
                 return await reply.json()
         finally:
             stop.set()

@@ -6,11 +6,13 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import re
 import signal
 import subprocess
 import time
 import urllib.request
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -54,3 +56,18 @@ def get_json(url: str) -> Any:
             return json.load(reply)
     except OSError:
         return None
+
+
+_PRINTED_URL = re.compile(r"\b(?:http|ws)://127\.0\.0\.1:\d+/\?token=[\w-]+")
+
+
+def printed_url(log: Path, timeout: float = 20.0) -> str:
+    """The URL (with its per-run token) a `view` or `foxglove` server printed into `log`."""
+    return poll(lambda: (m := _PRINTED_URL.search(log.read_text(errors="replace"))) and m.group(0),
+                timeout, f"the server's URL in {log.name}")
+
+
+def api(url: str, path: str) -> str:
+    """`path` on the server of a printed `url`, with the same token."""
+    base, _, query = url.partition("?")
+    return f"{base}{path}?{query}"

@@ -33,8 +33,8 @@ from twinfleet import QOS_DEFAULT, String
 from twinfleet.nodes.mapfile import load_map
 from twinfleet.nodes.msgs import Collision, RobotStatus
 from twinfleet.nodes.report import FleetReport
+from twinfleet.runtime.access.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.contract.messages import encode
-from twinfleet.runtime.fleet.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, free_port, run_fleet
 from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config

@@ -17,7 +17,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
-from twinfleet.runtime.fleet.connection import (
+from twinfleet.runtime.access.connection import (
     CommandError,
     Connection,
     add_connection_arguments,
@@ -160,7 +160,7 @@ def interface_export_command(args: argparse.Namespace) -> int:
     _need_libraries()
     from twinfleet.ros2.interfaces import InterfaceError, write_package
     from twinfleet.ros2.live import fleet_interfaces
-    from twinfleet.runtime.fleet.connection import import_modules
+    from twinfleet.runtime.access.connection import import_modules
 
     import_modules(args.module or ["twinfleet.nodes.msgs"])
     interfaces = fleet_interfaces()
@@ -187,7 +187,7 @@ def print_ros_graph(conn: Connection, domain: int, what: str, *, types: bool = F
     import zenoh
 
     from twinfleet.ros2.graph_list import graph_lines, ros_graph
-    from twinfleet.runtime.fleet.connection import zenoh_conf
+    from twinfleet.runtime.access.connection import zenoh_conf
 
     with zenoh.open(zenoh_conf(conn.endpoint, conn.auth)) as session:
         graph = ros_graph(session, domain, timeout_s)
@@ -211,7 +211,7 @@ def ros_echo(conn: Connection, domain: int, topic: str, *, count: int | None = N
     from twinfleet.ros2.cdr import MessageError
     from twinfleet.ros2.live import fleet_interfaces
     from twinfleet.ros2.wire import WireError, ros_type_name
-    from twinfleet.runtime.fleet.connection import zenoh_conf
+    from twinfleet.runtime.access.connection import zenoh_conf
 
     types = fleet_interfaces().types  # standard types and the bridge's by-fields ones
     samples: queue.Queue[tuple[str, bytes]] = queue.Queue()

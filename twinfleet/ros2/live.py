@@ -23,7 +23,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import sys
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, TextIO
 
@@ -41,9 +41,9 @@ from twinfleet.ros2.mapping import (
     load_mapping,
     mapping_of_scene,
 )
+from twinfleet.runtime.access.fleetauth import MonitorAuth
 from twinfleet.runtime.contract.messages import encode, registered_types
-from twinfleet.runtime.core.guard import Rejected, check_message, sign
-from twinfleet.runtime.fleet.fleetauth import MonitorAuth
+from twinfleet.runtime.core.guard import Rejected, check_message, signer
 from twinfleet.runtime.host.keys import (
     KeyKind,
     fleet_key,
@@ -96,6 +96,8 @@ class Forwarder:
         self.now_ms = 0  # fleet time: the latest stamp the bridge heard from the fleet
         self.forwarded = 0
         self._seq: dict[str, int] = {}
+        # one signer per key: one sender id, numbers 0, 1, ... as the nodes' replay windows expect
+        self._signers: dict[str, Callable[[bytes], bytes | None]] = {}
 
     def forward(self, ros_topic: str, ros_type: str,
                 fields: Mapping[str, Any]) -> tuple[str, bytes, bytes] | None:
@@ -117,7 +119,8 @@ class Forwarder:
         payload = encode(msg, stamp_ms=self.now_ms, seq=seq, sender=SENDER)
         key = topic_key(self.fleet, fleet_topic)
         self.forwarded += 1
-        return key, payload, sign(self.bridge_key, key, payload)
+        attach = self._signers.setdefault(key, signer(self.bridge_key, key))
+        return key, payload, attach(payload)
 
 
 @dataclass

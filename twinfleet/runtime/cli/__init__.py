@@ -7,4 +7,5 @@ __all__ = [
     "commands",
     "recording_commands",
     "render",
+    "viewer_commands",
 ]

@@ -10,9 +10,10 @@
 
 SCENARIO is a scenario file or the name of a shipped example (`twinfleet examples`
 lists them). Monitors find the fleet in the fleet registry unless --connect is
-given (`runtime.fleet.connection.connection`). `register(subparsers)` adds the commands to
+given (`runtime.access.connection.connection`). `register(subparsers)` adds the commands to
 the `twinfleet` command line (`twinfleet.cli`); `record`, `play`, `export` and
-`bag` come from `runtime.cli.recording_commands`. Every command imports its engine
+`bag` come from `runtime.cli.recording_commands`, `view` and `foxglove` from
+`runtime.cli.viewer_commands`. Every command imports its engine
 when it runs.
 """
 
@@ -23,8 +24,7 @@ import asyncio
 import sys
 from typing import Any
 
-from twinfleet.runtime.cli import recording_commands
-from twinfleet.runtime.fleet.connection import (
+from twinfleet.runtime.access.connection import (
     CommandError,
     add_connection_arguments,
     add_message_arguments,
@@ -33,6 +33,7 @@ from twinfleet.runtime.fleet.connection import (
     import_modules,
     need_fleet,
 )
+from twinfleet.runtime.cli import recording_commands, viewer_commands
 from twinfleet.runtime.scenario.overrides import add_override_arguments, override_words
 
 
@@ -44,27 +45,19 @@ def register(sub: argparse._SubParsersAction) -> None:
     _node_parser(sub)
     _param_parser(sub)
     _interface_parser(sub)
-    _view_parser(sub)
     _examples_parser(sub)
-    _foxglove_parser(sub)
     recording_commands.register(sub)
+    viewer_commands.register(sub)
 
 
 def cmd_launch(args: argparse.Namespace) -> int:
     """`twinfleet launch`: validate, run the fleet `--runs` times, print summaries."""
-    from twinfleet.runtime.fleet.fleetauth import CredentialsError, listen_problem, read_credentials
     from twinfleet.runtime.scenario.overrides import load_with_params
     from twinfleet.runtime.scenario.property_fields import check_property_fields
     from twinfleet.runtime.scenario.spec import ScenarioError
 
     params = launch_params(args)
-    problem = listen_problem(args.listen, insecure=args.insecure_listen) if args.listen else None
-    if problem:
-        raise CommandError(problem)
-    try:
-        auth = read_credentials(args.credentials)[1] if args.credentials else None
-    except CredentialsError as exc:
-        raise CommandError(str(exc)) from None
+    auth = _launch_access(args)
     try:
         scenario = load_with_params(args.scenario, params)
         check_property_fields(scenario)  # a misspelt field stops here, before any process
@@ -92,14 +85,15 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                            run_record=args.record_run,
                                            record_events=_events_path(args, run),
                                            params=params, auth=auth,
-                                           bridge=bridge is not None, driver=bridge))
+                                           bridge=bridge is not None, driver=bridge,
+                                           accept_recorded=args.accept_recorded))
         except FleetConflict as exc:
             raise CommandError(str(exc)) from None
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
             print(f"error: {exc}", file=sys.stderr)
             return 2
         except (OSError, zenoh.ZError) as exc:  # e.g. a --listen port in use
-            raise CommandError(router_error(args, exc)) from None
+            raise CommandError(router_error(args, exc, auth)) from None
         for line in format_result(result):
             print(f"[launcher] {line}", flush=True)
         worst = _worse(worst, result.exit_code)
@@ -110,6 +104,24 @@ def cmd_launch(args: argparse.Namespace) -> int:
         print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "
               f"{args.runs - passed}/{args.runs} failed", flush=True)
     return worst
+
+
+def _launch_access(args: argparse.Namespace) -> Any:
+    """The credentials a launch joins with (`--credentials`), after refusing a --listen
+    address that would expose the fleet unencrypted."""
+    from twinfleet.runtime.access.fleetauth import (
+        CredentialsError,
+        listen_problem,
+        read_credentials,
+    )
+
+    problem = listen_problem(args.listen, insecure=args.insecure_listen) if args.listen else None
+    if problem:
+        raise CommandError(problem)
+    try:
+        return read_credentials(args.credentials)[1] if args.credentials else None
+    except CredentialsError as exc:
+        raise CommandError(str(exc)) from None
 
 
 def _ros2_driver(args: argparse.Namespace, scenario: Any) -> Any:
@@ -172,13 +184,14 @@ def launch_params(args: argparse.Namespace) -> list[str]:
         raise CommandError(str(exc)) from None
 
 
-def router_error(args: argparse.Namespace, exc: Exception) -> str:
+def router_error(args: argparse.Namespace, exc: Exception, auth: Any = None) -> str:
     """One line for a router that cannot be opened or joined (e.g. a --listen port in use)."""
-    from twinfleet.runtime.fleet.connection import zenoh_error_text
+    from twinfleet.runtime.access.connection import unreachable_hint, zenoh_error_text
 
     where = f"--connect {args.connect}" if args.connect else (
         f"--listen {args.listen}" if args.listen else "the embedded router")
-    return f"cannot open {where}: {zenoh_error_text(exc)}"
+    hint = f" ({unreachable_hint(args.connect, auth)})" if args.connect else ""
+    return f"cannot open {where}: {zenoh_error_text(exc)}{hint}"
 
 
 def _events_path(args: argparse.Namespace, run: int) -> str | None:
@@ -307,53 +320,6 @@ def cmd_interface(args: argparse.Namespace) -> int:
     return graph_verbs.interface_list(conn, out=sys.stdout, timeout_s=args.query_timeout)
 
 
-def cmd_view(args: argparse.Namespace) -> int:
-    """`twinfleet view`: serve the live viewer (or a trace) on 127.0.0.1."""
-    from twinfleet.runtime.tools.view.viewer import run_viewer
-
-    connect, fleet = args.connect, args.fleet
-    if args.trace is None and not connect:
-        from twinfleet.runtime.fleet.registry import running_fleets
-
-        if any(fleet in ("*", e.fleet) for e in running_fleets()):
-            conn = connection(args)  # one fleet: that one; several: the one-line question
-            connect, fleet = conn.endpoint, conn.fleet
-    try:
-        return run_viewer(connect=connect, fleet=fleet, port=args.port, trace_path=args.trace)
-    except (ValueError, KeyError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
-        return 2
-
-
-def cmd_foxglove(args: argparse.Namespace) -> int:
-    """`twinfleet foxglove`: a Foxglove WebSocket server showing the fleet."""
-    from twinfleet.runtime.tools.view.foxglove_bridge import run_foxglove
-
-    conn = connection(args)
-    try:
-        return run_foxglove(conn.endpoint, conn.fleet, port=args.port)
-    except RuntimeError as exc:  # the SDK's server could not bind the port
-        raise CommandError(f"foxglove: cannot serve on 127.0.0.1:{args.port}: {exc}") from None
-
-
-def _foxglove_parser(sub: argparse._SubParsersAction) -> None:
-    text = ("serve the live fleet to Foxglove (WebSocket, subprotocol foxglove.sdk.v1): the map "
-            "as a grid, robots as scene entities, scans as point clouds, every topic as JSON")
-    p = sub.add_parser("foxglove", help=text, description=text[0].upper() + text[1:] + ". In "
-                       "Foxglove: Open connection, ws://127.0.0.1:PORT; the 3D panel draws the "
-                       "fleet in frame 'map' with no configuration. The server is foxglove-sdk's, "
-                       "which accepts only the subprotocol name foxglove.sdk.v1 (offered by "
-                       "current Foxglove releases); a client that offers only the older name "
-                       "foxglove.websocket.v1 (older Foxglove and Lichtblick builds) is refused "
-                       "at the handshake (HTTP 400).")
-    p.add_argument("--port", type=int, default=None, metavar="P",
-                   help="TCP port on 127.0.0.1; 0 picks a free one (default: 8765, Foxglove's "
-                        "usual one, or a free one when 8765 is taken: the URL is printed)")
-    add_connection_arguments(p)
-    add_wait_arguments(p, "serve it once its router is found")
-    p.set_defaults(func=cmd_foxglove)
-
-
 def _launch_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("launch", help="run a scenario live: a router plus one process per node",
                        description="Run a scenario live: an embedded Zenoh router plus one process "
@@ -368,7 +334,9 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--time-scale", type=float, default=None, metavar="K",
                    help="run fleet time K times faster than wall time (default: live.time_scale or 1)")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
-                   help="end the run after S wall seconds (default: live.timeout_s, else never)")
+                   help="end the run S wall seconds after every node is alive (the fleet's "
+                        "epoch; default: live.timeout_s, else never); a fleet not up within "
+                        "60 s ends INCONCLUSIVE")
     p.add_argument("--seed", type=int, default=None, help="fleet seed (default: the scenario's)")
     p.add_argument("--runs", type=int, default=1, metavar="N",
                    help="run the fleet N times with seeds S, S+1, ... (default: 1)")
@@ -382,6 +350,10 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                    help="with --connect: join the fleet whose registry entry FILE is (copied "
                         "from the machine that launched it, owner-only): its key signs this "
                         "launch's nodes (default: this machine's registry entry for EP)")
+    p.add_argument("--accept-recorded", action="store_true",
+                   help="let the nodes take recorded input that `twinfleet play --into-fleet` "
+                        "injects (signed as recorded; the result then says so); without it "
+                        "they drop and count it (rejected_recorded)")
     p.add_argument("--insecure-listen", action="store_true",
                    help="allow --listen on a plain tcp/udp endpoint reachable from other "
                         "machines: the fleet's traffic then crosses the network unencrypted")
@@ -546,16 +518,3 @@ def _interface_parser(sub: argparse._SubParsersAction) -> None:
     made["export"].add_argument("--package", default="twinfleet_msgs",
                                 help="the package (and type prefix) to export (default: "
                                      "%(default)s)")
-
-
-def _view_parser(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("view", help="web page on 127.0.0.1 showing a live fleet, or stepping "
-                                    "through a checker trace")
-    p.add_argument("--port", type=int, default=8765, metavar="P",
-                   help="TCP port of the page on 127.0.0.1; 0 picks a free one (default: %(default)s)")
-    p.add_argument("--trace", default=None, metavar="FILE",
-                   help="step through this checker trace JSON (from `twinfleet check --trace-out`) "
-                        "instead of watching a live fleet")
-    add_connection_arguments(p, fleet_help="fleet to show; '*' shows the first fleet whose data "
-                             "arrives")
-    p.set_defaults(func=cmd_view)

@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
-from twinfleet.runtime.fleet.connection import (
+from twinfleet.runtime.access.connection import (
     CommandError,
     add_connection_arguments,
     add_wait_arguments,
@@ -43,7 +43,7 @@ def cmd_record(args: argparse.Namespace) -> int:
             conn = _joined(args)
             result, rec = None, asyncio.run(recorder.record_live(
                 conn.endpoint, conn.fleet, args.output, duration_s=args.duration,
-                handle_signals=True, auth=conn.auth))
+                handle_signals=True, auth=conn.auth if args.credentials else None))
         else:
             result, rec = asyncio.run(recorder.record_scenario(
                 load_scenario(args.scenario), args.output, time_scale=args.time_scale,
@@ -73,9 +73,9 @@ def cmd_play(args: argparse.Namespace) -> int:
     """`twinfleet play`: re-publish a recording onto Zenoh (module docstring)."""
     import zenoh
 
-    from twinfleet.runtime.fleet import registry
-    from twinfleet.runtime.fleet.connection import zenoh_error_text
-    from twinfleet.runtime.fleet.fleetauth import login_settings, registry_auth
+    from twinfleet.runtime.access import registry
+    from twinfleet.runtime.access.connection import zenoh_error_text
+    from twinfleet.runtime.access.fleetauth import login_settings, registry_auth
     from twinfleet.runtime.fleet.launcher import free_port
     from twinfleet.runtime.host.zenoh_transport import zenoh_config
     from twinfleet.runtime.tools.record.bag import RecordingError, check_readable, read_summary
@@ -86,6 +86,8 @@ def cmd_play(args: argparse.Namespace) -> int:
         check_readable(args.file)
     except RecordingError as exc:
         raise CommandError(str(exc)) from None
+    if args.into_fleet:
+        return _play_into_fleet(args)
     listen = args.listen or (None if args.connect else f"tcp/127.0.0.1:{free_port()}")
     if listen:
         def make_config():  # noqa: ANN202 - zenoh imported lazily
@@ -107,6 +109,32 @@ def cmd_play(args: argparse.Namespace) -> int:
         raise CommandError(f"play: cannot open {where}: {zenoh_error_text(exc)}") from None
     finally:
         registry.unregister(entry)
+
+
+def _play_into_fleet(args: argparse.Namespace) -> int:
+    """`play --into-fleet`: join the running fleet (--connect, --credentials or the registry)
+    with its operator login, and sign every message as recorded input with its key."""
+    import zenoh
+
+    from twinfleet.runtime.access.connection import zenoh_conf, zenoh_error_text
+    from twinfleet.runtime.tools.record.recorder import play
+
+    if args.listen:
+        raise CommandError("play --into-fleet joins a running fleet: give --connect EP (or "
+                           "nothing: the fleet running here), not --listen")
+    conn = connection(args)
+    if conn.auth.key is None or conn.auth.operator is None:
+        raise CommandError(f"play --into-fleet: no credentials for the fleet at {conn.endpoint} "
+                           "(launched on another machine? pass --credentials FILE, a copy of "
+                           "its registry entry)")
+    fleet = None if conn.fleet == "*" else conn.fleet
+    print(f"[play] into fleet {conn.fleet!r} at {conn.endpoint}, signed as recorded input "
+          "(taken only by a fleet launched with --accept-recorded)", flush=True)
+    try:
+        return play(lambda: zenoh_conf(conn.endpoint, conn.auth, write=True), args.file,
+                    rate=args.rate, fleet=fleet, wait_s=args.wait, key=conn.auth.key)
+    except zenoh.ZError as exc:
+        raise CommandError(f"play: cannot join {conn.endpoint}: {zenoh_error_text(exc)}") from None
 
 
 def cmd_bag(args: argparse.Namespace) -> int:
@@ -177,6 +205,11 @@ def _add_record(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--fleet", default=os.environ.get("TWINFLEET_FLEET", "*"),
                    help="with --connect: the fleet to record, '*' for every fleet "
                         "(default: $TWINFLEET_FLEET or %(default)s)")
+    r.add_argument("--credentials", metavar="FILE",
+                   default=os.environ.get("TWINFLEET_CREDENTIALS"),
+                   help="with --connect: the fleet's credentials, a copy of its fleet registry "
+                        "entry (owner-only JSON; default: $TWINFLEET_CREDENTIALS, else this "
+                        "machine's registry, read again when the fleet is launched again)")
     r.add_argument("--time-scale", type=float, default=None, metavar="K",
                    help="with a SCENARIO: run fleet time K times faster (default: live.time_scale or 1)")
     r.add_argument("--seed", type=int, default=None,
@@ -203,6 +236,11 @@ def _add_play(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--wait", type=float, default=2.0, metavar="S",
                    help="wait up to S seconds for a subscriber to match before playing "
                         "(default: %(default)s)")
+    p.add_argument("--into-fleet", action="store_true",
+                   help="inject the recording into a running fleet on purpose: join it with "
+                        "its credentials and sign every message as recorded input, which "
+                        "only a fleet launched with --accept-recorded takes (its result then "
+                        "says so); without this flag a fleet drops what play publishes")
     add_connection_arguments(p, fleet_help="publish into this fleet; '*' keeps the recorded fleet")
     p.set_defaults(func=cmd_play)
     p.description = ("Re-publish a recording at its recorded pace. Without --connect, play is "

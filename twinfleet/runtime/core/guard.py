@@ -5,8 +5,10 @@ launcher. Each launch draws a fresh *fleet key* (32 random bytes) and hands it
 to its nodes in the environment (``TWINFLEET_FLEET_KEY``, hex; never on a
 command line, which other users can read in ``ps``) and to the owner's monitors
 through the owner-only fleet registry. Every sample a fleet member publishes
-carries, as its Zenoh attachment, ``HMAC-SHA256(key, key_expr NUL payload)``
-cut to 16 bytes; binding the key expression stops a captured ``/r1/status``
+carries, as its Zenoh attachment, a tag and a *stamp*: the stamp is the sender's
+role, its sender id (64 random bits drawn once per publisher) and a sequence number
+(one more per sample); the tag is ``HMAC-SHA256(key, key_expr NUL stamp payload)``
+cut to 16 bytes. Binding the key expression stops a captured ``/r1/status``
 being replayed as a ``/collisions``. A receiver with the key drops and counts
 (``rejected_forged``) any sample whose tag is missing or wrong, before it is
 decoded, so nothing an outsider publishes reaches a handler, the run report or
@@ -18,6 +20,20 @@ signs with. A node accepts a sample signed with it only on the topics its class
 declares ``external_topics`` (a robot's ``goal``), and counts it (``external_input``):
 the bridge cannot pose as a fleet node (it does not sign with the fleet key, and its
 key opens no other topic), and the live verdict says the run took external input.
+
+Replays. A holder of a login (an insider, or a captured sample) could still send a
+signed sample again. Each subscription keeps a `ReplayWindow`: per (key expression,
+sender id), the highest sequence number seen and which of the `WINDOW` before it
+arrived; a sample whose number was seen, or is older than the window, is dropped and
+counted (``rejected_replayed``). The stamp is signed, so a replayed sample cannot be
+renumbered. A receiver that meets a sender id for the first time takes its first
+sample as new (it cannot know what it missed), so one replay per sender may reach a
+receiver that joins after the sender started; never more, and never twice.
+
+Roles. The stamp's role says who signed: a fleet member (`Role.MEMBER`), or
+``twinfleet play --into-fleet`` injecting recorded input (`Role.RECORDED`), which a
+node accepts only when its fleet was launched to (``--accept-recorded``) and
+otherwise drops and counts (``rejected_recorded``).
 
 Bounds. A sample larger than its topic's limit is dropped and counted
 (``rejected_oversize``) before it is copied or decoded; the default limit is
@@ -35,13 +51,17 @@ from __future__ import annotations
 import dataclasses
 import hmac
 import inspect
+import itertools
 import math
 import os
 import secrets
+import struct
+import threading
 import types
 import typing
 from collections.abc import Callable, Mapping
-from typing import Any, Final, final
+from enum import IntEnum, unique
+from typing import Any, Final, NamedTuple, final
 
 from twinfleet.runtime.contract.messages import DecodeError
 from twinfleet.runtime.core.statistics import Rejection
@@ -51,6 +71,26 @@ BRIDGE_KEY_ENV: Final = "TWINFLEET_BRIDGE_KEY"
 TAG_BYTES: Final = 16
 DEFAULT_LIMIT: Final = 256 * 1024  # bytes: far above any pose, scan, path or status
 _SEP: Final = b"\0"
+_STAMP: Final = struct.Struct(">BQQ")  # role, sender id, sequence number
+ATTACHMENT_BYTES: Final = TAG_BYTES + _STAMP.size
+WINDOW: Final = 1024  # sequence numbers a `ReplayWindow` remembers per sender
+_SENDERS: Final = 4096  # sender ids a `ReplayWindow` remembers (the oldest go first)
+
+
+@unique
+class Role(IntEnum):
+    """Who signed a sample (module docstring)."""
+
+    MEMBER = 0  # a node, the launcher, the owner's operator commands
+    RECORDED = 1  # `twinfleet play --into-fleet`: recorded input injected on purpose
+
+
+class Stamp(NamedTuple):
+    """The signed part of an attachment besides the payload: who sent it and its number."""
+
+    role: Role
+    sender: int
+    sequence: int
 
 Check = Callable[[Any], None]
 
@@ -87,22 +127,86 @@ def key_from_env(env: Mapping[str, str] | None = None, name: str = KEY_ENV) -> b
         raise ValueError(f"{name} must be hex, got {len(text)} other characters") from None
 
 
-def sign(key: bytes, key_expr: str, payload: bytes) -> bytes:
-    """The attachment that proves `payload` on `key_expr` comes from a holder of `key`."""
-    return hmac.digest(key, key_expr.encode() + _SEP + payload, "sha256")[:TAG_BYTES]
+def _tag(key: bytes, key_expr: bytes, stamp: bytes, payload: bytes) -> bytes:
+    return hmac.digest(key, key_expr + _SEP + stamp + payload, "sha256")[:TAG_BYTES]
+
+
+def sign(key: bytes, key_expr: str, payload: bytes, role: Role = Role.MEMBER) -> bytes:
+    """The attachment of one sample on `key_expr` from a holder of `key`: a sender of its
+    own (a fresh sender id), number 0. A stream of samples takes a `signer`."""
+    stamp = _STAMP.pack(role, secrets.randbits(64), 0)
+    return _tag(key, key_expr.encode(), stamp, payload) + stamp
+
+
+def opened(key: bytes, key_expr: str, payload: bytes, attachment: bytes | None) -> Stamp | None:
+    """The stamp of `attachment` if it proves `payload` on `key_expr` comes from a holder of
+    `key` (compared in constant time), else None."""
+    if attachment is None or len(attachment) != ATTACHMENT_BYTES:
+        return None
+    tag, stamp = attachment[:TAG_BYTES], attachment[TAG_BYTES:]
+    if not hmac.compare_digest(_tag(key, key_expr.encode(), stamp, payload), tag):
+        return None
+    role, sender, sequence = _STAMP.unpack(stamp)
+    try:
+        return Stamp(Role(role), sender, sequence)
+    except ValueError:  # a role this version does not know
+        return None
 
 
 def authentic(key: bytes, key_expr: str, payload: bytes, tag: bytes | None) -> bool:
-    """True when `tag` is `sign(key, key_expr, payload)` (compared in constant time)."""
-    return tag is not None and hmac.compare_digest(sign(key, key_expr, payload), tag)
+    """True when `tag` is a valid attachment of `payload` on `key_expr` under `key`."""
+    return opened(key, key_expr, payload, tag) is not None
 
 
-def signer(key: bytes | None, key_expr: str) -> Callable[[bytes], bytes | None]:
-    """A function payload → attachment for one key expression (None without a key)."""
+def signer(key: bytes | None, key_expr: str,
+           role: Role = Role.MEMBER) -> Callable[[bytes], bytes | None]:
+    """A function payload → attachment for one sender on one key expression: one sender id,
+    numbers 0, 1, 2, ... (None without a key)."""
     if key is None:
         return lambda _payload: None
-    prefix = key_expr.encode() + _SEP
-    return lambda payload: hmac.digest(key, prefix + payload, "sha256")[:TAG_BYTES]
+    prefix, sender = key_expr.encode() + _SEP, secrets.randbits(64)
+    numbers = itertools.count()  # next() is atomic: publishers may share a signer
+    pack = _STAMP.pack
+
+    def attach(payload: bytes) -> bytes:
+        stamp = pack(role, sender, next(numbers))
+        return hmac.digest(key, prefix + stamp + payload, "sha256")[:TAG_BYTES] + stamp
+
+    return attach
+
+
+@final
+class ReplayWindow:
+    """Which (sender id, sequence number) pairs a subscription has let through, per key
+    expression (module docstring); thread-safe (Zenoh calls back on its threads)."""
+
+    __slots__ = ("_lock", "_seen")
+
+    def __init__(self) -> None:
+        self._seen: dict[tuple[str, int], tuple[int, int]] = {}  # -> (highest, bit mask)
+        self._lock = threading.Lock()
+
+    def fresh(self, key_expr: str, stamp: Stamp) -> bool:
+        """True, and remembered, the first time `stamp` comes on `key_expr`; False for a
+        number seen before or older than `WINDOW` behind the sender's highest."""
+        sender, number = (key_expr, stamp.sender), stamp.sequence
+        with self._lock:
+            state = self._seen.get(sender)
+            if state is None:
+                if len(self._seen) >= _SENDERS:
+                    del self._seen[next(iter(self._seen))]
+                self._seen[sender] = (number, 1)
+                return True
+            highest, mask = state
+            if number > highest:
+                mask = ((mask << min(number - highest, WINDOW)) | 1) & ((1 << WINDOW) - 1)
+                self._seen[sender] = (number, mask)
+                return True
+            behind = highest - number
+            if behind >= WINDOW or (mask >> behind) & 1:
+                return False
+            self._seen[sender] = (highest, mask | (1 << behind))
+            return True
 
 
 # ------------------------------------------------------------------ payload limits

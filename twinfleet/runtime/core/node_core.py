@@ -506,11 +506,12 @@ class NodeCore:
 
     def statistics(self, *, dropped_overflow: int = 0,
                    refused: Mapping[Rejection, int] | None = None,
-                   external: int = 0) -> NodeStatistics:
+                   external: int = 0, played: int = 0) -> NodeStatistics:
         """Counters since start, as a frozen record. The driver adds what its transport
         counted below the core: samples its hand-off dropped (`dropped_overflow`), the
-        ones it refused before decoding (`refused`: forged, oversize) and the ones it took
-        from outside the fleet (`external`)."""
+        ones it refused before decoding (`refused`: forged, oversize, replayed, recorded),
+        the ones it took from outside the fleet (`external`) and the recorded ones it let
+        in (`played`)."""
         n, below = self._n, refused or {}
         rejected = {r: self._rejected[r] + below.get(r, 0) for r in Rejection}
         return NodeStatistics(
@@ -522,4 +523,5 @@ class NodeCore:
             sequence_jumps=n["seq_jumps"], dropped_lossless=n["lossless"], stalls=n["stalls"],
             max_lateness_ms=n["max_late"],
             stall_threshold_ms=self.stall_threshold() if self.stall_ms is not None else 0,
-            rejected_external=n["external"], external_input=external, rejected=rejected)
+            rejected_external=n["external"], external_input=external, played=played,
+            rejected=rejected)

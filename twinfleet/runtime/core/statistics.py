@@ -37,6 +37,8 @@ class Rejection(StrEnum):
     INVALID = "invalid"  # fields that do not fit the message type's annotations
     OVERSIZE = "oversize"  # larger than the topic's payload limit (the transport)
     WRONG_TYPE = "wrong_type"  # a message type the handler does not take
+    REPLAYED = "replayed"  # a signed sample let through before (its sender and number)
+    RECORDED = "recorded"  # recorded input (`play --into-fleet`) the fleet does not accept
 
     @property
     def counter(self) -> str:
@@ -75,6 +77,8 @@ class NodeStatistics:
         stall_threshold_ms: that threshold (0: stalls are not counted).
         external_input: samples accepted from outside the fleet (signed with the bridge key,
             on a topic the node declares external: `runtime.core.guard`).
+        played: recorded samples let in (`play --into-fleet`, a fleet launched with
+            ``--accept-recorded``).
         rejected: samples refused before any handler, per reason (every reason present).
         rejected_external: samples an operator's command sent (sender
             `contract.names.OPERATOR_SENDER`, e.g. ``topic pub --force``) that the node
@@ -101,6 +105,7 @@ class NodeStatistics:
     stall_threshold_ms: int = 0
     rejected_external: int = 0
     external_input: int = 0
+    played: int = 0
     rejected: Mapping[Rejection, int] = field(default_factory=dict)
 
     def __post_init__(self) -> None:

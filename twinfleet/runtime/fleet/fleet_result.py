@@ -6,8 +6,8 @@ from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from twinfleet.runtime.access.connection import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from twinfleet.runtime.contract.kinds import Status
-from twinfleet.runtime.fleet.connection import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from twinfleet.runtime.fleet.live_verdict import RESULT_WORDS, Verdict
 from twinfleet.runtime.fleet.run_record import RunRecord
 
@@ -64,7 +64,7 @@ class FleetResult:
     @property
     def exit_code(self) -> int:
         """0 passed, 1 violated or a node failed, 2 a property raised, 3 inconclusive,
-        130 interrupted (`runtime.fleet.connection`)."""
+        130 interrupted (`runtime.access.connection`)."""
         if self.verdict is not None:
             return self.verdict.exit_code
         if self.interrupted:

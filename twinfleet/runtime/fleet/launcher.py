@@ -30,7 +30,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import TextIO, final
 
-from twinfleet.runtime.fleet import fleetauth, registry
+from twinfleet.runtime.access import fleetauth, registry
 from twinfleet.runtime.fleet.event_merge import fresh_parts_dir, merge_logged
 from twinfleet.runtime.fleet.fleet_result import (
     FleetResult,
@@ -38,7 +38,7 @@ from twinfleet.runtime.fleet.fleet_result import (
     format_result,
     record_summary,
 )
-from twinfleet.runtime.fleet.live_fleet import SHUTDOWN_TOPIC, Fleet, free_port
+from twinfleet.runtime.fleet.live_fleet import SHUTDOWN_TOPIC, Fleet, endpoint_host, free_port
 from twinfleet.runtime.fleet.live_verdict import RunEnd, Verdict
 from twinfleet.runtime.fleet.run_record import RunRecord, versions
 from twinfleet.runtime.host.introspect import param_arguments
@@ -59,6 +59,9 @@ __all__ = [
 
 _STATS_TIMEOUT_S = 2.0  # for the nodes' final statistics (the live verdict reads them)
 _DRIVER_STOP_S = 5.0  # for a driver still running at the end to finish its cancellation
+#: wall seconds every node has to become alive (imports, session, liveliness) before a run
+#: ends as not started; the timeout counts from the epoch, after that
+STARTUP_S = 60.0
 
 
 class FleetConflict(ValueError):
@@ -72,20 +75,20 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     run_record: str | None = None, record_events: str | None = None,
                     node_args: Sequence[str] = (), params: Sequence[str] = (),
                     driver: Callable[[Fleet], Awaitable[str]] | None = None,
-                    judge: bool = True,
-                    auth: fleetauth.MonitorAuth | None = None,
-                    bridge: bool = False) -> FleetResult:
+                    judge: bool = True, auth: fleetauth.MonitorAuth | None = None,
+                    bridge: bool = False, startup_s: float = STARTUP_S,
+                    accept_recorded: bool = False) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
         scenario: a validated scenario (`runtime.scenario.spec.load_scenario`, or
             `Scenario.build`: then written to a file for the node processes, see
             `live_fleet.launchable`).
-        time_scale: fleet speed-up (default: scenario `live.time_scale`, else 1).
-        timeout_s: wall seconds before the run ends (default: `live.timeout_s`, else none).
-        seed: fleet seed (default: the scenario's).
-        connect: join this Zenoh router instead of embedding one.
-        listen: endpoint of the embedded router (default: tcp/127.0.0.1:<free port>).
+        time_scale, seed: fleet speed-up and seed (default: the scenario's).
+        timeout_s: wall seconds the run lasts once every node is alive (from the fleet's
+            epoch; default: `live.timeout_s`, else none).
+        connect, listen: join this Zenoh router instead of embedding one; the embedded
+            router's endpoint (default: tcp/127.0.0.1:<free port>).
         out: where the prefixed output lines go.
         handle_signals: end the run on SIGINT/SIGTERM (main thread only).
         run_record: write the run as JSON lines to this file (`runtime.fleet.run_record`).
@@ -95,13 +98,16 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             scenario must already be loaded with them (`introspect.load_with_params`).
         driver: a coroutine function run with the fleet once its nodes started; the run
             ends with the reason it returns (an exception it raises is re-raised).
-        judge: judge the scenario's properties live (`runtime.fleet.live_verdict`; the
-            result's `verdict`); False: no state reports (the result follows exits and
-            the report only).
+        judge: judge the properties live (`runtime.fleet.live_verdict`: the result's
+            `verdict`); False: no state reports (exits and the report decide).
         auth: with `connect`, the joined fleet's key and logins (default: this machine's
             fleet registry entry for that endpoint, if any).
-        bridge: the fleet takes external input: a bridge key its nodes accept on their
-            ``external_topics`` (`runtime.core.guard`); the `driver` usually runs the bridge.
+        bridge: take external input under a bridge key (`runtime.core.guard`); the `driver`
+            usually runs the bridge.
+        startup_s: wall seconds for every node to become alive; a run not up by then
+            (or stopped before) is INCONCLUSIVE, never a node's failure.
+        accept_recorded: the nodes let in recorded input signed by ``twinfleet play
+            --into-fleet`` (the verdict then says it was injected); otherwise they drop it.
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
@@ -112,10 +118,10 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                   out=out, record=record, node_args=[*node_args, *param_arguments(params)],
                   events_dir=fresh_parts_dir(record_events) if record_events else None,
                   keep_scenario_beside=record_events or run_record, judge=judge, auth=auth,
-                  bridge=bridge)
+                  bridge=bridge, accept_recorded=accept_recorded)
     started = time.monotonic()
     async with _Launch(fleet, record_events, handle_signals) as launch:
-        reason, running = await launch.until_end(timeout_s, params, driver)
+        reason, running = await launch.until_end((startup_s, timeout_s), params, driver)
     result = _result(fleet, reason, running, time.monotonic() - started)
     if record is not None:
         record_summary(record, result)
@@ -140,13 +146,14 @@ class _Launch:
     async def __aenter__(self) -> _Launch:
         return self
 
-    async def until_end(self, timeout_s: float | None, params: Sequence[str],
+    async def until_end(self, limits: tuple[float, float | None], params: Sequence[str],
                         driver: Callable[[Fleet], Awaitable[str]] | None) -> tuple[str, list[str]]:
         """Open the fleet, register it, start its nodes (and the driver) and wait for the
-        end; return why the run ended and which nodes were still running then."""
+        end (`limits`: start-up and timeout seconds); return why the run ended and which
+        nodes were still running then."""
         fleet = self.fleet
         if fleet.record is not None:
-            _record_start(fleet.record, fleet, timeout_s=timeout_s)
+            _record_start(fleet.record, fleet, timeout_s=limits[1])
         await fleet.open()
         if fleet.connect:  # an embedded router is new: only a shared one can hold a twin fleet
             await refuse_twins(fleet)
@@ -159,7 +166,7 @@ class _Launch:
         if driver is not None:
             self.driving = asyncio.create_task(driver(fleet))
             self.driving.add_done_callback(lambda task: fleet.end(_driver_reason(task)))
-        reason = await _until_end(fleet, timeout_s)
+        reason = await _until_end(fleet, *limits)
         running = [name for name, p in fleet.processes.items() if p.running()]
         await _final_statistics(fleet, fleet.record, reason)
         return reason, running
@@ -228,9 +235,20 @@ def _record_start(record: RunRecord, fleet: Fleet, *, timeout_s: float | None) -
                         for c in scenario.nodes])
 
 
-async def _until_end(fleet: Fleet, timeout_s: float | None) -> str:
-    """Why the run ended: what `fleet.end` was told, or the timeout."""
+async def _until_end(fleet: Fleet, startup_s: float, timeout_s: float | None) -> str:
+    """Why the run ended: what `fleet.end` was told, the start-up limit (some node not alive
+    after `startup_s`), or the timeout, which counts from the epoch (every node alive): a
+    loaded machine's slow imports are not the run's time."""
     assert fleet.ended is not None
+    up: asyncio.Future[object] = asyncio.ensure_future(fleet.all_alive.wait())
+    ended: asyncio.Future[object] = fleet.ended
+    try:
+        await asyncio.wait([ended, up], timeout=startup_s,
+                           return_when=asyncio.FIRST_COMPLETED)
+    finally:
+        up.cancel()
+    if not fleet.all_alive.is_set():
+        fleet.end(f"the fleet was not up after {startup_s:g} s")
     try:
         reason = await asyncio.wait_for(asyncio.shield(fleet.ended), timeout_s)
     except TimeoutError:
@@ -278,20 +296,40 @@ def _verdict(fleet: Fleet, reason: str, running: Sequence[str],
     end = RunEnd(reason, interrupted=ended_by_signal(reason),
                  failed={n: codes.get(n) for n in fleet.failed}, statistics=fleet.statistics,
                  running=tuple(running), dropped_reports=dropped,
+                 not_up=() if fleet.all_alive.is_set() else tuple(sorted(fleet.unseen)),
                  unreadable=fleet.unreadable_statistics)
     return fleet.judge.verdict(end)
 
 
 def _register(fleet: Fleet, params: Sequence[str]) -> Path | None:
-    """Enter the fleet in the per-user registry (`runtime.fleet.registry`) so that monitors find it;
-    None (and a line saying why) when the registry cannot be written."""
+    """Enter the fleet in the per-user registry (`runtime.access.registry`) so that monitors find it,
+    with its router's TLS certificate and key beside it (owner-only); None (and a line saying
+    why) when the registry cannot be written."""
     try:
-        return registry.register(fleet.scenario.fleet, fleet.endpoint,
-                                 scenario=str(fleet.scenario.path), params={"overrides": list(params)},
-                                 extra=fleet.creds.registry_extra())
+        entry = registry.register(fleet.scenario.fleet, fleet.endpoint,
+                                  scenario=str(fleet.scenario.path),
+                                  params={"overrides": list(params)},
+                                  extra=fleet.creds.registry_extra())
+        if fleet.server_tls is not None:
+            registry.write_beside(entry, "server.pem",
+                                  fleet.server_tls.certificate + fleet.server_tls.key)
+            fleet.log(f"TLS: certificates made for this launch; other hosts join with "
+                      f"{_remote_hint(fleet)} --credentials FILE, FILE a copy of {entry}")
+        return entry
     except (OSError, registry.RegistryError) as exc:
         fleet.log(f"not registered for discovery ({exc}); monitors need --connect")
         return None
+
+
+def _remote_hint(fleet: Fleet) -> str:
+    """``--connect EP`` for another host: the listen endpoint, or for a wildcard address
+    the names its certificate carries."""
+    host = endpoint_host(fleet.listen)
+    if host not in ("0.0.0.0", "[::]"):
+        return f"--connect {fleet.listen}"
+    remote = [n for n in fleet.tls_names if n not in ("localhost", "127.0.0.1", "::1")]
+    return (f"--connect {fleet.listen.replace(host, 'HOST', 1)} (HOST: "
+            f"{', '.join(remote) or 'this machine'})")
 
 
 def _driver_reason(task: asyncio.Task[str]) -> str:

@@ -20,6 +20,7 @@ import contextlib
 import dataclasses
 import importlib
 import shutil
+import signal
 import socket
 import sys
 import tempfile
@@ -31,16 +32,17 @@ from typing import Any, TextIO, final
 import msgpack
 import yaml
 
+from twinfleet.runtime.access import fleetauth
 from twinfleet.runtime.contract.messages import DecodeError, decode
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.core.guard import Rejected, check_message, payload_limit
 from twinfleet.runtime.core.state_report import decode_report
 from twinfleet.runtime.core.statistics import NodeStatistics, Rejection, StatisticsError
-from twinfleet.runtime.fleet import fleetauth
 from twinfleet.runtime.fleet.live_verdict import LiveJudge
 from twinfleet.runtime.fleet.node_main import LIMIT_ENV, read_statistics
 from twinfleet.runtime.fleet.node_process import NODE_PROCESS_FLAGS, NodeProcess, emit, stop_all
 from twinfleet.runtime.fleet.run_record import RunRecord
+from twinfleet.runtime.host import certs
 from twinfleet.runtime.host.introspect import fleet_description
 from twinfleet.runtime.host.keys import (
     KeyKind,
@@ -56,6 +58,8 @@ from twinfleet.runtime.scenario.spec import NodeConfig, Scenario
 
 SHUTDOWN_TOPIC = "/twinfleet/shutdown"
 _RESPAWN_DELAY_S = 0.5
+#: exit codes of a process ended by the launcher's own stop signals: not a failure of the node
+_STOPPED = (-signal.SIGINT, -signal.SIGTERM, -signal.SIGKILL)
 _REPORT_GRACE_S = 0.5  # wall seconds between the report's "finished" and the end of the run
 
 
@@ -75,14 +79,26 @@ class Fleet:
                  record: RunRecord | None = None, node_args: Sequence[str] = (),
                  events_dir: Path | None = None, keep_scenario_beside: str | None = None,
                  judge: bool = True, auth: fleetauth.MonitorAuth | None = None,
-                 bridge: bool = False) -> None:
+                 bridge: bool = False, accept_recorded: bool = False) -> None:
         self.time_scale, self.seed, self.out = time_scale, seed, out
+        self.accept_recorded = accept_recorded
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
         self.connect = connect
-        self.endpoint = connect or listen or f"tcp/127.0.0.1:{free_port()}"
+        self.listen = listen or f"tcp/127.0.0.1:{free_port()}"
+        # where this machine's nodes and monitors reach the router (a wildcard listen address
+        # is not one a certificate can name)
+        self.endpoint = connect or local_endpoint(self.listen)
         # `bridge`: the fleet takes external input (a bridge key: `runtime.core.guard`)
         self.creds = fleetauth.FleetCredentials.fresh(bridge=bridge)
+        #: the router's TLS certificate and key (an embedded router on tls/ or quic/)
+        self.server_tls: certs.Pem | None = None
+        self.tls_names: list[str] = []  # the names and addresses its certificate carries
+        if not connect and fleetauth.secure(self.listen):
+            authority = certs.fleet_authority(scenario.fleet)
+            self.tls_names = certs.host_names(endpoint_host(self.listen))
+            self.server_tls = certs.server_certificate(authority, self.tls_names)
+            self.creds = dataclasses.replace(self.creds, tls_ca=authority.certificate)
         # Joining a router (--connect): the fleet there may span machines; its key and
         # operator login (this machine's registry, or --credentials FILE) make us a member.
         joined = (auth if auth is not None else fleetauth.registry_auth(connect)) if connect \
@@ -91,6 +107,8 @@ class Fleet:
             self.creds = dataclasses.replace(
                 self.creds, key=joined.key,
                 bridge=(joined.bridge or self.creds.bridge) if bridge else None)
+        if joined is not None and joined.tls_ca is not None:
+            self.creds = dataclasses.replace(self.creds, tls_ca=joined.tls_ca)
         self.limit = scenario_payload_limit(scenario)
         self._auth_dir: Path | None = None
         self._login = joined.login(write=True) if joined is not None else None
@@ -127,12 +145,16 @@ class Fleet:
         self.ended = asyncio.get_running_loop().create_future()
         if self.connect:  # someone else's router: its access control is theirs
             conf = zenoh_config(connect=[self.connect], mode="client",
-                                settings=self._login.settings() if self._login else None)
+                                settings={**(self._login.settings() if self._login else {}),
+                                          **fleetauth.tls_settings(self.creds.tls_ca)})
         else:
             self._auth_dir = fleetauth.private_dir()
             settings = fleetauth.router_settings(self.creds, self._auth_dir)
             settings["transport/link/rx/max_message_size"] = self.limit + 1024
-            conf = zenoh_config(listen=[self.endpoint], mode="router", settings=settings)
+            if self.server_tls is not None:
+                settings.update(fleetauth.router_tls_settings(self.server_tls.certificate,
+                                                              self.server_tls.key))
+            conf = zenoh_config(listen=[self.listen], mode="router", settings=settings)
         self.transport = ZenohTransport(conf, key=self.creds.key, limit=self.limit)
         await self.transport.open()
         fleet = self.scenario.fleet
@@ -166,9 +188,9 @@ class Fleet:
     def refusals(self) -> dict[Rejection, int]:
         """What the launcher's own subscriptions (report, shutdown) refused, by reason."""
         refused = self.transport.statistics().refused if self.transport is not None else {}
-        return {Rejection.FORGED: refused.get(Rejection.FORGED, 0),
-                Rejection.OVERSIZE: refused.get(Rejection.OVERSIZE, 0),
-                Rejection.INVALID: self.invalid}
+        return {**{reason: refused.get(reason, 0) for reason in (
+            Rejection.FORGED, Rejection.OVERSIZE, Rejection.REPLAYED, Rejection.RECORDED)},
+            Rejection.INVALID: self.invalid}
 
     def node_secrets(self) -> dict[str, str]:
         """The environment a node process gets: fleet key, login (embedded router), limit."""
@@ -179,6 +201,8 @@ class Fleet:
             if self._login is not None:
                 env.update({fleetauth.ENV_USER: self._login.user,
                             fleetauth.ENV_PASSWORD: self._login.password})
+        if self.accept_recorded:
+            env[fleetauth.ENV_ACCEPT_RECORDED] = "1"
         return {**env, LIMIT_ENV: str(self.limit)}
 
     def _on_shutdown(self, _key: str, payload: bytes) -> None:
@@ -320,13 +344,27 @@ class Fleet:
         procs = list(self.processes.values())
         await stop_all(procs, self.log)
         for p in procs:
-            if p.final_code() not in (0, None) and p.cfg.name not in self.failed:
+            if p.final_code() not in (0, None, *_STOPPED) and p.cfg.name not in self.failed:
                 self.failed.append(p.cfg.name)
         if self.transport is not None:
             await self.transport.close()
         if self._private_dir is not None:
             shutil.rmtree(self._private_dir, ignore_errors=True)
         fleetauth.remove_dir(self._auth_dir)
+
+
+def endpoint_host(endpoint: str) -> str:
+    """The host part of a Zenoh endpoint (``tls/10.0.0.1:7447`` → ``10.0.0.1``)."""
+    address = endpoint.split("#", 1)[0].partition("/")[2]
+    return address.rsplit(":", 1)[0]
+
+
+def local_endpoint(listen: str) -> str:
+    """The endpoint a process on this machine connects to for a router listening on `listen`:
+    the same, but for a wildcard address, which becomes the loopback one."""
+    host = endpoint_host(listen)
+    wildcard = {"0.0.0.0": "127.0.0.1", "[::]": "[::1]"}.get(host)
+    return listen.replace(host, wildcard, 1) if wildcard else listen
 
 
 def scenario_payload_limit(scenario: Scenario) -> int:

@@ -127,6 +127,7 @@ class RunEnd:
     # node -> why its statistics could not be read (`NodeStatistics.from_dict` refused them)
     unreadable: Mapping[str, str] = field(default_factory=dict)
     dropped_reports: int = 0  # state reports the launcher's own hand-off dropped
+    not_up: Sequence[str] = ()  # nodes not alive yet when the run ended (before the epoch)
 
 
 def stall_floor_ms(time_scale: float = 1.0) -> int:
@@ -306,18 +307,25 @@ class LiveJudge:
 
     def verdict(self, end: RunEnd) -> Verdict:
         """The run's result (`_decide`), with detail lines for input from outside the fleet,
-        which neither voids nor decides the verdict: samples an operator's command sent that
-        nodes refused, and samples the ROS 2 bridge brought in on declared external topics."""
+        which neither voids nor decides the verdict: recorded input played into the fleet
+        (``play --into-fleet``, a fleet launched with ``--accept-recorded``: said first, as
+        what the run shows was partly not the nodes' own doing), samples an operator's
+        command sent that nodes refused, and samples the ROS 2 bridge brought in on
+        declared external topics."""
         decided = self._decide(end)
+        played = {n: s.played for n, s in end.statistics.items() if s.played}
+        first = (("recorded input was injected (twinfleet play --into-fleet): "
+                  + ", ".join(f"{n} took {k} recorded samples" for n, k in sorted(played.items())),)
+                 if played else ())
         refused = tuple(f"external input: {node} refused {stats.rejected_external} samples "
                         "an operator's command sent (e.g. `twinfleet topic pub --force`)"
                         for node, stats in sorted(end.statistics.items())
                         if stats.rejected_external)
         taken = external_input_line(end.statistics)
-        lines = (*refused, *((taken,) if taken is not None else ()))
-        if not lines:
+        last = (*refused, *((taken,) if taken is not None else ()))
+        if not first and not last:
             return decided
-        return dataclasses.replace(decided, details=(*decided.details, *lines))
+        return dataclasses.replace(decided, details=(*first, *decided.details, *last))
 
     def _decide(self, end: RunEnd) -> Verdict:
         """The run's result: a property that raised; a failed node process; inconclusive
@@ -360,13 +368,16 @@ class LiveJudge:
     def inconclusive_reasons(self, end: RunEnd) -> list[str]:
         """Why the run cannot back a verdict (module docstring); empty when it can."""
         reasons = [w.broken for w in self.watches if w.broken not in (None, "decided", "error")]
+        if end.not_up:
+            reasons.append(f"the run ended before the fleet was up ({end.reason}; not alive "
+                           f"yet: {', '.join(end.not_up)}): nothing ran to judge")
         for node in self.names:
             if node in end.statistics:
                 reasons += statistics_reasons(node, end.statistics[node])
             elif node in end.unreadable:
                 reasons.append(f"{node} sent statistics the launcher cannot read "
                                f"({end.unreadable[node]})")
-            elif node in end.running:
+            elif node in end.running and node not in end.not_up:
                 reasons.append(f"{node} did not answer for its statistics")
         reasons += [f"{n} lost {k} state reports" for n, k in sorted(self.lost.items())]
         reasons += self.undecodable[:1]

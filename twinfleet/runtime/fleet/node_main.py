@@ -18,7 +18,19 @@ node under a replay coordinator: logical time, and only granted events run
 (`runtime.host.replay_gate.ReplayGate`).
 """
 
+# ruff: noqa: E402 - the stop handlers go in before the slow imports (below)
 from __future__ import annotations
+
+import signal
+import sys
+
+if __name__ == "__main__":
+    # The launcher may stop the fleet while this process still imports (zenoh, the user's
+    # module: seconds on a loaded machine); it then leaves quietly, exit code 0, not with a
+    # KeyboardInterrupt traceback that reads like a failure. `main` keeps these handlers
+    # until the event loop installs its own.
+    for _sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(_sig, lambda *_: sys.exit(0))
 
 import argparse
 import asyncio
@@ -26,18 +38,16 @@ import ctypes
 import faulthandler
 import json
 import os
-import signal
-import sys
 from collections.abc import Sequence
 
 import msgpack
 
+from twinfleet.runtime.access.fleetauth import accepts_recorded, node_secrets, node_tls
 from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.core.guard import BRIDGE_KEY_ENV, key_from_env
 from twinfleet.runtime.core.state_report import StateReporter
 from twinfleet.runtime.core.statistics import NodeStatistics, StatisticsError
-from twinfleet.runtime.fleet.fleetauth import node_secrets
 from twinfleet.runtime.host.clock import Clock, FleetClock
 from twinfleet.runtime.host.introspect import PARAM_FLAG, load_with_params, serve_info
 from twinfleet.runtime.host.keys import KeyKind, node_key, topic_key
@@ -171,12 +181,13 @@ def _transport(args: argparse.Namespace, external: frozenset[str]) -> ZenohTrans
     login, key = node_secrets()
     bridge_key = key_from_env(name=BRIDGE_KEY_ENV)
     limit = int(os.environ[LIMIT_ENV]) if os.environ.get(LIMIT_ENV) else None
-    settings = login.settings() if login else {}
+    settings = {**(login.settings() if login else {}), **node_tls()}
     if limit is not None:  # Zenoh itself refuses larger frames (the router does too)
         settings["transport/link/rx/max_message_size"] = limit + 1024
     config = zenoh_config(connect=[args.connect], settings=settings)
     return ZenohTransport(config, key=key, limit=limit, bridge_key=bridge_key,
-                          external=external if bridge_key is not None else frozenset())
+                          external=external if bridge_key is not None else frozenset(),
+                          accept_recorded=accepts_recorded())
 
 
 def _event_log(args: argparse.Namespace, scenario: Scenario, name: str, seed: int,

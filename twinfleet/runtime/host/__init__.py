@@ -1,9 +1,11 @@
-"""The thin asyncio loop that runs one node's core over a transport, and the Zenoh transport.
+"""The thin asyncio loop that runs one node's core over a transport, the Zenoh transport, and
+the TLS certificates a Zenoh router presents.
 
 Imports the core, the scenario and the contract.
 """
 
 __all__ = [
+    "certs",
     "clock",
     "introspect",
     "keys",

@@ -172,7 +172,7 @@ class NodeHost:
             return self.core.statistics()
         below = transport_stats()
         return self.core.statistics(dropped_overflow=below.overflow, refused=below.refused,
-                                    external=below.external)
+                                    external=below.external, played=below.played)
 
     def idle(self) -> bool:
         """True when nothing can run now: no handler is ready and no drain is scheduled (a

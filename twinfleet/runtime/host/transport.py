@@ -41,14 +41,17 @@ class TransportStatistics:
         wakeups: loop wake-ups used to hand samples over (one per burst).
         overflow: samples a bounded hand-off to the loop dropped (the loop fell behind).
         refused: samples and requests refused before decoding, per reason (a live
-            transport counts `Rejection.FORGED` and `Rejection.OVERSIZE`).
+            transport counts `Rejection.FORGED`, `Rejection.OVERSIZE`,
+            `Rejection.REPLAYED` and `Rejection.RECORDED`).
         external: samples accepted with the bridge key instead of the fleet key.
+        played: recorded samples let in (signed as `runtime.core.guard.Role.RECORDED`).
     """
 
     wakeups: int = 0
     overflow: int = 0
     refused: Mapping[Rejection, int] = field(default_factory=dict)
     external: int = 0
+    played: int = 0
 
 
 

@@ -24,12 +24,17 @@ e.g. ``transport/link/tx/lease=1000`` to notice a cut link within a second;
 keys under ``scouting/multicast`` and ``transport/shared_memory`` are refused.
 
 Guard (`runtime.core.guard`, README "Trust model"). With a fleet key, every put
-and query carries a signature as its attachment, and a sample (or a service
-request) without a valid one is dropped on Zenoh's thread before it is copied
-and counted (``statistics().refused``, `Rejection.FORGED`); a sample above the payload
-limit is dropped first (`Rejection.OVERSIZE`). Both tests are cheaper than the hand-off they
-spare a flood. With a bridge key as well, a sample on one of the `external` keys that is
-signed with it instead is accepted and counted (``statistics().external``).
+and query carries a signature and a stamp (sender id, sequence number, role) as
+its attachment, and a sample (or a service request) without a valid one is dropped
+on Zenoh's thread before it is copied and counted (``statistics().refused``,
+`Rejection.FORGED`); a sample above the payload limit is dropped first
+(`Rejection.OVERSIZE`). A sample whose stamp was seen before is a replay
+(`Rejection.REPLAYED`; on a latched subscription, where history and live copies
+of one sample both arrive, the second copy is dropped uncounted); recorded input
+(`Role.RECORDED`) passes only a transport made with ``accept_recorded``
+(`Rejection.RECORDED` otherwise). These tests are cheaper than the hand-off they
+spare a flood. With a bridge key as well, a sample on one of the `external`
+keys that is signed with it instead is accepted and counted (``statistics().external``).
 
 QoS mapping. Reliable topics publish with congestion control BLOCK,
 best-effort ones with DROP. Transient-local ("latched") topics use
@@ -59,7 +64,7 @@ import zenoh
 from zenoh import ext
 
 from twinfleet.runtime.contract.node import Durability, QoS, Reliability
-from twinfleet.runtime.core.guard import authentic, sign, signer
+from twinfleet.runtime.core.guard import ReplayWindow, Role, opened, signer
 from twinfleet.runtime.core.statistics import Rejection
 from twinfleet.runtime.host.transport import (
     Deliver,
@@ -104,7 +109,7 @@ def zenoh_config(*, connect: Sequence[str] = (), listen: Sequence[str] = (),
         listen: endpoints to listen on (routers and peers).
         mode: "client", "peer" or "router".
         settings: more keys (path → JSON value), e.g. a fleet's credentials and access
-            control (`runtime.fleet.fleetauth`); applied before the override variable.
+            control (`runtime.access.fleetauth`); applied before the override variable.
 
     Raises:
         ValueError: on a bad mode, or a bad ``TWINFLEET_ZENOH_CONFIG_OVERRIDE`` entry.
@@ -204,18 +209,23 @@ class ZenohTransport:
         bridge_key: the key a bridge to another system signs with (`runtime.core.guard`);
             accepted, with `key`, only on the keys in `external`.
         external: the data keys of the topics the node takes from outside the fleet.
+        accept_recorded: let in samples signed as recorded input (``play --into-fleet``).
     """
 
     def __init__(self, config: zenoh.Config, *, max_pending: int = DEFAULT_MAX_PENDING,
                  key: bytes | None = None, limit: int | None = None,
                  limits: Mapping[str, int] | None = None, bridge_key: bytes | None = None,
-                 external: frozenset[str] = frozenset()) -> None:
+                 external: frozenset[str] = frozenset(), accept_recorded: bool = False) -> None:
         self.config = config
         self.max_pending = max_pending
         self.key, self.limit, self.limits = key, limit, dict(limits or {})
         self.bridge_key, self.external = bridge_key, external
+        self.accept_recorded = accept_recorded
         self._external = [0]  # a list: the sample callbacks count into it on Zenoh's thread
-        self._refused = {Rejection.FORGED: 0, Rejection.OVERSIZE: 0}
+        self._refused = {Rejection.FORGED: 0, Rejection.OVERSIZE: 0, Rejection.REPLAYED: 0,
+                         Rejection.RECORDED: 0}
+        self._played = [0]  # one cell: Zenoh's threads add to it
+        self._query_signers: dict[str, Callable[[bytes], bytes | None]] = {}
         self.session: zenoh.Session | None = None
         self._handoff: Handoff | None = None
         self._publishers: dict[str, Any] = {}
@@ -248,8 +258,9 @@ class ZenohTransport:
     def subscribe(self, key: str, deliver: Deliver, qos: QoS) -> None:
         """Subscribe; latched QoS uses an advanced subscriber with history."""
         offer = self._h.offer
+        latched = qos.durability is Durability.TRANSIENT_LOCAL
         if self.key is not None or self.limits.get(key, self.limit) is not None:
-            on_sample = self._guarded(key, deliver)
+            on_sample = self._guarded(key, deliver, latched=latched)
         elif "*" in key:
             def on_sample(sample: zenoh.Sample) -> None:
                 offer(deliver, str(sample.key_expr), sample.payload.to_bytes())
@@ -257,23 +268,26 @@ class ZenohTransport:
             def on_sample(sample: zenoh.Sample) -> None:
                 offer(deliver, key, sample.payload.to_bytes())
 
-        if qos.durability is Durability.TRANSIENT_LOCAL:
+        if latched:
             history = ext.HistoryConfig(detect_late_publishers=True, max_samples=max(1, qos.depth))
             self._advanced.append(ext.declare_advanced_subscriber(self._s, key, on_sample,
                                                                   history=history))
         else:
             self._entities.append(self._s.declare_subscriber(key, on_sample))
 
-    def _guarded(self, key: str, deliver: Deliver) -> Callable[[zenoh.Sample], None]:
-        """A sample callback that refuses oversize and unsigned samples before copying them.
+    def _guarded(self, key: str, deliver: Deliver, *,
+                 latched: bool = False) -> Callable[[zenoh.Sample], None]:
+        """A sample callback that refuses oversize, unsigned, replayed and (unless accepted)
+        recorded samples before copying them.
 
-        It runs on Zenoh's thread, as the plain callbacks do: a length test and one
-        HMAC per sample, cheaper than the copy and hand-off it saves a forged flood.
+        It runs on Zenoh's thread, as the plain callbacks do: a length test, one HMAC and
+        one window update per sample, cheaper than the copy and hand-off it saves a flood.
         """
         offer, fleet_key, refused = self._h.offer, self.key, self._refused
         limit = self.limits.get(key, self.limit) or (1 << 62)
         bridge_key = self.bridge_key if key in self.external else None
         external = self._external
+        window, accept_recorded, played = ReplayWindow(), self.accept_recorded, self._played
 
         def on_sample(sample: zenoh.Sample) -> None:
             if len(sample.payload) > limit:
@@ -281,12 +295,25 @@ class ZenohTransport:
                 return
             payload, where = sample.payload.to_bytes(), str(sample.key_expr)
             if fleet_key is not None:
-                tag = sample.attachment and sample.attachment.to_bytes()
-                if not authentic(fleet_key, where, payload, tag):
-                    if bridge_key is None or not authentic(bridge_key, where, payload, tag):
-                        refused[Rejection.FORGED] += 1
-                        return
-                    external[0] += 1
+                raw = sample.attachment and sample.attachment.to_bytes()
+                stamp = opened(fleet_key, where, payload, raw)
+                from_bridge = False
+                if stamp is None and bridge_key is not None:
+                    stamp = opened(bridge_key, where, payload, raw)
+                    from_bridge = stamp is not None
+                if stamp is None:
+                    refused[Rejection.FORGED] += 1
+                    return
+                recorded = stamp.role is Role.RECORDED
+                if recorded and not accept_recorded:
+                    refused[Rejection.RECORDED] += 1
+                    return
+                if not window.fresh(where, stamp):
+                    if not latched:  # there, the history's copy of a live sample
+                        refused[Rejection.REPLAYED] += 1
+                    return
+                played[0] += recorded
+                external[0] += from_bridge
             offer(deliver, where, payload)
 
         return on_sample
@@ -297,18 +324,21 @@ class ZenohTransport:
         With a fleet key, a request to a service without a valid tag is answered
         "server error: unauthenticated request" at once and counted as `Rejection.FORGED`.
         """
-        push, refused = self._h.push, self._refused
+        push, refused, window = self._h.push, self._refused, ReplayWindow()
         # "@" queryables (statistics, types, info) are read-only views monitors may ask
         fleet_key = self.key if "/@" not in key else None
 
         def on_query(query: zenoh.Query) -> None:
             payload = query.payload.to_bytes() if query.payload is not None else b""
-            tag = query.attachment
-            if fleet_key is not None and not authentic(fleet_key, key, payload,
-                                                       tag and tag.to_bytes()):
-                refused[Rejection.FORGED] += 1
-                push(self._refuse, query)
-                return
+            if fleet_key is not None:
+                tag = query.attachment
+                stamp = opened(fleet_key, key, payload, tag and tag.to_bytes())
+                why = (Rejection.FORGED if stamp is None or stamp.role is not Role.MEMBER
+                       else None if window.fresh(key, stamp) else Rejection.REPLAYED)
+                if why is not None:
+                    refused[why] += 1
+                    push(self._refuse, query)
+                    return
             push(self._answer, key, query, payload, on_request)
 
         self._entities.append(self._s.declare_queryable(key, on_query))
@@ -317,7 +347,7 @@ class ZenohTransport:
     def _refuse(query: zenoh.Query) -> None:
         with query:
             query.reply_err(b"server error: unauthenticated request (not signed with the "
-                            b"fleet key)")
+                            b"fleet key, or a replay)")
 
     @staticmethod
     def _answer(key: str, query: zenoh.Query, payload: bytes, on_request: OnRequest) -> None:
@@ -389,7 +419,10 @@ class ZenohTransport:
             elapsed = time.monotonic() - started
             push(finish, None, "timeout" if elapsed >= 0.9 * timeout_s else "no server")
 
-        attachment = sign(self.key, key, payload) if self.key is not None else None
+        tag = self._query_signers.get(key)
+        if tag is None:
+            tag = self._query_signers[key] = signer(self.key, key)
+        attachment = tag(payload)
         self._s.get(key, zenoh.handlers.Callback(on_reply, on_final), payload=payload,
                     timeout=timeout_s, attachment=attachment)
 
@@ -422,7 +455,7 @@ class ZenohTransport:
         h = self._handoff
         return TransportStatistics(wakeups=h.wakeups if h else 0,
                                    overflow=h.overflow if h else 0, refused=dict(self._refused),
-                                   external=self._external[0])
+                                   external=self._external[0], played=self._played[0])
 
     async def close(self) -> None:
         """Undeclare (advanced entities first), then close the session, on the loop thread."""

@@ -22,23 +22,29 @@ Refused: attributes and names that start with ``_`` (``__class__``,
 expression is evaluated with `SAFE_FUNCTIONS` as its only builtins.
 
 Time. A property that runs too long must not outlast the checker's
-``--max-time``: `time_limit(seconds)` arms one interval timer (SIGALRM, main
-thread only); when it expires while an expression is being evaluated, the
-evaluation raises `Overtime` (naming the expression), and otherwise it looks
-again every 50 ms until evaluation and timer meet. ``range`` is a Python loop
-here so that even ``sum(range(10**12))`` reaches a point where the timer can
-interrupt it (a C loop over a C iterator never does). Outside `time_limit`
-nothing is armed and evaluation costs two attribute writes more than `eval`.
+``--max-time``: `time_limit(seconds)` sets a deadline for the calling thread;
+while an expression is evaluated under a deadline, a trace function
+(``sys.settrace``, which acts on the calling thread only) looks at the clock at
+every call, generator resume and loop iteration of the expression's frames, and
+raises `Overtime` (naming the expression) once the deadline has passed; an
+expression evaluated after the deadline stops at its first step. No signal is
+involved, so this works the same in any thread (a worker thread, a notebook,
+pytest-xdist). ``range`` is a Python generator here so that even
+``sum(range(10**12))`` resumes a traced frame at every step (a C loop over a C
+iterator never would). Outside `time_limit` nothing is traced and evaluation
+costs one attribute read more than `eval`; a tracer already installed (a
+debugger, coverage) is set aside during the evaluation and put back after.
 """
 
 from __future__ import annotations
 
 import ast
 import contextlib
-import signal
+import sys
 import threading
+import time
 from collections.abc import Iterator, Mapping, Sequence
-from types import CodeType
+from types import CodeType, FrameType
 from typing import Any, Final, final
 
 
@@ -107,13 +113,17 @@ class Expression:
             Exception: whatever the expression raised (a missing field, a type error).
         """
         env["__builtins__"] = SAFE_FUNCTIONS
-        _CLOCK.inside = True
+        deadline = _DEADLINE.at
+        if deadline is None:
+            return bool(eval(self.code, env))  # noqa: S307 - checked against the language
+        previous = sys.gettrace()
+        sys.settrace(_Watchdog(deadline))
         try:
             return bool(eval(self.code, env))  # noqa: S307 - checked against the language
         except Overtime:
             raise Overtime(f"{self.where}: {self.source!r}") from None
         finally:
-            _CLOCK.inside = False
+            sys.settrace(previous)
 
 
 def parse_expression(source: str, node_names: Sequence[str], where: str) -> Expression:
@@ -198,37 +208,42 @@ def _describe(node: ast.AST) -> str:
 # ---------------------------------------------------------------------- time limit
 
 
+class _Deadline(threading.local):
+    """The calling thread's `time_limit` deadline (`time.monotonic` seconds), or None."""
+
+    at: float | None = None
+
+
+_DEADLINE: Final = _Deadline()
+
+
 @final
-class _Clock:
-    """Whether an expression is being evaluated; the alarm looks here."""
+class _Watchdog:
+    """The trace function of one evaluation: raises `Overtime` at the first step past
+    `deadline` (a call, a generator resume, a line or a loop's jump back)."""
 
-    __slots__ = ("inside",)
+    __slots__ = ("deadline",)
 
-    def __init__(self) -> None:
-        self.inside = False
+    def __init__(self, deadline: float) -> None:
+        self.deadline = deadline
 
-
-_CLOCK: Final = _Clock()
-_RECHECK_S: Final = 0.05
-
-
-def _on_alarm(_signum: int, _frame: Any) -> None:
-    if _CLOCK.inside:
-        raise Overtime("time limit")
-    signal.setitimer(signal.ITIMER_REAL, _RECHECK_S)  # look again soon
+    def __call__(self, _frame: FrameType, _event: str, _arg: Any) -> _Watchdog:
+        if time.monotonic() > self.deadline:
+            raise Overtime("time limit")
+        return self
 
 
 @contextlib.contextmanager
 def time_limit(seconds: float | None) -> Iterator[None]:
-    """Interrupt expression evaluation with `Overtime` once `seconds` have passed (module
-    docstring). No-op for None or outside the main thread (signals go to the main thread)."""
-    if seconds is None or threading.current_thread() is not threading.main_thread():
+    """Make expression evaluation in this thread raise `Overtime` once `seconds` have passed
+    (module docstring). No-op for None; nests (the earlier deadline wins)."""
+    if seconds is None:
         yield
         return
-    previous = signal.signal(signal.SIGALRM, _on_alarm)
-    signal.setitimer(signal.ITIMER_REAL, max(seconds, 1e-3))
+    outer = _DEADLINE.at
+    mine = time.monotonic() + max(seconds, 1e-3)
+    _DEADLINE.at = mine if outer is None else min(outer, mine)
     try:
         yield
     finally:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, previous)
+        _DEADLINE.at = outer

@@ -24,9 +24,9 @@ import msgpack
 import yaml
 import zenoh
 
+from twinfleet.runtime.access.connection import CommandError, Connection
 from twinfleet.runtime.contract.messages import registered_types
 from twinfleet.runtime.core.guard import signer
-from twinfleet.runtime.fleet.connection import CommandError, Connection
 from twinfleet.runtime.host.keys import topic_expr
 from twinfleet.runtime.tools.monitor import graph as g
 from twinfleet.runtime.tools.monitor.graph_verbs import (

@@ -24,14 +24,15 @@ from typing import Any, TextIO
 import yaml
 import zenoh
 
-from twinfleet.runtime.contract.messages import registered_types
-from twinfleet.runtime.core.statistics import NodeStatistics
-from twinfleet.runtime.fleet.connection import (
+from twinfleet.runtime.access.connection import (
     CommandError,
     Connection,
+    unreachable_hint,
     zenoh_conf,
     zenoh_error_text,
 )
+from twinfleet.runtime.contract.messages import registered_types
+from twinfleet.runtime.core.statistics import NodeStatistics
 from twinfleet.runtime.host.schemas import dataclass_schema
 from twinfleet.runtime.tools.monitor import graph as g
 from twinfleet.runtime.tools.monitor.payload import PayloadError, normalise_type
@@ -47,8 +48,7 @@ def open_session(conn: Connection, *, write: bool = False) -> Iterator[zenoh.Ses
     try:
         session = zenoh.open(zenoh_conf(conn.endpoint, conn.auth, write=write))
     except zenoh.ZError as exc:
-        how = ("the fleet registry names it, but its launcher does not answer"
-               if conn.found == "registry" else "is a fleet running there?")
+        how = unreachable_hint(conn.endpoint, conn.auth, registry=conn.found == "registry")
         raise CommandError(f"cannot reach the Zenoh router at {conn.endpoint} ({how}): "
                            f"{zenoh_error_text(exc)}") from None
     try:

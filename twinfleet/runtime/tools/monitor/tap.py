@@ -34,12 +34,13 @@ from typing import Any, final
 import zenoh
 from zenoh import ext
 
-from twinfleet.runtime.fleet.fleetauth import MonitorAuth, login_settings, registry_auth
+from twinfleet.runtime.access.fleetauth import MonitorAuth, login_settings, registry_auth
 from twinfleet.runtime.host.keys import fleet_topics, topic_expr, topic_in_fleet
 from twinfleet.runtime.host.zenoh_transport import Handoff, zenoh_config
 
 RECONNECT = "{period_init_ms: 100, period_max_ms: 500, period_increase_factor: 1.5}"
 RETRY_S = 0.25
+FOLLOW_S = 1.0  # how often `follow_relaunches` looks at the link
 DUPLICATE_WINDOW_S = 10.0  # history and live copies of one latched sample arrive well within
 _SEEN_PER_KEY = 16
 
@@ -172,7 +173,7 @@ class FleetTap:
     async def reopen_if_stale(self) -> bool:
         """Open a new session when this one has lost its router and the config would now
         differ; True if it did. A fleet launched again on the same endpoint has new
-        credentials (`runtime.fleet.fleetauth`), which the old session's reconnects never
+        credentials (`runtime.access.fleetauth`), which the old session's reconnects never
         present, so without this a tap never saw the new run."""
         if self._stopped or not self.is_open or self.routers():
             return False
@@ -185,6 +186,11 @@ class FleetTap:
         await self._shut()
         await self.open()
         return True
+
+    @property
+    def stopped(self) -> bool:
+        """True once `stop` or `close` was called."""
+        return self._stopped
 
     async def close(self) -> None:
         """Undeclare (advanced subscribers first), then close the session, on the loop thread."""
@@ -204,3 +210,19 @@ class FleetTap:
         if self.session is not None and not self.session.is_closed():
             self.session.close()
         self.session, self._handoff = None, None
+
+
+async def follow_relaunches(tap: FleetTap, period_s: float = FOLLOW_S) -> None:
+    """Keep `tap` on its fleet until cancelled: every `period_s`, a session that lost its
+    router is replaced when the fleet was launched again with new credentials
+    (`FleetTap.reopen_if_stale`; `make_config` must read them afresh, e.g. from the
+    registry), and a tap whose reopening failed (no router yet) tries again."""
+    while not tap.stopped:
+        await asyncio.sleep(period_s)
+        try:
+            if tap.is_open:
+                await tap.reopen_if_stale()
+            elif not tap.stopped:
+                await tap.open()
+        except (zenoh.ZError, LookupError):  # the new run's router is not up yet
+            continue

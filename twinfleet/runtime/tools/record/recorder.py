@@ -57,6 +57,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from twinfleet.runtime.contract.node import Durability
+from twinfleet.runtime.core.guard import Role, signer
 from twinfleet.runtime.host.introspect import latched_topics
 from twinfleet.runtime.host.keys import (
     ANY,
@@ -70,7 +71,7 @@ from twinfleet.runtime.host.keys import (
 from twinfleet.runtime.host.schemas import message_schema
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
 from twinfleet.runtime.tools.monitor.graph import fleet_infos
-from twinfleet.runtime.tools.monitor.tap import FleetTap, tap_config
+from twinfleet.runtime.tools.monitor.tap import FleetTap, follow_relaunches, tap_config
 
 DRAIN_S = 0.3
 LINGER_S = 0.5
@@ -246,7 +247,8 @@ async def record_live(connect: str, fleet: str, path: str | Path, *,
                       handle_signals: bool = False, auth: Any = None) -> McapRecorder:
     """Record a running fleet reached at `connect` for `duration_s` or until `stop` is set
     (with `handle_signals`, also until SIGINT/SIGTERM); `auth`: the fleet's logins
-    (`runtime.fleet.fleetauth.MonitorAuth`; default: this machine's registry)."""
+    (`runtime.access.fleetauth.MonitorAuth`; default: this machine's registry, read again when
+    the router goes away, so the recording follows a fleet launched again on `connect`)."""
     import signal
 
     stop = stop or asyncio.Event()
@@ -273,9 +275,11 @@ async def record_live(connect: str, fleet: str, path: str | Path, *,
         recorder.metadata({"fleet": fleet, "connect": connect, **({"scene": scene} if scene else {})})
         waiter = asyncio.ensure_future(stop.wait())
         flusher = asyncio.create_task(_flush_until(recorder, stop))
+        follower = asyncio.create_task(follow_relaunches(tap))
         await asyncio.wait([waiter], timeout=duration_s)
-        waiter.cancel()
-        flusher.cancel()
+        for task in (waiter, flusher, follower):
+            task.cancel()
+        await asyncio.gather(follower, return_exceptions=True)
     finally:
         await tap.close()
         recorder.close()
@@ -357,7 +361,7 @@ def _announce(session: Any, summary: Any, fleet: str | None) -> list[Any]:
 
 def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
          fleet: str | None = None, out: TextIO = sys.stdout, wait_s: float = 2.0,
-         linger_s: float = LINGER_S) -> int:
+         linger_s: float = LINGER_S, key: bytes | None = None) -> int:
     """Publish every recorded message in log-time order, at the recorded pace divided by `rate`.
 
     Args:
@@ -368,6 +372,9 @@ def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
         out: where progress lines go.
         wait_s: wait up to this long for a subscriber to match before publishing.
         linger_s: keep the session open this long after the last message.
+        key: sign every message with this fleet key as recorded input
+            (`runtime.core.guard.Role.RECORDED`: ``play --into-fleet``); None: unsigned,
+            which a fleet with a key drops.
 
     Returns 0, or 2 when the file holds no twinfleet messages.
     """
@@ -378,7 +385,7 @@ def play(make_config: Callable[[], Any], path: str | Path, *, rate: float = 1.0,
     with open(path, "rb") as stream, zenoh.open(make_config()) as session:
         reader = make_reader(stream)
         summary = reader.get_summary()
-        pubs = _Publishers(session, path, fleet)
+        pubs = _Publishers(session, path, fleet, key)
         for channel in (summary.channels.values() if summary else ()):
             pubs.declare(channel)
         described = _describe_fleets(session, reader, summary, fleet)
@@ -406,7 +413,7 @@ def _publish_paced(reader: Any, pubs: _Publishers, rate: float, started: float) 
         delay = started + (message.log_time - first) / 1e9 / rate - time.monotonic()
         if delay > 0:
             time.sleep(delay)
-        pubs.of(channel).put(message.data)
+        pubs.put(channel, message.data)
         count += 1
     return count
 
@@ -415,9 +422,11 @@ def _publish_paced(reader: Any, pubs: _Publishers, rate: float, started: float) 
 class _Publishers:
     """One Zenoh publisher per recorded channel, declared on `play`'s session."""
 
-    def __init__(self, session: Any, path: str | Path, fleet: str | None) -> None:
-        self.session, self.path, self.fleet = session, path, fleet
+    def __init__(self, session: Any, path: str | Path, fleet: str | None,
+                 key: bytes | None = None) -> None:
+        self.session, self.path, self.fleet, self.key = session, path, fleet, key
         self._pubs: dict[int, Any] = {}
+        self._tags: dict[int, Callable[[bytes], bytes | None]] = {}
 
     def __len__(self) -> int:
         return len(self._pubs)
@@ -442,7 +451,17 @@ class _Publishers:
         else:
             pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         self._pubs[channel.id] = pub
+        self._tags[channel.id] = signer(self.key, key, Role.RECORDED)
         return pub
+
+    def put(self, channel: Any, payload: bytes) -> None:
+        """Publish `payload` on `channel`'s publisher (signed as recorded, with a key)."""
+        pub = self.of(channel)
+        attachment = self._tags[channel.id](payload)
+        if attachment is None:
+            pub.put(payload)
+        else:
+            pub.put(payload, attachment=attachment)
 
     def of(self, channel: Any) -> Any:
         """The publisher of `channel`, declared on first use if the summary had no such channel."""

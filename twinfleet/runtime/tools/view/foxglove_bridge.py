@@ -23,7 +23,9 @@ its JSON channels only.
 
 A client that subscribes late gets the latest map, every robot and the last
 message of each latched topic again at once (the SDK keeps no history).
-Open Foxglove, "Open connection", ``ws://127.0.0.1:8765``.
+Open Foxglove, "Open connection", with the printed ``ws://127.0.0.1:8765/?token=...``:
+clients reach the SDK's server only through `runtime.tools.view.foxglove_gate`, which
+checks their Host, Origin and token (`runtime.tools.view.web_guard`).
 `twinfleet export` writes the same channels into an MCAP file.
 """
 
@@ -43,7 +45,9 @@ from twinfleet.runtime.contract.scene import Scene
 from twinfleet.runtime.host.keys import topic_in_fleet
 from twinfleet.runtime.host.schemas import message_schema
 from twinfleet.runtime.tools.record.mcap_export import json_schema, message_json
+from twinfleet.runtime.tools.view.foxglove_gate import FoxgloveGate, inner_certificate
 from twinfleet.runtime.tools.view.foxglove_scene import MAP_TOPIC, ROBOTS_TOPIC, FoxgloveScene
+from twinfleet.runtime.tools.view.web_guard import WebAccess
 
 RESEND_DELAY_S = 0.05  # let the server finish a subscription before re-sending to it
 DEFAULT_PORT = 8765  # what Foxglove's "Open connection" proposes
@@ -173,10 +177,12 @@ class _Listener:
 
 async def serve_foxglove(endpoint: str, fleet: str, *, port: int | None = None,
                          out: TextIO = sys.stdout, ready: Callable[[int], None] | None = None,
-                         stop: asyncio.Event | None = None) -> None:
-    """Bridge the fleet behind `endpoint` to a Foxglove WebSocket server on 127.0.0.1:`port`
-    until `stop` is set (None: 8765, or a free port if that one is taken; 0: a free port;
-    `ready` gets the port)."""
+                         stop: asyncio.Event | None = None, auth: Any = None,
+                         web: WebAccess | None = None) -> None:
+    """Bridge the fleet behind `endpoint` to Foxglove on 127.0.0.1:`port` until `stop` is set
+    (None: 8765, or a free port if that one is taken; 0: a free port; `ready` gets the port).
+    `auth`: the fleet's credentials (default: this machine's registry); `web`: who may
+    connect (default: a fresh token, the local host names)."""
     from twinfleet.runtime.tools.monitor.tap import FleetTap, tap_config
     from twinfleet.runtime.tools.record.recorder import fleet_schemas
     from twinfleet.runtime.tools.view.scene_finder import SceneFinder
@@ -184,30 +190,31 @@ async def serve_foxglove(endpoint: str, fleet: str, *, port: int | None = None,
     context = foxglove.Context()
     bridge = FoxgloveBridge(context, fleet)
     listener = _Listener(asyncio.get_running_loop(), bridge)
-
-    def start(on: int) -> Any:
-        return foxglove.start_server(name=f"twinfleet {fleet}", host="127.0.0.1", port=on,
-                                     context=context, server_listener=listener)
-
+    access = web or WebAccess()
+    tls, client_tls = inner_certificate()
+    server = foxglove.start_server(name=f"twinfleet {fleet}", host="127.0.0.1", port=0,
+                                   context=context, server_listener=listener,
+                                   tls_cert=tls.certificate, tls_key=tls.key)
+    gate = FoxgloveGate(server.port, client_tls, access,
+                        lambda text: print(f"[foxglove] {text}", file=out, flush=True))
     try:
-        server = start(DEFAULT_PORT if port is None else port)
-    except RuntimeError:
-        if port is not None:
-            raise
-        server = start(0)  # Foxglove's usual port is taken (by `twinfleet view`?): any other
+        await _open_gate(gate, port)
+    except OSError:
+        server.stop()
+        raise
 
     def deliver(key: str, payload: bytes) -> None:
         finder.seen(key)
         bridge.on_sample(key, payload)
 
-    tap = FleetTap(lambda: tap_config(endpoint), fleet, deliver, retry=True)
+    tap = FleetTap(lambda: tap_config(endpoint, auth), fleet, deliver, retry=True)
     finder = SceneFinder(tap, lambda scene: bridge.set_scene(scene, tap.latched), out=out)
     try:
         opening = asyncio.ensure_future(tap.open())
         print(f"[foxglove] fleet {fleet!r} via {endpoint}: in Foxglove, open connection "
-              f"ws://127.0.0.1:{server.port}", file=out, flush=True)
+              f"{access.url('ws', gate.port)}", file=out, flush=True)
         if ready is not None:
-            ready(server.port)
+            ready(gate.port)
         stopping = asyncio.ensure_future((stop or asyncio.Event()).wait())
         await asyncio.wait([opening, stopping], return_when=asyncio.FIRST_COMPLETED)
         if opening.done() and tap.session is not None:
@@ -217,10 +224,23 @@ async def serve_foxglove(endpoint: str, fleet: str, *, port: int | None = None,
         tap.stop()
         await finder.close()
         await tap.close()
+        await gate.stop()
         server.stop()
 
 
-def run_foxglove(endpoint: str, fleet: str, *, port: int | None = None) -> int:
+async def _open_gate(gate: FoxgloveGate, port: int | None) -> None:
+    """Listen on `port`; None: Foxglove's usual port, or any free one when it is taken (by
+    `twinfleet view`?)."""
+    try:
+        await gate.start(DEFAULT_PORT if port is None else port)
+    except OSError:
+        if port is not None:
+            raise
+        await gate.start(0)
+
+
+def run_foxglove(endpoint: str, fleet: str, *, port: int | None = None, auth: Any = None,
+                 web: WebAccess | None = None) -> int:
     """Blocking entry point of `twinfleet foxglove`: serve until SIGINT/SIGTERM."""
     import signal
 
@@ -229,7 +249,7 @@ def run_foxglove(endpoint: str, fleet: str, *, port: int | None = None) -> int:
         loop = asyncio.get_running_loop()
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
-        await serve_foxglove(endpoint, fleet, port=port, stop=stop)
+        await serve_foxglove(endpoint, fleet, port=port, stop=stop, auth=auth, web=web)
 
     asyncio.run(main())
     return 0

@@ -17,7 +17,11 @@ fleet how it is drawn (its scene) and which topics are latched, which the tap
 then hears with history, so a viewer that joins late still gets the map.
 
 Without --connect, the viewer takes the fleet from the fleet registry
-(`runtime.fleet.registry`), and if none runs yet it waits for one to be launched.
+(`runtime.access.registry`), and if none runs yet it waits for one to be launched.
+
+Only the user's own browser gets an answer: every request passes
+`runtime.tools.view.web_guard` (its Host, its Origin, the per-run token of the
+printed URL), else it is refused with one line and logged.
 
 Trace mode (``--trace FILE``) serves `trace_document(FILE)`; the page steps
 through it. No Zenoh session is opened.
@@ -38,6 +42,7 @@ from typing import Any, TextIO
 from aiohttp import WSMsgType, web
 
 from twinfleet.runtime.tools.view.viewstate import LiveState, trace_document
+from twinfleet.runtime.tools.view.web_guard import WebAccess, guard_middleware
 
 STATIC_DIR = Path(__file__).with_name("static")
 FLUSH_S = 0.05
@@ -53,7 +58,8 @@ _FINDER = web.AppKey("finder", object)  # SceneFinder | None
 
 def make_app(*, state: LiveState | None = None, trace: dict[str, Any] | None = None,
              info: dict[str, Any] | None = None, tap: Any = None,
-             finder: Any = None) -> web.Application:
+             finder: Any = None, access: WebAccess | None = None,
+             log: Callable[[str], None] = print) -> web.Application:
     """The aiohttp application: the page, its script, the JSON API and the websocket.
 
     Args:
@@ -62,8 +68,10 @@ def make_app(*, state: LiveState | None = None, trace: dict[str, Any] | None = N
         info: extra fields of /api/info.
         tap: live mode: the `FleetTap` feeding `state`; opened and closed with the app.
         finder: live mode: the `SceneFinder` using `tap`; its question ends before the tap.
+        access: who may read (`web_guard`); None: anyone who reaches the port (tests only).
+        log: where refusals are written.
     """
-    app = web.Application()
+    app = web.Application(middlewares=[guard_middleware(access, log)] if access else [])
     app[_STATE], app[_TRACE], app[_TAP], app[_FINDER] = state, trace, tap, finder
     app[_INFO] = {"mode": "trace" if trace is not None else "live", **(info or {})}
     app[_SOCKETS] = weakref.WeakSet()
@@ -168,7 +176,8 @@ async def _flush(app: web.Application) -> None:
 async def serve(*, connect: str | None, fleet: str = "*", port: int = 0,
                 trace_path: str | None = None, out: TextIO = sys.stdout,
                 ready: Callable[[str], None] | None = None,
-                stop: asyncio.Event | None = None) -> None:
+                stop: asyncio.Event | None = None, auth: Any = None,
+                web_access: WebAccess | None = None) -> None:
     """Serve the viewer on 127.0.0.1:`port` until `stop` is set (or the task is cancelled).
 
     Args:
@@ -177,11 +186,20 @@ async def serve(*, connect: str | None, fleet: str = "*", port: int = 0,
         port: TCP port; 0 picks a free one (the URL is printed).
         trace_path: serve this checker trace instead of a live fleet.
         out: where the URL line goes.
-        ready: called with the page's URL once the server listens.
+        ready: called with the page's URL (with its token) once the server listens.
         stop: set it to end the server.
+        auth: the fleet's credentials (`runtime.access.fleetauth.MonitorAuth`, from
+            ``--credentials``; default: this machine's registry).
+        web_access: who may read the page (default: a fresh token, the local host names).
     """
+    access = web_access or WebAccess()
+
+    def log(text: str) -> None:
+        print(f"[viewer] {text}", file=out, flush=True)
+
     if trace_path is not None:
-        app = make_app(trace=trace_document(trace_path), info={"trace": trace_path})
+        app = make_app(trace=trace_document(trace_path), info={"trace": trace_path},
+                       access=access, log=log)
     else:
         from twinfleet.runtime.tools.monitor.tap import FleetTap, tap_config
         from twinfleet.runtime.tools.view.scene_finder import SceneFinder
@@ -192,20 +210,19 @@ async def serve(*, connect: str | None, fleet: str = "*", port: int = 0,
             finder.seen(key)
             state.on_sample(key, payload)
 
-        make_config = (lambda: tap_config(connect)) if connect else _registry_config(fleet)
+        make_config = (lambda: tap_config(connect, auth)) if connect else _registry_config(fleet)
         tap = FleetTap(make_config, fleet, deliver)
         finder = SceneFinder(tap, state.set_scene, out=out)
         # The page's header says where the fleet is found; whether it is reached yet is the
         # link indicator's to say (it follows the tap), not a word frozen at start-up.
-        app = make_app(state=state, tap=tap, finder=finder, info={
+        app = make_app(state=state, tap=tap, finder=finder, access=access, log=log, info={
             "fleet": fleet, "connect": connect or "the fleet registry"})
     runner = web.AppRunner(app, access_log=None, handle_signals=False)
     await runner.setup()
     try:
         site = web.TCPSite(runner, "127.0.0.1", port)
         await site.start()
-        host, bound = runner.addresses[0][:2]
-        url = f"http://{host}:{bound}/"
+        url = access.url("http", runner.addresses[0][1])
         what = (f"trace {trace_path}" if trace_path else
                 f"fleet {fleet!r} via {connect or 'the fleet registry (waiting for a launch)'}")
         print(f"[viewer] {what}: open {url}", file=out, flush=True)
@@ -218,7 +235,7 @@ async def serve(*, connect: str | None, fleet: str = "*", port: int = 0,
 
 def _registry_config(fleet: str) -> Callable[[], Any]:
     """A tap config for the fleet the registry names; `LookupError` (retried) until one runs."""
-    from twinfleet.runtime.fleet.registry import RegistryError, find_fleet
+    from twinfleet.runtime.access.registry import RegistryError, find_fleet
     from twinfleet.runtime.tools.monitor.tap import tap_config
 
     def make() -> Any:
@@ -230,7 +247,8 @@ def _registry_config(fleet: str) -> Callable[[], Any]:
 
 
 def run_viewer(*, connect: str | None, fleet: str = "*", port: int = 0,
-               trace_path: str | None = None, out: TextIO = sys.stdout) -> int:
+               trace_path: str | None = None, out: TextIO = sys.stdout, auth: Any = None,
+               web: WebAccess | None = None) -> int:
     """Blocking entry point of `twinfleet view`: serve until SIGINT/SIGTERM; exit code."""
     import signal
 
@@ -240,7 +258,7 @@ def run_viewer(*, connect: str | None, fleet: str = "*", port: int = 0,
         for sig in (signal.SIGINT, signal.SIGTERM):
             loop.add_signal_handler(sig, stop.set)
         await serve(connect=connect, fleet=fleet, port=port, trace_path=trace_path, out=out,
-                    stop=stop)
+                    stop=stop, auth=auth, web_access=web)
 
     asyncio.run(main())
     return 0

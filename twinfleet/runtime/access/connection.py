@@ -3,7 +3,7 @@ the one-line error type.
 
 Connection options are defined once (`add_connection_arguments`). Without
 ``--connect`` (or $TWINFLEET_CONNECT) a command finds the fleet in the
-per-user fleet registry (`runtime.fleet.registry`): the only running fleet, or the
+per-user fleet registry (`runtime.access.registry`): the only running fleet, or the
 one named by ``--fleet``. `connection(args)` resolves that into an endpoint
 and a fleet name, or raises `CommandError`. Nothing here imports Zenoh until
 a command runs.
@@ -21,6 +21,15 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from twinfleet.runtime.access.fleetauth import (
+    CredentialsError,
+    MonitorAuth,
+    login_settings,
+    monitor_auth,
+    read_credentials,
+    registry_auth,
+    secure,
+)
 from twinfleet.runtime.contract.kinds import (  # noqa: F401 (the commands' exit codes, from here too)
     EXIT_BAD_INPUT,
     EXIT_CONTRACT_BREACH,
@@ -28,13 +37,6 @@ from twinfleet.runtime.contract.kinds import (  # noqa: F401 (the commands' exit
     EXIT_INCONCLUSIVE,
     EXIT_INTERRUPTED,
     EXIT_OK,
-)
-from twinfleet.runtime.fleet.fleetauth import (
-    CredentialsError,
-    MonitorAuth,
-    monitor_auth,
-    read_credentials,
-    registry_auth,
 )
 
 DISCOVERY_S = 1.0
@@ -56,6 +58,19 @@ def zenoh_error_text(exc: BaseException) -> str:
     """A `zenoh.ZError` as one line, without the Rust source locations it carries."""
     text = _RUST_WHERE.sub("", str(exc)).strip()
     return " ".join(text.split()).rstrip(".!] ").replace("[", "")
+
+
+def unreachable_hint(endpoint: str, auth: MonitorAuth | None, *, registry: bool = False) -> str:
+    """What to check when the router at `endpoint` refused or did not answer (one clause)."""
+    if secure(endpoint) and (auth is None or auth.tls_ca is None):
+        return ("a tls/quic fleet is reached with its certificate authority: pass --credentials "
+                "FILE, a copy of its registry entry on the machine that launched it")
+    if secure(endpoint):
+        return ("is the fleet running there, and are the --credentials its current ones? A "
+                "relaunch makes new certificates, and the TLS handshake fails with another "
+                "launch's authority: copy its registry entry again")
+    return ("the fleet registry names it, but its launcher does not answer" if registry
+            else "is a fleet running there?")
 
 
 @dataclass(frozen=True)
@@ -107,7 +122,7 @@ def _await_fleet(fleet: str, timeout_s: float | None) -> Any:
     import sys
     import time
 
-    from twinfleet.runtime.fleet.registry import RegistryError, find_fleet, running_fleets
+    from twinfleet.runtime.access.registry import RegistryError, find_fleet, running_fleets
 
     deadline = None if timeout_s is None else time.monotonic() + timeout_s
     said = False
@@ -134,7 +149,7 @@ def connection(args: argparse.Namespace) -> Connection:
     Raises:
         CommandError: no --connect and the registry has no single matching fleet.
     """
-    from twinfleet.runtime.fleet.registry import RegistryError, find_fleet
+    from twinfleet.runtime.access.registry import RegistryError, find_fleet
 
     try:
         given = getattr(args, "credentials", None)
@@ -160,10 +175,9 @@ def zenoh_conf(endpoint: str, auth: MonitorAuth | None = None, *,
     operator login when it publishes or calls, `write`, else the read-only one)."""
     from twinfleet.runtime.host.zenoh_transport import zenoh_config
 
-    login = auth.login(write=write) if auth is not None else None
     try:
         return zenoh_config(connect=[endpoint], mode="client",
-                            settings=login.settings() if login else None)
+                            settings=login_settings(auth, write=write) if auth else None)
     except ValueError as exc:
         raise CommandError(str(exc)) from None
 

@@ -20,14 +20,20 @@ A fleet launched with a bridge to another system (``launch --ros2``) also draws 
 their ``external_topics`` only, and count it; the bridge signs with it and never with
 the fleet key.
 
+A fleet that listens on ``tls/`` or ``quic/`` also has its own certificate authority
+(`runtime.host.certs`): the router presents a server certificate it signed, and every
+client trusts that authority's certificate alone (`FleetCredentials.tls_ca`,
+`tls_settings`), so a client reaches this launch's router or nothing.
+
 Nodes get their secrets from the launcher in the environment (`ENV_USER`,
-`ENV_PASSWORD`, `guard.KEY_ENV`). Monitors get them from the fleet registry
-(owner-only, `runtime.fleet.registry`; `registry_extra`), or from ``--credentials
+`ENV_PASSWORD`, `ENV_TLS_CA`, `guard.KEY_ENV`). Monitors get them from the fleet registry
+(owner-only, `runtime.access.registry`; `registry_extra`), or from ``--credentials
 FILE`` — a registry entry file copied to where the monitor runs.
 """
 
 from __future__ import annotations
 
+import base64
 import ipaddress
 import json
 import os
@@ -43,6 +49,10 @@ from twinfleet.runtime.core.guard import BRIDGE_KEY_ENV, KEY_ENV, key_from_env, 
 
 ENV_USER: Final = "TWINFLEET_ZENOH_USER"
 ENV_PASSWORD: Final = "TWINFLEET_ZENOH_PASSWORD"
+ENV_TLS_CA: Final = "TWINFLEET_TLS_CA"  # the fleet authority's certificate, PEM
+SECURE_SCHEMES: Final = ("tls/", "quic/")
+#: set (to 1) for the nodes of a fleet launched to accept recorded input (``play --into-fleet``)
+ENV_ACCEPT_RECORDED: Final = "TWINFLEET_ACCEPT_RECORDED"
 NODE_USER: Final = "node"
 MONITOR_USER: Final = "monitor"
 _WRITES: Final = ["put", "delete", "reply", "declare_queryable", "liveliness_token"]
@@ -73,6 +83,7 @@ class FleetCredentials:
     node: Login
     monitor: Login
     bridge: bytes | None = None  # the bridge key, for a fleet that takes external input
+    tls_ca: bytes | None = None  # the fleet authority's certificate (PEM) on tls/quic
 
     @classmethod
     def fresh(cls, *, bridge: bool = False) -> FleetCredentials:
@@ -87,15 +98,38 @@ class FleetCredentials:
                ENV_PASSWORD: self.node.password}
         if self.bridge is not None:
             env[BRIDGE_KEY_ENV] = self.bridge.hex()
+        if self.tls_ca is not None:
+            env[ENV_TLS_CA] = self.tls_ca.decode()
         return env
 
     def registry_extra(self) -> dict[str, Any]:
         """The ``auth`` entry of the fleet registry (owner-only file)."""
-        auth = {"key": self.key.hex(), "operator": [self.node.user, self.node.password],
-                "monitor": [self.monitor.user, self.monitor.password]}
+        auth: dict[str, Any] = {"key": self.key.hex(),
+                                "operator": [self.node.user, self.node.password],
+                                "monitor": [self.monitor.user, self.monitor.password]}
         if self.bridge is not None:
             auth["bridge"] = self.bridge.hex()
+        if self.tls_ca is not None:
+            auth["tls_ca"] = self.tls_ca.decode()
         return {"auth": auth}
+
+
+def secure(endpoint: str) -> bool:
+    """True for an endpoint whose links are encrypted (``tls/``, ``quic/``)."""
+    return endpoint.startswith(SECURE_SCHEMES)
+
+
+def tls_settings(ca: bytes | None) -> dict[str, Any]:
+    """Client config keys that trust the fleet authority `ca` alone (none without one)."""
+    if ca is None:
+        return {}
+    return {"transport/link/tls/root_ca_certificate_base64": base64.b64encode(ca).decode()}
+
+
+def router_tls_settings(certificate: bytes, key: bytes) -> dict[str, Any]:
+    """Router config keys that present `certificate` (PEM; its `key` PKCS#8 PEM) on tls/quic."""
+    return {"transport/link/tls/listen_certificate_base64": base64.b64encode(certificate).decode(),
+            "transport/link/tls/listen_private_key_base64": base64.b64encode(key).decode()}
 
 
 def router_settings(creds: FleetCredentials, directory: Path) -> dict[str, Any]:
@@ -144,6 +178,17 @@ def node_secrets(env: Mapping[str, str] | None = None) -> tuple[Login | None, by
     return node_login(env), key_from_env(env)
 
 
+def accepts_recorded(env: Mapping[str, str] | None = None) -> bool:
+    """True when this node process's fleet was launched with ``--accept-recorded``."""
+    return (os.environ if env is None else env).get(ENV_ACCEPT_RECORDED) == "1"
+
+
+def node_tls(env: Mapping[str, str] | None = None) -> dict[str, Any]:
+    """The client TLS config keys of a node process (the fleet authority in its environment)."""
+    ca = (os.environ if env is None else env).get(ENV_TLS_CA)
+    return tls_settings(ca.encode()) if ca else {}
+
+
 @dataclass(frozen=True)
 class MonitorAuth:
     """What a monitor command uses: a login for reading, one for operating, the fleet key."""
@@ -152,6 +197,7 @@ class MonitorAuth:
     operator: Login | None = None
     monitor: Login | None = None
     bridge: bytes | None = None  # set when the fleet was launched to take external input
+    tls_ca: bytes | None = None  # the fleet authority's certificate (a tls/quic fleet)
 
     def login(self, *, write: bool) -> Login | None:
         """The login for a command that publishes or calls (`write`) or only reads."""
@@ -172,9 +218,10 @@ def monitor_auth(extra: Mapping[str, Any]) -> MonitorAuth:
         operator = Login(*auth["operator"]) if auth.get("operator") else None
         monitor = Login(*auth["monitor"]) if auth.get("monitor") else None
         bridge = bytes.fromhex(auth["bridge"]) if auth.get("bridge") else None
-    except (TypeError, ValueError, KeyError) as exc:
+        tls_ca = auth["tls_ca"].encode() if auth.get("tls_ca") else None
+    except (TypeError, ValueError, KeyError, AttributeError) as exc:
         raise CredentialsError(f"fleet credentials: malformed auth entry ({exc})") from None
-    return MonitorAuth(key, operator, monitor, bridge)
+    return MonitorAuth(key, operator, monitor, bridge=bridge, tls_ca=tls_ca)
 
 
 def read_credentials(path: str) -> tuple[str | None, MonitorAuth]:
@@ -216,12 +263,12 @@ def listen_problem(endpoint: str, *, insecure: bool) -> str | None:
     network: only ``tls/`` or ``quic/`` (certificates in the Zenoh config) are accepted
     there, unless the user says ``--insecure-listen``.
     """
-    if insecure or loopback_only(endpoint) or endpoint.startswith(("tls/", "quic/")):
+    if insecure or loopback_only(endpoint) or secure(endpoint):
         return None
     return (f"--listen {endpoint} is reachable from other machines, and plain tcp/udp sends "
             "every message in clear text to anyone on the path: use a tls/ (or quic/) "
-            "endpoint with certificates set through TWINFLEET_ZENOH_CONFIG_OVERRIDE "
-            "(transport/link/tls/...), or pass --insecure-listen to accept that risk")
+            "endpoint (the launch makes the certificates; remote hosts join with "
+            "--credentials), or pass --insecure-listen to accept that risk")
 
 
 def registry_auth(endpoint: str) -> MonitorAuth:
@@ -230,7 +277,7 @@ def registry_auth(endpoint: str) -> MonitorAuth:
     A command given ``--connect`` to a fleet launched here by the same user needs
     no ``--credentials``.
     """
-    from twinfleet.runtime.fleet.registry import RegistryError, running_fleets
+    from twinfleet.runtime.access.registry import RegistryError, running_fleets
 
     try:
         entries = [e for e in running_fleets() if e.endpoint == endpoint]
@@ -240,6 +287,7 @@ def registry_auth(endpoint: str) -> MonitorAuth:
 
 
 def login_settings(auth: MonitorAuth, *, write: bool = False) -> dict[str, Any]:
-    """The client config keys of `auth`'s login for reading (or writing), or none."""
+    """The client config keys of `auth`'s login for reading (or writing) and of its fleet
+    authority (a tls/quic fleet), or none."""
     login = auth.login(write=write)
-    return login.settings() if login else {}
+    return {**(login.settings() if login else {}), **tls_settings(auth.tls_ca)}

@@ -136,11 +136,23 @@ def register(fleet: str, endpoint: str, *, scenario: str = "", kind: str = "laun
     return path
 
 
+def write_beside(entry: Path, suffix: str, data: bytes) -> Path:
+    """Write `data` owner-only beside `entry` as ``<fleet>-<pid>.<suffix>`` (a secret of that
+    run, e.g. its router's TLS key); `unregister` removes it with the entry."""
+    path = entry.with_name(f"{entry.stem}.{suffix}")
+    fd = os.open(path, os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o600)
+    with os.fdopen(fd, "wb") as f:
+        f.write(data)
+    return path
+
+
 def unregister(path: Path | None) -> None:
-    """Remove an entry written by `register` (nothing if it is already gone)."""
+    """Remove an entry written by `register`, and what was written beside it (nothing if
+    it is already gone)."""
     if path is not None:
-        with contextlib.suppress(FileNotFoundError):
-            path.unlink()
+        for beside in [path, *path.parent.glob(f"{path.stem}.*")]:
+            with contextlib.suppress(FileNotFoundError):
+                beside.unlink()
 
 
 def _read(path: Path) -> FleetEntry | None:
