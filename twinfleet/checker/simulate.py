@@ -72,10 +72,14 @@ class Simulator:
     """Runs simulations of `system` (see the module docstring)."""
 
     def __init__(self, system: System, properties: PropertySet, model: TimingModel, *,
-                 seed: int, horizon_ms: int, max_steps: int, until_decided: bool = False) -> None:
+                 seed: int, horizon_ms: int, max_steps: int, until_decided: bool = False,
+                 reuse: bool = True) -> None:
         self.system, self.properties, self.model = system, properties, model
         self.seed, self.horizon_ms, self.max_steps = seed, horizon_ms, max_steps
         self.until_decided = until_decided
+        # Reuse handler runs across steps and simulations (`Runner.run_drawn`); off: run
+        # every handler (the same results, slower: for benchmarks and tests).
+        self._take = system.draw if reuse else system.step
         self._rest = PropertySet([p for p in properties.all if p.kind != "invariant"],
                                  queue_bounds=properties.queue_bounds,
                                  node_names=properties.node_names,
@@ -108,7 +112,7 @@ class Simulator:
                 ended = "horizon"
                 break
             actions = [a for a in system.actions(world) if type(a) is RunEvent]
-            t = system.step(world, rng.choice(actions), self._chooser(rng))
+            t = self._take(world, rng.choice(actions), self._chooser(rng))
             steps.append(t.step)
             world = t.world
             self._note(t, len(steps), seen)
