@@ -73,6 +73,7 @@ def main() -> None:
     ap.add_argument("--skip-precision", action="store_true", help="part 1 only")
     args = ap.parse_args()
     cases = [c for c in args.cases.split(",") if c]
+    cases.sort(key=lambda c: c != "c2a")  # c2a first: the reference of "vs c2a"
     print(f"part 1: {args.simulations} simulations per case, 1 worker, contract checks "
           f"{'on' if args.verify else 'off'}, loopback timing model")
     print(f"{'case':<12} {'sim/s':>8} {'steps/s':>9} {'vs c2a':>7}  ended")

@@ -324,7 +324,9 @@ def test_a_violating_simulation_replays_live(tmp_path, capsys, reap_nodes):
         simulations=8, seed=2, verify=False, traces_out=str(tmp_path), max_traces=1,
         until_decided=True))
     (trace,) = result.traces
-    assert json.loads(Path(trace).read_text())["search"] == "statistical"
+    doc = json.loads(Path(trace).read_text())
+    assert doc["search"] == "statistical" and doc["latency"] == [1, 134]
+    assert any(step["options"] for step in doc["steps"])  # drawn latencies are recorded
     assert main(["replay", trace, "--live", "--quiet"]) == 1
     assert "live replay CONFIRMED: no_collision" in capsys.readouterr().out
     assert not _my_node_processes()
