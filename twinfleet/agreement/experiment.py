@@ -336,6 +336,12 @@ def markdown_report(exp: Experiment) -> str:
         lines += ["Counterexample traces (`twinfleet replay T`, `twinfleet render T -o x.png`):", ""]
         lines += [f"- {case} ({c.semantics}): `{c.trace}`" for case, c in traces]
         lines.append("")
+    drawn = [(row.case, row.prediction.trace) for row in exp.rows
+             if row.prediction is not None and row.prediction.trace]
+    if drawn:
+        lines += ["A failing simulation of each prediction (`twinfleet replay T [--live]`):", ""]
+        lines += [f"- {case}: `{trace}`" for case, trace in drawn]
+        lines.append("")
     return "\n".join(lines)
 
 
