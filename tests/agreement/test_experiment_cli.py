@@ -27,7 +27,7 @@ def _run(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
 def test_experiment_on_headon_writes_markdown_and_csv(tmp_path):
     started = time.monotonic()
     proc = _run("experiment", "headon", "--runs", "2", "--time-scale", "10",
-                "--out", str(tmp_path))
+                "--predict", "20", "--out", str(tmp_path))
     elapsed = time.monotonic() - started
     assert proc.returncode in (0, 1), proc.stderr
     assert elapsed < 40, f"took {elapsed:.1f} s"
@@ -42,6 +42,11 @@ def test_experiment_on_headon_writes_markdown_and_csv(tmp_path):
     assert row["case"] == "headon" and row["runs"] == "2"
     assert int(row["passed"]) + int(row["failed"]) == 2
     assert row["simulations"] == f"{row['passed']}/2 passed, {row['failed']}/2 failed"
+    assert row["predicted_simulations"] == "20"
+    assert 0 <= float(row["predicted_low"]) <= float(row["predicted_pass"]) <= float(
+        row["predicted_high"]) <= 1
+    assert 0 <= float(row["agreement_p"]) <= 1
+    assert "[experiment] headon: predicted P(pass)" in proc.stderr
     for sem in both:
         assert int(row[f"{sem}_states"]) > 0
         assert row[f"{sem}_result"].split(":")[0] in ("satisfied", "violated")
@@ -52,6 +57,13 @@ def test_experiment_on_headon_writes_markdown_and_csv(tmp_path):
     assert "===== run 1/2 of headon" in log and "[map_server]" in log
     assert "[map_server]" not in proc.stdout  # node output goes to the log, not the terminal
     assert "[experiment] headon live 2/2" in proc.stderr
+    # The same command again keeps the finished case instead of running it.
+    again = _run("experiment", "headon", "--runs", "2", "--time-scale", "10",
+                 "--predict", "20", "--out", str(tmp_path), timeout=30)
+    assert again.returncode == proc.returncode, again.stderr
+    assert "headon: finished by an earlier run" in again.stderr
+    assert "live 1/2" not in again.stderr
+    assert list(csv.DictReader((tmp_path / "experiment.csv").open())) == [row]
 
 
 def test_bad_arguments_exit_2(tmp_path):
@@ -59,15 +71,20 @@ def test_bad_arguments_exit_2(tmp_path):
     assert proc.returncode == 2 and "--jobs" in proc.stderr
     proc = _run("demo", "--runs", "0", "--out", str(tmp_path))
     assert proc.returncode == 2 and "map server" in proc.stderr
+    proc = _run("headon", "--timing", str(tmp_path / "none.yaml"), "--out", str(tmp_path))
+    assert proc.returncode == 2 and "--timing" in proc.stderr
+    proc = _run("headon", "--confidence", "1.5", "--out", str(tmp_path))
+    assert proc.returncode == 2 and "--confidence" in proc.stderr
 
 
 def test_checker_only_with_runs_0(tmp_path):
-    proc = _run("headon", "--runs", "0", "--semantics", "ros", "--out",
+    proc = _run("headon", "--runs", "0", "--semantics", "ros", "--predict", "5", "--out",
                 str(tmp_path))
     assert proc.returncode == 0, proc.stderr
     (row,) = list(csv.DictReader((tmp_path / "experiment.csv").open()))
     assert list(row) == columns(("ros",))
     assert row["runs"] == "0" and row["simulations"] == ""
+    assert row["predicted_simulations"] == "5" and row["agreement_p"] == ""
     assert row["ros_trace"].endswith("headon.ros.trace.json")
     assert Path(row["ros_trace"]).is_file()
 

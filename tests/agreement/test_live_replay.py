@@ -310,3 +310,23 @@ def test_replay_live_command_runs_a_latency_trace_on_real_processes(tmp_path, ca
     assert main(["replay", str(trace), "--live"]) == 1
     assert "live replay CONFIRMED: quick" in capsys.readouterr().out
     assert not _my_node_processes()
+
+
+@pytest.mark.slow
+@pytest.mark.timeout(60)
+def test_a_violating_simulation_replays_live(tmp_path, capsys, reap_nodes):
+    # A simulation's latencies are drawn from the loopback model (1-134 ms): its trace
+    # carries them as granted branches, and the live fleet must collide the same way.
+    from twinfleet.checker.statistical import StatisticalOptions, check_statistical
+    from twinfleet.cli import main
+
+    result = check_statistical(HEADON, StatisticalOptions(
+        simulations=8, seed=2, verify=False, traces_out=str(tmp_path), max_traces=1,
+        until_decided=True))
+    (trace,) = result.traces
+    doc = json.loads(Path(trace).read_text())
+    assert doc["search"] == "statistical" and doc["latency"] == [1, 134]
+    assert any(step["options"] for step in doc["steps"])  # drawn latencies are recorded
+    assert main(["replay", trace, "--live", "--quiet"]) == 1
+    assert "live replay CONFIRMED: no_collision" in capsys.readouterr().out
+    assert not _my_node_processes()

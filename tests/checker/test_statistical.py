@@ -14,7 +14,7 @@ from tests.checker.smc_systems import Coin4, Nested, Receiver, Sender
 from twinfleet import testing
 from twinfleet.checker.estimate import Decision, Sprt, clopper_pearson
 from twinfleet.checker.properties import PropertySet
-from twinfleet.checker.simulate import Simulator
+from twinfleet.checker.simulate import Simulation, Simulator
 from twinfleet.checker.statistical import StatisticalOptions, check_statistical
 from twinfleet.checker.system import System
 from twinfleet.checker.timing import Histogram, TimingModel
@@ -137,3 +137,32 @@ def test_c2a_statistical_gives_an_interval_and_traces_that_replay(tmp_path: Path
     done = subprocess.run([sys.executable, "-m", "twinfleet", "replay", str(trace)],
                           capture_output=True, text=True, timeout=120, cwd=tmp_path)
     assert done.returncode == 1 and "replay confirmed: no_collision" in done.stdout
+
+
+def _key(s: Simulation) -> tuple[object, ...]:
+    return (s.violated, s.steps, s.end_ms, s.ended, s.first)
+
+
+@pytest.mark.parametrize("case", range(3), ids=["coin4", "nested", "latency"])
+def test_kept_handler_runs_give_the_same_simulations(case: int) -> None:
+    _, system, props, _ = _systems()[case]
+    runs = [[Simulator(system, props, COIN, seed=9, horizon_ms=100, max_steps=100,
+                       reuse=reuse).run(i) for i in range(60)] for reuse in (False, True)]
+    assert [_key(s) for s in runs[0]] == [_key(s) for s in runs[1]]
+
+
+def test_kept_handler_runs_on_a_robot_fleet_are_reused_and_give_the_same_simulations() -> None:
+    from twinfleet.checker.driver import load
+    from twinfleet.checker.statistical import timed_system
+    from twinfleet.checker.timing import default_timing
+
+    spec = load(Path(__file__).resolve().parents[2] / "twinfleet" / "launch" / "headon.yaml")
+    out, handler_runs = [], []
+    for reuse in (False, True):
+        system, props = timed_system(spec, default_timing(), verify=True)
+        sim = Simulator(system, props, default_timing(), seed=4, horizon_ms=6000,
+                        max_steps=10_000, reuse=reuse)
+        out.append([_key(sim.run(i)) for i in range(3)])
+        handler_runs.append(system.runner.handler_runs)
+    assert out[0] == out[1]
+    assert handler_runs[1] < handler_runs[0] / 2  # most steps reuse a kept run

@@ -7,6 +7,7 @@ real processes, which needs both drivers and so lives in this layer.
 
     twinfleet experiment SCENARIO... [--runs N] [--time-scale K]
                          [--semantics both|ros|rebeca] [--out DIR] [--jobs 1]
+                         [--predict N] [--timing FILE] [--confidence C] [--workers N]
 
 Exit codes: 0 done, and no live run contradicted a checker verdict; 1 a live
 run did what the checker says cannot happen (a collision in a scenario the
@@ -104,6 +105,18 @@ def _experiment_parser(subparsers: Any) -> None:
                         "(default: %(default)g)")
     p.add_argument("--keep-going", action="store_true",
                    help="do not end a live run at its first collision")
+    p.add_argument("--predict", type=int, default=100, metavar="N",
+                   help="simulations (check --statistical, ros rules, until the outcome is "
+                        "known) estimating P(a live run passes) per scenario; 0: no prediction "
+                        "(default: %(default)s)")
+    p.add_argument("--timing", default=None, metavar="FILE",
+                   help="timing model of the prediction (`twinfleet calibrate`), stretched to "
+                        "--time-scale (default: the loopback model shipped with twinfleet)")
+    p.add_argument("--confidence", type=float, default=0.99, metavar="C",
+                   help="confidence of the predicted interval (default: %(default)g)")
+    p.add_argument("--workers", type=int, default=1, metavar="N",
+                   help="local processes for the prediction's simulations (live runs are "
+                        "always one at a time; default: %(default)s)")
     p.set_defaults(func=experiment_command)
 
 
@@ -116,14 +129,28 @@ def experiment_command(args: argparse.Namespace) -> int:
         print("twinfleet experiment: --jobs: only 1 is supported; live fleets run one at a "
               "time so that their timing is not disturbed", file=sys.stderr)
         return EXIT_BAD_INPUT
-    if args.runs < 0 or args.time_scale <= 0:
-        print("twinfleet experiment: --runs must be >= 0 and --time-scale > 0", file=sys.stderr)
+    if args.runs < 0 or args.time_scale <= 0 or args.predict < 0 or args.workers < 1:
+        print("twinfleet experiment: --runs and --predict must be >= 0, --time-scale > 0 and "
+              "--workers >= 1", file=sys.stderr)
         return EXIT_BAD_INPUT
+    if not 0 < args.confidence < 1:
+        print("twinfleet experiment: --confidence must lie in (0, 1)", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.timing is not None:
+        from twinfleet.checker.timing import TimingError, load_timing
+
+        try:
+            load_timing(args.timing)
+        except TimingError as exc:
+            print(f"twinfleet experiment: --timing: {exc}", file=sys.stderr)
+            return EXIT_BAD_INPUT
     options = ExperimentOptions(runs=args.runs, time_scale=args.time_scale,
                                 semantics=_SEMANTICS[args.semantics], out=Path(args.out),
                                 seed=args.seed, max_states=args.max_states,
                                 max_time_s=args.max_time, horizon_s=args.horizon,
-                                stop_on_collision=not args.keep_going)
+                                stop_on_collision=not args.keep_going, predict=args.predict,
+                                timing=args.timing, confidence=args.confidence,
+                                workers=args.workers)
     command = command_line(args)
     try:
         exp = run_experiment(args.scenarios, options, command=command)
@@ -151,6 +178,11 @@ def command_line(args: argparse.Namespace) -> str:
         words += ["--horizon", f"{args.horizon:g}"]
     if args.keep_going:
         words.append("--keep-going")
+    words += ["--predict", str(args.predict), "--confidence", f"{args.confidence:g}"]
+    if args.timing is not None:
+        words += ["--timing", args.timing]
+    if args.workers != 1:
+        words += ["--workers", str(args.workers)]
     return " ".join(shlex.quote(w) for w in words)
 
 

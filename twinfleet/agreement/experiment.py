@@ -1,7 +1,8 @@
 """The paper's experiment end to end: checker verdicts and live runs, one table.
 
 For each scenario `run_experiment` runs the checker once per semantics
-(counterexample traces under `OUT/traces/`), then N live runs one after
+(counterexample traces under `OUT/traces/`), predicts P(a live run passes)
+from simulations under a timing model (`agreement.prediction`), then N live runs one after
 another in this process (seeds S, S+1, …; the nodes' output goes to
 `OUT/logs/<case>.live.log`; the fleets run a copy of the scenario file in
 `OUT/scenarios/`, see `agreement.live.private_copy`), and fills one
@@ -9,7 +10,8 @@ another in this process (seeds S, S+1, …; the nodes' output goes to
 is written as `experiment.md`, `experiment.csv` and `experiment.json` (every
 run's arrival times and collisions too) after every scenario and once more at
 the end, also when Ctrl-C stopped the experiment: what was done is kept, a
-half-done scenario shows "stopped after k of N".
+half-done scenario shows "stopped after k of N". A finished scenario is
+kept in `OUT/cases/` (`agreement.resume`): the same command run again skips it.
 
 Live runs end as soon as their outcome is known (`agreement.live`), or after
 `startup_s + horizon_s / time_scale` wall seconds: `horizon_s` fleet seconds
@@ -32,6 +34,7 @@ from typing import Any, TextIO, final
 from twinfleet.agreement import DEFAULT_TIME_SCALE
 from twinfleet.agreement.live import LiveRunResult, live_run, private_copy
 from twinfleet.agreement.paper import paper_row
+from twinfleet.agreement.resume import FinishedCase, fingerprint, load_case, save_case
 from twinfleet.agreement.table import CheckCell, LiveSummary, Row, csv_record, to_csv, to_markdown
 from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, robot_names, summarise
 from twinfleet.checker.driver import CheckOptions, check
@@ -60,6 +63,10 @@ class ExperimentOptions:
         horizon_s: fleet seconds a live run may last before it counts as not arrived.
         startup_s: wall seconds allowed for starting and stopping the processes.
         stop_on_collision: end a live run at its first collision.
+        predict: simulations for the predicted P(pass) (0: no prediction).
+        timing: the timing model file of the prediction (None: the loopback model shipped).
+        confidence: confidence of the predicted interval.
+        workers: local processes for the prediction's simulations.
     """
 
     runs: int = 20
@@ -72,6 +79,19 @@ class ExperimentOptions:
     horizon_s: float = 180.0
     startup_s: float = 20.0
     stop_on_collision: bool = True
+    predict: int = 100
+    timing: str | None = None
+    confidence: float = 0.99
+    workers: int = 1
+
+    def decisive(self) -> dict[str, Any]:
+        """The options that change a case's result (what a kept case must match)."""
+        timing = None if self.timing is None else Path(self.timing).read_text()
+        return {"runs": self.runs, "time_scale": self.time_scale,
+                "semantics": list(self.semantics), "seed": self.seed,
+                "max_states": self.max_states, "max_time_s": self.max_time_s,
+                "horizon_s": self.horizon_s, "stop_on_collision": self.stop_on_collision,
+                "predict": self.predict, "timing": timing, "confidence": self.confidence}
 
     @property
     def run_timeout_s(self) -> float:
@@ -144,17 +164,55 @@ def run_experiment(paths: Sequence[str | Path], options: ExperimentOptions, *,
     out = options.out
     (out / "logs").mkdir(parents=True, exist_ok=True)
     try:
+        decisive = options.decisive()
         for path, scenario in scenarios:
+            key = fingerprint(scenario.path, decisive)
+            kept = load_case(out, scenario.name, key)
+            if kept is not None:
+                _take_kept(exp, kept)
+                progress(f"{scenario.name}: finished by an earlier run with the same options, "
+                         f"kept ({out / 'cases'})")
+                continue
             row = scenario_row(path, scenario)
             exp.rows.append(row)
             _checks(exp, row, path, progress)
+            _predict(exp, row, path, progress)
             _live(exp, row, path, scenario, progress)
+            save_case(out, key, FinishedCase(
+                row, exp.runs.get(row.case, []), exp.predictions.get(row.case, {}),
+                [r for r in exp.retried if r[0] == row.case]))
             write_outputs(exp)
     except (KeyboardInterrupt, _Interrupted):
         exp.interrupted = True
         progress("interrupted: writing what was done")
     write_outputs(exp)
     return exp
+
+
+def _take_kept(exp: Experiment, kept: FinishedCase) -> None:
+    case = kept.row.case
+    exp.rows.append(kept.row)
+    if kept.runs or kept.row.live is not None:
+        exp.runs[case] = kept.runs
+        exp.predictions[case] = kept.predicted_arrival_ms
+    exp.retried += kept.retried
+
+
+def _predict(exp: Experiment, row: Row, path: str | Path,
+             progress: Callable[[str], None]) -> None:
+    from twinfleet.agreement.prediction import predict
+
+    opts = exp.options
+    if opts.predict <= 0:
+        return
+    progress(f"{row.case}: predicting P(pass) from {opts.predict} simulations "
+             f"(time scale {opts.time_scale:g}, {opts.workers} worker(s))")
+    row.prediction = pred = predict(
+        path, timing=opts.timing, time_scale=opts.time_scale, simulations=opts.predict,
+        seed=opts.seed, horizon_s=opts.horizon_s, confidence=opts.confidence,
+        workers=opts.workers, out=opts.out)
+    progress(f"{row.case}: predicted P(pass) {pred.text} at {pred.confidence:.0%} "
+             f"({pred.passes}/{pred.simulations} simulations passed, {pred.time_s:.1f} s)")
 
 
 def _checks(exp: Experiment, row: Row, path: str | Path, progress: Callable[[str], None]) -> None:
@@ -221,7 +279,9 @@ def _live(exp: Experiment, row: Row, path: str | Path, scenario: Scenario,
                         wall_s=record.wall_s)
             progress(f"{row.case} live {k + 1}/{opts.runs} (seed {seed}): {record.verdict} "
                      f"[{record.wall_s:.1f} s]")
-    progress(f"{row.case}: simulations {summary.simulations}; {row.agreement}")
+    agree = row.agreement_p
+    progress(f"{row.case}: simulations {summary.simulations}; {row.agreement}"
+             + ("" if agree is None else f"; agreement p {agree:.3g}"))
 
 
 def _header(log: TextIO, text: str) -> None:
@@ -251,6 +311,14 @@ def markdown_report(exp: Experiment) -> str:
               f"(seeds from {'the scenario seed' if o.seed is None else o.seed}); checker "
               f"semantics: {', '.join(o.semantics)}; started "
               f"{time.strftime('%Y-%m-%d %H:%M', time.localtime(exp.started))}."]
+    if o.predict > 0:
+        lines += ["", f"Predicted P(pass): {o.predict} simulations per case (`ros` rules) under "
+                  f"the timing model `{o.timing or 'loopback (shipped)'}` stretched to time scale "
+                  f"{o.time_scale:g} (`{o.out / 'timing.yaml'}`), {o.confidence:.0%} "
+                  "Clopper-Pearson interval. Agreement p: the exact two-sided binomial p-value "
+                  "of the live passes, maximised over the predicted interval, plus "
+                  f"{1 - o.confidence:.2g} for the interval's own error (1 when k/N lies in "
+                  "the interval; small means model and fleet disagree)."]
     if exp.interrupted:
         lines += ["", "**Interrupted (Ctrl-C): the table shows what was done.**"]
     lines += ["", to_markdown(exp.rows, o.semantics)]
@@ -267,6 +335,12 @@ def markdown_report(exp: Experiment) -> str:
     if traces:
         lines += ["Counterexample traces (`twinfleet replay T`, `twinfleet render T -o x.png`):", ""]
         lines += [f"- {case} ({c.semantics}): `{c.trace}`" for case, c in traces]
+        lines.append("")
+    drawn = [(row.case, row.prediction.trace) for row in exp.rows
+             if row.prediction is not None and row.prediction.trace]
+    if drawn:
+        lines += ["A failing simulation of each prediction (`twinfleet replay T [--live]`):", ""]
+        lines += [f"- {case}: `{trace}`" for case, trace in drawn]
         lines.append("")
     return "\n".join(lines)
 
@@ -313,7 +387,8 @@ def json_report(exp: Experiment) -> dict[str, Any]:
             "retried": [list(r) for r in exp.retried],
             "options": {"runs": o.runs, "time_scale": o.time_scale, "semantics": list(o.semantics),
                         "seed": o.seed, "max_states": o.max_states, "max_time_s": o.max_time_s,
-                        "horizon_s": o.horizon_s},
+                        "horizon_s": o.horizon_s, "predict": o.predict, "timing": o.timing,
+                        "confidence": o.confidence, "workers": o.workers},
             "scenarios": scenarios}
 
 

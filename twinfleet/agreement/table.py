@@ -1,10 +1,12 @@
 """The experiment table: one row per scenario, as the paper's Tables 4 and 5 lay it out.
 
 A `Row` holds a scenario's parameters, one `CheckCell` per checker semantics,
-a `LiveSummary` of its live runs and the paper's own figures (`PaperRow`).
+a `LiveSummary` of its live runs, the `Prediction` of P(pass) from simulations
+under a timing model, and the paper's own figures (`PaperRow`).
 `COLUMNS` names every CSV column for a list of semantics; `to_csv` and
 `to_markdown` render rows with them. Pure formatting: nothing here runs
-anything, so the module imports neither the checker nor the live runtime.
+anything, so the module imports neither the checker's search nor the live
+runtime (only the checker's arithmetic on counts, `checker.estimate`).
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from dataclasses import dataclass, field
 from typing import final
 
 from twinfleet.agreement.paper import PaperRow
+from twinfleet.checker.estimate import agreement_p_value
 from twinfleet.runtime.contract.kinds import Status
 
 
@@ -120,6 +123,43 @@ class LiveSummary:
 
 
 @final
+@dataclass(frozen=True, slots=True)
+class Prediction:
+    """How likely a live run of a case is to pass, as the simulations estimate it.
+
+    Attributes:
+        passes: simulations that violated no property.
+        simulations: simulations run.
+        low, high: the Clopper–Pearson interval of P(pass) at `confidence`.
+        confidence: the interval's confidence.
+        time_s: wall seconds the simulations took.
+        trace: a violating simulation written as a trace, if any.
+    """
+
+    passes: int
+    simulations: int
+    low: float
+    high: float
+    confidence: float
+    time_s: float
+    trace: str | None = None
+
+    @property
+    def p(self) -> float:
+        """The point estimate of P(pass)."""
+        return self.passes / self.simulations if self.simulations else 0.0
+
+    @property
+    def text(self) -> str:
+        """ "0.62 [0.49, 0.74]" """
+        return f"{self.p:.2f} [{self.low:.2f}, {self.high:.2f}]"
+
+    def agreement_p(self, passed: int, runs: int) -> float:
+        """The p-value of `passed` live passes in `runs` against this prediction."""
+        return agreement_p_value(passed, runs, self.low, self.high, self.confidence)
+
+
+@final
 @dataclass(slots=True)
 class Row:
     """One scenario of the experiment.
@@ -132,6 +172,7 @@ class Row:
         robots: per robot (name, speed m/s, max wait ms).
         checks: checker result per semantics, in the order run.
         live: the live runs, or None when none were run.
+        prediction: P(pass) from simulations, or None when none were run.
         paper: the paper's figures for this case, if it is one of the paper's.
     """
 
@@ -143,6 +184,7 @@ class Row:
     checks: dict[str, CheckCell] = field(default_factory=dict)
     live: LiveSummary | None = None
     paper: PaperRow | None = None
+    prediction: Prediction | None = None
 
     @property
     def parameters(self) -> str:
@@ -176,6 +218,13 @@ class Row:
         return f"checker: {check.detail} violated; live failed {live.failed}/{live.runs}"
 
     @property
+    def agreement_p(self) -> float | None:
+        """The p-value of the live passes against the prediction (None: one is missing)."""
+        if self.prediction is None or self.live is None or self.live.runs == 0:
+            return None
+        return self.prediction.agreement_p(self.live.passed, self.live.runs)
+
+    @property
     def contradiction(self) -> bool:
         """True when a live run did what the checker proved impossible."""
         return self.agreement.startswith("CONTRADICTION")
@@ -196,7 +245,8 @@ def columns(semantics: Sequence[str]) -> list[str]:
     for sem in semantics:
         cols += [f"{sem}_result", f"{sem}_states", f"{sem}_transitions",
                  f"{sem}_rmc_transitions", f"{sem}_time_s", f"{sem}_trace"]
-    cols += ["runs", "passed", "failed", "collision_runs", "unarrived_runs", "time_scale",
+    cols += ["predicted_pass", "predicted_low", "predicted_high", "predicted_simulations",
+             "agreement_p", "runs", "passed", "failed", "collision_runs", "unarrived_runs", "time_scale",
              "simulations", "agreement", "paper_result", "paper_states", "paper_transitions",
              "paper_simulations"]
     return cols
@@ -213,7 +263,12 @@ def csv_record(row: Row, semantics: Sequence[str]) -> dict[str, object]:
                     f"{sem}_rmc_transitions": c.rmc_transitions if c else "",
                     f"{sem}_time_s": f"{c.time_s:.2f}" if c else "",
                     f"{sem}_trace": (c.trace or "") if c else ""})
-    live = row.live
+    live, pred, agree = row.live, row.prediction, row.agreement_p
+    rec.update({"predicted_pass": f"{pred.p:.4f}" if pred else "",
+                "predicted_low": f"{pred.low:.4f}" if pred else "",
+                "predicted_high": f"{pred.high:.4f}" if pred else "",
+                "predicted_simulations": pred.simulations if pred else "",
+                "agreement_p": "" if agree is None else f"{agree:.4g}"})
     rec.update({"runs": live.runs if live else 0, "passed": live.passed if live else 0,
                 "failed": live.failed if live else 0,
                 "collision_runs": live.collision_runs if live else 0,
@@ -243,7 +298,8 @@ def markdown_header(semantics: Sequence[str]) -> list[str]:
     head = ["case", "scan ms", "speed m/s / max wait ms (r1, r2, …)"]
     for sem in semantics:
         head += [f"{sem}: result", f"{sem}: states", f"{sem}: transitions / RMC-style"]
-    return head + ["simulations", "live failures", "agreement", "paper: result",
+    return head + ["predicted P(pass) [interval]", "simulations", "agreement p",
+                   "live failures", "agreement", "paper: result",
                    "paper: states / transitions", "paper: simulations"]
 
 
@@ -256,8 +312,10 @@ def markdown_cells(row: Row, semantics: Sequence[str]) -> list[str]:
             cells += ["", "", ""]
         else:
             cells += [c.result, _int(c.states), f"{_int(c.transitions)} / {_int(c.rmc_transitions)}"]
-    live, p = row.live, row.paper
-    cells += [live.simulations if live else "", live.failures if live else "", row.agreement]
+    live, p, pred, agree = row.live, row.paper, row.prediction, row.agreement_p
+    cells += [f"{pred.text} ({pred.simulations} sim.)" if pred else "",
+              live.simulations if live else "", "" if agree is None else f"{agree:.3g}",
+              live.failures if live else "", row.agreement]
     if p is None:
         cells += ["", "", ""]
     else:

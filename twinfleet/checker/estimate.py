@@ -11,6 +11,11 @@ with an indifference region [`bound` - `indifference`, `bound`]:
   sign-off);
 - `beta`: the probability of refusing although p <= bound - indifference.
 
+`binomial_test` is the exact two-sided test of "k successes in n trials come
+from probability p"; `agreement_p_value` extends it to a p known only up to a
+confidence interval (how `twinfleet experiment` holds a live frequency against
+a predicted interval).
+
 With H_safe: p = p0 = bound - indifference and H_unsafe: p = p1 = bound, the
 log-likelihood ratio L = sum log(f_unsafe / f_safe) over the outcomes is
 compared after each one with log(alpha / (1 - beta)) (accept "below") and
@@ -109,6 +114,34 @@ def wilson(k: int, n: int, confidence: float) -> tuple[float, float]:
     centre = (p + z * z / (2 * n)) / (1 + z * z / n)
     half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
     return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def binomial_test(k: int, n: int, p: float) -> float:
+    """The exact two-sided binomial p-value of `k` successes in `n` trials under probability
+    `p`: the total probability of every outcome no more likely than `k`."""
+    if n == 0:
+        return 1.0
+    if p <= 0.0 or p >= 1.0:
+        return 1.0 if k == (0 if p <= 0.0 else n) else 0.0
+    logs = [math.lgamma(n + 1) - math.lgamma(j + 1) - math.lgamma(n - j + 1)
+            + j * math.log(p) + (n - j) * math.log1p(-p) for j in range(n + 1)]
+    # Outcomes as likely as k up to rounding count as "no more likely" (the usual relative
+    # tolerance of exact tests), so that a symmetric case gives exactly 1.
+    edge = logs[k] + 1e-7
+    return min(1.0, math.fsum(math.exp(x) for x in logs if x <= edge))
+
+
+def agreement_p_value(k: int, n: int, low: float, high: float, confidence: float) -> float:
+    """How well `k` of `n` agrees with a probability known to lie in [`low`, `high`] at
+    `confidence`: the largest `binomial_test` p-value over the interval, plus the interval's
+    own error 1 - `confidence` (Berger and Boos's p-value for a nuisance parameter known up
+    to a confidence set, 1994), at most 1. Small: the counts and the interval disagree."""
+    if n == 0:
+        return 1.0
+    if low <= k / n <= high:
+        return 1.0
+    grid = [low + (high - low) * i / 200 for i in range(201)]
+    return min(1.0, max(binomial_test(k, n, p) for p in grid) + (1.0 - confidence))
 
 
 class Decision(Enum):

@@ -16,6 +16,15 @@ probed, the node's other attributes compared by identity, the module and class
 variables of its code watched, and the handler is run a second time from the same state with the same answers; a difference is
 a contract breach. The system caches outcomes, so only new runs are verified.
 
+`Runner.run_drawn` is `run` for a chooser that draws its answers (a
+simulation, `checker.simulate`): a handler that made no `ctx.choose` is run
+once per (node state, event) — and per time too if it read `ctx.now()` — and
+its recorded effects are kept; a later run of the same key turns the kept
+effects into events again with new draws (latency and fault branches are
+answered there, after the handler, and only set the due times and copies of
+the messages it sent). The same draws are taken in the same order as a real
+run would take them, so a simulation's results do not depend on the cache.
+
 Equal node states are interned to one bytes object; the node object keeps
 the last state it was given, so running several events of one node in a row
 restores nothing.
@@ -28,6 +37,7 @@ import re
 from collections.abc import Sequence
 from typing import Any, final
 
+from twinfleet.checker.cache import GenerationCache
 from twinfleet.checker.choices import ChoiceMismatch, ExploringChooser, PrefixChooser
 from twinfleet.checker.diagnosis import (
     CONTRACT_KINDS,
@@ -62,6 +72,31 @@ _INTERN_LIMIT = 100_000  # interned node states kept before starting afresh
 _UNVERIFIED = CONTRACT_KINDS | {FailureKind.CHOICE_MISMATCH}
 _NO_PROBE = contextlib.nullcontext()
 _ADDRESS = re.compile(r" at 0x[0-9a-f]+")  # object addresses differ between two runs
+_DRAWN_LIMIT = 20_000  # handler outcomes kept per generation for simulations (two kept)
+_ANY_TIME = -1  # the time slot of a drawn-run key whose handler did not read the clock
+
+# A handler run that reached its effects: (new node state, effects, service reply).
+_Handled = tuple[bytes, tuple[Any, ...], Any]
+
+
+class _ClockContext(Context):
+    """A `Context` that notes whether the handler read the time (`now()` or `now_ms`):
+    a handler that did not gives the same outcome at any time."""
+
+    __slots__ = ("_t", "read_clock")
+
+    def __init__(self, node: Node, now_ms: int, chooser: Any) -> None:
+        super().__init__(node, now_ms, chooser)
+        self.read_clock = False
+
+    @property
+    def now_ms(self) -> int:
+        self.read_clock = True
+        return self._t
+
+    @now_ms.setter
+    def now_ms(self, value: int) -> None:
+        self._t = value
 
 
 @final
@@ -93,6 +128,9 @@ class Runner:
         self.hashed = 0  # events created: content hashes for the collision bound
         self.handler_runs = 0  # handlers actually run (re-executions included)
         self.reruns = 0  # re-executions that verified a run (checker.diagnosis)
+        self._handled: _Handled | None = None  # the last `_exec` that reached its effects
+        self._read_clock = False  # whether that handler read the time
+        self._drawn: GenerationCache[_Handled] = GenerationCache(_DRAWN_LIMIT)
 
     def interned(self) -> int:
         """How many node-state encodings are interned."""
@@ -107,6 +145,25 @@ class Runner:
     def run(self, ev: Event, data: bytes, chooser: ExploringChooser) -> Variant:
         """Run `ev`'s handler on node state `data` (verified unless `verify` is off)."""
         return self._checked(ev, data, chooser)
+
+    def run_drawn(self, ev: Event, data: bytes, chooser: ExploringChooser) -> Variant:
+        """`run` for a fresh chooser that draws its answers (module docstring)."""
+        drawn = self._drawn
+        kept = drawn.get((data, ev.key, _ANY_TIME)) or drawn.get((data, ev.key, ev.due))
+        if kept is not None:
+            new, effects, reply = kept
+            events, failure, logs, faults = self._effects(ev, effects, reply, chooser)
+            n = len(chooser.indices)
+            return Variant(tuple(chooser.indices), tuple(chooser.options), new, tuple(events),
+                           failure, tuple(logs), tuple(faults), tuple(range(n)))
+        v = self._checked(ev, data, chooser)
+        handled = self._handled
+        # Kept only when every answer was drawn after the handler (no ctx.choose) and the
+        # run was sound: a breach or a handler exception is reported by running it again.
+        if (handled is not None and len(chooser.indices) == len(v.branches)
+                and (v.failure is None or v.failure.kind is FailureKind.HANDLER)):
+            drawn.put((data, ev.key, ev.due if self._read_clock else _ANY_TIME), handled)
+        return v
 
     def deadline_miss(self, ev: Event, data: bytes) -> Variant:
         """Taking `ev` after its deadline (Rule 5): nothing runs, the step fails."""
@@ -177,7 +234,8 @@ class Runner:
         attributes = dict(vars(node)) if self.verify else None
         scope = None if self._scopes is None else self._scopes[i]
         held = None if scope is None else scope.take()
-        ctx = Context(node, ev.due, chooser)
+        self._handled = None
+        ctx = _ClockContext(node, ev.due, chooser)
         self._current[i] = None  # the state object is about to change
         probe = self._probe
         with probe or _NO_PROBE:
@@ -213,6 +271,8 @@ class Runner:
         except ChoiceMismatch as exc:  # a forced latency or fault branch that does not exist
             return _failed(chooser, data, FailureKind.CHOICE_MISMATCH, node.name, ev.method,
                            str(exc))
+        self._handled, self._read_clock = (new, tuple(outcome.effects), outcome.reply), \
+            ctx.read_clock
         indices = tuple(chooser.indices)
         return Variant(indices, tuple(chooser.options), new, tuple(events), failure,
                        tuple(logs), tuple(faults), tuple(range(handler_end, len(indices))))

@@ -9,7 +9,10 @@ until nothing is pending, the next event lies beyond the horizon (fleet ms),
 or `max_steps` steps were taken. Every property is watched on the way: each
 invariant on its own, handler failures, `within`, queue bounds, deadlock and
 quiescence at an end with nothing pending; an `eventually` that held nowhere
-by the end is violated within the horizon. The simulation's generator is
+by the end is violated within the horizon. With `until_decided` a simulation
+also ends ("decided") at its first violation or once every `eventually`
+property has held, as a live run of `twinfleet experiment` does (its outcome
+is known; what follows would only cost time). The simulation's generator is
 seeded from (seed, index) alone (`simulation_seed`), so simulation `i` is the
 same in any process and in any order.
 """
@@ -49,7 +52,7 @@ class Simulation:
         index: its index in the run.
         violated: the properties violated, in the order first seen.
         steps: steps taken; end_ms: the fleet time reached; ended: why it stopped
-            ("nothing pending", "horizon" or "step limit").
+            ("nothing pending", "horizon", "step limit" or "decided").
         first: the first violation and the path to it (a `Counterexample`), or None;
             `replayable` says whether `twinfleet replay` can confirm it (an `eventually`
             cut by the horizon cannot be).
@@ -69,9 +72,14 @@ class Simulator:
     """Runs simulations of `system` (see the module docstring)."""
 
     def __init__(self, system: System, properties: PropertySet, model: TimingModel, *,
-                 seed: int, horizon_ms: int, max_steps: int) -> None:
+                 seed: int, horizon_ms: int, max_steps: int, until_decided: bool = False,
+                 reuse: bool = True) -> None:
         self.system, self.properties, self.model = system, properties, model
         self.seed, self.horizon_ms, self.max_steps = seed, horizon_ms, max_steps
+        self.until_decided = until_decided
+        # Reuse handler runs across steps and simulations (`Runner.run_drawn`); off: run
+        # every handler (the same results, slower: for benchmarks and tests).
+        self._take = system.draw if reuse else system.step
         self._rest = PropertySet([p for p in properties.all if p.kind != "invariant"],
                                  queue_bounds=properties.queue_bounds,
                                  node_names=properties.node_names,
@@ -93,6 +101,9 @@ class Simulator:
         never = {p.name: p for p in self.properties.eventually if not self._holds(p.name, world)}
         ended = "step limit"
         while len(steps) < self.max_steps:
+            if self.until_decided and (seen or (self.properties.eventually and not never)):
+                ended = "decided"
+                break
             nxt = world.next_time
             if nxt is None:
                 ended = "nothing pending"
@@ -101,13 +112,14 @@ class Simulator:
                 ended = "horizon"
                 break
             actions = [a for a in system.actions(world) if type(a) is RunEvent]
-            t = system.step(world, rng.choice(actions), self._chooser(rng))
+            t = self._take(world, rng.choice(actions), self._chooser(rng))
             steps.append(t.step)
             world = t.world
             self._note(t, len(steps), seen)
             for name in [n for n in never if self._holds(n, world)]:
                 del never[name]
-        for name, prop in never.items():
+        # A run decided by a violation says nothing about the `eventually`s it cut short.
+        for name, prop in (() if ended == "decided" else never.items()):
             shape = "terminal" if ended == "nothing pending" else "horizon"
             source = prop.expr.source if prop.expr is not None else ""
             seen.setdefault(name, (PropertyViolation(

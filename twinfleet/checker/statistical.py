@@ -62,6 +62,7 @@ class StatisticalOptions:
     verify: bool = True
     profile: str | None = None
     semantics: str | None = None
+    until_decided: bool = False
     progress: Callable[[StatisticalResult], None] | None = field(default=None, compare=False)
 
 
@@ -78,6 +79,7 @@ class SimulationJob:
     horizon_ms: int
     max_steps: int
     verify: bool = True
+    until_decided: bool = False
 
     def __call__(self, indices: list[int]) -> list[Simulation]:
         return _simulator(self).batch(indices)
@@ -92,7 +94,8 @@ def _simulator(job: SimulationJob) -> Simulator:
         scenario = load(job.scenario, profile=job.profile, semantics=job.semantics)
         system, props = timed_system(scenario, job.model, verify=job.verify)
         sim = _SIMULATORS[job] = Simulator(system, props, job.model, seed=job.seed,
-                                           horizon_ms=job.horizon_ms, max_steps=job.max_steps)
+                                           horizon_ms=job.horizon_ms, max_steps=job.max_steps,
+                                           until_decided=job.until_decided)
     return sim
 
 
@@ -211,7 +214,7 @@ def check_statistical(scenario: str | Path, options: StatisticalOptions) -> Stat
     horizon = options.horizon_ms or int(1000 * (spec.live.timeout_s or 60))
     seed = options.seed if options.seed is not None else spec.seed
     job = SimulationJob(str(path.resolve()), options.profile, options.semantics, model, seed,
-                        horizon, options.max_steps, options.verify)
+                        horizon, options.max_steps, options.verify, options.until_decided)
     sim = _simulator(job)  # here too: it writes the traces, and a bad scenario fails early
     result = StatisticalResult(spec.source, model.describe(), horizon, options.confidence,
                                options.workers, names=_names(sim.properties))

@@ -191,6 +191,15 @@ class System:
         """Take `action` in `world`, `chooser` answering its choice points: the next world."""
         return self._apply(world, action, self._variant(world, action, chooser))
 
+    def draw(self, world: World, action: RunEvent, chooser: ExploringChooser) -> Transition:
+        """`step` for a fresh chooser that draws its answers (a simulation): handler runs
+        are kept and reused as `Runner.run_drawn` says; the same transition as `step`."""
+        ev = world.events[action.index]
+        if ev.sk[3]:  # late: a deadline miss, nothing runs
+            return self.step(world, action, chooser)
+        return self._apply(world, action,
+                           self.runner.run_drawn(ev, world.states[ev.target], chooser))
+
     def outcomes(self, world: World, action: Action) -> list[Transition]:
         """`action` taken with every combination of answers to its choice points."""
         return [self._apply(world, action, v) for v in self._variants(world, action)]

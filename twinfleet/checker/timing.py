@@ -110,6 +110,16 @@ class Histogram:
                 return v
         return self.values[-1]
 
+    def scaled(self, factor: float) -> Histogram:
+        """The same distribution with every value multiplied by `factor` (rounded to whole
+        ms; values that round together pool their weight)."""
+        pooled: dict[int, float] = {}
+        for v, w in zip(self.values, self.weights, strict=True):
+            key = max(0, round(v * factor))
+            pooled[key] = pooled.get(key, 0.0) + w
+        values = tuple(sorted(pooled))
+        return Histogram(values, tuple(pooled[v] for v in values), self.samples)
+
     def to_yaml(self) -> dict[str, Any]:
         """The mapping the file format writes."""
         return {"values": list(self.values), "weights": [round(w, 6) for w in self.weights],
@@ -151,6 +161,18 @@ class TimingModel:
         default = None if high == 0 else (low, high)
         known = set(channels)
         return default, tuple((name, h.bounds) for name, h in self.latency if name in known)
+
+    def at_time_scale(self, time_scale: float) -> TimingModel:
+        """The model for runs at `time_scale`: a wall delay of d ms is d * K fleet ms at time
+        scale K, so every histogram is stretched by `time_scale / self.time_scale` (a model
+        of unknown scale is taken as it is)."""
+        if self.time_scale is None or self.time_scale == time_scale:
+            return self
+        f = time_scale / self.time_scale
+        return TimingModel(self.default.scaled(f), tuple((n, h.scaled(f)) for n, h in self.latency),
+                           self.timer_lateness.scaled(f), self.loss, self.machine, time_scale,
+                           (*self.sources, f"stretched from time scale {self.time_scale:g} "
+                                           f"to {time_scale:g}"))
 
     def describe(self) -> str:
         """One line: default latency bounds and mean, channels, lateness, machine, scale."""

@@ -1,0 +1,106 @@
+"""Statistical checking speed: simulations per second per worker for every paper case, and
+the time c2a takes to a 95 % interval of half-width <= 0.05 on 2 workers.
+
+Part 1 runs `--simulations N` simulations of each case (C1a-C1c and C2a-C2c in the fixed
+profile, C2a-C2c in the rebeca profile) in this process, one worker, as `twinfleet check
+CASE --statistical` does by default (the loopback timing model, the scenario's `live.timeout_s`
+as horizon, node-contract checks on), and prints simulations/s, steps/s and how the
+simulations ended. "vs c2a" is each case's rate over c2a's, measured in the same run. Then
+c2a once more with every handler run (`Simulator(reuse=False)`: the simulation path before
+handler runs were kept across steps and simulations, `Runner.run_drawn`): the speed-up of
+keeping them, and a check that both give the same simulations.
+
+Part 2 runs `twinfleet check c2a --statistical --precision 0.05 --confidence 0.95 --workers 2`
+(`--no-contract-checks` with the flag of the same name) and prints the simulations and wall
+time it took, and that time over the 10-minute target.
+
+    PYTHONPATH=. python benchmarks/statistical_throughput.py [--simulations 8]
+        [--cases c1a,c2a] [--workers 2] [--no-contract-checks] [--skip-precision]
+
+The machine's other load changes the figures: run it on an otherwise idle machine, or read
+the ratios.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from collections import Counter
+from pathlib import Path
+
+from twinfleet.checker.driver import load
+from twinfleet.checker.simulate import Simulation, Simulator
+from twinfleet.checker.statistical import StatisticalOptions, check_statistical, timed_system
+from twinfleet.checker.timing import default_timing
+
+ROOT = Path(__file__).resolve().parents[1]
+CASES = ("c1a", "c1b", "c1c", "c2a", "c2b", "c2c", "c2a_rebeca", "c2b_rebeca", "c2c_rebeca")
+TARGET_S = 600.0
+
+
+def throughput(case: str, simulations: int, verify: bool, reuse: bool = True,
+               ) -> tuple[float, float, str, list[Simulation]]:
+    """(simulations/s, steps/s, how they ended, the simulations) of `simulations`
+    simulations of `case`, in this process."""
+    spec = load(ROOT / "twinfleet" / "launch" / f"{case}.yaml")
+    model = default_timing()
+    system, props = timed_system(spec, model, verify=verify)
+    sim = Simulator(system, props, model, seed=spec.seed, reuse=reuse,
+                    horizon_ms=int(1000 * (spec.live.timeout_s or 60)), max_steps=1_000_000)
+    start = time.perf_counter()
+    done = [sim.run(i) for i in range(simulations)]
+    elapsed = time.perf_counter() - start
+    steps = sum(s.steps for s in done)
+    ends = Counter(s.ended for s in done)
+    violated = sum(1 for s in done if s.violated)
+    how = ", ".join(f"{n} {why}" for why, n in ends.most_common()) + f"; {violated} violating"
+    return simulations / elapsed, steps / elapsed, how, done
+
+
+def _same(a: list[Simulation], b: list[Simulation]) -> bool:
+    return [(s.violated, s.steps, s.end_ms, s.ended, s.first) for s in a] == [
+        (s.violated, s.steps, s.end_ms, s.ended, s.first) for s in b]
+
+
+def main() -> None:
+    """Run both parts and print their tables."""
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--simulations", type=int, default=8, help="per case in part 1")
+    ap.add_argument("--cases", default=",".join(CASES), help="comma-separated case names")
+    ap.add_argument("--workers", type=int, default=2, help="workers of part 2")
+    ap.add_argument("--no-contract-checks", dest="verify", action="store_false",
+                    help="skip the node-contract checks of every handler run (both parts)")
+    ap.add_argument("--skip-precision", action="store_true", help="part 1 only")
+    args = ap.parse_args()
+    cases = [c for c in args.cases.split(",") if c]
+    cases.sort(key=lambda c: c != "c2a")  # c2a first: the reference of "vs c2a"
+    print(f"part 1: {args.simulations} simulations per case, 1 worker, contract checks "
+          f"{'on' if args.verify else 'off'}, loopback timing model")
+    print(f"{'case':<12} {'sim/s':>8} {'steps/s':>9} {'vs c2a':>7}  ended")
+    rates = {}
+    for case in cases:
+        rates[case] = rate, steps, how, _ = throughput(case, args.simulations, args.verify)
+        ref = rates.get("c2a", rates[cases[0]])[0]
+        print(f"{case:<12} {rate:>8.2f} {steps:>9,.0f} {rate / ref:>7.2f}  {how}", flush=True)
+    if "c2a" in rates:
+        rate, steps, _, plain = throughput("c2a", args.simulations, args.verify, reuse=False)
+        print(f"{'c2a, every handler run':<22} {rate:>8.2f} sim/s {steps:>9,.0f} steps/s; keeping "
+              f"handler runs is {rates['c2a'][0] / rate:.2f}x faster; same simulations: "
+              f"{_same(plain, rates['c2a'][3])}", flush=True)
+    if args.skip_precision:
+        return
+    print(f"part 2: c2a to a 95 % interval of half-width <= 0.05 on {args.workers} workers")
+    start = time.perf_counter()
+    result = check_statistical(ROOT / "twinfleet" / "launch" / "c2a.yaml", StatisticalOptions(
+        precision=0.05, confidence=0.95, workers=args.workers, verify=args.verify,
+        traces_out=str(ROOT / "out" / "bench"), max_traces=0))
+    wall = time.perf_counter() - start
+    widest = max(result.estimates(), key=lambda e: e.high - e.low)
+    print(f"c2a: {len(result.simulations)} simulations, {wall:.1f} s on {args.workers} workers "
+          f"({len(result.simulations) / wall:.2f} simulations/s; {result.stopped}); widest "
+          f"interval {widest.name} {widest.p:.3f} [{widest.low:.3f}, {widest.high:.3f}]; "
+          f"time / 10-minute target = {wall / TARGET_S:.3f}")
+
+
+if __name__ == "__main__":
+    main()
