@@ -18,7 +18,6 @@ from dataclasses import dataclass, field
 from typing import final
 
 from twinfleet.agreement.paper import PaperRow
-from twinfleet.checker.estimate import agreement_p_value
 from twinfleet.runtime.contract.kinds import Status
 
 
@@ -156,6 +155,9 @@ class Prediction:
 
     def agreement_p(self, passed: int, runs: int) -> float:
         """The p-value of `passed` live passes in `runs` against this prediction."""
+        # imported here: `twinfleet --help` reads this module and loads none of the checker
+        from twinfleet.checker.estimate import agreement_p_value
+
         return agreement_p_value(passed, runs, self.low, self.high, self.confidence)
 
 
