@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from twinfleet.nodes.render import draw_world, robot_colour, scenario_view, states_view
+from twinfleet.nodes.render import LEGEND_PX, draw_world, robot_colour, scenario_view, states_view
 from twinfleet.runtime.scenario.spec import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -21,7 +21,8 @@ def pixel(img, cell):
 def test_c1a_picture_shows_map_and_each_robot_in_its_colour_at_its_start():
     scenario = load_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml")
     img = draw_world(scenario_view(scenario), cell_px=PX)
-    assert img.size == (50 * PX, 50 * PX + 18)
+    caption_px = 18 if scenario_view(scenario).caption else 0
+    assert img.size == (50 * PX, 50 * PX + LEGEND_PX + caption_px)
     arr = np.asarray(img)
     assert tuple(arr[int(15.5 * PX), int(20.5 * PX)]) == (60, 60, 60)  # obstacle A
     for i, cfg in enumerate(c for c in scenario.nodes if c.name.startswith("r")):
