@@ -3,10 +3,18 @@
 from __future__ import annotations
 
 import os
+import tempfile
 
 import pytest
 
-from tests.support import RUNTIME_DIR, pick_free_port
+# Under pytest-xdist each worker gets its own temporary directory (before anything below
+# creates one): tests that look for files a run leaves in the temporary directory, and the
+# processes they start, then never see another worker's.
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    os.environ["TMPDIR"] = tempfile.mkdtemp(prefix=f"tf-{os.environ['PYTEST_XDIST_WORKER']}-")
+    tempfile.tempdir = None
+
+from tests.support import RUNTIME_DIR, pick_free_port  # noqa: E402
 
 # Commands run in-process (`twinfleet.cli.main([...])`) read the fleet registry too: give them
 # the test session's private one, as `child_env` gives it to subprocesses, so that a fleet the
@@ -19,3 +27,18 @@ os.environ.pop("TWINFLEET_RUNTIME_DIR", None)
 def free_port() -> int:
     """A TCP port on 127.0.0.1 that was free a moment ago."""
     return pick_free_port()
+
+
+# Tests that run fleets of real processes are timed against the wall clock: under
+# pytest-xdist they share one group, so two fleets never compete for this machine's cores,
+# while the CPU-bound checker tests run beside them on the other worker.
+LIVE_FOLDERS = frozenset({"adversarial", "agreement", "cluster", "integration", "ros2", "viewer"})
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Put every live test into the `live` xdist group (no effect without xdist)."""
+    tests_root = config.rootpath / "tests"
+    for item in items:
+        parts = item.path.relative_to(tests_root).parts
+        if item.get_closest_marker("slow") or (len(parts) > 1 and parts[0] in LIVE_FOLDERS):
+            item.add_marker(pytest.mark.xdist_group("live"))

@@ -37,7 +37,7 @@ tf = run_cli_in
 @pytest.fixture(scope="module")
 def c1a(runtime_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     log = tmp_path_factory.mktemp("c1a") / "fleet.log"
-    proc = launch_in(runtime_dir, log, str(C1A), "--time-scale", "1", "--timeout", "110")
+    proc = launch_in(runtime_dir, log, str(C1A), "--time-scale", "1", "--timeout", "600")
     try:
         assert poll(lambda: log.read_text().count("] t=") >= 6 or proc.poll() is not None, 40)
         assert proc.poll() is None, log.read_text()
@@ -51,7 +51,7 @@ def demo(runtime_dir: Path, c1a: Path, tmp_path_factory: pytest.TempPathFactory)
     log = tmp_path_factory.mktemp("demo") / "fleet.log"
     scenario = str(ROOT / "twinfleet" / "launch" / "demo.yaml")
     proc = launch_in(runtime_dir, log, scenario, "talker.period_ms:=250", "--param",
-                   "caller.period_ms=300", "--timeout", "100")
+                   "caller.period_ms=300", "--timeout", "600")
     try:
         assert poll(lambda: log.read_text().count("started") >= 4 or proc.poll() is not None, 40)
         assert proc.poll() is None, log.read_text()
