@@ -578,3 +578,39 @@ def test_crash_faults_and_drops_and_duplicates_are_searched(tmp_path):
     allowed = v.validate(log2, crashing)  # the crash is taken: whatever fails later, not it
     assert allowed.failure is None or allowed.failure.reason != v.OUTSIDE, allowed.summary()
     assert allowed.explained > refused.explained
+
+
+class Hearer(Node):
+    """Notes that /x came; sends nothing."""
+
+    def initial_state(self) -> HeardState:
+        return HeardState()
+
+    @subscribe("/x")
+    def on_x(self, ctx: Context, msg: String) -> None:
+        self.state.heard = True
+
+
+def test_a_run_cut_off_by_a_crash_is_the_models_crash_before_it(tmp_path):
+    """A node logs a run, then publishes: killed in between, its log holds a run whose
+    outputs nobody received and whose state died with it: the checker's crash before it."""
+    doc = {"name": "hear", "nodes": [{"name": "s", "class": "test_validate:EarlySender"},
+                                     {"name": "l", "class": "test_validate:Hearer"}],
+           "properties": [{"name": "deaf", "kind": "invariant", "expr": "not l.heard"}]}
+    (tmp_path / "hear.yaml").write_text(yaml.safe_dump(doc))
+    trace = tmp_path / "hear.trace.json"
+    assert check(tmp_path / "hear.yaml", CheckOptions(trace_out=str(trace))).status == "violated"
+    records, names = trace_records(trace)  # s starts and sends /x, l hears it
+    assert [(r["node"], r["handler"]) for r in records if r["kind"] != "start"] == [("l", "on_x")]
+    crash = {"node": "l", "i": 1, "t": records[-1]["t"] + 5, "kind": "crash", "handler": "",
+             "sender": "", "args": "", "digest": ""}
+    log = write_log(tmp_path / "cut.jsonl", [*records, crash], names)
+    crashing = tmp_path / "crashing.yaml"
+    crashing.write_text(yaml.safe_dump({**doc, "name": "crashing",
+                                        "check": {"faults": {"crash": {"nodes": ["l"]}}}}))
+    result = v.validate(log, crashing, tolerance_ms=0)
+    # Taken as run, on_x leaves nothing pending, and a crash then is no action of the model;
+    # taken as cut off, the crash comes first and discards the /x it was handling.
+    assert result.ok, result.summary()
+    assert result.explained == 2 and not result.violations, result.summary()
+    assert v.validate(log, tmp_path / "hear.yaml").failure.reason == v.OUTSIDE

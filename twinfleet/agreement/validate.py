@@ -67,6 +67,16 @@ log, then its new process's start events: that is the checker's `Crash` action
 (allowed by ``check.faults.crash``), whose restart must make the same start
 choices and reach the same state.
 
+Crash window. A node writes a handler's log line before it publishes the
+handler's outputs (the line is flushed first, so the log never misses a run
+whose messages others received). A process killed between the two leaves a
+logged run whose outputs nobody got. The validator takes such a run — the last
+one before a ``crash`` record — either as run (tried first) or as cut off: the
+model's crash came before it, and the event it handled was lost with the node,
+as the checker's `Crash` discards what is pending to it. A node that keeps its
+state across crashes must then restart in the state from before that run, so a
+cut-off run that changed a durable state stays unexplained.
+
 Reasons a step is unexplained: ``model drift`` (no such pending event, a
 different message, different choices, a different state, a failure on one
 side only), ``order`` (an earlier message of the same channel is pending:
@@ -161,6 +171,7 @@ Option = tuple[int, int, tuple[int, ...]]  # (node, pending event, branch prefix
 DROPPED = -1  # the `node` of an option that drops the pending event (KEEP_LAST)
 RESTART = -1  # the `pending event` of an option that crashes and restarts the node
 LEFT = -2  # the `pending event` of an option that takes a peer leaving at shutdown
+CUT = -3  # the `pending event` of an option that takes a run as cut off by the crash after it
 
 
 @final
@@ -335,6 +346,11 @@ class _Search:
         world = frame.world
         if k == RESTART:
             return self._restart(frame, i, branches)
+        if k == CUT:  # the crash came before the run's outputs left: the model's crash first
+            pos = (*frame.pos[:i], frame.pos[i] + 1, *frame.pos[i + 1:])
+            options, why = self._options(world, pos)
+            live = self.queues[i][frame.pos[i]]
+            return _Frame(world, pos, options, why, 0, f"{live.label()} (cut off by the crash)")
         if k == LEFT:  # the node heard a peer leave at the run's end: nothing to model
             pos = (*frame.pos[:i], frame.pos[i] + 1, *frame.pos[i + 1:])
             options, why = self._options(world, pos)
@@ -383,6 +399,13 @@ class _Search:
         gone = payload_digest((NodeAlive(live.sender, False),))
         queue = self.queues[self.system.index[live.sender]]
         return live.args == gone and not any(e.t > live.t for e in queue)
+
+    def _cut_off(self, i: int, p: int) -> bool:
+        """Whether node i's p-th event is its last logged run before a crash record: it logs
+        a run before it publishes the run's outputs, so a process that died in between left
+        the log line but sent nothing (module docstring, "Crash window")."""
+        queue = self.queues[i]
+        return p + 1 < len(queue) and queue[p + 1].kind is EventKind.CRASH
 
     def _restart(self, frame: _Frame, i: int, branches: tuple[int, ...]) -> _Frame | Unexplained:
         """A live crash record and the new process's start events: the checker's `Crash`."""
@@ -442,6 +465,8 @@ class _Search:
                 options.append((i, LEFT, ()))
             else:
                 why.append(self.explain.why_not(world, live, matches, allowed))
+            if self._cut_off(i, pos[i]):
+                options.append((i, CUT, ()))
         # Tried after every live event: a message KEEP_LAST may have dropped (Rule 6).
         drops = self.system.rules.droppable(world.events, self.tolerance)
         options += [(DROPPED, k, ()) for k in drops]
