@@ -169,8 +169,13 @@ def wait_matched(session: zenoh.Session, fleet: str, topic: str, timeout: float 
 
 
 def honest_result(out: str, code: int) -> bool:
-    """The run's own verdict, not one an attacker chose: PASSED (exit 0), or INCONCLUSIVE
-    (exit 3) where the verdict rules count refused samples (`rejected_*`) as a reason."""
+    """The run's own verdict, not one an attacker chose: PASSED (exit 0), CONTRACT BREACH
+    (exit 4) for a message of the wrong type, or INCONCLUSIVE (exit 3) where the verdict
+    rules count refused samples (`rejected_*`) as a reason."""
     if "result: PASSED" in out:
         return code == 0
+    if "result: CONTRACT BREACH (wrong message type" in out:
+        # a sample of a type its handler does not take, signed with the fleet key: the
+        # verdict the checker gives for such a send (whoever holding the key forged it)
+        return code == 4
     return "INCONCLUSIVE" in out and "rejected_" in out and code == 3

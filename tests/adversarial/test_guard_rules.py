@@ -9,6 +9,7 @@ import pytest
 from tests.integration.reliability_nodes import Tick
 from twinfleet.nodes.msgs import ObstacleScan, PathRequest, RobotPose
 from twinfleet.runtime.access.fleetauth import FleetCredentials, listen_problem, loopback_only
+from twinfleet.runtime.contract.dispatch import declared_message_type
 from twinfleet.runtime.core.guard import (
     DEFAULT_LIMIT,
     WINDOW,
@@ -19,7 +20,6 @@ from twinfleet.runtime.core.guard import (
     Stamp,
     authentic,
     check_message,
-    expected_type,
     opened,
     payload_limit,
     sign,
@@ -91,7 +91,7 @@ def test_valid_messages_pass_and_nested_tuples_are_checked() -> None:
 def test_the_handler_annotation_names_the_only_type_it_takes() -> None:
     from twinfleet.nodes.robot import Robot
 
-    assert expected_type(Robot, "on_scan") is ObstacleScan
+    assert declared_message_type(Robot, "on_scan") is ObstacleScan
     admit = Admission(ObstacleScan)
     with pytest.raises(Rejected) as info:
         admit(RobotPose("r1", (1, 2), 0, 0))

@@ -60,8 +60,9 @@ def test_the_wire_form_keeps_the_printed_counter_names_in_order():
     wire = BUSY.to_dict()
     assert set(wire) == WIRE_NAMES
     assert list(wire)[:3] == ["received", "dropped_undecodable", "handler_errors"]
-    assert list(wire)[-6:] == ["rejected_forged", "rejected_invalid", "rejected_oversize",
-                               "rejected_wrong_type", "rejected_replayed", "rejected_recorded"]
+    assert list(wire)[-7:] == ["rejected_forged", "rejected_invalid", "rejected_oversize",
+                               "rejected_wrong_type", "rejected_replayed", "rejected_recorded",
+                               "wrong_types"]
     assert BUSY.line().startswith("received=12 dropped_undecodable=1 handler_errors=2 ")
     assert " rejected_oversize=19 rejected_wrong_type=20 " in BUSY.line()
 
@@ -131,7 +132,7 @@ def test_the_core_adds_what_its_transport_refused_to_its_own_rejections():
 def test_every_counter_is_judged_by_the_live_verdict_or_listed_as_not_judged():
     """A new counter needs a decision: judged (a reason line) or listed in NOT_JUDGED."""
     fields = {f.name for f in dataclasses.fields(NodeStatistics)}
-    judged = fields - NOT_JUDGED
+    judged = fields - NOT_JUDGED - {"wrong_types"}  # a breach, not a reason: see below
     assert NOT_JUDGED.issubset(fields)
     for name in judged:
         value = ({reason: 1 for reason in Rejection} if name == "rejected" else 1)
@@ -149,7 +150,7 @@ def test_one_status_word_list_for_the_checker_and_the_live_verdict():
         Status.ERROR: 2, Status.INCONCLUSIVE: 3, Status.INTERRUPTED: 130}
     assert RESULT_WORDS == {Status.HOLDS: "PASSED", Status.VIOLATED: "FAILED",
                             Status.ERROR: "ERROR", Status.INCONCLUSIVE: "INCONCLUSIVE",
-                            Status.INTERRUPTED: "interrupted"}
+                            Status.INTERRUPTED: "interrupted", Status.BREACH: "CONTRACT BREACH"}
     assert f"{Status.BREACH}" == "contract breach" and Status("holds") is Status.HOLDS
 
 

@@ -112,6 +112,49 @@ def register(subparsers: Any) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
     add_statistical_arguments(p)
     p.set_defaults(func=check_command)
+    _register_trace(subparsers)
+
+
+def _register_trace(subparsers: Any) -> None:
+    """Add `trace show`: a counterexample step by step."""
+    t = subparsers.add_parser("trace", help="read a counterexample trace",
+                              description="Read a counterexample trace written by `check`.")
+    sub = t.add_subparsers(dest="trace_command", required=True, metavar="ACTION")
+    s = sub.add_parser("show", help="print a trace step by step",
+                       description="Re-execute a trace on its scenario (checking every step's "
+                       "world digest, as `replay` does) and print each step: time, node and "
+                       "handler, the message it handled, the messages it sent, the states it "
+                       "changed, its logs; the violated property last. Exit 0, or 2 when the "
+                       "trace cannot be read or does not replay.")
+    s.add_argument("trace", help="the trace file (e.g. out/<scenario>.trace.json)")
+    s.add_argument("--json", action="store_true",
+                   help="print the steps as one JSON document, for tools")
+    s.set_defaults(func=trace_show_command)
+
+
+def trace_show_command(args: argparse.Namespace) -> int:
+    """Run `trace show` for parsed arguments; return the exit code."""
+    from twinfleet.checker.driver import system_for_trace
+    from twinfleet.checker.trace import NondeterminismError
+    from twinfleet.checker.trace_show import text_lines, walk
+    from twinfleet.runtime.contract.tracefile import load_trace
+
+    try:
+        trace = load_trace(args.trace)
+        system, _ = system_for_trace(trace)
+        shown = walk(system, trace)
+    except (*bad_input_errors(), NondeterminismError) as exc:  # type: ignore[misc]
+        print(f"twinfleet trace show: {args.trace}: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except (KeyError, TypeError, ValueError, IndexError) as exc:
+        print(f"twinfleet trace show: {args.trace}: the trace does not fit its scenario "
+              f"({type(exc).__name__}: {exc})", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.json:
+        print(json.dumps(shown.to_json(), indent=1, default=str))
+    else:
+        print("\n".join(text_lines(shown)))
+    return 0
 
 
 def add_replay_parser(subparsers: Any) -> argparse.ArgumentParser:

@@ -60,7 +60,12 @@ from twinfleet.checker.transition import (
 )
 from twinfleet.checker.world import ENVIRONMENT, Event
 from twinfleet.runtime.contract.context import After, Call, Context, Fail, Log, Publish
-from twinfleet.runtime.contract.dispatch import HandlerOutcome, run_handler
+from twinfleet.runtime.contract.dispatch import (
+    HandlerOutcome,
+    declared_message_type,
+    run_handler,
+    wrong_type_line,
+)
 from twinfleet.runtime.contract.kinds import EventKind, FailureKind
 from twinfleet.runtime.contract.messages import CallError
 from twinfleet.runtime.contract.node import Node
@@ -119,6 +124,7 @@ class Runner:
         self.rules = rules
         self.nodes: tuple[Node, ...] = topology.nodes
         self.names = tuple(node.name for node in self.nodes)
+        self._declared_types: dict[tuple[int, str], type | None] = {}
         self.debug_state = debug_state
         self.verify = verify
         self._probe = EnvironmentProbe() if verify else None
@@ -248,7 +254,8 @@ class Runner:
             return _failed(chooser, data, FailureKind.STATE_OUTSIDE, node.name, ev.method,
                            f"it changed {', '.join(stray)}, outside self.state; fix: "
                            f"{FIX_STATE}")
-        breach = self._breach(node, ev, attributes, before, outcome)
+        breach = self._breach(node, ev, attributes, before, outcome) or self._wrong_type(
+            ev, outcome.effects)
         if breach is not None:
             return _failed(chooser, data, *breach)
         if chooser.mismatch is not None:  # even if the handler caught the exception
@@ -276,6 +283,34 @@ class Runner:
         indices = tuple(chooser.indices)
         return Variant(indices, tuple(chooser.options), new, tuple(events), failure,
                        tuple(logs), tuple(faults), tuple(range(handler_end, len(indices))))
+
+    def _wrong_type(self, ev: Event, effects: Sequence[Any]
+                    ) -> tuple[FailureKind, str, str, str] | None:
+        """A message sent whose type is not what a receiving handler declares: a breach
+        found at the send, in the words the live fleet uses for it (`wrong_type_line`)."""
+        topology, sender = self.topology, self.names[ev.target]
+        for eff in effects:
+            match eff:
+                case Publish(topic=name, msg=msg):
+                    receivers, call = tuple(topology.subscribers.get(name, ())), False
+                case Call(service=name, request=msg):
+                    server = topology.servers.get(name)
+                    receivers, call = ((server,) if server else ()), True
+                case _:
+                    continue
+            for j, method, _ in receivers:
+                expected = self._declared(j, method)
+                if expected is not None and type(msg) is not expected:
+                    return (FailureKind.CONTRACT, sender, ev.method, wrong_type_line(
+                        sender, name, msg, expected, f"{self.names[j]}.{method}", call=call))
+        return None
+
+    def _declared(self, j: int, method: str) -> type | None:
+        """The message class node j's handler `method` declares (looked up once)."""
+        key = (j, method)
+        if key not in self._declared_types:
+            self._declared_types[key] = declared_message_type(self.nodes[j], method)
+        return self._declared_types[key]
 
     def _breach(self, node: Node, ev: Event, attributes: dict[str, Any] | None,
                 before: dict[str, bytes] | None, outcome: HandlerOutcome

@@ -1,8 +1,11 @@
-"""`run_handler`: the one place where a handler is run, for both drivers."""
+"""`run_handler`: the one place where a handler is run, for both drivers; what a handler
+declares it takes, and the line both drivers give when a message is not that."""
 
 from __future__ import annotations
 
+import inspect
 import traceback
+import typing
 from dataclasses import dataclass
 from typing import Any
 
@@ -65,3 +68,32 @@ def run_handler(node: Node, method: str, ctx: Context, args: tuple[Any, ...] = (
     """Run `node.<method>(ctx, *args)` to completion and collect what it did (see `invoke`)."""
     reply, error = invoke(node, method, ctx, args, expects_reply)
     return HandlerOutcome(reply, tuple(ctx.effects), tuple(ctx.choices), error)
+
+
+def declared_message_type(node: Any, method: str) -> type | None:
+    """The message class a handler ``fn(self, ctx, msg: Cls)`` of `node` (an instance or
+    its class) declares for its message, or None (no annotation, or not a message class)."""
+    fn = getattr(node if isinstance(node, type) else type(node), method, None)
+    if fn is None:
+        return None
+    try:
+        params = list(inspect.signature(fn).parameters.values())
+        hints = typing.get_type_hints(fn)
+    except Exception:  # unreadable annotations: no type check for this handler
+        return None
+    if len(params) < 3:
+        return None
+    hint = hints.get(params[2].name)
+    return hint if isinstance(hint, type) and hasattr(hint, "__message_type__") else None
+
+
+def wrong_type_line(sender: str, name: str, sent: object, expected: type, receiver: str,
+                    *, call: bool = False) -> str:
+    """The one line both drivers give for a message whose type is not the one its
+    receiving handler declares: sender, topic or service, both types and the handler."""
+    sent_name = getattr(sent if isinstance(sent, type) else type(sent), "__message_type__",
+                        type(sent).__name__)
+    expected_name = getattr(expected, "__message_type__", expected.__name__)
+    how = f"called {name} with" if call else f"published on {name}"
+    return (f"wrong message type: {sender} {how} {sent_name}, but {receiver} takes "
+            f"{expected_name}; fix: send {expected_name} or change the handler's annotation")

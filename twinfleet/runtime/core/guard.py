@@ -50,7 +50,6 @@ from __future__ import annotations
 
 import dataclasses
 import hmac
-import inspect
 import itertools
 import math
 import os
@@ -63,7 +62,9 @@ from collections.abc import Callable, Mapping
 from enum import IntEnum, unique
 from typing import Any, Final, NamedTuple, final
 
+from twinfleet.runtime.contract.dispatch import wrong_type_line
 from twinfleet.runtime.contract.messages import DecodeError
+from twinfleet.runtime.contract.names import OPERATOR_SENDER
 from twinfleet.runtime.core.statistics import Rejection
 
 KEY_ENV: Final = "TWINFLEET_FLEET_KEY"
@@ -98,9 +99,12 @@ Check = Callable[[Any], None]
 class Rejected(DecodeError):
     """A decoded sample that does not fit its topic; `reason` says which counter it goes to."""
 
-    def __init__(self, reason: Rejection, text: str) -> None:
+    def __init__(self, reason: Rejection, text: str, *, first: bool | None = None) -> None:
         super().__init__(text)
         self.reason = reason
+        # For a message of the wrong type: whether it is the first of its sender and topic
+        # (its line is shown once, the rest counted); None for other reasons.
+        self.first = first
 
 
 # ------------------------------------------------------------------ the fleet key
@@ -346,21 +350,27 @@ def _any_of(options: list[Check], value: Any, hint: Any) -> None:
     raise _bad(value, str(hint).replace("typing.", ""))
 
 
-def expected_type(node: Any, method: str) -> type | None:
-    """The message class a handler ``fn(self, ctx, msg: Cls)`` of `node` (an instance or
-    its class) declares, or None."""
-    fn = getattr(node if isinstance(node, type) else type(node), method, None)
-    if fn is None:
-        return None
-    try:
-        params = list(inspect.signature(fn).parameters.values())
-        hints = typing.get_type_hints(fn)
-    except Exception:  # unreadable annotations: no type check for this handler
-        return None
-    if len(params) < 3:
-        return None
-    hint = hints.get(params[2].name)
-    return hint if isinstance(hint, type) and hasattr(hint, "__message_type__") else None
+@final
+class WrongTypes:
+    """Messages of a type their handler does not take, per (sender, topic): each pair's
+    line (`contract.dispatch.wrong_type_line`, the checker's words) and how many came."""
+
+    def __init__(self) -> None:
+        self.seen: dict[tuple[str, str], list[Any]] = {}  # (sender, topic) -> [line, count]
+
+    def note(self, sender: str, topic: str, msg: Any, expected: type, receiver: str
+             ) -> Rejected:
+        """Count one such message; the `Rejected` to raise (``first`` for a new pair)."""
+        entry = self.seen.get((sender, topic))
+        if entry is None:
+            entry = self.seen[(sender, topic)] = [
+                wrong_type_line(sender, topic, msg, expected, receiver), 0]
+        entry[1] += 1
+        return Rejected(Rejection.WRONG_TYPE, entry[0], first=entry[1] == 1)
+
+    def lines(self) -> tuple[str, ...]:
+        """Every pair's line with its count, in the order the pairs first came."""
+        return tuple(f"{line} ({count} samples)" for line, count in self.seen.values())
 
 
 @final
@@ -369,17 +379,23 @@ class Admission:
 
     Args:
         expected: the message class the handler declares (None: any registered type).
+        receiver: ``node.handler``, named when a message of another type comes.
+        topic: the subscription's topic.
+        wrong: where messages of another type are noted (None: not noted).
     """
 
-    __slots__ = ("expected",)
+    __slots__ = ("expected", "receiver", "topic", "wrong")
 
-    def __init__(self, expected: type | None) -> None:
-        self.expected = expected
+    def __init__(self, expected: type | None, receiver: str = "", topic: str = "",
+                 wrong: WrongTypes | None = None) -> None:
+        self.expected, self.receiver, self.topic, self.wrong = expected, receiver, topic, wrong
 
-    def __call__(self, msg: Any) -> None:
+    def __call__(self, msg: Any, sender: str = "") -> None:
         """Raise `Rejected` for a message of the wrong type or with invalid fields."""
         expected = self.expected
         if expected is not None and type(msg) is not expected:
+            if self.wrong is not None and sender != OPERATOR_SENDER:
+                raise self.wrong.note(sender, self.topic, msg, expected, self.receiver)
             raise Rejected(Rejection.WRONG_TYPE,
                            f"{getattr(type(msg), '__message_type__', type(msg).__name__)} where "
                            f"{expected.__message_type__} is expected")  # type: ignore[attr-defined]

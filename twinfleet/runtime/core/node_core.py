@@ -77,7 +77,7 @@ from dataclasses import dataclass
 from typing import Any, Final, Protocol, final
 
 from twinfleet.runtime.contract.context import Chooser, Context, Effect
-from twinfleet.runtime.contract.dispatch import HandlerError, invoke
+from twinfleet.runtime.contract.dispatch import HandlerError, declared_message_type, invoke
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import (
     CallError,
@@ -90,7 +90,7 @@ from twinfleet.runtime.contract.node import LIVELINESS_TOPIC, HandlerSpec, Node,
 from twinfleet.runtime.core.choosers import RecordingChooser, SeededChooser, derive_seed
 from twinfleet.runtime.core.due import DueEntries
 from twinfleet.runtime.core.events import Event
-from twinfleet.runtime.core.guard import Admission, Rejected, check_message, expected_type
+from twinfleet.runtime.core.guard import Admission, Rejected, WrongTypes, check_message
 from twinfleet.runtime.core.outbox import LogOutput, Outbox, Output, ReplyOutput
 from twinfleet.runtime.core.statistics import NodeStatistics, Rejection
 
@@ -172,7 +172,7 @@ class _Subscription:
                 n["undecodable"] += 1
                 raise DecodeError(str(exc)) from None
             try:  # before the gap check: a refused sample leaves no trace in the core
-                admit(sample[0])
+                admit(sample[0], sample[3])
             except Rejected as exc:
                 if sample[3] == OPERATOR_SENDER:  # an operator's input: named, not a loss
                     n["external"] += 1
@@ -269,14 +269,16 @@ class NodeCore:
         self._observers: list[Observer] = []
         self._n = dict.fromkeys(_COUNTERS, 0)
         self._rejected = dict.fromkeys(Rejection, 0)  # the core's own: invalid, wrong type
+        self._wrong = WrongTypes()
         self._outbox = Outbox(node.name, self.due, self._n, stop_on_error=stop_on_error)
         self._subs: dict[str, _Subscription] = {}
         self._liveliness: HandlerSpec | None = None
         for spec in self.spec.of_kind("subscribe"):
             topic = node.resolve(spec.name or "")
             if topic != LIVELINESS_TOPIC:
-                self._subs[spec.method] = _Subscription(
-                    spec, topic, keep_last, Admission(expected_type(node, spec.method)))
+                admission = Admission(declared_message_type(node, spec.method),
+                                      f"{node.name}.{spec.method}", topic, self._wrong)
+                self._subs[spec.method] = _Subscription(spec, topic, keep_last, admission)
             elif self._liveliness is None:
                 self._liveliness = spec
         self.services = {s.method: node.resolve(s.name or "") for s in self.spec.of_kind("service")}
@@ -524,4 +526,4 @@ class NodeCore:
             max_lateness_ms=n["max_late"],
             stall_threshold_ms=self.stall_threshold() if self.stall_ms is not None else 0,
             rejected_external=n["external"], external_input=external, played=played,
-            rejected=rejected)
+            rejected=rejected, wrong_types=self._wrong.lines())

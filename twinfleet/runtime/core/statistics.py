@@ -84,6 +84,9 @@ class NodeStatistics:
             `contract.names.OPERATOR_SENDER`, e.g. ``topic pub --force``) that the node
             refused, for any reason; not in ``rejected``: input from outside the fleet,
             not a loss of the fleet's own.
+        wrong_types: one line per (sender, topic) whose messages were of a type the
+            receiving handler does not take (`contract.dispatch.wrong_type_line`, with the
+            count): a breach of the node contract by the sender, which the verdict names.
     """
 
     received: int = 0
@@ -107,6 +110,7 @@ class NodeStatistics:
     external_input: int = 0
     played: int = 0
     rejected: Mapping[Rejection, int] = field(default_factory=dict)
+    wrong_types: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         # Every reason present, read-only: readers index it without a default, and a
@@ -118,11 +122,12 @@ class NodeStatistics:
         full = {reason: self.rejected.get(reason, 0) for reason in Rejection}
         object.__setattr__(self, "rejected", MappingProxyType(full))
 
-    def to_dict(self) -> dict[str, int]:
-        """The flat wire form: counter name → value, in declaration order, then one
-        ``rejected_<reason>`` per `Rejection`."""
-        out = {name: getattr(self, name) for name in _SCALARS}
+    def to_dict(self) -> dict[str, Any]:
+        """The flat wire form: counter name → value, in declaration order, one
+        ``rejected_<reason>`` per `Rejection`, then ``wrong_types`` (a list of lines)."""
+        out: dict[str, Any] = {name: getattr(self, name) for name in _SCALARS}
         out.update((reason.counter, count) for reason, count in self.rejected.items())
+        out[_LINES] = list(self.wrong_types)
         return out
 
     @classmethod
@@ -138,20 +143,27 @@ class NodeStatistics:
                                   f"{type(data).__name__}")
         _check_names(data.keys())
         for name, value in data.items():
-            if type(value) is not int:
+            if name != _LINES and type(value) is not int:
                 raise StatisticsError(f"node statistics: {name} must be an integer, "
                                       f"got {value!r:.40}")
+        lines = data[_LINES]
+        if not isinstance(lines, list | tuple) or not all(isinstance(x, str) for x in lines):
+            raise StatisticsError(f"node statistics: {_LINES} must be a list of lines, "
+                                  f"got {lines!r:.40}")
         rejected = {reason: data[reason.counter] for reason in Rejection}
-        return cls(**{name: data[name] for name in _SCALARS}, rejected=rejected)
+        return cls(**{name: data[name] for name in _SCALARS}, rejected=rejected,
+                   wrong_types=tuple(lines))
 
     def line(self) -> str:
         """The counters as ``name=value`` words (the ``stopped:`` line, ``node list
         --stats``)."""
-        return " ".join(f"{k}={v}" for k, v in self.to_dict().items())
+        return " ".join(f"{k}={v}" for k, v in self.to_dict().items() if k != _LINES)
 
 
-_SCALARS: Final = tuple(f.name for f in dataclasses.fields(NodeStatistics) if f.name != "rejected")
-WIRE_NAMES: Final = frozenset((*_SCALARS, *(reason.counter for reason in Rejection)))
+_LINES: Final = "wrong_types"
+_SCALARS: Final = tuple(f.name for f in dataclasses.fields(NodeStatistics)
+                        if f.name not in ("rejected", _LINES))
+WIRE_NAMES: Final = frozenset((*_SCALARS, *(reason.counter for reason in Rejection), _LINES))
 
 
 def _check_names(names: Any) -> None:

@@ -76,7 +76,8 @@ from twinfleet.runtime.scenario.spec import PropertyConfig, Scenario
 
 # The launcher's result line says these words (tests and users read them).
 RESULT_WORDS: Final = {Status.HOLDS: "PASSED", Status.VIOLATED: "FAILED", Status.ERROR: "ERROR",
-                       Status.INCONCLUSIVE: "INCONCLUSIVE", Status.INTERRUPTED: "interrupted"}
+                       Status.INCONCLUSIVE: "INCONCLUSIVE", Status.INTERRUPTED: "interrupted",
+                       Status.BREACH: "CONTRACT BREACH"}
 EVAL_BUDGET_S: Final = 1.0  # wall seconds one evaluation may take in the launcher
 STALL_FLOOR_WALL_MS: Final = 100  # a stall threshold is never below this much wall time
 _STATE_CHARS: Final = 300  # of each node's state in a violation's description
@@ -87,7 +88,7 @@ _STATE_CHARS: Final = 300  # of each node's state in a violation's description
 class Verdict:
     """How a live run stands against its scenario's properties."""
 
-    status: Status  # HOLDS, VIOLATED, ERROR, INCONCLUSIVE or INTERRUPTED
+    status: Status  # HOLDS, VIOLATED, BREACH, ERROR, INCONCLUSIVE or INTERRUPTED
     summary: str  # one line: what decided it
     details: tuple[str, ...] = ()  # the violation's states and event, the reasons, ...
     property_name: str | None = None  # the property violated
@@ -328,11 +329,15 @@ class LiveJudge:
         return dataclasses.replace(decided, details=(*first, *decided.details, *last))
 
     def _decide(self, end: RunEnd) -> Verdict:
-        """The run's result: a property that raised; a failed node process; inconclusive
+        """The run's result: a property that raised; a message of a type its handler does
+        not take (a contract breach); a failed node process; inconclusive
         reasons (which also void a violation: it may come from the lost samples or the
         stall, not from the code); violations; an interruption; what never held; else holds."""
         if self.errors:
             return Verdict(Status.ERROR, self.errors[0], tuple(self.errors[1:]))
+        wrong = [line for _, stats in sorted(end.statistics.items()) for line in stats.wrong_types]
+        if wrong:  # the checker stops at such a send: the same breach, in the same words
+            return Verdict(Status.BREACH, wrong[0], tuple(wrong[1:]))
         if end.failed:  # a process that died is a fact of the run, lost samples or not
             nodes = ", ".join(f"{n} (exit code {c})" for n, c in end.failed.items())
             return Verdict(Status.VIOLATED, f"node failed: {nodes}")

@@ -44,10 +44,10 @@ import typing
 from collections.abc import Mapping, Sequence
 from typing import Any
 
+from twinfleet.runtime.contract.dispatch import declared_message_type
 from twinfleet.runtime.contract.messages import type_name_of
 from twinfleet.runtime.contract.names import resolve
 from twinfleet.runtime.contract.node import Durability, HandlerSpec, NodeSpec, QoS
-from twinfleet.runtime.core.guard import expected_type
 from twinfleet.runtime.host.keys import KeyKind, node_key, topic_in_fleet
 from twinfleet.runtime.scenario.overrides import (  # noqa: F401 (launch and node processes load here)
     load_with_params,
@@ -102,14 +102,14 @@ def _type_name(cls: type | None) -> str:
 
 def service_types(node: Any, spec: HandlerSpec) -> list[str]:
     """[request type, reply type] of a service handler, from its annotations ("?" if unknown):
-    the request as `guard.expected_type` reads it for the admission check."""
+    the request as `dispatch.declared_message_type` reads it for the admission check."""
     try:
         reply = typing.get_type_hints(getattr(type(node), spec.method)).get("return")
     except Exception:  # an unresolvable forward reference: say what is known, nothing
         reply = None
     if not (isinstance(reply, type) and hasattr(reply, "__message_type__")):
         reply = None
-    return [_type_name(expected_type(node, spec.method)), _type_name(reply)]
+    return [_type_name(declared_message_type(node, spec.method)), _type_name(reply)]
 
 
 def node_description(node: Any, class_path: str) -> dict[str, Any]:
@@ -130,7 +130,7 @@ def node_description(node: Any, class_path: str) -> dict[str, Any]:
             "subscriptions": {node.resolve(s.name or ""): qos_dict(s.qos)
                               for s in spec.of_kind("subscribe")},
             "subscription_types": {node.resolve(s.name or ""):
-                                   _type_name(expected_type(node, s.method))
+                                   _type_name(declared_message_type(node, s.method))
                                    for s in spec.of_kind("subscribe")},
             "services": [node.resolve(s.name or "") for s in spec.of_kind("service")],
             "service_types": {node.resolve(s.name or ""): service_types(node, s)

@@ -209,6 +209,10 @@ class NodeHost:
                 if receive(payload, now_ms()) and not self._scheduled:
                     wake()
             except DecodeError as exc:  # counted by the core
+                if isinstance(exc, Rejected) and exc.first is not None:
+                    if exc.first:  # a message of the wrong type: once per sender and topic
+                        self._line(str(exc), err=True)
+                    return
                 self._dropped += 1
                 if self._dropped <= _DROP_LINES:  # a flood of bad samples is counted, not logged
                     what = "rejected" if isinstance(exc, Rejected) else "dropped undecodable"
