@@ -69,8 +69,13 @@ def ok(result: subprocess.CompletedProcess[str]) -> str:
 def test_node_list_and_echo_poses_without_connect(runtime_dir, c1a):
     # One fleet running: found with no --connect and no TWINFLEET_* variable.
     assert ok(tf(runtime_dir, "node", "list")).split() == ["/map_server", *(f"/{r}" for r in ROBOTS)]
+    # as ros2 prints them: the message's fields; --full: the envelope around them
     [pose] = [d for d in yaml.safe_load_all(ok(tf(runtime_dir, "topic", "echo", "/poses", "--once"))) if d]
-    assert pose["type"] == "twinfleet_msgs/RobotPose" and pose["data"]["robot"] in ROBOTS
+    assert pose["robot"] in ROBOTS and "type" not in pose
+    [env] = [d for d in yaml.safe_load_all(ok(tf(runtime_dir, "topic", "echo", "/poses", "--once",
+                                                  "--full"))) if d]
+    assert env["type"] == "twinfleet_msgs/RobotPose" and env["data"]["robot"] in ROBOTS
+    assert {"stamp_ms", "seq", "sender"} <= set(env)
 
 
 def test_echo_map_once_for_a_late_joiner(runtime_dir, c1a):
@@ -78,16 +83,19 @@ def test_echo_map_once_for_a_late_joiner(runtime_dir, c1a):
     # (the fixture waited for every node's start line), so this echo joins late.
     ok(tf(runtime_dir, "topic", "echo", "/poses", "--once"))
     [doc] = [d for d in yaml.safe_load_all(ok(tf(runtime_dir, "topic", "echo", "/map", "--once"))) if d]
-    assert doc["type"] == "twinfleet_msgs/OccupancyGrid"
-    assert (doc["data"]["width"], doc["data"]["height"]) == (50, 50)
+    assert (doc["width"], doc["height"]) == (50, 50)
 
 
 def test_echo_field(runtime_dir, c1a):
     out = ok(tf(runtime_dir, "topic", "echo", "/poses", "--once", "--field", "cell"))
     cell = yaml.safe_load(out.split("---")[0])
     assert isinstance(cell, list) and len(cell) == 2 and all(isinstance(v, int) for v in cell)
+    first = ok(tf(runtime_dir, "topic", "echo", "/poses", "--once", "--field", "cell.0"))
+    assert isinstance(yaml.safe_load(first.split("---")[0]), int)
     bad = tf(runtime_dir, "topic", "echo", "/poses", "--once", "--field", "nope")
     assert bad.returncode == 2 and "no field 'nope'" in bad.stderr
+    sender = ok(tf(runtime_dir, "topic", "echo", "/poses", "--once", "--full", "--field", "sender"))
+    assert sender.split("\n")[0] in ROBOTS
 
 
 def test_topic_list_with_types_matches_the_readme(runtime_dir, c1a):
@@ -125,6 +133,9 @@ def test_node_info(runtime_dir, c1a):
     assert "/r1/scan: twinfleet_msgs/ObstacleScan" in subs
     assert "/poses: twinfleet_msgs/RobotPose" in out.split("Publishers:")[1]
     assert "speed: 0.5" in out.split("Parameters:")[1]
+    clients = out.split("Service Clients:")[1].split("Timers:")[0]
+    assert clients.split() == ["/generate_path"]  # its ctx.call, read from its code
+    assert "update_moving_status: one-shot, set by ctx.after" in out.split("Timers:")[1]
     assert "/generate_path" in ok(tf(runtime_dir, "node", "info", "map_server"))
 
 
@@ -142,6 +153,15 @@ def test_interface_show_reads_the_fleets_schemas(runtime_dir, c1a):
     assert out.splitlines()[0].startswith("# twinfleet_msgs/RobotPose (served by ")
     assert "int64[2] cell" in out and "bool done  # optional" in out
     assert "twinfleet_msgs/Collision" in ok(tf(runtime_dir, "interface", "list"))
+
+
+def test_param_dump_and_set(runtime_dir, c1a):
+    dumped = yaml.safe_load(ok(tf(runtime_dir, "param", "dump", "r2")))
+    assert dumped["/r2"]["ros__parameters"]["speed"] == 0.7
+    assert dumped["/r2"]["ros__parameters"]["goal"] == [45, 35]
+    refused = tf(runtime_dir, "param", "set", "r2", "speed", "0.4")
+    assert refused.returncode == 2 and len(refused.stderr.strip().splitlines()) == 1
+    assert "fixed for a launch" in refused.stderr and "r2.speed:=0.4" in refused.stderr
 
 
 def test_bag_info_of_a_recording_of_the_running_fleet(runtime_dir, c1a, tmp_path):
@@ -179,15 +199,42 @@ def test_pub_takes_a_ros_type_name_and_warns_without_subscriber(runtime_dir, dem
 def test_service_call_with_a_ros_service_type(runtime_dir, demo):
     out = ok(tf(runtime_dir, "service", "call", "/add_two_ints",
                 "example_interfaces/srv/AddTwoInts", "{a: 2, b: 40}", "--fleet", "demo"))
-    assert "data: {sum: 42}" in out
+    assert out.strip() == "sum: 42"  # the reply's fields, as ros2 prints them
+    full = ok(tf(runtime_dir, "service", "call", "/add_two_ints",
+                 "example_interfaces/srv/AddTwoInts", "{a: 2, b: 40}", "--fleet", "demo", "--full"))
+    assert "data: {sum: 42}" in full and "type: example_interfaces/AddTwoInts_Response" in full
+
+
+def test_pub_once_rate_and_times_and_echo_of_a_bare_field(runtime_dir, demo):
+    for once in ("--once", "-1"):
+        out = ok(tf(runtime_dir, "topic", "pub", once, "/chatter", "std_msgs/String",
+                    "{data: once}", "--fleet", "demo"))
+        assert out.count("published #") == 1, out
+    times = ok(tf(runtime_dir, "topic", "pub", "/chatter", "std_msgs/String", "{data: t}",
+                  "-r", "20", "-t", "3", "--fleet", "demo"))
+    assert [line.split()[1] for line in times.splitlines() if line.startswith("published")] \
+        == ["#1", "#2", "#3"], times
+    text = ok(tf(runtime_dir, "topic", "echo", "/chatter", "--once", "--field", "data",
+                 "--fleet", "demo"))
+    value = text.split("\n---")[0].strip()
+    assert value and not value.startswith(("data:", "{")), text  # the bare value
 
 
 def test_service_list_with_types_and_service_type(runtime_dir, demo):
     listed = ok(tf(runtime_dir, "service", "list", "-t", "--fleet", "demo"))
-    kinds = "[example_interfaces/AddTwoInts_Request -> example_interfaces/AddTwoInts_Response]"
-    assert f"/add_two_ints {kinds}" in listed
+    assert "/add_two_ints [example_interfaces/srv/AddTwoInts]" in listed
     one = ok(tf(runtime_dir, "service", "type", "/add_two_ints", "--fleet", "demo"))
-    assert one.strip() == kinds.strip("[]")
+    assert one.strip() == "example_interfaces/srv/AddTwoInts"
+    shown = ok(tf(runtime_dir, "interface", "show", "example_interfaces/srv/AddTwoInts",
+                  "--fleet", "demo"))
+    request, reply = shown.split("\n---\n")
+    assert "int64 a" in request and "int64 b" in request and "int64 sum" in reply
+    services = ok(tf(runtime_dir, "interface", "list", "--fleet", "demo")).split("Services:")[1]
+    assert "example_interfaces/srv/AddTwoInts" in services.split()
+    caller = ok(tf(runtime_dir, "node", "info", "caller", "--fleet", "demo"))
+    assert caller.split("Service Clients:")[1].split("Timers:")[0].split() == ["/add_two_ints"]
+    talker = ok(tf(runtime_dir, "node", "info", "talker", "--fleet", "demo"))
+    assert "tick: one-shot, set by ctx.after" in talker
     missing = tf(runtime_dir, "service", "type", "/add_three_ints", "--fleet", "demo")
     assert missing.returncode == 2 and "no running node serves it" in missing.stderr
 

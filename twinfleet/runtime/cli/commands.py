@@ -224,15 +224,16 @@ def cmd_topic(args: argparse.Namespace) -> int:
         count = 1 if args.once else args.count
         return data_verbs.topic_echo(conn, args.topic, out=out, count=count,
                                        duration_s=args.duration, field=args.field,
-                                       wait=args.wait, timeout_s=wait)
+                                       wait=args.wait, timeout_s=wait, full=args.full)
     if args.action == "hz":
         return data_verbs.topic_hz(conn, args.topic, out=out, window=args.window,
                                      duration_s=args.duration, timeout_s=wait, wait=args.wait)
     import_modules(args.module)
     need_fleet(args, conn)
     data_verbs.refuse_other_type(conn, args.topic, args.type, force=args.force, timeout_s=wait)
+    count = 1 if args.once else args.times
     return data_verbs.topic_pub(conn, args.topic, args.type, parse_fields(args.data), out=out,
-                                  rate_hz=args.rate, count=None if args.count == 0 else args.count,
+                                  rate_hz=args.rate, count=None if count == 0 else count,
                                   timeout_s=wait)
 
 
@@ -263,7 +264,7 @@ def cmd_service(args: argparse.Namespace) -> int:
                                  timeout_s=args.query_timeout)
     return data_verbs.service_call(conn, args.service, args.type, parse_fields(args.data),
                                      out=sys.stdout, timeout_s=args.timeout,
-                                     discovery_s=args.query_timeout)
+                                     discovery_s=args.query_timeout, full=args.full)
 
 
 def cmd_node(args: argparse.Namespace) -> int:
@@ -288,13 +289,20 @@ def _ros2_graph(args: argparse.Namespace, conn: Any, what: str, **shown: bool) -
 
 
 def cmd_param(args: argparse.Namespace) -> int:
-    """`twinfleet param list|get`."""
+    """`twinfleet param list|get|dump|set`."""
     from twinfleet.runtime.tools.monitor import graph_verbs
 
+    if args.action == "set":  # before connecting: the answer is the same for every fleet
+        raise CommandError(f"parameters are fixed for a launch (the checker checks the values a "
+                           f"run starts with); set them when launching: twinfleet launch "
+                           f"SCENARIO {args.node.lstrip('/')}.{args.name}:={args.value}")
     conn = connection(args)
     if args.action == "get":
         return graph_verbs.param_get(conn, args.node, args.name, out=sys.stdout,
                                  timeout_s=args.query_timeout)
+    if args.action == "dump":
+        return graph_verbs.param_dump(conn, args.node, out=sys.stdout,
+                                      timeout_s=args.query_timeout)
     return graph_verbs.param_list(conn, args.node, out=sys.stdout, timeout_s=args.query_timeout)
 
 
@@ -417,8 +425,11 @@ def _topic_parser(sub: argparse._SubParsersAction) -> None:
     te.add_argument("--once", action="store_true", help="print one message and exit")
     te.add_argument("--count", type=int, default=None, metavar="N", help="exit after N messages")
     te.add_argument("--field", default=None, metavar="PATH",
-                    help="print only this field, e.g. cell or data.cell.0 (envelope fields: "
-                         "type, stamp_ms, seq, sender)")
+                    help="print only this field of the message, bare, dotted for nesting "
+                         "(e.g. data, cell, cell.0); with --full, of the envelope")
+    te.add_argument("--full", action="store_true",
+                    help="print the whole envelope (type, stamp_ms, seq, sender, data) instead "
+                         "of the message's fields")
     te.add_argument("--duration", type=float, default=None, metavar="S", help="exit after S seconds")
     add_wait_arguments(te, "for a publisher of a topic no node uses yet")
     te.add_argument("--ros2-domain", type=int, default=None, metavar="N",
@@ -434,10 +445,12 @@ def _topic_parser(sub: argparse._SubParsersAction) -> None:
     tp = _sub(ts, "pub", "publish a message on a topic (checked against its type first)")
     tp.add_argument("topic", help="fully qualified topic name, e.g. /chatter")
     add_message_arguments(tp)
-    tp.add_argument("--rate", type=float, default=1.0, metavar="HZ",
+    tp.add_argument("-r", "--rate", type=float, default=1.0, metavar="HZ",
                     help="messages per second (default: 1)")
-    tp.add_argument("--count", type=int, default=1, metavar="N",
-                    help="number of messages, 0 for until Ctrl-C (default: 1)")
+    tp.add_argument("-t", "--times", "--count", dest="times", type=int, default=1, metavar="N",
+                    help="number of messages, 0 for until Ctrl-C (default: 1; ros2's default "
+                         "is until Ctrl-C: say -t 0)")
+    tp.add_argument("-1", "--once", action="store_true", help="publish one message and exit")
     for p in (tl, ti, tt, te, th, tp):
         add_connection_arguments(p, discovery=True)
         p.set_defaults(func=cmd_topic)
@@ -458,6 +471,8 @@ def _service_parser(sub: argparse._SubParsersAction) -> None:
     add_message_arguments(sc)
     sc.add_argument("--timeout", type=float, default=2.0, metavar="S",
                     help="seconds to wait for the reply (default: 2)")
+    sc.add_argument("--full", action="store_true",
+                    help="print the reply's whole envelope instead of its fields")
     for p in (sl, st, sc):
         add_connection_arguments(p, discovery=True)
         p.set_defaults(func=cmd_service)
@@ -490,13 +505,19 @@ def _node_parser(sub: argparse._SubParsersAction) -> None:
 
 
 def _param_parser(sub: argparse._SubParsersAction) -> None:
-    _verbs(sub, "param", "list and read node parameters", cmd_param, {
+    _verbs(sub, "param", "list, read and dump node parameters", cmd_param, {
         "list": ("list the parameters of every node, or of one",
                  [("node", {"nargs": "?", "default": None,
                             "help": "node name (default: every node)"})]),
         "get": ("print one parameter of a node",
                 [("node", {"help": "node name, e.g. r1"}),
-                 ("name", {"help": "parameter name, e.g. speed"})])})
+                 ("name", {"help": "parameter name, e.g. speed"})]),
+        "dump": ("print a node's parameters in force as a ROS 2 parameter file (YAML)",
+                 [("node", {"help": "node name, e.g. r1"})]),
+        "set": ("not available: parameters are fixed per launch (says how to override them)",
+                [("node", {"help": "node name, e.g. r1"}),
+                 ("name", {"help": "parameter name, e.g. speed"}),
+                 ("value", {"help": "the value you wanted"})])})
 
 
 def _interface_parser(sub: argparse._SubParsersAction) -> None:

@@ -10,7 +10,9 @@ entry and the node class's declared handlers (`node_description`)::
      "subscription_types": {"/listener/chatter": "std_msgs/String"},
      "service_types": {"/add_two_ints": ["example_interfaces/AddTwoInts_Request",
                                          "example_interfaces/AddTwoInts_Response"]},
-     "timers": [{"handler", "period_ms"}], "publication_qos": {"/map": qos},
+     "timers": [{"handler", "period_ms"}],    # @every; ctx.after targets: "after": True
+     "clients": ["/add_two_ints"],            # services its code calls (`host.code_refs`)
+     "publication_qos": {"/map": qos},
      "publications":  {"/chatter": "std_msgs/String"}}   # published so far
 
 with ``qos = {"reliability", "durability", "depth"}``. `twinfleet node info`,
@@ -48,6 +50,7 @@ from twinfleet.runtime.contract.dispatch import declared_message_type
 from twinfleet.runtime.contract.messages import type_name_of
 from twinfleet.runtime.contract.names import resolve
 from twinfleet.runtime.contract.node import Durability, HandlerSpec, NodeSpec, QoS
+from twinfleet.runtime.host.code_refs import code_references
 from twinfleet.runtime.host.keys import KeyKind, node_key, topic_in_fleet
 from twinfleet.runtime.scenario.overrides import (  # noqa: F401 (launch and node processes load here)
     load_with_params,
@@ -125,6 +128,8 @@ def node_description(node: Any, class_path: str) -> dict[str, Any]:
         except Exception:  # a bad period fails the node elsewhere; describe what is known
             period = None
         timers.append({"handler": s.method, "period_ms": period})
+    clients, scheduled = code_references(type(node))
+    timers += [{"handler": method, "period_ms": None, "after": True} for method in scheduled]
     return {"name": node.name, "namespace": node.namespace or "/", "class": class_path,
             "pid": os.getpid(), "params": values,
             "subscriptions": {node.resolve(s.name or ""): qos_dict(s.qos)
@@ -136,8 +141,17 @@ def node_description(node: Any, class_path: str) -> dict[str, Any]:
             "service_types": {node.resolve(s.name or ""): service_types(node, s)
                               for s in spec.of_kind("service")},
             "timers": timers,
+            "clients": sorted({node.resolve(_client(name, params)) for name in clients}),
             "publication_qos": {node.resolve(t): qos_dict(q)
                                 for t, q in spec.publications.items()}}
+
+
+def _client(name: str, params: Any) -> str:
+    """A service a node's code calls, a parameter's value where it names one."""
+    if name.startswith("params."):
+        value = getattr(params, name.removeprefix("params."), None)
+        return value if isinstance(value, str) else f"<{name}>"
+    return name
 
 
 def serve_info(transport: Any, fleet: str, node: Any, class_path: str) -> None:

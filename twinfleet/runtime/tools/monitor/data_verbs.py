@@ -41,23 +41,30 @@ from twinfleet.runtime.tools.monitor.graph_verbs import (
 from twinfleet.runtime.tools.monitor.payload import PayloadError, build_fields, envelope
 
 
-def render_envelope(payload: bytes) -> str:
-    """A YAML rendering of a raw envelope (no message classes needed)."""
+def render_envelope(payload: bytes, *, full: bool = False) -> str:
+    """A YAML rendering of a raw sample (no message classes needed): the message's fields,
+    as ``ros2 topic echo`` prints them, or with `full` the whole envelope (type, stamp_ms,
+    seq, sender, data)."""
     try:
         env = msgpack.unpackb(payload, raw=False, strict_map_key=False)
     except Exception as exc:  # msgpack raises several unrelated types
         return f"<undecodable payload of {len(payload)} bytes: {exc}>\n"
-    return yaml.safe_dump(env, sort_keys=False, default_flow_style=None, width=100)
+    shown = env if full or not isinstance(env, dict) else env.get("data", {})
+    if not isinstance(shown, dict):
+        return yaml.safe_dump(shown, default_flow_style=None, width=100)
+    # one line per top-level field as ros2 prints it, nested values inline
+    return "".join(yaml.safe_dump({k: v}, sort_keys=False, width=100, default_flow_style=(
+        None if isinstance(v, dict | list) else False)) for k, v in shown.items())
 
 
-def field_of(payload: bytes, path: str) -> Any:
-    """The value at `path` (``data.cell``, ``cell`` = ``data.cell``, ``stamp_ms``) of an
-    envelope; raises KeyError naming the missing part."""
+def field_of(payload: bytes, path: str, *, full: bool = False) -> Any:
+    """The value at dotted `path` of a sample's message (``cell``, ``cell.0``,
+    ``header.stamp``), or with `full` of its envelope (``stamp_ms``, ``data.cell``);
+    raises KeyError naming the missing part."""
     value: Any = msgpack.unpackb(payload, raw=False, strict_map_key=False)
-    parts = path.split(".")
-    if parts[0] not in ("type", "stamp_ms", "seq", "sender", "data"):
-        parts = ["data", *parts]
-    for part in parts:
+    if not full:
+        value = value["data"]
+    for part in path.split("."):
         if isinstance(value, list | tuple) and part.lstrip("-").isdigit():
             value = value[int(part)]
         elif isinstance(value, dict) and part in value:
@@ -69,8 +76,9 @@ def field_of(payload: bytes, path: str) -> Any:
 
 def topic_echo(conn: Connection, topic: str, *, out: TextIO, count: int | None = None,
                duration_s: float | None = None, field: str | None = None, wait: bool = False,
-               timeout_s: float = 1.0, err: TextIO = sys.stderr) -> int:
-    """Print each sample on `topic` as YAML, `---` between samples (`field`: that field only).
+               timeout_s: float = 1.0, err: TextIO = sys.stderr, full: bool = False) -> int:
+    """Print each sample's message on `topic` as YAML, `---` between samples (`field`: that
+    field only, bare; `full`: the whole envelope).
 
     A latched topic's last sample arrives at once, however late the echo starts.
     Returns 0, or 2 when the topic is unknown (no publisher, no subscriber; with
@@ -89,7 +97,7 @@ def topic_echo(conn: Connection, topic: str, *, out: TextIO, count: int | None =
             _check_echo_topic(conn, graph, where, latched, wait, timeout_s, err, samples)
             while (count is None or seen < count) and (deadline is None or time.monotonic() < deadline):
                 while samples and (count is None or seen < count):
-                    _print_sample(out, samples.popleft(), field, where[1])
+                    _print_sample(out, samples.popleft(), field, where[1], full)
                     seen += 1
                 out.flush()
                 time.sleep(POLL_S)
@@ -120,12 +128,13 @@ def _check_echo_topic(conn: Connection, graph: g.Graph, where: tuple[str, str],
     print(f"warning: {text}; waiting for a publisher", file=err, flush=True)
 
 
-def _print_sample(out: TextIO, payload: bytes, field: str | None, topic: str) -> None:
+def _print_sample(out: TextIO, payload: bytes, field: str | None, topic: str,
+                  full: bool) -> None:
     if field is None:
-        out.write(render_envelope(payload) + "---\n")
+        out.write(render_envelope(payload, full=full) + "---\n")
         return
     try:
-        value = field_of(payload, field)
+        value = field_of(payload, field, full=full)
     except (KeyError, IndexError, ValueError, TypeError) as exc:
         raise CommandError(f"{topic}: its messages have no field {field!r} "
                            f"(missing {exc}); fields: {_fields(payload)}") from None
@@ -241,8 +250,10 @@ def topic_pub(conn: Connection, topic: str, type_name: str, data: dict[str, Any]
 
 
 def service_call(conn: Connection, service: str, type_name: str, data: dict[str, Any], *,
-                 out: TextIO, timeout_s: float = 2.0, discovery_s: float = 1.0) -> int:
-    """Call `service` once and print the reply envelope; 2 on error, timeout or no server."""
+                 out: TextIO, timeout_s: float = 2.0, discovery_s: float = 1.0,
+                 full: bool = False) -> int:
+    """Call `service` once and print the reply's fields (`full`: its envelope); 2 on error,
+    timeout or no server."""
     type_name = checked_type(type_name, service=True)
     with open_session(conn, write=True) as session:
         fields = _payload_fields(type_name, data, _known_schemas(session, conn.fleet,
@@ -252,7 +263,7 @@ def service_call(conn: Connection, service: str, type_name: str, data: dict[str,
                                    attachment=signer(conn.auth.key, key)(payload)))
     for reply in replies:
         if reply.ok is not None:
-            out.write(render_envelope(reply.ok.payload.to_bytes()))
+            out.write(render_envelope(reply.ok.payload.to_bytes(), full=full))
             out.flush()
             return 0
         if reply.err is not None:

@@ -132,9 +132,14 @@ def node_info(conn: Connection, node: str, *, out: TextIO, timeout_s: float = 1.
             kind = types.get((fleet, topic))
             print(f"    {topic}" + (f": {kind}" if kind else ""), file=out)
     if info:
+        print("  Service Clients:", file=out)
+        for service in info.get("clients", []):
+            print(f"    {service}", file=out)
         print("  Timers:", file=out)
         for timer in info.get("timers", []):
-            print(f"    {timer['handler']}: every {timer['period_ms']} ms", file=out)
+            when = ("one-shot, set by ctx.after" if timer.get("after") else
+                    f"every {timer['period_ms']} ms")
+            print(f"    {timer['handler']}: {when}", file=out)
         print("  Parameters:", file=out)
         for key, value in info.get("params", {}).items():
             print(f"    {key}: {inline(value)}", file=out)
@@ -253,7 +258,7 @@ def service_list(conn: Connection, *, out: TextIO, verbose: bool = False, types:
     for (fleet, name), servers in sorted(graph.servers.items()):
         line = _shown(conn, fleet, name)
         if types:
-            line += " [{} -> {}]".format(*kinds.get((fleet, name), ["?", "?"]))
+            line += f" [{service_type_name(*kinds.get((fleet, name), ['?', '?']))}]"
         if verbose:
             line += f"  [servers: {', '.join(servers)}]"
         print(line, file=out)
@@ -269,8 +274,18 @@ def service_type(conn: Connection, service: str, *, out: TextIO, timeout_s: floa
         if where not in graph.servers:
             raise CommandError(f"{where[1]}: no running node serves it (`twinfleet service list`)")
         kinds = _service_types(session, conn, timeout_s).get(where, ["?", "?"])
-    print(f"{kinds[0]} -> {kinds[1]}", file=out, flush=True)
+    print(service_type_name(*kinds), file=out, flush=True)
     return 0
+
+
+def service_type_name(request: str, reply: str) -> str:
+    """A service's type as ros2 names it (``pkg/srv/Name`` for ``pkg/Name_Request`` and
+    ``pkg/Name_Response``), else ``REQUEST -> REPLY``."""
+    stem = request.removesuffix("_Request")
+    if stem != request and reply == f"{stem}_Response" and "/" in stem:
+        package, name = stem.rsplit("/", 1)
+        return f"{package}/srv/{name}"
+    return f"{request} -> {reply}"
 
 
 def checked_type(type_name: str, *, service: bool = False) -> str:
@@ -317,27 +332,64 @@ def param_get(conn: Connection, node: str, name: str, *, out: TextIO,
     return 0
 
 
+def param_dump(conn: Connection, node: str, *, out: TextIO, timeout_s: float = 1.0) -> int:
+    """`ros2 param dump NODE`: the parameters in force, as a ROS 2 parameter file (YAML)."""
+    bare = node.lstrip("/")
+    with open_session(conn) as session:
+        graph = graph_of(session, conn, timeout_s)
+        fleet = _node_fleet(conn, graph, bare)
+        info = g.node_infos(session, fleet, timeout_s, bare).get((fleet, bare))
+    if info is None:
+        raise CommandError(f"node {bare!r} does not describe itself (an older twinfleet?)")
+    doc = {f"/{bare}": {"ros__parameters": info.get("params", {})}}
+    out.write(yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=100))
+    out.flush()
+    return 0
+
+
 def interface_list(conn: Connection | None, *, out: TextIO, timeout_s: float = 1.0) -> int:
     """`ros2 interface list`: the message types this process and the fleet's nodes know."""
     names = set(registered_types())
     if conn is not None:
         with open_session(conn) as session:
             names |= set(g.served_schemas(session, conn.fleet, timeout_s))
+    services = sorted({n.removesuffix("_Request") for n in names if n.endswith("_Request")
+                       and f"{n.removesuffix('_Request')}_Response" in names})
+    parts = {f"{s}_{end}" for s in services for end in ("Request", "Response")}
     print("Messages:", file=out)
-    for name in sorted(names):
+    for name in sorted(names - parts):
         print(f"    {name}", file=out)
+    print("Services:", file=out)
+    for stem in services:
+        print(f"    {service_type_name(stem + '_Request', stem + '_Response')}", file=out)
     out.flush()
     return 0
 
 
 def interface_show(conn: Connection | None, type_name: str, *, out: TextIO,
                    timeout_s: float = 1.0) -> int:
-    """`ros2 interface show`: the fields of a message type, from the fleet's ``@types``."""
-    name = checked_type(type_name, service=True)
+    """`ros2 interface show`: the fields of a message type, from the fleet's ``@types``; of
+    a service type (``pkg/srv/Name``), its request, ``---`` and its reply."""
+    name = checked_type(type_name)
     served: dict[str, tuple[dict[str, Any], list[str]]] = {}
     if conn is not None:
         with open_session(conn) as session:
             served = g.served_schemas(session, conn.fleet, timeout_s)
+    request, reply = f"{name}_Request", f"{name}_Response"
+    if name not in served and name not in registered_types() and (
+            request in served or request in registered_types()):
+        _show_fields(request, served, out)  # a service: its request, ---, its reply
+        print("---", file=out)
+        _show_fields(reply, served, out)
+        out.flush()
+        return 0
+    _show_fields(name, served, out)
+    out.flush()
+    return 0
+
+
+def _show_fields(name: str, served: dict[str, tuple[dict[str, Any], list[str]]],
+                 out: TextIO) -> None:
     cls = registered_types().get(name)
     if name in served:
         schema, nodes = served[name]
@@ -352,8 +404,6 @@ def interface_show(conn: Connection | None, type_name: str, *, out: TextIO,
     for field, sub in (schema.get("properties") or {}).items():
         optional = "" if field in required else "  # optional"
         print(f"{field_type(sub)} {field}{optional}", file=out)
-    out.flush()
-    return 0
 
 
 def field_type(schema: dict[str, Any]) -> str:
