@@ -91,7 +91,9 @@ def write_scenario(tmp: Path, name: str, *, goal: int = 15, scale: float = 2.0) 
 
 def launch(scenario: Path, log: Path, *args: str) -> subprocess.Popen:
     with log.open("w") as sink:
-        return subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", str(scenario), *args],
+        # -v: every node's full counters at the end, which these tests read
+        return subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", str(scenario), "-v",
+                                 *args],
                                 stdout=sink, stderr=subprocess.STDOUT, env=child_env(), cwd=ROOT,
                                 start_new_session=True)
 

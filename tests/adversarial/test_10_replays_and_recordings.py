@@ -91,7 +91,8 @@ def test_recorded_input_reaches_a_fleet_only_on_purpose(tmp_path, accept) -> Non
     recording = _recording(tmp_path / "notes.mcap")
     endpoint = f"tcp/127.0.0.1:{pick_free_port()}"
     log = tmp_path / "launch.log"
-    flags = ["--listen", endpoint, "--timeout", "30", *(["--accept-recorded"] if accept else [])]
+    flags = ["--listen", endpoint, "--timeout", "30", "-v",
+             *(["--accept-recorded"] if accept else [])]
     with log.open("w") as sink:
         proc = subprocess.Popen(launch_command(scenario, *flags), stdout=sink,
                                 stderr=subprocess.STDOUT, env=child_env(), cwd=ROOT,

@@ -51,7 +51,7 @@ def start_fleet(tmp: Path, text: str, name: str = "itest", *extra: str) -> Runni
     log = tmp / f"{name}.log"
     with log.open("w") as sink:
         proc = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", str(scenario),
-                                 "--listen", endpoint, *extra], stdout=sink,
+                                 "--listen", endpoint, "-v", *extra], stdout=sink,
                                 stderr=subprocess.STDOUT, env=child_env(), cwd=ROOT)
     return RunningFleet(proc, log, scenario, endpoint, name)
 

@@ -123,7 +123,7 @@ class Launch:
         with self.log.open("w") as sink:
             self.proc = subprocess.Popen(
                 ["ip", "netns", "exec", ns, sys.executable, "-m", "twinfleet", "launch",
-                 str(self.scenario), *args], stdout=sink, stderr=subprocess.STDOUT, env=env,
+                 str(self.scenario), "-v", *args], stdout=sink, stderr=subprocess.STDOUT, env=env,
                 cwd=ROOT)
 
     def output(self) -> str:

@@ -95,7 +95,7 @@ def test_a_launched_fleet_is_a_citizen_of_a_ros2_network(tmp_path):
     router = zenoh.open(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"], mode="router"))
     env = child_env()
     launcher = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch",
-                                 str(_scenario(tmp_path, port)), "--timeout", "60"],
+                                 str(_scenario(tmp_path, port)), "--timeout", "60", "-v"],
                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
                                 env=env)
     fleet_out: queue.Queue = queue.Queue()

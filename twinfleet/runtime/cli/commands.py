@@ -86,7 +86,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                            record_events=_events_path(args, run),
                                            params=params, auth=auth,
                                            bridge=bridge is not None, driver=bridge,
-                                           accept_recorded=args.accept_recorded))
+                                           accept_recorded=args.accept_recorded,
+                                           node_args=["--verbose"] if args.verbose else [],
+                                           until_settled=args.until_settled or None))
         except FleetConflict as exc:
             raise CommandError(str(exc)) from None
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
@@ -341,6 +343,13 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
     add_override_arguments(p)
     p.add_argument("--time-scale", type=float, default=None, metavar="K",
                    help="run fleet time K times faster than wall time (default: live.time_scale or 1)")
+    p.add_argument("--until-settled", action="store_true",
+                   help="end the run once every eventually property has held (as the scenario's "
+                        "live.stop: settled does); each one's time of holding is printed anyway")
+    p.add_argument("-v", "--verbose", action="store_true",
+                   help="print every node's full counters at the end (default: a table of "
+                        "the counters that are not zero; full counters when something went "
+                        "wrong)")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
                    help="end the run S wall seconds after every node is alive (the fleet's "
                         "epoch; default: live.timeout_s, else never); a fleet not up within "

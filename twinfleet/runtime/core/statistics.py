@@ -154,6 +154,17 @@ class NodeStatistics:
         return cls(**{name: data[name] for name in _SCALARS}, rejected=rejected,
                    wrong_types=tuple(lines))
 
+    def troubled(self) -> bool:
+        """Whether a counter says something went wrong: a loss, a refusal, an error, a
+        stall (then the node's full counters are worth printing)."""
+        return any(getattr(self, name) for name in _TROUBLE) or any(
+            self.rejected.values()) or bool(self.wrong_types)
+
+    def nonzero(self) -> str:
+        """The counters that are not zero, as ``name=value`` words (settings left out)."""
+        return " ".join(f"{k}={v}" for k, v in self.to_dict().items()
+                        if v and k not in (_LINES, "stall_threshold_ms"))
+
     def line(self) -> str:
         """The counters as ``name=value`` words (the ``stopped:`` line, ``node list
         --stats``)."""
@@ -161,6 +172,9 @@ class NodeStatistics:
 
 
 _LINES: Final = "wrong_types"
+_TROUBLE: Final = ("dropped_undecodable", "handler_errors", "failures", "gaps",
+                   "dropped_overflow", "dropped_best_effort", "sequence_jumps",
+                   "dropped_lossless", "stalls", "rejected_external")
 _SCALARS: Final = tuple(f.name for f in dataclasses.fields(NodeStatistics)
                         if f.name not in ("rejected", _LINES))
 WIRE_NAMES: Final = frozenset((*_SCALARS, *(reason.counter for reason in Rejection), _LINES))

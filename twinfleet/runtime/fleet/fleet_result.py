@@ -8,6 +8,7 @@ from typing import Any
 
 from twinfleet.runtime.access.connection import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from twinfleet.runtime.contract.kinds import Status
+from twinfleet.runtime.core.statistics import NodeStatistics
 from twinfleet.runtime.fleet.live_verdict import RESULT_WORDS, Verdict
 from twinfleet.runtime.fleet.run_record import RunRecord
 
@@ -28,6 +29,7 @@ class FleetResult:
         report: the scenario's run report (`live.report`), if any.
         verdict: the live verdict on the scenario's properties (None: not monitored).
         handler_failures: handler failures per node, from the state reports.
+        statistics: each node's counters at the end (when the launcher read them).
     """
 
     fleet: str
@@ -42,6 +44,7 @@ class FleetResult:
     verdict: Verdict | None = None
     handler_failures: Mapping[str, int] = field(default_factory=dict)
     state_reports: int = 0  # state reports the monitor received
+    statistics: Mapping[str, NodeStatistics] = field(default_factory=dict)  # at the end
 
     @property
     def ok(self) -> bool:
@@ -86,7 +89,9 @@ def format_result(result: FleetResult) -> list[str]:
         status = "FAILED" if name in result.failed else (
             f"FAILED: {failures} handler failures" if failures else "ok")
         extra = f", restarts {result.restarts[name]}" if result.restarts.get(name) else ""
-        lines.append(f"  {name}: exit code {code} ({status}{extra})")
+        stats = result.statistics.get(name)
+        counters = f"  {stats.nonzero()}" if stats is not None else ""
+        lines.append(f"  {name}: exit code {code} ({status}{extra}){counters}")
     for topic, msg in result.last_messages.items():
         lines.append(f"  last on {topic}: {msg}")
     if result.report is not None:

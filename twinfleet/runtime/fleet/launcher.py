@@ -77,7 +77,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     driver: Callable[[Fleet], Awaitable[str]] | None = None,
                     judge: bool = True, auth: fleetauth.MonitorAuth | None = None,
                     bridge: bool = False, startup_s: float = STARTUP_S,
-                    accept_recorded: bool = False) -> FleetResult:
+                    accept_recorded: bool = False,
+                    until_settled: bool | None = None) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
@@ -108,6 +109,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             (or stopped before) is INCONCLUSIVE, never a node's failure.
         accept_recorded: the nodes let in recorded input signed by ``twinfleet play
             --into-fleet`` (the verdict then says it was injected); otherwise they drop it.
+        until_settled: end the run once every eventually property has held (default:
+            the scenario's ``live.stop: settled``).
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
@@ -118,7 +121,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                   out=out, record=record, node_args=[*node_args, *param_arguments(params)],
                   events_dir=fresh_parts_dir(record_events) if record_events else None,
                   keep_scenario_beside=record_events or run_record, judge=judge, auth=auth,
-                  bridge=bridge, accept_recorded=accept_recorded)
+                  bridge=bridge, accept_recorded=accept_recorded,
+                  until_settled=live.stop == "settled" if until_settled is None else until_settled)
     started = time.monotonic()
     async with _Launch(fleet, record_events, handle_signals) as launch:
         reason, running = await launch.until_end((startup_s, timeout_s), params, driver)
@@ -284,7 +288,8 @@ def _result(fleet: Fleet, reason: str, running: Sequence[str], duration_s: float
                        last_messages=dict(fleet.last_messages), duration_s=duration_s,
                        report=fleet.report, verdict=_verdict(fleet, reason, running, codes),
                        handler_failures=dict(judge.failures) if judge else {},
-                       state_reports=judge.reports if judge else 0)
+                       state_reports=judge.reports if judge else 0,
+                       statistics=dict(fleet.statistics))
 
 
 def _verdict(fleet: Fleet, reason: str, running: Sequence[str],

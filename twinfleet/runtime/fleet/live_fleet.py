@@ -79,8 +79,10 @@ class Fleet:
                  record: RunRecord | None = None, node_args: Sequence[str] = (),
                  events_dir: Path | None = None, keep_scenario_beside: str | None = None,
                  judge: bool = True, auth: fleetauth.MonitorAuth | None = None,
-                 bridge: bool = False, accept_recorded: bool = False) -> None:
+                 bridge: bool = False, accept_recorded: bool = False,
+                 until_settled: bool = False) -> None:
         self.time_scale, self.seed, self.out = time_scale, seed, out
+        self.until_settled = until_settled
         self.accept_recorded = accept_recorded
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
@@ -124,7 +126,7 @@ class Fleet:
         self.shutting_down = False
         self.failed: list[str] = []
         self.report = load_report(scenario)
-        self.judge = LiveJudge(scenario, time_scale=time_scale) if judge else None
+        self.judge = LiveJudge(scenario, time_scale=time_scale, say=self.log) if judge else None
         self.statistics: dict[str, NodeStatistics] = {}
         self.unreadable_statistics: dict[str, str] = {}  # node -> why `from_dict` refused them
         self.invalid = 0  # report samples refused by `guard.check_message`
@@ -184,6 +186,9 @@ class Fleet:
             self.log(f"ignored a malformed state report on {key}: {exc}")
             return
         self.judge.on_report(report)
+        if self.until_settled and self.judge.settled():
+            self.end(f"settled: every eventually property held (the last at t="
+                     f"{max(self.judge.held_at.values())} ms)")
 
     def refusals(self) -> dict[Rejection, int]:
         """What the launcher's own subscriptions (report, shutdown) refused, by reason."""

@@ -58,7 +58,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, Final, final
 
@@ -187,8 +187,10 @@ class LiveJudge:
     """
 
     def __init__(self, scenario: Scenario, *, time_scale: float = 1.0,
-                 budget_s: float | None = EVAL_BUDGET_S) -> None:
-        self.budget_s = budget_s
+                 budget_s: float | None = EVAL_BUDGET_S,
+                 say: Callable[[str], None] | None = None) -> None:
+        self.budget_s, self.say = budget_s, say
+        self.held_at: dict[str, int] = {}  # eventually and within properties: when they held
         self.nodes = [cfg.instantiate() for cfg in scenario.nodes]
         self.names = [n.name for n in self.nodes]
         self.states: dict[str, Any] = {n.name: n.state for n in self.nodes}
@@ -278,6 +280,15 @@ class LiveJudge:
                                f"t={self.now} ms", report, self._read_by(w))
         elif kind != "invariant" and value:
             w.held = True
+            self.held_at[w.cfg.name] = self.now
+            if self.say is not None:
+                self.say(f"{w.cfg.name} held at t={self.now} ms")
+
+    def settled(self) -> bool:
+        """Whether the run's outcome is settled: it has eventually (or within) properties and
+        every one has held; the invariants stay judged until the run ends."""
+        goals = [w for w in self.watches if w.cfg.kind in ("eventually", "within")]
+        return bool(goals) and all(w.held for w in goals)
 
     def _evaluate(self, w: _Watch, report: StateReport | None) -> bool | None:
         assert w.expr is not None

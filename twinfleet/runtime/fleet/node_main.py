@@ -115,6 +115,9 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
     p.add_argument("--restarted", action="store_true",
                    help="this process respawns a node that died: @on_start runs at the "
                         "fleet time it restarts at")
+    p.add_argument("--verbose", action="store_true",
+                   help="print every counter at the end (default: only when something went "
+                        "wrong)")
     p.add_argument("--close-timeout", type=float, default=5.0,
                    help="seconds allowed for closing Zenoh before the process is forced out")
     p.add_argument("--record-events", default=None, metavar="FILE",
@@ -164,7 +167,9 @@ async def run_node(args: argparse.Namespace, scenario: Scenario) -> int:
         faulthandler.cancel_dump_traceback_later()
         if events is not None:
             events.close()
-    print(f"stopped: {host.statistics().line()}", file=sys.stderr, flush=True)
+    statistics = host.statistics()
+    if args.verbose or host.failed or statistics.troubled():  # else the launcher's table says it
+        print(f"stopped: {statistics.line()}", file=sys.stderr, flush=True)
     return 1 if host.failed else 0
 
 

@@ -137,9 +137,14 @@ class LiveConfig:
     summary_topics: tuple[str, ...] = ()
     max_payload_bytes: int | None = None  # per sample; default sized to the map (runtime.core.guard)
     max_nodes: int = 100  # nodes a scenario may have (checked first by runtime.scenario.spec)
+    # "settled": end the run once every eventually (and within) property has held;
+    # "timeout": run until the timeout, a shutdown request, a failure or Ctrl-C
+    stop: str = "timeout"
 
     def __post_init__(self) -> None:
         _optional(self, "live", "timeout_s", _positive)
+        if self.stop not in ("timeout", "settled"):
+            raise ConfigError("live.stop", f"expected timeout or settled, got {self.stop!r}")
         if self.max_payload_bytes is not None and (
                 type(self.max_payload_bytes) is not int or self.max_payload_bytes < 1024):
             raise ConfigError("live.max_payload_bytes",
