@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import json
 import os
+import re
+import shlex
 import shutil
 import subprocess
 import sys
@@ -244,7 +246,7 @@ def test_examples_list_copy_and_a_bad_name(venv: Path, workdir: Path) -> None:
     bad = run([twinfleet, "launch", "c1z"], workdir)
     assert bad.returncode == 2
     assert bad.stderr.strip().splitlines() == [
-        "error: c1z: cannot read scenario file: no such file, and no shipped example is called "
+        "twinfleet launch: c1z: cannot read scenario file: no such file, and no shipped example is called "
         "'c1z' (shipped: " + ", ".join(sorted(p.stem for p in (ROOT / "twinfleet" / "launch").glob("*.yaml")))
         + "; `twinfleet examples` describes them)"]
 
@@ -382,3 +384,53 @@ def test_each_install_runs_a_users_nodes_runtime_checker_packages(installed: Ins
             "no_failure hold)") in out, out
     want = expected_modules(tmp_path / "proj")
     assert logged_modules(out) == {"pinger": (want, ()), "listener": (want, ())}, out
+
+
+# Examples run for real, after a plain wheel install, from an empty directory, in the order
+# the help and the README give them: the ones that need no running fleet and end by
+# themselves (their outputs feed the next ones: `check --trace-out` writes what `replay`,
+# `trace show` and `render` read). Every other example (a live fleet, a browser, a long
+# experiment) is parsed by the installed command line, so each command, option and argument
+# it shows exists there.
+RUN_FOR_REAL = ("check", "replay", "render", "trace", "examples", "interface")
+
+
+def command_examples() -> list[str]:
+    """Every `twinfleet ...` command line of `twinfleet --help` and of the README's command
+    blocks, comments dropped (output lines such as ``twinfleet check: ...`` left out)."""
+    from twinfleet.cli import build_parser
+
+    commands = set(build_parser()._subparsers._group_actions[0].choices)  # type: ignore[union-attr]
+    help_text = build_parser().format_help()
+    readme = (ROOT / "README.md").read_text()
+    blocks = [b for lang, b in re.findall(r"```(\w*)\n(.*?)```", readme, re.S) if not lang]
+    # a comment, or (in the help) a description after two spaces, ends a command
+    lines = [re.split(r"#|\s{2,}", line.strip())[0].strip() for text in (help_text, *blocks)
+             for line in text.splitlines()]
+    return [line for line in dict.fromkeys(lines)
+            if line.startswith("twinfleet ") and line.split()[1] in commands]
+
+
+def test_every_command_example_of_the_help_and_readme_works_installed(venv: Path,
+                                                                      workdir: Path) -> None:
+    examples = command_examples()
+    assert len(examples) >= 20 and "twinfleet launch demo" in examples, examples
+    python = str(venv / "bin" / "python")
+    parse = ("import shlex, sys\nfrom twinfleet.cli import build_parser\n"
+             "for line in sys.argv[1:]: build_parser().parse_args(shlex.split(line)[1:])")
+    ok(run([python, "-c", parse, *examples], workdir))
+    ran = []
+    for line in examples:
+        words = shlex.split(line)
+        if words[1] not in RUN_FOR_REAL or "--statistical" in words or "--live" in words:
+            continue
+        result = run([str(venv / "bin" / "twinfleet"), *words[1:]], workdir, timeout=300)
+        # a check or replay of a counterexample exits 1; anything else must succeed
+        expected = {1} if words[1] in ("check", "replay") and "c2a" in line else {0}
+        assert result.returncode in expected, f"{line}:\n{result.stdout}\n{result.stderr}"
+        assert "Traceback" not in result.stderr, line
+        ran.append(line)
+    launched = run([str(venv / "bin" / "twinfleet"), "launch", "demo", "--timeout", "2"],
+                   workdir, timeout=60)
+    assert launched.returncode == 0 and "result: PASSED" in launched.stdout, launched.stdout
+    assert {w.split()[1] for w in ran} >= {"check", "replay", "render"}, ran

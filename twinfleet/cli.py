@@ -30,7 +30,12 @@ from collections.abc import Sequence
 from twinfleet.agreement import commands as agreement_commands
 from twinfleet.checker import commands as checker_commands
 from twinfleet.ros2 import commands as ros2_commands
-from twinfleet.runtime.access.connection import EXIT_BAD_INPUT, EXIT_INTERRUPTED, CommandError
+from twinfleet.runtime.access.connection import (
+    EXIT_BAD_INPUT,
+    EXIT_INTERRUPTED,
+    CommandError,
+    error_prefix,
+)
 from twinfleet.runtime.cli import commands as runtime_commands
 from twinfleet.runtime.cli import render as render_command
 
@@ -91,7 +96,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except Exception as exc:  # the last resort: one line, unless --debug
         if args.debug:
             traceback.print_exc()
-        print(f"error: {error_line(exc)}", file=sys.stderr, flush=True)
+        print(f"{error_prefix(args)} {error_line(exc)}", file=sys.stderr, flush=True)
         return exc.code if isinstance(exc, CommandError) else EXIT_BAD_INPUT
 
 

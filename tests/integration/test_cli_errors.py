@@ -32,10 +32,12 @@ tf = run_cli_in
 
 
 def one_line_error(result: subprocess.CompletedProcess[str], *needles: str) -> str:
-    """Assert exit 2, exactly one line on stderr (`error: ...`), no traceback anywhere."""
+    """Assert exit 2, exactly one line on stderr (`twinfleet COMMAND: ...`), no traceback
+    anywhere."""
     assert result.returncode == 2, (result.returncode, result.stdout, result.stderr)
     lines = result.stderr.strip().splitlines()
-    assert len(lines) == 1 and lines[0].startswith("error: "), result.stderr
+    assert len(lines) == 1 and lines[0].startswith("twinfleet "), result.stderr
+    assert lines[0].split(":")[0].split()[1] == result.args[3], lines[0]  # the command's name
     assert "Traceback" not in result.stdout + result.stderr
     assert ".rs:" not in lines[0], "a Rust source location leaked into the message"
     for needle in needles:
@@ -157,4 +159,4 @@ def test_bad_payloads(runtime_dir, demo):
 def test_debug_shows_the_traceback(runtime_dir, tmp_path):
     result = tf(runtime_dir, "--debug", "bag", "info", str(tmp_path / "none.mcap"))
     assert result.returncode == 2 and "Traceback" in result.stderr
-    assert result.stderr.strip().splitlines()[-1].startswith("error: ")
+    assert result.stderr.strip().splitlines()[-1].startswith("twinfleet ")

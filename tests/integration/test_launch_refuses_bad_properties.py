@@ -64,7 +64,7 @@ def test_a_misspelt_property_field_stops_launch_before_any_process(tmp_path: Pat
     elapsed = time.monotonic() - begun
     assert proc.returncode == 2, (out, err)
     assert elapsed < 3.0, elapsed
-    assert err.strip() == ("error: prop_field.yaml: property 'charged': "
+    assert err.strip() == ("twinfleet launch: prop_field.yaml: property 'charged': "
                            "r1.batery: the state of r1 (Battery) has no field 'batery'; its "
                            "fields: battery, charging")
     assert out == ""

@@ -110,6 +110,9 @@ def register(subparsers: Any) -> None:
                    "unless --checkpoint names another file); FILE is a pickle, trusted like "
                    "code (see --checkpoint)")
     p.add_argument("--quiet", action="store_true", help="no progress line on stderr")
+    p.add_argument("--strict", action="store_true",
+                   help="lint warnings (nondeterminism sources, names nothing answers) fail the "
+                        "check with exit 2 before it starts")
     add_statistical_arguments(p)
     p.set_defaults(func=check_command)
     _register_trace(subparsers)
@@ -195,6 +198,8 @@ def check_command(args: argparse.Namespace) -> int:
     from twinfleet.checker.diagnosis import ContractBreachError
     from twinfleet.checker.driver import CheckOptions, check
 
+    if args.strict and args.scenario is not None and _lint_fails(args, params):
+        return EXIT_BAD_INPUT
     stem = Path(args.scenario or args.resume).stem
     trace_out = args.trace_out or str(Path("out") / f"{stem}.trace.json")
     options = CheckOptions(search=args.search, walks=args.walks, seed=args.seed,
@@ -223,6 +228,24 @@ def check_command(args: argparse.Namespace) -> int:
             print(line, file=sys.stderr)
     _report(result, as_json=args.json)
     return result.exit_code
+
+
+def _lint_fails(args: argparse.Namespace, params: tuple[str, ...]) -> bool:
+    """With --strict: print the scenario's lint warnings and say they fail the check."""
+    from twinfleet.checker.driver import load
+    from twinfleet.runtime.scenario.lint import lint_scenario
+
+    try:
+        warnings = lint_scenario(load(args.scenario, profile=args.profile,
+                                      semantics=args.semantics, params=params))
+    except bad_input_errors():
+        return False  # the check itself reports a scenario it cannot load
+    for warning in warnings:
+        print(warning, file=sys.stderr)
+    if warnings:
+        print(f"twinfleet check: --strict: {len(warnings)} lint warning(s) fail the check",
+              file=sys.stderr)
+    return bool(warnings)
 
 
 def _report(result: CheckResult, *, as_json: bool) -> None:

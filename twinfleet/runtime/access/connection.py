@@ -54,6 +54,12 @@ class CommandError(Exception):
 _RUST_WHERE = re.compile(r"\s*at /\S+?\.rs:\d+\.?")
 
 
+def error_prefix(args: argparse.Namespace | None) -> str:
+    """The prefix of every command's one-line errors: ``twinfleet topic echo:``, say."""
+    words = [getattr(args, name, None) for name in ("command", "action")] if args else []
+    return " ".join(["twinfleet", *(w for w in words if isinstance(w, str))]) + ":"
+
+
 def zenoh_error_text(exc: BaseException) -> str:
     """A `zenoh.ZError` as one line, without the Rust source locations it carries."""
     text = _RUST_WHERE.sub("", str(exc)).strip()

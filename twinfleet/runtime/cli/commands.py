@@ -30,6 +30,7 @@ from twinfleet.runtime.access.connection import (
     add_message_arguments,
     add_wait_arguments,
     connection,
+    error_prefix,
     import_modules,
     need_fleet,
 )
@@ -62,12 +63,17 @@ def cmd_launch(args: argparse.Namespace) -> int:
         scenario = load_with_params(args.scenario, params)
         check_property_fields(scenario)  # a misspelt field stops here, before any process
     except ScenarioError as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"{error_prefix(args)} {exc}", file=sys.stderr)
         return 2
     from twinfleet.runtime.scenario.lint import lint_scenario
 
-    for warning in lint_scenario(scenario):  # nondeterminism sources, names nothing answers
+    warnings = lint_scenario(scenario)  # nondeterminism sources, names nothing answers
+    for warning in warnings:
         print(warning, file=sys.stderr)
+    if warnings and args.strict:
+        print(f"{error_prefix(args)} --strict: {len(warnings)} lint warning(s) fail the run; "
+              "nothing was started", file=sys.stderr)
+        return 2
     import zenoh
 
     from twinfleet.runtime.fleet.launcher import FleetConflict, format_result, run_fleet
@@ -92,7 +98,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
         except FleetConflict as exc:
             raise CommandError(str(exc)) from None
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
-            print(f"error: {exc}", file=sys.stderr)
+            print(f"{error_prefix(args)} {exc}", file=sys.stderr)
             return 2
         except (OSError, zenoh.ZError) as exc:  # e.g. a --listen port in use
             raise CommandError(router_error(args, exc, auth)) from None
@@ -156,7 +162,7 @@ def cmd_examples(args: argparse.Namespace) -> int:
 
     if args.copy is None:
         if args.dir is not None:
-            print("error: a directory is given only with --copy NAME", file=sys.stderr)
+            print(f"{error_prefix(args)} a directory is given only with --copy NAME", file=sys.stderr)
             return 2
         shipped = shipped_scenarios()
         width = max(map(len, shipped))
@@ -171,7 +177,7 @@ def cmd_examples(args: argparse.Namespace) -> int:
         files = copy_example(args.copy, args.dir or ".")
         load_scenario(files[0][0])  # the copy must load as it is
     except (ExampleError, ScenarioError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"{error_prefix(args)} {exc}", file=sys.stderr)
         return 2
     for path, written in files:
         print(f"{'wrote' if written else 'kept existing'} {path}")
@@ -343,6 +349,8 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
     add_override_arguments(p)
     p.add_argument("--time-scale", type=float, default=None, metavar="K",
                    help="run fleet time K times faster than wall time (default: live.time_scale or 1)")
+    p.add_argument("--strict", action="store_true",
+                   help="lint warnings fail the run with exit 2 before anything starts")
     p.add_argument("--until-settled", action="store_true",
                    help="end the run once every eventually property has held (as the scenario's "
                         "live.stop: settled does); each one's time of holding is printed anyway")

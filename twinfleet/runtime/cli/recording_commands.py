@@ -21,6 +21,7 @@ from twinfleet.runtime.access.connection import (
     add_connection_arguments,
     add_wait_arguments,
     connection,
+    error_prefix,
     import_modules,
 )
 
@@ -35,7 +36,7 @@ def cmd_record(args: argparse.Namespace) -> int:
 
     import_modules(args.module)
     if args.scenario is not None and args.connect:
-        print("error: give a SCENARIO to launch or --connect EP of a running fleet, not both "
+        print(f"{error_prefix(args)} give a SCENARIO to launch or --connect EP of a running fleet, not both "
               "(with a SCENARIO the recorder is the fleet's router: see --listen)", file=sys.stderr)
         return 2
     try:
@@ -49,7 +50,7 @@ def cmd_record(args: argparse.Namespace) -> int:
                 load_scenario(args.scenario), args.output, time_scale=args.time_scale,
                 duration_s=args.duration, seed=args.seed, listen=args.listen))
     except (ScenarioError, OSError, zenoh.ZError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"{error_prefix(args)} {exc}", file=sys.stderr)
         return 2
     for line in format_result(result) if result is not None else ():
         print(f"[launcher] {line}", flush=True)
@@ -171,7 +172,7 @@ def cmd_export(args: argparse.Namespace) -> int:
         check_readable(args.file)
         done = export_json(args.file, args.output)
     except (ValueError, OSError, McapError, RecordingError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"{error_prefix(args)} {exc}", file=sys.stderr)
         return 2
     view = ("and their Foxglove view (/foxglove/map, /foxglove/robots, /foxglove/<robot>/scan, "
             "/foxglove/collisions)" if done.scene else

@@ -18,6 +18,7 @@ from twinfleet.runtime.access.connection import (
     add_connection_arguments,
     add_wait_arguments,
     connection,
+    error_prefix,
 )
 
 
@@ -45,7 +46,7 @@ def cmd_view(args: argparse.Namespace) -> int:
         return run_viewer(connect=connect, fleet=fleet, port=args.port, trace_path=args.trace,
                           auth=auth, web=web_access(args))
     except (ValueError, KeyError, OSError) as exc:
-        print(f"error: {exc}", file=sys.stderr)
+        print(f"{error_prefix(args)} {exc}", file=sys.stderr)
         return 2
 
 

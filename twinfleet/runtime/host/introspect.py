@@ -11,7 +11,7 @@ entry and the node class's declared handlers (`node_description`)::
      "service_types": {"/add_two_ints": ["example_interfaces/AddTwoInts_Request",
                                          "example_interfaces/AddTwoInts_Response"]},
      "timers": [{"handler", "period_ms"}],    # @every; ctx.after targets: "after": True
-     "clients": ["/add_two_ints"],            # services its code calls (`host.code_refs`)
+     "clients": ["/add_two_ints"],            # services its code calls (`lint.code_uses`)
      "publication_qos": {"/map": qos},
      "publications":  {"/chatter": "std_msgs/String"}}   # published so far
 
@@ -50,8 +50,8 @@ from twinfleet.runtime.contract.dispatch import declared_message_type
 from twinfleet.runtime.contract.messages import type_name_of
 from twinfleet.runtime.contract.names import resolve
 from twinfleet.runtime.contract.node import Durability, HandlerSpec, NodeSpec, QoS
-from twinfleet.runtime.host.code_refs import code_references
 from twinfleet.runtime.host.keys import KeyKind, node_key, topic_in_fleet
+from twinfleet.runtime.scenario.lint import code_uses
 from twinfleet.runtime.scenario.overrides import (  # noqa: F401 (launch and node processes load here)
     load_with_params,
     overrides_doc,
@@ -128,7 +128,7 @@ def node_description(node: Any, class_path: str) -> dict[str, Any]:
         except Exception:  # a bad period fails the node elsewhere; describe what is known
             period = None
         timers.append({"handler": s.method, "period_ms": period})
-    clients, scheduled = code_references(type(node))
+    clients, scheduled = code_uses(type(node))
     timers += [{"handler": method, "period_ms": None, "after": True} for method in scheduled]
     return {"name": node.name, "namespace": node.namespace or "/", "class": class_path,
             "pid": os.getpid(), "params": values,

@@ -135,7 +135,7 @@ def lint_topics(nodes: Sequence[tuple[str, str, type[Node]]]) -> list[LintWarnin
         for topic in [*spec.publications, *getattr(cls, "tool_topics", ())]:
             published.append((_resolved(topic, namespace, name) or topic, name, "declared"))
         # A class is hashable: mypy reads Node.__hash__ (an instance method) as the class's.
-        for kind, pattern, where in _uses(cls):  # type: ignore[arg-type]
+        for kind, pattern, where in _uses(cls):
             full = pattern if "*" in pattern else _resolved(pattern, namespace, name)
             target = published if kind == "publish" else called
             target.append((full or pattern, name, where))
@@ -197,10 +197,10 @@ def _resolved(name: str | None, namespace: str, node: str) -> str | None:
 
 
 @functools.cache
-def _uses(cls: type[Node]) -> list[tuple[str, str, str]]:
-    """(kind, name, file:line) of each `ctx.publish`/`ctx.call` in the methods `cls` has
-    (its own or inherited, overridden ones left out), with literal or f-string names."""
-    found: list[tuple[str, str, str]] = []
+def _calls(cls: type[Node]) -> list[tuple[ast.Call, str]]:
+    """Each ``x.publish/call/after(...)`` call with arguments in the methods `cls` has (its
+    own or inherited, overridden ones left out), with its file:line."""
+    found: list[tuple[ast.Call, str]] = []
     for _, fn in inspect.getmembers(cls, inspect.isfunction):
         if fn.__module__.startswith("twinfleet.runtime"):
             continue
@@ -213,10 +213,51 @@ def _uses(cls: type[Node]) -> list[tuple[str, str, str]]:
             # that cannot read a method says nothing about it)
         for item in ast.walk(tree):
             if isinstance(item, ast.Call) and isinstance(item.func, ast.Attribute) and \
-                    item.func.attr in ("publish", "call") and item.args:
-                found.append((item.func.attr, _pattern(item.args[0]),
-                              f"{file}:{first + item.lineno - 1}"))
+                    item.func.attr in ("publish", "call", "after") and item.args:
+                found.append((item, f"{file}:{first + item.lineno - 1}"))
     return found
+
+
+def _uses(cls: type[Node]) -> list[tuple[str, str, str]]:
+    """(kind, name, file:line) of each `ctx.publish`/`ctx.call` of `cls` (`_calls`), with
+    literal or f-string names."""
+    # A class is hashable: mypy reads Node.__hash__ (an instance method) as the class's.
+    return [(call.func.attr, _pattern(call.args[0]), where)  # type: ignore[attr-defined]
+            for call, where in _calls(cls)  # type: ignore[arg-type]
+            if call.func.attr != "after"]  # type: ignore[attr-defined]
+
+
+def code_uses(cls: type[Node]) -> tuple[list[str], list[str]]:
+    """What a class's code names plainly, for `twinfleet node info`: the services it calls
+    (a literal name, or ``params.NAME`` for ``ctx.call(self.params.NAME, ...)``) and the
+    handlers it schedules (``ctx.after(delay, self.handler)``), each sorted."""
+    handlers = {h.method for h in NodeSpec.of(cls).handlers}
+    clients: set[str] = set()
+    after: set[str] = set()
+    for call, _ in _calls(cls):  # type: ignore[arg-type]
+        kind = call.func.attr  # type: ignore[attr-defined]
+        if kind == "call":
+            name = _pattern(call.args[0])
+            param = _self_attribute(call.args[0], "params")
+            clients.add(f"params.{param}" if name == "*" and param else name)
+        elif kind == "after" and len(call.args) > 1:
+            target = _self_attribute(call.args[1])
+            if target in handlers:
+                after.add(target)
+    clients.discard("*")
+    return sorted(clients), sorted(after)
+
+
+def _self_attribute(arg: ast.expr, through: str | None = None) -> str | None:
+    """X of ``self.X`` (or of ``self.<through>.X``), else None."""
+    base = arg.value if isinstance(arg, ast.Attribute) else None
+    if through is not None:
+        if not (isinstance(base, ast.Attribute) and base.attr == through):
+            return None
+        base = base.value
+    if isinstance(base, ast.Name) and base.id == "self" and isinstance(arg, ast.Attribute):
+        return arg.attr
+    return None
 
 
 def _pattern(arg: ast.expr) -> str:

@@ -74,11 +74,14 @@ def check_property_fields(scenario: Scenario) -> None:
         names = frozenset(configs) - _bound_names(tree)
         for node, name in _node_reads(tree, names):
             if node not in states:
-                states[node] = configs[node].instantiate().state
-            state = states[node]
+                states[node] = configs[node].instantiate()
+            state = states[node].state
             if isinstance(state, dict) or hasattr(state, name):
                 continue
+            hint = (f" ({name} is a parameter of {node}: properties read the nodes' states, "
+                    "not their parameters; copy it into the state to read it)"
+                    if hasattr(states[node].params, name) else "")
             raise ScenarioError(
                 f"{scenario.source}: property {prop.name!r}: {node}.{name}: the state of "
                 f"{node} ({type(state).__name__}) has no field {name!r}; its fields: "
-                f"{', '.join(state_fields(state)) or '(none)'}")
+                f"{', '.join(state_fields(state)) or '(none)'}{hint}")
