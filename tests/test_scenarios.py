@@ -125,7 +125,7 @@ def mutate(path: str, value):
         ("check", {"faults": {"crash": {"nodes": ["r1"], "durable": ["r7"]}}},
          r"check\.faults\.crash: 'r7' is not a node"),
         ("live", {"timeout": 3}, r"live\.timeout: unknown key; expected one of max_nodes, max_payload_bytes, report, "
-                                 r"stop_on_error, summary_topics, time_scale, timeout_s"),
+                                 r"stop, stop_on_error, summary_topics, time_scale, timeout_s"),
         ("live", {"timeout_s": 0}, r"live\.timeout_s: expected a number > 0"),
         ("live", {"time_scale": "fast"}, r"live\.time_scale: expected a number > 0"),
         ("live", {"stop_on_error": 1}, r"live\.stop_on_error: expected true or false"),

@@ -53,26 +53,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def cmd_launch(args: argparse.Namespace) -> int:
     """`twinfleet launch`: validate, run the fleet `--runs` times, print summaries."""
-    from twinfleet.runtime.scenario.overrides import load_with_params
-    from twinfleet.runtime.scenario.property_fields import check_property_fields
-    from twinfleet.runtime.scenario.spec import ScenarioError
-
     params = launch_params(args)
     auth = _launch_access(args)
-    try:
-        scenario = load_with_params(args.scenario, params)
-        check_property_fields(scenario)  # a misspelt field stops here, before any process
-    except ScenarioError as exc:
-        print(f"{error_prefix(args)} {exc}", file=sys.stderr)
-        return 2
-    from twinfleet.runtime.scenario.lint import lint_scenario
-
-    warnings = lint_scenario(scenario)  # nondeterminism sources, names nothing answers
-    for warning in warnings:
-        print(warning, file=sys.stderr)
-    if warnings and args.strict:
-        print(f"{error_prefix(args)} --strict: {len(warnings)} lint warning(s) fail the run; "
-              "nothing was started", file=sys.stderr)
+    scenario = _launchable(args, params)
+    if scenario is None:
         return 2
     import zenoh
 
@@ -112,6 +96,30 @@ def cmd_launch(args: argparse.Namespace) -> int:
         print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "
               f"{args.runs - passed}/{args.runs} failed", flush=True)
     return worst
+
+
+def _launchable(args: argparse.Namespace, params: Any) -> Any:
+    """The scenario to launch, its lint warnings printed; None (after a one-line error)
+    when it does not load, names a field no state has, or `--strict` refuses a warning."""
+    from twinfleet.runtime.scenario.lint import lint_scenario
+    from twinfleet.runtime.scenario.overrides import load_with_params
+    from twinfleet.runtime.scenario.property_fields import check_property_fields
+    from twinfleet.runtime.scenario.spec import ScenarioError
+
+    try:
+        scenario = load_with_params(args.scenario, params)
+        check_property_fields(scenario)  # a misspelt field stops here, before any process
+    except ScenarioError as exc:
+        print(f"{error_prefix(args)} {exc}", file=sys.stderr)
+        return None
+    warnings = lint_scenario(scenario)  # nondeterminism sources, names nothing answers
+    for warning in warnings:
+        print(warning, file=sys.stderr)
+    if warnings and args.strict:
+        print(f"{error_prefix(args)} --strict: {len(warnings)} lint warning(s) fail the run; "
+              "nothing was started", file=sys.stderr)
+        return None
+    return scenario
 
 
 def _launch_access(args: argparse.Namespace) -> Any:
@@ -342,8 +350,9 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                        "per node. The scenario's properties are judged on the running fleet "
                        "(runtime verification over the states the nodes report); the run ends "
                        "with `result: PASSED` (exit 0), `FAILED` and the property violated (1), "
-                       "`INCONCLUSIVE` and why (3: a node dropped samples or stalled), or "
-                       "`interrupted` (130, Ctrl-C).")
+                       "`INCONCLUSIVE` and why (3: a node dropped samples or stalled), "
+                       "`CONTRACT BREACH` (4: a node published a type its topic does not carry), "
+                       "or `interrupted` (130, Ctrl-C).")
     p.add_argument("scenario", help="scenario YAML file, or the name of a shipped example "
                                     "(twinfleet examples lists them)")
     add_override_arguments(p)
@@ -365,16 +374,7 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=None, help="fleet seed (default: the scenario's)")
     p.add_argument("--runs", type=int, default=1, metavar="N",
                    help="run the fleet N times with seeds S, S+1, ... (default: 1)")
-    p.add_argument("--connect", default=None, metavar="EP",
-                   help="join the Zenoh router at EP (e.g. tcp/10.0.0.2:7447) instead of embedding one")
-    p.add_argument("--listen", default=None, metavar="EP",
-                   help="endpoint of the embedded router (default: tcp/127.0.0.1:<free port>); "
-                        "an endpoint other machines can reach must be tls/ or quic/ (README "
-                        "\"Trust model\")")
-    p.add_argument("--credentials", default=None, metavar="FILE",
-                   help="with --connect: join the fleet whose registry entry FILE is (copied "
-                        "from the machine that launched it, owner-only): its key signs this "
-                        "launch's nodes (default: this machine's registry entry for EP)")
+    _launch_network_arguments(p)
     p.add_argument("--accept-recorded", action="store_true",
                    help="let the nodes take recorded input that `twinfleet play --into-fleet` "
                         "injects (signed as recorded; the result then says so); without it "
@@ -397,6 +397,20 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                    help="with --ros2: the ROS 2 network's router (default: the ros2: section's, "
                         "else tcp/127.0.0.1:7447, rmw_zenohd's)")
     p.set_defaults(func=cmd_launch)
+
+
+def _launch_network_arguments(p: argparse.ArgumentParser) -> None:
+    """Where a launch's router is and whose key signs its nodes."""
+    p.add_argument("--connect", default=None, metavar="EP",
+                   help="join the Zenoh router at EP (e.g. tcp/10.0.0.2:7447) instead of embedding one")
+    p.add_argument("--listen", default=None, metavar="EP",
+                   help="endpoint of the embedded router (default: tcp/127.0.0.1:<free port>); "
+                        "an endpoint other machines can reach must be tls/ or quic/ (README "
+                        "\"Trust model\")")
+    p.add_argument("--credentials", default=None, metavar="FILE",
+                   help="with --connect: join the fleet whose registry entry FILE is (copied "
+                        "from the machine that launched it, owner-only): its key signs this "
+                        "launch's nodes (default: this machine's registry entry for EP)")
 
 
 def _examples_parser(sub: argparse._SubParsersAction) -> None:

@@ -82,16 +82,13 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
-        scenario: a validated scenario (`runtime.scenario.spec.load_scenario`, or
-            `Scenario.build`: then written to a file for the node processes, see
-            `live_fleet.launchable`).
+        scenario: a validated scenario (`load_scenario`, or `Scenario.build`: then written
+            to a file for the node processes, `live_fleet.launchable`).
         time_scale, seed: fleet speed-up and seed (default: the scenario's).
         timeout_s: wall seconds the run lasts once every node is alive (from the fleet's
             epoch; default: `live.timeout_s`, else none).
-        connect, listen: join this Zenoh router instead of embedding one; the embedded
-            router's endpoint (default: tcp/127.0.0.1:<free port>).
-        out: where the prefixed output lines go.
-        handle_signals: end the run on SIGINT/SIGTERM (main thread only).
+        connect, listen: join this router; else the embedded one's endpoint.
+        out, handle_signals: where output goes; end on SIGINT/SIGTERM (main thread only).
         run_record: write the run as JSON lines to this file (`runtime.fleet.run_record`).
         record_events: write every dispatched event to this file (module docstring).
         node_args: extra arguments for every node process (`runtime.fleet.node_main`).
@@ -101,16 +98,13 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             ends with the reason it returns (an exception it raises is re-raised).
         judge: judge the properties live (`runtime.fleet.live_verdict`: the result's
             `verdict`); False: no state reports (exits and the report decide).
-        auth: with `connect`, the joined fleet's key and logins (default: this machine's
-            fleet registry entry for that endpoint, if any).
-        bridge: take external input under a bridge key (`runtime.core.guard`); the `driver`
-            usually runs the bridge.
-        startup_s: wall seconds for every node to become alive; a run not up by then
-            (or stopped before) is INCONCLUSIVE, never a node's failure.
-        accept_recorded: the nodes let in recorded input signed by ``twinfleet play
-            --into-fleet`` (the verdict then says it was injected); otherwise they drop it.
-        until_settled: end the run once every eventually property has held (default:
-            the scenario's ``live.stop: settled``).
+        auth: with `connect`, the joined fleet's key and logins (default: the registry's).
+        bridge: take external input under a bridge key (`core.guard`); `driver` runs it.
+        startup_s: wall seconds for every node to become alive; a run not up by then is
+            INCONCLUSIVE, never a node's failure.
+        accept_recorded: the nodes take recorded input ``twinfleet play --into-fleet``
+            signs (the verdict says so); otherwise they drop it.
+        until_settled: end once every eventually property held (default: ``live.stop``).
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
