@@ -272,3 +272,15 @@ def test_the_scanner_sees_imports_inside_functions(tmp_path):
     sample = tmp_path / "m.py"
     sample.write_text("def f():\n    import zenoh.ext\n    from time import monotonic\n")
     assert _imported(sample) == {"zenoh.ext", "time"}
+
+
+#: the one module of the checker that may import Ray (the distributed search's engine)
+RAY_MODULE = "twinfleet.checker.cluster.engine"
+
+
+def test_only_the_cluster_engine_imports_ray():
+    bad = [f"{path.relative_to(ROOT)} imports {name}"
+           for module, path in SOURCES.items() if module != RAY_MODULE
+           for name in sorted(_imported(path)) if name.split(".")[0] == "ray"]
+    assert bad == []
+    assert "ray" in {n.split(".")[0] for n in _imported(SOURCES[RAY_MODULE])}

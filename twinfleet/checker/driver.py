@@ -30,7 +30,7 @@ from twinfleet.checker.diagnosis import (
     ContractBreachError,
     breach_line,
 )
-from twinfleet.checker.outcome import Limits, SearchStatistics
+from twinfleet.checker.outcome import Limits, Outcome, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.reduction import describe, plan
 from twinfleet.checker.search import Search
@@ -71,6 +71,10 @@ class CheckOptions:
     reduction: str | None = None
     timing: str | None = None  # a timing model whose bounds are the latency ranges
     params: tuple[str, ...] = ()  # parameter overrides, as `launch` takes them (r1.speed:=0.4)
+    workers: int = 1  # Ray workers for the search (checker.cluster); 1 with no cluster: here
+    cluster: str | None = None  # a Ray cluster to join instead of starting a local one
+    min_width: int = 64  # frontier width at which a search moves to the cluster
+    report: Callable[[str], None] | None = field(default=None, compare=False)
     progress: Callable[[SearchStatistics], None] | None = field(default=None, compare=False)
 
 
@@ -96,6 +100,7 @@ class CheckResult:
     reduction: str = "none"
     reduction_statistics: dict[str, int] | None = None
     params: tuple[str, ...] = ()  # the parameter overrides checked with
+    engine: str | None = None  # where the search ran, when workers were asked for
 
     @property
     def rmc_transitions(self) -> int:
@@ -127,7 +132,7 @@ class CheckResult:
             "trace": self.trace_path,
             "trace_steps": None if self.trace is None else len(self.trace["steps"]),
             "reduction": self.reduction, "reduction_statistics": self.reduction_statistics,
-            "params": list(self.params),
+            "params": list(self.params), "engine": self.engine,
             "exit_code": self.exit_code,
         }
 
@@ -156,6 +161,8 @@ class CheckResult:
                  f"({s.bytes_per_state:.0f} B/state, {s.digest_bits}-bit digests, "
                  f"collision probability <= {s.collision_probability:.1e})",
                  f"reduction: {self.reduction}"]
+        if self.engine:
+            lines.append(f"engine: {self.engine}")
         if self.resumed_from:
             lines.append(f"resumed from checkpoint {self.resumed_from}")
         if self.checkpoint:
@@ -255,8 +262,13 @@ def check(scenario: str | Path | Scenario | None,
     if data is not None:
         search.restore(data)
     seed = options.seed if options.seed is not None else scenario.seed
+    engine, outcome = None, None
     try:
-        outcome = search.run(strategy, walks=options.walks, seed=seed)
+        if options.workers > 1 or options.cluster is not None:
+            outcome, engine = _distributed(system, props, strategy, reduction is not None,
+                                           options, path, scenario, flags)
+        if outcome is None:
+            outcome = search.run(strategy, walks=options.walks, seed=seed)
     except ContractBreachError as exc:  # found while rebuilding a path (checker.paths)
         return _breach_result(scenario, system, strategy, props, str(exc), search, warnings)
     if outcome.violation is not None and (breach := _breach_of(system, outcome.violation)):
@@ -267,7 +279,7 @@ def check(scenario: str | Path | Scenario | None,
                          resumed_from=options.resume, warnings=warnings,
                          reduction=describe(reduction, reduction_name, strategy),
                          reduction_statistics=None if reduction is None else
-                         reduction.statistics(), params=tuple(meta["params"]))
+                         reduction.statistics(), params=tuple(meta["params"]), engine=engine)
     if outcome.violation is not None and outcome.counterexample is not None:
         try:
             result.trace = build_trace(system, outcome.violation, outcome.counterexample,
@@ -284,6 +296,31 @@ def check(scenario: str | Path | Scenario | None,
             write_trace(result.trace, options.trace_out)
             result.trace_path = options.trace_out
     return result
+
+
+def _distributed(system: System, props: PropertySet, strategy: str, reduced: bool,
+                 options: CheckOptions, path: Path | None, scenario: Scenario,
+                 flags: Mapping[str, Any]) -> tuple[Outcome | None, str]:
+    """The outcome of the search on Ray workers (`checker.cluster`), or None and why it
+    runs here."""
+    from twinfleet.checker.cluster import SystemSpec, distributed, why_local
+
+    local = why_local(strategy, reduced, props)
+    if local is not None:
+        return None, local
+    if path is None or options.checkpoint or options.resume or options.exact_states:
+        raise ScenarioError("--workers/--cluster need a scenario file and no --checkpoint, "
+                            "--resume or --exact-states")
+    timing = _timing_ranges(scenario, options)
+    spec = SystemSpec(str(path.resolve()), scenario.profile, system.semantics.value,
+                      tuple(options.params), tuple(sorted(flags.items())), options.timing,
+                      timing.get("latency"), timing.get("topic_latency"))
+    limits = limits_for(options, scenario.check)
+    run = distributed(system, props, limits, spec, workers=options.workers,
+                      address=options.cluster, min_width=options.min_width,
+                      report=options.report)
+    note = run.note if strategy == "bfs" else f"{run.note}; strict BFS order instead of {strategy}"
+    return run.outcome, note
 
 
 def _timing_ranges(scenario: Scenario, options: CheckOptions) -> dict[str, Any]:

@@ -1,0 +1,93 @@
+"""The search on several processes or machines (Ray), behind the checker's seams.
+
+`distributed(...)` runs a check's safety search as a strict BFS over worker
+and shard actors (`checker.cluster.coordinator`, design in
+docs/distributed.md) and returns its `Outcome` with a line for the summary,
+or None with the reason the search must run in one process instead (a
+reduced search, `eventually` properties, random walks). Only
+`checker.cluster.engine` imports Ray, and only when a search first gets wide
+enough to need it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from contextlib import ExitStack
+from dataclasses import dataclass
+from typing import Any, final
+
+from twinfleet.checker.cluster.coordinator import Backend, Coordinator, Traffic
+from twinfleet.checker.cluster.level import Item
+from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint
+from twinfleet.checker.outcome import Limits, Outcome
+from twinfleet.checker.properties import PropertySet
+from twinfleet.checker.system import System
+
+__all__ = ["ClusterError", "Distributed", "SystemSpec", "distributed", "why_local"]
+
+DEFAULT_MIN_WIDTH = 64  # frontier worlds before the search moves to the cluster
+
+
+@final
+@dataclass
+class Distributed:
+    """A distributed search's outcome, its summary line and what crossed processes."""
+
+    outcome: Outcome
+    note: str
+    traffic: Traffic
+
+
+def why_local(strategy: str, reduced: bool, properties: PropertySet) -> str | None:
+    """Why this search runs in one process even though workers were asked for, or None."""
+    if strategy == "random":
+        return "random walks run in one process"
+    if reduced:
+        return ("the reduced search runs in one process: its cycle proviso reads the "
+                "global BFS order (use --reduction none to distribute)")
+    if properties.eventually:
+        return "eventually properties need the whole graph: the search runs in one process"
+    return None
+
+
+def engine_module() -> Any:
+    """`checker.cluster.engine` (imports Ray); ClusterError when Ray is not installed."""
+    try:
+        from twinfleet.checker.cluster import engine
+    except ImportError as exc:
+        raise ClusterError("the distributed search needs Ray: pip install "
+                           f"twinfleet[cluster] ({exc})") from None
+    return engine
+
+
+def distributed(system: System, properties: PropertySet, limits: Limits, spec: SystemSpec, *,
+                workers: int, address: str | None, min_width: int,
+                report: Callable[[str], None] | None = None,
+                on_backend: Callable[[Backend], None] | None = None) -> Distributed:
+    """Search on `workers` Ray workers once the frontier is `min_width` wide (module
+    docstring); ClusterError when the cluster cannot start or loses a worker."""
+    expected = fingerprint(system)
+    with ExitStack() as stack:
+        def factory(frontier: list[Item], parents: dict[int, int]) -> Backend:
+            engine = engine_module()
+            if report is not None:
+                report(f"[check] frontier {len(frontier):,} wide: moving the search to "
+                       f"{workers} Ray worker(s)")
+            stack.enter_context(engine.session(workers, address))
+            backend: Backend = engine.RayBackend(spec, expected, workers).load(frontier, parents)
+            if on_backend is not None:
+                on_backend(backend)
+            return backend
+
+        coordinator = Coordinator(system, properties, limits, factory, min_width, report)
+        outcome = coordinator.run()
+    t = coordinator.traffic
+    if coordinator.distributed_at is None:
+        note = (f"ran in one process: the frontier never reached {min_width} worlds "
+                "(--min-width)")
+    else:
+        per = t.claims / max(1, outcome.statistics.states)
+        note = (f"strict BFS on {workers} Ray worker(s) from depth "
+                f"{coordinator.distributed_at} ({t.levels} levels, {per:.2f} claims per "
+                f"state, {t.stolen:,} worlds moved in {t.moves} blobs)")
+    return Distributed(outcome, note, t)

@@ -1,0 +1,283 @@
+"""The distributed search's coordinator: strict BFS level by level over a `Backend`.
+
+The search starts in this process (`LocalBackend`: one expander, one shard).
+When a level's frontier reaches `min_width` worlds and more than one process
+was asked for, the frontier and the visited set are handed to the cluster
+(`checker.cluster.engine.RayBackend`) and the search goes on there; a search
+whose frontier never gets that wide ends here and says so, since a per-level
+barrier (about a millisecond of round trips) is ruinous against a level of a
+few worlds. Every level ends with a barrier, so the search is a strict BFS:
+the same states, transitions and depth as `checker.search` for any number of
+workers, and a counterexample of the same length. After each level the
+coordinator moves frontier worlds from the busiest worker to the idlest when
+they differ by more than `STEAL_MIN` (one packed blob per move).
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Protocol, final
+
+from twinfleet.checker.diagnosis import FIX_HIDDEN, ContractBreachError, breach_line
+from twinfleet.checker.outcome import Counterexample, Limits, Outcome, SearchStatistics, peak_rss_mb
+from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.system import System
+from twinfleet.checker.world import World
+from twinfleet.checker.cluster.level import ROOT, Acceptance, Expander, Expansion, Item, ShardCore
+from twinfleet.runtime.contract.kinds import FailureKind, Status
+
+STEAL_MIN = 64  # frontier worlds two workers must differ by before some are moved
+
+
+class Backend(Protocol):
+    """Where levels are expanded: this process, or a cluster of workers and shards."""
+
+    workers: int
+
+    def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
+        """Expand every worker's frontier by one level; claims answered, new worlds kept."""
+        ...
+
+    def parent(self, key: int) -> int:
+        """The parent key of a visited key."""
+        ...
+
+    def shard_bytes(self) -> list[int]:
+        """Bytes held per shard."""
+        ...
+
+    def move(self, source: int, target: int, count: int) -> None:
+        """Move `count` frontier worlds from worker `source` to worker `target`."""
+        ...
+
+
+@final
+class LocalBackend:
+    """One expander and one shard in this process."""
+
+    workers = 1
+
+    def __init__(self, system: System, properties: PropertySet) -> None:
+        self.expander = Expander(system, properties, 1)
+        self.shard = ShardCore()
+
+    def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
+        """One level here (`Backend.level`)."""
+        expansion, blobs = self.expander.expand(max_depth)
+        return [expansion], [self.expander.accept(self.shard.claim(blobs))]
+
+    def parent(self, key: int) -> int:
+        """`Backend.parent`."""
+        return self.shard.parent(key)
+
+    def shard_bytes(self) -> list[int]:
+        """`Backend.shard_bytes`."""
+        return [self.shard.nbytes()]
+
+    def move(self, source: int, target: int, count: int) -> None:
+        """Nothing to move between one worker."""
+
+
+@final
+@dataclass
+class Traffic:
+    """What crossed between processes (for the benchmark and the progress line)."""
+
+    claims: int = 0  # (key, parent) pairs sent to shards
+    stolen: int = 0  # frontier worlds moved between workers
+    moves: int = 0  # blobs moved
+    levels: int = 0  # barriers
+    new_per_worker: list[int] = field(default_factory=list)
+
+
+Factory = Callable[[list[Item], dict[int, int]], Backend]
+
+
+@final
+class Coordinator:
+    """One distributed strict-BFS search (module docstring).
+
+    Args:
+        system, properties: the coordinator's own copy (initial worlds, counterexamples).
+        limits: as `checker.search.Search` takes them (checked between levels).
+        factory: makes the cluster backend from a frontier and the visited parents;
+            None: everything in this process.
+        min_width: frontier width at which the search moves to the cluster.
+        report: called with a progress line at most every `interval` seconds.
+    """
+
+    def __init__(self, system: System, properties: PropertySet, limits: Limits,
+                 factory: Factory | None, min_width: int,
+                 report: Callable[[str], None] | None = None, interval: float = 1.0) -> None:
+        self.system, self.properties, self.limits = system, properties, limits
+        self.factory, self.min_width = factory, min_width
+        self.report, self.interval = report, interval
+        self.local = LocalBackend(system, properties)
+        self.backend: Backend = self.local
+        self.roots: dict[int, tuple[int, ...]] = {}
+        self.traffic = Traffic()
+        self.states = self.transitions = self.initial = self.depth = self.frontier = 0
+        self.peak_frontier = 0
+        self.distributed_at: int | None = None  # the depth where the cluster took over
+        self._started = time.monotonic()
+        self._last_report = self._started
+
+    # ------------------------------------------------------------------ run
+
+    def run(self) -> Outcome:
+        """Search to a verdict or a limit."""
+        self._started = self._last_report = time.monotonic()
+        found = self._start()
+        if found is not None:
+            return found
+        level = 0
+        while self.frontier:
+            if self.backend is self.local and self.factory is not None and \
+                    self.frontier >= self.min_width:
+                self.backend = self.factory(self.local.expander.frontier, self.local.shard.parents)
+                self.local.expander.frontier = []
+                self.distributed_at = level
+            outcome = self._level()
+            if outcome is not None:
+                return outcome
+            level += 1
+        return self._outcome(Status.HOLDS, "every property holds")
+
+    def _start(self) -> Outcome | None:
+        """The initial worlds, claimed and checked here."""
+        shard, frontier = self.local.shard, self.local.expander.frontier
+        for t in self.system.initial():
+            self.initial += 1
+            if t.failure is not None:
+                return self._violated(self.properties.check_failure(t.failure),
+                                      Counterexample(t.step.choices, ()))
+            key = t.world.key
+            if key in shard.parents:
+                continue
+            shard.parents[key] = ROOT
+            self.roots[key] = t.step.choices
+            self.states += 1
+            violation = self.properties.check_world(self.system, t.world)
+            if violation is not None:
+                return self._violated(violation, Counterexample(t.step.choices, ()))
+            frontier.append((t.world, key, 0))
+        self.frontier = self.peak_frontier = len(frontier)
+        return None
+
+    def _level(self) -> Outcome | None:
+        expansions, acceptances = self.backend.level(self.limits.max_depth)
+        t = self.traffic
+        t.levels += 1
+        t.claims += sum(e.claims for e in expansions) if self.backend is not self.local else 0
+        if len(t.new_per_worker) < len(acceptances):
+            t.new_per_worker = [0] * len(acceptances)
+        self.transitions += sum(e.transitions for e in expansions)
+        for i, a in enumerate(acceptances):
+            self.states += a.new
+            t.new_per_worker[i] += a.new
+            self.depth = max(self.depth, a.depth)
+        self.frontier = sum(a.frontier for a in acceptances)
+        self.peak_frontier = max(self.peak_frontier, self.frontier)
+        failure = next((e.failure for e in expansions if e.failure is not None), None)
+        if failure is not None:
+            return self._failed(failure.parent)
+        violation = next((a.violation for a in acceptances if a.violation is not None), None)
+        if violation is not None:
+            return self._violated(violation[0], self._path(violation[1])[0])
+        if any(e.pruned for e in expansions) and not self.frontier:
+            return self._outcome(Status.UNKNOWN, f"max-depth {self.limits.max_depth} "
+                                 "reached before the search finished")
+        stop = self._limit_reached()
+        if stop is not None:
+            return self._outcome(Status.UNKNOWN, stop)
+        self._balance([a.frontier for a in acceptances])
+        self._progress()
+        return None
+
+    def _limit_reached(self) -> str | None:
+        limits = self.limits
+        if limits.max_time_s is not None and time.monotonic() - self._started >= limits.max_time_s:
+            return f"max-time {limits.max_time_s:g} s reached before the search finished"
+        if limits.max_states is not None and self.states >= limits.max_states:
+            return f"max-states {limits.max_states} reached before the search finished"
+        return None
+
+    def _balance(self, sizes: list[int]) -> None:
+        """Move worlds from the busiest worker to the idlest (work sharing)."""
+        if len(sizes) < 2:
+            return
+        busy = max(range(len(sizes)), key=sizes.__getitem__)
+        idle = min(range(len(sizes)), key=sizes.__getitem__)
+        gap = sizes[busy] - sizes[idle]
+        if gap > STEAL_MIN:
+            self.backend.move(busy, idle, gap // 2)
+            self.traffic.stolen += gap // 2
+            self.traffic.moves += 1
+
+    # ------------------------------------------------------------- answers
+
+    def statistics(self) -> SearchStatistics:
+        """The counters so far."""
+        n = self.states
+        return SearchStatistics(n, self.transitions, self.initial, self.depth, self.frontier,
+                                time.monotonic() - self._started, peak_rss_mb(),
+                                sum(self.backend.shard_bytes()), 64, min(1.0, n * n / 2.0**65),
+                                self.peak_frontier)
+
+    def _outcome(self, status: Status, reason: str) -> Outcome:
+        return Outcome(status, reason, self.statistics())
+
+    def _violated(self, violation: PropertyViolation, path: Counterexample) -> Outcome:
+        return Outcome(Status.VIOLATED, violation.property, self.statistics(), violation, path)
+
+    def _failed(self, parent: int) -> Outcome:
+        """A handler failed on a step from `parent`: the first failing step from there."""
+        path, world = self._path(parent)
+        for t in self.system.successors(world):
+            if t.failure is not None:
+                steps = (*path.steps, t.step)
+                return self._violated(self.properties.check_failure(t.failure),
+                                      Counterexample(path.initial, steps))
+        raise ContractBreachError(_NOT_AGAIN)
+
+    def _path(self, key: int) -> tuple[Counterexample, World]:
+        """The steps from an initial world to the world with `key`, along recorded parents."""
+        keys = [key]
+        while (parent := self._parent(keys[-1])) != ROOT:
+            keys.append(parent)
+        keys.reverse()
+        initial = self.roots[keys[0]]
+        world = self.system.initial_world(initial).world
+        steps = []
+        for nxt in keys[1:]:
+            step = next((t for t in self.system.successors(world)
+                         if t.failure is None and t.world.key == nxt), None)
+            if step is None:
+                raise ContractBreachError(_NOT_AGAIN)
+            steps.append(step.step)
+            world = step.world
+        return Counterexample(initial, tuple(steps)), world
+
+    def _parent(self, key: int) -> int:
+        parent = self.local.shard.parents.get(key)
+        return parent if parent is not None else self.backend.parent(key)
+
+    def _progress(self) -> None:
+        now = time.monotonic()
+        if self.report is None or now - self._last_report < self.interval:
+            return
+        self._last_report = now
+        elapsed = max(now - self._started, 1e-9)
+        per = "/".join(f"{n / elapsed:,.0f}" for n in self.traffic.new_per_worker)
+        mem = "/".join(f"{b / 2**20:.0f}" for b in self.backend.shard_bytes())
+        self.report(f"[check] {self.backend.workers} worker(s)  states {self.states:,}  "
+                    f"transitions {self.transitions:,}  states/s per worker {per}  "
+                    f"depth {self.depth}  frontier {self.frontier:,}  shard memory {mem} MB")
+
+
+_NOT_AGAIN = breach_line(
+    FailureKind.NONDETERMINISM, "", "(unknown)", "a path the search recorded does not run "
+    "again from its initial world: some handler depends on something outside self.state; "
+    f"rerun with --check-determinism to name it; fix: {FIX_HIDDEN}")

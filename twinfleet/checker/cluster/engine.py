@@ -1,0 +1,216 @@
+"""The one module of the checker that imports Ray: actors, the cluster backend, the engine.
+
+`session(workers, address)` starts a local cluster (loopback, no dashboard,
+no usage statistics, a fresh cluster even when a stale
+/tmp/ray/ray_current_cluster names a dead one) or joins `address`, and stops
+what it started. A Ray already initialised by the caller (a test's shared
+cluster) is used as it is and left running. `RayBackend` runs the levels of
+`checker.cluster.coordinator` on `Worker` actors (an `Expander` each) and
+`Shard` actors (a `ShardCore` each): claims go from workers to shards and
+masks back as object references, so the coordinator moves no claim itself.
+`RayEngine` is `checker.parallel.Engine` on Ray tasks.
+"""
+
+from __future__ import annotations
+
+import os
+import pickle
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from typing import Any, final
+
+from twinfleet.checker.cluster.level import Acceptance, Expander, Expansion, Item, ShardCore, owner
+from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint, mismatch
+
+try:
+    import ray
+    from ray.exceptions import RayError
+except ImportError:  # pragma: no cover - exercised in a subprocess without Ray
+    raise ClusterError("the distributed search needs Ray: pip install twinfleet[cluster]") \
+        from None
+
+_LOCAL_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
+
+
+def _runtime_env() -> dict[str, Any]:
+    """Workers import node code as this process does: its working directory and path."""
+    path = [os.getcwd(), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    return {"env_vars": {"PYTHONPATH": os.pathsep.join(path), "RAY_USAGE_STATS_ENABLED": "0"}}
+
+
+@contextmanager
+def session(workers: int, address: str | None) -> Iterator[None]:
+    """A Ray connection for the command (module docstring); ClusterError if none."""
+    if ray.is_initialized():
+        yield
+        return
+    os.environ.update(_LOCAL_ENV)
+    try:
+        if address is None:
+            ray.init(address="local", num_cpus=max(2, workers), include_dashboard=False,
+                     _node_ip_address="127.0.0.1", log_to_driver=False,
+                     configure_logging=False, runtime_env=_runtime_env())
+        else:
+            ray.init(address=address, log_to_driver=False, configure_logging=False,
+                     runtime_env=_runtime_env())
+    except Exception as exc:  # noqa: BLE001 - Ray raises many types for one bad address
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        where = "a local cluster" if address is None else f"cluster {address}"
+        raise ClusterError(f"cannot connect to {where}: {first} (a cluster started with "
+                           "`ray start --head` needs the same RAY_AUTH_TOKEN here)") from None
+    try:
+        yield
+    finally:
+        ray.shutdown()
+
+
+@ray.remote(num_cpus=1)
+class Worker:
+    """An `Expander` on a system built from a `SystemSpec`."""
+
+    def __init__(self, spec: SystemSpec, expected: dict[str, str], shards: int) -> None:
+        system, props = spec.build()
+        differs = mismatch(fingerprint(system), expected)
+        if differs is not None:
+            raise ClusterError(f"worker on {os.uname().nodename}: its {differs} differ(s) "
+                               "from the coordinator's")
+        self.core = Expander(system, props, shards)
+
+    def expand(self, max_depth: int | None) -> tuple[Any, ...]:
+        """`Expander.expand`, one return value per shard blob."""
+        expansion, blobs = self.core.expand(max_depth)
+        return (expansion, *blobs)
+
+    def accept(self, *masks: bytes) -> Acceptance:
+        """`Expander.accept`; then drop cached outcomes the frontier cannot use."""
+        out = self.core.accept(list(masks))
+        if out.min_due is not None:
+            self.core.forget_before(out.min_due)
+        return out
+
+    def give(self, count: int) -> bytes:
+        """`Expander.give`."""
+        return self.core.give(count)
+
+    def take(self, blob: bytes) -> int:
+        """`Expander.take`."""
+        return self.core.take(blob)
+
+
+@ray.remote(num_cpus=0)
+class Shard:
+    """A `ShardCore`."""
+
+    def __init__(self) -> None:
+        self.core = ShardCore()
+
+    def claim(self, *blobs: bytes) -> tuple[Any, ...]:
+        """`ShardCore.claim`, one mask per worker (and a count first)."""
+        masks = self.core.claim(list(blobs))
+        return (len(self.core.parents), *masks)
+
+    def add(self, keys: list[int], parents: list[int]) -> int:
+        """`ShardCore.add`."""
+        self.core.add(keys, parents)
+        return len(self.core.parents)
+
+    def parent(self, key: int) -> int:
+        """`ShardCore.parent`."""
+        return self.core.parent(key)
+
+    def nbytes(self) -> int:
+        """`ShardCore.nbytes`."""
+        return self.core.nbytes()
+
+
+def _get(refs: Any) -> Any:
+    try:
+        return ray.get(refs)
+    except RayError as exc:
+        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        cause = getattr(exc, "cause", None)
+        if isinstance(cause, ClusterError):
+            raise ClusterError(str(cause)) from None
+        raise ClusterError(f"a worker or shard of the cluster failed, no verdict: "
+                           f"{type(exc).__name__}: {first}") from None
+
+
+@final
+class RayBackend:
+    """`coordinator.Backend` on `workers` Worker actors and as many Shard actors."""
+
+    def __init__(self, spec: SystemSpec, expected: dict[str, str], workers: int) -> None:
+        self.workers = workers
+        self.shards = [Shard.remote() for _ in range(workers)]  # type: ignore[attr-defined]
+        self.actors = [Worker.remote(spec, expected, workers)  # type: ignore[attr-defined]
+                       for _ in range(workers)]
+        _get([a.take.remote(pickle.dumps([])) for a in self.actors])  # started, or why not
+        self._bytes = [0] * workers
+
+    def load(self, frontier: list[Item], parents: dict[int, int]) -> RayBackend:
+        """Take over a search begun in this process: its frontier and visited set."""
+        parts: list[list[Item]] = [frontier[i::self.workers] for i in range(self.workers)]
+        refs = [a.take.remote(pickle.dumps(p, protocol=pickle.HIGHEST_PROTOCOL))
+                for a, p in zip(self.actors, parts, strict=True)]
+        keys: list[list[int]] = [[] for _ in self.shards]
+        pars: list[list[int]] = [[] for _ in self.shards]
+        for k, p in parents.items():
+            s = owner(k, self.workers)
+            keys[s].append(k)
+            pars[s].append(p)
+        refs += [s.add.remote(k, p) for s, k, p in zip(self.shards, keys, pars, strict=True)]
+        _get(refs)
+        return self
+
+    def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
+        """One level on the cluster (`coordinator.Backend.level`)."""
+        n = self.workers
+        expanded = [a.expand.options(num_returns=n + 1).remote(max_depth) for a in self.actors]
+        claimed = [s.claim.options(num_returns=n + 1).remote(*[e[k + 1] for e in expanded])
+                   for k, s in enumerate(self.shards)]
+        accepted = [a.accept.remote(*[c[w + 1] for c in claimed])
+                    for w, a in enumerate(self.actors)]
+        expansions = _get([e[0] for e in expanded])
+        acceptances = _get(accepted)
+        self._sizes = _get([c[0] for c in claimed])
+        return expansions, acceptances
+
+    def parent(self, key: int) -> int:
+        """`coordinator.Backend.parent`: asks the owning shard."""
+        return int(_get(self.shards[owner(key, self.workers)].parent.remote(key)))
+
+    def shard_bytes(self) -> list[int]:
+        """`coordinator.Backend.shard_bytes`."""
+        return list(_get([s.nbytes.remote() for s in self.shards]))
+
+    def move(self, source: int, target: int, count: int) -> None:
+        """`coordinator.Backend.move`: one blob, passed by reference."""
+        _get(self.actors[target].take.remote(self.actors[source].give.remote(count)))
+
+    def kill_shard(self, index: int) -> None:
+        """Kill one shard actor (a fault for tests)."""
+        ray.kill(self.shards[index], no_restart=True)
+
+
+@ray.remote
+def _run_batch(batch_fn: Any, batch: list[int]) -> list[Any]:
+    return list(batch_fn(batch))
+
+
+@final
+class RayEngine:
+    """`checker.parallel.Engine` on Ray tasks: one task per batch."""
+
+    def __init__(self, workers: int, address: str | None) -> None:
+        self.workers = workers
+        self._session = session(workers, address)
+        self._session.__enter__()
+
+    def map(self, batch_fn: Any, batches: Sequence[list[int]]) -> list[list[Any]]:
+        """`batch_fn` on every batch as a Ray task; results in batch order."""
+        fn = ray.put(batch_fn)
+        return list(_get([_run_batch.remote(fn, b) for b in batches]))
+
+    def close(self) -> None:
+        """Leave the cluster (stopping it if this engine started it)."""
+        self._session.__exit__(None, None, None)

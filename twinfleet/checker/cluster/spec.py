@@ -1,0 +1,71 @@
+"""What a worker needs to build the coordinator's `System`, and the fingerprint it must match.
+
+Node code reaches workers by import (the same twinfleet and node packages
+installed on every machine); the scenario file is read on each worker. A
+worker builds its system from a `SystemSpec` and refuses to start when its
+`fingerprint` differs from the coordinator's: the scenario file's hash, the
+rules the system applies, and the source of every node class.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import inspect
+from dataclasses import dataclass, field
+from typing import Any, final
+
+from twinfleet.checker.properties import PropertySet
+from twinfleet.checker.system import System
+
+
+class ClusterError(Exception):
+    """The cluster cannot run or finish the search (no verdict; exit 2)."""
+
+
+@final
+@dataclass(frozen=True)
+class SystemSpec:
+    """How to build the system of a check on another machine (picklable)."""
+
+    scenario: str  # an absolute path to the scenario file
+    profile: str | None
+    semantics: str | None
+    params: tuple[str, ...]
+    flags: tuple[tuple[str, Any], ...]  # System's search flags (debug_state, verify...)
+    timing: str | None = None
+    latency: Any = field(default=None)  # System latency arguments, when a timing model set them
+    topic_latency: Any = field(default=None)
+
+    def build(self) -> tuple[System, PropertySet]:
+        """The system and properties, as `checker.driver.check` builds them."""
+        from twinfleet.checker.driver import load
+
+        scenario = load(self.scenario, profile=self.profile, semantics=self.semantics,
+                        params=self.params)
+        props = PropertySet.from_scenario(scenario)
+        extra = {} if self.latency is None else {"latency": self.latency,
+                                                 "topic_latency": self.topic_latency}
+        return System(scenario, properties=props, **dict(self.flags), **extra), props
+
+
+def fingerprint(system: System) -> dict[str, str]:
+    """What must be equal on every machine: scenario, rules, node sources (hashes)."""
+    scenario = system.scenario
+    text = scenario.path.read_bytes() if scenario.path is not None else repr(scenario).encode()
+    sources = hashlib.sha256()
+    for cls in sorted({type(n) for n in system.nodes}, key=lambda c: c.__qualname__):
+        try:
+            sources.update(inspect.getsource(inspect.getmodule(cls) or cls).encode())
+        except (OSError, TypeError):  # a class without a source file: its name only
+            sources.update(cls.__qualname__.encode())
+    return {"scenario": hashlib.sha256(text).hexdigest(),
+            "rules": hashlib.sha256(repr(system.rules).encode()).hexdigest(),
+            "node sources": sources.hexdigest()}
+
+
+def mismatch(mine: dict[str, str], theirs: dict[str, str]) -> str | None:
+    """Which part of two fingerprints differs, or None."""
+    for part in ("scenario", "rules", "node sources"):
+        if mine.get(part) != theirs.get(part):
+            return part
+    return None
