@@ -30,6 +30,7 @@ def bad_input_errors() -> tuple[type[Exception], ...]:
     """The errors that mean bad input (exit 2); importing them loads the checker, so only
     a running command asks."""
     from twinfleet.checker.checkpoint import CheckpointError
+    from twinfleet.checker.cluster import ClusterError
     from twinfleet.checker.properties import PropertyError
     from twinfleet.checker.timing import TimingError
     from twinfleet.runtime.contract.node import NodeDefinitionError
@@ -37,7 +38,7 @@ def bad_input_errors() -> tuple[type[Exception], ...]:
     from twinfleet.runtime.scenario.spec import ScenarioError
 
     return (ScenarioError, PropertyError, NodeDefinitionError, TraceError, CheckpointError,
-            TimingError)
+            TimingError, ClusterError)
 
 
 def register(subparsers: Any) -> None:
@@ -181,8 +182,15 @@ def _progress(stats: SearchStatistics) -> None:
           file=sys.stderr, end="" if tty else "\n", flush=True)
 
 
+def _report_line(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
 def check_command(args: argparse.Namespace) -> int:
     """Run `check` for parsed arguments; return the exit code."""
+    if args.workers < 1 or args.min_width < 1:
+        print("twinfleet check: --workers and --min-width must be at least 1", file=sys.stderr)
+        return EXIT_BAD_INPUT
     if args.statistical:
         from twinfleet.checker.statistical_commands import statistical_command
 
@@ -211,7 +219,9 @@ def check_command(args: argparse.Namespace) -> int:
                            transition_cache=not args.no_transition_cache,
                            checkpoint=args.checkpoint, checkpoint_every_s=args.checkpoint_every,
                            resume=args.resume, reduction=args.reduction, timing=args.timing,
-                           params=params,
+                           params=params, workers=args.workers, cluster=args.cluster,
+                           min_width=args.min_width,
+                           report=None if args.quiet or args.json else _report_line,
                            progress=None if args.quiet or args.json else _progress)
     try:
         result = check(args.scenario, options)

@@ -17,7 +17,7 @@ with (the scenario file must be unchanged: its hash is recorded).
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, final
@@ -41,7 +41,7 @@ from twinfleet.runtime.contract.node import NodeSpec
 from twinfleet.runtime.contract.tracefile import write_trace
 from twinfleet.runtime.scenario.config import SEARCHES, CheckConfig
 from twinfleet.runtime.scenario.lint import lint_scenario
-from twinfleet.runtime.scenario.overrides import load_with_params
+from twinfleet.runtime.scenario.overrides import load
 from twinfleet.runtime.scenario.property_fields import check_property_fields
 from twinfleet.runtime.scenario.spec import Scenario, ScenarioError, resolve_scenario
 
@@ -175,18 +175,6 @@ class CheckResult:
             if self.trace_path:
                 lines.append(f"reproduce with: twinfleet replay {self.trace_path}")
         return "\n".join(lines)
-
-
-def load(path: str | Path, *, profile: str | None = None, semantics: str | None = None,
-         params: Sequence[str] = ()) -> Scenario:
-    """Load a scenario with optional profile/semantics overrides and parameter overrides
-    (``r1.speed:=0.4``, validated as `launch` validates them)."""
-    overrides: dict[str, Any] = {}
-    if profile is not None:
-        overrides["profile"] = profile
-    if semantics is not None:
-        overrides["semantics"] = semantics
-    return load_with_params(path, params, overrides)
 
 
 def system_for_trace(trace: Mapping[str, Any]) -> tuple[System, PropertySet]:

@@ -76,7 +76,19 @@ def add_statistical_arguments(p: argparse.ArgumentParser) -> None:
                    help="SPRT: probability of refusing although P(violation) <= P-D "
                    "(default 0.01)")
     g.add_argument("--workers", type=int, default=1, metavar="N",
-                   help="local worker processes for the simulations (default 1)")
+                   help="worker processes (default 1). Exhaustive search: N > 1 runs it on a "
+                   "local Ray cluster this command starts and stops (127.0.0.1, no "
+                   "dashboard, no usage statistics; needs pip install twinfleet[cluster]) "
+                   "once its frontier is --min-width wide; --statistical: local processes, "
+                   "or Ray tasks with --cluster")
+    g.add_argument("--cluster", default=None, metavar="ADDRESS",
+                   help="join the Ray cluster at ADDRESS (host:port of `ray start --head`; "
+                   "RAY_AUTH_TOKEN must match the cluster's) instead of starting one; "
+                   "docs/distributed.md")
+    g.add_argument("--min-width", type=int, default=64, metavar="W",
+                   help="exhaustive search with --workers/--cluster: stay in this process "
+                   "until a BFS level holds W worlds (narrow searches never leave it; "
+                   "default 64)")
     g.add_argument("--traces-out", default="out", metavar="DIR",
                    help="directory for the traces of violating simulations (default out)")
     g.add_argument("--max-traces", type=int, default=3,

@@ -9,10 +9,9 @@ that builds what it needs in the process that first calls it).
 
 Engines: `workers <= 1` runs in this process; more runs a
 `concurrent.futures.ProcessPoolExecutor` kept for the whole command
-(`ProcessEngine`). A distributed engine (the Ray cluster of `check --workers N
---cluster ADDRESS`) plugs in by implementing `Engine.map` — send each slice to
-a worker as a task, return the slices' results in the order given — and being
-returned by `engine_for`; nothing else changes.
+(`ProcessEngine`). With a cluster address, `checker.cluster.engine.RayEngine`
+sends each slice to the Ray cluster as a task and returns the slices' results
+in the order given (`check --statistical --workers N --cluster ADDRESS`).
 """
 
 from __future__ import annotations
@@ -70,8 +69,16 @@ class ProcessEngine:
         self._pool.shutdown(cancel_futures=True)
 
 
-def engine_for(workers: int) -> Engine:
-    """The engine for `workers` local workers (1: this process)."""
+def engine_for(workers: int, cluster: str | None = None) -> Engine:
+    """The engine for `workers` local workers (1: this process), or `workers` Ray tasks at a
+    time on the Ray cluster at `cluster` ("local": one started here; a Ray already
+    initialised in this process is used as it is)."""
+    if cluster is not None:
+        from twinfleet.checker.cluster import engine_module
+
+        engine: Engine = engine_module().RayEngine(workers, None if cluster == "local"
+                                                   else cluster)
+        return engine
     return InProcess() if workers <= 1 else ProcessEngine(workers)
 
 

@@ -55,6 +55,7 @@ class StatisticalOptions:
     alpha: float = 0.01
     beta: float = 0.01
     workers: int = 1
+    cluster: str | None = None  # a Ray cluster address: simulations run as Ray tasks there
     timing: str | None = None
     traces_out: str = "out"
     max_traces: int = 3
@@ -224,7 +225,7 @@ def check_statistical(scenario: str | Path, options: StatisticalOptions) -> Stat
                            options.alpha, options.beta)
     limit = options.simulations or (1000 if result.sprt is None and options.precision is None
                                     else 10_000_000)
-    engine = engine_for(options.workers)
+    engine = engine_for(options.workers, options.cluster)
     start = time.perf_counter()
     try:
         while len(result.simulations) < limit and not result.stopped:

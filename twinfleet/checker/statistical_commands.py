@@ -43,7 +43,7 @@ def statistical_command(args: argparse.Namespace,
         simulations=args.simulations, seed=args.seed, horizon_ms=args.horizon_ms,
         max_steps=args.max_steps, confidence=args.confidence, precision=args.precision,
         assert_below=args.assert_below, indifference=args.indifference, alpha=args.alpha,
-        beta=args.beta, workers=args.workers, timing=args.timing, traces_out=args.traces_out,
+        beta=args.beta, workers=args.workers, cluster=args.cluster, timing=args.timing, traces_out=args.traces_out,
         max_traces=args.max_traces, max_time_s=args.max_time, verify=args.verify,
         profile=args.profile,
         semantics=args.semantics, progress=None if quiet else _progress)

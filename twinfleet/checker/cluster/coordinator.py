@@ -18,14 +18,14 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Protocol, final
+from typing import Protocol, cast, final
 
+from twinfleet.checker.cluster.level import ROOT, Acceptance, Expander, Expansion, Item, ShardCore
 from twinfleet.checker.diagnosis import FIX_HIDDEN, ContractBreachError, breach_line
 from twinfleet.checker.outcome import Counterexample, Limits, Outcome, SearchStatistics, peak_rss_mb
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.system import System
 from twinfleet.checker.world import World
-from twinfleet.checker.cluster.level import ROOT, Acceptance, Expander, Expansion, Item, ShardCore
 from twinfleet.runtime.contract.kinds import FailureKind, Status
 
 STEAL_MIN = 64  # frontier worlds two workers must differ by before some are moved
@@ -153,7 +153,7 @@ class Coordinator:
             if t.failure is not None:
                 return self._violated(self.properties.check_failure(t.failure),
                                       Counterexample(t.step.choices, ()))
-            key = t.world.key
+            key = cast(int, t.world.key)
             if key in shard.parents:
                 continue
             shard.parents[key] = ROOT

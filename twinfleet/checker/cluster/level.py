@@ -20,7 +20,7 @@ from __future__ import annotations
 import pickle
 import sys
 from dataclasses import dataclass, field
-from typing import final
+from typing import cast, final
 
 import numpy as np
 
@@ -105,7 +105,7 @@ class Expander:
                     if out.failure is None:
                         out.failure = Failure(key, depth + 1)
                     continue
-                child = t.world.key
+                child = cast(int, t.world.key)  # --exact-states never runs here
                 if child in seen:
                     continue
                 seen.add(child)
@@ -132,11 +132,12 @@ class Expander:
                     continue
                 out.new += 1
                 out.depth = max(out.depth, depth)
-                frontier.append((world, world.key, depth))
+                key = cast(int, world.key)
+                frontier.append((world, key, depth))
                 if out.violation is None:
                     violation = check(self.system, world)
                     if violation is not None:
-                        out.violation = (violation, world.key, depth)
+                        out.violation = (violation, key, depth)
         self._pending = []
         out.frontier = len(frontier)
         dues = [w.events[0].due for w, _, _ in frontier if w.events]

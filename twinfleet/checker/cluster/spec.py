@@ -38,7 +38,7 @@ class SystemSpec:
 
     def build(self) -> tuple[System, PropertySet]:
         """The system and properties, as `checker.driver.check` builds them."""
-        from twinfleet.checker.driver import load
+        from twinfleet.runtime.scenario.overrides import load
 
         scenario = load(self.scenario, profile=self.profile, semantics=self.semantics,
                         params=self.params)

@@ -119,6 +119,18 @@ def load_with_params(path: str | Path, params: Sequence[str] = (),
     return load_scenario(scenario.path, {**(overrides or {}), **doc})
 
 
+def load(path: str | Path, *, profile: str | None = None, semantics: str | None = None,
+         params: Sequence[str] = ()) -> Scenario:
+    """Load a scenario as `check` does: optional profile/semantics overrides and parameter
+    overrides (``r1.speed:=0.4``, validated as `launch` validates them)."""
+    overrides: dict[str, Any] = {}
+    if profile is not None:
+        overrides["profile"] = profile
+    if semantics is not None:
+        overrides["semantics"] = semantics
+    return load_with_params(path, params, overrides)
+
+
 def scenario_common(path: str | Path) -> dict[str, Any]:
     """The common ``params`` of a scenario file, as written."""
     doc = yaml.safe_load(Path(path).read_text())
