@@ -76,7 +76,7 @@ def engine_for(workers: int, cluster: str | None = None) -> Engine:
     if cluster is not None:
         from twinfleet.checker.cluster import engine_module
 
-        engine: Engine = engine_module().RayEngine(workers, None if cluster == "local"
+        engine: Engine = engine_module(cluster == "local").RayEngine(workers, None if cluster == "local"
                                                    else cluster)
         return engine
     return InProcess() if workers <= 1 else ProcessEngine(workers)

@@ -11,6 +11,8 @@ enough to need it.
 
 from __future__ import annotations
 
+import os
+import sys
 from collections.abc import Callable
 from contextlib import ExitStack
 from dataclasses import dataclass
@@ -50,8 +52,18 @@ def why_local(strategy: str, reduced: bool, properties: PropertySet) -> str | No
     return None
 
 
-def engine_module() -> Any:
-    """`checker.cluster.engine` (imports Ray); ClusterError when Ray is not installed."""
+def engine_module(local: bool = True) -> Any:
+    """`checker.cluster.engine` (imports Ray); ClusterError when Ray is not installed.
+
+    `local`: the command starts its own cluster. Ray reads its cluster switch once, when
+    first imported: set off, a local cluster advertises and binds 127.0.0.1 only, where
+    it would otherwise listen on every interface under the host's address (measured with
+    Ray 2.60; `_node_ip_address="127.0.0.1"` alone does not do it). Joining a cluster of
+    several machines needs the switch on, so only a local cluster sets it.
+    """
+    if local and "ray" not in sys.modules:
+        os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
+    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # offline: no usage report
     try:
         from twinfleet.checker.cluster import engine
     except ImportError as exc:
@@ -69,12 +81,14 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
     expected = fingerprint(system)
     with ExitStack() as stack:
         def factory(frontier: list[Item], parents: dict[int, int]) -> Backend:
-            engine = engine_module()
+            engine = engine_module(local=address is None)
             if report is not None:
                 report(f"[check] frontier {len(frontier):,} wide: moving the search to "
                        f"{workers} Ray worker(s)")
             stack.enter_context(engine.session(workers, address))
-            backend: Backend = engine.RayBackend(spec, expected, workers).load(frontier, parents)
+            ray_backend = engine.RayBackend(spec, expected, workers)
+            stack.callback(ray_backend.close)
+            backend: Backend = ray_backend.load(frontier, parents)
             if on_backend is not None:
                 on_backend(backend)
             return backend
@@ -83,8 +97,8 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
         outcome = coordinator.run()
     t = coordinator.traffic
     if coordinator.distributed_at is None:
-        note = (f"ran in one process: the frontier never reached {min_width} worlds "
-                "(--min-width)")
+        note = (f"ran in one process: the search ended before a level held {min_width} "
+                "worlds (--min-width)")
     else:
         per = t.claims / max(1, outcome.statistics.states)
         note = (f"strict BFS on {workers} Ray worker(s) from depth "

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import os
 import pickle
+import re
+import socket
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, final
@@ -29,7 +31,6 @@ except ImportError:  # pragma: no cover - exercised in a subprocess without Ray
     raise ClusterError("the distributed search needs Ray: pip install twinfleet[cluster]") \
         from None
 
-_LOCAL_ENV = {"RAY_USAGE_STATS_ENABLED": "0", "RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0"}
 
 
 def _runtime_env() -> dict[str, Any]:
@@ -44,7 +45,8 @@ def session(workers: int, address: str | None) -> Iterator[None]:
     if ray.is_initialized():
         yield
         return
-    os.environ.update(_LOCAL_ENV)
+    if address is not None:
+        _answers(address)
     try:
         if address is None:
             ray.init(address="local", num_cpus=max(2, workers), include_dashboard=False,
@@ -62,6 +64,20 @@ def session(workers: int, address: str | None) -> Iterator[None]:
         yield
     finally:
         ray.shutdown()
+
+
+def _answers(address: str) -> None:
+    """ClusterError unless something accepts a connection at `address` (HOST:PORT): Ray
+    itself keeps retrying an address where nothing listens."""
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit():
+        raise ClusterError(f"--cluster {address}: expected HOST:PORT, the address "
+                           "`ray start --head` prints")
+    try:
+        socket.create_connection((host, int(port)), timeout=5).close()
+    except OSError as exc:
+        raise ClusterError(f"cannot connect to cluster {address}: "
+                           f"{exc.strerror or exc}") from None
 
 
 @ray.remote(num_cpus=1)
@@ -123,14 +139,18 @@ class Shard:
         return self.core.nbytes()
 
 
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")  # Ray colours the names in its messages
+_OURS = f"{ClusterError.__module__}.{ClusterError.__name__}: "
+
+
 def _get(refs: Any) -> Any:
     try:
         return ray.get(refs)
     except RayError as exc:
-        first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        cause = getattr(exc, "cause", None)
-        if isinstance(cause, ClusterError):
-            raise ClusterError(str(cause)) from None
+        text = str(exc).strip()
+        if _OURS in text:  # a worker refused (e.g. other node sources): its own words
+            raise ClusterError(text.rsplit(_OURS, 1)[1].splitlines()[0]) from None
+        first = _ANSI.sub("", text.splitlines()[0]) if text else type(exc).__name__
         raise ClusterError(f"a worker or shard of the cluster failed, no verdict: "
                            f"{type(exc).__name__}: {first}") from None
 
@@ -144,7 +164,11 @@ class RayBackend:
         self.shards = [Shard.remote() for _ in range(workers)]  # type: ignore[attr-defined]
         self.actors = [Worker.remote(spec, expected, workers)  # type: ignore[attr-defined]
                        for _ in range(workers)]
-        _get([a.take.remote(pickle.dumps([])) for a in self.actors])  # started, or why not
+        try:
+            _get([a.take.remote(pickle.dumps([])) for a in self.actors])  # started, or why not
+        except ClusterError:
+            self.close()
+            raise
         self._bytes = [0] * workers
 
     def load(self, frontier: list[Item], parents: dict[int, int]) -> RayBackend:
@@ -186,6 +210,12 @@ class RayBackend:
     def move(self, source: int, target: int, count: int) -> None:
         """`coordinator.Backend.move`: one blob, passed by reference."""
         _get(self.actors[target].take.remote(self.actors[source].give.remote(count)))
+
+    def close(self) -> None:
+        """Stop every actor of this search (a cluster that outlives the command, or a shared
+        one, keeps no worker of it holding a CPU)."""
+        for actor in (*self.actors, *self.shards):
+            ray.kill(actor, no_restart=True)
 
     def kill_shard(self, index: int) -> None:
         """Kill one shard actor (a fault for tests)."""

@@ -9,9 +9,12 @@ rules the system applies, and the source of every node class.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import inspect
+from collections.abc import Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, final
 
 from twinfleet.checker.properties import PropertySet
@@ -54,13 +57,29 @@ def fingerprint(system: System) -> dict[str, str]:
     text = scenario.path.read_bytes() if scenario.path is not None else repr(scenario).encode()
     sources = hashlib.sha256()
     for cls in sorted({type(n) for n in system.nodes}, key=lambda c: c.__qualname__):
-        try:
-            sources.update(inspect.getsource(inspect.getmodule(cls) or cls).encode())
+        try:  # the bytes of the file the class was imported from
+            sources.update(Path(inspect.getfile(cls)).read_bytes())
         except (OSError, TypeError):  # a class without a source file: its name only
             sources.update(cls.__qualname__.encode())
     return {"scenario": hashlib.sha256(text).hexdigest(),
-            "rules": hashlib.sha256(repr(system.rules).encode()).hexdigest(),
+            "rules": hashlib.sha256(_canonical(system.rules).encode()).hexdigest(),
             "node sources": sources.hexdigest()}
+
+
+def _canonical(value: Any) -> str:
+    """`repr` whose sets and mappings are sorted: the same on every process (a frozenset's
+    order follows string hashing, which each process seeds differently)."""
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        shown = [(f.name, _canonical(getattr(value, f.name)))
+                 for f in dataclasses.fields(value) if f.repr]
+        return f"{type(value).__name__}({shown})"
+    if isinstance(value, Mapping):
+        return repr(sorted((_canonical(k), _canonical(v)) for k, v in value.items()))
+    if isinstance(value, (set, frozenset)):
+        return repr(sorted(_canonical(v) for v in value))
+    if isinstance(value, (list, tuple)):
+        return repr([_canonical(v) for v in value])
+    return repr(value)
 
 
 def mismatch(mine: dict[str, str], theirs: dict[str, str]) -> str | None:

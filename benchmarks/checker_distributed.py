@@ -1,0 +1,169 @@
+"""The exhaustive search on Ray workers against one process, on wide searches.
+
+For each case, measured in this run: the single-process search (`twinfleet check
+--reduction none`) and the distributed one on 1 and 2 Ray workers of a local cluster
+(started once, before the timed searches: its start-up is not in the figures), each for
+`--max-time` seconds or to the end. Printed per case: states, transitions, transitions/s,
+the ratio to the single process, levels, claims per state (16-byte messages to the shard
+owning a digest) and worlds moved between workers per state (work sharing). With
+`--two-nodes`: the same on a simulated two-node cluster (`ray.cluster_utils.Cluster`, one
+CPU per node).
+
+Cases (every eventually property dropped: those keep a search in one process):
+- `c1a_jitter`: the paper's C1a (fixed profile, ros) with `check: {latency: {default:
+  [0, 1]}}`, unreduced: levels of tens of thousands of worlds;
+- `lanes6`: six robots in separate lanes (benchmarks/checker_scaling.py), unreduced;
+- `crossing6`: six robots crossing on maps/random100, unreduced.
+
+    python benchmarks/checker_distributed.py [--cases c1a_jitter,lanes6] [--max-time 60]
+        [--two-nodes]
+
+This machine has 2 cores that Ray's own processes and the coordinator share with the
+workers: read the ratios, and run it on an otherwise idle machine.
+"""
+
+from __future__ import annotations
+
+import argparse
+import re
+import sys
+import tempfile
+from collections.abc import Callable
+from contextlib import AbstractContextManager
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
+
+from checker_scaling import crossing_scenario, lanes_scenario  # noqa: E402
+
+from twinfleet.checker import CheckOptions, CheckResult, check  # noqa: E402
+from twinfleet.checker.cluster import engine_module  # noqa: E402
+from twinfleet.cli import main as cli  # noqa: E402
+
+CASES = ("c1a_jitter", "lanes6", "crossing6")
+
+
+def safety_only(path: Path, **check_block: Any) -> Path:
+    """Rewrite a scenario without eventually properties (and with `check:` additions)."""
+    doc = yaml.safe_load(path.read_text())
+    doc["properties"] = [p for p in doc["properties"] if p["kind"] != "eventually"]
+    if check_block:
+        doc.setdefault("check", {}).update(check_block)
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def scenario(case: str, out: Path) -> Path:
+    """The scenario file of `case`, written into `out`."""
+    if case == "c1a_jitter":
+        cli(["examples", "--copy", "c1a", str(out)])
+        return safety_only(out / "c1a.yaml", latency={"default": [0, 1]})
+    if case == "lanes6":
+        return safety_only(lanes_scenario(out, 6, "ros"))
+    if case == "crossing6":
+        return safety_only(crossing_scenario(out, 6, 3, "ros"))
+    raise SystemExit(f"unknown case {case!r} (known: {', '.join(CASES)})")
+
+
+def _rate(result: CheckResult) -> float:
+    s = result.statistics
+    return s.transitions / max(s.elapsed_s, 1e-9)
+
+
+def _traffic(result: CheckResult) -> str:
+    """Claims and moved worlds per state, read from the summary's engine line."""
+    note = result.engine or ""
+    claims = re.search(r"([\d.]+) claims per state", note)
+    moved = re.search(r"([\d,]+) worlds moved", note)
+    levels = re.search(r"\((\d+) levels", note)
+    if claims is None or moved is None or levels is None:
+        return f"(stayed in one process: {note})"
+    per_moved = int(moved.group(1).replace(",", "")) / max(1, result.statistics.states)
+    return (f"levels {levels.group(1)}, claims/state {claims.group(1)}, "
+            f"moved/state {per_moved:.3f}")
+
+
+def row(label: str, result: CheckResult, base: float | None) -> str:
+    s = result.statistics
+    ratio = "" if base is None else f"  x{_rate(result) / base:.2f}"
+    extra = "" if result.engine is None else f"  {_traffic(result)}"
+    return (f"  {label:<22} {result.status.value:<8} states {s.states:>10,}  transitions "
+            f"{s.transitions:>11,}  {_rate(result):>9,.0f} tr/s{ratio}{extra}")
+
+
+def measure(path: Path, max_time: float, session: Callable[[], AbstractContextManager[Any]],
+            workers: tuple[int, ...], label: str) -> None:
+    """One process, then `workers` on the cluster `session` makes, printed as rows."""
+    one = check(path, CheckOptions(reduction="none", max_time_s=max_time))
+    base = _rate(one)
+    print(row("one process", one, None), flush=True)
+    with session() as address:
+        for n in workers:
+            many = check(path, CheckOptions(reduction="none", max_time_s=max_time, workers=n,
+                                            cluster=address, min_width=1))
+            print(row(f"{label}, {n} worker(s)", many, base), flush=True)
+
+
+class _TwoNodes(AbstractContextManager[str]):
+    """A simulated two-node Ray cluster (one CPU per node), joined by this process."""
+
+    def __enter__(self) -> str:
+        import ray
+        from ray.cluster_utils import Cluster
+
+        self.cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1})
+        self.cluster.add_node(num_cpus=1)
+        ray.init(address=self.cluster.address, log_to_driver=False, configure_logging=False,
+                 runtime_env={"env_vars": {"PYTHONPATH": str(ROOT)}})
+        return str(self.cluster.address)
+
+    def __exit__(self, *exc: object) -> None:
+        import ray
+
+        ray.shutdown()
+        self.cluster.shutdown()
+
+
+def main() -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    p.add_argument("--cases", default=",".join(CASES), help="comma-separated cases")
+    p.add_argument("--max-time", type=float, default=60.0, help="seconds per search")
+    p.add_argument("--two-nodes", action="store_true",
+                   help="also run 2 workers on a simulated two-node cluster")
+    args = p.parse_args()
+    engine = engine_module()  # before Ray is imported: a loopback cluster
+
+    def local() -> AbstractContextManager[Any]:
+        return _Local(engine)
+
+    with tempfile.TemporaryDirectory() as tmp:
+        for case in args.cases.split(","):
+            out = Path(tmp) / case
+            out.mkdir()
+            path = scenario(case, out)
+            print(f"{case} (unreduced, up to {args.max_time:g} s per search):", flush=True)
+            measure(path, args.max_time, local, (1, 2), "local Ray")
+            if args.two_nodes:
+                measure(path, args.max_time, _TwoNodes, (2,), "two nodes")
+
+
+class _Local(AbstractContextManager[str]):
+    """A local Ray cluster of 2 workers on loopback, started before the timed searches."""
+
+    def __init__(self, engine: Any) -> None:
+        self.session = engine.session(2, None)
+
+    def __enter__(self) -> str:
+        self.session.__enter__()
+        return "this process's"
+
+    def __exit__(self, *exc: object) -> None:
+        self.session.__exit__(None, None, None)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,175 @@
+"""The exhaustive search on Ray workers gives the single process's answers, exactly.
+
+One local Ray cluster (loopback, no dashboard) serves the module; the search
+uses a Ray already initialised as it is (`checker.cluster.engine.session`).
+For 1, 2 and 3 workers, on shipped scenarios and on generated systems: the
+same verdict; when every property holds the same states, transitions and
+RMC-style counts; when one is violated a trace of the same length (a strict
+BFS) that replays. `min_width=1` moves every search to the cluster at once,
+so the distributed path is what is compared; each result says so.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import pytest
+import yaml
+from hypothesis import HealthCheck, assume, given, settings
+from hypothesis import strategies as st
+
+from tests.checker.helpers import replay_confirms
+from tests.checker.program_systems import systems, write_scenario
+from twinfleet.checker import CheckOptions, CheckResult, check
+from twinfleet.checker.cluster import ClusterError, engine_module
+from twinfleet.checker.cluster.spec import SystemSpec
+from twinfleet.cli import main as cli
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(600)]
+
+@pytest.fixture(scope="module", autouse=True)
+def engine() -> Any:
+    """The engine module, with a local Ray cluster of 3 workers on 127.0.0.1 for the module
+    (the search uses a Ray already initialised as it is)."""
+    engine = engine_module()
+    with engine.session(3, None):
+        yield engine
+
+
+def safety_copy(name: str, where: Path, **check: Any) -> Path:
+    """A copy of a shipped scenario without its eventually properties (those keep a search
+    in one process), with `check:` options added."""
+    cli(["examples", "--copy", name, str(where)])
+    path = where / f"{name}.yaml"
+    doc = yaml.safe_load(path.read_text())
+    doc["properties"] = [p for p in doc["properties"] if p["kind"] != "eventually"]
+    if check:
+        doc.setdefault("check", {}).update(check)
+    path.write_text(yaml.safe_dump(doc, sort_keys=False))
+    return path
+
+
+def distributed(path: Path, workers: int, *, beyond_start: bool = True,
+                **options: Any) -> CheckResult:
+    """The search on `workers` Ray workers from its first level (a search that ends among
+    its initial worlds, `beyond_start` False, never needs them)."""
+    result = check(path, CheckOptions(reduction="none", workers=workers, cluster="this",
+                                      min_width=1, **options))
+    want = f"strict BFS on {workers} Ray worker(s)" if beyond_start else "ran in one process"
+    assert result.engine is not None and result.engine.startswith(want), result.engine
+    return result
+
+
+def assert_same_answer(one: CheckResult, many: CheckResult) -> None:
+    """Holds: the same counts; violated: the same property and trace length, replayable."""
+    assert many.status == one.status, (one.reason, many.reason)
+    if one.violation is None:
+        assert (many.statistics.states, many.statistics.transitions, many.rmc_transitions,
+                many.statistics.depth) == (one.statistics.states, one.statistics.transitions,
+                                           one.rmc_transitions, one.statistics.depth)
+    else:
+        assert many.violation is not None
+        assert many.violation.property == one.violation.property
+        if one.trace is not None:
+            assert many.trace is not None
+            assert len(many.trace["steps"]) == len(one.trace["steps"])
+            assert replay_confirms(many)
+
+
+@pytest.mark.parametrize("workers", [1, 2, 3])
+def test_a_violated_shipped_case_has_a_trace_as_short(tmp_path: Path, workers: int) -> None:
+    path = safety_copy("headon", tmp_path)
+    one = check(path, CheckOptions(reduction="none"))
+    many = distributed(path, workers)
+    assert one.violation is not None and one.trace is not None
+    assert_same_answer(one, many)
+
+
+def test_a_wide_holding_search_has_the_same_counts(tmp_path: Path) -> None:
+    # headon with latencies of 0-1 ms and a horizon: a graph whose levels are hundreds of
+    # worlds wide, so workers share work (frontier worlds move between them).
+    path = safety_copy("headon", tmp_path, latency={"default": [0, 1]})
+    one = check(path, CheckOptions(reduction="none", max_depth=40))
+    for workers in (2, 3):
+        many = distributed(path, workers, max_depth=40)
+        assert_same_answer(one, many)
+        assert "worlds moved" in (many.engine or "")
+    assert one.statistics.states > 1_000
+
+
+def test_a_violated_paper_case_with_two_workers(tmp_path: Path) -> None:
+    path = safety_copy("c2c", tmp_path)
+    assert_same_answer(check(path, CheckOptions(reduction="none")), distributed(path, 2))
+
+
+def _safety_only(doc: dict[str, Any]) -> dict[str, Any]:
+    doc = dict(doc)
+    doc["properties"] = [p for p in doc.get("properties", []) if p.get("kind") != "eventually"]
+    return doc
+
+
+@settings(max_examples=20, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@given(doc=systems(), workers=st.sampled_from([1, 2, 3]))
+def test_generated_systems(tmp_path: Path, doc: dict[str, Any], workers: int) -> None:
+    path = write_scenario(_safety_only(doc), tmp_path / "generated.yaml")
+    one = check(path, CheckOptions(reduction="none", max_states=1_000))
+    assume(one.status.value != "unknown")  # a search cut by a limit proves nothing
+    assert_same_answer(one, distributed(path, workers, max_states=1_000,
+                                        beyond_start=one.statistics.depth > 0))
+
+
+def test_a_worker_with_other_node_sources_refuses_to_start(tmp_path: Path, engine: Any) -> None:
+    path = safety_copy("headon", tmp_path)
+    spec = SystemSpec(str(path), None, None, (), ())
+    expected = {"scenario": "0" * 64, "rules": "", "node sources": ""}
+    with pytest.raises(ClusterError, match="its scenario differ"):
+        engine.RayBackend(spec, expected, 2)
+
+
+def test_reduced_and_liveness_searches_say_they_stay_in_one_process(tmp_path: Path) -> None:
+    cli(["examples", "--copy", "headon", str(tmp_path)])
+    path = tmp_path / "headon.yaml"
+    reduced = check(path, CheckOptions(workers=2, cluster="this"))
+    assert "reduced search runs in one process" in (reduced.engine or ""), reduced.engine
+    lasso = check(path, CheckOptions(reduction="none", workers=2, cluster="this"))
+    assert "eventually properties need the whole graph" in (lasso.engine or ""), lasso.engine
+    assert lasso.status == check(path, CheckOptions(reduction="none")).status
+
+
+_LOOPBACK = {"0100007F", "0000000000000000FFFF00000100007F", "00000000000000000000000001000000"}
+
+
+def _listening_of(pids: set[int]) -> list[str]:
+    """The local addresses (hex, as /proc/net shows them) of the TCP sockets `pids` listen on."""
+    inodes = set()
+    for pid in pids:
+        for fd in Path(f"/proc/{pid}/fd").glob("*"):
+            try:
+                target = fd.readlink().as_posix()
+            except OSError:
+                continue
+            if target.startswith("socket:["):
+                inodes.add(target[8:-1])
+    found = []
+    for table in ("/proc/net/tcp", "/proc/net/tcp6"):
+        for line in Path(table).read_text().splitlines()[1:]:
+            fields = line.split()
+            if fields[3] == "0A" and fields[9] in inodes:  # LISTEN
+                found.append(fields[1].split(":")[0])
+    return found
+
+
+def test_the_local_cluster_listens_on_loopback_only() -> None:
+    ray_pids = set()
+    for entry in Path("/proc").glob("[0-9]*"):
+        try:
+            cmdline = (entry / "cmdline").read_bytes()
+        except OSError:
+            continue
+        if b"ray::" in cmdline or b"raylet" in cmdline or b"gcs_server" in cmdline:
+            ray_pids.add(int(entry.name))
+    addresses = _listening_of(ray_pids)
+    assert addresses, "no listening socket found in Ray's processes"
+    assert set(addresses) <= _LOOPBACK, addresses
