@@ -102,7 +102,7 @@ def sweep_command(args: argparse.Namespace) -> int:
     from twinfleet.checker.commands import bad_input_errors
 
     try:
-        _validate(settings, axes)
+        _validate(settings)
         results = _run(args, axes, settings, out)
     except bad_input_errors() as exc:
         print(f"twinfleet sweep: {exc}", file=sys.stderr)
@@ -150,26 +150,37 @@ def _fixed_word(word: str) -> str:
     return f"{name}={value}"
 
 
-def _validate(settings: SweepSettings, axes: tuple[Axis, ...]) -> None:
-    """Load the scenario with the first point's overrides, so that a misspelt node or
-    parameter is one line before anything runs, not an error in every row.
+def _validate(settings: SweepSettings) -> None:
+    """Every node and parameter an axis names exists, so that a misspelt name is one line
+    before anything runs, not an error in every row. (A value a node refuses, such as an
+    unsafe speed, is the verdict ``error`` of its points only.)
 
     Raises:
         ScenarioError: the scenario, or a node or parameter an axis names, does not exist.
     """
-    from twinfleet.runtime.scenario.overrides import load
-    from twinfleet.runtime.scenario.spec import ScenarioError
-    from twinfleet.sweep.grid import Target, points
-    from twinfleet.sweep.point import node_overrides, nodes_with
+    import dataclasses
 
-    targets = dict(settings.targets)
-    for name, target in targets.items():
-        key = name.removeprefix("*.")
-        if target is Target.EVERY_NODE and not nodes_with(settings.scenario, key):
+    from twinfleet.runtime.scenario.overrides import scenario_common
+    from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
+    from twinfleet.sweep.grid import Target
+
+    scenario = load_scenario(settings.scenario)
+    fields = {cfg.name: [f.name for f in dataclasses.fields(cfg.cls.Params)]
+              for cfg in scenario.nodes}
+    common = set(scenario_common(settings.scenario))
+    for name, target in settings.targets:
+        node, _, key = name.rpartition(".")
+        if target is Target.NODE and node not in fields:
+            raise ScenarioError(f"{settings.scenario}: --param {name}: the scenario has no node "
+                                f"{node!r} (nodes: {', '.join(fields)})")
+        if target is Target.NODE and key not in fields[node]:
+            raise ScenarioError(f"{settings.scenario}: --param {name}: node {node} has no "
+                                f"parameter {key!r} (it has: {', '.join(fields[node])})")
+        known = {f for names in fields.values() for f in names}
+        if target in (Target.COMMON, Target.EVERY_NODE) and key not in known | (
+                common if target is Target.COMMON else set()):
             raise ScenarioError(f"{settings.scenario}: --param {name}: no node of the scenario "
                                 f"has parameter {key!r}")
-    first = settings.fixed + points(axes)[0]
-    load(settings.scenario, params=node_overrides(settings.scenario, first, targets))
 
 
 def _run(args: argparse.Namespace, axes: tuple[Axis, ...], settings: SweepSettings,

@@ -102,7 +102,7 @@ def _legend(pen: ImageDraw.ImageDraw, font: ImageFont.FreeTypeFont | ImageFont.I
             seen: set[str], top: int) -> None:
     left = 10
     for verdict, colour in COLOURS.items():
-        if verdict not in seen and verdict not in ("holds", "violated"):
+        if verdict not in seen and verdict not in ("holds", "violated", "unknown"):
             continue
         pen.rectangle((left, top, left + 16, top + 16), fill=colour)
         pen.text((left + 22, top + 1), verdict, fill=_INK, font=font)

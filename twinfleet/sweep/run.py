@@ -10,6 +10,7 @@ the checks run in the engine's processes.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Callable, Sequence
 from concurrent.futures import FIRST_COMPLETED, Future, ThreadPoolExecutor, wait
 from dataclasses import dataclass
@@ -17,7 +18,7 @@ from typing import final
 
 from twinfleet.checker.parallel import Engine
 from twinfleet.sweep.cache import PointCache, point_key, scenario_digest
-from twinfleet.sweep.grid import Point
+from twinfleet.sweep.grid import Point, point_label
 from twinfleet.sweep.point import PointResult, SweepSettings, run_point
 
 
@@ -29,7 +30,7 @@ class PointJob:
 
     settings: SweepSettings
     points: tuple[Point, ...]
-    names: tuple[str, ...]  # each point's cache key, which also names its trace file
+    names: tuple[str, ...]  # each point's trace file name (`trace_name`)
 
     def __call__(self, indices: list[int]) -> list[PointResult]:
         """Check the points at `indices`, one after another."""
@@ -76,13 +77,21 @@ def run_sweep(settings: SweepSettings, grid: Sequence[Point], engine: Engine,
         if stored is not None:
             finish(index, stored, cached=True)
     todo = [i for i in range(len(grid)) if i not in results]
-    job = PointJob(settings, tuple(grid), keys)
+    job = PointJob(settings, tuple(grid), tuple(trace_name(p, k) for p, k in zip(grid, keys,
+                                                                                   strict=True)))
     if engine.workers <= 1:  # here, in the main thread: Ctrl-C stops the check cleanly
         for index in todo:
             finish(index, engine.map(job, [[index]])[0][0], cached=False)
     else:
         _run_threads(job, todo, engine, finish)
     return [results[i] for i in range(len(grid))]
+
+
+def trace_name(point: Point, key: str) -> str:
+    """``r4.speed=0.8_scan_rate_ms=60-1a2b3c4d``: a point's trace file name, readable, safe
+    on any file system, and told apart by its cache key from the same point under other
+    settings."""
+    return re.sub(r"[^\w.=+-]+", "_", point_label(point)).strip("_")[:120] + f"-{key[:8]}"
 
 
 def _run_threads(job: PointJob, todo: Sequence[int], engine: Engine,
