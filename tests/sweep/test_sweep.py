@@ -134,7 +134,8 @@ def test_a_cell_over_a_third_axis_shows_the_worst_verdict(tmp_path):
 
 
 def test_a_value_a_node_refuses_is_an_error_row_not_the_end(tmp_path, capsys):
-    code = main(["sweep", "headon", "--param", "r1.speed=0.5,3", "--out", str(tmp_path)])
+    code = main(["sweep", "headon", "--param", "r1.speed=0.5,3", "--workers", "1", "--out",
+                 str(tmp_path)])
     captured = capsys.readouterr()
     assert code == 0
     assert "[sweep] 2/2 r1.speed=3: ERROR: " in captured.err and "scan-rate rule" in captured.err
