@@ -169,3 +169,17 @@ def test_help_explains_every_flag(capsys):
     for flag in ("--param", "--workers", "--cluster", "--out", "--heatmap", "--rerun",
                  "--max-time", "--max-states", "--search", "--reduction", "--quiet"):
         assert flag in text
+
+
+def test_ray_tasks_answer_what_local_workers_answer():
+    """`--cluster local`: the points as Ray tasks on a cluster started here (about 10 s)."""
+    pytest.importorskip("ray")
+    grid = points(parse_grid(GRID))
+    engine = engine_for(2, "local")
+    try:
+        on_ray = run_sweep(_settings(), grid, engine)
+    finally:
+        engine.close()
+    here = run_sweep(_settings(), grid, engine_for(1))
+    assert [(r.point, r.verdict, r.states, r.transitions, r.violation_time_ms) for r in on_ray] \
+        == [(r.point, r.verdict, r.states, r.transitions, r.violation_time_ms) for r in here]
