@@ -72,7 +72,7 @@ def cell_centre(x: Axis, y: Axis, column: int, row: int) -> tuple[int, int]:
 def draw(x: Axis, y: Axis, results: Sequence[PointResult], title: str,
          path: str | Path) -> Path:
     """Write the heatmap PNG to `path` and return it."""
-    font = ImageFont.load_default(size=14)
+    font = _font()
     width = max(_LEFT + len(x.values) * CELL + 30, 460)
     height = _TOP + len(y.values) * CELL + _BOTTOM
     image = Image.new("RGB", (width, height), _BACKGROUND)
@@ -86,19 +86,44 @@ def draw(x: Axis, y: Axis, results: Sequence[PointResult], title: str,
     bottom = _TOP + len(y.values) * CELL
     for column, value in enumerate(x.values):
         cx = cell_centre(x, y, column, 0)[0]
-        pen.text((cx, bottom + 6), format_value(value), fill=_INK, font=font, anchor="ma")
+        _centred(pen, (cx, bottom + 6), format_value(value), font)
     for row, value in enumerate(y.values):
         cy = cell_centre(x, y, 0, row)[1]
-        pen.text((_LEFT - 8, cy), format_value(value), fill=_INK, font=font, anchor="rm")
-    pen.text((_LEFT + len(x.values) * CELL // 2, bottom + 28), x.name, fill=_INK, font=font,
-             anchor="ma")
+        _right(pen, (_LEFT - 8, cy), format_value(value), font)
+    _centred(pen, (_LEFT + len(x.values) * CELL // 2, bottom + 28), x.name, font)
     pen.text((10, _TOP - 20), y.name, fill=_INK, font=font)
     _legend(pen, font, {r.verdict for r in results}, bottom + 60)
     image.save(path)
     return Path(path)
 
 
-def _legend(pen: ImageDraw.ImageDraw, font: ImageFont.FreeTypeFont | ImageFont.ImageFont,
+Font = ImageFont.FreeTypeFont | ImageFont.ImageFont
+
+
+def _font() -> Font:
+    """Pillow's own font at 14 px; its small bitmap font before Pillow 10.1 (no sizes)."""
+    try:
+        return ImageFont.load_default(size=14)
+    except TypeError:
+        return ImageFont.load_default()
+
+
+# Text is placed from its measured box rather than with Pillow's `anchor`, which bitmap
+# fonts do not take.
+def _centred(pen: ImageDraw.ImageDraw, top_middle: tuple[int, int], text: str,
+             font: Font) -> None:
+    left, _, right, _ = pen.textbbox((0, 0), text, font=font)
+    pen.text((top_middle[0] - (right - left) // 2, top_middle[1]), text, fill=_INK, font=font)
+
+
+def _right(pen: ImageDraw.ImageDraw, right_middle: tuple[int, int], text: str,
+           font: Font) -> None:
+    left, top, right, bottom = pen.textbbox((0, 0), text, font=font)
+    pen.text((right_middle[0] - (right - left), right_middle[1] - (bottom + top) // 2), text,
+             fill=_INK, font=font)
+
+
+def _legend(pen: ImageDraw.ImageDraw, font: Font,
             seen: set[str], top: int) -> None:
     left = 10
     for verdict, colour in COLOURS.items():
