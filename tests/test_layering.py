@@ -4,7 +4,8 @@ Every source file belongs to one layer, read from its folder under `twinfleet/`:
 
 - `runtime/<wing>/` for each wing of the runtime (`contract`, `scenario`, `core`, `host`,
   `fleet`, `tools`, `cli`);
-- `checker/`, `agreement/`, `nodes/`, `ros2/` (the ROS 2 bridge, beside the runtime: it
+- `checker/`, `sweep/` (many checks over a grid of parameters, on the checker's engines),
+  `agreement/`, `nodes/`, `ros2/` (the ROS 2 bridge, beside the runtime: it
   speaks rmw_zenoh's protocol through the runtime's tools, and only it imports the ROS
   field's libraries, `ROS_LIBRARIES`, so the default install needs none of them);
 - `twinfleet/__init__.py` (the node API, which re-exports the contract);
@@ -43,13 +44,14 @@ RULES: dict[str, set[str]] = {
     "tools": {"fleet", "access", *_BELOW_HOST},
     "cli": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes", "ros2"},
     "checker": {"api", "contract", "scenario"},
+    "sweep": {"api", "contract", "scenario", "checker"},
     "nodes": {"api", "contract"},
     "agreement": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "nodes"},
     "ros2": {"api", "access", "fleet", "tools", *_BELOW_HOST},
     "runtime": set(),  # runtime/__init__.py: names its wings, imports none
     "maps": set(), "launch": set(),  # package data: shipped maps and scenarios
     "top": {"api", "access", "fleet", "tools", *_BELOW_HOST, "cli", "checker", "agreement", "nodes", "ros2",
-            "top"},
+            "sweep", "top"},
 }
 #: `tools/` groups three wings of its own (tests/test_sizes.py measures each alone): the
 #: monitors lie below the recordings and the viewers, which use each other (the Foxglove
@@ -64,6 +66,7 @@ IO = {"asyncio", "zenoh", "aiohttp", "mcap", "foxglove"}
 ROS_LIBRARIES = {"rosbags", "mcap_ros2", "zenoh_ros2_sdk", "rclpy"}
 PURE: dict[str, set[str]] = {
     "contract": IO, "scenario": IO, "core": IO, "checker": IO,
+    "sweep": IO | {"ray"},  # Ray only through checker.parallel.engine_for
     "nodes": {"random", "time", "asyncio", "threading", "socket", "zenoh"},
 }
 

@@ -6,6 +6,7 @@
     twinfleet check                                               (twinfleet.checker.commands)
     twinfleet replay|validate|experiment|calibrate                (twinfleet.agreement.commands)
     twinfleet ros2 bridge                                         (twinfleet.ros2.commands)
+    twinfleet sweep                                               (twinfleet.sweep.commands)
 
 This module sits above every layer; each layer's `register(subparsers)` adds
 its own commands and imports its engines only when a command runs.
@@ -38,6 +39,7 @@ from twinfleet.runtime.access.connection import (
 )
 from twinfleet.runtime.cli import commands as runtime_commands
 from twinfleet.runtime.cli import render as render_command
+from twinfleet.sweep import commands as sweep_commands
 
 DESCRIPTION = """\
 twinfleet runs a fleet of robot nodes (or any nodes you write in Python) as separate
@@ -78,6 +80,7 @@ def build_parser() -> argparse.ArgumentParser:
     runtime_commands.register(sub)
     render_command.register(sub)
     checker_commands.register(sub)
+    sweep_commands.register(sub)
     agreement_commands.register(sub)
     ros2_commands.register(sub)
     return parser

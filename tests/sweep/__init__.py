@@ -1,0 +1,1 @@
+"""Tests of `twinfleet sweep` (twinfleet/sweep/)."""
