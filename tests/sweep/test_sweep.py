@@ -171,9 +171,10 @@ def test_help_explains_every_flag(capsys):
         assert flag in text
 
 
+@pytest.mark.slow
 def test_ray_tasks_answer_what_local_workers_answer():
-    """`--cluster local`: the points as Ray tasks on a cluster started here (about 10 s)."""
-    pytest.importorskip("ray")
+    """`--cluster local`: the points as Ray tasks on a cluster started here (about 10 s; Ray
+    is in the test extra)."""
     grid = points(parse_grid(GRID))
     engine = engine_for(2, "local")
     try:
