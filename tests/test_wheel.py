@@ -251,6 +251,16 @@ def test_examples_list_copy_and_a_bad_name(venv: Path, workdir: Path) -> None:
         + "; `twinfleet examples` describes them)"]
 
 
+def test_the_cluster_engine_without_ray_is_one_line(venv: Path, workdir: Path) -> None:
+    """The default install has no Ray: asking for it says what to install, exit 2."""
+    result = run([str(venv / "bin" / "twinfleet"), "check", "c2a", "--statistical",
+                  "--cluster", "local", "--simulations", "1"], workdir)
+    assert result.returncode == 2, result
+    lines = result.stderr.strip().splitlines()
+    assert len(lines) == 1 and "pip install twinfleet[cluster]" in lines[0], result.stderr
+    assert lines[0].startswith("twinfleet check: "), lines
+
+
 def test_launch_a_shipped_scenario_by_name(venv: Path, workdir: Path) -> None:
     shipped = next(venv.glob("lib/python*/site-packages")) / "twinfleet" / "launch" / "c1a.yaml"
     try:
