@@ -2,8 +2,10 @@
 
 from __future__ import annotations
 
+import atexit
 import os
 import re
+import shutil
 import socket
 import subprocess
 import tempfile
@@ -15,6 +17,7 @@ ROOT = Path(__file__).resolve().parents[1]
 # directory per test session, so test fleets never mix with a developer's own fleets or with
 # another test session's, and a test that finds "the running fleet" finds its own.
 RUNTIME_DIR = tempfile.mkdtemp(prefix="twinfleet-test-runtime-")
+atexit.register(shutil.rmtree, RUNTIME_DIR, ignore_errors=True)  # the session's, only
 
 
 def pick_free_port() -> int:
