@@ -17,7 +17,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from twinfleet.checker.options import REDUCTIONS, Semantics, add_statistical_arguments
+from twinfleet.checker.options import (
+    REDUCTIONS,
+    Semantics,
+    add_engine_arguments,
+    add_statistical_arguments,
+)
 from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_CONTRACT_BREACH, EXIT_FAILED
 from twinfleet.runtime.scenario.overrides import add_override_arguments, override_words
 
@@ -115,6 +120,7 @@ def register(subparsers: Any) -> None:
                    help="lint warnings (nondeterminism sources, names nothing answers) fail the "
                         "check with exit 2 before it starts")
     add_statistical_arguments(p)
+    add_engine_arguments(p)
     p.set_defaults(func=check_command)
     _register_trace(subparsers)
 

@@ -75,12 +75,27 @@ def add_statistical_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--beta", type=_probability, default=0.01,
                    help="SPRT: probability of refusing although P(violation) <= P-D "
                    "(default 0.01)")
+    g.add_argument("--traces-out", default="out", metavar="DIR",
+                   help="directory for the traces of violating simulations (default out)")
+    g.add_argument("--max-traces", type=int, default=3,
+                   help="write at most this many violating simulations (default 3)")
+
+
+def add_engine_arguments(p: argparse.ArgumentParser) -> None:
+    """Add the options that spread a check over processes or machines (`checker.cluster`,
+    `checker.parallel`)."""
+    g = p.add_argument_group(
+        "workers (the exhaustive search on Ray, --statistical simulations)",
+        "The exhaustive search on several processes or machines gives the one-process "
+        "states, transitions, verdict and trace length; the summary's engine line says "
+        "where it ran (docs/distributed.md).")
     g.add_argument("--workers", type=int, default=1, metavar="N",
                    help="worker processes (default 1). Exhaustive search: N > 1 runs it on a "
                    "local Ray cluster this command starts and stops (127.0.0.1, no "
                    "dashboard, no usage statistics; needs pip install twinfleet[cluster]) "
-                   "once its frontier is --min-width wide; --statistical: local processes, "
-                   "or Ray tasks with --cluster")
+                   "once its frontier is --min-width wide (levels of a few hundred worlds "
+                   "or fewer are slower there: docs/distributed.md); --statistical: local "
+                   "processes, or Ray tasks with --cluster")
     g.add_argument("--cluster", default=None, metavar="ADDRESS",
                    help="join the Ray cluster at ADDRESS (host:port of `ray start --head`; "
                    "RAY_AUTH_TOKEN must match the cluster's) instead of starting one; "
@@ -89,7 +104,3 @@ def add_statistical_arguments(p: argparse.ArgumentParser) -> None:
                    help="exhaustive search with --workers/--cluster: stay in this process "
                    "until a BFS level holds W worlds (narrow searches never leave it; "
                    "default 64)")
-    g.add_argument("--traces-out", default="out", metavar="DIR",
-                   help="directory for the traces of violating simulations (default out)")
-    g.add_argument("--max-traces", type=int, default=3,
-                   help="write at most this many violating simulations (default 3)")
