@@ -394,11 +394,12 @@ def _children_of(pid: int) -> list[int]:
 
 @pytest.fixture(scope="module")
 def c1a_events(tmp_path_factory: pytest.TempPathFactory) -> EventLogFile:
-    """A live C1a run (six processes over Zenoh, time scale 10) with its event log."""
+    """A live C1a run (six processes over Zenoh, time scale 5: at 10 a robot can fall behind
+    its queue while the other test worker runs CPU-bound checks) with its event log."""
     path = tmp_path_factory.mktemp("c1a") / "c1a.events.jsonl"
     env = {**os.environ, "PYTHONPATH": str(ROOT), "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", str(C1A),
-                             "--time-scale", "10", "--timeout", "60", "--record-events",
+                             "--time-scale", "5", "--timeout", "60", "--record-events",
                              str(path)], cwd=ROOT, env=env, stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, start_new_session=True)
     try:

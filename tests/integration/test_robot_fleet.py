@@ -17,7 +17,9 @@ def test_c1a_live_all_robots_arrive_without_collision(tmp_path):
     copy = tmp_path / "c1a.yaml"
     copy.write_text(text.replace("../maps/map50.yaml", str(ROOT / "twinfleet" / "maps" / "map50.yaml")))
     scenario = str(copy)
-    cmd = [sys.executable, "-m", "twinfleet", "launch", scenario, "--time-scale", "10",
+    # Time scale 5, not 10: beside the other test worker's CPU-bound checks, a robot at 10
+    # once fell behind its KEEP_LAST queue (INCONCLUSIVE: 11 samples dropped).
+    cmd = [sys.executable, "-m", "twinfleet", "launch", scenario, "--time-scale", "5",
            "--timeout", "60"]
     try:
         result = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=child_env(),
