@@ -35,6 +35,9 @@ def free_port() -> int:
 LIVE_FOLDERS = frozenset({"adversarial", "agreement", "cluster", "integration", "ros2", "viewer"})
 
 
+# tryfirst: pytest-xdist reads the xdist_group marks in its own collection hook (it turns
+# them into the `@live` suffix its scheduler groups by); a mark added after it has no effect.
+@pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
     """Put every live test into the `live` xdist group (no effect without xdist)."""
     tests_root = config.rootpath / "tests"
