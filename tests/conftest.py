@@ -32,16 +32,22 @@ def free_port() -> int:
 # Tests that run fleets of real processes are timed against the wall clock: under
 # pytest-xdist they share one group, so two fleets never compete for this machine's cores,
 # while the CPU-bound checker tests run beside them on the other worker.
-LIVE_FOLDERS = frozenset({"adversarial", "agreement", "cluster", "integration", "ros2", "viewer"})
+LIVE_FOLDERS = frozenset({"adversarial", "agreement", "integration", "ros2", "viewer"})
+# The Ray tests start clusters, not fleets: CPU-bound like the checker tests, they form a
+# group of their own (one Ray cluster at a time) that runs beside the live group.
+RAY_FOLDERS = frozenset({"cluster"})
 
 
 # tryfirst: pytest-xdist reads the xdist_group marks in its own collection hook (it turns
 # them into the `@live` suffix its scheduler groups by); a mark added after it has no effect.
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Put every live test into the `live` xdist group (no effect without xdist)."""
+    """Put every live test into the `live` xdist group, the Ray tests into `ray` (no effect
+    without xdist)."""
     tests_root = config.rootpath / "tests"
     for item in items:
         parts = item.path.relative_to(tests_root).parts
-        if item.get_closest_marker("slow") or (len(parts) > 1 and parts[0] in LIVE_FOLDERS):
+        if len(parts) > 1 and parts[0] in RAY_FOLDERS:
+            item.add_marker(pytest.mark.xdist_group("ray"))
+        elif item.get_closest_marker("slow") or (len(parts) > 1 and parts[0] in LIVE_FOLDERS):
             item.add_marker(pytest.mark.xdist_group("live"))
