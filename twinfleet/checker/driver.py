@@ -247,14 +247,16 @@ def check(scenario: str | Path | Scenario | None,
                     checkpoint=options.checkpoint or options.resume,
                     checkpoint_every_s=options.checkpoint_every_s, checkpoint_meta=meta,
                     reduction=reduction)
-    if data is not None:
+    resumed_cluster = data is not None and data["meta"].get("engine") == "cluster"
+    if data is not None and not resumed_cluster:
         search.restore(data)
     seed = options.seed if options.seed is not None else scenario.seed
     engine, outcome = None, None
     try:
-        if options.workers > 1 or options.cluster is not None:
+        if options.workers > 1 or options.cluster is not None or resumed_cluster:
             outcome, engine = _distributed(system, props, strategy, reduction is not None,
-                                           options, path, scenario, flags)
+                                           options, path, scenario, flags, meta,
+                                           data if resumed_cluster else None)
         if outcome is None:
             outcome = search.run(strategy, walks=options.walks, seed=seed)
     except ContractBreachError as exc:  # found while rebuilding a path (checker.paths)
@@ -288,17 +290,21 @@ def check(scenario: str | Path | Scenario | None,
 
 def _distributed(system: System, props: PropertySet, strategy: str, reduced: bool,
                  options: CheckOptions, path: Path | None, scenario: Scenario,
-                 flags: Mapping[str, Any]) -> tuple[Outcome | None, str]:
-    """The outcome of the search on Ray workers (`checker.cluster`), or None and why it
-    runs here."""
-    from twinfleet.checker.cluster import SystemSpec, distributed, why_local
+                 flags: Mapping[str, Any], meta: Mapping[str, Any],
+                 resume: Mapping[str, Any] | None) -> tuple[Outcome | None, str]:
+    """The outcome of the search on Ray workers (`checker.cluster`), from the checkpoint
+    `resume` if given, or None and why it runs here."""
+    from twinfleet.checker.cluster import Checkpointing, SystemSpec, distributed, why_local
 
     local = why_local(strategy, reduced, props)
     if local is not None:
         return None, local
-    if path is None or options.checkpoint or options.resume or options.exact_states:
-        raise ScenarioError("--workers/--cluster need a scenario file and no --checkpoint, "
-                            "--resume or --exact-states")
+    if path is None or options.exact_states:
+        raise ScenarioError("--workers/--cluster need a scenario file and no --exact-states")
+    if options.resume is not None and resume is None:
+        raise CheckpointError(f"{options.resume}: written by the search in one process; "
+                              "continue it without --workers/--cluster")
+    saving = options.checkpoint or options.resume
     timing = _timing_ranges(scenario, options)
     spec = SystemSpec(str(path.resolve()), scenario.profile, system.semantics.value,
                       tuple(options.params), tuple(sorted(flags.items())), options.timing,
@@ -306,7 +312,9 @@ def _distributed(system: System, props: PropertySet, strategy: str, reduced: boo
     limits = limits_for(options, scenario.check)
     run = distributed(system, props, limits, spec, workers=options.workers,
                       address=options.cluster, min_width=options.min_width,
-                      report=options.report)
+                      report=options.report, resume=resume,
+                      checkpointing=None if saving is None else
+                      Checkpointing(saving, options.checkpoint_every_s, meta))
     note = run.note if strategy == "bfs" else f"{run.note}; strict BFS order instead of {strategy}"
     return run.outcome, note
 

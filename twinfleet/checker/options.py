@@ -88,7 +88,8 @@ def add_engine_arguments(p: argparse.ArgumentParser) -> None:
         "workers (the exhaustive search on Ray, --statistical simulations)",
         "The exhaustive search on several processes or machines gives the one-process "
         "states, transitions, verdict and trace length; the summary's engine line says "
-        "where it ran (docs/distributed.md).")
+        "where it ran (docs/distributed.md). With --checkpoint it is saved between two "
+        "levels; --resume continues it on any number of workers, or in this process.")
     g.add_argument("--workers", type=int, default=1, metavar="N",
                    help="worker processes (default 1). Exhaustive search: N > 1 runs it on a "
                    "local Ray cluster this command starts and stops (127.0.0.1, no "

@@ -4,7 +4,9 @@
 and shard actors (`checker.cluster.coordinator`, design in
 docs/distributed.md) and returns its `Outcome` with a line for the summary,
 or None with the reason the search must run in one process instead (a
-reduced search, `eventually` properties, random walks). Only
+reduced search, `eventually` properties, random walks). A distributed search
+saves itself to a checkpoint file and continues one on any number of workers
+(`Checkpointing`, `is_distributed_checkpoint`). Only
 `checker.cluster.engine` imports Ray, and only when a search first gets wide
 enough to need it.
 """
@@ -13,19 +15,26 @@ from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from contextlib import ExitStack
 from dataclasses import dataclass
 from typing import Any, final
 
-from twinfleet.checker.cluster.coordinator import Backend, Coordinator, Traffic
+from twinfleet.checker.cluster.coordinator import (
+    ENGINE,
+    Backend,
+    Checkpointing,
+    Coordinator,
+    Traffic,
+)
 from twinfleet.checker.cluster.level import Item
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint
 from twinfleet.checker.outcome import Limits, Outcome
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.system import System
 
-__all__ = ["ClusterError", "Distributed", "SystemSpec", "distributed", "why_local"]
+__all__ = ["Checkpointing", "ClusterError", "Distributed", "SystemSpec", "distributed",
+           "is_distributed_checkpoint", "why_local"]
 
 DEFAULT_MIN_WIDTH = 64  # frontier worlds before the search moves to the cluster
 
@@ -52,6 +61,11 @@ def why_local(strategy: str, reduced: bool, properties: PropertySet) -> str | No
     return None
 
 
+def is_distributed_checkpoint(meta: Mapping[str, Any]) -> bool:
+    """Whether a checkpoint's meta says the distributed search wrote it."""
+    return meta.get("engine") == ENGINE
+
+
 def engine_module(local: bool = True) -> Any:
     """`checker.cluster.engine` (imports Ray); ClusterError when Ray is not installed.
 
@@ -75,9 +89,12 @@ def engine_module(local: bool = True) -> Any:
 def distributed(system: System, properties: PropertySet, limits: Limits, spec: SystemSpec, *,
                 workers: int, address: str | None, min_width: int,
                 report: Callable[[str], None] | None = None,
-                on_backend: Callable[[Backend], None] | None = None) -> Distributed:
+                on_backend: Callable[[Backend], None] | None = None,
+                checkpointing: Checkpointing | None = None,
+                resume: Mapping[str, Any] | None = None) -> Distributed:
     """Search on `workers` Ray workers once the frontier is `min_width` wide (module
-    docstring); ClusterError when the cluster cannot start or loses a worker."""
+    docstring), from the checkpoint `resume` if given (one local worker: in this process);
+    ClusterError when the cluster cannot start or loses a worker."""
     expected = fingerprint(system)
     with ExitStack() as stack:
         def factory(frontier: list[Item], parents: dict[int, int]) -> Backend:
@@ -93,10 +110,16 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
                 on_backend(backend)
             return backend
 
-        coordinator = Coordinator(system, properties, limits, factory, min_width, report)
+        here = workers == 1 and address is None
+        coordinator = Coordinator(system, properties, limits, None if here else factory,
+                                  min_width, report, checkpointing=checkpointing)
+        if resume is not None:
+            coordinator.restore(resume)
         outcome = coordinator.run()
     t = coordinator.traffic
-    if coordinator.distributed_at is None:
+    if here:
+        note = "strict BFS in one process (the distributed search's order and checkpoints)"
+    elif coordinator.distributed_at is None:
         note = (f"ran in one process: the search ended before a level held {min_width} "
                 "worlds (--min-width)")
     else:

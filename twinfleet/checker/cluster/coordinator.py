@@ -11,24 +11,52 @@ the same states, transitions and depth as `checker.search` for any number of
 workers, and a counterexample of the same length. After each level the
 coordinator moves frontier worlds from the busiest worker to the idlest when
 they differ by more than `STEAL_MIN` (one packed blob per move).
+
+Between two levels the search is consistent, so that is where it stops on
+Ctrl-C, max-time or max-states, and where it is saved (`Checkpointing`): the
+visited set and every worker's frontier gathered into one
+`checker.checkpoint` file, which `Coordinator.restore` continues on any
+number of workers, this process included.
 """
 
 from __future__ import annotations
 
+import dataclasses
+import pickle
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Protocol, cast, final
+from typing import Any, Protocol, cast, final
 
-from twinfleet.checker.cluster.level import ROOT, Acceptance, Expander, Expansion, Item, ShardCore
+from twinfleet.checker import checkpoint as ckpt
+from twinfleet.checker.cluster.level import (
+    ROOT,
+    Acceptance,
+    Expander,
+    Expansion,
+    Item,
+    ShardCore,
+    visited_from,
+)
+from twinfleet.checker.cluster.spec import ClusterError
 from twinfleet.checker.diagnosis import FIX_HIDDEN, ContractBreachError, breach_line
-from twinfleet.checker.outcome import Counterexample, Limits, Outcome, SearchStatistics, peak_rss_mb
+from twinfleet.checker.outcome import (
+    INTERRUPTED_REASON,
+    Counterexample,
+    Guard,
+    Limits,
+    Outcome,
+    SearchStatistics,
+    Stop,
+    peak_rss_mb,
+)
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.system import System
 from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import FailureKind, Status
 
 STEAL_MIN = 64  # frontier worlds two workers must differ by before some are moved
+ENGINE = "cluster"  # a checkpoint's meta["engine"]: written by this coordinator
 
 
 class Backend(Protocol):
@@ -50,6 +78,11 @@ class Backend(Protocol):
 
     def move(self, source: int, target: int, count: int) -> None:
         """Move `count` frontier worlds from worker `source` to worker `target`."""
+        ...
+
+    def snapshot(self) -> tuple[list[bytes], list[bytes]]:
+        """Every worker's frontier (`Expander.packed`) and every shard's visited keys
+        (`ShardCore.dump`), between two levels."""
         ...
 
 
@@ -79,6 +112,10 @@ class LocalBackend:
     def move(self, source: int, target: int, count: int) -> None:
         """Nothing to move between one worker."""
 
+    def snapshot(self) -> tuple[list[bytes], list[bytes]]:
+        """`Backend.snapshot`."""
+        return [self.expander.packed()], [self.shard.dump()]
+
 
 @final
 @dataclass
@@ -96,6 +133,17 @@ Factory = Callable[[list[Item], dict[int, int]], Backend]
 
 
 @final
+@dataclass(frozen=True)
+class Checkpointing:
+    """Where a distributed search is saved, how often, and what the file records of the
+    check (`checker.checkpoint` meta: scenario, its hash, options)."""
+
+    path: str
+    every_s: float
+    meta: Mapping[str, Any]
+
+
+@final
 class Coordinator:
     """One distributed strict-BFS search (module docstring).
 
@@ -106,43 +154,68 @@ class Coordinator:
             None: everything in this process.
         min_width: frontier width at which the search moves to the cluster.
         report: called with a progress line at most every `interval` seconds.
+        checkpointing: save the search between levels (periodically and when it stops
+            early), or None.
     """
 
     def __init__(self, system: System, properties: PropertySet, limits: Limits,
                  factory: Factory | None, min_width: int,
-                 report: Callable[[str], None] | None = None, interval: float = 1.0) -> None:
+                 report: Callable[[str], None] | None = None, interval: float = 1.0,
+                 checkpointing: Checkpointing | None = None) -> None:
         self.system, self.properties, self.limits = system, properties, limits
         self.factory, self.min_width = factory, min_width
         self.report, self.interval = report, interval
+        self.checkpointing = checkpointing
+        self.guard = Guard(limits, None, interval, handle_sigint=True)
         self.local = LocalBackend(system, properties)
         self.backend: Backend = self.local
         self.roots: dict[int, tuple[int, ...]] = {}
         self.traffic = Traffic()
         self.states = self.transitions = self.initial = self.depth = self.frontier = 0
-        self.peak_frontier = 0
-        self.distributed_at: int | None = None  # the depth where the cluster took over
-        self._started = time.monotonic()
-        self._last_report = self._started
+        self.peak_frontier = self.level = 0
+        self.distributed_at: int | None = None  # the level where the cluster took over
+        self._started = self._last_report = self._last_save = time.monotonic()
+        self._elapsed_before = 0.0  # the time of the runs a restored checkpoint continues
+        self._restored = False
+        self.saved: str | None = None  # the checkpoint file, once written
 
     # ------------------------------------------------------------------ run
 
     def run(self) -> Outcome:
-        """Search to a verdict or a limit."""
-        self._started = self._last_report = time.monotonic()
-        found = self._start()
-        if found is not None:
-            return found
-        level = 0
+        """Search to a verdict or a limit (Ctrl-C, max-time and max-states stop it between
+        two levels; a second Ctrl-C at once)."""
+        self._started = self._last_report = self._last_save = time.monotonic()
+        self.guard.restart_clock()
+        with self.guard.sigint_handler():
+            try:
+                return self._search()
+            except Stop as stop:
+                if self.checkpointing is not None:
+                    self.save()
+                return self._outcome(Status.UNKNOWN, stop.reason)
+            except KeyboardInterrupt:  # a second Ctrl-C, maybe inside a level
+                return self._outcome(Status.UNKNOWN, INTERRUPTED_REASON)
+            except ClusterError as exc:
+                if self.saved is None:
+                    raise
+                raise ClusterError(f"{exc}; the search saved before continues with: "
+                                   f"twinfleet check --resume {self.saved}") from None
+
+    def _search(self) -> Outcome:
+        if not self._restored:
+            found = self._start()
+            if found is not None:
+                return found
         while self.frontier:
             if self.backend is self.local and self.factory is not None and \
                     self.frontier >= self.min_width:
                 self.backend = self.factory(self.local.expander.frontier, self.local.shard.parents)
                 self.local.expander.frontier = []
-                self.distributed_at = level
+                self.distributed_at = self.level
             outcome = self._level()
             if outcome is not None:
                 return outcome
-            level += 1
+            self._maybe_save()
         return self._outcome(Status.HOLDS, "every property holds")
 
     def _start(self) -> Outcome | None:
@@ -170,6 +243,7 @@ class Coordinator:
         expansions, acceptances = self.backend.level(self.limits.max_depth)
         t = self.traffic
         t.levels += 1
+        self.level += 1
         t.claims += sum(e.claims for e in expansions) if self.backend is not self.local else 0
         if len(t.new_per_worker) < len(acceptances):
             t.new_per_worker = [0] * len(acceptances)
@@ -189,19 +263,11 @@ class Coordinator:
         if any(e.pruned for e in expansions) and not self.frontier:
             return self._outcome(Status.UNKNOWN, f"max-depth {self.limits.max_depth} "
                                  "reached before the search finished")
-        stop = self._limit_reached()
-        if stop is not None:
-            return self._outcome(Status.UNKNOWN, stop)
         self._balance([a.frontier for a in acceptances])
+        if self.limits.max_states is not None and self.states >= self.limits.max_states:
+            raise Stop(f"max-states {self.limits.max_states} reached before the search finished")
+        self.guard.tick(self.statistics)  # Ctrl-C, max-time
         self._progress()
-        return None
-
-    def _limit_reached(self) -> str | None:
-        limits = self.limits
-        if limits.max_time_s is not None and time.monotonic() - self._started >= limits.max_time_s:
-            return f"max-time {limits.max_time_s:g} s reached before the search finished"
-        if limits.max_states is not None and self.states >= limits.max_states:
-            return f"max-states {limits.max_states} reached before the search finished"
         return None
 
     def _balance(self, sizes: list[int]) -> None:
@@ -222,12 +288,56 @@ class Coordinator:
         """The counters so far."""
         n = self.states
         return SearchStatistics(n, self.transitions, self.initial, self.depth, self.frontier,
-                                time.monotonic() - self._started, peak_rss_mb(),
+                                self._elapsed(), peak_rss_mb(),
                                 sum(self.backend.shard_bytes()), 64, min(1.0, n * n / 2.0**65),
                                 self.peak_frontier)
 
+    def _elapsed(self) -> float:
+        return self._elapsed_before + time.monotonic() - self._started
+
     def _outcome(self, status: Status, reason: str) -> Outcome:
-        return Outcome(status, reason, self.statistics())
+        outcome = Outcome(status, reason, self.statistics())
+        if status is Status.UNKNOWN:
+            outcome.checkpoint = self.saved
+        return outcome
+
+    # --------------------------------------------------------- checkpoints
+
+    def _maybe_save(self) -> None:
+        plan = self.checkpointing
+        if plan is not None and time.monotonic() - self._last_save >= plan.every_s:
+            self.save()
+
+    def save(self) -> str:
+        """Write the search as it stands between two levels to the checkpoint file."""
+        plan = self.checkpointing
+        assert plan is not None
+        frontier, visited = self.backend.snapshot()
+        counters = {"states": self.states, "transitions": self.transitions,
+                    "initial": self.initial, "depth": self.depth,
+                    "peak_frontier": self.peak_frontier, "level": self.level,
+                    "distributed_at": self.distributed_at, "elapsed": self._elapsed(),
+                    "roots": self.roots, "traffic": dataclasses.asdict(self.traffic)}
+        ckpt.save(plan.path, {**plan.meta, "engine": ENGINE}, {"visited": visited}, frontier,
+                  counters)
+        self._last_save = time.monotonic()
+        self.saved = plan.path
+        return plan.path
+
+    def restore(self, data: Mapping[str, Any]) -> None:
+        """Continue a checkpoint `save` wrote (`checker.checkpoint.load`), on this process
+        until the frontier is `min_width` wide, whatever number of workers wrote it."""
+        c = data["counters"]
+        self.states, self.transitions = c["states"], c["transitions"]
+        self.initial, self.depth, self.level = c["initial"], c["depth"], c["level"]
+        self.peak_frontier = c["peak_frontier"]
+        self._elapsed_before, self.roots = c["elapsed"], c["roots"]
+        self.traffic = Traffic(**c["traffic"])
+        self.local.shard.parents = visited_from(data["store"]["visited"], self.roots)
+        self.local.expander.frontier = [item for blob in data["frontier"]
+                                        for item in pickle.loads(blob)]  # noqa: S301
+        self.frontier = len(self.local.expander.frontier)
+        self._restored = True
 
     def _violated(self, violation: PropertyViolation, path: Counterexample) -> Outcome:
         return Outcome(Status.VIOLATED, violation.property, self.statistics(), violation, path)

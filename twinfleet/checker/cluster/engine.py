@@ -112,6 +112,10 @@ class Worker:
         """`Expander.take`."""
         return self.core.take(blob)
 
+    def packed(self) -> bytes:
+        """`Expander.packed`."""
+        return self.core.packed()
+
 
 @ray.remote(num_cpus=0)
 class Shard:
@@ -137,6 +141,10 @@ class Shard:
     def nbytes(self) -> int:
         """`ShardCore.nbytes`."""
         return self.core.nbytes()
+
+    def dump(self) -> bytes:
+        """`ShardCore.dump`."""
+        return self.core.dump()
 
 
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")  # Ray colours the names in its messages
@@ -210,6 +218,12 @@ class RayBackend:
     def move(self, source: int, target: int, count: int) -> None:
         """`coordinator.Backend.move`: one blob, passed by reference."""
         _get(self.actors[target].take.remote(self.actors[source].give.remote(count)))
+
+    def snapshot(self) -> tuple[list[bytes], list[bytes]]:
+        """`coordinator.Backend.snapshot`: every worker's frontier and shard's keys."""
+        frontier = [a.packed.remote() for a in self.actors]
+        visited = [s.dump.remote() for s in self.shards]
+        return list(_get(frontier)), list(_get(visited))
 
     def close(self) -> None:
         """Stop every actor of this search (a cluster that outlives the command, or a shared

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import pickle
 import sys
+from collections.abc import Iterable
 from dataclasses import dataclass, field
 from typing import cast, final
 
@@ -116,9 +117,7 @@ class Expander:
         self.frontier = []
         self._pending = worlds
         out.claims = len(seen)
-        blobs = [np.array(k, dtype=np.uint64).tobytes() + np.array(p, dtype=np.uint64).tobytes()
-                 for k, p in zip(keys, parents, strict=True)]
-        return out, blobs
+        return out, [pack_pairs(k, p) for k, p in zip(keys, parents, strict=True)]
 
     def accept(self, masks: list[bytes]) -> Acceptance:
         """Keep the claimed worlds the shards answered new; check the properties on them."""
@@ -160,9 +159,18 @@ class Expander:
         self.frontier.extend(pickle.loads(blob))  # noqa: S301 - from our own workers
         return len(self.frontier)
 
+    def packed(self) -> bytes:
+        """The whole frontier as one blob (`take` reads it), kept here (a checkpoint)."""
+        return pickle.dumps(self.frontier, protocol=pickle.HIGHEST_PROTOCOL)
+
+
+def pack_pairs(keys: list[int], parents: list[int]) -> bytes:
+    """One blob of keys then parent keys (uint64): a claim batch, or a visited set."""
+    return np.array(keys, dtype=np.uint64).tobytes() + np.array(parents, dtype=np.uint64).tobytes()
+
 
 def unpack_claims(blob: bytes) -> tuple[np.ndarray, np.ndarray]:
-    """The keys and parent keys of a claim blob."""
+    """The keys and parent keys of a blob from `pack_pairs`."""
     both = np.frombuffer(blob, dtype=np.uint64)
     half = len(both) // 2
     return both[:half], both[half:]
@@ -198,6 +206,23 @@ class ShardCore:
         """The parent key of a stored key (ROOT for an initial world)."""
         return self.parents[key]
 
+    def dump(self) -> bytes:
+        """The partition as one `pack_pairs` blob; an initial world's parent is written as
+        0 (a checkpoint records which keys are initial, `visited_from` reads it back)."""
+        return pack_pairs(list(self.parents), [max(p, 0) for p in self.parents.values()])
+
     def nbytes(self) -> int:
         """Bytes the partition holds (the dict and its int objects, roughly)."""
         return sys.getsizeof(self.parents) + 64 * len(self.parents)
+
+
+def visited_from(blobs: list[bytes], roots: Iterable[int]) -> dict[int, int]:
+    """The visited set (key -> parent key) of `ShardCore.dump` blobs; `roots`: the keys of
+    initial worlds."""
+    parents: dict[int, int] = {}
+    for blob in blobs:
+        keys, pars = unpack_claims(blob)
+        parents.update(zip(keys.tolist(), pars.tolist(), strict=True))
+    for key in roots:
+        parents[key] = ROOT
+    return parents
