@@ -29,12 +29,14 @@ def free_port() -> int:
     return pick_free_port()
 
 
-# Tests that run fleets of real processes are timed against the wall clock: under
-# pytest-xdist they share one group, so two fleets never compete for this machine's cores,
-# while the CPU-bound checker tests run beside them on the other worker.
+# Tests that run fleets of real processes (these folders, and tests marked `fleet`) are
+# timed against the wall clock: under pytest-xdist they share one group, so two fleets never
+# compete for this machine's cores, while the CPU-bound checker tests run beside them on the
+# other worker. A slow test that starts no fleet is not in it: the group is the suite's
+# longest chain of tests.
 LIVE_FOLDERS = frozenset({"adversarial", "agreement", "integration", "ros2", "viewer"})
-# The Ray tests start clusters, not fleets: CPU-bound like the checker tests, they form a
-# group of their own (one Ray cluster at a time) that runs beside the live group.
+# The Ray tests (this folder, and tests marked `ray`) start clusters, not fleets: CPU-bound
+# like the checker tests, they form a group of their own (one Ray cluster at a time).
 RAY_FOLDERS = frozenset({"cluster"})
 
 
@@ -47,7 +49,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     tests_root = config.rootpath / "tests"
     for item in items:
         parts = item.path.relative_to(tests_root).parts
-        if len(parts) > 1 and parts[0] in RAY_FOLDERS:
+        folder = parts[0] if len(parts) > 1 else ""
+        if item.get_closest_marker("ray") or folder in RAY_FOLDERS:
             item.add_marker(pytest.mark.xdist_group("ray"))
-        elif item.get_closest_marker("slow") or (len(parts) > 1 and parts[0] in LIVE_FOLDERS):
+        elif item.get_closest_marker("fleet") or folder in LIVE_FOLDERS:
             item.add_marker(pytest.mark.xdist_group("live"))

@@ -189,6 +189,7 @@ def pong_report(scenario: Scenario) -> PongReport:
 
 
 @pytest.mark.slow
+@pytest.mark.fleet
 @pytest.mark.timeout(90)
 @pytest.mark.parametrize("record", [False, True], ids=["private-file", "beside-the-event-log"])
 def test_a_python_scenario_runs_live(tmp_path: Path, record: bool) -> None:

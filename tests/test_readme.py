@@ -35,6 +35,7 @@ def test_the_walk_through_has_its_files():
 
 
 @pytest.mark.slow
+@pytest.mark.fleet
 @pytest.mark.timeout(120)
 def test_the_readme_walk_through_runs(tmp_path: Path):
     for name, code in readme_files().items():

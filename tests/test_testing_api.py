@@ -72,6 +72,7 @@ def _alive(pid: int) -> bool:
 
 
 @pytest.mark.slow
+@pytest.mark.fleet
 def test_a_live_fleet_hears_and_cleans_up_even_when_the_test_fails(monkeypatch):
     for key, value in child_env().items():
         monkeypatch.setenv(key, value)
@@ -91,6 +92,7 @@ def test_a_live_fleet_hears_and_cleans_up_even_when_the_test_fails(monkeypatch):
 
 
 @pytest.mark.slow
+@pytest.mark.fleet
 def test_a_test_that_ends_at_once_still_finds_every_node_running(monkeypatch):
     for key, value in child_env().items():
         monkeypatch.setenv(key, value)
@@ -104,6 +106,7 @@ def test_a_test_that_ends_at_once_still_finds_every_node_running(monkeypatch):
 
 
 @pytest.mark.slow
+@pytest.mark.fleet
 def test_run_live_publishes_into_the_fleet_and_times_out_clearly(monkeypatch):
     for key, value in child_env().items():
         monkeypatch.setenv(key, value)

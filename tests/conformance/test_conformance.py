@@ -203,6 +203,7 @@ def children(pid: int) -> list[int]:
 
 
 @pytest.mark.slow
+@pytest.mark.fleet
 @pytest.mark.timeout(90)
 @pytest.mark.parametrize("name", sorted(CASES))
 def test_every_live_event_log_is_a_path_of_the_checker(name, tmp_path):

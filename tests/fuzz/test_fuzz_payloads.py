@@ -39,7 +39,7 @@ from twinfleet.runtime.fleet.launcher import free_port  # noqa: E402
 from twinfleet.runtime.host.keys import KeyKind, node_key, topic_key  # noqa: E402
 from twinfleet.runtime.host.zenoh_transport import zenoh_config  # noqa: E402
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(150)]
+pytestmark = [pytest.mark.slow, pytest.mark.fleet, pytest.mark.timeout(150)]
 
 ROOT = Path(__file__).resolve().parents[2]
 FLEET = "fuzz"

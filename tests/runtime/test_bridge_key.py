@@ -15,7 +15,7 @@ from twinfleet.runtime.core.statistics import Rejection
 from twinfleet.runtime.fleet.launcher import free_port
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
 
-pytestmark = [pytest.mark.slow, pytest.mark.timeout(30)]
+pytestmark = [pytest.mark.slow, pytest.mark.fleet, pytest.mark.timeout(30)]
 GOAL, STATUS = "twinfleet/f/r1/goal", "twinfleet/f/r1/status"
 
 

@@ -98,6 +98,7 @@ def test_shipped_scenarios_are_silent(name):
 
 
 @pytest.mark.slow
+@pytest.mark.fleet
 def test_launch_prints_the_warnings_before_the_fleet_starts(tmp_path):
     import subprocess
     import sys

@@ -172,6 +172,7 @@ def test_help_explains_every_flag(capsys):
 
 
 @pytest.mark.slow
+@pytest.mark.ray
 def test_ray_tasks_answer_what_local_workers_answer():
     """`--cluster local`: the points as Ray tasks on a cluster started here (about 10 s; Ray
     is in the test extra)."""
