@@ -2,10 +2,10 @@
 
 One local Ray cluster (loopback, no dashboard) serves the module; the search
 uses a Ray already initialised as it is (`checker.cluster.engine.session`).
-For 1, 2 and 3 workers, on shipped scenarios and on generated systems: the
-same verdict; when every property holds the same states, transitions and
-RMC-style counts; when one is violated a trace of the same length (a strict
-BFS) that replays. `min_width=1` moves every search to the cluster at once,
+For 1, 2 and 3 workers, on shipped scenarios and on generated systems, with
+and without the partial-order reduction: the same verdict; when every
+property holds the same states, transitions and RMC-style counts; when one
+is violated a trace of the same length (a strict BFS) that replays. `min_width=1` moves every search to the cluster at once,
 so the distributed path is what is compared; each result says so.
 """
 
@@ -53,9 +53,10 @@ def safety_copy(name: str, where: Path, **check: Any) -> Path:
 def distributed(path: Path, workers: int, *, beyond_start: bool = True,
                 **options: Any) -> CheckResult:
     """The search on `workers` Ray workers from its first level (a search that ends among
-    its initial worlds, `beyond_start` False, never needs them)."""
-    result = check(path, CheckOptions(reduction="none", workers=workers, cluster="this",
-                                      min_width=1, **options))
+    its initial worlds, `beyond_start` False, never needs them); unreduced unless
+    `reduction` is given."""
+    options.setdefault("reduction", "none")
+    result = check(path, CheckOptions(workers=workers, cluster="this", min_width=1, **options))
     want = f"strict BFS on {workers} Ray worker(s)" if beyond_start else "ran in one process"
     assert result.engine is not None and result.engine.startswith(want), result.engine
     return result
@@ -77,11 +78,13 @@ def assert_same_answer(one: CheckResult, many: CheckResult) -> None:
             assert replay_confirms(many)
 
 
+@pytest.mark.parametrize("reduction", ["none", "por"])
 @pytest.mark.parametrize("workers", [1, 2, 3])
-def test_a_violated_shipped_case_has_a_trace_as_short(tmp_path: Path, workers: int) -> None:
+def test_a_violated_shipped_case_has_a_trace_as_short(tmp_path: Path, workers: int,
+                                                      reduction: str) -> None:
     path = safety_copy("headon", tmp_path)
-    one = check(path, CheckOptions(reduction="none"))
-    many = distributed(path, workers)
+    one = check(path, CheckOptions(reduction=reduction))
+    many = distributed(path, workers, reduction=reduction)
     assert one.violation is not None and one.trace is not None
     assert_same_answer(one, many)
 
@@ -98,6 +101,18 @@ def test_a_wide_holding_search_has_the_same_counts(tmp_path: Path) -> None:
     assert one.statistics.states > 1_000
 
 
+def test_a_wide_reduced_search_has_the_same_counts_and_restarts(tmp_path: Path) -> None:
+    # The reduction learns its send relation on every worker; what they learn at a level
+    # is merged and the search starts again, as in one process at the end of that level.
+    path = safety_copy("headon", tmp_path, latency={"default": [0, 1]})
+    one = check(path, CheckOptions(max_depth=80))
+    assert one.reduction is not None and "restarts" in one.reduction
+    for workers in (2, 3):
+        many = distributed(path, workers, max_depth=80, reduction="por")
+        assert_same_answer(one, many)
+        assert many.reduction == one.reduction  # worlds reduced, expanded fully, restarts
+
+
 def test_a_violated_paper_case_with_two_workers(tmp_path: Path) -> None:
     path = safety_copy("c2c", tmp_path)
     assert_same_answer(check(path, CheckOptions(reduction="none")), distributed(path, 2))
@@ -111,13 +126,18 @@ def _safety_only(doc: dict[str, Any]) -> dict[str, Any]:
 
 @settings(max_examples=20, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
-@given(doc=systems(), workers=st.sampled_from([1, 2, 3]))
-def test_generated_systems(tmp_path: Path, doc: dict[str, Any], workers: int) -> None:
+@given(doc=systems(), workers=st.sampled_from([1, 2, 3]),
+       reduction=st.sampled_from(["none", "por"]))
+def test_generated_systems(tmp_path: Path, doc: dict[str, Any], workers: int,
+                           reduction: str) -> None:
     path = write_scenario(_safety_only(doc), tmp_path / "generated.yaml")
-    one = check(path, CheckOptions(reduction="none", max_states=1_000))
+    one = check(path, CheckOptions(reduction=reduction, max_states=1_000))
     assume(one.status.value != "unknown")  # a search cut by a limit proves nothing
-    assert_same_answer(one, distributed(path, workers, max_states=1_000,
-                                        beyond_start=one.statistics.depth > 0))
+    many = distributed(path, workers, max_states=1_000, reduction=reduction,
+                       beyond_start=one.statistics.depth > 0)
+    assert_same_answer(one, many)
+    if one.violation is None:
+        assert many.reduction == one.reduction
 
 
 def test_a_worker_with_other_node_sources_refuses_to_start(tmp_path: Path, engine: Any) -> None:
@@ -128,11 +148,9 @@ def test_a_worker_with_other_node_sources_refuses_to_start(tmp_path: Path, engin
         engine.RayBackend(spec, expected, 2)
 
 
-def test_reduced_and_liveness_searches_say_they_stay_in_one_process(tmp_path: Path) -> None:
+def test_liveness_searches_say_they_stay_in_one_process(tmp_path: Path) -> None:
     cli(["examples", "--copy", "headon", str(tmp_path)])
     path = tmp_path / "headon.yaml"
-    reduced = check(path, CheckOptions(workers=2, cluster="this"))
-    assert "reduced search runs in one process" in (reduced.engine or ""), reduced.engine
     lasso = check(path, CheckOptions(reduction="none", workers=2, cluster="this"))
     assert "eventually properties need the whole graph" in (lasso.engine or ""), lasso.engine
     assert lasso.status == check(path, CheckOptions(reduction="none")).status

@@ -40,20 +40,23 @@ def engine() -> Any:
         yield engine
 
 
-def _stopped_on_two_workers(path: Path, checkpoint: Path, **limits: Any) -> None:
-    first = check(path, CheckOptions(reduction="none", workers=2, cluster="this", min_width=1,
-                                     checkpoint=str(checkpoint), **limits))
+def _stopped_on_two_workers(path: Path, checkpoint: Path, reduction: str = "none",
+                            **limits: Any) -> None:
+    first = check(path, CheckOptions(reduction=reduction, workers=2, cluster="this",
+                                     min_width=1, checkpoint=str(checkpoint), **limits))
     assert first.status.value == "unknown" and "max-states" in first.reason, first.reason
     assert (first.engine or "").startswith("strict BFS on 2 Ray worker(s)"), first.engine
     assert first.checkpoint == str(checkpoint) and checkpoint.is_file()
 
 
 @pytest.mark.usefixtures("engine")
-def test_a_holding_search_resumes_on_three_workers_and_in_one_process(tmp_path: Path) -> None:
+@pytest.mark.parametrize("reduction", ["none", "por"])
+def test_a_holding_search_resumes_on_three_workers_and_in_one_process(tmp_path: Path,
+                                                                      reduction: str) -> None:
     path = safety_copy("headon", tmp_path, latency={"default": [0, 1]})
-    one = check(path, CheckOptions(reduction="none", max_depth=80))
+    one = check(path, CheckOptions(reduction=reduction, max_depth=80))
     saved = tmp_path / "search.ckpt"
-    _stopped_on_two_workers(path, saved, max_depth=80, max_states=3_000)
+    _stopped_on_two_workers(path, saved, reduction, max_depth=80, max_states=3_000)
     copy = tmp_path / "copy.ckpt"
     shutil.copy(saved, copy)
     on_three = check(None, CheckOptions(resume=str(saved), workers=3, cluster="this",
@@ -67,6 +70,7 @@ def test_a_holding_search_resumes_on_three_workers_and_in_one_process(tmp_path: 
         assert (resumed.statistics.states, resumed.statistics.transitions,
                 resumed.statistics.depth) == (one.statistics.states, one.statistics.transitions,
                                               one.statistics.depth)
+        assert resumed.reduction == one.reduction
 
 
 @pytest.mark.usefixtures("engine")

@@ -32,7 +32,7 @@ from twinfleet.checker.diagnosis import (
 )
 from twinfleet.checker.outcome import Limits, Outcome, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
-from twinfleet.checker.reduction import describe, plan
+from twinfleet.checker.reduction import Reduction, describe, plan
 from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import build_trace
@@ -254,8 +254,8 @@ def check(scenario: str | Path | Scenario | None,
     engine, outcome = None, None
     try:
         if options.workers > 1 or options.cluster is not None or resumed_cluster:
-            outcome, engine = _distributed(system, props, strategy, reduction is not None,
-                                           options, path, scenario, flags, meta,
+            outcome, engine = _distributed(system, props, strategy, reduction, options, path,
+                                           scenario, flags, meta,
                                            data if resumed_cluster else None)
         if outcome is None:
             outcome = search.run(strategy, walks=options.walks, seed=seed)
@@ -288,7 +288,7 @@ def check(scenario: str | Path | Scenario | None,
     return result
 
 
-def _distributed(system: System, props: PropertySet, strategy: str, reduced: bool,
+def _distributed(system: System, props: PropertySet, strategy: str, reduction: Reduction | None,
                  options: CheckOptions, path: Path | None, scenario: Scenario,
                  flags: Mapping[str, Any], meta: Mapping[str, Any],
                  resume: Mapping[str, Any] | None) -> tuple[Outcome | None, str]:
@@ -296,7 +296,7 @@ def _distributed(system: System, props: PropertySet, strategy: str, reduced: boo
     `resume` if given, or None and why it runs here."""
     from twinfleet.checker.cluster import Checkpointing, SystemSpec, distributed, why_local
 
-    local = why_local(strategy, reduced, props)
+    local = why_local(strategy, props)
     if local is not None:
         return None, local
     if path is None or options.exact_states:
@@ -308,11 +308,12 @@ def _distributed(system: System, props: PropertySet, strategy: str, reduced: boo
     timing = _timing_ranges(scenario, options)
     spec = SystemSpec(str(path.resolve()), scenario.profile, system.semantics.value,
                       tuple(options.params), tuple(sorted(flags.items())), options.timing,
-                      timing.get("latency"), timing.get("topic_latency"))
+                      timing.get("latency"), timing.get("topic_latency"),
+                      None if reduction is None else meta["reduction"])
     limits = limits_for(options, scenario.check)
     run = distributed(system, props, limits, spec, workers=options.workers,
                       address=options.cluster, min_width=options.min_width,
-                      report=options.report, resume=resume,
+                      report=options.report, resume=resume, reduction=reduction,
                       checkpointing=None if saving is None else
                       Checkpointing(saving, options.checkpoint_every_s, meta))
     note = run.note if strategy == "bfs" else f"{run.note}; strict BFS order instead of {strategy}"

@@ -19,11 +19,20 @@ it into the reduced graph; f itself only has to stay enabled and do the same
 thing, which depends on its own node's state and event only (the node
 contract). So the reduced search also meets a transition outside the
 relation, and restarts.
+
+A breadth-first search learns level by level (`freeze`): while frozen, what
+handlers are seen to send is only noted (`learned`), the reduction keeps
+reading the relation it started the level with, and the search restarts at
+the end of a level that learned something, with everything learned added
+(`commit`). Every world of a level is then expanded under the same
+relation, whatever the order of its expansions or the process it runs in, so
+a search on several workers (`checker.cluster`), which merges what each
+learned, finds the graph of the search in one process.
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from typing import TYPE_CHECKING, Any, Final, final
 
 from twinfleet.runtime.contract.kinds import EventKind
@@ -32,6 +41,7 @@ if TYPE_CHECKING:
     from twinfleet.checker.transition import Variant
 
 Handler = tuple[int, str]  # (node index, method name)
+Edge = tuple[int, Handler, str, int]  # (target node, sending handler, method, priority)
 
 #: Event kinds whose rules `checker.reduction` knows; any other kind turns it off for the run.
 KNOWN_KINDS: Final = frozenset({EventKind.DELIVERY, EventKind.REQUEST, EventKind.REPLY,
@@ -46,14 +56,17 @@ class Publications:
         into: per target node X, sending handler (Y, m) -> the (method, priority) of the
             events m created at X due at the instant of its run (Y == X: zero-delay timers).
         out: per sending handler, the handlers (X, method) those events run.
-        version: grows whenever the relation grows (a search compares it).
+        version: grows whenever the relation grows, or, frozen, learns (a search compares it).
         unknown: the first event kind outside `KNOWN_KINDS` seen, or None.
+        frozen: new edges are noted in `pending` (and an unknown kind in
+            `pending_unknown`) instead of entering the relation (`freeze`).
         derived: what `checker.closure` derives from the relation and from variant lists,
             kept across worlds; emptied whenever the relation grows, so nothing in it was
             derived from an older relation.
     """
 
-    __slots__ = ("derived", "into", "out", "unknown", "version")
+    __slots__ = ("derived", "frozen", "into", "out", "pending", "pending_unknown", "unknown",
+                 "version")
 
     def __init__(self, nodes: int) -> None:
         self.into: list[dict[Handler, set[tuple[str, int]]]] = [{} for _ in range(nodes)]
@@ -61,6 +74,29 @@ class Publications:
         self.version = 0
         self.unknown: str | None = None
         self.derived: dict[Any, Any] = {}
+        self.frozen = False
+        self.pending: set[Edge] = set()
+        self.pending_unknown: str | None = None
+
+    def freeze(self) -> None:
+        """From now on note what is learned without using it (module docstring)."""
+        self.frozen = True
+
+    def learned(self) -> tuple[frozenset[Edge], str | None]:
+        """What was noted while frozen, not yet committed: edges, and an unknown kind."""
+        return frozenset(self.pending), self.pending_unknown
+
+    def commit(self, edges: Iterable[Edge] = (), unknown: str | None = None) -> None:
+        """Add what was noted here, and `edges` and `unknown` (learned by other workers),
+        to the relation."""
+        for target, sender, method, priority in (*self.pending, *edges):
+            self._add(target, sender, (method, priority))
+        unknown = self.pending_unknown or unknown
+        if unknown is not None and self.unknown is None:
+            self.unknown = unknown
+            self._grew()
+        self.pending.clear()
+        self.pending_unknown = None
 
     def observe(self, sender: Handler, now: int, variants: Sequence[Variant]) -> None:
         """Record the zero-delay events that handler `sender`'s run at `now` created."""
@@ -68,18 +104,33 @@ class Publications:
         for v in variants:
             for e in v.events:
                 if e.kind not in KNOWN_KINDS and self.unknown is None:
-                    self.unknown = str(e.kind)
-                    self._grew()
+                    self._unknown(str(e.kind))
                 if e.due != now:
                     continue
                 made = into[e.target].get(sender)
-                if made is None:
-                    made = into[e.target][sender] = set()
                 item = (e.method, e.priority)
-                if item not in made:
-                    made.add(item)
-                    self.out.setdefault(sender, set()).add((e.target, e.method))
-                    self._grew()
+                if made is not None and item in made:
+                    continue
+                if not self.frozen:
+                    self._add(e.target, sender, item)
+                elif (edge := (e.target, sender, e.method, e.priority)) not in self.pending:
+                    self.pending.add(edge)
+                    self.version += 1
+
+    def _unknown(self, kind: str) -> None:
+        if not self.frozen:
+            self.unknown = kind
+            self._grew()
+        elif self.pending_unknown is None:
+            self.pending_unknown = kind
+            self.version += 1
+
+    def _add(self, target: int, sender: Handler, item: tuple[str, int]) -> None:
+        made = self.into[target].setdefault(sender, set())
+        if item not in made:
+            made.add(item)
+            self.out.setdefault(sender, set()).add((target, item[0]))
+            self._grew()
 
     def _grew(self) -> None:
         self.version += 1
@@ -112,8 +163,11 @@ class Publications:
         return sum(len(p) for per in self.into for p in per.values())
 
     def __getstate__(self) -> tuple[object, ...]:
-        return (self.into, self.out, self.version, self.unknown)
+        return (self.into, self.out, self.version, self.unknown, self.frozen, self.pending,
+                self.pending_unknown)
 
-    def __setstate__(self, state: tuple[object, ...]) -> None:
-        self.into, self.out, self.version, self.unknown = state  # type: ignore[assignment]
+    def __setstate__(self, state: tuple[Any, ...]) -> None:
+        self.into, self.out, self.version, self.unknown = state[:4]
+        self.frozen, self.pending, self.pending_unknown = (
+            state[4:] if len(state) > 4 else (False, set(), None))
         self.derived = {}

@@ -168,7 +168,9 @@ class Reduction:
         return self.stats.to_json()
 
     def restarted(self) -> None:
-        """Count a restart; the other counters start again with the search."""
+        """Count a restart, and add what the search learned while frozen to the relation;
+        the other counters start again with the search."""
+        self.publications.commit()
         self.stats = ReductionStatistics(restarts=self.stats.restarts + 1)
         self.visibility.rises = 0
 
@@ -176,8 +178,9 @@ class Reduction:
     def stale(self) -> bool:
         """True when the send relation grew, or a rising goal fell, since `begin` (the
         search must restart)."""
-        return self.publications.version != self._version or \
-            self.visibility.rising != self._rising
+        publications = self.publications
+        return publications.version != self._version or bool(publications.pending) or \
+            publications.pending_unknown is not None or self.visibility.rising != self._rising
 
     @property
     def disabled(self) -> str | None:
@@ -188,27 +191,45 @@ class Reduction:
     def successors(self, world: World, find: Callable[[object], int],
                    done: int | None) -> list[Transition]:
         """The transitions a reduced search takes from `world`. For the cycle proviso,
-        `find(key)` is a world's id in the store (-1: none) and `done` the id of the world
-        being expanded when every id up to it is expanded (BFS), else None (any stored
-        world then counts as expanded)."""
-        system = self.system
+        `find(key)` is a world's id in the store (-1: none) and `done` the largest id of a
+        world at most as deep as `world` (BFS: every such world is stored when a level
+        starts, whatever order the level is expanded in), else None (DFS: any stored world
+        counts)."""
+        out, probes = self.candidates(world)
+        if probes is None:
+            return out
+        limit = done if done is not None else _INF
+        if any(0 <= find(key) <= limit for key in probes):
+            return self.full(world)
+        return self.reduced(world, out)
+
+    def candidates(self, world: World) -> tuple[list[Transition], list[object] | None]:
+        """The transitions of a persistent set of `world`'s enabled events and the keys of
+        those successors that stay at its instant: if one of them is already stored (at
+        most as deep as `world`), C3t asks for `full`, else `reduced`. No set smaller than
+        everything: every transition, already counted, and None."""
         enabled = self.rules.enabled(world.events)
         chosen = None if self.disabled else self._choose(world, enabled)
         if chosen is None:
             self.stats.full += 1
-            return self._observed(world, list(system.successors(world, enabled)))
+            return self._observed(world, list(self.system.successors(world, enabled))), None
         out: list[Transition] = []
         for i in chosen:
-            out += system.outcomes(world, RunEvent(i))
+            out += self.system.outcomes(world, RunEvent(i))
         out += self._drops(world, {world.events[i].target for i in chosen})
         t = world.events[0].due
-        for tr in out:
-            w = tr.world
-            if tr.failure is None and w.events and w.events[0].due == t and \
-                    0 <= find(w.key) <= (done if done is not None else _INF):
-                self.stats.full += 1
-                self.stats.cycle_proviso += 1
-                return self._observed(world, list(system.successors(world, enabled)))
+        return out, [tr.world.key for tr in out if tr.failure is None
+                     and tr.world.events and tr.world.events[0].due == t]
+
+    def full(self, world: World) -> list[Transition]:
+        """Every transition of `world`: the cycle proviso refused its persistent set."""
+        self.stats.full += 1
+        self.stats.cycle_proviso += 1
+        enabled = self.rules.enabled(world.events)
+        return self._observed(world, list(self.system.successors(world, enabled)))
+
+    def reduced(self, world: World, out: list[Transition]) -> list[Transition]:
+        """The persistent set's transitions `candidates` gave, taken."""
         self.stats.reduced += 1
         return self._observed(world, out)
 

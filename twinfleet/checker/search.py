@@ -107,6 +107,8 @@ class Search:
         self._hashed_before = 0  # content hashes of the searches this one continues
         self._expanding: tuple[World, int, int] | None = None
         self._partial = 0
+        # BFS: the depth being expanded and the largest id of a world at most that deep
+        self._level: tuple[int, int] = (-1, -1)
         self._checkpoint = checkpoint
         self._checkpoint_every = checkpoint_every_s
         self._checkpoint_meta = dict(checkpoint_meta or {})
@@ -204,7 +206,7 @@ class Search:
                     "pruned": self._pruned, "peak_frontier": c.peak_frontier,
                     "elapsed": self._elapsed_before + time.monotonic() - self.guard.started,
                     "hashed": self.system.hashed + self._hashed_before,
-                    "strategy": "dfs" if self._lifo else "bfs",
+                    "strategy": "dfs" if self._lifo else "bfs", "level": self._level,
                     "publications": self.system.publications.__getstate__(),
                     "reduction": None if self.reduction is None else self.reduction.stats}
         checkpoint.save(path, self._checkpoint_meta, self.store, list(self._frontier), counters)
@@ -217,6 +219,7 @@ class Search:
         c = data["counters"]
         self.counters = Counters(c["transitions"], c["initial"], c["depth"], c["peak_frontier"])
         self._pruned = c["pruned"]
+        self._level = tuple(c.get("level", (-1, -1)))
         self._elapsed_before = c["elapsed"]
         self._hashed_before = c["hashed"]
         if "publications" in c:  # what the reduced search so far relied on
@@ -229,8 +232,11 @@ class Search:
 
     def _explore_until_stable(self) -> None:
         """Explore; with a reduction, start again from scratch whenever the send relation
-        it relies on grew during the search (`checker.publications`)."""
+        it relies on grew during the search (`checker.publications`): at once in a DFS, at
+        the end of the level in a BFS, which learns level by level (`Publications.freeze`)."""
         reduction = self.reduction
+        if reduction is not None and not self._lifo:
+            reduction.publications.freeze()
         while True:
             if reduction is not None:
                 reduction.begin()
@@ -252,6 +258,7 @@ class Search:
         self._next_forget = _FORGET_EVERY
         self._pruned = False
         self._resumed = False
+        self._level = (-1, -1)
 
     def _explore(self) -> None:
         max_depth = self.limits.max_depth
@@ -274,13 +281,15 @@ class Search:
         while frontier:
             item = pop()
             world, sid, depth = item
+            if not lifo and depth > self._level[0]:
+                self._next_level(depth)
             if max_depth is not None and depth >= max_depth:
                 self._pruned = True
                 continue
             self._expanding = item
             children = []
             for t in (successors(world) if reduction is None
-                      else reduction.successors(world, find, None if lifo else sid)):
+                      else reduction.successors(world, find, None if lifo else self._level[1])):
                 counters.transitions += 1
                 self._partial += 1
                 children.append(discover(t, sid, depth + 1))
@@ -288,12 +297,21 @@ class Search:
                 edges.set(sid, children)
             self._expanding = None
             self._partial = 0
-            if reduction is not None and reduction.stale:
+            if lifo and reduction is not None and reduction.stale:
                 raise _Restart
             self._expansions += 1
             if self._expansions >= self._next_forget:
                 self._forget()
             tick()
+        if reduction is not None and reduction.stale:
+            raise _Restart
+
+    def _next_level(self, depth: int) -> None:
+        """A BFS starts expanding the worlds of `depth`: every world at most that deep is
+        stored. Restart if the level before learned a send."""
+        if self.reduction is not None and self.reduction.stale:
+            raise _Restart
+        self._level = (depth, len(self.store) - 1)
 
     def _forget(self) -> None:
         """Let the system drop cached outcomes no world left to expand can use.

@@ -27,10 +27,10 @@ from twinfleet.checker.cluster.coordinator import (
     Coordinator,
     Traffic,
 )
-from twinfleet.checker.cluster.level import Item
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint
 from twinfleet.checker.outcome import Limits, Outcome
 from twinfleet.checker.properties import PropertySet
+from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.system import System
 
 __all__ = ["Checkpointing", "ClusterError", "Distributed", "SystemSpec", "distributed",
@@ -49,13 +49,10 @@ class Distributed:
     traffic: Traffic
 
 
-def why_local(strategy: str, reduced: bool, properties: PropertySet) -> str | None:
+def why_local(strategy: str, properties: PropertySet) -> str | None:
     """Why this search runs in one process even though workers were asked for, or None."""
     if strategy == "random":
         return "random walks run in one process"
-    if reduced:
-        return ("the reduced search runs in one process: its cycle proviso reads the "
-                "global BFS order (use --reduction none to distribute)")
     if properties.eventually:
         return "eventually properties need the whole graph: the search runs in one process"
     return None
@@ -91,28 +88,27 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
                 report: Callable[[str], None] | None = None,
                 on_backend: Callable[[Backend], None] | None = None,
                 checkpointing: Checkpointing | None = None,
-                resume: Mapping[str, Any] | None = None) -> Distributed:
+                resume: Mapping[str, Any] | None = None,
+                reduction: Reduction | None = None) -> Distributed:
     """Search on `workers` Ray workers once the frontier is `min_width` wide (module
     docstring), from the checkpoint `resume` if given (one local worker: in this process);
     ClusterError when the cluster cannot start or loses a worker."""
     expected = fingerprint(system)
     with ExitStack() as stack:
-        def factory(frontier: list[Item], parents: dict[int, int]) -> Backend:
+        def factory() -> Backend:
             engine = engine_module(local=address is None)
-            if report is not None:
-                report(f"[check] frontier {len(frontier):,} wide: moving the search to "
-                       f"{workers} Ray worker(s)")
             stack.enter_context(engine.session(workers, address))
             ray_backend = engine.RayBackend(spec, expected, workers)
             stack.callback(ray_backend.close)
-            backend: Backend = ray_backend.load(frontier, parents)
+            backend: Backend = ray_backend
             if on_backend is not None:
                 on_backend(backend)
             return backend
 
         here = workers == 1 and address is None
         coordinator = Coordinator(system, properties, limits, None if here else factory,
-                                  min_width, report, checkpointing=checkpointing)
+                                  min_width, report, checkpointing=checkpointing,
+                                  reduction=reduction)
         if resume is not None:
             coordinator.restore(resume)
         outcome = coordinator.run()

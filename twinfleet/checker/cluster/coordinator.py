@@ -12,6 +12,13 @@ workers, and a counterexample of the same length. After each level the
 coordinator moves frontier worlds from the busiest worker to the idlest when
 they differ by more than `STEAL_MIN` (one packed blob per move).
 
+A reduced search (`checker.reduction`) runs the same levels in two halves
+(`Expander.propose`, then `expand`) and learns its send relation level by
+level (`Publications.freeze`): when some worker learned a send, the
+coordinator merges what every worker learned and starts the search again
+from scratch with it, as the search in one process does at the end of that
+level, so both explore the same reduced graph.
+
 Between two levels the search is consistent, so that is where it stops on
 Ctrl-C, max-time or max-states, and where it is saved (`Checkpointing`): the
 visited set and every worker's frontier gathered into one
@@ -35,6 +42,7 @@ from twinfleet.checker.cluster.level import (
     Expander,
     Expansion,
     Item,
+    Learned,
     ShardCore,
     visited_from,
 )
@@ -51,6 +59,7 @@ from twinfleet.checker.outcome import (
     peak_rss_mb,
 )
 from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.reduction import Reduction, ReductionStatistics
 from twinfleet.checker.system import System
 from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import FailureKind, Status
@@ -85,6 +94,16 @@ class Backend(Protocol):
         (`ShardCore.dump`), between two levels."""
         ...
 
+    def load(self, frontier: list[Item], parents: dict[int, int],
+             relation: tuple[Any, ...] | None) -> None:
+        """Take over a search begun in the coordinator: its frontier, its visited set and
+        (reduced) the send relation learned so far."""
+        ...
+
+    def reset(self, relation: tuple[Any, ...] | None) -> None:
+        """Forget the search (a reduced search starts again with `relation`)."""
+        ...
+
 
 @final
 class LocalBackend:
@@ -92,13 +111,17 @@ class LocalBackend:
 
     workers = 1
 
-    def __init__(self, system: System, properties: PropertySet) -> None:
-        self.expander = Expander(system, properties, 1)
+    def __init__(self, system: System, properties: PropertySet,
+                 reduction: Reduction | None = None) -> None:
+        self.expander = Expander(system, properties, 1, reduction)
         self.shard = ShardCore()
 
     def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
         """One level here (`Backend.level`)."""
-        expansion, blobs = self.expander.expand(max_depth)
+        stored = None
+        if self.expander.reduction is not None:
+            stored = self.shard.stored(self.expander.propose(max_depth))
+        expansion, blobs = self.expander.expand(max_depth, stored)
         return [expansion], [self.expander.accept(self.shard.claim(blobs))]
 
     def parent(self, key: int) -> int:
@@ -116,6 +139,15 @@ class LocalBackend:
         """`Backend.snapshot`."""
         return [self.expander.packed()], [self.shard.dump()]
 
+    def load(self, frontier: list[Item], parents: dict[int, int],
+             relation: tuple[Any, ...] | None) -> None:
+        """Never called: the coordinator's own backend holds its search."""
+        raise AssertionError("the local backend is not loaded")
+
+    def reset(self, relation: tuple[Any, ...] | None) -> None:
+        """Never called: a restart makes a new local backend."""
+        raise AssertionError("the local backend is not reset")
+
 
 @final
 @dataclass
@@ -129,7 +161,7 @@ class Traffic:
     new_per_worker: list[int] = field(default_factory=list)
 
 
-Factory = Callable[[list[Item], dict[int, int]], Backend]
+Factory = Callable[[], Backend]  # the cluster's backend, started empty
 
 
 @final
@@ -150,8 +182,8 @@ class Coordinator:
     Args:
         system, properties: the coordinator's own copy (initial worlds, counterexamples).
         limits: as `checker.search.Search` takes them (checked between levels).
-        factory: makes the cluster backend from a frontier and the visited parents;
-            None: everything in this process.
+        factory: starts the cluster's backend (once: a restart reuses it); None:
+            everything in this process.
         min_width: frontier width at which the search moves to the cluster.
         report: called with a progress line at most every `interval` seconds.
         checkpointing: save the search between levels (periodically and when it stops
@@ -161,14 +193,20 @@ class Coordinator:
     def __init__(self, system: System, properties: PropertySet, limits: Limits,
                  factory: Factory | None, min_width: int,
                  report: Callable[[str], None] | None = None, interval: float = 1.0,
-                 checkpointing: Checkpointing | None = None) -> None:
+                 checkpointing: Checkpointing | None = None,
+                 reduction: Reduction | None = None) -> None:
         self.system, self.properties, self.limits = system, properties, limits
         self.factory, self.min_width = factory, min_width
         self.report, self.interval = report, interval
         self.checkpointing = checkpointing
+        self.reduction = reduction
+        if reduction is not None:
+            reduction.publications.freeze()
+            reduction.begin()
         self.guard = Guard(limits, None, interval, handle_sigint=True)
-        self.local = LocalBackend(system, properties)
+        self.local = LocalBackend(system, properties, reduction)
         self.backend: Backend = self.local
+        self.cluster: Backend | None = None
         self.roots: dict[int, tuple[int, ...]] = {}
         self.traffic = Traffic()
         self.states = self.transitions = self.initial = self.depth = self.frontier = 0
@@ -209,14 +247,45 @@ class Coordinator:
         while self.frontier:
             if self.backend is self.local and self.factory is not None and \
                     self.frontier >= self.min_width:
-                self.backend = self.factory(self.local.expander.frontier, self.local.shard.parents)
-                self.local.expander.frontier = []
-                self.distributed_at = self.level
+                self._to_cluster(self.factory)
             outcome = self._level()
             if outcome is not None:
                 return outcome
             self._maybe_save()
         return self._outcome(Status.HOLDS, "every property holds")
+
+    def _to_cluster(self, factory: Factory) -> None:
+        """Hand the frontier and the visited set to the cluster's backend."""
+        if self.cluster is None:
+            if self.report is not None:
+                self.report(f"[check] frontier {self.frontier:,} wide: moving the search to "
+                            "the cluster's workers")
+            self.cluster = factory()
+        self.cluster.load(self.local.expander.frontier, self.local.shard.parents,
+                          self._relation())
+        self.local.expander.frontier = []
+        self.backend = self.cluster
+        if self.distributed_at is None:
+            self.distributed_at = self.level
+
+    def _relation(self) -> tuple[Any, ...] | None:
+        return None if self.reduction is None else self.reduction.publications.__getstate__()
+
+    def _restart(self, learned: list[Learned]) -> None:
+        """Some worker learned a send: merge what all learned and search from scratch."""
+        reduction = self.reduction
+        assert reduction is not None
+        for found in learned:
+            reduction.publications.commit(found.edges, found.unknown)
+        reduction.restarted()
+        reduction.begin()
+        if self.cluster is not None:
+            self.cluster.reset(self._relation())
+        self.local = LocalBackend(self.system, self.properties, reduction)
+        self.backend = self.local
+        self.roots = {}
+        self.states = self.transitions = self.initial = self.depth = self.frontier = 0
+        self.peak_frontier = self.level = 0
 
     def _start(self) -> Outcome | None:
         """The initial worlds, claimed and checked here."""
@@ -260,6 +329,12 @@ class Coordinator:
         violation = next((a.violation for a in acceptances if a.violation is not None), None)
         if violation is not None:
             return self._violated(violation[0], self._path(violation[1])[0])
+        learned = [a.learned for a in acceptances if a.learned is not None]
+        if self.backend is not self.local:
+            self._count(learned)
+        if any(found.grew() for found in learned):
+            self._restart(learned)
+            return self._start()
         if any(e.pruned for e in expansions) and not self.frontier:
             return self._outcome(Status.UNKNOWN, f"max-depth {self.limits.max_depth} "
                                  "reached before the search finished")
@@ -292,6 +367,16 @@ class Coordinator:
                                 sum(self.backend.shard_bytes()), 64, min(1.0, n * n / 2.0**65),
                                 self.peak_frontier)
 
+    def _count(self, learned: list[Learned]) -> None:
+        """Add the workers' reduction counters to this process's (the summary's)."""
+        if self.reduction is None:
+            return
+        stats = self.reduction.stats
+        for found in learned:
+            for name, value in found.counted.items():
+                setattr(stats, name, getattr(stats, name) + value)
+            self.reduction.relied |= found.relied
+
     def _elapsed(self) -> float:
         return self._elapsed_before + time.monotonic() - self._started
 
@@ -317,7 +402,10 @@ class Coordinator:
                     "initial": self.initial, "depth": self.depth,
                     "peak_frontier": self.peak_frontier, "level": self.level,
                     "distributed_at": self.distributed_at, "elapsed": self._elapsed(),
-                    "roots": self.roots, "traffic": dataclasses.asdict(self.traffic)}
+                    "roots": self.roots, "traffic": dataclasses.asdict(self.traffic),
+                    "publications": self._relation(),
+                    "reduction": None if self.reduction is None else
+                    dataclasses.asdict(self.reduction.stats)}
         ckpt.save(plan.path, {**plan.meta, "engine": ENGINE}, {"visited": visited}, frontier,
                   counters)
         self._last_save = time.monotonic()
@@ -333,6 +421,10 @@ class Coordinator:
         self.peak_frontier = c["peak_frontier"]
         self._elapsed_before, self.roots = c["elapsed"], c["roots"]
         self.traffic = Traffic(**c["traffic"])
+        if self.reduction is not None and c.get("publications") is not None:
+            self.reduction.publications.__setstate__(c["publications"])
+            self.reduction.stats = ReductionStatistics(**c["reduction"])
+            self.reduction.begin()
         self.local.shard.parents = visited_from(data["store"]["visited"], self.roots)
         self.local.expander.frontier = [item for blob in data["frontier"]
                                         for item in pickle.loads(blob)]  # noqa: S301

@@ -85,17 +85,30 @@ class Worker:
     """An `Expander` on a system built from a `SystemSpec`."""
 
     def __init__(self, spec: SystemSpec, expected: dict[str, str], shards: int) -> None:
-        system, props = spec.build()
+        system, props, reduction = spec.build()
         differs = mismatch(fingerprint(system), expected)
         if differs is not None:
             raise ClusterError(f"worker on {os.uname().nodename}: its {differs} differ(s) "
                                "from the coordinator's")
-        self.core = Expander(system, props, shards)
+        self.core = Expander(system, props, shards, reduction)
 
-    def expand(self, max_depth: int | None) -> tuple[Any, ...]:
-        """`Expander.expand`, one return value per shard blob."""
-        expansion, blobs = self.core.expand(max_depth)
+    def propose(self, max_depth: int | None) -> tuple[Any, ...]:
+        """`Expander.propose`, a count then one return value per shard blob."""
+        return (0, *self.core.propose(max_depth))
+
+    def expand(self, max_depth: int | None, *stored: bytes) -> tuple[Any, ...]:
+        """`Expander.expand` (`stored`: the shards' answers to `propose`), one return
+        value per shard blob."""
+        expansion, blobs = self.core.expand(max_depth, list(stored) if stored else None)
         return (expansion, *blobs)
+
+    def relearn(self, relation: tuple[Any, ...] | None) -> int:
+        """`Expander.relearn` (an unreduced search: an empty frontier only)."""
+        if relation is None:
+            self.core.frontier = []
+        else:
+            self.core.relearn(relation)
+        return 0
 
     def accept(self, *masks: bytes) -> Acceptance:
         """`Expander.accept`; then drop cached outcomes the frontier cannot use."""
@@ -128,6 +141,15 @@ class Shard:
         """`ShardCore.claim`, one mask per worker (and a count first)."""
         masks = self.core.claim(list(blobs))
         return (len(self.core.parents), *masks)
+
+    def stored(self, *blobs: bytes) -> tuple[Any, ...]:
+        """`ShardCore.stored`, a count then one mask per worker."""
+        return (0, *self.core.stored(list(blobs)))
+
+    def clear(self) -> int:
+        """`ShardCore.clear`."""
+        self.core.clear()
+        return 0
 
     def add(self, keys: list[int], parents: list[int]) -> int:
         """`ShardCore.add`."""
@@ -169,6 +191,7 @@ class RayBackend:
 
     def __init__(self, spec: SystemSpec, expected: dict[str, str], workers: int) -> None:
         self.workers = workers
+        self.reduced = spec.reduction is not None
         self.shards = [Shard.remote() for _ in range(workers)]  # type: ignore[attr-defined]
         self.actors = [Worker.remote(spec, expected, workers)  # type: ignore[attr-defined]
                        for _ in range(workers)]
@@ -179,8 +202,12 @@ class RayBackend:
             raise
         self._bytes = [0] * workers
 
-    def load(self, frontier: list[Item], parents: dict[int, int]) -> RayBackend:
-        """Take over a search begun in this process: its frontier and visited set."""
+    def load(self, frontier: list[Item], parents: dict[int, int],
+             relation: tuple[Any, ...] | None = None) -> RayBackend:
+        """Take over a search begun in this process: its frontier, visited set and (a
+        reduced search) send relation."""
+        if relation is not None:
+            _get([a.relearn.remote(relation) for a in self.actors])
         parts: list[list[Item]] = [frontier[i::self.workers] for i in range(self.workers)]
         refs = [a.take.remote(pickle.dumps(p, protocol=pickle.HIGHEST_PROTOCOL))
                 for a, p in zip(self.actors, parts, strict=True)]
@@ -197,7 +224,15 @@ class RayBackend:
     def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
         """One level on the cluster (`coordinator.Backend.level`)."""
         n = self.workers
-        expanded = [a.expand.options(num_returns=n + 1).remote(max_depth) for a in self.actors]
+        stored: list[list[Any]] = [[] for _ in self.actors]
+        if self.reduced:  # the cycle proviso's questions first (`Expander.propose`)
+            proposed = [a.propose.options(num_returns=n + 1).remote(max_depth)
+                        for a in self.actors]
+            answered = [s.stored.options(num_returns=n + 1).remote(*[p[k + 1] for p in proposed])
+                        for k, s in enumerate(self.shards)]
+            stored = [[a[w + 1] for a in answered] for w in range(n)]
+        expanded = [a.expand.options(num_returns=n + 1).remote(max_depth, *stored[w])
+                    for w, a in enumerate(self.actors)]
         claimed = [s.claim.options(num_returns=n + 1).remote(*[e[k + 1] for e in expanded])
                    for k, s in enumerate(self.shards)]
         accepted = [a.accept.remote(*[c[w + 1] for c in claimed])
@@ -218,6 +253,11 @@ class RayBackend:
     def move(self, source: int, target: int, count: int) -> None:
         """`coordinator.Backend.move`: one blob, passed by reference."""
         _get(self.actors[target].take.remote(self.actors[source].give.remote(count)))
+
+    def reset(self, relation: tuple[Any, ...] | None) -> None:
+        """`coordinator.Backend.reset`: empty frontiers and shards."""
+        _get([a.relearn.remote(relation) for a in self.actors] +
+             [s.clear.remote() for s in self.shards])
 
     def snapshot(self) -> tuple[list[bytes], list[bytes]]:
         """`coordinator.Backend.snapshot`: every worker's frontier and shard's keys."""

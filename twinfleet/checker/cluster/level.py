@@ -17,16 +17,20 @@ that stays narrow.
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
-from typing import cast, final
+from typing import Any, cast, final
 
 import numpy as np
 
 from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.publications import Edge
+from twinfleet.checker.reduction import Reduction, ReductionStatistics
 from twinfleet.checker.system import System
+from twinfleet.checker.transition import Transition
 from twinfleet.checker.world import World
 
 ROOT = -1  # the parent key recorded for an initial world
@@ -64,6 +68,24 @@ class Expansion:
     claims: int = 0
 
 
+_COUNTERS = ("reduced", "full", "cycle_proviso", "commuted", "pairs", "refuted")
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class Learned:
+    """What a worker's reduced search learned and counted at one level."""
+
+    edges: frozenset[Edge]
+    unknown: str | None
+    counted: dict[str, int]
+    relied: frozenset[str]
+
+    def grew(self) -> bool:
+        """Whether the relation must grow (the search then starts again)."""
+        return bool(self.edges) or self.unknown is not None
+
+
 @final
 @dataclass(slots=True)
 class Acceptance:
@@ -74,33 +96,88 @@ class Acceptance:
     frontier: int = 0
     violation: tuple[PropertyViolation, int, int] | None = None  # violation, key, depth
     min_due: int | None = None
+    learned: Learned | None = None  # a reduced search's sends learned, counters
 
 
 @final
 class Expander:
-    """One worker's frontier and its level-by-level expansion (module docstring)."""
+    """One worker's frontier and its level-by-level expansion (module docstring).
 
-    def __init__(self, system: System, properties: PropertySet, shards: int) -> None:
+    With a `reduction` a level has two halves: `propose` finds each world's persistent
+    set and asks the shards whether the successors that stay at the world's instant are
+    stored (the cycle proviso; the shards hold exactly the worlds at most as deep as the
+    level then), and `expand` takes the sets, or every transition where one is.
+    """
+
+    def __init__(self, system: System, properties: PropertySet, shards: int,
+                 reduction: Reduction | None = None) -> None:
         self.system = system
         self.properties = properties
         self.shards = shards
+        self.reduction = reduction
         self.frontier: list[Item] = []
         self._pending: list[list[tuple[World, int]]] = []
+        self._proposals: list[tuple[Item, list[Transition], list[int] | None]] = []
+        self._probes: list[list[int]] = []
+        self._counted = ReductionStatistics()
 
-    def expand(self, max_depth: int | None) -> tuple[Expansion, list[bytes]]:
-        """Expand every frontier world; return the counts and one packed claim blob per
-        shard (keys then parent keys, uint64)."""
+    def propose(self, max_depth: int | None) -> list[bytes]:
+        """Reduced search, first half of a level: the persistent sets; one blob of keys
+        (uint64) per shard whose storing decides the cycle proviso."""
+        reduction = self.reduction
+        assert reduction is not None
+        self._proposals = []
+        probes: list[list[int]] = [[] for _ in range(self.shards)]
+        for item in self.frontier:
+            if max_depth is not None and item[2] >= max_depth:
+                continue
+            out, found = reduction.candidates(item[0])
+            keys = cast("list[int] | None", found)  # 64-bit digests: --exact-states stays home
+            self._proposals.append((item, out, keys))
+            for key in keys or ():
+                probes[owner(key, self.shards)].append(key)
+        self._probes = probes
+        return [np.array(k, dtype=np.uint64).tobytes() for k in probes]
+
+    def _level(self, max_depth: int | None, stored: list[bytes] | None, out: Expansion
+               ) -> Iterator[tuple[int, int, Iterable[Transition]]]:
+        """(key, depth, transitions taken) of every frontier world expanded at this level."""
+        if self.reduction is None:
+            for world, key, depth in self.frontier:
+                if max_depth is not None and depth >= max_depth:
+                    out.pruned = True
+                    continue
+                yield key, depth, self.system.successors(world)
+            return
+        out.pruned = len(self._proposals) < len(self.frontier)
+        found: set[int] = set()
+        for keys, mask in zip(self._probes, stored or [], strict=True):
+            found.update(k for k, hit in zip(keys, np.frombuffer(mask, dtype=np.bool_).tolist(),
+                                             strict=True) if hit)
+        reduction = self.reduction
+        for (world, key, depth), candidates, probes in self._proposals:
+            if probes is None:
+                taken = candidates
+            elif any(k in found for k in probes):
+                taken = reduction.full(world)
+            else:
+                taken = reduction.reduced(world, candidates)
+            yield key, depth, taken
+        self._proposals, self._probes = [], []
+
+    def expand(self, max_depth: int | None, stored: list[bytes] | None = None
+               ) -> tuple[Expansion, list[bytes]]:
+        """Expand every frontier world (reduced: by the sets `propose` found, `stored`
+        the shards' answers); return the counts and one packed claim blob per shard (keys
+        then parent keys, uint64)."""
         out = Expansion()
         seen: set[int] = set()
         worlds: list[list[tuple[World, int]]] = [[] for _ in range(self.shards)]
         keys: list[list[int]] = [[] for _ in range(self.shards)]
         parents: list[list[int]] = [[] for _ in range(self.shards)]
-        successors, shards = self.system.successors, self.shards
-        for world, key, depth in self.frontier:
-            if max_depth is not None and depth >= max_depth:
-                out.pruned = True
-                continue
-            for t in successors(world):
+        shards = self.shards
+        for key, depth, transitions in self._level(max_depth, stored, out):
+            for t in transitions:
                 out.transitions += 1
                 if t.failure is not None:
                     if out.failure is None:
@@ -118,6 +195,30 @@ class Expander:
         self._pending = worlds
         out.claims = len(seen)
         return out, [pack_pairs(k, p) for k, p in zip(keys, parents, strict=True)]
+
+    def learned(self) -> Learned | None:
+        """Reduced search, at the end of a level: the sends learned and the reduction's
+        counters since the last call, or None when nothing was learned nor counted."""
+        reduction = self.reduction
+        if reduction is None:
+            return None
+        now = dataclasses.replace(reduction.stats)
+        counted = {f: getattr(now, f) - getattr(self._counted, f) for f in _COUNTERS}
+        self._counted = now
+        edges, unknown = reduction.publications.learned()
+        return Learned(edges, unknown, counted, frozenset(reduction.relied))
+
+    def relearn(self, state: tuple[Any, ...]) -> None:
+        """Start again from scratch with the relation `state` (`Publications.__getstate__`
+        of the coordinator's, everything learned merged): an empty frontier, counters at 0."""
+        reduction = self.reduction
+        assert reduction is not None
+        reduction.publications.__setstate__(state)
+        reduction.publications.freeze()
+        reduction.stats = ReductionStatistics()
+        reduction.begin()
+        self._counted = ReductionStatistics()
+        self.frontier, self._pending, self._proposals, self._probes = [], [], [], []
 
     def accept(self, masks: list[bytes]) -> Acceptance:
         """Keep the claimed worlds the shards answered new; check the properties on them."""
@@ -139,6 +240,7 @@ class Expander:
                         out.violation = (violation, key, depth)
         self._pending = []
         out.frontier = len(frontier)
+        out.learned = self.learned()
         dues = [w.events[0].due for w, _, _ in frontier if w.events]
         out.min_due = min(dues) if dues else None
         return out
@@ -197,6 +299,17 @@ class ShardCore:
                     mask[i] = True
             out.append(mask.tobytes())
         return out
+
+    def stored(self, blobs: list[bytes]) -> list[bytes]:
+        """Whether each key of each blob (uint64 keys, from `Expander.propose`) is stored:
+        one mask per blob."""
+        parents = self.parents
+        return [np.array([k in parents for k in np.frombuffer(b, dtype=np.uint64).tolist()],
+                         dtype=np.bool_).tobytes() for b in blobs]
+
+    def clear(self) -> None:
+        """Forget every key (a reduced search starts again)."""
+        self.parents = {}
 
     def add(self, keys: list[int], parents: list[int]) -> None:
         """Enter known states (a search handed over from one process)."""

@@ -18,6 +18,7 @@ from pathlib import Path
 from typing import Any, final
 
 from twinfleet.checker.properties import PropertySet
+from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.system import System
 
 
@@ -38,9 +39,12 @@ class SystemSpec:
     timing: str | None = None
     latency: Any = field(default=None)  # System latency arguments, when a timing model set them
     topic_latency: Any = field(default=None)
+    reduction: str | None = None  # "por": the partial-order reduction runs on the workers too
 
-    def build(self) -> tuple[System, PropertySet]:
-        """The system and properties, as `checker.driver.check` builds them."""
+    def build(self) -> tuple[System, PropertySet, Reduction | None]:
+        """The system, properties and reduction, as `checker.driver.check` builds them
+        (a reduction learning level by level, `Publications.freeze`)."""
+        from twinfleet.checker.reduction import plan
         from twinfleet.runtime.scenario.overrides import load
 
         scenario = load(self.scenario, profile=self.profile, semantics=self.semantics,
@@ -48,7 +52,12 @@ class SystemSpec:
         props = PropertySet.from_scenario(scenario)
         extra = {} if self.latency is None else {"latency": self.latency,
                                                  "topic_latency": self.topic_latency}
-        return System(scenario, properties=props, **dict(self.flags), **extra), props
+        system = System(scenario, properties=props, **dict(self.flags), **extra)
+        reduction = None if self.reduction is None else plan(system, props, "bfs",
+                                                             self.reduction)[0]
+        if reduction is not None:
+            reduction.publications.freeze()
+        return system, props, reduction
 
 
 def fingerprint(system: System) -> dict[str, str]:
