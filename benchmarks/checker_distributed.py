@@ -1,22 +1,26 @@
 """The exhaustive search on Ray workers against one process, on wide searches.
 
-For each case, measured in this run: the single-process search (`twinfleet check
---reduction none`) and the distributed one on 1 and 2 Ray workers of a local cluster
-(started once, before the timed searches: its start-up is not in the figures), each for
-`--max-time` seconds or to the end. Printed per case: states, transitions, transitions/s,
-the ratio to the single process, levels, claims per state (16-byte messages to the shard
-owning a digest) and worlds moved between workers per state (work sharing). With
-`--two-nodes`: the same on a simulated two-node cluster (`ray.cluster_utils.Cluster`, one
-CPU per node).
+For each case, measured in this run: the single-process search (`twinfleet check`) and
+the distributed one on 1 and 2 Ray workers of a local cluster (started once, before the
+timed searches: its start-up is not in the figures), each for `--max-time` seconds or to
+the end. Printed per case: states, transitions, transitions/s, the ratio to the single
+process, handler runs (outcome-cache misses, all processes) per transition against the
+single process's, levels, claims per state (16-byte messages to the shard owning a
+digest) and worlds moved between workers per state (work sharing). With `--two-nodes`:
+the same on a simulated two-node cluster (`ray.cluster_utils.Cluster`, one CPU per node).
+With `--sweep`: a 24-point `twinfleet sweep` of C2a (r4's speed x the scan period), its
+points one after another against 2 local workers, wall time of each.
 
 Cases (every eventually property dropped: those keep a search in one process):
 - `c1a_jitter`: the paper's C1a (fixed profile, ros) with `check: {latency: {default:
   [0, 1]}}`, unreduced: levels of tens of thousands of worlds;
+- `c1a_jitter_por`: the same with the partial-order reduction (the issue's 5,994,253
+  states in 582 s on one core);
 - `lanes6`: six robots in separate lanes (benchmarks/checker_scaling.py), unreduced;
 - `crossing6`: six robots crossing on maps/random100, unreduced.
 
     python benchmarks/checker_distributed.py [--cases c1a_jitter,lanes6] [--max-time 60]
-        [--two-nodes]
+        [--two-nodes] [--sweep]
 
 This machine has 2 cores that Ray's own processes and the coordinator share with the
 workers: read the ratios, and run it on an otherwise idle machine.
@@ -26,8 +30,10 @@ from __future__ import annotations
 
 import argparse
 import re
+import subprocess
 import sys
 import tempfile
+import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 from pathlib import Path
@@ -44,7 +50,10 @@ from twinfleet.checker import CheckOptions, CheckResult, check  # noqa: E402
 from twinfleet.checker.cluster import engine_module  # noqa: E402
 from twinfleet.cli import main as cli  # noqa: E402
 
-CASES = ("c1a_jitter", "lanes6", "crossing6")
+CASES = ("c1a_jitter", "c1a_jitter_por", "lanes6", "crossing6")
+REDUCED = frozenset({"c1a_jitter_por"})
+SWEEP = ("c2a", "*.allow_unsafe_speed:=true", "--param", "r4.speed=0.3:1.0:0.1",
+         "--param", "scan_rate_ms=60:140:40", "--max-time", "120")  # 8 x 3 points
 
 
 def safety_only(path: Path, **check_block: Any) -> Path:
@@ -59,7 +68,7 @@ def safety_only(path: Path, **check_block: Any) -> Path:
 
 def scenario(case: str, out: Path) -> Path:
     """The scenario file of `case`, written into `out`."""
-    if case == "c1a_jitter":
+    if case in ("c1a_jitter", "c1a_jitter_por"):
         cli(["examples", "--copy", "c1a", str(out)])
         return safety_only(out / "c1a.yaml", latency={"default": [0, 1]})
     if case == "lanes6":
@@ -74,38 +83,66 @@ def _rate(result: CheckResult) -> float:
     return s.transitions / max(s.elapsed_s, 1e-9)
 
 
+def _number(pattern: str, text: str) -> float | None:
+    found = re.search(pattern, text)
+    return None if found is None else float(found.group(1).replace(",", ""))
+
+
+def _runs_per_transition(result: CheckResult) -> float:
+    runs = _number(r"([\d,]+) handler runs", result.engine or "")
+    total = result.handler_runs if runs is None else runs
+    return total / max(1, result.statistics.transitions)
+
+
 def _traffic(result: CheckResult) -> str:
     """Claims and moved worlds per state, read from the summary's engine line."""
     note = result.engine or ""
-    claims = re.search(r"([\d.]+) claims per state", note)
-    moved = re.search(r"([\d,]+) worlds moved", note)
-    levels = re.search(r"\((\d+) levels", note)
+    claims = _number(r"([\d.]+) claims per state", note)
+    moved = _number(r"([\d,]+) worlds moved", note)
+    levels = _number(r"\((\d+) levels", note)
     if claims is None or moved is None or levels is None:
         return f"(stayed in one process: {note})"
-    per_moved = int(moved.group(1).replace(",", "")) / max(1, result.statistics.states)
-    return (f"levels {levels.group(1)}, claims/state {claims.group(1)}, "
-            f"moved/state {per_moved:.3f}")
+    per_moved = moved / max(1, result.statistics.states)
+    return f"levels {levels:.0f}, claims/state {claims:.2f}, moved/state {per_moved:.3f}"
 
 
-def row(label: str, result: CheckResult, base: float | None) -> str:
+def row(label: str, result: CheckResult, base: CheckResult | None) -> str:
     s = result.statistics
-    ratio = "" if base is None else f"  x{_rate(result) / base:.2f}"
+    runs = _runs_per_transition(result)
+    ratio = "" if base is None else (
+        f"  x{_rate(result) / _rate(base):.2f}  handler runs x"
+        f"{runs / max(_runs_per_transition(base), 1e-12):.2f}")
     extra = "" if result.engine is None else f"  {_traffic(result)}"
     return (f"  {label:<22} {result.status.value:<8} states {s.states:>10,}  transitions "
-            f"{s.transitions:>11,}  {_rate(result):>9,.0f} tr/s{ratio}{extra}")
+            f"{s.transitions:>11,}  {_rate(result):>9,.0f} tr/s  runs/tr {runs:.3f}"
+            f"{ratio}{extra}")
 
 
 def measure(path: Path, max_time: float, session: Callable[[], AbstractContextManager[Any]],
-            workers: tuple[int, ...], label: str) -> None:
+            workers: tuple[int, ...], label: str, reduction: str) -> None:
     """One process, then `workers` on the cluster `session` makes, printed as rows."""
-    one = check(path, CheckOptions(reduction="none", max_time_s=max_time))
-    base = _rate(one)
+    one = check(path, CheckOptions(reduction=reduction, max_time_s=max_time))
     print(row("one process", one, None), flush=True)
     with session() as address:
         for n in workers:
-            many = check(path, CheckOptions(reduction="none", max_time_s=max_time, workers=n,
-                                            cluster=address, min_width=1))
-            print(row(f"{label}, {n} worker(s)", many, base), flush=True)
+            many = check(path, CheckOptions(reduction=reduction, max_time_s=max_time,
+                                            workers=n, cluster=address, min_width=1))
+            print(row(f"{label}, {n} worker(s)", many, one), flush=True)
+
+
+def sweep(out: Path) -> None:
+    """The 24-point sweep, serial then on 2 local workers (each with its own cache)."""
+    times = []
+    for workers in (1, 2):
+        start = time.perf_counter()
+        done = subprocess.run([sys.executable, "-m", "twinfleet", "sweep", *SWEEP, "--workers",
+                               str(workers), "--out", str(out / f"sweep{workers}")],
+                              capture_output=True, text=True, cwd=out, check=False)
+        times.append(time.perf_counter() - start)
+        if done.returncode not in (0, 1):
+            raise SystemExit(f"sweep failed: {done.stderr.strip().splitlines()[-1:]}")
+        print(f"  sweep, 24 points, {workers} worker(s): {times[-1]:.1f} s", flush=True)
+    print(f"  sweep speed-up on 2 workers: x{times[0] / times[1]:.2f}", flush=True)
 
 
 class _TwoNodes(AbstractContextManager[str]):
@@ -134,6 +171,8 @@ def main() -> None:
     p.add_argument("--max-time", type=float, default=60.0, help="seconds per search")
     p.add_argument("--two-nodes", action="store_true",
                    help="also run 2 workers on a simulated two-node cluster")
+    p.add_argument("--sweep", action="store_true",
+                   help="also time a 24-point sweep, serial against 2 workers")
     args = p.parse_args()
     engine = engine_module()  # before Ray is imported: a loopback cluster
 
@@ -145,10 +184,15 @@ def main() -> None:
             out = Path(tmp) / case
             out.mkdir()
             path = scenario(case, out)
-            print(f"{case} (unreduced, up to {args.max_time:g} s per search):", flush=True)
-            measure(path, args.max_time, local, (1, 2), "local Ray")
+            reduction = "por" if case in REDUCED else "none"
+            print(f"{case} (reduction {reduction}, up to {args.max_time:g} s per search):",
+                  flush=True)
+            measure(path, args.max_time, local, (1, 2), "local Ray", reduction)
             if args.two_nodes:
-                measure(path, args.max_time, _TwoNodes, (2,), "two nodes")
+                measure(path, args.max_time, _TwoNodes, (2,), "two nodes", reduction)
+        if args.sweep:
+            print("sweep (C2a, r4.speed 0.3-1.0 x scan_rate_ms 60-140):", flush=True)
+            sweep(Path(tmp))
 
 
 class _Local(AbstractContextManager[str]):

@@ -101,6 +101,7 @@ class CheckResult:
     reduction_statistics: dict[str, int] | None = None
     params: tuple[str, ...] = ()  # the parameter overrides checked with
     engine: str | None = None  # where the search ran, when workers were asked for
+    handler_runs: int = 0  # handlers run by this process (its outcome cache missed)
 
     @property
     def rmc_transitions(self) -> int:
@@ -269,7 +270,8 @@ def check(scenario: str | Path | Scenario | None,
                          resumed_from=options.resume, warnings=warnings,
                          reduction=describe(reduction, reduction_name, strategy),
                          reduction_statistics=None if reduction is None else
-                         reduction.statistics(), params=tuple(meta["params"]), engine=engine)
+                         reduction.statistics(), params=tuple(meta["params"]), engine=engine,
+                         handler_runs=system.runner.handler_runs)
     if outcome.violation is not None and outcome.counterexample is not None:
         try:
             result.trace = build_trace(system, outcome.violation, outcome.counterexample,

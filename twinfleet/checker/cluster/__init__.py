@@ -120,7 +120,8 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
                 "worlds (--min-width)")
     else:
         per = t.claims / max(1, outcome.statistics.states)
+        runs = system.runner.handler_runs + sum(t.handler_runs)
         note = (f"strict BFS on {workers} Ray worker(s) from depth "
                 f"{coordinator.distributed_at} ({t.levels} levels, {per:.2f} claims per "
-                f"state, {t.stolen:,} worlds moved in {t.moves} blobs)")
+                f"state, {t.stolen:,} worlds moved in {t.moves} blobs, {runs:,} handler runs)")
     return Distributed(outcome, note, t)

@@ -159,6 +159,7 @@ class Traffic:
     moves: int = 0  # blobs moved
     levels: int = 0  # barriers
     new_per_worker: list[int] = field(default_factory=list)
+    handler_runs: list[int] = field(default_factory=list)  # per worker, so far
 
 
 Factory = Callable[[], Backend]  # the cluster's backend, started empty
@@ -316,6 +317,8 @@ class Coordinator:
         t.claims += sum(e.claims for e in expansions) if self.backend is not self.local else 0
         if len(t.new_per_worker) < len(acceptances):
             t.new_per_worker = [0] * len(acceptances)
+        if self.backend is not self.local:
+            t.handler_runs = [a.handler_runs for a in acceptances]
         self.transitions += sum(e.transitions for e in expansions)
         for i, a in enumerate(acceptances):
             self.states += a.new

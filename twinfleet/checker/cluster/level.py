@@ -97,6 +97,7 @@ class Acceptance:
     violation: tuple[PropertyViolation, int, int] | None = None  # violation, key, depth
     min_due: int | None = None
     learned: Learned | None = None  # a reduced search's sends learned, counters
+    handler_runs: int = 0  # handlers this worker has run so far (its outcome cache missed)
 
 
 @final
@@ -241,6 +242,7 @@ class Expander:
         self._pending = []
         out.frontier = len(frontier)
         out.learned = self.learned()
+        out.handler_runs = self.system.runner.handler_runs
         dues = [w.events[0].due for w, _, _ in frontier if w.events]
         out.min_due = min(dues) if dues else None
         return out
