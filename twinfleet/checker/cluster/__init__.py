@@ -1,10 +1,11 @@
 """The search on several processes or machines (Ray), behind the checker's seams.
 
-`distributed(...)` runs a check's safety search as a strict BFS over worker
-and shard actors (`checker.cluster.coordinator`, design in
-docs/distributed.md) and returns its `Outcome` with a line for the summary,
-or None with the reason the search must run in one process instead (a
-reduced search, `eventually` properties, random walks). A distributed search
+`distributed(...)` runs a check's search as a strict BFS over worker and
+shard actors (`checker.cluster.coordinator`, design in docs/distributed.md),
+reduced or not, with `eventually` properties decided on the graph gathered
+to the coordinator, and returns its `Outcome` with a line for the summary;
+`why_local` says when a search must run in one process instead (random
+walks, a reduced search of `eventually` properties). A distributed search
 saves itself to a checkpoint file and continues one on any number of workers
 (`Checkpointing`, `is_distributed_checkpoint`). Only
 `checker.cluster.engine` imports Ray, and only when a search first gets wide
@@ -49,12 +50,14 @@ class Distributed:
     traffic: Traffic
 
 
-def why_local(strategy: str, properties: PropertySet) -> str | None:
+def why_local(strategy: str, reduced: bool, properties: PropertySet) -> str | None:
     """Why this search runs in one process even though workers were asked for, or None."""
     if strategy == "random":
         return "random walks run in one process"
-    if properties.eventually:
-        return "eventually properties need the whole graph: the search runs in one process"
+    if properties.eventually and reduced:
+        return ("a reduced search of eventually properties runs in one process: its "
+                "rising-goal rule is learned in the global order (use --reduction none to "
+                "distribute, the lasso search then runs on the gathered graph)")
     return None
 
 
@@ -124,4 +127,6 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
         note = (f"strict BFS on {workers} Ray worker(s) from depth "
                 f"{coordinator.distributed_at} ({t.levels} levels, {per:.2f} claims per "
                 f"state, {t.stolen:,} worlds moved in {t.moves} blobs, {runs:,} handler runs)")
+    if properties.eventually:
+        note += "; eventually properties: lasso search on the graph gathered to this process"
     return Distributed(outcome, note, t)

@@ -29,7 +29,6 @@ number of workers, this process included.
 from __future__ import annotations
 
 import dataclasses
-import pickle
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
@@ -41,9 +40,11 @@ from twinfleet.checker.cluster.level import (
     Acceptance,
     Expander,
     Expansion,
+    Graph,
     Item,
     Learned,
     ShardCore,
+    unpack,
     visited_from,
 )
 from twinfleet.checker.cluster.spec import ClusterError
@@ -58,8 +59,10 @@ from twinfleet.checker.outcome import (
     Stop,
     peak_rss_mb,
 )
+from twinfleet.checker.paths import lasso_counterexample
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.reduction import Reduction, ReductionStatistics
+from twinfleet.checker.store import StateStore
 from twinfleet.checker.system import System
 from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import FailureKind, Status
@@ -102,6 +105,10 @@ class Backend(Protocol):
 
     def reset(self, relation: tuple[Any, ...] | None) -> None:
         """Forget the search (a reduced search starts again with `relation`)."""
+        ...
+
+    def graphs(self) -> list[Graph]:
+        """What every worker saw of the graph (`eventually` properties), at the end."""
         ...
 
 
@@ -147,6 +154,10 @@ class LocalBackend:
     def reset(self, relation: tuple[Any, ...] | None) -> None:
         """Never called: a restart makes a new local backend."""
         raise AssertionError("the local backend is not reset")
+
+    def graphs(self) -> list[Graph]:
+        """`Backend.graphs`."""
+        return [] if self.expander.graph is None else [self.expander.graph]
 
 
 @final
@@ -253,6 +264,8 @@ class Coordinator:
             if outcome is not None:
                 return outcome
             self._maybe_save()
+        if self.properties.eventually:
+            return self._liveness()
         return self._outcome(Status.HOLDS, "every property holds")
 
     def _to_cluster(self, factory: Factory) -> None:
@@ -302,6 +315,8 @@ class Coordinator:
             shard.parents[key] = ROOT
             self.roots[key] = t.step.choices
             self.states += 1
+            if self.local.expander.graph is not None:
+                self.local.expander.graph.keep(self.system, self.properties, t.world, key)
             violation = self.properties.check_world(self.system, t.world)
             if violation is not None:
                 return self._violated(violation, Counterexample(t.step.choices, ()))
@@ -359,6 +374,45 @@ class Coordinator:
             self.backend.move(busy, idle, gap // 2)
             self.traffic.stolen += gap // 2
             self.traffic.moves += 1
+
+    # ------------------------------------------------------------- liveness
+
+    def _liveness(self) -> Outcome:
+        """Every `eventually` property, by the lasso search of one process, on the graph
+        the workers saw, gathered here (`checker.paths`)."""
+        store = self._gathered()
+        for prop in self.properties.eventually:
+            found = lasso_counterexample(self.system, store, prop)
+            if found is not None:
+                return self._violated(*found)
+        return self._outcome(Status.HOLDS, "every property holds")
+
+    def _gathered(self) -> StateStore:
+        """The whole graph as a one-process search records it: ids, first-discovery
+        parents, roots, terminal worlds, the properties' bits and the successor ids."""
+        graph = Graph()
+        for part in (*self.local.graphs(), *(self.backend.graphs()
+                                             if self.backend is not self.local else ())):
+            graph.extend(part)
+        parents = self.local.shard.parents if self.backend is self.local else \
+            visited_from(self.backend.snapshot()[1], self.roots)
+        names = tuple(p.name for p in self.properties.eventually)
+        store = StateStore(record_edges=True, flags=names)
+        for i, key in enumerate(graph.keys):
+            store.add(key, -1, terminal=bool(graph.terminal[i]))
+            for name, bits in zip(names, graph.holds, strict=True):
+                store.holds[name].append(bits[i])
+        for sid, key in enumerate(graph.keys):
+            parent = parents[key]
+            store.parent[sid] = -1 if parent == ROOT else store.find(parent)
+        for key, choices in self.roots.items():
+            store.roots[store.find(key)] = choices
+        edges, find, at = store.edges, store.find, 0
+        assert edges is not None
+        for key, count in zip(graph.expanded, graph.counts, strict=True):
+            edges.set(find(key), [find(c) for c in graph.children[at:at + count]])
+            at += count
+        return store
 
     # ------------------------------------------------------------- answers
 
@@ -429,9 +483,13 @@ class Coordinator:
             self.reduction.stats = ReductionStatistics(**c["reduction"])
             self.reduction.begin()
         self.local.shard.parents = visited_from(data["store"]["visited"], self.roots)
-        self.local.expander.frontier = [item for blob in data["frontier"]
-                                        for item in pickle.loads(blob)]  # noqa: S301
-        self.frontier = len(self.local.expander.frontier)
+        expander = self.local.expander
+        for blob in data["frontier"]:
+            frontier, graph = unpack(blob)
+            expander.frontier += frontier
+            if graph is not None and expander.graph is not None:
+                expander.graph.extend(graph)
+        self.frontier = len(expander.frontier)
         self._restored = True
 
     def _violated(self, violation: PropertyViolation, path: Counterexample) -> Outcome:

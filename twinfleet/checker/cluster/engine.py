@@ -21,7 +21,15 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, final
 
-from twinfleet.checker.cluster.level import Acceptance, Expander, Expansion, Item, ShardCore, owner
+from twinfleet.checker.cluster.level import (
+    Acceptance,
+    Expander,
+    Expansion,
+    Graph,
+    Item,
+    ShardCore,
+    owner,
+)
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint, mismatch
 
 try:
@@ -128,6 +136,10 @@ class Worker:
     def packed(self) -> bytes:
         """`Expander.packed`."""
         return self.core.packed()
+
+    def graph(self) -> bytes:
+        """The worker's graph records (`Expander.graph`), pickled."""
+        return pickle.dumps(self.core.graph, protocol=pickle.HIGHEST_PROTOCOL)
 
 
 @ray.remote(num_cpus=0)
@@ -253,6 +265,11 @@ class RayBackend:
     def move(self, source: int, target: int, count: int) -> None:
         """`coordinator.Backend.move`: one blob, passed by reference."""
         _get(self.actors[target].take.remote(self.actors[source].give.remote(count)))
+
+    def graphs(self) -> list[Graph]:
+        """`coordinator.Backend.graphs`."""
+        found = [pickle.loads(b) for b in _get([a.graph.remote() for a in self.actors])]
+        return [g for g in found if g is not None]
 
     def reset(self, relation: tuple[Any, ...] | None) -> None:
         """`coordinator.Backend.reset`: empty frontiers and shards."""

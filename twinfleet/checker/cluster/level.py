@@ -72,6 +72,44 @@ _COUNTERS = ("reduced", "full", "cycle_proviso", "commuted", "pairs", "refuted")
 
 
 @final
+@dataclass(slots=True)
+class Graph:
+    """What a worker saw of the graph, for `eventually` properties (a lasso search over
+    the whole graph, gathered to the coordinator): every world it kept (key, whether
+    nothing is pending there, whether each property holds there) and the successor keys
+    of every world it expanded."""
+
+    keys: list[int] = field(default_factory=list)
+    terminal: bytearray = field(default_factory=bytearray)
+    holds: list[bytearray] = field(default_factory=list)  # one per eventually property
+    expanded: list[int] = field(default_factory=list)
+    counts: list[int] = field(default_factory=list)
+    children: list[int] = field(default_factory=list)
+
+    def keep(self, system: System, properties: PropertySet, world: World, key: int) -> None:
+        """Record a world the search keeps."""
+        self.keys.append(key)
+        self.terminal.append(not world.events)
+        if not self.holds:
+            self.holds = [bytearray() for _ in properties.eventually]
+        for bits, prop in zip(self.holds, properties.eventually, strict=True):
+            assert prop.expr is not None
+            bits.append(prop.expr.holds(system, world.states, world.now))
+
+    def extend(self, other: Graph) -> None:
+        """Add another worker's records."""
+        self.keys += other.keys
+        self.terminal += other.terminal
+        if not self.holds:
+            self.holds = [bytearray() for _ in other.holds]
+        for mine, theirs in zip(self.holds, other.holds, strict=False):
+            mine += theirs
+        self.expanded += other.expanded
+        self.counts += other.counts
+        self.children += other.children
+
+
+@final
 @dataclass(frozen=True, slots=True)
 class Learned:
     """What a worker's reduced search learned and counted at one level."""
@@ -121,6 +159,7 @@ class Expander:
         self._proposals: list[tuple[Item, list[Transition], list[int] | None]] = []
         self._probes: list[list[int]] = []
         self._counted = ReductionStatistics()
+        self.graph = Graph() if properties.eventually else None
 
     def propose(self, max_depth: int | None) -> list[bytes]:
         """Reduced search, first half of a level: the persistent sets; one blob of keys
@@ -176,8 +215,11 @@ class Expander:
         worlds: list[list[tuple[World, int]]] = [[] for _ in range(self.shards)]
         keys: list[list[int]] = [[] for _ in range(self.shards)]
         parents: list[list[int]] = [[] for _ in range(self.shards)]
-        shards = self.shards
+        shards, graph = self.shards, self.graph
         for key, depth, transitions in self._level(max_depth, stored, out):
+            if graph is not None:
+                graph.expanded.append(key)
+                graph.counts.append(0)
             for t in transitions:
                 out.transitions += 1
                 if t.failure is not None:
@@ -185,6 +227,9 @@ class Expander:
                         out.failure = Failure(key, depth + 1)
                     continue
                 child = cast(int, t.world.key)  # --exact-states never runs here
+                if graph is not None:
+                    graph.counts[-1] += 1
+                    graph.children.append(child)
                 if child in seen:
                     continue
                 seen.add(child)
@@ -220,6 +265,7 @@ class Expander:
         reduction.begin()
         self._counted = ReductionStatistics()
         self.frontier, self._pending, self._proposals, self._probes = [], [], [], []
+        self.graph = Graph() if self.properties.eventually else None
 
     def accept(self, masks: list[bytes]) -> Acceptance:
         """Keep the claimed worlds the shards answered new; check the properties on them."""
@@ -235,6 +281,8 @@ class Expander:
                 out.depth = max(out.depth, depth)
                 key = cast(int, world.key)
                 frontier.append((world, key, depth))
+                if self.graph is not None:
+                    self.graph.keep(self.system, self.properties, world, key)
                 if out.violation is None:
                     violation = check(self.system, world)
                     if violation is not None:
@@ -264,8 +312,15 @@ class Expander:
         return len(self.frontier)
 
     def packed(self) -> bytes:
-        """The whole frontier as one blob (`take` reads it), kept here (a checkpoint)."""
-        return pickle.dumps(self.frontier, protocol=pickle.HIGHEST_PROTOCOL)
+        """The frontier and the graph records as one blob (`unpack`), kept here (a
+        checkpoint)."""
+        return pickle.dumps((self.frontier, self.graph), protocol=pickle.HIGHEST_PROTOCOL)
+
+
+def unpack(blob: bytes) -> tuple[list[Item], Graph | None]:
+    """The frontier and graph records of an `Expander.packed` blob."""
+    frontier, graph = pickle.loads(blob)  # noqa: S301 - our own checkpoint
+    return frontier, graph
 
 
 def pack_pairs(keys: list[int], parents: list[int]) -> bytes:
