@@ -118,21 +118,14 @@ def test_a_violated_paper_case_with_two_workers(tmp_path: Path) -> None:
     assert_same_answer(check(path, CheckOptions(reduction="none")), distributed(path, 2))
 
 
-def _safety_only(doc: dict[str, Any]) -> dict[str, Any]:
-    doc = dict(doc)
-    doc["properties"] = [p for p in doc.get("properties", []) if p.get("kind") != "eventually"]
-    return doc
-
-
 @settings(max_examples=20, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(doc=systems(), workers=st.sampled_from([1, 2, 3]),
        reduction=st.sampled_from(["none", "por"]))
 def test_generated_systems(tmp_path: Path, doc: dict[str, Any], workers: int,
                            reduction: str) -> None:
-    # unreduced, eventually properties stay: the lasso search runs on the gathered graph
-    path = write_scenario(doc if reduction == "none" else _safety_only(doc),
-                          tmp_path / "generated.yaml")
+    # eventually properties stay: the lasso search runs on the gathered graph
+    path = write_scenario(doc, tmp_path / "generated.yaml")
     one = check(path, CheckOptions(reduction=reduction, max_states=1_000))
     assume(one.status.value != "unknown")  # a search cut by a limit proves nothing
     many = distributed(path, workers, max_states=1_000, reduction=reduction,
@@ -150,13 +143,11 @@ def test_a_worker_with_other_node_sources_refuses_to_start(tmp_path: Path, engin
         engine.RayBackend(spec, expected, 2)
 
 
-def test_a_reduced_liveness_search_says_it_stays_in_one_process(tmp_path: Path) -> None:
+def test_random_walks_say_they_stay_in_one_process(tmp_path: Path) -> None:
     cli(["examples", "--copy", "headon", str(tmp_path)])
-    path = tmp_path / "headon.yaml"
-    lasso = check(path, CheckOptions(workers=2, cluster="this"))
-    assert "reduced search of eventually properties runs in one process" in \
-        (lasso.engine or ""), lasso.engine
-    assert lasso.status == check(path, CheckOptions()).status
+    walks = check(tmp_path / "headon.yaml", CheckOptions(workers=2, cluster="this",
+                                                         search="random", walks=5))
+    assert "random walks run in one process" in (walks.engine or ""), walks.engine
 
 
 _LOOPBACK = {"0100007F", "0000000000000000FFFF00000100007F", "00000000000000000000000001000000"}

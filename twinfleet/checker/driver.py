@@ -298,7 +298,7 @@ def _distributed(system: System, props: PropertySet, strategy: str, reduction: R
     `resume` if given, or None and why it runs here."""
     from twinfleet.checker.cluster import Checkpointing, SystemSpec, distributed, why_local
 
-    local = why_local(strategy, reduction is not None, props)
+    local = why_local(strategy)
     if local is not None:
         return None, local
     if path is None or options.exact_states:

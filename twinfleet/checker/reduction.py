@@ -53,7 +53,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Final, final
+from typing import TYPE_CHECKING, Any, Final, final
 
 from twinfleet.checker.closure import Closure
 from twinfleet.checker.commuting import loose_nodes
@@ -167,10 +167,31 @@ class Reduction:
         self.stats.rises = self.visibility.rises
         return self.stats.to_json()
 
+    def freeze(self) -> None:
+        """Learn level by level (`Publications.freeze`): the send relation, and the fall of
+        a rising goal."""
+        self.publications.freeze()
+        self.visibility.frozen = True
+
+    def learned_state(self) -> tuple[Any, ...]:
+        """What this search learned (the send relation, the rising-goal rule), for
+        `relearn` on another worker or a checkpoint."""
+        return (self.publications.__getstate__(), self.visibility.rising, self.visibility.fell)
+
+    def relearn(self, state: tuple[Any, ...]) -> None:
+        """Start again from scratch with what `learned_state` gave, frozen, counters at 0."""
+        self.publications.__setstate__(state[0])
+        self.visibility.rising, self.visibility.fell = state[1], state[2]
+        self.visibility.pending_fall, self.visibility.rises = None, 0
+        self.freeze()
+        self.stats = ReductionStatistics()
+        self.begin()
+
     def restarted(self) -> None:
         """Count a restart, and add what the search learned while frozen to the relation;
         the other counters start again with the search."""
         self.publications.commit()
+        self.visibility.commit()
         self.stats = ReductionStatistics(restarts=self.stats.restarts + 1)
         self.visibility.rises = 0
 
@@ -180,7 +201,8 @@ class Reduction:
         search must restart)."""
         publications = self.publications
         return publications.version != self._version or bool(publications.pending) or \
-            publications.pending_unknown is not None or self.visibility.rising != self._rising
+            publications.pending_unknown is not None or \
+            self.visibility.pending_fall is not None or self.visibility.rising != self._rising
 
     @property
     def disabled(self) -> str | None:

@@ -208,6 +208,9 @@ class Search:
                     "hashed": self.system.hashed + self._hashed_before,
                     "strategy": "dfs" if self._lifo else "bfs", "level": self._level,
                     "publications": self.system.publications.__getstate__(),
+                    "visibility": None if self.reduction is None else
+                    (self.reduction.visibility.rising, self.reduction.visibility.fell,
+                     self.reduction.visibility.pending_fall),
                     "reduction": None if self.reduction is None else self.reduction.stats}
         checkpoint.save(path, self._checkpoint_meta, self.store, list(self._frontier), counters)
         self._last_checkpoint = time.monotonic()
@@ -226,6 +229,9 @@ class Search:
             self.system.publications.__setstate__(c["publications"])
         if self.reduction is not None and c.get("reduction") is not None:
             self.reduction.stats = c["reduction"]
+        if self.reduction is not None and c.get("visibility") is not None:
+            visibility = self.reduction.visibility
+            visibility.rising, visibility.fell, visibility.pending_fall = c["visibility"]
         self._resumed = True
 
     # -------------------------------------------------------- safety search
@@ -236,7 +242,7 @@ class Search:
         the end of the level in a BFS, which learns level by level (`Publications.freeze`)."""
         reduction = self.reduction
         if reduction is not None and not self._lifo:
-            reduction.publications.freeze()
+            reduction.freeze()
         while True:
             if reduction is not None:
                 reduction.begin()

@@ -217,13 +217,18 @@ class Visibility:
         #: the rising-goal relaxation holds (no falling transition seen); why not, if not
         self.rising = any(self._rising)
         self.fell: str | None = None
+        #: a BFS learns level by level (`Publications.freeze`): a fall seen while frozen
+        #: waits here, the relaxation still on, until the search restarts (`commit`)
+        self.frozen = False
+        self.pending_fall: str | None = None
         self.rises = 0  # events a rising goal let through (for the statistics)
         self._rose: set[tuple[int, bytes, bytes]] = set()  # (node, before, after) seen not to fall
 
     def observe(self, system: System, world: World, transitions: Iterable[Transition]) -> None:
         """Check that no transition makes an atom of a rising goal fall; the first that does
-        turns the relaxation off (`rising`; the search must restart)."""
-        if not self.rising:
+        turns the relaxation off (`rising`; the search must restart), or, frozen, is noted
+        (`pending_fall`)."""
+        if not self.rising or self.pending_fall is not None:
             return
         rising, seen = self._rising, self._rose
         before = world.states
@@ -237,13 +242,24 @@ class Visibility:
                     continue
                 for expr in rising[node]:
                     if expr.falls(system, before, tr.world.states, node):
-                        self.rising = False
-                        self.fell = (f"{system.names[node]}.{tr.event.method} makes an atom "
-                                     f"of `{expr.source}` false")
+                        fell = (f"{system.names[node]}.{tr.event.method} makes an atom of "
+                                f"`{expr.source}` false")
+                        if self.frozen:
+                            self.pending_fall = fell
+                        else:
+                            self.rising, self.fell = False, fell
                         return
                 if len(seen) >= _CACHE_LIMIT:
                     seen.clear()
                 seen.add(key)
+
+    def commit(self, fell: str | None = None) -> None:
+        """Turn the relaxation off if a fall was noted here, or `fell` (noted by another
+        worker), when the search restarts."""
+        fell = self.pending_fall or fell
+        if fell is not None and self.rising:
+            self.rising, self.fell = False, fell
+        self.pending_fall = None
 
     def needs(self, system: System, world: World, chosen: Sequence[int],
               frozen: set[int], acyclic: Callable[[], bool] | None = None) -> set[int] | None:

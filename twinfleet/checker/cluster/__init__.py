@@ -5,7 +5,7 @@ shard actors (`checker.cluster.coordinator`, design in docs/distributed.md),
 reduced or not, with `eventually` properties decided on the graph gathered
 to the coordinator, and returns its `Outcome` with a line for the summary;
 `why_local` says when a search must run in one process instead (random
-walks, a reduced search of `eventually` properties). A distributed search
+walks). A distributed search
 saves itself to a checkpoint file and continues one on any number of workers
 (`Checkpointing`, `is_distributed_checkpoint`). Only
 `checker.cluster.engine` imports Ray, and only when a search first gets wide
@@ -50,14 +50,10 @@ class Distributed:
     traffic: Traffic
 
 
-def why_local(strategy: str, reduced: bool, properties: PropertySet) -> str | None:
+def why_local(strategy: str) -> str | None:
     """Why this search runs in one process even though workers were asked for, or None."""
     if strategy == "random":
         return "random walks run in one process"
-    if properties.eventually and reduced:
-        return ("a reduced search of eventually properties runs in one process: its "
-                "rising-goal rule is learned in the global order (use --reduction none to "
-                "distribute, the lasso search then runs on the gathered graph)")
     return None
 
 

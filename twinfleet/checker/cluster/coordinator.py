@@ -213,7 +213,7 @@ class Coordinator:
         self.checkpointing = checkpointing
         self.reduction = reduction
         if reduction is not None:
-            reduction.publications.freeze()
+            reduction.freeze()
             reduction.begin()
         self.guard = Guard(limits, None, interval, handle_sigint=True)
         self.local = LocalBackend(system, properties, reduction)
@@ -283,7 +283,7 @@ class Coordinator:
             self.distributed_at = self.level
 
     def _relation(self) -> tuple[Any, ...] | None:
-        return None if self.reduction is None else self.reduction.publications.__getstate__()
+        return None if self.reduction is None else self.reduction.learned_state()
 
     def _restart(self, learned: list[Learned]) -> None:
         """Some worker learned a send: merge what all learned and search from scratch."""
@@ -291,6 +291,7 @@ class Coordinator:
         assert reduction is not None
         for found in learned:
             reduction.publications.commit(found.edges, found.unknown)
+            reduction.visibility.commit(found.fell)
         reduction.restarted()
         reduction.begin()
         if self.cluster is not None:
@@ -430,7 +431,9 @@ class Coordinator:
             return
         stats = self.reduction.stats
         for found in learned:
-            for name, value in found.counted.items():
+            counted = dict(found.counted)
+            self.reduction.visibility.rises += counted.pop("rises", 0)
+            for name, value in counted.items():
                 setattr(stats, name, getattr(stats, name) + value)
             self.reduction.relied |= found.relied
 
@@ -462,7 +465,7 @@ class Coordinator:
                     "roots": self.roots, "traffic": dataclasses.asdict(self.traffic),
                     "publications": self._relation(),
                     "reduction": None if self.reduction is None else
-                    dataclasses.asdict(self.reduction.stats)}
+                    self.reduction.statistics()}
         ckpt.save(plan.path, {**plan.meta, "engine": ENGINE}, {"visited": visited}, frontier,
                   counters)
         self._last_save = time.monotonic()
@@ -479,9 +482,9 @@ class Coordinator:
         self._elapsed_before, self.roots = c["elapsed"], c["roots"]
         self.traffic = Traffic(**c["traffic"])
         if self.reduction is not None and c.get("publications") is not None:
-            self.reduction.publications.__setstate__(c["publications"])
+            self.reduction.relearn(c["publications"])
             self.reduction.stats = ReductionStatistics(**c["reduction"])
-            self.reduction.begin()
+            self.reduction.visibility.rises = self.reduction.stats.rises
         self.local.shard.parents = visited_from(data["store"]["visited"], self.roots)
         expander = self.local.expander
         for blob in data["frontier"]:

@@ -116,12 +116,13 @@ class Learned:
 
     edges: frozenset[Edge]
     unknown: str | None
+    fell: str | None  # a rising goal's atom seen falling (`Visibility.pending_fall`)
     counted: dict[str, int]
     relied: frozenset[str]
 
     def grew(self) -> bool:
-        """Whether the relation must grow (the search then starts again)."""
-        return bool(self.edges) or self.unknown is not None
+        """Whether what the search relies on changed (it then starts again)."""
+        return bool(self.edges) or self.unknown is not None or self.fell is not None
 
 
 @final
@@ -159,6 +160,7 @@ class Expander:
         self._proposals: list[tuple[Item, list[Transition], list[int] | None]] = []
         self._probes: list[list[int]] = []
         self._counted = ReductionStatistics()
+        self._rises = 0
         self.graph = Graph() if properties.eventually else None
 
     def propose(self, max_depth: int | None) -> list[bytes]:
@@ -250,20 +252,20 @@ class Expander:
             return None
         now = dataclasses.replace(reduction.stats)
         counted = {f: getattr(now, f) - getattr(self._counted, f) for f in _COUNTERS}
-        self._counted = now
+        counted["rises"] = reduction.visibility.rises - self._rises
+        self._counted, self._rises = now, reduction.visibility.rises
         edges, unknown = reduction.publications.learned()
-        return Learned(edges, unknown, counted, frozenset(reduction.relied))
+        return Learned(edges, unknown, reduction.visibility.pending_fall, counted,
+                       frozenset(reduction.relied))
 
     def relearn(self, state: tuple[Any, ...]) -> None:
-        """Start again from scratch with the relation `state` (`Publications.__getstate__`
-        of the coordinator's, everything learned merged): an empty frontier, counters at 0."""
+        """Start again from scratch with `state` (`Reduction.learned_state` of the
+        coordinator's, everything learned merged): an empty frontier, counters at 0."""
         reduction = self.reduction
         assert reduction is not None
-        reduction.publications.__setstate__(state)
-        reduction.publications.freeze()
-        reduction.stats = ReductionStatistics()
-        reduction.begin()
+        reduction.relearn(state)
         self._counted = ReductionStatistics()
+        self._rises = 0
         self.frontier, self._pending, self._proposals, self._probes = [], [], [], []
         self.graph = Graph() if self.properties.eventually else None
 

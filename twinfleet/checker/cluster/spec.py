@@ -56,7 +56,7 @@ class SystemSpec:
         reduction = None if self.reduction is None else plan(system, props, "bfs",
                                                              self.reduction)[0]
         if reduction is not None:
-            reduction.publications.freeze()
+            reduction.freeze()
         return system, props, reduction
 
 
