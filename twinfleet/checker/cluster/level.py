@@ -20,6 +20,7 @@ from __future__ import annotations
 import dataclasses
 import pickle
 import sys
+from array import array
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from typing import Any, cast, final
@@ -79,12 +80,12 @@ class Graph:
     nothing is pending there, whether each property holds there) and the successor keys
     of every world it expanded."""
 
-    keys: list[int] = field(default_factory=list)
+    keys: array[int] = field(default_factory=lambda: array("Q"))
     terminal: bytearray = field(default_factory=bytearray)
     holds: list[bytearray] = field(default_factory=list)  # one per eventually property
-    expanded: list[int] = field(default_factory=list)
-    counts: list[int] = field(default_factory=list)
-    children: list[int] = field(default_factory=list)
+    expanded: array[int] = field(default_factory=lambda: array("Q"))
+    counts: array[int] = field(default_factory=lambda: array("I"))
+    children: array[int] = field(default_factory=lambda: array("Q"))
 
     def keep(self, system: System, properties: PropertySet, world: World, key: int) -> None:
         """Record a world the search keeps."""
