@@ -9,13 +9,17 @@ that builds what it needs in the process that first calls it).
 
 Engines: `workers <= 1` runs in this process; more runs a
 `concurrent.futures.ProcessPoolExecutor` kept for the whole command
-(`ProcessEngine`). With a cluster address, `checker.cluster.engine.RayEngine`
+(`ProcessEngine`), whose processes come from a fork server: a plain fork
+copies the caller's threads' locks as they are (an experiment forks after
+its live fleets have run Zenoh threads here), and a copied lock that was
+held is held for ever in the child. With a cluster address, `checker.cluster.engine.RayEngine`
 sends each slice to the Ray cluster as a task and returns the slices' results
 in the order given (`check --statistical --workers N --cluster ADDRESS`).
 """
 
 from __future__ import annotations
 
+import multiprocessing
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from typing import Protocol, TypeVar, final
@@ -58,7 +62,8 @@ class ProcessEngine:
 
     def __init__(self, workers: int) -> None:
         self.workers = workers
-        self._pool = ProcessPoolExecutor(max_workers=workers)
+        self._pool = ProcessPoolExecutor(max_workers=workers,
+                                         mp_context=multiprocessing.get_context("forkserver"))
 
     def map(self, batch_fn: BatchFn[R], batches: Sequence[list[int]]) -> list[list[R]]:
         """`batch_fn` applied to every batch in the pool; results in batch order."""
