@@ -64,6 +64,15 @@ def test_experiment_on_headon_writes_markdown_and_csv(tmp_path):
     assert "headon: finished by an earlier run" in again.stderr
     assert "live 1/2" not in again.stderr
     assert list(csv.DictReader((tmp_path / "experiment.csv").open())) == [row]
+    # Another prediction (here: more simulations) keeps the live runs, predicts again.
+    other = _run("experiment", "headon", "--runs", "2", "--time-scale", "10",
+                 "--predict", "30", "--out", str(tmp_path), timeout=30)
+    assert "checks and live runs kept" in other.stderr and "live 1/2" not in other.stderr
+    (again_row,) = list(csv.DictReader((tmp_path / "experiment.csv").open()))
+    assert again_row["predicted_simulations"] == "30"
+    assert again_row["simulations"] == row["simulations"]
+    assert json.loads((tmp_path / "experiment.json").read_text())["scenarios"]["headon"][
+        "runs"] == runs
 
 
 def test_bad_arguments_exit_2(tmp_path):

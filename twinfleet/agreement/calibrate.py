@@ -7,9 +7,12 @@ difference is the message's delivery latency as the checker counts it (the
 wire and the wait in the receiver's queue). Timers and ticks carry ``due``:
 ``t - due`` is how late they ran. Each channel (topic or service) with at
 least `min_samples` latencies gets a histogram of its own; the default
-histogram pools every channel. The logs' time scale is recorded, and must be
-the same in every file: fleet ms at another scale are another clock.
+histogram pools every channel. Messages sent in the fleet's first
+`startup_ms` fleet ms are fitted apart, into the start-up histogram (they take
+several times longer; `checker.timing`). The logs' time scale is recorded, and
+must be the same in every file: fleet ms at another scale are another clock.
 """
+
 
 from __future__ import annotations
 
@@ -25,6 +28,8 @@ from twinfleet.runtime.core.eventlog import EVENTS_FORMAT
 
 _MESSAGES = {str(EventKind.DELIVERY), str(EventKind.REQUEST), str(EventKind.REPLY)}
 _TIMED = {str(EventKind.TIMER), str(EventKind.PERIODIC)}
+STARTUP_MS = 20  # fleet ms: at time scale 2, the first scans and path requests of a fleet
+STARTUP_MIN_SAMPLES = 5  # fewer start-up latencies than this: no start-up histogram
 
 
 def machine() -> str:
@@ -50,11 +55,13 @@ def _records(path: Path) -> Iterable[dict[str, object]]:
             yield record
 
 
-def calibrate(paths: Sequence[str | Path], *, min_samples: int = 30) -> TimingModel:
+def calibrate(paths: Sequence[str | Path], *, min_samples: int = 30,
+              startup_ms: int = STARTUP_MS) -> TimingModel:
     """Fit a `TimingModel` from event logs (module docstring)."""
     if not paths:
         raise TimingError("calibrate: give at least one event log")
     latency: defaultdict[str, list[int]] = defaultdict(list)
+    startup: list[int] = []
     lateness: list[int] = []
     scales: set[float] = set()
     for name in paths:
@@ -70,8 +77,9 @@ def calibrate(paths: Sequence[str | Path], *, min_samples: int = 30) -> TimingMo
             t = r.get("t")
             if not isinstance(t, int):
                 continue
-            if kind in _MESSAGES and isinstance(r.get("stamp"), int) and r.get("topic"):
-                latency[str(r["topic"])].append(t - int(r["stamp"]))  # type: ignore[call-overload]
+            stamp = r.get("stamp")
+            if kind in _MESSAGES and isinstance(stamp, int) and r.get("topic"):
+                (startup if stamp < startup_ms else latency[str(r["topic"])]).append(t - stamp)
             elif kind in _TIMED and isinstance(r.get("due"), int):
                 lateness.append(t - int(r["due"]))  # type: ignore[call-overload]
         if not headers:
@@ -84,6 +92,7 @@ def calibrate(paths: Sequence[str | Path], *, min_samples: int = 30) -> TimingMo
         raise TimingError("calibrate: the logs hold no handled message with a send stamp")
     own = tuple((name, Histogram.fit(samples)) for name, samples in sorted(latency.items())
                 if len(samples) >= min_samples)
+    start = Histogram.fit(startup) if len(startup) >= STARTUP_MIN_SAMPLES else None
     return TimingModel(Histogram.fit(pooled), own, Histogram.fit(lateness), (),
                        machine(), scales.pop() if scales else None,
-                       tuple(str(p) for p in paths))
+                       tuple(str(p) for p in paths), start, startup_ms if start else 0)

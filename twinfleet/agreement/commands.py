@@ -56,6 +56,10 @@ def _calibrate_parser(subparsers: Any) -> None:
     p.add_argument("--min-samples", type=int, default=30,
                    help="a channel with fewer latencies is covered by the default "
                    "histogram only (default 30)")
+    p.add_argument("--startup-ms", type=int, default=20, metavar="MS",
+                   help="messages sent in the fleet's first MS fleet ms get a latency "
+                   "histogram of their own, used for the first MS ms of every simulation: "
+                   "a fleet's first messages take several times longer (0: none; default 20)")
     p.set_defaults(func=calibrate_command)
 
 
@@ -65,7 +69,8 @@ def calibrate_command(args: argparse.Namespace) -> int:
     from twinfleet.checker.timing import TimingError, save_timing
 
     try:
-        model = calibrate(args.events, min_samples=args.min_samples)
+        model = calibrate(args.events, min_samples=args.min_samples,
+                          startup_ms=args.startup_ms)
     except TimingError as exc:
         print(f"twinfleet calibrate: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

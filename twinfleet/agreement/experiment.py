@@ -85,13 +85,20 @@ class ExperimentOptions:
     workers: int = 1
 
     def decisive(self) -> dict[str, Any]:
-        """The options that change a case's result (what a kept case must match)."""
-        timing = None if self.timing is None else Path(self.timing).read_text()
+        """The options that change a case's checks and live runs (what a kept case must
+        match to be kept)."""
         return {"runs": self.runs, "time_scale": self.time_scale,
                 "semantics": list(self.semantics), "seed": self.seed,
                 "max_states": self.max_states, "max_time_s": self.max_time_s,
-                "horizon_s": self.horizon_s, "stop_on_collision": self.stop_on_collision,
-                "predict": self.predict, "timing": timing, "confidence": self.confidence}
+                "horizon_s": self.horizon_s, "stop_on_collision": self.stop_on_collision}
+
+    def predictive(self) -> dict[str, Any]:
+        """The options that change a case's prediction besides: the timing model's
+        content, the simulations, the confidence (a kept case whose prediction differs
+        keeps its live runs and is predicted again)."""
+        timing = None if self.timing is None else Path(self.timing).read_text()
+        return {**self.decisive(), "predict": self.predict, "timing": timing,
+                "confidence": self.confidence}
 
     @property
     def run_timeout_s(self) -> float:
@@ -164,29 +171,41 @@ def run_experiment(paths: Sequence[str | Path], options: ExperimentOptions, *,
     out = options.out
     (out / "logs").mkdir(parents=True, exist_ok=True)
     try:
-        decisive = options.decisive()
+        decisive, predictive = options.decisive(), options.predictive()
         for path, scenario in scenarios:
             key = fingerprint(scenario.path, decisive)
+            predicted = fingerprint(scenario.path, predictive)
             kept = load_case(out, scenario.name, key)
             if kept is not None:
                 _take_kept(exp, kept)
-                progress(f"{scenario.name}: finished by an earlier run with the same options, "
-                         f"kept ({out / 'cases'})")
+                if kept.prediction_key != predicted:
+                    progress(f"{scenario.name}: checks and live runs kept ({out / 'cases'}); "
+                             "the prediction's options changed: predicting again")
+                    _predict(exp, kept.row, path, progress)
+                    _keep(exp, kept.row, key, predicted)
+                else:
+                    progress(f"{scenario.name}: finished by an earlier run with the same "
+                             f"options, kept ({out / 'cases'})")
                 continue
             row = scenario_row(path, scenario)
             exp.rows.append(row)
             _checks(exp, row, path, progress)
             _predict(exp, row, path, progress)
             _live(exp, row, path, scenario, progress)
-            save_case(out, key, FinishedCase(
-                row, exp.runs.get(row.case, []), exp.predictions.get(row.case, {}),
-                [r for r in exp.retried if r[0] == row.case]))
-            write_outputs(exp)
+            _keep(exp, row, key, predicted)
     except (KeyboardInterrupt, _Interrupted):
         exp.interrupted = True
         progress("interrupted: writing what was done")
     write_outputs(exp)
     return exp
+
+
+def _keep(exp: Experiment, row: Row, key: str, predicted: str) -> None:
+    """Keep a finished case under its fingerprints; rewrite the outputs."""
+    save_case(exp.options.out, key, FinishedCase(
+        row, exp.runs.get(row.case, []), exp.predictions.get(row.case, {}),
+        [r for r in exp.retried if r[0] == row.case], predicted))
+    write_outputs(exp)
 
 
 def _take_kept(exp: Experiment, kept: FinishedCase) -> None:

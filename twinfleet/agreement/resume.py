@@ -36,6 +36,7 @@ class FinishedCase:
     runs: list[LiveRunResult]
     predicted_arrival_ms: dict[str, int | None]
     retried: list[tuple[str, int, str]]
+    prediction_key: str | None = None  # the fingerprint of the prediction's options
 
 
 def fingerprint(scenario: str | Path, options: dict[str, Any]) -> str:
@@ -53,7 +54,7 @@ def case_path(out: Path, case: str) -> Path:
 def save_case(out: Path, key: str, done: FinishedCase) -> Path:
     """Keep a finished case under its fingerprint `key`."""
     row = done.row
-    doc = {"format": CASE_FORMAT, "fingerprint": key,
+    doc = {"format": CASE_FORMAT, "fingerprint": key, "prediction": done.prediction_key,
            "row": {"case": row.case, "scenario": row.scenario, "profile": row.profile,
                    "scan_ms": row.scan_ms, "robots": [list(r) for r in row.robots],
                    "checks": {sem: {**dataclasses.asdict(c), "status": c.status.value}
@@ -101,4 +102,5 @@ def _finished(doc: dict[str, Any]) -> FinishedCase:
         fields["stuck"] = tuple(fields.get("stuck", ()))
         runs.append(LiveRunResult(**fields))
     return FinishedCase(row, runs, dict(doc["predicted_arrival_ms"]),
-                        [(c, int(s), why) for c, s, why in doc["retried"]])
+                        [(c, int(s), why) for c, s, why in doc["retried"]],
+                        doc.get("prediction"))

@@ -27,6 +27,7 @@ class LatencySite:
 
     channel: str
     low: int
+    sent: int | None = None  # the fleet ms the message was sent at
 
 
 class ExploringChooser(Chooser, Protocol):

@@ -2,7 +2,8 @@
 
 A handler's `ctx.choose(options)` is drawn uniformly; the checker's latency
 branches (`checker.choices.LatencySite`) are drawn from the timing model's
-histogram of their channel, restricted to the branch's range; its other
+histogram of their channel (of the start-up, for a message sent in the model's
+start-up window), restricted to the branch's range; its other
 branches (drop, duplicate, no server) uniformly. Every answer is recorded as an
 index, as `PrefixChooser` records them, so a simulation's steps are ordinary
 trace steps that `twinfleet replay` re-takes.
@@ -26,9 +27,10 @@ class SamplingChooser:
     __slots__ = ("_cumulative", "_model", "_rng", "indices", "mismatch", "options")
 
     def __init__(self, rng: random.Random, model: TimingModel,
-                 cumulative: dict[tuple[str, int, int], list[float]] | None = None) -> None:
+                 cumulative: dict[tuple[str, int, int, bool], list[float]] | None = None
+                 ) -> None:
         self._rng, self._model = rng, model
-        #: cumulative weights per (channel, low, n): shared by the choosers of one run
+        #: cumulative weights per (channel, low, n, start-up): shared by one run's choosers
         self._cumulative = {} if cumulative is None else cumulative
         self.indices: list[int] = []
         self.options: list[int] = []
@@ -45,10 +47,12 @@ class SamplingChooser:
         """A latency's index drawn from the model; any other branch uniformly."""
         if site is None:
             return self.choose(n)
-        key = (site.channel, site.low, n)
+        model = self._model
+        startup = site.sent is not None and site.sent < model.startup_ms
+        key = (site.channel, site.low, n, startup)
         cum = self._cumulative.get(key)
         if cum is None:
-            weights = self._model.latency_of(site.channel).weights_over(site.low, n)
+            weights = model.latency_of(site.channel, site.sent).weights_over(site.low, n)
             cum = self._cumulative[key] = list(accumulate(weights))
         index = min(bisect_right(cum, self._rng.random() * cum[-1]), n - 1)
         self.indices.append(index)

@@ -245,7 +245,7 @@ class Rules:
         span = self._ranges.get(name, self.settings.latency)
         if span is not None:
             low, high = span
-            due = now + low + (chooser.branch(high - low + 1, LatencySite(name, low))
+            due = now + low + (chooser.branch(high - low + 1, LatencySite(name, low, now))
                                if high > low else 0)
         settings = self.settings
         limit = settings.deadline_for(name) if settings.has_deadlines else None

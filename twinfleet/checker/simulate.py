@@ -84,7 +84,7 @@ class Simulator:
                                  queue_bounds=properties.queue_bounds,
                                  node_names=properties.node_names,
                                  deadlines=properties.deadlines)
-        self._cumulative: dict[tuple[str, int, int], list[float]] = {}
+        self._cumulative: dict[tuple[str, int, int, bool], list[float]] = {}
 
     def batch(self, indices: list[int]) -> list[Simulation]:
         """Simulations `indices`, in that order."""

@@ -2,8 +2,16 @@
 
 A `TimingModel` holds, in fleet milliseconds, an empirical distribution
 (`Histogram`) of delivery latency per topic or service (and a default for the
-rest), one of timer lateness, an optional loss probability per topic, and
-where it came from (the machine, the time scale of the runs, how many samples).
+rest), one of the latency of messages sent while the fleet starts, one of
+timer lateness, an optional loss probability per topic, and where it came
+from (the machine, the time scale of the runs, how many samples).
+
+Start-up: the first messages of a live fleet (sent in its first few fleet
+ms: the first scans, the first service requests and their replies) take far
+longer than later ones (20-90 fleet ms at time scale 2 against about 7: new
+routes, processes still warming up), and their spread sets every robot's
+phase for the rest of the run. A message sent before `startup_ms` draws its
+latency from `startup`, whatever its channel.
 `twinfleet calibrate` fits one from live event logs
 (`twinfleet.agreement.calibrate`); a model for loopback ships with the package
 (`default_timing`).
@@ -24,6 +32,7 @@ File format (YAML, ``format: twinfleet-timing/1``)::
       default: {values: [0, 1, 2], weights: [0.80, 0.15, 0.05], samples: 9000}
       /poses: {values: [0, 1], weights: [0.9, 0.1], samples: 4000}
     timer_lateness: {values: [0, 1], weights: [0.95, 0.05], samples: 2000}
+    startup: {window_ms: 20, values: [20, 48], weights: [0.5, 0.5], samples: 24}  # optional
     loss: {/poses: 0.0}                  # optional
 
 `values` are distinct whole ms in increasing order, `weights` their
@@ -136,6 +145,8 @@ class TimingModel:
         latency: (topic or service, histogram) pairs, sorted by name.
         timer_lateness: how late timers (`ctx.after`, `@every`) fire.
         loss: (topic, probability) pairs, sorted by name.
+        startup: latency of a message sent before `startup_ms` (None: as any other).
+        startup_ms: the length of the start-up window, fleet ms.
         machine: where it was measured.
         time_scale: the time scale of the runs it was fitted from (None: not measured).
         sources: the event logs it was fitted from.
@@ -148,9 +159,13 @@ class TimingModel:
     machine: str = ""
     time_scale: float | None = None
     sources: tuple[str, ...] = ()
+    startup: Histogram | None = None
+    startup_ms: int = 0
 
-    def latency_of(self, channel: str) -> Histogram:
-        """The latency distribution of messages on `channel`."""
+    def latency_of(self, channel: str, sent: int | None = None) -> Histogram:
+        """The latency distribution of messages on `channel` (sent at fleet ms `sent`)."""
+        if self.startup is not None and sent is not None and sent < self.startup_ms:
+            return self.startup
         return dict(self.latency).get(channel, self.default)
 
     def ranges(self, channels: Iterable[str]) -> tuple[tuple[int, int] | None,
@@ -158,6 +173,8 @@ class TimingModel:
         """The model's bounds as a checker's latency ranges: (default range or None for
         none, per-channel ranges of those of `channels` that have their own histogram)."""
         low, high = self.default.bounds
+        if self.startup is not None:
+            low, high = min(low, self.startup.bounds[0]), max(high, self.startup.bounds[1])
         default = None if high == 0 else (low, high)
         known = set(channels)
         return default, tuple((name, h.bounds) for name, h in self.latency if name in known)
@@ -172,14 +189,19 @@ class TimingModel:
         return TimingModel(self.default.scaled(f), tuple((n, h.scaled(f)) for n, h in self.latency),
                            self.timer_lateness.scaled(f), self.loss, self.machine, time_scale,
                            (*self.sources, f"stretched from time scale {self.time_scale:g} "
-                                           f"to {time_scale:g}"))
+                                           f"to {time_scale:g}"),
+                           None if self.startup is None else self.startup.scaled(f),
+                           round(self.startup_ms * f))
 
     def describe(self) -> str:
         """One line: default latency bounds and mean, channels, lateness, machine, scale."""
         low, high = self.default.bounds
         scale = "unknown" if self.time_scale is None else f"{self.time_scale:g}"
+        start = "" if self.startup is None else (
+            f", {self.startup.bounds[0]}-{self.startup.bounds[1]} ms when sent in the first "
+            f"{self.startup_ms} ms")
         return (f"latency {low}-{high} ms (mean {self.default.mean:.2f} ms; "
-                f"{len(self.latency)} channel(s) of their own), timer lateness "
+                f"{len(self.latency)} channel(s) of their own{start}), timer lateness "
                 f"{self.timer_lateness.bounds[0]}-{self.timer_lateness.bounds[1]} ms; "
                 f"measured on {self.machine or 'an unknown machine'} at time scale {scale}")
 
@@ -191,6 +213,8 @@ class TimingModel:
             "latency": {"default": self.default.to_yaml(),
                         **{name: h.to_yaml() for name, h in self.latency}},
             "timer_lateness": self.timer_lateness.to_yaml()}
+        if self.startup is not None:
+            doc["startup"] = {"window_ms": self.startup_ms, **self.startup.to_yaml()}
         if self.loss:
             doc["loss"] = dict(self.loss)
         return doc
@@ -241,10 +265,22 @@ def parse_timing(doc: Any, where: str) -> TimingModel:
     scale = doc.get("time_scale")
     if scale is not None and not (isinstance(scale, int | float) and scale > 0):
         raise TimingError(f"{where}: time_scale: expected a positive number, got {scale!r}")
+    startup, window = _startup(doc.get("startup"), where)
     return TimingModel(default, per, lateness,
                        tuple(sorted((str(k), float(v)) for k, v in loss.items())),
                        str(doc.get("machine") or ""), None if scale is None else float(scale),
-                       tuple(str(s) for s in doc.get("sources") or ()))
+                       tuple(str(s) for s in doc.get("sources") or ()), startup, window)
+
+
+def _startup(value: Any, where: str) -> tuple[Histogram | None, int]:
+    """The start-up histogram and window of a model file (none: (None, 0))."""
+    if value is None:
+        return None, 0
+    window = value.get("window_ms") if isinstance(value, Mapping) else None
+    if not isinstance(window, int) or window < 0:
+        raise TimingError(f"{where}: startup.window_ms: expected whole fleet ms >= 0, "
+                          f"got {window!r}")
+    return _histogram(value, where, "startup"), window
 
 
 def _histogram(value: Any, where: str, key: str) -> Histogram:
