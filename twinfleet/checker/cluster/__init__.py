@@ -94,8 +94,11 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
     ClusterError when the cluster cannot start or loses a worker."""
     expected = fingerprint(system)
     with ExitStack() as stack:
-        def factory() -> Backend:
+        def factory(width: int) -> Backend:
             engine = engine_module(local=address is None)
+            if report is not None:
+                report(f"[check] frontier {width:,} wide: moving the search to {workers} Ray "
+                       "worker(s)")
             stack.enter_context(engine.session(workers, address))
             ray_backend = engine.RayBackend(spec, expected, workers)
             stack.callback(ray_backend.close)

@@ -173,7 +173,7 @@ class Traffic:
     handler_runs: list[int] = field(default_factory=list)  # per worker, so far
 
 
-Factory = Callable[[], Backend]  # the cluster's backend, started empty
+Factory = Callable[[int], Backend]  # the cluster's backend, started empty (the frontier's width)
 
 
 @final
@@ -271,10 +271,7 @@ class Coordinator:
     def _to_cluster(self, factory: Factory) -> None:
         """Hand the frontier and the visited set to the cluster's backend."""
         if self.cluster is None:
-            if self.report is not None:
-                self.report(f"[check] frontier {self.frontier:,} wide: moving the search to "
-                            "the cluster's workers")
-            self.cluster = factory()
+            self.cluster = factory(self.frontier)
         self.cluster.load(self.local.expander.frontier, self.local.shard.parents,
                           self._relation())
         self.local.expander.frontier = []
