@@ -211,7 +211,8 @@ class Search:
                     "visibility": None if self.reduction is None else
                     (self.reduction.visibility.rising, self.reduction.visibility.fell,
                      self.reduction.visibility.pending_fall),
-                    "reduction": None if self.reduction is None else self.reduction.stats}
+                    "reduction": None if self.reduction is None else self.reduction.stats,
+                    "relied": [] if self.reduction is None else sorted(self.reduction.relied)}
         checkpoint.save(path, self._checkpoint_meta, self.store, list(self._frontier), counters)
         self._last_checkpoint = time.monotonic()
 
@@ -229,6 +230,7 @@ class Search:
             self.system.publications.__setstate__(c["publications"])
         if self.reduction is not None and c.get("reduction") is not None:
             self.reduction.stats = c["reduction"]
+            self.reduction.relied = set(c.get("relied", ()))
         if self.reduction is not None and c.get("visibility") is not None:
             visibility = self.reduction.visibility
             visibility.rising, visibility.fell, visibility.pending_fall = c["visibility"]

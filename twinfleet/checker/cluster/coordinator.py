@@ -462,7 +462,8 @@ class Coordinator:
                     "roots": self.roots, "traffic": dataclasses.asdict(self.traffic),
                     "publications": self._relation(),
                     "reduction": None if self.reduction is None else
-                    self.reduction.statistics()}
+                    self.reduction.statistics(),
+                    "relied": [] if self.reduction is None else sorted(self.reduction.relied)}
         ckpt.save(plan.path, {**plan.meta, "engine": ENGINE}, {"visited": visited}, frontier,
                   counters)
         self._last_save = time.monotonic()
@@ -482,6 +483,7 @@ class Coordinator:
             self.reduction.relearn(c["publications"])
             self.reduction.stats = ReductionStatistics(**c["reduction"])
             self.reduction.visibility.rises = self.reduction.stats.rises
+            self.reduction.relied = set(c.get("relied", ()))
         self.local.shard.parents = visited_from(data["store"]["visited"], self.roots)
         expander = self.local.expander
         for blob in data["frontier"]:
