@@ -32,8 +32,9 @@ RULE_FUNCTIONS: tuple[Callable[..., Any], ...] = (
 )
 
 #: The fingerprint of `RULE_FUNCTIONS` as the closure was last reviewed for them: Rule 6
-#: (KEEP_LAST drops, BEST_EFFORT losses) and calls with no server.
-PINNED = "50bcf0d484dbdf6a"
+#: (KEEP_LAST drops, BEST_EFFORT losses), calls with no server, and a latency branch that
+#: tells a sampler the send time (its branches and due times unchanged).
+PINNED = "34e032a2dd446c3e"
 
 _SKIPPED = (tokenize.NL, tokenize.COMMENT)
 _STATEMENT_START = (tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT)
