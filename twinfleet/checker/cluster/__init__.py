@@ -33,6 +33,7 @@ from twinfleet.checker.outcome import Limits, Outcome
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.system import System
+from twinfleet.runtime.contract.kinds import Status
 
 __all__ = ["Checkpointing", "ClusterError", "Distributed", "SystemSpec", "distributed",
            "is_distributed_checkpoint", "why_local"]
@@ -126,6 +127,6 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
         note = (f"strict BFS on {workers} Ray worker(s) from depth "
                 f"{coordinator.distributed_at} ({t.levels} levels, {per:.2f} claims per "
                 f"state, {t.stolen:,} worlds moved in {t.moves} blobs, {runs:,} handler runs)")
-    if properties.eventually:
+    if properties.eventually and outcome.status is not Status.UNKNOWN:
         note += "; eventually properties: lasso search on the graph gathered to this process"
     return Distributed(outcome, note, t)
