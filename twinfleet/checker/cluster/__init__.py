@@ -126,7 +126,9 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
         runs = system.runner.handler_runs + sum(t.handler_runs)
         note = (f"strict BFS on {workers} Ray worker(s) from depth "
                 f"{coordinator.distributed_at} ({t.levels} levels, {per:.2f} claims per "
-                f"state, {t.stolen:,} worlds moved in {t.moves} blobs, {runs:,} handler runs)")
+                f"state, {t.stolen:,} worlds moved in {t.moves} blobs, {runs:,} handler runs"
+                + (f", back in this process {t.returns} time(s) when it narrowed" if t.returns
+                   else "") + ")")
     if properties.eventually and outcome.status is not Status.UNKNOWN:
         note += "; eventually properties: lasso search on the graph gathered to this process"
     return Distributed(outcome, note, t)

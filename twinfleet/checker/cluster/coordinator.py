@@ -6,7 +6,11 @@ was asked for, the frontier and the visited set are handed to the cluster
 (`checker.cluster.engine.RayBackend`) and the search goes on there; a search
 whose frontier never gets that wide ends here and says so, since a per-level
 barrier (about a millisecond of round trips) is ruinous against a level of a
-few worlds. Every level ends with a barrier, so the search is a strict BFS:
+few worlds. For the same reason a search whose frontier stays narrower than a
+quarter of `min_width` for `patience` levels comes back here, frontier and
+visited set, until it widens again (the workers keep what they recorded of
+the graph); a move costs time in proportion to the visited set, so each return
+doubles the patience the next one needs. Every level ends with a barrier, so the search is a strict BFS:
 the same states, transitions and depth as `checker.search` for any number of
 workers, and a counterexample of the same length. After each level the
 coordinator moves frontier worlds from the busiest worker to the idlest when
@@ -68,6 +72,8 @@ from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import FailureKind, Status
 
 STEAL_MIN = 64  # frontier worlds two workers must differ by before some are moved
+BACK = 4  # a frontier narrower than min_width / BACK comes back to the coordinator
+PATIENCE = 16  # narrow levels in a row before the first return (doubled after each)
 ENGINE = "cluster"  # a checkpoint's meta["engine"]: written by this coordinator
 
 
@@ -109,6 +115,11 @@ class Backend(Protocol):
 
     def graphs(self) -> list[Graph]:
         """What every worker saw of the graph (`eventually` properties), at the end."""
+        ...
+
+    def take_back(self) -> tuple[list[Item], list[bytes]]:
+        """Every worker's frontier and every shard's visited keys (`ShardCore.dump`),
+        leaving them empty (the search goes on in the coordinator)."""
         ...
 
 
@@ -159,6 +170,10 @@ class LocalBackend:
         """`Backend.graphs`."""
         return [] if self.expander.graph is None else [self.expander.graph]
 
+    def take_back(self) -> tuple[list[Item], list[bytes]]:
+        """Never called: the coordinator's own backend holds its search."""
+        raise AssertionError("the local backend is not taken back")
+
 
 @final
 @dataclass
@@ -169,6 +184,7 @@ class Traffic:
     stolen: int = 0  # frontier worlds moved between workers
     moves: int = 0  # blobs moved
     levels: int = 0  # barriers
+    returns: int = 0  # times a narrowing search came back to the coordinator
     new_per_worker: list[int] = field(default_factory=list)
     handler_runs: list[int] = field(default_factory=list)  # per worker, so far
 
@@ -200,15 +216,21 @@ class Coordinator:
         report: called with a progress line at most every `interval` seconds.
         checkpointing: save the search between levels (periodically and when it stops
             early), or None.
+        reduction: the partial-order reduction of the coordinator's system, or None.
+        back_width: a frontier narrower than this comes back (default min_width / BACK).
+        patience: narrow levels in a row before the first return.
     """
 
     def __init__(self, system: System, properties: PropertySet, limits: Limits,
                  factory: Factory | None, min_width: int,
                  report: Callable[[str], None] | None = None, interval: float = 1.0,
                  checkpointing: Checkpointing | None = None,
-                 reduction: Reduction | None = None) -> None:
+                 reduction: Reduction | None = None, back_width: int | None = None,
+                 patience: int = PATIENCE) -> None:
         self.system, self.properties, self.limits = system, properties, limits
         self.factory, self.min_width = factory, min_width
+        self.back_width = min_width // BACK if back_width is None else back_width
+        self.patience, self._narrow = patience, 0
         self.report, self.interval = report, interval
         self.checkpointing = checkpointing
         self.reduction = reduction
@@ -260,6 +282,10 @@ class Coordinator:
             if self.backend is self.local and self.factory is not None and \
                     self.frontier >= self.min_width:
                 self._to_cluster(self.factory)
+            elif self.backend is not self.local:
+                self._narrow = self._narrow + 1 if self.frontier < self.back_width else 0
+                if self._narrow >= self.patience << self.traffic.returns:
+                    self._to_local()
             outcome = self._level()
             if outcome is not None:
                 return outcome
@@ -278,6 +304,15 @@ class Coordinator:
         self.backend = self.cluster
         if self.distributed_at is None:
             self.distributed_at = self.level
+
+    def _to_local(self) -> None:
+        """Take the frontier and the visited set back from the cluster."""
+        frontier, visited = self.backend.take_back()
+        self.local.expander.frontier = frontier
+        self.local.shard.parents = visited_from(visited, self.roots)
+        self.backend = self.local
+        self.traffic.returns += 1
+        self._narrow = 0
 
     def _relation(self) -> tuple[Any, ...] | None:
         return None if self.reduction is None else self.reduction.learned_state()
@@ -389,8 +424,8 @@ class Coordinator:
         """The whole graph as a one-process search records it: ids, first-discovery
         parents, roots, terminal worlds, the properties' bits and the successor ids."""
         graph = Graph()
-        for part in (*self.local.graphs(), *(self.backend.graphs()
-                                             if self.backend is not self.local else ())):
+        for part in (*self.local.graphs(), *(() if self.cluster is None
+                                             else self.cluster.graphs())):
             graph.extend(part)
         parents = self.local.shard.parents if self.backend is self.local else \
             visited_from(self.backend.snapshot()[1], self.roots)

@@ -163,6 +163,10 @@ class Shard:
         self.core.clear()
         return 0
 
+    def drain(self) -> bytes:
+        """`ShardCore.drain`."""
+        return self.core.drain()
+
     def add(self, keys: list[int], parents: list[int]) -> int:
         """`ShardCore.add`."""
         self.core.add(keys, parents)
@@ -204,6 +208,7 @@ class RayBackend:
     def __init__(self, spec: SystemSpec, expected: dict[str, str], workers: int) -> None:
         self.workers = workers
         self.reduced = spec.reduction is not None
+        self._fresh = True  # the workers have not learned the coordinator's relation yet
         self.shards = [Shard.remote() for _ in range(workers)]  # type: ignore[attr-defined]
         self.actors = [Worker.remote(spec, expected, workers)  # type: ignore[attr-defined]
                        for _ in range(workers)]
@@ -218,8 +223,9 @@ class RayBackend:
              relation: tuple[Any, ...] | None = None) -> RayBackend:
         """Take over a search begun in this process: its frontier, visited set and (a
         reduced search) send relation."""
-        if relation is not None:
+        if relation is not None and self._fresh:  # later loads: the same relation, kept records
             _get([a.relearn.remote(relation) for a in self.actors])
+        self._fresh = False
         parts: list[list[Item]] = [frontier[i::self.workers] for i in range(self.workers)]
         refs = [a.take.remote(pickle.dumps(p, protocol=pickle.HIGHEST_PROTOCOL))
                 for a, p in zip(self.actors, parts, strict=True)]
@@ -271,10 +277,18 @@ class RayBackend:
         found = [pickle.loads(b) for b in _get([a.graph.remote() for a in self.actors])]
         return [g for g in found if g is not None]
 
+    def take_back(self) -> tuple[list[Item], list[bytes]]:
+        """`coordinator.Backend.take_back`: all frontiers given, all shards drained."""
+        given = _get([a.give.remote(1 << 62) for a in self.actors])
+        visited = _get([s.drain.remote() for s in self.shards])
+        self._sizes = [0] * self.workers
+        return [item for blob in given for item in pickle.loads(blob)], list(visited)
+
     def reset(self, relation: tuple[Any, ...] | None) -> None:
         """`coordinator.Backend.reset`: empty frontiers and shards."""
         _get([a.relearn.remote(relation) for a in self.actors] +
              [s.clear.remote() for s in self.shards])
+        self._fresh = False
 
     def snapshot(self) -> tuple[list[bytes], list[bytes]]:
         """`coordinator.Backend.snapshot`: every worker's frontier and shard's keys."""

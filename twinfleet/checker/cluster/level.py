@@ -371,6 +371,12 @@ class ShardCore:
         """Forget every key (a reduced search starts again)."""
         self.parents = {}
 
+    def drain(self) -> bytes:
+        """`dump`, then forget every key (the search goes back to the coordinator)."""
+        blob = self.dump()
+        self.parents = {}
+        return blob
+
     def add(self, keys: list[int], parents: list[int]) -> None:
         """Enter known states (a search handed over from one process)."""
         self.parents.update(zip(keys, parents, strict=True))
