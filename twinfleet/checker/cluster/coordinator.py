@@ -6,8 +6,8 @@ was asked for, the frontier and the visited set are handed to the cluster
 (`checker.cluster.engine.RayBackend`) and the search goes on there; a search
 whose frontier never gets that wide ends here and says so, since a per-level
 barrier (about a millisecond of round trips) is ruinous against a level of a
-few worlds. For the same reason a search whose frontier stays narrower than a
-quarter of `min_width` for `patience` levels comes back here, frontier and
+few worlds. For the same reason a search whose frontier stays narrower than
+`min_width` for `patience` levels comes back here, frontier and
 visited set, until it widens again (the workers keep what they recorded of
 the graph); a move costs time in proportion to the visited set, so each return
 doubles the patience the next one needs. Every level ends with a barrier, so the search is a strict BFS:
@@ -72,7 +72,7 @@ from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import FailureKind, Status
 
 STEAL_MIN = 64  # frontier worlds two workers must differ by before some are moved
-BACK = 4  # a frontier narrower than min_width / BACK comes back to the coordinator
+BACK = 1  # a frontier narrower than min_width / BACK comes back to the coordinator
 PATIENCE = 16  # narrow levels in a row before the first return (doubled after each)
 ENGINE = "cluster"  # a checkpoint's meta["engine"]: written by this coordinator
 
