@@ -1,9 +1,9 @@
 """The distributed search's coordinator, moving between itself and a cluster, gives the
 one process's answers.
 
-The cluster here is an in-process stand-in with the cores the Ray actors run
-(`Expander`, `ShardCore`, the system built from the `SystemSpec` as a worker
-builds it), so the coordinator's moves are tested without Ray: out to the
+The cluster here is a `LocalBackend` (the cores the Ray actors run) on a system
+built from the `SystemSpec` as a worker builds it, so the coordinator's moves
+are tested without Ray: out to the
 cluster when the frontier reaches `min_width`, back when it falls below
 `back_width`, again and again on generated systems, reduced or not, with
 `eventually` properties decided on the gathered graph and reduced searches
@@ -12,7 +12,6 @@ restarting.
 
 from __future__ import annotations
 
-import pickle
 from pathlib import Path
 from typing import Any
 
@@ -21,8 +20,8 @@ from hypothesis import strategies as st
 
 from tests.checker.program_systems import systems, write_scenario
 from twinfleet.checker import CheckOptions, check
-from twinfleet.checker.cluster.coordinator import Coordinator
-from twinfleet.checker.cluster.level import Acceptance, Expander, Expansion, Graph, Item, ShardCore
+from twinfleet.checker.cluster.coordinator import Coordinator, LocalBackend
+from twinfleet.checker.cluster.level import Item
 from twinfleet.checker.cluster.spec import SystemSpec
 from twinfleet.checker.outcome import Limits
 from twinfleet.checker.properties import PropertySet
@@ -31,71 +30,34 @@ from twinfleet.checker.system import System
 from twinfleet.runtime.scenario.overrides import load
 
 
-class InProcessCluster:
-    """`coordinator.Backend` as `engine.RayBackend` behaves, with one worker and one shard
-    in this process (the worker's system built apart, as on another machine)."""
-
-    workers = 1
+class CountingCluster:
+    """A `LocalBackend` on a system built from the `SystemSpec`, as a worker builds it on
+    another machine (the cluster's part of the cores), counting the coordinator's moves."""
 
     def __init__(self, spec: SystemSpec) -> None:
-        system, props, reduction = spec.build()
-        self.expander = Expander(system, props, 1, reduction)
-        self.shard = ShardCore()
-        self.fresh = True
+        self.inner = LocalBackend(*spec.build())
         self.loads = self.takes = 0
 
-    def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
-        stored = None
-        if self.expander.reduction is not None:
-            stored = self.shard.stored(self.expander.propose(max_depth))
-        expansion, blobs = self.expander.expand(max_depth, stored)
-        return [expansion], [self.expander.accept(self.shard.claim(blobs))]
+    def __getattr__(self, name: str) -> Any:
+        return getattr(self.inner, name)
 
-    def parent(self, key: int) -> int:
-        return self.shard.parent(key)
-
-    def shard_bytes(self) -> list[int]:
-        return [self.shard.nbytes()]
-
-    def move(self, source: int, target: int, count: int) -> None:
-        """One worker: nothing to move."""
-
-    def snapshot(self) -> tuple[list[bytes], list[bytes]]:
-        return [self.expander.packed()], [self.shard.dump()]
-
-    def load(self, frontier: list[Item], parents: dict[int, int],
-             relation: tuple[Any, ...] | None) -> None:
-        if relation is not None and self.fresh:
-            self.expander.relearn(relation)
-        self.fresh = False
-        self.expander.take(pickle.dumps(frontier))
-        keys = list(parents)
-        self.shard.add(keys, [parents[k] for k in keys])
+    def load(self, *args: Any) -> None:
         self.loads += 1
-
-    def reset(self, relation: tuple[Any, ...] | None) -> None:
-        if relation is None:
-            self.expander.frontier = []
-        else:
-            self.expander.relearn(relation)
-        self.shard.clear()
-
-    def graphs(self) -> list[Graph]:
-        return [] if self.expander.graph is None else [self.expander.graph]
+        self.inner.load(*args)
 
     def take_back(self) -> tuple[list[Item], list[bytes]]:
         self.takes += 1
-        return pickle.loads(self.expander.give(1 << 62)), [self.shard.drain()]
+        return self.inner.take_back()
 
 
-def _coordinated(path: Path, reduction: str, max_states: int) -> tuple[Any, InProcessCluster]:
+def _coordinated(path: Path, reduction: str, max_states: int) -> tuple[Any, CountingCluster]:
     scenario = load(str(path))
     props = PropertySet.from_scenario(scenario)
     system = System(scenario, properties=props)
     reduced, name = plan(system, props, "bfs", reduction)
     spec = SystemSpec(str(path), None, None, (), (),
                       reduction=None if reduced is None else name.split()[0])
-    cluster = InProcessCluster(spec)
+    cluster = CountingCluster(spec)
     coordinator = Coordinator(system, props, Limits(max_states=max_states),
                               lambda width: cluster, min_width=3, reduction=reduced,
                               back_width=2, patience=1)

@@ -248,7 +248,7 @@ def check(scenario: str | Path | Scenario | None,
                     checkpoint=options.checkpoint or options.resume,
                     checkpoint_every_s=options.checkpoint_every_s, checkpoint_meta=meta,
                     reduction=reduction)
-    resumed_cluster = data is not None and data["meta"].get("engine") == "cluster"
+    resumed_cluster = data is not None and _distributed_checkpoint(data["meta"])
     if data is not None and not resumed_cluster:
         search.restore(data)
     seed = options.seed if options.seed is not None else scenario.seed
@@ -288,6 +288,12 @@ def check(scenario: str | Path | Scenario | None,
             write_trace(result.trace, options.trace_out)
             result.trace_path = options.trace_out
     return result
+
+
+def _distributed_checkpoint(meta: Mapping[str, Any]) -> bool:
+    from twinfleet.checker.cluster import is_distributed_checkpoint
+
+    return is_distributed_checkpoint(meta)
 
 
 def _distributed(system: System, props: PropertySet, strategy: str, reduction: Reduction | None,

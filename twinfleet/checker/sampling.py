@@ -48,8 +48,7 @@ class SamplingChooser:
         if site is None:
             return self.choose(n)
         model = self._model
-        startup = site.sent is not None and site.sent < model.startup_ms
-        key = (site.channel, site.low, n, startup)
+        key = (site.channel, site.low, n, model.starting(site.sent))
         cum = self._cumulative.get(key)
         if cum is None:
             weights = model.latency_of(site.channel, site.sent).weights_over(site.low, n)

@@ -162,9 +162,14 @@ class TimingModel:
     startup: Histogram | None = None
     startup_ms: int = 0
 
+    def starting(self, sent: int | None) -> bool:
+        """Whether a message sent at fleet ms `sent` draws the start-up latency."""
+        return self.startup is not None and sent is not None and sent < self.startup_ms
+
     def latency_of(self, channel: str, sent: int | None = None) -> Histogram:
         """The latency distribution of messages on `channel` (sent at fleet ms `sent`)."""
-        if self.startup is not None and sent is not None and sent < self.startup_ms:
+        if self.starting(sent):
+            assert self.startup is not None
             return self.startup
         return dict(self.latency).get(channel, self.default)
 

@@ -133,6 +133,7 @@ class LocalBackend:
                  reduction: Reduction | None = None) -> None:
         self.expander = Expander(system, properties, 1, reduction)
         self.shard = ShardCore()
+        self._fresh = True  # used as a cluster: the coordinator's relation not learned yet
 
     def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
         """One level here (`Backend.level`)."""
@@ -159,20 +160,31 @@ class LocalBackend:
 
     def load(self, frontier: list[Item], parents: dict[int, int],
              relation: tuple[Any, ...] | None) -> None:
-        """Never called: the coordinator's own backend holds its search."""
-        raise AssertionError("the local backend is not loaded")
+        """`Backend.load`, as a cluster of one worker does it (the coordinator's own
+        backend is never loaded; a stand-in cluster in tests is)."""
+        if relation is not None and self._fresh:  # later loads: the same relation
+            self.expander.relearn(relation)
+        self._fresh = False
+        self.expander.frontier += frontier
+        self.shard.parents.update(parents)
 
     def reset(self, relation: tuple[Any, ...] | None) -> None:
-        """Never called: a restart makes a new local backend."""
-        raise AssertionError("the local backend is not reset")
+        """`Backend.reset` (the coordinator makes a new local backend instead)."""
+        if relation is None:
+            self.expander.frontier = []
+        else:
+            self.expander.relearn(relation)
+        self.shard.clear()
+        self._fresh = False
 
     def graphs(self) -> list[Graph]:
         """`Backend.graphs`."""
         return [] if self.expander.graph is None else [self.expander.graph]
 
     def take_back(self) -> tuple[list[Item], list[bytes]]:
-        """Never called: the coordinator's own backend holds its search."""
-        raise AssertionError("the local backend is not taken back")
+        """`Backend.take_back`, as a cluster of one worker does it."""
+        frontier, self.expander.frontier = self.expander.frontier, []
+        return frontier, [self.shard.drain()]
 
 
 @final
@@ -246,7 +258,7 @@ class Coordinator:
         self.states = self.transitions = self.initial = self.depth = self.frontier = 0
         self.peak_frontier = self.level = 0
         self.distributed_at: int | None = None  # the level where the cluster took over
-        self._started = self._last_report = self._last_save = time.monotonic()
+        self._last_report = self._last_save = time.monotonic()
         self._elapsed_before = 0.0  # the time of the runs a restored checkpoint continues
         self._restored = False
         self.saved: str | None = None  # the checkpoint file, once written
@@ -256,8 +268,8 @@ class Coordinator:
     def run(self) -> Outcome:
         """Search to a verdict or a limit (Ctrl-C, max-time and max-states stop it between
         two levels; a second Ctrl-C at once)."""
-        self._started = self._last_report = self._last_save = time.monotonic()
         self.guard.restart_clock()
+        self._last_report = self._last_save = self.guard.started
         with self.guard.sigint_handler():
             try:
                 return self._search()
@@ -470,7 +482,7 @@ class Coordinator:
             self.reduction.relied |= found.relied
 
     def _elapsed(self) -> float:
-        return self._elapsed_before + time.monotonic() - self._started
+        return self._elapsed_before + time.monotonic() - self.guard.started
 
     def _outcome(self, status: Status, reason: str) -> Outcome:
         outcome = Outcome(status, reason, self.statistics())
@@ -569,7 +581,7 @@ class Coordinator:
         if self.report is None or now - self._last_report < self.interval:
             return
         self._last_report = now
-        elapsed = max(now - self._started, 1e-9)
+        elapsed = max(now - self.guard.started, 1e-9)
         per = "/".join(f"{n / elapsed:,.0f}" for n in self.traffic.new_per_worker)
         mem = "/".join(f"{b / 2**20:.0f}" for b in self.backend.shard_bytes())
         self.report(f"[check] {self.backend.workers} worker(s)  states {self.states:,}  "

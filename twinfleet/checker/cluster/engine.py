@@ -150,7 +150,8 @@ class Shard:
         self.core = ShardCore()
 
     def claim(self, *blobs: bytes) -> tuple[Any, ...]:
-        """`ShardCore.claim`, one mask per worker (and a count first)."""
+        """`ShardCore.claim`, one mask per worker after a count (never read: it keeps the
+        number of return values above one, which Ray returns as a list)."""
         masks = self.core.claim(list(blobs))
         return (len(self.core.parents), *masks)
 
@@ -255,10 +256,7 @@ class RayBackend:
                    for k, s in enumerate(self.shards)]
         accepted = [a.accept.remote(*[c[w + 1] for c in claimed])
                     for w, a in enumerate(self.actors)]
-        expansions = _get([e[0] for e in expanded])
-        acceptances = _get(accepted)
-        self._sizes = _get([c[0] for c in claimed])
-        return expansions, acceptances
+        return _get([e[0] for e in expanded]), _get(accepted)
 
     def parent(self, key: int) -> int:
         """`coordinator.Backend.parent`: asks the owning shard."""
@@ -281,7 +279,6 @@ class RayBackend:
         """`coordinator.Backend.take_back`: all frontiers given, all shards drained."""
         given = _get([a.give.remote(1 << 62) for a in self.actors])
         visited = _get([s.drain.remote() for s in self.shards])
-        self._sizes = [0] * self.workers
         return [item for blob in given for item in pickle.loads(blob)], list(visited)
 
     def reset(self, relation: tuple[Any, ...] | None) -> None:
