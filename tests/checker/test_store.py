@@ -123,6 +123,39 @@ def test_digest_table_behaves_like_a_dict(keys):
     assert again.setdefault(12345678901) == ref.get(12345678901, len(ref))
 
 
+@given(st.lists(st.integers(min_value=0, max_value=2**64 - 1), unique=True, max_size=400),
+       st.lists(st.integers(min_value=0, max_value=2**64 - 1), max_size=50))
+@settings(max_examples=60, deadline=None)
+def test_a_loaded_table_finds_all_keys_at_once_as_get_finds_each(keys, others):
+    table = DigestTable(capacity=8)
+    table.load(np.array(keys, dtype=np.uint64))
+    probe = keys[::2] + others
+    assert table.find_all(np.array(probe, dtype=np.uint64)).tolist() == \
+        [keys.index(k) if k in keys else -1 for k in probe]
+    assert [table.get(k) for k in keys] == list(range(len(keys)))
+    assert table.setdefault(2**64 - 7) == (keys.index(2**64 - 7) if 2**64 - 7 in keys
+                                           else len(keys))
+
+
+@given(st.lists(st.lists(st.integers(min_value=0, max_value=9), max_size=6), max_size=10))
+@settings(max_examples=60, deadline=None)
+def test_edge_rows_built_at_once_equal_rows_set_one_by_one(rows):
+    states = 10
+    expanded = list(range(states - 1, states - 1 - len(rows), -1))  # any order of ids
+    one_by_one = EdgeStore()
+    for _ in range(states):
+        one_by_one.new_state()
+    for sid, children in zip(expanded, rows, strict=True):
+        one_by_one.set(sid, children)
+    at_once = EdgeStore.from_rows(states, np.array(expanded, dtype=np.int64),
+                                  np.array([len(r) for r in rows], dtype=np.int64),
+                                  np.array([c for r in rows for c in r], dtype=np.int64))
+    for sid in range(states):
+        assert [at_once.targets[k] for k in at_once.out(sid)] == \
+            [one_by_one.targets[k] for k in one_by_one.out(sid)]
+        assert (at_once.start[sid] < 0) == (one_by_one.start[sid] < 0)
+
+
 def test_digest_table_reads_the_older_checkpoint_layout():
     keys = np.zeros(8, dtype=np.uint64)
     ids = np.zeros(8, dtype=np.int32)

@@ -316,8 +316,12 @@ class Search:
 
     def _next_level(self, depth: int) -> None:
         """A BFS starts expanding the worlds of `depth`: every world at most that deep is
-        stored. Restart if the level before learned a send."""
-        if self.reduction is not None and self.reduction.stale:
+        stored. Restart if the level before learned a send, or a walk ahead, once the search
+        is large, did (`Reduction.probe`)."""
+        reduction = self.reduction
+        if reduction is not None and reduction.wants_probe(len(self.store)):
+            reduction.probe(self.system.initial(), self.limits.max_depth, len(self.store))
+        if reduction is not None and reduction.stale:
             raise _Restart
         self._level = (depth, len(self.store) - 1)
 

@@ -148,11 +148,37 @@ class DigestTable:
             used = keys != 0
             keys = keys[used][np.argsort(state["ids"][used], kind="stable")]
         self.__init__(state.get("capacity", len(state["keys"])))
+        self.load(keys)
+
+    def load(self, keys: np.ndarray) -> None:
+        """Fill an empty table with distinct `keys` (uint64), ids 0, 1, 2... in order."""
+        assert self._n == 0, "load fills an empty table"
+        capacity = self.capacity
+        while len(keys) > capacity * _MAX_LOAD:
+            capacity *= 2
+        if capacity != self.capacity:
+            self._alloc(capacity)
         for start in range(0, len(keys), _BLOCK):
             chunk = keys[start:start + _BLOCK]
             self._new_block()[:len(chunk)] = chunk
             self._n += len(chunk)
         self._place(keys, 0)
+
+    def find_all(self, keys: np.ndarray) -> np.ndarray:
+        """The ids of `keys` (uint64), -1 where absent: `get` in vectorised probing rounds."""
+        stored = self.keys()
+        found = np.full(len(keys), -1, dtype=np.int64)
+        slots = (keys & np.uint64(self._mask)).astype(np.int64)
+        todo = np.arange(len(keys))
+        while len(todo):
+            ids = self._slots[slots[todo]].astype(np.int64) - 1
+            empty = ids < 0
+            hit = ~empty
+            hit[hit] = stored[ids[hit]] == keys[todo[hit]]
+            found[todo[hit]] = ids[hit]
+            todo = todo[~(empty | hit)]
+            slots[todo] = (slots[todo] + 1) & self._mask
+        return found
 
 
 @final
@@ -193,6 +219,26 @@ class EdgeStore:
         self.start.append(-1)
         self.count.append(0)
 
+    @classmethod
+    def from_rows(cls, states: int, rows: np.ndarray, counts: np.ndarray,
+                  targets: np.ndarray) -> EdgeStore:
+        """The store `set` would build for `states` ids, given each expanded id in `rows`,
+        its successor count in `counts` and all successors, row after row, in `targets`
+        (duplicates within a row dropped, first-seen order kept, as `set` does)."""
+        row_of = np.repeat(np.arange(len(rows), dtype=np.int64), counts)
+        pairs = row_of * max(states, 1) + targets.astype(np.int64)
+        keep = np.sort(np.unique(pairs, return_index=True)[1])
+        kept = np.bincount(row_of[keep], minlength=len(rows))
+        start = np.full(states, -1, dtype=np.int32)
+        count = np.zeros(states, dtype=np.int32)
+        start[rows] = np.concatenate(([0], np.cumsum(kept)[:-1])) if len(rows) else []
+        count[rows] = kept
+        edges = cls()
+        edges.targets.frombytes(targets[keep].astype(np.int32).tobytes())
+        edges.start.frombytes(start.tobytes())
+        edges.count.frombytes(count.tobytes())
+        return edges
+
     def set(self, sid: int, children: list[int]) -> None:
         """Record the successors of `sid` (duplicates dropped, first-seen order kept)."""
         unique = list(dict.fromkeys(children))
@@ -231,6 +277,20 @@ class StateStore:
         self.roots: dict[int, tuple[int, ...]] = {}
         self.edges = EdgeStore() if record_edges else None
         self.digest_bits = 128 if exact else 64
+
+    @classmethod
+    def from_arrays(cls, keys: np.ndarray, parent: np.ndarray, terminal: bytes,
+                    holds: dict[str, bytes], edges: EdgeStore | None) -> StateStore:
+        """A store of 64-bit `keys` (ids in their order) with these per-id records, as
+        `add`, one key at a time, would have built it."""
+        store = cls(record_edges=False, flags=tuple(holds))
+        assert isinstance(store.index, DigestTable)
+        store.index.load(keys)
+        store.parent.frombytes(parent.astype(np.int32).tobytes())
+        store.terminal = bytearray(terminal)
+        store.holds = {name: bytearray(bits) for name, bits in holds.items()}
+        store.edges = edges
+        return store
 
     def __len__(self) -> int:
         return len(self.parent)

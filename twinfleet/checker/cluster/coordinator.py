@@ -291,6 +291,11 @@ class Coordinator:
             if found is not None:
                 return found
         while self.frontier:
+            if self._probed():
+                found = self._start()
+                if found is not None:
+                    return found
+                continue
             if self.backend is self.local and self.factory is not None and \
                     self.frontier >= self.min_width:
                 self._to_cluster(self.factory)
@@ -305,6 +310,18 @@ class Coordinator:
         if self.properties.eventually:
             return self._liveness()
         return self._outcome(Status.HOLDS, "every property holds")
+
+    def _probed(self) -> bool:
+        """Walk ahead once the search is large, at the level the one-process search does
+        (`Reduction.probe`); True if that learned something and the search restarted."""
+        reduction = self.reduction
+        if reduction is None or not reduction.wants_probe(self.states):
+            return False
+        reduction.probe(self.system.initial(), self.limits.max_depth, self.states)
+        if not reduction.stale:
+            return False
+        self._restart([])
+        return True
 
     def _to_cluster(self, factory: Factory) -> None:
         """Hand the frontier and the visited set to the cluster's backend."""
@@ -439,24 +456,11 @@ class Coordinator:
         for part in (*self.local.graphs(), *(() if self.cluster is None
                                              else self.cluster.graphs())):
             graph.extend(part)
-        parents = self.local.shard.parents if self.backend is self.local else \
-            visited_from(self.backend.snapshot()[1], self.roots)
-        names = tuple(p.name for p in self.properties.eventually)
-        store = StateStore(record_edges=True, flags=names)
-        for i, key in enumerate(graph.keys):
-            store.add(key, -1, terminal=bool(graph.terminal[i]))
-            for name, bits in zip(names, graph.holds, strict=True):
-                store.holds[name].append(bits[i])
-        for sid, key in enumerate(graph.keys):
-            parent = parents[key]
-            store.parent[sid] = -1 if parent == ROOT else store.find(parent)
+        visited = [self.local.shard.dump()] if self.backend is self.local else \
+            self.backend.snapshot()[1]
+        store = graph.store(visited, self.roots, tuple(p.name for p in self.properties.eventually))
         for key, choices in self.roots.items():
             store.roots[store.find(key)] = choices
-        edges, find, at = store.edges, store.find, 0
-        assert edges is not None
-        for key, count in zip(graph.expanded, graph.counts, strict=True):
-            edges.set(find(key), [find(c) for c in graph.children[at:at + count]])
-            at += count
         return store
 
     # ------------------------------------------------------------- answers
@@ -586,7 +590,8 @@ class Coordinator:
         mem = "/".join(f"{b / 2**20:.0f}" for b in self.backend.shard_bytes())
         self.report(f"[check] {self.backend.workers} worker(s)  states {self.states:,}  "
                     f"transitions {self.transitions:,}  states/s per worker {per}  "
-                    f"depth {self.depth}  frontier {self.frontier:,}  shard memory {mem} MB")
+                    f"depth {self.depth}  frontier {self.frontier:,}  shard memory {mem} MB  "
+                    f"{self._elapsed():.0f} s")
 
 
 _NOT_AGAIN = breach_line(
