@@ -122,9 +122,9 @@ class Graph:
         parent_keys = np.concatenate([p for _, p in pairs]) if pairs else known
         order = np.argsort(known, kind="stable")
         at = order[np.searchsorted(known, keys, sorter=order)]
+        holds = {name: bytes(bits) for name, bits in zip(names, self.holds, strict=True)}
         store = StateStore.from_arrays(keys, np.zeros(len(keys), np.int32),
-                                       bytes(self.terminal),
-                                       dict(zip(names, self.holds, strict=True)), None)
+                                       bytes(self.terminal), holds, None)
         assert isinstance(store.index, DigestTable) and len(store.index) == len(keys)
         parent = store.index.find_all(parent_keys[at])
         parent[np.isin(keys, np.fromiter(roots, dtype=np.uint64))] = -1
