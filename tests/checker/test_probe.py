@@ -27,6 +27,7 @@ def test_walking_ahead_keeps_the_verdict_and_the_coordinator_walks_alike(
     assume(full.status.value != "unknown")
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr("twinfleet.checker.reduction.PROBE_STATES", 5)  # walk early
+        patch.setattr("twinfleet.checker.reduction.PROBE_SHARE", 1)
         reduced = check(path, CheckOptions(reduction="por", max_states=2_000))
         outcome, _ = _coordinated(path, "por", 2_000)
     assert reduced.status == full.status, (reduced.reason, full.reason)
@@ -50,6 +51,7 @@ def test_a_send_met_deep_is_learned_before_the_search_gets_there(tmp_path: Path)
         level_by_level = check(path, CheckOptions())
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr("twinfleet.checker.reduction.PROBE_STATES", 500)
+        patch.setattr("twinfleet.checker.reduction.PROBE_SHARE", 1)
         ahead = check(path, CheckOptions())
     assert ahead.status == level_by_level.status
     assert ahead.statistics.states == level_by_level.statistics.states

@@ -70,10 +70,13 @@ if TYPE_CHECKING:
     from twinfleet.checker.world import World
 
 _INF: Final = 1 << 62  # larger than any state id
-# A BFS walks ahead once (`Reduction.probe`) when a level starts with this many worlds
-# stored, taking at most as many steps as it stored: the walks cost at most the search so
-# far, and a smaller search, which a restart costs little, never walks.
-PROBE_STATES: Final = 10_000
+# A BFS walks ahead once (`Reduction.probe`) when a level starts with PROBE_STATES worlds
+# stored, taking at most one step per PROBE_SHARE worlds stored: a step runs handlers the
+# search mostly finds in its cache, about six times the cost of a stored world (C1a), so
+# the walks cost about the search so far; a smaller search, which a restart costs little,
+# never walks.
+PROBE_STATES: Final = 50_000
+PROBE_SHARE: Final = 8
 PROBE_WALKS: Final = 2
 PROBE_SEED: Final = 1
 
@@ -212,7 +215,7 @@ class Reduction:
         (`PROBE_STATES`) that walks cost little beside it and a late restart much."""
         return self.stats.probes == 0 and stored >= PROBE_STATES
 
-    def probe(self, initial: Iterable[Transition], max_depth: int | None, budget: int) -> None:
+    def probe(self, initial: Iterable[Transition], max_depth: int | None, stored: int) -> None:
         """Walk the reduced graph ahead of the search, noting what it sends and which
         goals fall (`Publications.observe`, `Visibility.observe`), so that a search
         restarts for them now, while it is small.
@@ -224,7 +227,7 @@ class Reduction:
         One seeded walk per initial world (at most `PROBE_WALKS`) from the first, each to
         a world with nothing pending, a world met again on the walk, a world that violates
         a safety property (the search goes no further there either) or `max_depth`
-        steps, `budget` steps in all, taking a random transition of each world's persistent set,
+        steps, `stored` (the worlds the search stored) / `PROBE_SHARE` steps in all, taking a random transition of each world's persistent set,
         as the search would (the cycle proviso only adds transitions). What it learns is
         learned from reduced worlds, as the search learns; a search that probes at the
         same level of the same graph learns the same, in one process or on workers. The
@@ -233,6 +236,7 @@ class Reduction:
             self.visibility.rises
         rng = random.Random(PROBE_SEED)
         walks = steps = 0
+        budget = stored // PROBE_SHARE
         for start in [t.world for t in initial if t.failure is None][:PROBE_WALKS]:
             walks += 1
             world, seen = start, {start.key}

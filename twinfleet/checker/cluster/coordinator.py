@@ -52,6 +52,7 @@ from twinfleet.checker.cluster.level import (
     visited_from,
 )
 from twinfleet.checker.cluster.spec import ClusterError
+from twinfleet.checker.cluster.visited import VisitedTable
 from twinfleet.checker.diagnosis import FIX_HIDDEN, ContractBreachError, breach_line
 from twinfleet.checker.outcome import (
     INTERRUPTED_REASON,
@@ -103,7 +104,7 @@ class Backend(Protocol):
         (`ShardCore.dump`), between two levels."""
         ...
 
-    def load(self, frontier: list[Item], parents: dict[int, int],
+    def load(self, frontier: list[Item], visited: VisitedTable,
              relation: tuple[Any, ...] | None) -> None:
         """Take over a search begun in the coordinator: its frontier, its visited set and
         (reduced) the send relation learned so far."""
@@ -158,7 +159,7 @@ class LocalBackend:
         """`Backend.snapshot`."""
         return [self.expander.packed()], [self.shard.dump()]
 
-    def load(self, frontier: list[Item], parents: dict[int, int],
+    def load(self, frontier: list[Item], visited: VisitedTable,
              relation: tuple[Any, ...] | None) -> None:
         """`Backend.load`, as a cluster of one worker does it (the coordinator's own
         backend is never loaded; a stand-in cluster in tests is)."""
@@ -166,7 +167,7 @@ class LocalBackend:
             self.expander.relearn(relation)
         self._fresh = False
         self.expander.frontier += frontier
-        self.shard.parents.update(parents)
+        self.shard.add(*visited.arrays())
 
     def reset(self, relation: tuple[Any, ...] | None) -> None:
         """`Backend.reset` (the coordinator makes a new local backend instead)."""
@@ -327,7 +328,7 @@ class Coordinator:
         """Hand the frontier and the visited set to the cluster's backend."""
         if self.cluster is None:
             self.cluster = factory(self.frontier)
-        self.cluster.load(self.local.expander.frontier, self.local.shard.parents,
+        self.cluster.load(self.local.expander.frontier, self.local.shard.visited,
                           self._relation())
         self.local.expander.frontier = []
         self.backend = self.cluster
@@ -338,7 +339,7 @@ class Coordinator:
         """Take the frontier and the visited set back from the cluster."""
         frontier, visited = self.backend.take_back()
         self.local.expander.frontier = frontier
-        self.local.shard.parents = visited_from(visited, self.roots)
+        self.local.shard.visited = visited_from(visited, self.roots)
         self.backend = self.local
         self.traffic.returns += 1
         self._narrow = 0
@@ -372,9 +373,9 @@ class Coordinator:
                 return self._violated(self.properties.check_failure(t.failure),
                                       Counterexample(t.step.choices, ()))
             key = cast(int, t.world.key)
-            if key in shard.parents:
+            if key in shard.visited:
                 continue
-            shard.parents[key] = ROOT
+            shard.visited.put(key, ROOT)
             self.roots[key] = t.step.choices
             self.states += 1
             if self.local.expander.graph is not None:
@@ -535,7 +536,7 @@ class Coordinator:
             self.reduction.stats = ReductionStatistics(**c["reduction"])
             self.reduction.visibility.rises = self.reduction.stats.rises
             self.reduction.relied = set(c.get("relied", ()))
-        self.local.shard.parents = visited_from(data["store"]["visited"], self.roots)
+        self.local.shard.visited = visited_from(data["store"]["visited"], self.roots)
         expander = self.local.expander
         for blob in data["frontier"]:
             frontier, graph = unpack(blob)
@@ -577,7 +578,7 @@ class Coordinator:
         return Counterexample(initial, tuple(steps)), world
 
     def _parent(self, key: int) -> int:
-        parent = self.local.shard.parents.get(key)
+        parent = self.local.shard.visited.get(key)
         return parent if parent is not None else self.backend.parent(key)
 
     def _progress(self) -> None:

@@ -21,6 +21,8 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, final
 
+import numpy as np
+
 from twinfleet.checker.cluster.level import (
     Acceptance,
     Expander,
@@ -29,8 +31,10 @@ from twinfleet.checker.cluster.level import (
     Item,
     ShardCore,
     owner,
+    owners,
 )
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint, mismatch
+from twinfleet.checker.cluster.visited import VisitedTable
 
 try:
     import ray
@@ -153,7 +157,7 @@ class Shard:
         """`ShardCore.claim`, one mask per worker after a count (never read: it keeps the
         number of return values above one, which Ray returns as a list)."""
         masks = self.core.claim(list(blobs))
-        return (len(self.core.parents), *masks)
+        return (len(self.core.visited), *masks)
 
     def stored(self, *blobs: bytes) -> tuple[Any, ...]:
         """`ShardCore.stored`, a count then one mask per worker."""
@@ -168,10 +172,10 @@ class Shard:
         """`ShardCore.drain`."""
         return self.core.drain()
 
-    def add(self, keys: list[int], parents: list[int]) -> int:
+    def add(self, keys: np.ndarray, parents: np.ndarray) -> int:
         """`ShardCore.add`."""
         self.core.add(keys, parents)
-        return len(self.core.parents)
+        return len(self.core.visited)
 
     def parent(self, key: int) -> int:
         """`ShardCore.parent`."""
@@ -220,7 +224,7 @@ class RayBackend:
             raise
         self._bytes = [0] * workers
 
-    def load(self, frontier: list[Item], parents: dict[int, int],
+    def load(self, frontier: list[Item], visited: VisitedTable,
              relation: tuple[Any, ...] | None = None) -> RayBackend:
         """Take over a search begun in this process: its frontier, visited set and (a
         reduced search) send relation."""
@@ -230,13 +234,9 @@ class RayBackend:
         parts: list[list[Item]] = [frontier[i::self.workers] for i in range(self.workers)]
         refs = [a.take.remote(pickle.dumps(p, protocol=pickle.HIGHEST_PROTOCOL))
                 for a, p in zip(self.actors, parts, strict=True)]
-        keys: list[list[int]] = [[] for _ in self.shards]
-        pars: list[list[int]] = [[] for _ in self.shards]
-        for k, p in parents.items():
-            s = owner(k, self.workers)
-            keys[s].append(k)
-            pars[s].append(p)
-        refs += [s.add.remote(k, p) for s, k, p in zip(self.shards, keys, pars, strict=True)]
+        keys, parents = visited.arrays()
+        by = owners(keys, self.workers)
+        refs += [s.add.remote(keys[by == i], parents[by == i]) for i, s in enumerate(self.shards)]
         _get(refs)
         return self
 

@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import dataclasses
 import pickle
-import sys
 from array import array
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -27,6 +26,7 @@ from typing import Any, cast, final
 
 import numpy as np
 
+from twinfleet.checker.cluster.visited import ROOT, VisitedTable
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.publications import Edge
 from twinfleet.checker.reduction import Reduction, ReductionStatistics
@@ -35,7 +35,6 @@ from twinfleet.checker.system import System
 from twinfleet.checker.transition import Transition
 from twinfleet.checker.world import World
 
-ROOT = -1  # the parent key recorded for an initial world
 Item = tuple[World, int, int]  # a frontier world, its key, its depth
 _SHIFT = np.uint64(40)  # owners read high bits: a store's slot table reads the low ones
 
@@ -367,67 +366,58 @@ def unpack_claims(blob: bytes) -> tuple[np.ndarray, np.ndarray]:
 @final
 @dataclass
 class ShardCore:
-    """One partition of the visited set: key -> parent key (ROOT for initial worlds)."""
+    """One partition of the visited set: key -> parent key (`VisitedTable`)."""
 
-    parents: dict[int, int] = field(default_factory=dict)
+    visited: VisitedTable = field(default_factory=VisitedTable)
 
     def claim(self, blobs: list[bytes]) -> list[bytes]:
         """Answer each worker's claims (in worker order, so a key claimed by two workers
         goes to the first): one new/seen mask per blob."""
-        parents = self.parents
-        out = []
-        for blob in blobs:
-            keys, pars = unpack_claims(blob)
-            mask = np.zeros(len(keys), dtype=np.bool_)
-            for i, (k, p) in enumerate(zip(keys.tolist(), pars.tolist(), strict=True)):
-                if k not in parents:
-                    parents[k] = p
-                    mask[i] = True
-            out.append(mask.tobytes())
-        return out
+        return [self.visited.add(*unpack_claims(blob)).tobytes() for blob in blobs]
 
     def stored(self, blobs: list[bytes]) -> list[bytes]:
         """Whether each key of each blob (uint64 keys, from `Expander.propose`) is stored:
         one mask per blob."""
-        parents = self.parents
-        return [np.array([k in parents for k in np.frombuffer(b, dtype=np.uint64).tolist()],
-                         dtype=np.bool_).tobytes() for b in blobs]
+        return [self.visited.contains(np.frombuffer(b, dtype=np.uint64)).tobytes()
+                for b in blobs]
 
     def clear(self) -> None:
         """Forget every key (a reduced search starts again)."""
-        self.parents = {}
+        self.visited = VisitedTable()
 
     def drain(self) -> bytes:
         """`dump`, then forget every key (the search goes back to the coordinator)."""
         blob = self.dump()
-        self.parents = {}
+        self.clear()
         return blob
 
-    def add(self, keys: list[int], parents: list[int]) -> None:
+    def add(self, keys: np.ndarray, parents: np.ndarray) -> None:
         """Enter known states (a search handed over from one process)."""
-        self.parents.update(zip(keys, parents, strict=True))
+        self.visited.add(keys, parents)
 
     def parent(self, key: int) -> int:
         """The parent key of a stored key (ROOT for an initial world)."""
-        return self.parents[key]
+        parent = self.visited.get(key)
+        if parent is None:
+            raise KeyError(key)
+        return parent
 
     def dump(self) -> bytes:
         """The partition as one `pack_pairs` blob; an initial world's parent is written as
         0 (a checkpoint records which keys are initial, `visited_from` reads it back)."""
-        return pack_pairs(list(self.parents), [max(p, 0) for p in self.parents.values()])
+        keys, parents = self.visited.arrays()
+        return keys.tobytes() + parents.tobytes()
 
     def nbytes(self) -> int:
-        """Bytes the partition holds (the dict and its int objects, roughly)."""
-        return sys.getsizeof(self.parents) + 64 * len(self.parents)
+        """Bytes the partition holds."""
+        return self.visited.nbytes()
 
 
-def visited_from(blobs: list[bytes], roots: Iterable[int]) -> dict[int, int]:
-    """The visited set (key -> parent key) of `ShardCore.dump` blobs; `roots`: the keys of
-    initial worlds."""
-    parents: dict[int, int] = {}
+def visited_from(blobs: list[bytes], roots: Iterable[int]) -> VisitedTable:
+    """The visited set of `ShardCore.dump` blobs; `roots`: the keys of initial worlds."""
+    visited = VisitedTable()
     for blob in blobs:
-        keys, pars = unpack_claims(blob)
-        parents.update(zip(keys.tolist(), pars.tolist(), strict=True))
+        visited.add(*unpack_claims(blob))
     for key in roots:
-        parents[key] = ROOT
-    return parents
+        visited.put(key, ROOT)
+    return visited

@@ -1,0 +1,64 @@
+"""A shard's visited table answers as a dict of key -> parent key does, batch by batch."""
+
+from __future__ import annotations
+
+import numpy as np
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from twinfleet.checker.cluster.level import ShardCore, pack_pairs, visited_from
+from twinfleet.checker.cluster.visited import ROOT, VisitedTable
+
+KEYS = st.one_of(st.integers(min_value=0, max_value=40),  # repeats, and the key 0
+                 st.integers(min_value=0, max_value=2**64 - 1))
+BATCHES = st.lists(st.lists(st.tuples(KEYS, st.integers(min_value=1, max_value=2**64 - 1)),
+                            max_size=60), max_size=8)
+
+
+@settings(max_examples=80, deadline=None)
+@given(batches=BATCHES, roots=st.lists(KEYS, max_size=3))
+def test_batches_of_claims_are_answered_as_a_dict_answers_them_one_by_one(
+        batches: list[list[tuple[int, int]]], roots: list[int]) -> None:
+    table, ref = VisitedTable(capacity=4), {}
+    for key in roots:
+        table.put(key, ROOT)
+        ref.setdefault(key, ROOT)
+    for batch in batches:
+        keys = np.array([k for k, _ in batch], dtype=np.uint64)
+        before = table.contains(keys).tolist()
+        assert before == [k in ref for k, _ in batch]
+        stored = table.add(keys, np.array([p for _, p in batch], dtype=np.uint64))
+        expected = []
+        for key, parent in batch:
+            expected.append(key not in ref)
+            ref.setdefault(key, parent)
+        assert stored.tolist() == expected
+    assert len(table) == len(ref)
+    assert all(table.get(k) == p for k, p in ref.items())
+    assert table.get(2**64 - 3) == ref.get(2**64 - 3)
+    keys, parents = table.arrays()
+    assert dict(zip(keys.tolist(), [ROOT if p == 0 else p for p in parents.tolist()],
+                    strict=True)) == ref
+    again = visited_from([ShardCore(table).dump()], roots)
+    assert all(again.get(k) == p for k, p in ref.items()) and len(again) == len(ref)
+
+
+def test_a_shard_answers_the_first_worker_that_claims_a_key() -> None:
+    shard = ShardCore()
+    first, second = shard.claim([pack_pairs([5, 6, 7], [1, 1, 1]), pack_pairs([7, 8], [2, 2])])
+    assert np.frombuffer(first, dtype=np.bool_).tolist() == [True, True, True]
+    assert np.frombuffer(second, dtype=np.bool_).tolist() == [False, True]
+    assert shard.parent(7) == 1 and shard.parent(8) == 2
+    stored = shard.stored([np.array([5, 9], dtype=np.uint64).tobytes()])[0]
+    assert np.frombuffer(stored, dtype=np.bool_).tolist() == [True, False]
+
+
+def test_the_table_grows_and_stays_compact() -> None:
+    rng = np.random.default_rng(3)
+    table = VisitedTable()
+    keys = rng.integers(1, 2**63, size=200_000, dtype=np.uint64)
+    for chunk in np.array_split(keys, 50):
+        table.add(chunk, chunk + np.uint64(1))
+    assert len(table) == len(np.unique(keys))
+    assert table.contains(keys).all()
+    assert table.nbytes() / len(table) <= 16 / 0.375
