@@ -586,7 +586,7 @@ class Coordinator:
         if self.report is None or now - self._last_report < self.interval:
             return
         self._last_report = now
-        elapsed = max(now - self.guard.started, 1e-9)
+        elapsed = max(self._elapsed(), 1e-9)  # a resumed search's counts include the runs before
         per = "/".join(f"{n / elapsed:,.0f}" for n in self.traffic.new_per_worker)
         mem = "/".join(f"{b / 2**20:.0f}" for b in self.backend.shard_bytes())
         self.report(f"[check] {self.backend.workers} worker(s)  states {self.states:,}  "
