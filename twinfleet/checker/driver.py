@@ -30,6 +30,7 @@ from twinfleet.checker.diagnosis import (
     ContractBreachError,
     breach_line,
 )
+from twinfleet.checker.options import MIN_WIDTH
 from twinfleet.checker.outcome import Limits, Outcome, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.reduction import Reduction, describe, plan
@@ -73,7 +74,7 @@ class CheckOptions:
     params: tuple[str, ...] = ()  # parameter overrides, as `launch` takes them (r1.speed:=0.4)
     workers: int = 1  # Ray workers for the search (checker.cluster); 1 with no cluster: here
     cluster: str | None = None  # a Ray cluster to join instead of starting a local one
-    min_width: int = 64  # frontier width at which a search moves to the cluster
+    min_width: int = MIN_WIDTH  # frontier width at which a search moves to the cluster
     report: Callable[[str], None] | None = field(default=None, compare=False)
     progress: Callable[[SearchStatistics], None] | None = field(default=None, compare=False)
 

@@ -38,8 +38,6 @@ from twinfleet.runtime.contract.kinds import Status
 __all__ = ["Checkpointing", "ClusterError", "Distributed", "SystemSpec", "distributed",
            "is_distributed_checkpoint", "why_local"]
 
-DEFAULT_MIN_WIDTH = 64  # frontier worlds before the search moves to the cluster
-
 
 @final
 @dataclass

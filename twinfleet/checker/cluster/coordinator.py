@@ -589,7 +589,9 @@ class Coordinator:
         elapsed = max(self._elapsed(), 1e-9)  # a resumed search's counts include the runs before
         per = "/".join(f"{n / elapsed:,.0f}" for n in self.traffic.new_per_worker)
         mem = "/".join(f"{b / 2**20:.0f}" for b in self.backend.shard_bytes())
-        self.report(f"[check] {self.backend.workers} worker(s)  states {self.states:,}  "
+        where = "in this process" if self.backend is self.local else \
+            f"{self.backend.workers} worker(s)"
+        self.report(f"[check] {where}  states {self.states:,}  "
                     f"transitions {self.transitions:,}  states/s per worker {per}  "
                     f"depth {self.depth}  frontier {self.frontier:,}  shard memory {mem} MB  "
                     f"{self._elapsed():.0f} s")
