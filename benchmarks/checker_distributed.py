@@ -2,8 +2,9 @@
 
 For each case, measured in this run: the single-process search (`twinfleet check`) and
 the distributed one on 1 and 2 Ray workers of a local cluster (started once, before the
-timed searches: its start-up is not in the figures), each for `--max-time` seconds or to
-the end. Printed per case: states, transitions, transitions/s, the ratio to the single
+timed searches: its start-up is not in the figures), from the first level (--min-width 1,
+the engine itself) and, on 2 workers, with the default --min-width (what `check --workers
+2` does: narrow levels stay in one process), each for `--max-time` seconds or to the end. Printed per case: states, transitions, transitions/s, the ratio to the single
 process, handler runs (outcome-cache misses, all processes) per transition against the
 single process's, levels, claims per state (16-byte messages to the shard owning a
 digest) and worlds moved between workers per state (work sharing). With `--two-nodes`:
@@ -48,6 +49,7 @@ from checker_scaling import crossing_scenario, lanes_scenario  # noqa: E402
 
 from twinfleet.checker import CheckOptions, CheckResult, check  # noqa: E402
 from twinfleet.checker.cluster import engine_module  # noqa: E402
+from twinfleet.checker.options import MIN_WIDTH  # noqa: E402
 from twinfleet.cli import main as cli  # noqa: E402
 
 CASES = ("c1a_jitter", "c1a_jitter_por", "lanes6", "crossing6")
@@ -119,8 +121,11 @@ def row(label: str, result: CheckResult, base: CheckResult | None) -> str:
 
 
 def measure(path: Path, max_time: float, session: Callable[[], AbstractContextManager[Any]],
-            workers: tuple[int, ...], label: str, reduction: str) -> None:
-    """One process, then `workers` on the cluster `session` makes, printed as rows."""
+            workers: tuple[int, ...], label: str, reduction: str, *,
+            default_width: bool = False) -> None:
+    """One process, then `workers` on the cluster `session` makes from the first level
+    (--min-width 1: the engine itself), printed as rows; with `default_width` also 2
+    workers with the default --min-width (what `check --workers 2` does)."""
     one = check(path, CheckOptions(reduction=reduction, max_time_s=max_time))
     print(row("one process", one, None), flush=True)
     with session() as address:
@@ -128,6 +133,10 @@ def measure(path: Path, max_time: float, session: Callable[[], AbstractContextMa
             many = check(path, CheckOptions(reduction=reduction, max_time_s=max_time,
                                             workers=n, cluster=address, min_width=1))
             print(row(f"{label}, {n} worker(s)", many, one), flush=True)
+        if default_width:
+            many = check(path, CheckOptions(reduction=reduction, max_time_s=max_time,
+                                            workers=2, cluster=address))
+            print(row(f"{label}, 2, width {MIN_WIDTH}", many, one), flush=True)
 
 
 def sweep(out: Path) -> None:
@@ -187,7 +196,8 @@ def main() -> None:
             reduction = "por" if case in REDUCED else "none"
             print(f"{case} (reduction {reduction}, up to {args.max_time:g} s per search):",
                   flush=True)
-            measure(path, args.max_time, local, (1, 2), "local Ray", reduction)
+            measure(path, args.max_time, local, (1, 2), "local Ray", reduction,
+                    default_width=True)
             if args.two_nodes:
                 measure(path, args.max_time, _TwoNodes, (2,), "two nodes", reduction)
         if args.sweep:
