@@ -217,43 +217,47 @@ class Reduction:
 
     def probe(self, initial: Iterable[Transition], max_depth: int | None, stored: int) -> None:
         """Walk the reduced graph ahead of the search, noting what it sends and which
-        goals fall (`Publications.observe`, `Visibility.observe`), so that a search
-        restarts for them now, while it is small.
+        goals fall (`Publications.observe`, `Visibility.observe`), so that the search
+        restarts for them now, while it is small, not when its levels get there.
 
-        Why: a BFS meets a send first at the depth where it happens, and restarts there
-        with everything before that level searched for nothing; in a wide graph that is
-        most of the work (C1a with 0-1 ms of jitter learns its last send at depth 2,119
-        of 5,515, after 5.6 M of its 6 M worlds, while every run takes that send).
-        One seeded walk per initial world (at most `PROBE_WALKS`) from the first, each to
-        a world with nothing pending, a world met again on the walk, a world that violates
-        a safety property (the search goes no further there either) or `max_depth`
-        steps, `stored` (the worlds the search stored) / `PROBE_SHARE` steps in all, taking a random transition of each world's persistent set,
-        as the search would (the cycle proviso only adds transitions). What it learns is
-        learned from reduced worlds, as the search learns; a search that probes at the
-        same level of the same graph learns the same, in one process or on workers. The
-        walk's own counters are not the search's: they are put back."""
+        Why: a BFS meets a send first at the depth where it happens, and everything it
+        searched before is searched again after the restart; in a wide graph that can be
+        most of the work (C1a with 0-1 ms of jitter learned its last send at depth 2,119
+        of 5,515, after 5.6 M of its 6 M worlds, though every run takes that send).
+
+        One seeded walk (`_walk`) from each of the first `PROBE_WALKS` initial worlds,
+        `stored` / `PROBE_SHARE` steps in all. Each step takes a transition of the
+        world's persistent set, as the search would (the cycle proviso only adds
+        transitions), so what the walks learn the search could learn; a search that
+        probes at the same level of the same graph learns the same, in one process or
+        on workers. The walks' own counters are not the search's: they are put back."""
         counted, relied, rises = dataclasses.replace(self.stats), set(self.relied), \
             self.visibility.rises
         rng = random.Random(PROBE_SEED)
-        walks = steps = 0
-        budget = stored // PROBE_SHARE
+        budget, walks = stored // PROBE_SHARE, 0
         for start in [t.world for t in initial if t.failure is None][:PROBE_WALKS]:
             walks += 1
-            world, seen = start, {start.key}
-            limit = budget - steps if max_depth is None else min(budget - steps, max_depth)
-            for _ in range(limit):
-                live = [t for t in self.reduced(world, self.candidates(world)[0])
-                        if t.failure is None] if world.events else []
-                if not live:
-                    break
-                world = rng.choice(live).world
-                steps += 1
-                if world.key in seen or self.properties.check_world(self.system, world):
-                    break
-                seen.add(world.key)
+            budget -= self._walk(start, rng, budget if max_depth is None
+                                 else min(budget, max_depth))
         self.stats, self.relied, self.visibility.rises = counted, relied, rises
         self.stats.probes += max(walks, 1)  # once per search, even with no initial world
-        self.stats.probe_steps += steps
+        self.stats.probe_steps += stored // PROBE_SHARE - budget
+
+    def _walk(self, world: World, rng: random.Random, limit: int) -> int:
+        """Steps of one walk from `world` until nothing is pending, a world of the walk
+        comes back, a safety property is violated (the search goes no further there
+        either) or `limit` steps; returns the steps taken."""
+        seen = {world.key}
+        for steps in range(limit):
+            live = [t for t in self.reduced(world, self.candidates(world)[0])
+                    if t.failure is None] if world.events else []
+            if not live:
+                return steps
+            world = rng.choice(live).world
+            if world.key in seen or self.properties.check_world(self.system, world):
+                return steps + 1
+            seen.add(world.key)
+        return limit
 
     @property
     def stale(self) -> bool:
