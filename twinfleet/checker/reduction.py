@@ -52,7 +52,7 @@ from __future__ import annotations
 
 import dataclasses
 import random
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final, final
 
@@ -209,16 +209,12 @@ class Reduction:
                                          probe_steps=s.probe_steps)
         self.visibility.rises = 0
 
-    def wants_probe(self, stored: int) -> bool:
-        """Whether a breadth-first search that has stored `stored` worlds when a level
-        starts should `probe` first: once per search, when it has grown large enough
-        (`PROBE_STATES`) that walks cost little beside it and a late restart much."""
-        return self.stats.probes == 0 and stored >= PROBE_STATES
-
-    def probe(self, initial: Iterable[Transition], max_depth: int | None, stored: int) -> None:
-        """Walk the reduced graph ahead of the search, noting what it sends and which
-        goals fall (`Publications.observe`, `Visibility.observe`), so that the search
-        restarts for them now, while it is small, not when its levels get there.
+    def probe(self, stored: int, max_depth: int | None) -> bool:
+        """Walk the reduced graph ahead of a breadth-first search that has stored `stored`
+        worlds when a level starts, once per search and only from `PROBE_STATES` worlds
+        on; True if it walked. The walks note what they see sent and which goals fall
+        (`Publications.observe`, `Visibility.observe`), so that the search restarts for
+        them now, while it is small, not when its levels get there.
 
         Why: a BFS meets a send first at the depth where it happens, and everything it
         searched before is searched again after the restart; in a wide graph that can be
@@ -231,17 +227,21 @@ class Reduction:
         transitions), so what the walks learn the search could learn; a search that
         probes at the same level of the same graph learns the same, in one process or
         on workers. The walks' own counters are not the search's: they are put back."""
+        if self.stats.probes or stored < PROBE_STATES:
+            return False
         counted, relied, rises = dataclasses.replace(self.stats), set(self.relied), \
             self.visibility.rises
         rng = random.Random(PROBE_SEED)
         budget, walks = stored // PROBE_SHARE, 0
-        for start in [t.world for t in initial if t.failure is None][:PROBE_WALKS]:
+        starts = [t.world for t in self.system.initial() if t.failure is None][:PROBE_WALKS]
+        for start in starts:
             walks += 1
             budget -= self._walk(start, rng, budget if max_depth is None
                                  else min(budget, max_depth))
         self.stats, self.relied, self.visibility.rises = counted, relied, rises
         self.stats.probes += max(walks, 1)  # once per search, even with no initial world
         self.stats.probe_steps += stored // PROBE_SHARE - budget
+        return True
 
     def _walk(self, world: World, rng: random.Random, limit: int) -> int:
         """Steps of one walk from `world` until nothing is pending, a world of the walk

@@ -319,10 +319,10 @@ class Search:
         stored. Restart if the level before learned a send, or a walk ahead, once the search
         is large, did (`Reduction.probe`)."""
         reduction = self.reduction
-        if reduction is not None and reduction.wants_probe(len(self.store)):
-            reduction.probe(self.system.initial(), self.limits.max_depth, len(self.store))
-        if reduction is not None and reduction.stale:
-            raise _Restart
+        if reduction is not None:
+            reduction.probe(len(self.store), self.limits.max_depth)
+            if reduction.stale:
+                raise _Restart
         self._level = (depth, len(self.store) - 1)
 
     def _forget(self) -> None:

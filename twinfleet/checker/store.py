@@ -279,13 +279,12 @@ class StateStore:
         self.digest_bits = 128 if exact else 64
 
     @classmethod
-    def from_arrays(cls, keys: np.ndarray, parent: np.ndarray, terminal: bytes,
+    def from_arrays(cls, index: DigestTable, parent: np.ndarray, terminal: bytes,
                     holds: dict[str, bytes], edges: EdgeStore | None) -> StateStore:
-        """A store of 64-bit `keys` (ids in their order) with these per-id records, as
+        """A store over a filled `index` (ids in its order) with these per-id records, as
         `add`, one key at a time, would have built it."""
         store = cls(record_edges=False, flags=tuple(holds))
-        assert isinstance(store.index, DigestTable)
-        store.index.load(keys)
+        store.index = index
         store.parent.frombytes(parent.astype(np.int32).tobytes())
         store.terminal = bytearray(terminal)
         store.holds = {name: bytearray(bits) for name, bits in holds.items()}

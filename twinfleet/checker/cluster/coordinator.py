@@ -73,7 +73,6 @@ from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import FailureKind, Status
 
 STEAL_MIN = 64  # frontier worlds two workers must differ by before some are moved
-BACK = 1  # a frontier narrower than min_width / BACK comes back to the coordinator
 PATIENCE = 16  # narrow levels in a row before the first return (doubled after each)
 ENGINE = "cluster"  # a checkpoint's meta["engine"]: written by this coordinator
 
@@ -230,7 +229,7 @@ class Coordinator:
         checkpointing: save the search between levels (periodically and when it stops
             early), or None.
         reduction: the partial-order reduction of the coordinator's system, or None.
-        back_width: a frontier narrower than this comes back (default min_width / BACK).
+        back_width: a frontier narrower than this comes back (default min_width).
         patience: narrow levels in a row before the first return.
     """
 
@@ -242,7 +241,7 @@ class Coordinator:
                  patience: int = PATIENCE) -> None:
         self.system, self.properties, self.limits = system, properties, limits
         self.factory, self.min_width = factory, min_width
-        self.back_width = min_width // BACK if back_width is None else back_width
+        self.back_width = min_width if back_width is None else back_width
         self.patience, self._narrow = patience, 0
         self.report, self.interval = report, interval
         self.checkpointing = checkpointing
@@ -316,10 +315,8 @@ class Coordinator:
         """Walk ahead once the search is large, at the level the one-process search does
         (`Reduction.probe`); True if that learned something and the search restarted."""
         reduction = self.reduction
-        if reduction is None or not reduction.wants_probe(self.states):
-            return False
-        reduction.probe(self.system.initial(), self.limits.max_depth, self.states)
-        if not reduction.stale:
+        if reduction is None or not reduction.probe(self.states, self.limits.max_depth) or \
+                not reduction.stale:
             return False
         self._restart([])
         return True

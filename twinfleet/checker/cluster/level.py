@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import pickle
 from array import array
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from typing import Any, cast, final
 
@@ -121,18 +121,16 @@ class Graph:
         parent_keys = np.concatenate([p for _, p in pairs]) if pairs else known
         order = np.argsort(known, kind="stable")
         at = order[np.searchsorted(known, keys, sorter=order)]
-        holds = {name: bytes(bits) for name, bits in zip(names, self.holds, strict=True)}
-        store = StateStore.from_arrays(keys, np.zeros(len(keys), np.int32),
-                                       bytes(self.terminal), holds, None)
-        assert isinstance(store.index, DigestTable) and len(store.index) == len(keys)
-        parent = store.index.find_all(parent_keys[at])
+        index = DigestTable()
+        index.load(keys)
+        parent = index.find_all(parent_keys[at])
         parent[np.isin(keys, np.fromiter(roots, dtype=np.uint64))] = -1
-        store.parent = array("i", parent.astype(np.int32).tobytes())
-        store.edges = EdgeStore.from_rows(
-            len(keys), store.index.find_all(np.frombuffer(self.expanded, dtype=np.uint64)),
+        edges = EdgeStore.from_rows(
+            len(keys), index.find_all(np.frombuffer(self.expanded, dtype=np.uint64)),
             np.frombuffer(self.counts, dtype=np.uint32).astype(np.int64),
-            store.index.find_all(np.frombuffer(self.children, dtype=np.uint64)))
-        return store
+            index.find_all(np.frombuffer(self.children, dtype=np.uint64)))
+        holds = {name: bytes(bits) for name, bits in zip(names, self.holds, strict=True)}
+        return StateStore.from_arrays(index, parent, bytes(self.terminal), holds, edges)
 
 
 @final
@@ -351,7 +349,7 @@ def unpack(blob: bytes) -> tuple[list[Item], Graph | None]:
     return frontier, graph
 
 
-def pack_pairs(keys: list[int], parents: list[int]) -> bytes:
+def pack_pairs(keys: Sequence[int] | np.ndarray, parents: Sequence[int] | np.ndarray) -> bytes:
     """One blob of keys then parent keys (uint64): a claim batch, or a visited set."""
     return np.array(keys, dtype=np.uint64).tobytes() + np.array(parents, dtype=np.uint64).tobytes()
 
@@ -405,8 +403,7 @@ class ShardCore:
     def dump(self) -> bytes:
         """The partition as one `pack_pairs` blob; an initial world's parent is written as
         0 (a checkpoint records which keys are initial, `visited_from` reads it back)."""
-        keys, parents = self.visited.arrays()
-        return keys.tobytes() + parents.tobytes()
+        return pack_pairs(*self.visited.arrays())
 
     def nbytes(self) -> int:
         """Bytes the partition holds."""
