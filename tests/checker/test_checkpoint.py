@@ -4,11 +4,14 @@ from __future__ import annotations
 
 import json
 import shutil
+import subprocess
+import sys
 from pathlib import Path
 
 import pytest
 
 from tests.checker.helpers import node, replay_confirms, scenario
+from tests.support import child_env
 from twinfleet.checker import checkpoint, commands
 from twinfleet.checker.checkpoint import CheckpointError
 from twinfleet.checker.driver import CheckOptions, check
@@ -143,3 +146,66 @@ def test_cli_checkpoint_and_resume(tmp_path, capsys):
 def test_checkpoint_errors_are_bad_input(tmp_path):
     with pytest.raises(CheckpointError, match="no such checkpoint"):
         check(None, CheckOptions(resume=str(tmp_path / "missing.ckpt")))
+
+
+_USER_NODES = '''
+from dataclasses import dataclass
+
+from twinfleet import Context, Node, every, message, subscribe
+
+
+@message("tally/Note")
+class Note:
+    total: int
+
+
+@dataclass
+class TallyState:
+    total: int = 0
+    ticks: int = 0
+    heard: int = 0
+
+
+class Tally(Node):
+    def initial_state(self) -> TallyState:
+        return TallyState()
+
+    @every(5)
+    def tick(self, ctx: Context) -> None:
+        if self.state.ticks < 6:
+            self.state.ticks += 1
+            self.state.total += ctx.choose([0, 1, 2])
+            ctx.publish("/notes", Note(self.state.total))
+
+    @subscribe("/notes")
+    def on_note(self, ctx: Context, msg: Note) -> None:
+        self.state.heard += 1
+'''
+
+
+def test_a_checkpoint_of_the_users_own_nodes_resumes_from_another_folder(tmp_path):
+    # The saved frontier holds messages of the user's classes: a resume that names only
+    # the checkpoint must find their module beside the scenario, as the first run did.
+    home, elsewhere = tmp_path / "project", tmp_path / "elsewhere"
+    home.mkdir()
+    elsewhere.mkdir()
+    (home / "tally.py").write_text(_USER_NODES)
+    path = home / "tally.yaml"
+    path.write_text("name: tally\nnodes:\n  - {name: t1, class: 'tally:Tally'}\n"
+                    "  - {name: t2, class: 'tally:Tally'}\n"
+                    "properties:\n  - {name: small, kind: invariant, expr: 't1.total < 99'}\n")
+    ckpt = tmp_path / "tally.ckpt"
+
+    def run(*args: str) -> subprocess.CompletedProcess[str]:
+        return subprocess.run([sys.executable, "-m", "twinfleet", "check", *args, "--json"],
+                              cwd=elsewhere, env=child_env(), capture_output=True, text=True,
+                              timeout=120, check=False)
+
+    first = run(str(path), "--checkpoint", str(ckpt), "--max-states", "100")
+    assert first.returncode == 2 and ckpt.is_file(), first.stderr
+    resumed = run("--resume", str(ckpt))
+    assert resumed.returncode == 0, resumed.stderr
+    whole = check(path, CheckOptions())
+    counts = json.loads(resumed.stdout)
+    assert (counts["states"], counts["transitions"]) == (whole.statistics.states,
+                                                         whole.statistics.transitions)

@@ -1,10 +1,13 @@
 """Checkpoint files: a long search saved to disk and resumed later.
 
-A checkpoint is a pickle (``"format": "twinfleet-checkpoint/2"``; /2: event kinds
-are `EventKind` values) of the
-visited-state store, the frontier (worlds waiting to be expanded, with their
-ids and depths), the counters and `meta`: what the search was run on (the
-scenario file, its SHA-256, semantics, profile, search order, state mode...).
+A checkpoint is two pickles in one file: a header (``"format":
+"twinfleet-checkpoint/3"`` and `meta`: what the search was run on: the scenario
+file, its SHA-256, semantics, profile, search order, state mode...), then the
+visited-state store, the frontier (worlds waiting to be expanded, with their ids
+and depths) and the counters. The header comes first because the rest holds node
+states of the user's own classes: `load` puts the scenario's folder on the import
+path, as loading the scenario does, before it reads them. (/2, one pickle of all
+of it, is still read; event kinds have been `EventKind` values since /2.)
 It is written to a temporary file and renamed, so a crash while writing
 leaves the previous checkpoint intact. Only load checkpoints you wrote: a
 pickle can run code when it is read.
@@ -22,8 +25,10 @@ from pathlib import Path
 from typing import Any
 
 from twinfleet.runtime.contract.tracefile import file_sha256  # noqa: F401 (the checker's name for it)
+from twinfleet.runtime.scenario.spec import user_import_path
 
-FORMAT = "twinfleet-checkpoint/2"
+FORMAT = "twinfleet-checkpoint/3"
+_ONE_PICKLE = "twinfleet-checkpoint/2"  # header and body in one pickle, still read
 
 
 class CheckpointError(ValueError):
@@ -36,10 +41,10 @@ def save(path: str | Path, meta: Mapping[str, Any], store: Any, frontier: list[A
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = out.with_name(out.name + ".tmp")
-    doc = {"format": FORMAT, "meta": dict(meta), "store": store, "frontier": frontier,
-           "counters": dict(counters)}
     with open(tmp, "wb") as f:
-        pickle.dump(doc, f, protocol=pickle.HIGHEST_PROTOCOL)
+        pickle.dump({"format": FORMAT, "meta": dict(meta)}, f, protocol=pickle.HIGHEST_PROTOCOL)
+        pickle.dump({"store": store, "frontier": frontier, "counters": dict(counters)}, f,
+                    protocol=pickle.HIGHEST_PROTOCOL)
         f.flush()
         os.fsync(f.fileno())
     os.replace(tmp, out)
@@ -54,11 +59,16 @@ def load(path: str | Path) -> dict[str, Any]:
     try:
         with open(path, "rb") as f:
             doc = pickle.load(f)
+            if isinstance(doc, dict) and doc.get("format") == FORMAT:
+                scenario = doc["meta"].get("scenario")
+                if scenario is not None:  # the node states below may be of its modules
+                    user_import_path(Path(scenario).parent)
+                doc.update(pickle.load(f))
     except FileNotFoundError:
         raise CheckpointError(f"{path}: no such checkpoint file") from None
     except Exception as exc:  # pickle raises many kinds for a damaged file
         raise CheckpointError(f"{path}: cannot read checkpoint: {type(exc).__name__}: {exc}") \
             from None
-    if not isinstance(doc, dict) or doc.get("format") != FORMAT:
+    if not isinstance(doc, dict) or doc.get("format") not in (FORMAT, _ONE_PICKLE):
         raise CheckpointError(f"{path}: not a {FORMAT} file")
     return doc
