@@ -1,12 +1,15 @@
 """The exhaustive search on Ray workers against one process, on wide searches.
 
 For each case, measured in this run: the single-process search (`twinfleet check`) and
-the distributed one on 1 and 2 Ray workers of a local cluster (started once, before the
+the distributed one on 1 and 2 Ray workers of a local cluster (started before each round's
 timed searches: its start-up is not in the figures), from the first level (--min-width 1,
 the engine itself) and, on 2 workers, with the default --min-width (what `check --workers
 2` does: narrow levels stay in one process), each for `--max-time` seconds or to the end. Printed per case: states, transitions, transitions/s, the ratio to the single
 process, handler runs (outcome-cache misses, all processes) per transition against the
-single process's, levels, claims per state (16-byte messages to the shard owning a
+single process's, levels, and for a reduced search that started again after learning a
+send, the rate of its last attempt (what it counts: the transitions since that restart)
+and that rate's ratio, which leaves out the restarts' narrow early levels and the walk
+ahead that both engines spend, the workers at a few round trips a level; claims per state (16-byte messages to the shard owning a
 digest) and worlds moved between workers per state (work sharing). With `--two-nodes`:
 the same on a simulated two-node cluster (`ray.cluster_utils.Cluster`, one CPU per node).
 With `--sweep`: a 24-point `twinfleet sweep` of C2a (r4's speed x the scan period), its
@@ -21,7 +24,7 @@ Cases (every eventually property dropped: those keep a search in one process):
 - `crossing6`: six robots crossing on maps/random100, unreduced.
 
     python benchmarks/checker_distributed.py [--cases c1a_jitter,lanes6] [--max-time 60]
-        [--two-nodes] [--sweep]
+        [--repeat 3] [--two-nodes] [--sweep]
 
 This machine has 2 cores that Ray's own processes and the coordinator share with the
 workers: read the ratios, and run it on an otherwise idle machine.
@@ -85,6 +88,10 @@ def _rate(result: CheckResult) -> float:
     return s.transitions / max(s.elapsed_s, 1e-9)
 
 
+def _attempt_rate(result: CheckResult) -> float:
+    return result.statistics.attempt_transitions_per_s
+
+
 def _number(pattern: str, text: str) -> float | None:
     found = re.search(pattern, text)
     return None if found is None else float(found.group(1).replace(",", ""))
@@ -108,35 +115,61 @@ def _traffic(result: CheckResult) -> str:
     return f"levels {levels:.0f}, claims/state {claims:.2f}, moved/state {per_moved:.3f}"
 
 
-def row(label: str, result: CheckResult, base: CheckResult | None) -> str:
+def row(label: str, runs: list[CheckResult], base: list[CheckResult] | None) -> str:
+    """One configuration's line: its median run (by transitions/s), with the range of
+    the rates when it ran more than once, and ratios of medians to the single process."""
+    result = median(runs)
     s = result.statistics
-    runs = _runs_per_transition(result)
-    ratio = "" if base is None else (
-        f"  x{_rate(result) / _rate(base):.2f}  handler runs x"
-        f"{runs / max(_runs_per_transition(base), 1e-12):.2f}")
+    per = _runs_per_transition(result)
+    spread = "" if len(runs) < 2 else \
+        f" ({min(map(_rate, runs)):,.0f}-{max(map(_rate, runs)):,.0f})"
+    ratio = ""
+    if base is not None:
+        one = median(base)
+        ratio = (f"  x{_rate(result) / _rate(one):.2f}  handler runs x"
+                 f"{per / max(_runs_per_transition(one), 1e-12):.2f}")
+        if result.statistics.attempt_s is not None:
+            ratio += (f"  last attempt x"
+                      f"{_attempt_rate(result) / max(_attempt_rate(one), 1e-9):.2f}")
     extra = "" if result.engine is None else f"  {_traffic(result)}"
+    attempt = "" if s.attempt_s is None else \
+        f" [last attempt {_attempt_rate(result):,.0f} tr/s in {s.attempt_s:.0f} s]"
     return (f"  {label:<22} {result.status.value:<8} states {s.states:>10,}  transitions "
-            f"{s.transitions:>11,}  {_rate(result):>9,.0f} tr/s  runs/tr {runs:.3f}"
-            f"{ratio}{extra}")
+            f"{s.transitions:>11,}  {_rate(result):>9,.0f} tr/s{spread}{attempt}  runs/tr "
+            f"{per:.3f}{ratio}{extra}")
+
+
+def median(runs: list[CheckResult]) -> CheckResult:
+    """The run with the median transitions/s (the lower middle one of an even count)."""
+    return sorted(runs, key=_rate)[(len(runs) - 1) // 2]
 
 
 def measure(path: Path, max_time: float, session: Callable[[], AbstractContextManager[Any]],
             workers: tuple[int, ...], label: str, reduction: str, *,
-            default_width: bool = False) -> None:
+            default_width: bool = False, repeat: int = 1) -> None:
     """One process, then `workers` on the cluster `session` makes from the first level
     (--min-width 1: the engine itself), printed as rows; with `default_width` also 2
-    workers with the default --min-width (what `check --workers 2` does)."""
-    one = check(path, CheckOptions(reduction=reduction, max_time_s=max_time))
-    print(row("one process", one, None), flush=True)
-    with session() as address:
-        for n in workers:
-            many = check(path, CheckOptions(reduction=reduction, max_time_s=max_time,
-                                            workers=n, cluster=address, min_width=1))
-            print(row(f"{label}, {n} worker(s)", many, one), flush=True)
-        if default_width:
-            many = check(path, CheckOptions(reduction=reduction, max_time_s=max_time,
-                                            workers=2, cluster=address))
-            print(row(f"{label}, 2, width {MIN_WIDTH}", many, one), flush=True)
+    workers with the default --min-width (what `check --workers 2` does). `repeat`
+    rounds of all of them, one after another (the cluster started afresh each round, the
+    single process run while none is up), and each row is the median of its rounds: this
+    machine's speed drifts by 10-20 % from minute to minute."""
+    runs: dict[str, list[CheckResult]] = {}
+
+    def timed(name: str, **options: Any) -> None:
+        runs.setdefault(name, []).append(
+            check(path, CheckOptions(reduction=reduction, max_time_s=max_time, **options)))
+
+    for _ in range(repeat):
+        timed("one process")
+        with session() as address:
+            for n in workers:
+                timed(f"{label}, {n} worker(s)", workers=n, cluster=address, min_width=1)
+            if default_width:
+                timed(f"{label}, 2, width {MIN_WIDTH}", workers=2, cluster=address)
+    base = runs.pop("one process")
+    print(row("one process", base, None), flush=True)
+    for name, found in runs.items():
+        print(row(name, found, base), flush=True)
 
 
 def sweep(out: Path) -> None:
@@ -178,6 +211,8 @@ def main() -> None:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--cases", default=",".join(CASES), help="comma-separated cases")
     p.add_argument("--max-time", type=float, default=60.0, help="seconds per search")
+    p.add_argument("--repeat", type=int, default=1,
+                   help="rounds of every search; rows show the median (and the range)")
     p.add_argument("--two-nodes", action="store_true",
                    help="also run 2 workers on a simulated two-node cluster")
     p.add_argument("--sweep", action="store_true",
@@ -197,9 +232,10 @@ def main() -> None:
             print(f"{case} (reduction {reduction}, up to {args.max_time:g} s per search):",
                   flush=True)
             measure(path, args.max_time, local, (1, 2), "local Ray", reduction,
-                    default_width=True)
+                    default_width=True, repeat=args.repeat)
             if args.two_nodes:
-                measure(path, args.max_time, _TwoNodes, (2,), "two nodes", reduction)
+                measure(path, args.max_time, _TwoNodes, (2,), "two nodes", reduction,
+                        repeat=args.repeat)
         if args.sweep:
             print("sweep (C2a, r4.speed 0.3-1.0 x scan_rate_ms 60-140):", flush=True)
             sweep(Path(tmp))

@@ -157,8 +157,10 @@ class CheckResult:
                  f"states {s.states:,}  transitions {s.transitions:,} "
                  f"(RMC-style {self.rmc_transitions:,})  depth {s.depth}  "
                  f"initial states {s.initial_states}",
-                 f"time {s.elapsed_s:.2f} s ({s.transitions_per_s:,.0f} transitions/s)  "
-                 f"peak memory {s.peak_rss_mb:.0f} MB",
+                 f"time {s.elapsed_s:.2f} s ({s.transitions_per_s:,.0f} transitions/s"
+                 + ("" if s.attempt_s is None else
+                    f"; {s.attempt_transitions_per_s:,.0f}/s in the {s.attempt_s:.0f} s since "
+                    "the last restart") + f")  peak memory {s.peak_rss_mb:.0f} MB",
                  f"visited-state store {s.store_bytes / 2**20:.1f} MB "
                  f"({s.bytes_per_state:.0f} B/state, {s.digest_bits}-bit digests, "
                  f"collision probability <= {s.collision_probability:.1e})",

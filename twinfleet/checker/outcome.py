@@ -61,6 +61,15 @@ class SearchStatistics:
     digest_bits: int = 64
     collision_probability: float = 0.0
     peak_frontier: int = 0
+    attempt_s: float | None = None  # seconds since a reduced search last started again
+
+    @property
+    def attempt_transitions_per_s(self) -> float:
+        """Transitions per second of the search's last attempt: a reduced search that
+        learned a send started again from scratch and counts only what it did since
+        (`attempt_s`); the whole run when it never started again."""
+        seconds = self.elapsed_s if self.attempt_s is None else self.attempt_s
+        return self.transitions / seconds if seconds > 0 else 0.0
 
     @property
     def states_per_s(self) -> float:

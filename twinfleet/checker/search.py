@@ -104,6 +104,7 @@ class Search:
         self._pruned = False
         self._resumed = False
         self._elapsed_before = 0.0
+        self._attempt: float | None = None  # when the search last started again (monotonic)
         self._hashed_before = 0  # content hashes of the searches this one continues
         self._expanding: tuple[World, int, int] | None = None
         self._partial = 0
@@ -134,7 +135,8 @@ class Search:
             len(store), c.transitions, c.initial, c.depth, len(self._frontier),
             self._elapsed_before + time.monotonic() - self.guard.started, peak_rss_mb(),
             store.nbytes(), store.digest_bits, store.collision_probability(hashed),
-            c.peak_frontier)
+            c.peak_frontier,
+            None if self._attempt is None else time.monotonic() - self._attempt)
 
     def run(self, strategy: str = "bfs", *, walks: int = 100, seed: int = 0) -> Outcome:
         """Search with `strategy` ("bfs", "dfs" or "random") until a verdict or a limit."""
@@ -255,6 +257,7 @@ class Search:
                 assert reduction is not None
                 reduction.restarted()
                 self._reset()
+                self._attempt = time.monotonic()
 
     def _reset(self) -> None:
         """Forget everything explored (a restart of a reduced search)."""

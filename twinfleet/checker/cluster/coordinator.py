@@ -261,6 +261,7 @@ class Coordinator:
         self._last_report = self._last_save = time.monotonic()
         self._elapsed_before = 0.0  # the time of the runs a restored checkpoint continues
         self._restored = False
+        self._attempt: float | None = None  # when the search last started again (monotonic)
         self.saved: str | None = None  # the checkpoint file, once written
 
     # ------------------------------------------------------------------ run
@@ -360,6 +361,7 @@ class Coordinator:
         self.roots = {}
         self.states = self.transitions = self.initial = self.depth = self.frontier = 0
         self.peak_frontier = self.level = 0
+        self._attempt = time.monotonic()
 
     def _start(self) -> Outcome | None:
         """The initial worlds, claimed and checked here."""
@@ -469,7 +471,8 @@ class Coordinator:
         return SearchStatistics(n, self.transitions, self.initial, self.depth, self.frontier,
                                 self._elapsed(), peak_rss_mb(),
                                 sum(self.backend.shard_bytes()), 64, min(1.0, n * n / 2.0**65),
-                                self.peak_frontier)
+                                self.peak_frontier,
+                                None if self._attempt is None else time.monotonic() - self._attempt)
 
     def _count(self, learned: list[Learned]) -> None:
         """Add the workers' reduction counters to this process's (the summary's)."""

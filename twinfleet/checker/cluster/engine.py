@@ -146,9 +146,11 @@ class Worker:
         return pickle.dumps(self.core.graph, protocol=pickle.HIGHEST_PROTOCOL)
 
 
-@ray.remote(num_cpus=0)
+@ray.remote(num_cpus=0, allow_out_of_order_execution=True)
 class Shard:
-    """A `ShardCore`."""
+    """A `ShardCore`. Its calls run as soon as their arguments are ready, not in the order
+    they were made (a worker's questions need not wait behind another's): every call
+    that must follow another depends on its result, or the coordinator waited for it."""
 
     def __init__(self) -> None:
         self.core = ShardCore()
@@ -222,7 +224,7 @@ class RayBackend:
         except ClusterError:
             self.close()
             raise
-        self._bytes = [0] * workers
+        self._moves: list[Any] = []  # moves made since the last level (`move`)
 
     def load(self, frontier: list[Item], visited: VisitedTable,
              relation: tuple[Any, ...] | None = None) -> RayBackend:
@@ -241,22 +243,31 @@ class RayBackend:
         return self
 
     def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
-        """One level on the cluster (`coordinator.Backend.level`)."""
+        """One level on the cluster (`coordinator.Backend.level`).
+
+        A reduced level asks each worker's cycle-proviso questions with one call per
+        worker and shard, so a worker expands as soon as the shards have answered its
+        own questions: the claims are the level's only barrier. A shard answers a
+        level's questions before its claims (the claims wait for every expansion, each
+        expansion for its answers), so it holds exactly the worlds at most as deep as
+        the level then.
+        """
         n = self.workers
         stored: list[list[Any]] = [[] for _ in self.actors]
         if self.reduced:  # the cycle proviso's questions first (`Expander.propose`)
             proposed = [a.propose.options(num_returns=n + 1).remote(max_depth)
                         for a in self.actors]
-            answered = [s.stored.options(num_returns=n + 1).remote(*[p[k + 1] for p in proposed])
-                        for k, s in enumerate(self.shards)]
-            stored = [[a[w + 1] for a in answered] for w in range(n)]
+            stored = [[s.stored.options(num_returns=2).remote(proposed[w][k + 1])[1]
+                       for k, s in enumerate(self.shards)] for w in range(n)]
         expanded = [a.expand.options(num_returns=n + 1).remote(max_depth, *stored[w])
                     for w, a in enumerate(self.actors)]
         claimed = [s.claim.options(num_returns=n + 1).remote(*[e[k + 1] for e in expanded])
                    for k, s in enumerate(self.shards)]
         accepted = [a.accept.remote(*[c[w + 1] for c in claimed])
                     for w, a in enumerate(self.actors)]
-        return _get([e[0] for e in expanded]), _get(accepted)
+        done = _get([*[e[0] for e in expanded], *accepted, *self._moves])
+        self._moves = []
+        return done[:n], done[n:2 * n]
 
     def parent(self, key: int) -> int:
         """`coordinator.Backend.parent`: asks the owning shard."""
@@ -267,8 +278,10 @@ class RayBackend:
         return list(_get([s.nbytes.remote() for s in self.shards]))
 
     def move(self, source: int, target: int, count: int) -> None:
-        """`coordinator.Backend.move`: one blob, passed by reference."""
-        _get(self.actors[target].take.remote(self.actors[source].give.remote(count)))
+        """`coordinator.Backend.move`: one blob, passed by reference, not waited for here
+        (a worker runs its calls in order, so the next level's see the move; its failure
+        comes out with that level's answers)."""
+        self._moves.append(self.actors[target].take.remote(self.actors[source].give.remote(count)))
 
     def graphs(self) -> list[Graph]:
         """`coordinator.Backend.graphs`."""
