@@ -140,6 +140,14 @@ def test_send_relation_is_learned_with_restarts(tmp_path, reduction, expected):
         assert result.reduction_statistics is not None
         assert result.reduction_statistics["restarts"] == 2
         assert "2 restarts" in result.reduction
+        # the rate counts the last attempt's transitions over the time since it began
+        s = result.statistics
+        assert s.attempt_s is not None and 0 < s.attempt_s <= s.elapsed_s
+        assert s.attempt_transitions_per_s == pytest.approx(s.transitions / s.attempt_s)
+        assert "since the last restart" in result.summary()
+    else:
+        assert result.statistics.attempt_s is None
+        assert "since the last restart" not in result.summary()
 
 
 REPORTERS = [node(f"r{v}", "Reporter", value=v) for v in (1, 2, 3)]
