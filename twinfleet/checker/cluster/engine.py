@@ -146,7 +146,8 @@ class Worker:
         return pickle.dumps(self.core.graph, protocol=pickle.HIGHEST_PROTOCOL)
 
 
-@ray.remote(num_cpus=0, allow_out_of_order_execution=True)
+# Ray's typed overloads of `remote` do not list this (real, documented) actor option.
+@ray.remote(num_cpus=0, allow_out_of_order_execution=True)  # type: ignore[call-overload]
 class Shard:
     """A `ShardCore`. Its calls run as soon as their arguments are ready, not in the order
     they were made (a worker's questions need not wait behind another's): every call
