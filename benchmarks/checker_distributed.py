@@ -84,12 +84,7 @@ def scenario(case: str, out: Path) -> Path:
 
 
 def _rate(result: CheckResult) -> float:
-    s = result.statistics
-    return s.transitions / max(s.elapsed_s, 1e-9)
-
-
-def _attempt_rate(result: CheckResult) -> float:
-    return result.statistics.attempt_transitions_per_s
+    return result.statistics.transitions_per_s
 
 
 def _number(pattern: str, text: str) -> float | None:
@@ -128,12 +123,12 @@ def row(label: str, runs: list[CheckResult], base: list[CheckResult] | None) -> 
         one = median(base)
         ratio = (f"  x{_rate(result) / _rate(one):.2f}  handler runs x"
                  f"{per / max(_runs_per_transition(one), 1e-12):.2f}")
-        if result.statistics.attempt_s is not None:
-            ratio += (f"  last attempt x"
-                      f"{_attempt_rate(result) / max(_attempt_rate(one), 1e-9):.2f}")
+        if s.attempt_s is not None:
+            base_rate = max(one.statistics.attempt_transitions_per_s, 1e-9)
+            ratio += f"  last attempt x{s.attempt_transitions_per_s / base_rate:.2f}"
     extra = "" if result.engine is None else f"  {_traffic(result)}"
     attempt = "" if s.attempt_s is None else \
-        f" [last attempt {_attempt_rate(result):,.0f} tr/s in {s.attempt_s:.0f} s]"
+        f" [last attempt {s.attempt_transitions_per_s:,.0f} tr/s in {s.attempt_s:.0f} s]"
     return (f"  {label:<22} {result.status.value:<8} states {s.states:>10,}  transitions "
             f"{s.transitions:>11,}  {_rate(result):>9,.0f} tr/s{spread}{attempt}  runs/tr "
             f"{per:.3f}{ratio}{extra}")

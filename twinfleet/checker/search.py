@@ -257,7 +257,6 @@ class Search:
                 assert reduction is not None
                 reduction.restarted()
                 self._reset()
-                self._attempt = time.monotonic()
 
     def _reset(self) -> None:
         """Forget everything explored (a restart of a reduced search)."""
@@ -270,6 +269,7 @@ class Search:
         self._pruned = False
         self._resumed = False
         self._level = (-1, -1)
+        self._attempt = time.monotonic()
 
     def _explore(self) -> None:
         max_depth = self.limits.max_depth
