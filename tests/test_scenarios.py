@@ -173,7 +173,7 @@ def test_check_and_live_sections_become_typed_frozen_config(tmp_path):
                                 latency=PerName((0, 5), (("/r1/scan", (0, 0)),)),
                                 deadline_ms=PerName(50), queue_bound=PerName(8, (("r1", 20),)),
                                 faults=FaultConfig(drop=("/poses",), crash=CrashConfig(("r1",))))
-    assert isinstance(check.max_time_s, float) and check.search == "bfs"
+    assert isinstance(check.max_time_s, float) and check.search is None
     assert check.queue_bound.get("r1") == 20 and check.queue_bound.get("map_server") == 8
     assert live == LiveConfig(timeout_s=30.0, summary_topics=("/poses",))
     with pytest.raises(AttributeError):

@@ -234,7 +234,8 @@ def check(scenario: str | Path | Scenario | None,
     warnings = [str(w) for w in lint_scenario(scenario)]
     flags = {key: meta.get(key, getattr(options, key)) for key in _SEARCH_FLAGS}
     system = System(scenario, properties=props, **flags, **_timing_ranges(scenario, options))
-    strategy = meta.get("strategy") or options.search or scenario.check.search
+    asked = options.search or scenario.check.search
+    strategy = meta.get("strategy") or asked or "bfs"
     if strategy not in SEARCHES:
         raise ScenarioError(f"search: expected {', '.join(SEARCHES)}, got {strategy!r}")
     try:
@@ -259,7 +260,7 @@ def check(scenario: str | Path | Scenario | None,
     try:
         if options.workers > 1 or options.cluster is not None or resumed_cluster:
             outcome, engine = _distributed(system, props, strategy, reduction, options, path,
-                                           scenario, flags, meta,
+                                           scenario, flags, meta, asked != "bfs",
                                            data if resumed_cluster else None)
         if outcome is None:
             outcome = search.run(strategy, walks=options.walks, seed=seed)
@@ -301,10 +302,11 @@ def _distributed_checkpoint(meta: Mapping[str, Any]) -> bool:
 
 def _distributed(system: System, props: PropertySet, strategy: str, reduction: Reduction | None,
                  options: CheckOptions, path: Path | None, scenario: Scenario,
-                 flags: Mapping[str, Any], meta: Mapping[str, Any],
+                 flags: Mapping[str, Any], meta: Mapping[str, Any], unordered: bool,
                  resume: Mapping[str, Any] | None) -> tuple[Outcome | None, str]:
     """The outcome of the search on Ray workers (`checker.cluster`), from the checkpoint
-    `resume` if given, or None and why it runs here."""
+    `resume` if given, or None and why it runs here. `unordered`: no strict BFS was asked
+    for, so the workers may search in a relaxed order where nothing else needs levels."""
     from twinfleet.checker.cluster import Checkpointing, SystemSpec, distributed, why_local
 
     local = why_local(strategy)
@@ -322,12 +324,14 @@ def _distributed(system: System, props: PropertySet, strategy: str, reduction: R
                       timing.get("latency"), timing.get("topic_latency"),
                       None if reduction is None else meta["reduction"])
     limits = limits_for(options, scenario.check)
-    run = distributed(system, props, limits, spec, workers=options.workers,
+    relaxed = unordered and reduction is None and limits.max_depth is None and saving is None
+    run = distributed(system, props, limits, spec, workers=options.workers, relaxed=relaxed,
                       address=options.cluster, min_width=options.min_width,
                       report=options.report, resume=resume, reduction=reduction,
                       checkpointing=None if saving is None else
                       Checkpointing(saving, options.checkpoint_every_s, meta))
-    note = run.note if strategy == "bfs" else f"{run.note}; strict BFS order instead of {strategy}"
+    note = run.note if strategy == "bfs" or relaxed else \
+        f"{run.note}; strict BFS order instead of {strategy}"
     return run.outcome, note
 
 

@@ -2,8 +2,9 @@
 
 `distributed(...)` runs a check's search as a strict BFS over worker and
 shard actors (`checker.cluster.coordinator`, design in docs/distributed.md),
-reduced or not, with `eventually` properties decided on the graph gathered
-to the coordinator, and returns its `Outcome` with a line for the summary;
+reduced or not, or in a relaxed order on workers that do not wait for each
+other (`checker.cluster.flow`), with `eventually` properties decided on the
+graph gathered to the coordinator, and returns its `Outcome` with a line for the summary;
 `why_local` says when a search must run in one process instead (random
 walks). A distributed search
 saves itself to a checkpoint file and continues one on any number of workers
@@ -19,7 +20,7 @@ import sys
 from collections.abc import Callable, Mapping
 from contextlib import ExitStack
 from dataclasses import dataclass
-from typing import Any, final
+from typing import Any, cast, final
 
 from twinfleet.checker.cluster.coordinator import (
     ENGINE,
@@ -28,6 +29,7 @@ from twinfleet.checker.cluster.coordinator import (
     Coordinator,
     Traffic,
 )
+from twinfleet.checker.cluster.flow import FlowBackend
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint
 from twinfleet.checker.outcome import Limits, Outcome
 from twinfleet.checker.properties import PropertySet
@@ -87,32 +89,49 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
                 on_backend: Callable[[Backend], None] | None = None,
                 checkpointing: Checkpointing | None = None,
                 resume: Mapping[str, Any] | None = None,
-                reduction: Reduction | None = None) -> Distributed:
+                reduction: Reduction | None = None, relaxed: bool = False) -> Distributed:
     """Search on `workers` Ray workers once the frontier is `min_width` wide (module
     docstring), from the checkpoint `resume` if given (one local worker: in this process);
-    ClusterError when the cluster cannot start or loses a worker."""
+    `relaxed`: in a relaxed order there (a search without reduction, depth bound or
+    checkpoints). ClusterError when the cluster cannot start or loses a worker."""
     expected = fingerprint(system)
     with ExitStack() as stack:
-        def factory(width: int) -> Backend:
-            engine = engine_module(local=address is None)
+        def engine(width: int) -> Any:
+            found = engine_module(local=address is None)
             if report is not None:
                 report(f"[check] frontier {width:,} wide: moving the search to {workers} Ray "
-                       "worker(s)")
-            stack.enter_context(engine.session(workers, address))
-            ray_backend = engine.RayBackend(spec, expected, workers)
+                       "worker(s)" + (" (relaxed order)" if relaxed else ""))
+            stack.enter_context(found.session(workers, address))
+            return found
+
+        def factory(width: int) -> Backend:
+            ray_backend = engine(width).RayBackend(spec, expected, workers)
             stack.callback(ray_backend.close)
             backend: Backend = ray_backend
             if on_backend is not None:
                 on_backend(backend)
             return backend
 
+        def flow(width: int) -> FlowBackend:
+            ray_flow = engine(width).RayFlow(spec, expected, workers)
+            stack.callback(ray_flow.close)
+            return cast(FlowBackend, ray_flow)
+
         here = workers == 1 and address is None
         coordinator = Coordinator(system, properties, limits, None if here else factory,
                                   min_width, report, checkpointing=checkpointing,
-                                  reduction=reduction)
+                                  reduction=reduction,
+                                  flow=flow if relaxed and not here else None)
         if resume is not None:
             coordinator.restore(resume)
         outcome = coordinator.run()
+    return Distributed(outcome, _note(coordinator, outcome, workers, min_width, here),
+                       coordinator.traffic)
+
+
+def _note(coordinator: Coordinator, outcome: Outcome, workers: int, min_width: int,
+          here: bool) -> str:
+    """The summary's line on where and in which order the search ran."""
     t = coordinator.traffic
     if here:
         note = "strict BFS in one process (the distributed search's order and checkpoints)"
@@ -121,12 +140,17 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
                 "worlds (--min-width)")
     else:
         per = t.claims / max(1, outcome.statistics.states)
-        runs = system.runner.handler_runs + sum(t.handler_runs)
-        note = (f"strict BFS on {workers} Ray worker(s) from depth "
-                f"{coordinator.distributed_at} ({t.levels} levels, {per:.2f} claims per "
+        runs = coordinator.system.runner.handler_runs + sum(t.handler_runs)
+        order = "relaxed order" if coordinator.flow is not None else "strict BFS"
+        levels = "" if coordinator.flow is not None else f"{t.levels} levels, "
+        note = (f"{order} on {workers} Ray worker(s) from depth "
+                f"{coordinator.distributed_at} ({levels}{per:.2f} claims per "
                 f"state, {t.stolen:,} worlds moved in {t.moves} blobs, {runs:,} handler runs"
                 + (f", back in this process {t.returns} time(s) when it narrowed" if t.returns
                    else "") + ")")
-    if properties.eventually and outcome.status is not Status.UNKNOWN:
+        if coordinator.flow is not None:
+            note += ("; the states and transitions of a strict BFS, depth and counterexample "
+                     "as found (--search bfs: the shortest)")
+    if coordinator.properties.eventually and outcome.status is not Status.UNKNOWN:
         note += "; eventually properties: lasso search on the graph gathered to this process"
-    return Distributed(outcome, note, t)
+    return note

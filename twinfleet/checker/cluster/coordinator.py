@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, cast, final
 
 from twinfleet.checker import checkpoint as ckpt
+from twinfleet.checker.cluster.flow import FlowBackend, FlowStatus
 from twinfleet.checker.cluster.level import (
     ROOT,
     Acceptance,
@@ -73,6 +74,8 @@ from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import FailureKind, Status
 
 STEAL_MIN = 64  # frontier worlds two workers must differ by before some are moved
+FLOW_STEAL_MIN = 16  # the same in a relaxed order, where an empty queue is a worker idle
+POLL_S = 0.05  # a relaxed-order search's coordinator reads the workers this often
 PATIENCE = 16  # narrow levels in a row before the first return (doubled after each)
 ENGINE = "cluster"  # a checkpoint's meta["engine"]: written by this coordinator
 
@@ -202,6 +205,7 @@ class Traffic:
 
 
 Factory = Callable[[int], Backend]  # the cluster's backend, started empty (the frontier's width)
+FlowFactory = Callable[[int], FlowBackend]  # the same for a relaxed order
 
 
 @final
@@ -231,6 +235,9 @@ class Coordinator:
         reduction: the partial-order reduction of the coordinator's system, or None.
         back_width: a frontier narrower than this comes back (default min_width).
         patience: narrow levels in a row before the first return.
+        flow: starts the workers of a relaxed order (`checker.cluster.flow`), which then
+            replace `factory`'s levels; None: a strict BFS. Only for a search without
+            reduction, depth bound or checkpoints.
     """
 
     def __init__(self, system: System, properties: PropertySet, limits: Limits,
@@ -238,7 +245,11 @@ class Coordinator:
                  report: Callable[[str], None] | None = None, interval: float = 1.0,
                  checkpointing: Checkpointing | None = None,
                  reduction: Reduction | None = None, back_width: int | None = None,
-                 patience: int = PATIENCE) -> None:
+                 patience: int = PATIENCE, flow: FlowFactory | None = None) -> None:
+        if flow is not None and (reduction is not None or limits.max_depth is not None
+                                 or checkpointing is not None):
+            raise ValueError("a relaxed order needs a search without reduction, depth bound "
+                             "or checkpoints")
         self.system, self.properties, self.limits = system, properties, limits
         self.factory, self.min_width = factory, min_width
         self.back_width = min_width if back_width is None else back_width
@@ -253,6 +264,8 @@ class Coordinator:
         self.local = LocalBackend(system, properties, reduction)
         self.backend: Backend = self.local
         self.cluster: Backend | None = None
+        self.flow_factory = flow
+        self.flow: FlowBackend | None = None  # the relaxed order's workers, once started
         self.roots: dict[int, tuple[int, ...]] = {}
         self.traffic = Traffic()
         self.states = self.transitions = self.initial = self.depth = self.frontier = 0
@@ -299,6 +312,8 @@ class Coordinator:
                 continue
             if self.backend is self.local and self.factory is not None and \
                     self.frontier >= self.min_width:
+                if self.flow_factory is not None:
+                    return self._flow(self.flow_factory)
                 self._to_cluster(self.factory)
             elif self.backend is not self.local:
                 self._narrow = self._narrow + 1 if self.frontier < self.back_width else 0
@@ -437,6 +452,73 @@ class Coordinator:
             self.traffic.stolen += gap // 2
             self.traffic.moves += 1
 
+    # ------------------------------------------------------------ relaxed order
+
+    def _flow(self, factory: FlowFactory) -> Outcome:
+        """The rest of the search on workers that do not wait for each other
+        (`checker.cluster.flow`), to its end: no level, no return to this process."""
+        flow = self.flow = factory(self.frontier)
+        self.distributed_at = self.level
+        flow.load(self.local.expander.frontier, self.local.shard.visited)
+        self.local.expander.frontier = []
+        before = (self.states, self.transitions)
+        quiet: list[tuple[int, int]] | None = None
+        try:
+            while True:
+                flow.advance(POLL_S)
+                statuses = flow.status()
+                found = self._flowed(statuses, *before)
+                if found is not None:
+                    return found
+                counts = [(s.sent, s.received) for s in statuses]
+                if all(s.idle for s in statuses) and \
+                        sum(s.sent for s in statuses) == sum(s.received for s in statuses):
+                    if counts == quiet:  # nothing moved between two reads: the end
+                        break
+                    quiet = counts
+                else:
+                    quiet = None
+                    self._share([s.queue for s in statuses])
+                self.guard.tick(self.statistics)  # Ctrl-C, max-time
+                self._progress()
+        finally:
+            flow.stop()
+        if self.properties.eventually:
+            return self._liveness()
+        return self._outcome(Status.HOLDS, "every property holds")
+
+    def _flowed(self, statuses: list[FlowStatus], states: int, transitions: int
+                ) -> Outcome | None:
+        """Count what the workers did; the outcome if one found a violation or a failure."""
+        t = self.traffic
+        self.states = states + sum(s.new for s in statuses)
+        self.transitions = transitions + sum(s.transitions for s in statuses)
+        self.depth = max(self.depth, *(s.depth for s in statuses))
+        self.frontier = sum(s.queue for s in statuses)
+        self.peak_frontier = max(self.peak_frontier, self.frontier)
+        t.claims = sum(s.claims for s in statuses)
+        t.new_per_worker = [s.new for s in statuses]
+        t.handler_runs = [s.handler_runs for s in statuses]
+        failure = next((s.failure for s in statuses if s.failure is not None), None)
+        if failure is not None:
+            return self._failed(failure.parent)
+        violation = next((s.violation for s in statuses if s.violation is not None), None)
+        if violation is not None:
+            return self._violated(violation[0], self._path(violation[1])[0])
+        if self.limits.max_states is not None and self.states >= self.limits.max_states:
+            raise Stop(f"max-states {self.limits.max_states} reached before the search finished")
+        return None
+
+    def _share(self, queues: list[int]) -> None:
+        """Give half the busiest worker's queue to an idle one."""
+        idle = min(range(len(queues)), key=queues.__getitem__)
+        busy = max(range(len(queues)), key=queues.__getitem__)
+        if queues[idle] == 0 and queues[busy] > FLOW_STEAL_MIN:
+            assert self.flow is not None
+            self.flow.move(busy, idle, queues[busy] // 2)
+            self.traffic.stolen += queues[busy] // 2
+            self.traffic.moves += 1
+
     # ------------------------------------------------------------- liveness
 
     def _liveness(self) -> Outcome:
@@ -453,11 +535,15 @@ class Coordinator:
         """The whole graph as a one-process search records it: ids, first-discovery
         parents, roots, terminal worlds, the properties' bits and the successor ids."""
         graph = Graph()
-        for part in (*self.local.graphs(), *(() if self.cluster is None
-                                             else self.cluster.graphs())):
+        remote = self.flow if self.flow is not None else self.cluster
+        for part in (*self.local.graphs(), *(() if remote is None else remote.graphs())):
             graph.extend(part)
-        visited = [self.local.shard.dump()] if self.backend is self.local else \
-            self.backend.snapshot()[1]
+        if self.flow is not None:
+            visited = self.flow.visited()
+        elif self.backend is self.local:
+            visited = [self.local.shard.dump()]
+        else:
+            visited = self.backend.snapshot()[1]
         store = graph.store(visited, self.roots, tuple(p.name for p in self.properties.eventually))
         for key, choices in self.roots.items():
             store.roots[store.find(key)] = choices
@@ -470,9 +556,12 @@ class Coordinator:
         n = self.states
         return SearchStatistics(n, self.transitions, self.initial, self.depth, self.frontier,
                                 self._elapsed(), peak_rss_mb(),
-                                sum(self.backend.shard_bytes()), 64, min(1.0, n * n / 2.0**65),
+                                sum(self._shard_bytes()), 64, min(1.0, n * n / 2.0**65),
                                 self.peak_frontier,
                                 None if self._attempt is None else time.monotonic() - self._attempt)
+
+    def _shard_bytes(self) -> list[int]:
+        return (self.flow or self.backend).shard_bytes()
 
     def _count(self, learned: list[Learned]) -> None:
         """Add the workers' reduction counters to this process's (the summary's)."""
@@ -579,7 +668,7 @@ class Coordinator:
 
     def _parent(self, key: int) -> int:
         parent = self.local.shard.visited.get(key)
-        return parent if parent is not None else self.backend.parent(key)
+        return parent if parent is not None else (self.flow or self.backend).parent(key)
 
     def _progress(self) -> None:
         now = time.monotonic()
@@ -588,9 +677,9 @@ class Coordinator:
         self._last_report = now
         elapsed = max(self._elapsed(), 1e-9)  # a resumed search's counts include the runs before
         per = "/".join(f"{n / elapsed:,.0f}" for n in self.traffic.new_per_worker)
-        mem = "/".join(f"{b / 2**20:.0f}" for b in self.backend.shard_bytes())
-        where = "in this process" if self.backend is self.local else \
-            f"{self.backend.workers} worker(s)"
+        mem = "/".join(f"{b / 2**20:.0f}" for b in self._shard_bytes())
+        where = "in this process" if self.backend is self.local and self.flow is None else \
+            f"{(self.flow or self.backend).workers} worker(s)"
         self.report(f"[check] {where}  states {self.states:,}  "
                     f"transitions {self.transitions:,}  states/s per worker {per}  "
                     f"depth {self.depth}  frontier {self.frontier:,}  shard memory {mem} MB  "

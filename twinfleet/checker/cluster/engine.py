@@ -8,6 +8,8 @@ cluster) is used as it is and left running. `RayBackend` runs the levels of
 `checker.cluster.coordinator` on `Worker` actors (an `Expander` each) and
 `Shard` actors (a `ShardCore` each): claims go from workers to shards and
 masks back as object references, so the coordinator moves no claim itself.
+`RayFlow` runs a relaxed-order search (`checker.cluster.flow`) on `FlowWorker`
+actors that send each other claims and answers directly.
 `RayEngine` is `checker.parallel.Engine` on Ray tasks.
 """
 
@@ -16,13 +18,17 @@ from __future__ import annotations
 import os
 import pickle
 import re
+import secrets
 import socket
+import sys
+import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from typing import Any, final
 
 import numpy as np
 
+from twinfleet.checker.cluster.flow import FlowCore, FlowStatus, partition
 from twinfleet.checker.cluster.level import (
     Acceptance,
     Expander,
@@ -33,6 +39,7 @@ from twinfleet.checker.cluster.level import (
     owner,
     owners,
 )
+from twinfleet.checker.cluster.links import TOKEN_BYTES, Links
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint, mismatch
 from twinfleet.checker.cluster.visited import VisitedTable
 
@@ -193,6 +200,139 @@ class Shard:
         return self.core.dump()
 
 
+SWITCH_S = 0.00005
+
+
+# Four threads: the loop, and the coordinator's calls (Ray's typed overloads of `remote`
+# do not list the actor option); the links read on threads of their own.
+@ray.remote(num_cpus=1, max_concurrency=4)  # type: ignore[call-overload]
+class FlowWorker:
+    """A `FlowCore` whose loop (`run`) expands on one thread while claims, answers (over
+    `Links`) and moved worlds arrive on others; one lock guards the core's shared parts,
+    and only the loop touches the system (expansion, property checks, outcome cache)."""
+
+    def __init__(self, spec: SystemSpec, expected: dict[str, str], index: int,
+                 workers: int, token: bytes) -> None:
+        system, props, _ = spec.build()
+        differs = mismatch(fingerprint(system), expected)
+        if differs is not None:
+            raise ClusterError(f"worker on {os.uname().nodename}: its {differs} differ(s) "
+                               "from the coordinator's")
+        self.core = FlowCore(system, props, index, workers)
+        self.lock = threading.Condition()
+        self.stopped = False
+        host = ray.util.get_node_ip_address()  # type: ignore[no-untyped-call]
+        self.links = Links(index, host, token, self._claims, self._answered)
+        # A claim's answer waits for the loop to let go of the interpreter, by default
+        # up to 5 ms: more than the rest of the round trip.
+        sys.setswitchinterval(SWITCH_S)
+
+    def address(self) -> tuple[str, int]:
+        """Where this worker's links listen."""
+        return self.links.address
+
+    def meet(self, addresses: list[tuple[str, int]]) -> int:
+        """Connect to every other worker (`Links.connect`)."""
+        self.links.connect(addresses)
+        return 0
+
+    def load(self, blob: bytes, keys: np.ndarray, parents: np.ndarray) -> int:
+        """`FlowCore.load`: pickled worlds and this partition's keys and parents."""
+        table = VisitedTable()
+        table.add(keys, parents)
+        with self.lock:
+            self.core.load(pickle.loads(blob), table)  # noqa: S301 - from the coordinator
+        return 0
+
+    def run(self) -> int:
+        """Expand until `stop`, waiting for answers or moved worlds when idle; the lock is
+        held only while the core's shared parts change (`FlowCore`'s order)."""
+        core, lock, links = self.core, self.lock, self.links
+        while True:
+            with lock:
+                while not self.stopped and not core.queue and not core.answers and \
+                        links.error is None:
+                    lock.wait(0.05)
+                if self.stopped:
+                    return 0
+                if links.error is not None:
+                    raise ClusterError(links.error)
+                answers = core.arrived()
+            core.keep_answers(answers)
+            with lock:
+                batch = core.next_batch()
+            if batch:
+                expansion, blobs = core.expand(batch)
+                with lock:
+                    own, out = core.settle(expansion, blobs)
+                for claims in out:
+                    links.claim(claims.target, claims.batch, claims.blob)
+                core.keep_own(own)
+            with lock:
+                core.finish()
+
+    def _claims(self, sender: int, batch: int, blob: bytes) -> bytes:
+        with self.lock:
+            return self.core.claim(blob)
+
+    def _answered(self, batch: int, mask: bytes) -> None:
+        with self.lock:
+            self.core.answered(batch, mask)
+            self.lock.notify()
+
+    def give(self, count: int) -> bytes:
+        """`FlowCore.give`, pickled."""
+        with self.lock:
+            given = self.core.give(count)
+        return pickle.dumps(given, protocol=pickle.HIGHEST_PROTOCOL)
+
+    def take(self, blob: bytes) -> int:
+        """`FlowCore.take` of a `give` blob; wakes the loop."""
+        worlds = pickle.loads(blob)  # noqa: S301 - from our own workers
+        with self.lock:
+            self.core.take(worlds)
+            self.lock.notify()
+        return 0
+
+    def status(self) -> FlowStatus:
+        """`FlowCore.status`."""
+        with self.lock:
+            return self.core.status()
+
+    def stop(self) -> int:
+        """End the loop."""
+        with self.lock:
+            self.stopped = True
+            self.lock.notify()
+        return 0
+
+    def unlink(self) -> int:
+        """Close the links (once every worker's loop ended: a closed link is otherwise an
+        error for the other end)."""
+        self.links.close()
+        return 0
+
+    def parent(self, key: int) -> int:
+        """`ShardCore.parent` of this partition."""
+        with self.lock:
+            return self.core.shard.parent(key)
+
+    def nbytes(self) -> int:
+        """`ShardCore.nbytes` of this partition."""
+        with self.lock:
+            return self.core.shard.nbytes()
+
+    def dump(self) -> bytes:
+        """`ShardCore.dump` of this partition."""
+        with self.lock:
+            return self.core.shard.dump()
+
+    def graph(self) -> bytes:
+        """The worker's graph records, pickled."""
+        with self.lock:
+            return pickle.dumps(self.core.graph, protocol=pickle.HIGHEST_PROTOCOL)
+
+
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")  # Ray colours the names in its messages
 _OURS = f"{ClusterError.__module__}.{ClusterError.__name__}: "
 
@@ -316,6 +456,85 @@ class RayBackend:
     def kill_shard(self, index: int) -> None:
         """Kill one shard actor (a fault for tests)."""
         ray.kill(self.shards[index], no_restart=True)
+
+
+@final
+class RayFlow:
+    """`checker.cluster.flow.FlowBackend` on `workers` FlowWorker actors."""
+
+    def __init__(self, spec: SystemSpec, expected: dict[str, str], workers: int) -> None:
+        self.workers = workers
+        token = secrets.token_bytes(TOKEN_BYTES)
+        self.actors = [FlowWorker.remote(spec, expected, i, workers, token)  # type: ignore[attr-defined]
+                       for i in range(workers)]
+        try:
+            addresses = _get([a.address.remote() for a in self.actors])  # started, or why not
+            _get([a.meet.remote(addresses) for a in self.actors])
+        except ClusterError:
+            self.close()
+            raise
+        self._runs: list[Any] = []
+        self._move: Any = None  # the move under way, if any
+
+    def load(self, frontier: list[Item], visited: VisitedTable) -> None:
+        """`FlowBackend.load`: each worker's share of the frontier and its partition; then
+        every loop starts."""
+        n = self.workers
+        parts = partition(visited, n)
+        _get([a.load.remote(pickle.dumps(frontier[i::n], protocol=pickle.HIGHEST_PROTOCOL),
+                            *part.arrays())
+              for i, (a, part) in enumerate(zip(self.actors, parts, strict=True))])
+        self._runs = [a.run.remote() for a in self.actors]
+
+    def advance(self, seconds: float) -> None:
+        """`FlowBackend.advance`: a loop that ended before `stop` failed."""
+        ended, _ = ray.wait(self._runs, timeout=seconds)
+        if ended:
+            _get(ended)
+            raise ClusterError("a worker of the cluster stopped before the search ended, "
+                               "no verdict")
+
+    def status(self) -> list[FlowStatus]:
+        """`FlowBackend.status`."""
+        return list(_get([a.status.remote() for a in self.actors]))
+
+    def move(self, source: int, target: int, count: int) -> None:
+        """`FlowBackend.move`, not waited for; none while the last one is under way."""
+        if self._move is not None:
+            if not ray.wait([self._move], timeout=0)[0]:
+                return
+            _get(self._move)
+        self._move = self.actors[target].take.remote(self.actors[source].give.remote(count))
+
+    def parent(self, key: int) -> int:
+        """`FlowBackend.parent`: asks the owning worker."""
+        return int(_get(self.actors[owner(key, self.workers)].parent.remote(key)))
+
+    def shard_bytes(self) -> list[int]:
+        """`FlowBackend.shard_bytes`."""
+        return list(_get([a.nbytes.remote() for a in self.actors]))
+
+    def graphs(self) -> list[Graph]:
+        """`FlowBackend.graphs`."""
+        found = [pickle.loads(b) for b in _get([a.graph.remote() for a in self.actors])]
+        return [g for g in found if g is not None]
+
+    def visited(self) -> list[bytes]:
+        """`FlowBackend.visited`."""
+        return list(_get([a.dump.remote() for a in self.actors]))
+
+    def stop(self) -> None:
+        """`FlowBackend.stop`: every loop ended (a failed one says so)."""
+        _get([a.stop.remote() for a in self.actors])
+        try:
+            _get(self._runs)
+        finally:
+            _get([a.unlink.remote() for a in self.actors])
+
+    def close(self) -> None:
+        """Stop every actor of this search."""
+        for actor in self.actors:
+            ray.kill(actor, no_restart=True)
 
 
 @ray.remote

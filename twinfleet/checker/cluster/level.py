@@ -20,7 +20,7 @@ from __future__ import annotations
 import dataclasses
 import pickle
 from array import array
-from collections.abc import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, MutableSequence, Sequence
 from dataclasses import dataclass, field
 from typing import Any, cast, final
 
@@ -180,7 +180,7 @@ class Expander:
         self.shards = shards
         self.reduction = reduction
         self.frontier: list[Item] = []
-        self._pending: list[list[tuple[World, int]]] = []
+        self.pending: list[list[tuple[World, int]]] = []  # claimed worlds, per shard
         self._proposals: list[tuple[Item, list[Transition], list[int] | None]] = []
         self._probes: list[list[int]] = []
         self._counted = ReductionStatistics()
@@ -264,7 +264,7 @@ class Expander:
                 keys[s].append(child)
                 parents[s].append(key)
         self.frontier = []
-        self._pending = worlds
+        self.pending = worlds
         out.claims = len(seen)
         return out, [pack_pairs(k, p) for k, p in zip(keys, parents, strict=True)]
 
@@ -290,36 +290,43 @@ class Expander:
         reduction.relearn(state)
         self._counted = ReductionStatistics()
         self._rises = 0
-        self.frontier, self._pending, self._proposals, self._probes = [], [], [], []
+        self.frontier, self.pending, self._proposals, self._probes = [], [], [], []
         self.graph = Graph() if self.properties.eventually else None
 
     def accept(self, masks: list[bytes]) -> Acceptance:
         """Keep the claimed worlds the shards answered new; check the properties on them."""
         out = Acceptance()
-        check = self.properties.check_world
         frontier = self.frontier
-        for pending, mask in zip(self._pending, masks, strict=True):
-            flags = np.frombuffer(mask, dtype=np.bool_)
-            for (world, depth), new in zip(pending, flags.tolist(), strict=True):
-                if not new:
-                    continue
-                out.new += 1
-                out.depth = max(out.depth, depth)
-                key = cast(int, world.key)
-                frontier.append((world, key, depth))
-                if self.graph is not None:
-                    self.graph.keep(self.system, self.properties, world, key)
-                if out.violation is None:
-                    violation = check(self.system, world)
-                    if violation is not None:
-                        out.violation = (violation, key, depth)
-        self._pending = []
+        for pending, mask in zip(self.pending, masks, strict=True):
+            self.keep(pending, mask, out, frontier)
+        self.pending = []
         out.frontier = len(frontier)
         out.learned = self.learned()
         out.handler_runs = self.system.runner.handler_runs
         dues = [w.events[0].due for w, _, _ in frontier if w.events]
         out.min_due = min(dues) if dues else None
         return out
+
+    def keep(self, pending: Sequence[tuple[World, int]], mask: bytes, out: Acceptance,
+             into: MutableSequence[Item]) -> None:
+        """Append to `into` the worlds of `pending` (claimed, with their depths) that
+        `mask` (a shard's answer) says are new, counting them and checking the safety
+        properties on them into `out` (the first violation is kept)."""
+        check = self.properties.check_world
+        for (world, depth), new in zip(pending, np.frombuffer(mask, dtype=np.bool_).tolist(),
+                                       strict=True):
+            if not new:
+                continue
+            out.new += 1
+            out.depth = max(out.depth, depth)
+            key = cast(int, world.key)
+            into.append((world, key, depth))
+            if self.graph is not None:
+                self.graph.keep(self.system, self.properties, world, key)
+            if out.violation is None:
+                violation = check(self.system, world)
+                if violation is not None:
+                    out.violation = (violation, key, depth)
 
     def forget_before(self, time_ms: int) -> None:
         """Let the system drop cached outcomes no world left to expand can use."""

@@ -101,7 +101,7 @@ class FaultConfig:
 class CheckConfig:
     """`check:`, the checker's settings; every one optional (see `checker.faults`)."""
 
-    search: str = "bfs"
+    search: str | None = None  # None: not said (breadth-first; relaxed across workers)
     max_states: int | None = None
     max_depth: int | None = None
     max_time_s: float | None = None
@@ -112,7 +112,7 @@ class CheckConfig:
     faults: FaultConfig = field(default_factory=FaultConfig)
 
     def __post_init__(self) -> None:
-        if self.search not in SEARCHES:
+        if self.search is not None and self.search not in SEARCHES:
             raise ConfigError("check.search", f"expected one of {', '.join(SEARCHES)}, "
                               f"got {self.search!r}")
         for name in ("max_states", "max_depth"):

@@ -1,0 +1,349 @@
+"""The relaxed-order search: workers that expand without waiting for each other (sans-IO).
+
+A level-by-level search makes every worker wait at each level for the slowest one
+and for a round trip to the shards, which costs more than a level of a few dozen
+worlds takes to expand. Where the order does not matter (no `--search bfs` asked,
+no depth bound, no reduction, no checkpoint), each worker runs a `FlowCore`
+instead: it owns one partition of the visited set itself, takes batches of
+frontier worlds from its own queue, answers the claims on its own partition at
+once and sends the others to their owners without waiting, and keeps a batch's
+worlds aside (`pending`) until their owner's answer arrives. Every world is still
+kept by exactly one worker (the first claim its owner sees) and expanded exactly
+once, so the states and transitions are those of the strict BFS; the depth of a
+world is the length of the path it was found on, which can exceed its BFS depth.
+
+The search is over when every worker is idle (`FlowStatus.idle`) and every message
+sent was received, seen the same twice in a row (Mattern's four counters: a
+message in flight between two reads shows as a changed count).
+
+`FlowCore` has no locks and does no I/O: `checker.cluster.engine.FlowWorker` runs
+one on its own thread beside the calls that bring claims and answers, and
+`LocalFlow` runs several in this process, delivering their messages in a shuffled
+order (tests).
+"""
+
+from __future__ import annotations
+
+import random
+from collections import deque
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Protocol, final
+
+from twinfleet.checker.cluster.level import (
+    Acceptance,
+    Expander,
+    Expansion,
+    Failure,
+    Graph,
+    Item,
+    ShardCore,
+    owner,
+    owners,
+)
+from twinfleet.checker.cluster.visited import VisitedTable
+from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.system import System
+from twinfleet.checker.world import World
+
+BATCH = 256  # frontier worlds expanded between two looks at the messages
+FORGET_EVERY = 64  # batches between two passes dropping outcomes no world can use
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class Claims:
+    """A batch of claims for the worker owning them: keys then parent keys (`pack_pairs`)."""
+
+    target: int
+    batch: int  # the sender's number for the batch, echoed in the answer
+    blob: bytes
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class FlowStatus:
+    """What a worker has done so far, read by the coordinator."""
+
+    queue: int  # frontier worlds not yet expanded
+    idle: bool  # nothing to expand, no answer left to keep, no turn of the loop under way
+    sent: int  # claim batches, answers and moved blobs sent
+    received: int  # the same, received
+    new: int
+    transitions: int
+    claims: int  # claims sent to other workers
+    depth: int
+    handler_runs: int
+    violation: tuple[PropertyViolation, int, int] | None
+    failure: Failure | None
+
+
+@final
+class FlowCore:
+    """One worker of the relaxed-order search (module docstring): worker `index` of
+    `workers`, owning the keys `owner` gives it."""
+
+    def __init__(self, system: System, properties: PropertySet, index: int, workers: int,
+                 batch: int = BATCH) -> None:
+        self.expander = Expander(system, properties, workers)
+        self.index, self.workers, self.batch = index, workers, batch
+        self.shard = ShardCore()
+        self.queue: deque[Item] = deque()
+        self.pending: dict[int, list[tuple[World, int]]] = {}  # batch number -> claimed worlds
+        self.answers: list[tuple[int, bytes]] = []  # arrived, kept at the next `next_batch`
+        self.kept = Acceptance()
+        self.failure: Failure | None = None
+        self.transitions = self.claims = self.sent = self.received = 0
+        self.busy = False  # between `arrived` and `finish`
+        self._batches = 0
+
+    # ---------------------------------------------------------- the worker's own loop
+    # A worker's loop calls, in turn: `arrived`, `keep_answers`, `next_batch`, `expand`,
+    # `settle`, `keep_own`, `finish`. Where messages arrive on other threads, `arrived`,
+    # `next_batch`, `settle` and `finish` (and every message) need the worker's lock; the
+    # rest (expansion, property checks: the long parts) touch only what the loop owns,
+    # or the queue by single appends. From `arrived` to `finish` the worker is busy even
+    # when its queue is empty: the worlds it holds are in neither.
+
+    def arrived(self) -> list[tuple[int, bytes]]:
+        """The answers that arrived since the last call; the worker is busy until `finish`."""
+        answers, self.answers = self.answers, []
+        self.busy = True
+        return answers
+
+    def keep_answers(self, answers: list[tuple[int, bytes]]) -> None:
+        """Keep the worlds that answers say are new (into the queue)."""
+        for batch, mask in answers:
+            self.expander.keep(self.pending.pop(batch), mask, self.kept, self.queue)
+
+    def next_batch(self) -> list[Item]:
+        """Up to `batch` worlds to expand (the oldest first: the search stays close to
+        breadth-first and so to the outcome cache's times)."""
+        queue = self.queue
+        return [queue.popleft() for _ in range(min(self.batch, len(queue)))]
+
+    def expand(self, batch: list[Item]) -> tuple[Expansion, list[bytes]]:
+        """Expand a batch (touches the system, not the partition nor the queue)."""
+        self.expander.frontier = batch
+        return self.expander.expand(None)
+
+    def settle(self, expansion: Expansion, blobs: list[bytes]
+               ) -> tuple[tuple[list[tuple[World, int]], bytes] | None, list[Claims]]:
+        """Answer the batch's claims on this worker's own partition, for `keep_own`; return
+        them, and the claims for the other workers (their worlds wait in `pending`)."""
+        self.transitions += expansion.transitions
+        if expansion.failure is not None and self.failure is None:
+            self.failure = expansion.failure
+        own, out = None, []
+        for target, (worlds, blob) in enumerate(zip(self.expander.pending, blobs, strict=True)):
+            if not worlds:
+                continue
+            if target == self.index:
+                own = (worlds, self.shard.claim([blob])[0])
+                continue
+            self._batches += 1
+            self.pending[self._batches] = worlds
+            self.claims += len(worlds)
+            self.sent += 1
+            out.append(Claims(target, self._batches, blob))
+        self.expander.pending = []
+        return own, out
+
+    def keep_own(self, own: tuple[list[tuple[World, int]], bytes] | None) -> None:
+        """Keep the new worlds among the batch's claims on this worker's own partition."""
+        if own is not None:
+            self.expander.keep(*own, self.kept, self.queue)
+
+    def finish(self) -> None:
+        """The end of a turn of the loop: idle again (unless the queue holds worlds); now
+        and then, drop cached outcomes that no world left here can use."""
+        self.busy = False
+        if self._batches % FORGET_EVERY:
+            return
+        dues = [w.events[0].due for w, _, _ in self.queue if w.events]
+        dues += [w.events[0].due for worlds in self.pending.values() for w, _ in worlds
+                 if w.events]
+        if dues:
+            self.expander.forget_before(min(dues))
+
+    # ------------------------------------------------------------ messages arriving
+
+    def claim(self, blob: bytes) -> bytes:
+        """Another worker's claims on this partition: the new/seen mask to send back."""
+        self.received += 1
+        self.sent += 1
+        return self.shard.claim([blob])[0]
+
+    def answered(self, batch: int, mask: bytes) -> None:
+        """The owner's answer to one of this worker's claim batches (kept by the loop)."""
+        self.received += 1
+        self.answers.append((batch, mask))
+
+    def give(self, count: int) -> list[Item]:
+        """Up to `count` frontier worlds for an idle worker (the newest)."""
+        count = min(count, len(self.queue))
+        given = [self.queue.pop() for _ in range(count)]
+        self.sent += bool(given)
+        return given
+
+    def take(self, worlds: Sequence[Item]) -> None:
+        """Worlds another worker gave."""
+        self.received += bool(worlds)
+        self.queue.extend(worlds)
+
+    def load(self, worlds: Sequence[Item], visited: VisitedTable | None) -> None:
+        """Worlds and (this partition's part of) the visited set of a search handed over."""
+        self.queue.extend(worlds)
+        if visited is not None:
+            self.shard.add(*visited.arrays())
+
+    # ------------------------------------------------------------------ reading
+
+    def status(self) -> FlowStatus:
+        """The counters (`FlowStatus`)."""
+        k = self.kept
+        idle = not self.queue and not self.answers and not self.busy
+        return FlowStatus(len(self.queue), idle, self.sent,
+                          self.received, k.new, self.transitions, self.claims, k.depth,
+                          self.expander.system.runner.handler_runs, k.violation, self.failure)
+
+    @property
+    def graph(self) -> Graph | None:
+        """What this worker saw of the graph (`eventually` properties)."""
+        return self.expander.graph
+
+
+def partition(visited: VisitedTable, workers: int) -> list[VisitedTable]:
+    """A visited set split by owner, one table per worker."""
+    keys, parents = visited.arrays()
+    by = owners(keys, workers)
+    parts = []
+    for i in range(workers):
+        table = VisitedTable()
+        table.add(keys[by == i], parents[by == i])
+        parts.append(table)
+    return parts
+
+
+@final
+class LocalFlow:
+    """`FlowCore`s in this process, stepped in turn, their messages delivered in a
+    shuffled order, and a turn of a worker's loop now and then left half done while the
+    coordinator reads the counters (as a worker's status is read while its loop runs):
+    the relaxed-order search without processes, for tests."""
+
+    def __init__(self, system: System, properties: PropertySet, workers: int,
+                 seed: int = 0, batch: int = 7) -> None:
+        self.workers = workers
+        self.cores = [FlowCore(system, properties, i, workers, batch) for i in range(workers)]
+        self._random = random.Random(seed)
+        self._mail: list[tuple[int, Claims]] = []  # (sender, claims) in flight
+        self._answers: list[tuple[int, int, bytes]] = []  # (receiver, batch, mask) in flight
+        self._halfway: dict[int, tuple[list[tuple[int, bytes]], list[Item]]] = {}
+
+    def load(self, frontier: list[Item], visited: VisitedTable) -> None:
+        """`FlowBackend.load`."""
+        for i, (core, part) in enumerate(zip(self.cores, partition(visited, self.workers),
+                                             strict=True)):
+            core.load(frontier[i::self.workers], part)
+
+    def advance(self, seconds: float) -> None:
+        """`FlowBackend.advance`: one round of one batch per worker, then some messages
+        delivered (`seconds` does not matter here)."""
+        for i, core in enumerate(self.cores):
+            answers, batch = self._halfway.pop(i) if i in self._halfway else \
+                (core.arrived(), core.next_batch())
+            if self._random.random() < 0.2:  # answers and worlds taken, the rest later
+                self._halfway[i] = (answers, batch)
+                continue
+            core.keep_answers(answers)
+            if batch:
+                own, out = core.settle(*core.expand(batch))
+                core.keep_own(own)
+                self._mail += [(i, c) for c in out]
+            core.finish()
+        self._deliver()
+
+    def _deliver(self) -> None:
+        """Deliver a random part of the messages in flight, in a random order."""
+        rng = self._random
+        rng.shuffle(self._mail)
+        rng.shuffle(self._answers)
+        cut, keep = rng.randint(0, len(self._mail)), rng.randint(0, len(self._answers))
+        for sender, claims in self._mail[:cut]:
+            self._answers.append((sender, claims.batch, self.cores[claims.target].claim(
+                claims.blob)))
+        self._mail = self._mail[cut:]
+        for receiver, batch, mask in self._answers[:keep]:
+            self.cores[receiver].answered(batch, mask)
+        self._answers = self._answers[keep:]
+
+    def status(self) -> list[FlowStatus]:
+        """`FlowBackend.status`."""
+        return [core.status() for core in self.cores]
+
+    def move(self, source: int, target: int, count: int) -> None:
+        """`FlowBackend.move`."""
+        self.cores[target].take(self.cores[source].give(count))
+
+    def parent(self, key: int) -> int:
+        """`FlowBackend.parent`."""
+        return self.cores[owner(key, self.workers)].shard.parent(key)
+
+    def shard_bytes(self) -> list[int]:
+        """`FlowBackend.shard_bytes`."""
+        return [core.shard.nbytes() for core in self.cores]
+
+    def graphs(self) -> list[Graph]:
+        """`FlowBackend.graphs`."""
+        return [core.graph for core in self.cores if core.graph is not None]
+
+    def visited(self) -> list[bytes]:
+        """`FlowBackend.visited`."""
+        return [core.shard.dump() for core in self.cores]
+
+    def stop(self) -> None:
+        """`FlowBackend.stop`: nothing runs on its own here."""
+
+
+class FlowBackend(Protocol):
+    """Where a relaxed-order search runs: `LocalFlow`, or Ray workers
+    (`checker.cluster.engine.RayFlow`)."""
+
+    workers: int
+
+    def load(self, frontier: list[Item], visited: VisitedTable) -> None:
+        """Take over a search begun in the coordinator, and start."""
+        ...
+
+    def advance(self, seconds: float) -> None:
+        """Let the workers run for about `seconds` (raises ClusterError if one failed)."""
+        ...
+
+    def status(self) -> list[FlowStatus]:
+        """Every worker's counters."""
+        ...
+
+    def move(self, source: int, target: int, count: int) -> None:
+        """Move up to `count` frontier worlds from worker `source` to worker `target`."""
+        ...
+
+    def parent(self, key: int) -> int:
+        """The parent key of a visited key."""
+        ...
+
+    def shard_bytes(self) -> list[int]:
+        """Bytes held per partition."""
+        ...
+
+    def graphs(self) -> list[Graph]:
+        """What every worker saw of the graph (`eventually` properties), at the end."""
+        ...
+
+    def visited(self) -> list[bytes]:
+        """Every partition's keys and parents (`ShardCore.dump`), at the end."""
+        ...
+
+    def stop(self) -> None:
+        """Stop the workers' loops."""
+        ...
