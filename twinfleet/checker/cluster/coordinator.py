@@ -74,7 +74,6 @@ from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import FailureKind, Status
 
 STEAL_MIN = 64  # frontier worlds two workers must differ by before some are moved
-FLOW_STEAL_MIN = 16  # the same in a relaxed order, where an empty queue is a worker idle
 POLL_S = 0.05  # a relaxed-order search's coordinator reads the workers this often
 PATIENCE = 16  # narrow levels in a row before the first return (doubled after each)
 ENGINE = "cluster"  # a checkpoint's meta["engine"]: written by this coordinator
@@ -478,7 +477,6 @@ class Coordinator:
                     quiet = counts
                 else:
                     quiet = None
-                    self._share([s.queue for s in statuses])
                 self.guard.tick(self.statistics)  # Ctrl-C, max-time
                 self._progress()
         finally:
@@ -498,6 +496,7 @@ class Coordinator:
         self.peak_frontier = max(self.peak_frontier, self.frontier)
         t.claims = sum(s.claims for s in statuses)
         t.new_per_worker = [s.new for s in statuses]
+        t.stolen, t.moves = sum(s.gifted for s in statuses), sum(s.gifts for s in statuses)
         t.handler_runs = [s.handler_runs for s in statuses]
         failure = next((s.failure for s in statuses if s.failure is not None), None)
         if failure is not None:
@@ -508,16 +507,6 @@ class Coordinator:
         if self.limits.max_states is not None and self.states >= self.limits.max_states:
             raise Stop(f"max-states {self.limits.max_states} reached before the search finished")
         return None
-
-    def _share(self, queues: list[int]) -> None:
-        """Give half the busiest worker's queue to an idle one."""
-        idle = min(range(len(queues)), key=queues.__getitem__)
-        busy = max(range(len(queues)), key=queues.__getitem__)
-        if queues[idle] == 0 and queues[busy] > FLOW_STEAL_MIN:
-            assert self.flow is not None
-            self.flow.move(busy, idle, queues[busy] // 2)
-            self.traffic.stolen += queues[busy] // 2
-            self.traffic.moves += 1
 
     # ------------------------------------------------------------- liveness
 

@@ -28,7 +28,7 @@ from typing import Any, final
 
 import numpy as np
 
-from twinfleet.checker.cluster.flow import FlowCore, FlowStatus, partition
+from twinfleet.checker.cluster.flow import ASK, FlowCore, FlowStatus, partition
 from twinfleet.checker.cluster.level import (
     Acceptance,
     Expander,
@@ -252,6 +252,8 @@ class FlowWorker:
             with lock:
                 while not self.stopped and not core.queue and not core.answers and \
                         links.error is None:
+                    if (peer := core.ask()) is not None:
+                        links.claim(peer, ASK, b"")
                     lock.wait(0.05)
                 if self.stopped:
                     return 0
@@ -272,27 +274,21 @@ class FlowWorker:
                 core.finish()
 
     def _claims(self, sender: int, batch: int, blob: bytes) -> bytes:
+        if batch != ASK:
+            with self.lock:
+                return self.core.claim(blob)
         with self.lock:
-            return self.core.claim(blob)
+            spared = self.core.spare()
+        return pickle.dumps(spared, protocol=pickle.HIGHEST_PROTOCOL)
 
-    def _answered(self, batch: int, mask: bytes) -> None:
+    def _answered(self, batch: int, answer: bytes) -> None:
+        worlds = pickle.loads(answer) if batch == ASK else None  # noqa: S301 - our workers
         with self.lock:
-            self.core.answered(batch, mask)
+            if worlds is None:
+                self.core.answered(batch, answer)
+            else:
+                self.core.given(worlds)
             self.lock.notify()
-
-    def give(self, count: int) -> bytes:
-        """`FlowCore.give`, pickled."""
-        with self.lock:
-            given = self.core.give(count)
-        return pickle.dumps(given, protocol=pickle.HIGHEST_PROTOCOL)
-
-    def take(self, blob: bytes) -> int:
-        """`FlowCore.take` of a `give` blob; wakes the loop."""
-        worlds = pickle.loads(blob)  # noqa: S301 - from our own workers
-        with self.lock:
-            self.core.take(worlds)
-            self.lock.notify()
-        return 0
 
     def status(self) -> FlowStatus:
         """`FlowCore.status`."""
@@ -474,7 +470,6 @@ class RayFlow:
             self.close()
             raise
         self._runs: list[Any] = []
-        self._move: Any = None  # the move under way, if any
 
     def load(self, frontier: list[Item], visited: VisitedTable) -> None:
         """`FlowBackend.load`: each worker's share of the frontier and its partition; then
@@ -497,14 +492,6 @@ class RayFlow:
     def status(self) -> list[FlowStatus]:
         """`FlowBackend.status`."""
         return list(_get([a.status.remote() for a in self.actors]))
-
-    def move(self, source: int, target: int, count: int) -> None:
-        """`FlowBackend.move`, not waited for; none while the last one is under way."""
-        if self._move is not None:
-            if not ray.wait([self._move], timeout=0)[0]:
-                return
-            _get(self._move)
-        self._move = self.actors[target].take.remote(self.actors[source].give.remote(count))
 
     def parent(self, key: int) -> int:
         """`FlowBackend.parent`: asks the owning worker."""

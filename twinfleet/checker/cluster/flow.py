@@ -47,7 +47,8 @@ from twinfleet.checker.system import System
 from twinfleet.checker.world import World
 
 BATCH = 256  # frontier worlds expanded between two looks at the messages
-FORGET_EVERY = 64  # batches between two passes dropping outcomes no world can use
+ASK = 0  # the batch number of a question for worlds and of its answer (claims count from 1)
+FORGET_EVERY = 64  # turns of the loop between two passes dropping outcomes no world can use
 
 
 @final
@@ -67,7 +68,7 @@ class FlowStatus:
 
     queue: int  # frontier worlds not yet expanded
     idle: bool  # nothing to expand, no answer left to keep, no turn of the loop under way
-    sent: int  # claim batches, answers and moved blobs sent
+    sent: int  # claim batches, answers, questions for worlds and their answers sent
     received: int  # the same, received
     new: int
     transitions: int
@@ -76,6 +77,8 @@ class FlowStatus:
     handler_runs: int
     violation: tuple[PropertyViolation, int, int] | None
     failure: Failure | None
+    gifts: int  # answers with worlds this worker got when it asked for some
+    gifted: int  # their worlds
 
 
 @final
@@ -95,7 +98,9 @@ class FlowCore:
         self.failure: Failure | None = None
         self.transitions = self.claims = self.sent = self.received = 0
         self.busy = False  # between `arrived` and `finish`
-        self._batches = 0
+        self.asking = self.refused = False  # a question for worlds out; the last refused
+        self.gifts = self.gifted = 0  # answers with worlds, and their worlds
+        self._batches = self._turns = self._asked = 0
 
     # ---------------------------------------------------------- the worker's own loop
     # A worker's loop calls, in turn: `arrived`, `keep_answers`, `next_batch`, `expand`,
@@ -117,10 +122,12 @@ class FlowCore:
             self.expander.keep(self.pending.pop(batch), mask, self.kept, self.queue)
 
     def next_batch(self) -> list[Item]:
-        """Up to `batch` worlds to expand (the oldest first: the search stays close to
-        breadth-first and so to the outcome cache's times)."""
+        """Up to `batch` worlds to expand, and no more than half the queue (rounded up),
+        so that a worker asking for worlds finds some and a short batch's claims leave
+        soon; the oldest first (the search stays close to breadth-first and so to the
+        outcome cache's times)."""
         queue = self.queue
-        return [queue.popleft() for _ in range(min(self.batch, len(queue)))]
+        return [queue.popleft() for _ in range(min(self.batch, (len(queue) + 1) // 2))]
 
     def expand(self, batch: list[Item]) -> tuple[Expansion, list[bytes]]:
         """Expand a batch (touches the system, not the partition nor the queue)."""
@@ -158,7 +165,8 @@ class FlowCore:
         """The end of a turn of the loop: idle again (unless the queue holds worlds); now
         and then, drop cached outcomes that no world left here can use."""
         self.busy = False
-        if self._batches % FORGET_EVERY:
+        self._turns += 1
+        if self._turns % FORGET_EVERY:
             return
         dues = [w.events[0].due for w, _, _ in self.queue if w.events]
         dues += [w.events[0].due for worlds in self.pending.values() for w, _ in worlds
@@ -172,6 +180,7 @@ class FlowCore:
         """Another worker's claims on this partition: the new/seen mask to send back."""
         self.received += 1
         self.sent += 1
+        self.refused = False  # the sender is expanding: it may have worlds to spare
         return self.shard.claim([blob])[0]
 
     def answered(self, batch: int, mask: bytes) -> None:
@@ -179,17 +188,35 @@ class FlowCore:
         self.received += 1
         self.answers.append((batch, mask))
 
-    def give(self, count: int) -> list[Item]:
-        """Up to `count` frontier worlds for an idle worker (the newest)."""
-        count = min(count, len(self.queue))
-        given = [self.queue.pop() for _ in range(count)]
-        self.sent += bool(given)
-        return given
+    def ask(self) -> int | None:
+        """The worker to ask for worlds, when this one is idle, has no question out and
+        was not refused since it last saw a claim (a worker that is expanding sends
+        claims; asking an idle one again and again would keep the counters moving and
+        the search from ever ending); else None."""
+        if self.asking or self.refused or self.queue or self.answers or self.workers < 2:
+            return None
+        self.asking = True
+        self.sent += 1
+        self._asked = (self._asked + 1) % self.workers
+        if self._asked == self.index:
+            self._asked = (self._asked + 1) % self.workers
+        return self._asked
 
-    def take(self, worlds: Sequence[Item]) -> None:
-        """Worlds another worker gave."""
-        self.received += bool(worlds)
+    def spare(self) -> list[Item]:
+        """Another worker asked: half this queue (the newest worlds), maybe none."""
+        self.received += 1
+        self.sent += 1
+        queue = self.queue
+        return [queue.pop() for _ in range(len(queue) // 2)]
+
+    def given(self, worlds: Sequence[Item]) -> None:
+        """The answer to `ask`: worlds to expand, or none (refused)."""
+        self.received += 1
+        self.asking = False
+        self.refused = not worlds
         self.queue.extend(worlds)
+        self.gifts += bool(worlds)
+        self.gifted += len(worlds)
 
     def load(self, worlds: Sequence[Item], visited: VisitedTable | None) -> None:
         """Worlds and (this partition's part of) the visited set of a search handed over."""
@@ -205,7 +232,8 @@ class FlowCore:
         idle = not self.queue and not self.answers and not self.busy
         return FlowStatus(len(self.queue), idle, self.sent,
                           self.received, k.new, self.transitions, self.claims, k.depth,
-                          self.expander.system.runner.handler_runs, k.violation, self.failure)
+                          self.expander.system.runner.handler_runs, k.violation, self.failure,
+                          self.gifts, self.gifted)
 
     @property
     def graph(self) -> Graph | None:
@@ -238,7 +266,8 @@ class LocalFlow:
         self.cores = [FlowCore(system, properties, i, workers, batch) for i in range(workers)]
         self._random = random.Random(seed)
         self._mail: list[tuple[int, Claims]] = []  # (sender, claims) in flight
-        self._answers: list[tuple[int, int, bytes]] = []  # (receiver, batch, mask) in flight
+        # (receiver, batch, mask or spared worlds) in flight
+        self._answers: list[tuple[int, int, bytes | list[Item]]] = []
         self._halfway: dict[int, tuple[list[tuple[int, bytes]], list[Item]]] = {}
 
     def load(self, frontier: list[Item], visited: VisitedTable) -> None:
@@ -262,6 +291,8 @@ class LocalFlow:
                 core.keep_own(own)
                 self._mail += [(i, c) for c in out]
             core.finish()
+            if (peer := core.ask()) is not None:
+                self._mail.append((i, Claims(peer, ASK, b"")))
         self._deliver()
 
     def _deliver(self) -> None:
@@ -271,20 +302,20 @@ class LocalFlow:
         rng.shuffle(self._answers)
         cut, keep = rng.randint(0, len(self._mail)), rng.randint(0, len(self._answers))
         for sender, claims in self._mail[:cut]:
-            self._answers.append((sender, claims.batch, self.cores[claims.target].claim(
-                claims.blob)))
+            target = self.cores[claims.target]
+            answer = target.spare() if claims.batch == ASK else target.claim(claims.blob)
+            self._answers.append((sender, claims.batch, answer))
         self._mail = self._mail[cut:]
-        for receiver, batch, mask in self._answers[:keep]:
-            self.cores[receiver].answered(batch, mask)
+        for receiver, batch, answer in self._answers[:keep]:
+            if isinstance(answer, bytes):
+                self.cores[receiver].answered(batch, answer)
+            else:
+                self.cores[receiver].given(answer)
         self._answers = self._answers[keep:]
 
     def status(self) -> list[FlowStatus]:
         """`FlowBackend.status`."""
         return [core.status() for core in self.cores]
-
-    def move(self, source: int, target: int, count: int) -> None:
-        """`FlowBackend.move`."""
-        self.cores[target].take(self.cores[source].give(count))
 
     def parent(self, key: int) -> int:
         """`FlowBackend.parent`."""
@@ -322,10 +353,6 @@ class FlowBackend(Protocol):
 
     def status(self) -> list[FlowStatus]:
         """Every worker's counters."""
-        ...
-
-    def move(self, source: int, target: int, count: int) -> None:
-        """Move up to `count` frontier worlds from worker `source` to worker `target`."""
         ...
 
     def parent(self, key: int) -> int:
