@@ -45,6 +45,7 @@ from twinfleet.checker.cluster.level import (
     Acceptance,
     Expander,
     Expansion,
+    Failure,
     Graph,
     Item,
     Learned,
@@ -417,12 +418,9 @@ class Coordinator:
             self.depth = max(self.depth, a.depth)
         self.frontier = sum(a.frontier for a in acceptances)
         self.peak_frontier = max(self.peak_frontier, self.frontier)
-        failure = next((e.failure for e in expansions if e.failure is not None), None)
-        if failure is not None:
-            return self._failed(failure.parent)
-        violation = next((a.violation for a in acceptances if a.violation is not None), None)
-        if violation is not None:
-            return self._violated(violation[0], self._path(violation[1])[0])
+        found = self._found([e.failure for e in expansions], [a.violation for a in acceptances])
+        if found is not None:
+            return found
         learned = [a.learned for a in acceptances if a.learned is not None]
         if self.backend is not self.local:
             self._count(learned)
@@ -498,12 +496,9 @@ class Coordinator:
         t.new_per_worker = [s.new for s in statuses]
         t.stolen, t.moves = sum(s.gifted for s in statuses), sum(s.gifts for s in statuses)
         t.handler_runs = [s.handler_runs for s in statuses]
-        failure = next((s.failure for s in statuses if s.failure is not None), None)
-        if failure is not None:
-            return self._failed(failure.parent)
-        violation = next((s.violation for s in statuses if s.violation is not None), None)
-        if violation is not None:
-            return self._violated(violation[0], self._path(violation[1])[0])
+        found = self._found([s.failure for s in statuses], [s.violation for s in statuses])
+        if found is not None:
+            return found
         if self.limits.max_states is not None and self.states >= self.limits.max_states:
             raise Stop(f"max-states {self.limits.max_states} reached before the search finished")
         return None
@@ -623,6 +618,18 @@ class Coordinator:
                 expander.graph.extend(graph)
         self.frontier = len(expander.frontier)
         self._restored = True
+
+    def _found(self, failures: list[Failure | None],
+               violations: list[tuple[PropertyViolation, int, int] | None]) -> Outcome | None:
+        """The outcome of the first handler failure, else the first violation, the workers
+        met (a failure's parent, a violating world's key), or None."""
+        failure = next((f for f in failures if f is not None), None)
+        if failure is not None:
+            return self._failed(failure.parent)
+        violation = next((v for v in violations if v is not None), None)
+        if violation is not None:
+            return self._violated(violation[0], self._path(violation[1])[0])
+        return None
 
     def _violated(self, violation: PropertyViolation, path: Counterexample) -> Outcome:
         return Outcome(Status.VIOLATED, violation.property, self.statistics(), violation, path)

@@ -42,6 +42,9 @@ from twinfleet.checker.cluster.level import (
 from twinfleet.checker.cluster.links import TOKEN_BYTES, Links
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint, mismatch
 from twinfleet.checker.cluster.visited import VisitedTable
+from twinfleet.checker.properties import PropertySet
+from twinfleet.checker.reduction import Reduction
+from twinfleet.checker.system import System
 
 try:
     import ray
@@ -99,16 +102,24 @@ def _answers(address: str) -> None:
                            f"{exc.strerror or exc}") from None
 
 
+def _built(spec: SystemSpec, expected: dict[str, str]
+           ) -> tuple[System, PropertySet, Reduction | None]:
+    """The system, properties and reduction of `spec`, built here; ClusterError when this
+    machine's scenario, rules or node sources differ from the coordinator's (`expected`)."""
+    system, props, reduction = spec.build()
+    differs = mismatch(fingerprint(system), expected)
+    if differs is not None:
+        raise ClusterError(f"worker on {os.uname().nodename}: its {differs} differ(s) "
+                           "from the coordinator's")
+    return system, props, reduction
+
+
 @ray.remote(num_cpus=1)
 class Worker:
     """An `Expander` on a system built from a `SystemSpec`."""
 
     def __init__(self, spec: SystemSpec, expected: dict[str, str], shards: int) -> None:
-        system, props, reduction = spec.build()
-        differs = mismatch(fingerprint(system), expected)
-        if differs is not None:
-            raise ClusterError(f"worker on {os.uname().nodename}: its {differs} differ(s) "
-                               "from the coordinator's")
+        system, props, reduction = _built(spec, expected)
         self.core = Expander(system, props, shards, reduction)
 
     def propose(self, max_depth: int | None) -> tuple[Any, ...]:
@@ -213,11 +224,7 @@ class FlowWorker:
 
     def __init__(self, spec: SystemSpec, expected: dict[str, str], index: int,
                  workers: int, token: bytes) -> None:
-        system, props, _ = spec.build()
-        differs = mismatch(fingerprint(system), expected)
-        if differs is not None:
-            raise ClusterError(f"worker on {os.uname().nodename}: its {differs} differ(s) "
-                               "from the coordinator's")
+        system, props, _ = _built(spec, expected)
         self.core = FlowCore(system, props, index, workers)
         self.lock = threading.Condition()
         self.stopped = False
