@@ -151,6 +151,8 @@ def _note(coordinator: Coordinator, outcome: Outcome, workers: int, min_width: i
         if coordinator.flow is not None:
             note += ("; the states and transitions of a strict BFS, depth and counterexample "
                      "as found (--search bfs: the shortest)")
-    if coordinator.properties.eventually and outcome.status is not Status.UNKNOWN:
+    eventually = {p.name for p in coordinator.properties.eventually}
+    violated = outcome.violation.property if outcome.violation is not None else None
+    if eventually and (outcome.status is Status.HOLDS or violated in eventually):
         note += "; eventually properties: lasso search on the graph gathered to this process"
     return note
