@@ -59,7 +59,9 @@ def register(subparsers: Any) -> None:
                         "with --resume)")
     add_override_arguments(p)  # the same overrides as `launch`, validated the same way
     p.add_argument("--search", choices=("bfs", "dfs", "random"), default=None,
-                   help="search order: bfs (shortest counterexample, default), dfs, or random walks")
+                   help="search order: bfs (shortest counterexample, default), dfs, or random "
+                        "walks; not given, an unreduced search on --workers runs in a relaxed "
+                        "order (same states and transitions, any counterexample)")
     p.add_argument("--walks", type=int, default=100, help="number of random walks (--search random)")
     p.add_argument("--seed", type=int, default=None,
                    help="seed of the random walks (default: the scenario's seed)")
