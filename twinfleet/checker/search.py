@@ -53,7 +53,7 @@ from twinfleet.checker.store import StateStore
 from twinfleet.checker.system import System
 from twinfleet.checker.transition import Transition
 from twinfleet.checker.walks import RandomWalks
-from twinfleet.checker.world import World
+from twinfleet.checker.world import World, earliest_time
 from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.scenario.property_eval import Overtime, time_limit
 
@@ -335,9 +335,9 @@ class Search:
         scanning the frontier costs O(1) per expansion.
         """
         self._next_forget = self._expansions + max(_FORGET_EVERY, len(self._frontier))
-        times = [w.events[0].due for w, _, _ in self._frontier if w.events]
-        if times:
-            self.system.forget_before(min(times))
+        due = earliest_time(w for w, _, _ in self._frontier)
+        if due is not None:
+            self.system.forget_before(due)
 
     def _discover(self, t: Transition, parent: int, depth: int) -> int:
         if t.failure is not None:

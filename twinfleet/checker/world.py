@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import hashlib
 from array import array
+from collections.abc import Iterable
 from operator import attrgetter
 from typing import Any, Final, final
 
@@ -209,6 +210,12 @@ class World:
 
 _HEADERS: dict[tuple[EventKind, int, str, int, str], bytes] = {}
 _NO_ARGS = snapshot(())
+
+
+def earliest_time(worlds: Iterable[World]) -> int | None:
+    """The smallest t* of `worlds` (None if nothing is pending in any): cached handler
+    outcomes of events due before it serve none of them."""
+    return min((t for w in worlds if (t := w.next_time) is not None), default=None)
 
 
 def event_key(kind: EventKind, target: int, method: str, sender: int, reply_to: str,

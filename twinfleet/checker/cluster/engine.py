@@ -28,7 +28,7 @@ from typing import Any, final
 
 import numpy as np
 
-from twinfleet.checker.cluster.flow import ASK, FlowCore, FlowStatus, partition
+from twinfleet.checker.cluster.flow import ASK, FlowCore, FlowStatus
 from twinfleet.checker.cluster.level import (
     Acceptance,
     Expander,
@@ -37,7 +37,7 @@ from twinfleet.checker.cluster.level import (
     Item,
     ShardCore,
     owner,
-    owners,
+    split,
 )
 from twinfleet.checker.cluster.links import TOKEN_BYTES, Links
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint, mismatch
@@ -245,10 +245,8 @@ class FlowWorker:
 
     def load(self, blob: bytes, keys: np.ndarray, parents: np.ndarray) -> int:
         """`FlowCore.load`: pickled worlds and this partition's keys and parents."""
-        table = VisitedTable()
-        table.add(keys, parents)
         with self.lock:
-            self.core.load(pickle.loads(blob), table)  # noqa: S301 - from the coordinator
+            self.core.load(pickle.loads(blob), keys, parents)  # noqa: S301 - the coordinator
         return 0
 
     def run(self) -> int:
@@ -380,9 +378,8 @@ class RayBackend:
         parts: list[list[Item]] = [frontier[i::self.workers] for i in range(self.workers)]
         refs = [a.take.remote(pickle.dumps(p, protocol=pickle.HIGHEST_PROTOCOL))
                 for a, p in zip(self.actors, parts, strict=True)]
-        keys, parents = visited.arrays()
-        by = owners(keys, self.workers)
-        refs += [s.add.remote(keys[by == i], parents[by == i]) for i, s in enumerate(self.shards)]
+        refs += [s.add.remote(*part)
+                 for s, part in zip(self.shards, split(visited, self.workers), strict=True)]
         _get(refs)
         return self
 
@@ -482,10 +479,9 @@ class RayFlow:
         """`FlowBackend.load`: each worker's share of the frontier and its partition; then
         every loop starts."""
         n = self.workers
-        parts = partition(visited, n)
         _get([a.load.remote(pickle.dumps(frontier[i::n], protocol=pickle.HIGHEST_PROTOCOL),
-                            *part.arrays())
-              for i, (a, part) in enumerate(zip(self.actors, parts, strict=True))])
+                            *part)
+              for i, (a, part) in enumerate(zip(self.actors, split(visited, n), strict=True))])
         self._runs = [a.run.remote() for a in self.actors]
 
     def advance(self, seconds: float) -> None:

@@ -28,7 +28,10 @@ import random
 from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import chain
 from typing import Protocol, final
+
+import numpy as np
 
 from twinfleet.checker.cluster.level import (
     Acceptance,
@@ -39,12 +42,12 @@ from twinfleet.checker.cluster.level import (
     Item,
     ShardCore,
     owner,
-    owners,
+    split,
 )
 from twinfleet.checker.cluster.visited import VisitedTable
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.system import System
-from twinfleet.checker.world import World
+from twinfleet.checker.world import World, earliest_time
 
 BATCH = 256  # frontier worlds expanded between two looks at the messages
 ASK = 0  # the batch number of a question for worlds and of its answer (claims count from 1)
@@ -168,11 +171,10 @@ class FlowCore:
         self._turns += 1
         if self._turns % FORGET_EVERY:
             return
-        dues = [w.events[0].due for w, _, _ in self.queue if w.events]
-        dues += [w.events[0].due for worlds in self.pending.values() for w, _ in worlds
-                 if w.events]
-        if dues:
-            self.expander.forget_before(min(dues))
+        due = earliest_time(chain((w for w, _, _ in self.queue),
+                                 (w for worlds in self.pending.values() for w, _ in worlds)))
+        if due is not None:
+            self.expander.forget_before(due)
 
     # ------------------------------------------------------------ messages arriving
 
@@ -218,11 +220,11 @@ class FlowCore:
         self.gifts += bool(worlds)
         self.gifted += len(worlds)
 
-    def load(self, worlds: Sequence[Item], visited: VisitedTable | None) -> None:
-        """Worlds and (this partition's part of) the visited set of a search handed over."""
+    def load(self, worlds: Sequence[Item], keys: np.ndarray, parents: np.ndarray) -> None:
+        """Worlds and this partition's part of the visited set (keys and parent keys) of a
+        search handed over."""
         self.queue.extend(worlds)
-        if visited is not None:
-            self.shard.add(*visited.arrays())
+        self.shard.add(keys, parents)
 
     # ------------------------------------------------------------------ reading
 
@@ -239,18 +241,6 @@ class FlowCore:
     def graph(self) -> Graph | None:
         """What this worker saw of the graph (`eventually` properties)."""
         return self.expander.graph
-
-
-def partition(visited: VisitedTable, workers: int) -> list[VisitedTable]:
-    """A visited set split by owner, one table per worker."""
-    keys, parents = visited.arrays()
-    by = owners(keys, workers)
-    parts = []
-    for i in range(workers):
-        table = VisitedTable()
-        table.add(keys[by == i], parents[by == i])
-        parts.append(table)
-    return parts
 
 
 @final
@@ -272,9 +262,9 @@ class LocalFlow:
 
     def load(self, frontier: list[Item], visited: VisitedTable) -> None:
         """`FlowBackend.load`."""
-        for i, (core, part) in enumerate(zip(self.cores, partition(visited, self.workers),
+        for i, (core, part) in enumerate(zip(self.cores, split(visited, self.workers),
                                              strict=True)):
-            core.load(frontier[i::self.workers], part)
+            core.load(frontier[i::self.workers], *part)
 
     def advance(self, seconds: float) -> None:
         """`FlowBackend.advance`: one round of one batch per worker, then some messages

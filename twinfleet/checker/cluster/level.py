@@ -33,7 +33,7 @@ from twinfleet.checker.reduction import Reduction, ReductionStatistics
 from twinfleet.checker.store import DigestTable, EdgeStore, StateStore
 from twinfleet.checker.system import System
 from twinfleet.checker.transition import Transition
-from twinfleet.checker.world import World
+from twinfleet.checker.world import World, earliest_time
 
 Item = tuple[World, int, int]  # a frontier world, its key, its depth
 _SHIFT = np.uint64(40)  # owners read high bits: a store's slot table reads the low ones
@@ -42,6 +42,13 @@ _SHIFT = np.uint64(40)  # owners read high bits: a store's slot table reads the 
 def owners(keys: np.ndarray, shards: int) -> np.ndarray:
     """The shard index owning each key of `keys` (uint64)."""
     return ((keys >> _SHIFT) % np.uint64(shards)).astype(np.int64)
+
+
+def split(visited: VisitedTable, shards: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """A visited set's keys and parent keys, one pair of arrays per owning shard."""
+    keys, parents = visited.arrays()
+    by = owners(keys, shards)
+    return [(keys[by == i], parents[by == i]) for i in range(shards)]
 
 
 def owner(key: int, shards: int) -> int:
@@ -303,8 +310,7 @@ class Expander:
         out.frontier = len(frontier)
         out.learned = self.learned()
         out.handler_runs = self.system.runner.handler_runs
-        dues = [w.events[0].due for w, _, _ in frontier if w.events]
-        out.min_due = min(dues) if dues else None
+        out.min_due = earliest_time(w for w, _, _ in frontier)
         return out
 
     def keep(self, pending: Sequence[tuple[World, int]], mask: bytes, out: Acceptance,
