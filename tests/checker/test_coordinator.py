@@ -4,7 +4,8 @@ one process's answers.
 The cluster here is a `LocalBackend` (the cores the Ray actors run) on a system
 built from the `SystemSpec` as a worker builds it, so the coordinator's moves
 are tested without Ray: out to the
-cluster when the frontier reaches `min_width`, back when it falls below
+cluster when the frontier reaches `min_width` and the cluster says it is up (some
+levels later, as real workers take a while to start), back when it falls below
 `back_width`, again and again on generated systems, reduced or not, with
 `eventually` properties decided on the gathered graph and reduced searches
 restarting.
@@ -34,9 +35,14 @@ class CountingCluster:
     """A `LocalBackend` on a system built from the `SystemSpec`, as a worker builds it on
     another machine (the cluster's part of the cores), counting the coordinator's moves."""
 
-    def __init__(self, spec: SystemSpec) -> None:
+    def __init__(self, spec: SystemSpec, late: int = 0) -> None:
         self.inner = LocalBackend(*spec.build())
         self.loads = self.takes = 0
+        self.late = late  # polls of `ready` that say no: workers still starting
+
+    def ready(self) -> bool:
+        self.late -= 1
+        return self.late < 0
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.inner, name)
@@ -50,14 +56,15 @@ class CountingCluster:
         return self.inner.take_back()
 
 
-def _coordinated(path: Path, reduction: str, max_states: int) -> tuple[Any, CountingCluster]:
+def _coordinated(path: Path, reduction: str, max_states: int,
+                 late: int = 0) -> tuple[Any, CountingCluster]:
     scenario = load(str(path))
     props = PropertySet.from_scenario(scenario)
     system = System(scenario, properties=props)
     reduced, name = plan(system, props, "bfs", reduction)
     spec = SystemSpec(str(path), None, None, (), (),
                       reduction=None if reduced is None else name.split()[0])
-    cluster = CountingCluster(spec)
+    cluster = CountingCluster(spec, late)
     coordinator = Coordinator(system, props, Limits(max_states=max_states),
                               lambda width: cluster, min_width=3, reduction=reduced,
                               back_width=2, patience=1)
@@ -66,13 +73,13 @@ def _coordinated(path: Path, reduction: str, max_states: int) -> tuple[Any, Coun
 
 @settings(max_examples=150, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
-@given(doc=systems(), reduction=st.sampled_from(["none", "por"]))
+@given(doc=systems(), reduction=st.sampled_from(["none", "por"]), late=st.integers(0, 3))
 def test_moving_out_and_back_keeps_the_one_process_answers(tmp_path: Path, doc: dict[str, Any],
-                                                            reduction: str) -> None:
+                                                            reduction: str, late: int) -> None:
     path = write_scenario(doc, tmp_path / "generated.yaml")
     one = check(path, CheckOptions(reduction=reduction, max_states=2_000))
     assume(one.status.value != "unknown")
-    outcome, cluster = _coordinated(path, reduction, 2_000)
+    outcome, cluster = _coordinated(path, reduction, 2_000, late)
     assert outcome.status == one.status, (outcome.reason, one.reason)
     if one.violation is None:
         assert (outcome.statistics.states, outcome.statistics.transitions,

@@ -3,7 +3,8 @@ transitions and verdicts, whatever order its messages arrive in.
 
 The workers are `FlowCore`s stepped in this process (`LocalFlow`) on a system built from
 the `SystemSpec` as a worker builds it, their claims and answers delivered in an order
-shuffled by a seed; the coordinator hands them the search at `min_width`.
+shuffled by a seed; the coordinator hands them the search at `min_width`, once they say
+they are up (some levels later: real workers take a while to start).
 """
 
 from __future__ import annotations
@@ -25,12 +26,13 @@ from twinfleet.checker.system import System
 from twinfleet.runtime.scenario.overrides import load
 
 
-def _relaxed(path: Path, workers: int, seed: int, max_states: int) -> tuple[Outcome, LocalFlow]:
+def _relaxed(path: Path, workers: int, seed: int, max_states: int,
+             late: int = 0) -> tuple[Outcome, LocalFlow]:
     scenario = load(str(path))
     props = PropertySet.from_scenario(scenario)
     system = System(scenario, properties=props)
     system_there, props_there, _ = SystemSpec(str(path), None, None, (), ()).build()
-    flow = LocalFlow(system_there, props_there, workers, seed=seed)
+    flow = LocalFlow(system_there, props_there, workers, seed=seed, late=late)
 
     def no_levels(width: int) -> Any:
         raise AssertionError("a relaxed order runs no level on the cluster")
@@ -42,13 +44,14 @@ def _relaxed(path: Path, workers: int, seed: int, max_states: int) -> tuple[Outc
 
 @settings(max_examples=150, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
-@given(doc=systems(), workers=st.integers(2, 3), seed=st.integers(0, 2**16))
+@given(doc=systems(), workers=st.integers(2, 3), seed=st.integers(0, 2**16),
+       late=st.integers(0, 3))
 def test_any_delivery_order_keeps_the_bfs_answers(tmp_path: Path, doc: dict[str, Any],
-                                                  workers: int, seed: int) -> None:
+                                                  workers: int, seed: int, late: int) -> None:
     path = write_scenario(doc, tmp_path / "generated.yaml")
     one = check(path, CheckOptions(reduction="none", max_states=2_000))
     assume(one.status.value != "unknown")
-    outcome, flow = _relaxed(path, workers, seed, 10**6)
+    outcome, flow = _relaxed(path, workers, seed, 10**6, late)
     event("handed to the workers" if any(s.new for s in flow.status()) else "stayed home")
     assert outcome.status == one.status, (outcome.reason, one.reason)
     if one.violation is None:

@@ -76,14 +76,14 @@ def test_a_shard_killed_mid_search_ends_with_no_verdict(tmp_path: Path, order: l
     # strict BFS: a shard actor; relaxed order: a worker, which holds a partition too
     path = safety_copy("c2c", tmp_path)
     proc = subprocess.Popen([sys.executable, "-m", "twinfleet", "check", str(path),
-                             "--reduction", "none", "--workers", "2", "--min-width", "2",
+                             "--reduction", "none", "--workers", "2", "--min-width", "1",
                              *order],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=child_env(), cwd=ROOT, start_new_session=True)
     try:
         assert proc.stderr is not None
         for line in proc.stderr:
-            if "moving the search to 2 Ray worker(s)" in line:
+            if "starting 2 Ray worker(s)" in line:
                 break
         deadline = time.monotonic() + 60
         shard = None

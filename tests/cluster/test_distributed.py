@@ -13,6 +13,7 @@ so the distributed path is what is compared; each result says so.
 
 from __future__ import annotations
 
+import time
 from pathlib import Path
 from typing import Any
 
@@ -180,12 +181,20 @@ def test_generated_systems(tmp_path: Path, doc: dict[str, Any], workers: int,
         assert many.reduction == one.reduction
 
 
-def test_a_worker_with_other_node_sources_refuses_to_start(tmp_path: Path, engine: Any) -> None:
+@pytest.mark.parametrize("backend", ["RayBackend", "RayFlow"])
+def test_a_worker_with_other_node_sources_refuses_to_start(tmp_path: Path, engine: Any,
+                                                           backend: str) -> None:
     path = safety_copy("headon", tmp_path)
     spec = SystemSpec(str(path), None, None, (), ())
     expected = {"scenario": "0" * 64, "rules": "", "node sources": ""}
+    starting = getattr(engine, backend)(spec, expected, 2)  # returns before the workers start
+
+    def wait() -> None:
+        while not starting.ready():
+            time.sleep(0.02)
+
     with pytest.raises(ClusterError, match="its scenario differ"):
-        engine.RayBackend(spec, expected, 2)
+        wait()
 
 
 def test_random_walks_say_they_stay_in_one_process(tmp_path: Path) -> None:

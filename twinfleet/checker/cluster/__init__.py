@@ -99,8 +99,10 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
         def engine(width: int) -> Any:
             found = engine_module(local=address is None)
             if report is not None:
-                report(f"[check] frontier {width:,} wide: moving the search to {workers} Ray "
-                       "worker(s)" + (" (relaxed order)" if relaxed else ""))
+                report(f"[check] frontier {width:,} wide: starting {workers} Ray worker(s)"
+                       + (" (relaxed order)" if relaxed else "")
+                       + ("" if min_width <= 1 else "; the search goes on here until they "
+                          "are up"))
             stack.enter_context(found.session(workers, address))
             return found
 

@@ -76,6 +76,7 @@ from twinfleet.runtime.contract.kinds import FailureKind, Status
 
 STEAL_MIN = 64  # frontier worlds two workers must differ by before some are moved
 POLL_S = 0.05  # a relaxed-order search's coordinator reads the workers this often
+START_POLL_S = 0.01  # how often a search that waits for its workers asks if they are up
 PATIENCE = 16  # narrow levels in a row before the first return (doubled after each)
 ENGINE = "cluster"  # a checkpoint's meta["engine"]: written by this coordinator
 
@@ -84,6 +85,10 @@ class Backend(Protocol):
     """Where levels are expanded: this process, or a cluster of workers and shards."""
 
     workers: int
+
+    def ready(self) -> bool:
+        """Whether every worker is up (raises ClusterError if one cannot start)."""
+        ...
 
     def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
         """Expand every worker's frontier by one level; claims answered, new worlds kept."""
@@ -137,6 +142,10 @@ class LocalBackend:
         self.expander = Expander(system, properties, 1, reduction)
         self.shard = ShardCore()
         self._fresh = True  # used as a cluster: the coordinator's relation not learned yet
+
+    def ready(self) -> bool:
+        """Always (`Backend.ready`)."""
+        return True
 
     def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
         """One level here (`Backend.level`)."""
@@ -226,7 +235,8 @@ class Coordinator:
     Args:
         system, properties: the coordinator's own copy (initial worlds, counterexamples).
         limits: as `checker.search.Search` takes them (checked between levels).
-        factory: starts the cluster's backend (once: a restart reuses it); None:
+        factory: starts the cluster's backend (once: a restart reuses it) and returns
+            at once; the search goes on here until the backend is `ready`. None:
             everything in this process.
         min_width: frontier width at which the search moves to the cluster.
         report: called with a progress line at most every `interval` seconds.
@@ -235,8 +245,8 @@ class Coordinator:
         reduction: the partial-order reduction of the coordinator's system, or None.
         back_width: a frontier narrower than this comes back (default min_width).
         patience: narrow levels in a row before the first return.
-        flow: starts the workers of a relaxed order (`checker.cluster.flow`), which then
-            replace `factory`'s levels; None: a strict BFS. Only for a search without
+        flow: starts the workers of a relaxed order (`checker.cluster.flow`), as
+            `factory` does, which then replace `factory`'s levels; None: a strict BFS. Only for a search without
             reduction, depth bound or checkpoints.
     """
 
@@ -265,7 +275,8 @@ class Coordinator:
         self.backend: Backend = self.local
         self.cluster: Backend | None = None
         self.flow_factory = flow
-        self.flow: FlowBackend | None = None  # the relaxed order's workers, once started
+        self.flow: FlowBackend | None = None  # the relaxed order's workers, once searching
+        self._starting: Backend | FlowBackend | None = None  # the cluster's, once started
         self.roots: dict[int, tuple[int, ...]] = {}
         self.traffic = Traffic()
         self.states = self.transitions = self.initial = self.depth = self.frontier = 0
@@ -311,10 +322,10 @@ class Coordinator:
                     return found
                 continue
             if self.backend is self.local and self.factory is not None and \
-                    self.frontier >= self.min_width:
+                    self.frontier >= self.min_width and self._started():
                 if self.flow_factory is not None:
-                    return self._flow(self.flow_factory)
-                self._to_cluster(self.factory)
+                    return self._flow()
+                self._to_cluster()
             elif self.backend is not self.local:
                 self._narrow = self._narrow + 1 if self.frontier < self.back_width else 0
                 if self._narrow >= self.patience << self.traffic.returns:
@@ -337,10 +348,31 @@ class Coordinator:
         self._restart([])
         return True
 
-    def _to_cluster(self, factory: Factory) -> None:
+    def _started(self) -> bool:
+        """Start the cluster's backend, once, and say whether its workers are up. They
+        start while the search goes on here (a worker process takes a second or two to
+        import the node code and build its system: time this process spends searching),
+        except with `min_width` 1, which asks for the whole search on the workers: then
+        this waits for them."""
+        if self._starting is None:
+            if self.flow_factory is not None:
+                self._starting = self.flow_factory(self.frontier)
+            else:
+                assert self.factory is not None
+                self._starting = self.factory(self.frontier)
+        while not self._starting.ready():
+            if self.min_width > 1:
+                return False
+            self.guard.tick(self.statistics)  # Ctrl-C, max-time
+            time.sleep(START_POLL_S)
+        if self.report is not None and self.distributed_at is None:
+            self.report(f"[check] {self._starting.workers} worker(s) up: the search moves "
+                        f"to them at depth {self.level}, frontier {self.frontier:,} wide")
+        return True
+
+    def _to_cluster(self) -> None:
         """Hand the frontier and the visited set to the cluster's backend."""
-        if self.cluster is None:
-            self.cluster = factory(self.frontier)
+        self.cluster = cast(Backend, self._starting)
         self.cluster.load(self.local.expander.frontier, self.local.shard.visited,
                           self._relation())
         self.local.expander.frontier = []
@@ -451,10 +483,10 @@ class Coordinator:
 
     # ------------------------------------------------------------ relaxed order
 
-    def _flow(self, factory: FlowFactory) -> Outcome:
+    def _flow(self) -> Outcome:
         """The rest of the search on workers that do not wait for each other
         (`checker.cluster.flow`), to its end: no level, no return to this process."""
-        flow = self.flow = factory(self.frontier)
+        flow = self.flow = cast(FlowBackend, self._starting)
         self.distributed_at = self.level
         flow.load(self.local.expander.frontier, self.local.shard.visited)
         self.local.expander.frontier = []

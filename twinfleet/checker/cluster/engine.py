@@ -350,6 +350,20 @@ def _get(refs: Any) -> Any:
                            f"{type(exc).__name__}: {first}") from None
 
 
+def _up(backend: RayBackend | RayFlow, starting: list[Any]) -> bool:
+    """Whether the first calls to `backend`'s actors (`starting`) have all returned: the
+    actors are up. Raises ClusterError, the actors stopped, when one could not start."""
+    done, _ = ray.wait(starting, num_returns=len(starting), timeout=0)
+    if len(done) < len(starting):
+        return False
+    try:
+        _get(starting)
+    except ClusterError:
+        backend.close()
+        raise
+    return True
+
+
 @final
 class RayBackend:
     """`coordinator.Backend` on `workers` Worker actors and as many Shard actors."""
@@ -361,12 +375,15 @@ class RayBackend:
         self.shards = [Shard.remote() for _ in range(workers)]  # type: ignore[attr-defined]
         self.actors = [Worker.remote(spec, expected, workers)  # type: ignore[attr-defined]
                        for _ in range(workers)]
-        try:
-            _get([a.take.remote(pickle.dumps([])) for a in self.actors])  # started, or why not
-        except ClusterError:
-            self.close()
-            raise
+        self._starting = [a.take.remote(pickle.dumps([])) for a in self.actors]
         self._moves: list[Any] = []  # moves made since the last level (`move`)
+
+    def ready(self) -> bool:
+        """`coordinator.Backend.ready`, without waiting."""
+        if self._starting and not _up(self, self._starting):
+            return False
+        self._starting = []
+        return True
 
     def load(self, frontier: list[Item], visited: VisitedTable,
              relation: tuple[Any, ...] | None = None) -> RayBackend:
@@ -467,13 +484,23 @@ class RayFlow:
         token = secrets.token_bytes(TOKEN_BYTES)
         self.actors = [FlowWorker.remote(spec, expected, i, workers, token)  # type: ignore[attr-defined]
                        for i in range(workers)]
+        self._starting = [a.address.remote() for a in self.actors]
+        self._runs: list[Any] = []
+
+    def ready(self) -> bool:
+        """`FlowBackend.ready`, without waiting for a worker to start; once all are up,
+        they connect to each other."""
+        if not self._starting:
+            return True
+        if not _up(self, self._starting):
+            return False
+        addresses, self._starting = _get(self._starting), []
         try:
-            addresses = _get([a.address.remote() for a in self.actors])  # started, or why not
             _get([a.meet.remote(addresses) for a in self.actors])
         except ClusterError:
             self.close()
             raise
-        self._runs: list[Any] = []
+        return True
 
     def load(self, frontier: list[Item], visited: VisitedTable) -> None:
         """`FlowBackend.load`: each worker's share of the frontier and its partition; then

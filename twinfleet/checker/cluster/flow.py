@@ -251,14 +251,20 @@ class LocalFlow:
     the relaxed-order search without processes, for tests."""
 
     def __init__(self, system: System, properties: PropertySet, workers: int,
-                 seed: int = 0, batch: int = 7) -> None:
+                 seed: int = 0, batch: int = 7, late: int = 0) -> None:
         self.workers = workers
+        self.late = late  # polls of `ready` that say no (workers still starting)
         self.cores = [FlowCore(system, properties, i, workers, batch) for i in range(workers)]
         self._random = random.Random(seed)
         self._mail: list[tuple[int, Claims]] = []  # (sender, claims) in flight
         # (receiver, batch, mask or spared worlds) in flight
         self._answers: list[tuple[int, int, bytes | list[Item]]] = []
         self._halfway: dict[int, tuple[list[tuple[int, bytes]], list[Item]]] = {}
+
+    def ready(self) -> bool:
+        """`FlowBackend.ready`: no for the first `late` polls."""
+        self.late -= 1
+        return self.late < 0
 
     def load(self, frontier: list[Item], visited: VisitedTable) -> None:
         """`FlowBackend.load`."""
@@ -332,6 +338,10 @@ class FlowBackend(Protocol):
     (`checker.cluster.engine.RayFlow`)."""
 
     workers: int
+
+    def ready(self) -> bool:
+        """Whether every worker is up (raises ClusterError if one cannot start)."""
+        ...
 
     def load(self, frontier: list[Item], visited: VisitedTable) -> None:
         """Take over a search begun in the coordinator, and start."""
