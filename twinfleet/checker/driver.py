@@ -24,6 +24,7 @@ from typing import Any, final
 
 from twinfleet.checker import checkpoint as ckpt
 from twinfleet.checker.checkpoint import CheckpointError
+from twinfleet.checker.collector import seldom_collections
 from twinfleet.checker.diagnosis import (
     CONTRACT_KINDS,
     FIX_HIDDEN,
@@ -258,12 +259,13 @@ def check(scenario: str | Path | Scenario | None,
     seed = options.seed if options.seed is not None else scenario.seed
     engine, outcome = None, None
     try:
-        if options.workers > 1 or options.cluster is not None or resumed_cluster:
-            outcome, engine = _distributed(system, props, strategy, reduction, options, path,
-                                           scenario, flags, meta, asked != "bfs",
-                                           data if resumed_cluster else None)
-        if outcome is None:
-            outcome = search.run(strategy, walks=options.walks, seed=seed)
+        with seldom_collections():
+            if options.workers > 1 or options.cluster is not None or resumed_cluster:
+                outcome, engine = _distributed(system, props, strategy, reduction, options,
+                                               path, scenario, flags, meta, asked != "bfs",
+                                               data if resumed_cluster else None)
+            if outcome is None:
+                outcome = search.run(strategy, walks=options.walks, seed=seed)
     except ContractBreachError as exc:  # found while rebuilding a path (checker.paths)
         return _breach_result(scenario, system, strategy, props, str(exc), search, warnings)
     if outcome.violation is not None and (breach := _breach_of(system, outcome.violation)):

@@ -15,6 +15,7 @@ actors that send each other claims and answers directly.
 
 from __future__ import annotations
 
+import gc
 import os
 import pickle
 import re
@@ -42,6 +43,7 @@ from twinfleet.checker.cluster.level import (
 from twinfleet.checker.cluster.links import TOKEN_BYTES, Links
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint, mismatch
 from twinfleet.checker.cluster.visited import VisitedTable
+from twinfleet.checker.collector import SEARCH_THRESHOLDS
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.system import System
@@ -106,6 +108,7 @@ def _built(spec: SystemSpec, expected: dict[str, str]
            ) -> tuple[System, PropertySet, Reduction | None]:
     """The system, properties and reduction of `spec`, built here; ClusterError when this
     machine's scenario, rules or node sources differ from the coordinator's (`expected`)."""
+    gc.set_threshold(*SEARCH_THRESHOLDS)  # this process runs a search, nothing else
     system, props, reduction = spec.build()
     differs = mismatch(fingerprint(system), expected)
     if differs is not None:
