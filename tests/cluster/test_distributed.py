@@ -13,6 +13,7 @@ so the distributed path is what is compared; each result says so.
 
 from __future__ import annotations
 
+import os
 import time
 from pathlib import Path
 from typing import Any
@@ -225,6 +226,16 @@ def _listening_of(pids: set[int]) -> list[str]:
             if fields[3] == "0A" and fields[9] in inodes:  # LISTEN
                 found.append(fields[1].split(":")[0])
     return found
+
+
+def test_the_local_cluster_runs_its_workers_at_this_process_priority() -> None:
+    import ray
+
+    @ray.remote(num_cpus=0)
+    def niceness() -> int:
+        return os.getpriority(os.PRIO_PROCESS, 0)
+
+    assert ray.get(niceness.remote(), timeout=120) == os.getpriority(os.PRIO_PROCESS, 0)
 
 
 def test_the_local_cluster_listens_on_loopback_only() -> None:
