@@ -108,4 +108,6 @@ def add_engine_arguments(p: argparse.ArgumentParser) -> None:
     g.add_argument("--min-width", type=int, default=MIN_WIDTH, metavar="W",
                    help="exhaustive search with --workers/--cluster: stay in this process "
                    "until a BFS level holds W worlds, and come back when levels stay "
-                   f"narrower (narrow searches never leave it; default {MIN_WIDTH})")
+                   f"narrower (narrow searches never leave it; default {MIN_WIDTH}). The "
+                   "workers start while the search goes on here and take it over once "
+                   "up; 1: the whole search on the workers, waiting for them to start")
