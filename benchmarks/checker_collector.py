@@ -22,7 +22,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 
-from checker_distributed import REDUCED, scenario  # noqa: E402
+from checker_distributed import cases  # noqa: E402
 
 from twinfleet.checker import CheckOptions, check, collector  # noqa: E402
 
@@ -47,11 +47,7 @@ def main() -> None:
     args = p.parse_args()
     default = gc.get_threshold()
     with tempfile.TemporaryDirectory() as tmp:
-        for case in args.cases.split(","):
-            out = Path(tmp) / case
-            out.mkdir()
-            path = scenario(case, out)
-            reduction = "por" if case in REDUCED else "none"
+        for case, path, reduction in cases(args.cases, Path(tmp)):
             runs: dict[tuple[int, ...], list[tuple[float, float, int]]] = {default: [],
                                                                            SEARCH: []}
             for _ in range(args.rounds):

@@ -38,7 +38,7 @@ import subprocess
 import sys
 import tempfile
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from contextlib import AbstractContextManager
 from pathlib import Path
 from typing import Any
@@ -81,6 +81,15 @@ def scenario(case: str, out: Path) -> Path:
     if case == "crossing6":
         return safety_only(crossing_scenario(out, 6, 3, "ros"))
     raise SystemExit(f"unknown case {case!r} (known: {', '.join(CASES)})")
+
+
+def cases(names: str, tmp: Path) -> Iterator[tuple[str, Path, str]]:
+    """(case, its scenario file written under `tmp`, its reduction) of each of the
+    comma-separated `names`."""
+    for case in names.split(","):
+        out = tmp / case
+        out.mkdir()
+        yield case, scenario(case, out), "por" if case in REDUCED else "none"
 
 
 def _rate(result: CheckResult) -> float:
@@ -220,11 +229,7 @@ def main() -> None:
         return _Local(engine)
 
     with tempfile.TemporaryDirectory() as tmp:
-        for case in args.cases.split(","):
-            out = Path(tmp) / case
-            out.mkdir()
-            path = scenario(case, out)
-            reduction = "por" if case in REDUCED else "none"
+        for case, path, reduction in cases(args.cases, Path(tmp)):
             print(f"{case} (reduction {reduction}, up to {args.max_time:g} s per search):",
                   flush=True)
             measure(path, args.max_time, local, (1, 2), "local Ray", reduction,
