@@ -2,8 +2,9 @@
 
 The search starts in this process (`LocalBackend`: one expander, one shard).
 When a level's frontier reaches `min_width` worlds and more than one process
-was asked for, the frontier and the visited set are handed to the cluster
-(`checker.cluster.engine.RayBackend`) and the search goes on there; a search
+was asked for, the cluster's workers start (`checker.cluster.engine.RayBackend`)
+while the search goes on here, and once they are up the frontier and the visited
+set are handed to them and the search goes on there; a search
 whose frontier never gets that wide ends here and says so, since a per-level
 barrier (about a millisecond of round trips) is ruinous against a level of a
 few worlds. For the same reason a search whose frontier stays narrower than
