@@ -57,10 +57,26 @@ except ImportError:  # pragma: no cover - exercised in a subprocess without Ray
 
 
 
-def _runtime_env() -> dict[str, Any]:
+def _worker_env() -> dict[str, str]:
     """Workers import node code as this process does: its working directory and path."""
     path = [os.getcwd(), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
-    return {"env_vars": {"PYTHONPATH": os.pathsep.join(path), "RAY_USAGE_STATS_ENABLED": "0"}}
+    return {"PYTHONPATH": os.pathsep.join(path), "RAY_USAGE_STATS_ENABLED": "0"}
+
+
+@contextmanager
+def _environment(values: dict[str, str]) -> Iterator[None]:
+    """`values` in this process's environment while the block runs, the old ones back
+    after."""
+    before = {name: os.environ.get(name) for name in values}
+    os.environ.update(values)
+    try:
+        yield
+    finally:
+        for name, value in before.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 @contextmanager
@@ -73,12 +89,17 @@ def session(workers: int, address: str | None) -> Iterator[None]:
         _answers(address)
     try:
         if address is None:
-            ray.init(address="local", num_cpus=max(2, workers), include_dashboard=False,
-                     _node_ip_address="127.0.0.1", log_to_driver=False,
-                     configure_logging=False, runtime_env=_runtime_env())
+            # A local cluster's processes inherit the path from this one: with a job's
+            # runtime_env instead, Ray starts a new process for every actor rather than
+            # using the ones it keeps ready (measured: two actors up in 1.0-1.2 s against
+            # 0.2-0.5 s).
+            with _environment(_worker_env()):
+                ray.init(address="local", num_cpus=max(2, workers), include_dashboard=False,
+                         _node_ip_address="127.0.0.1", log_to_driver=False,
+                         configure_logging=False)
         else:
             ray.init(address=address, log_to_driver=False, configure_logging=False,
-                     runtime_env=_runtime_env())
+                     runtime_env={"env_vars": _worker_env()})
     except Exception as exc:  # noqa: BLE001 - Ray raises many types for one bad address
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         where = "a local cluster" if address is None else f"cluster {address}"
