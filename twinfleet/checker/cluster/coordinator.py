@@ -247,8 +247,8 @@ class Coordinator:
         back_width: a frontier narrower than this comes back (default min_width).
         patience: narrow levels in a row before the first return.
         flow: starts the workers of a relaxed order (`checker.cluster.flow`), as
-            `factory` does, which then replace `factory`'s levels; None: a strict BFS. Only for a search without
-            reduction, depth bound or checkpoints.
+            `factory` does, which then replace `factory`'s levels; None: a strict BFS.
+            Only for a search without reduction, depth bound or checkpoints.
     """
 
     def __init__(self, system: System, properties: PropertySet, limits: Limits,
