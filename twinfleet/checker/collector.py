@@ -4,8 +4,8 @@ A search keeps millions of small containers alive for as long as it runs
 (worlds, cached handler outcomes, what a reduction derives from its relation),
 and CPython's default thresholds walk all of them again and again: a reduced
 search of C1a with 0-1 ms of latency made 11 full collections in 30 s in one
-process and 65 in a worker that held its own copy of the system, 15-28 % of
-the time (docs/performance.md). What a search allocates forms next to no
+process (8-18 % of its time) and 65 in a worker that held its own copy of the
+system (28 %; docs/performance.md). What a search allocates forms next to no
 reference cycles (1,667 objects collected in those 30 s), so it asks for a
 collection a hundred times less often; cycles are still collected, later.
 """

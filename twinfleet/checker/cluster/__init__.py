@@ -70,13 +70,8 @@ def engine_module(local: bool = True) -> Any:
     first imported: set off, a local cluster advertises and binds 127.0.0.1 only, where
     it would otherwise listen on every interface under the host's address (measured with
     Ray 2.60; `_node_ip_address="127.0.0.1"` alone does not do it). Joining a cluster of
-    several machines needs the switch on, so only a local cluster sets it. A local
-    cluster also runs its workers at this process's priority: Ray lowers them by 15
-    (`worker_niceness`), and on a busy machine a search's workers then lose the cores to
-    everything else, where the same search in one process would not.
+    several machines needs the switch on, so only a local cluster sets it.
     """
-    if local:
-        os.environ.setdefault("RAY_worker_niceness", "0")  # read when the raylet starts
     if local and "ray" not in sys.modules:
         os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
     os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # offline: no usage report

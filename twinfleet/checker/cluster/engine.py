@@ -92,8 +92,12 @@ def session(workers: int, address: str | None) -> Iterator[None]:
             # A local cluster's processes inherit the path from this one: with a job's
             # runtime_env instead, Ray starts a new process for every actor rather than
             # using the ones it keeps ready (measured: two actors up in 1.0-1.2 s against
-            # 0.2-0.5 s).
-            with _environment(_worker_env()):
+            # 0.2-0.5 s). And its workers run at this process's priority, unless the
+            # user set one: Ray lowers them by 15, and on a busy machine a search's
+            # workers then lose the cores to everything else, where the same search in
+            # one process would not.
+            niceness = os.environ.get("RAY_worker_niceness", "0")  # noqa: SIM112 - Ray's name
+            with _environment({**_worker_env(), "RAY_worker_niceness": niceness}):
                 ray.init(address="local", num_cpus=max(2, workers), include_dashboard=False,
                          _node_ip_address="127.0.0.1", log_to_driver=False,
                          configure_logging=False)
@@ -127,9 +131,11 @@ def _answers(address: str) -> None:
 
 def _built(spec: SystemSpec, expected: dict[str, str]
            ) -> tuple[System, PropertySet, Reduction | None]:
-    """The system, properties and reduction of `spec`, built here; ClusterError when this
-    machine's scenario, rules or node sources differ from the coordinator's (`expected`)."""
-    gc.set_threshold(*SEARCH_THRESHOLDS)  # this process runs a search, nothing else
+    """The system, properties and reduction of `spec`, built here (the search's collector
+    thresholds set for the whole worker process: it runs nothing else); ClusterError when
+    this machine's scenario, rules or node sources differ from the coordinator's
+    (`expected`)."""
+    gc.set_threshold(*SEARCH_THRESHOLDS)
     system, props, reduction = spec.build()
     differs = mismatch(fingerprint(system), expected)
     if differs is not None:
