@@ -6,7 +6,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from twinfleet.checker.cluster.level import ShardCore, pack_pairs, visited_from
+from twinfleet.checker.cluster.level import ShardCore, owner, pack_pairs, visited_from
 from twinfleet.checker.cluster.visited import ROOT, VisitedTable
 
 KEYS = st.one_of(st.integers(min_value=0, max_value=40),  # repeats, and the key 0
@@ -51,6 +51,28 @@ def test_a_shard_answers_the_first_worker_that_claims_a_key() -> None:
     assert shard.parent(7) == 1 and shard.parent(8) == 2
     stored = shard.stored([np.array([5, 9], dtype=np.uint64).tobytes()])[0]
     assert np.frombuffer(stored, dtype=np.bool_).tolist() == [True, False]
+
+
+@settings(max_examples=60, deadline=None)
+@given(length=st.integers(1, 40), shards=st.integers(1, 3), seed=st.integers(0, 2**16))
+def test_a_path_walked_by_lineages_is_the_path_walked_parent_by_parent(
+        length: int, shards: int, seed: int) -> None:
+    rng = np.random.default_rng(seed)
+    path = [int(k) for k in rng.integers(1, 2**63, size=length, dtype=np.uint64)]
+    parts = [ShardCore() for _ in range(shards)]
+    for parent, key in zip([0, *path], path, strict=False):  # 0: the first is initial
+        parts[owner(key, shards)].add(np.array([key], dtype=np.uint64),
+                                      np.array([parent], dtype=np.uint64))
+    walked, calls = [path[-1]], 0
+    while walked[-1] != ROOT:
+        index = owner(walked[-1], shards)
+        found = parts[index].lineage(walked[-1], index, shards)
+        assert all(owner(k, shards) == index for k in found[:-1])  # one partition's run
+        walked += found
+        calls += 1
+    assert walked[:-1] == path[::-1]
+    assert calls == 1 + sum(owner(a, shards) != owner(b, shards)
+                            for a, b in zip(path, path[1:], strict=False))
 
 
 def test_the_table_grows_and_stays_compact() -> None:

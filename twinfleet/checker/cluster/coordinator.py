@@ -95,8 +95,9 @@ class Backend(Protocol):
         """Expand every worker's frontier by one level; claims answered, new worlds kept."""
         ...
 
-    def parent(self, key: int) -> int:
-        """The parent key of a visited key."""
+    def lineage(self, key: int) -> list[int]:
+        """The parent of a visited key and its ancestors, one call's worth
+        (`ShardCore.lineage`): ends with ROOT or with a key to ask about next."""
         ...
 
     def shard_bytes(self) -> list[int]:
@@ -156,9 +157,9 @@ class LocalBackend:
         expansion, blobs = self.expander.expand(max_depth, stored)
         return [expansion], [self.expander.accept(self.shard.claim(blobs))]
 
-    def parent(self, key: int) -> int:
-        """`Backend.parent`."""
-        return self.shard.parent(key)
+    def lineage(self, key: int) -> list[int]:
+        """`Backend.lineage`: all of it (one partition)."""
+        return self.shard.lineage(key, 0, 1)
 
     def shard_bytes(self) -> list[int]:
         """`Backend.shard_bytes`."""
@@ -497,9 +498,8 @@ class Coordinator:
             while True:
                 flow.advance(POLL_S)
                 statuses = flow.status()
-                found = self._flowed(statuses, *before)
-                if found is not None:
-                    return found
+                if self._flowed(statuses, *before):
+                    break
                 counts = [(s.sent, s.received) for s in statuses]
                 if all(s.idle for s in statuses) and \
                         sum(s.sent for s in statuses) == sum(s.received for s in statuses):
@@ -512,13 +512,16 @@ class Coordinator:
                 self._progress()
         finally:
             flow.stop()
+        # The path is walked once the workers stopped: they would slow every call.
+        found = self._found([s.failure for s in statuses], [s.violation for s in statuses])
+        if found is not None:
+            return found
         if self.properties.eventually:
             return self._liveness()
         return self._outcome(Status.HOLDS, "every property holds")
 
-    def _flowed(self, statuses: list[FlowStatus], states: int, transitions: int
-                ) -> Outcome | None:
-        """Count what the workers did; the outcome if one found a violation or a failure."""
+    def _flowed(self, statuses: list[FlowStatus], states: int, transitions: int) -> bool:
+        """Count what the workers did; whether one found a violation or a failure."""
         t = self.traffic
         self.states = states + sum(s.new for s in statuses)
         self.transitions = transitions + sum(s.transitions for s in statuses)
@@ -529,12 +532,11 @@ class Coordinator:
         t.new_per_worker = [s.new for s in statuses]
         t.stolen, t.moves = sum(s.gifted for s in statuses), sum(s.gifts for s in statuses)
         t.handler_runs = [s.handler_runs for s in statuses]
-        found = self._found([s.failure for s in statuses], [s.violation for s in statuses])
-        if found is not None:
-            return found
+        if any(s.failure is not None or s.violation is not None for s in statuses):
+            return True
         if self.limits.max_states is not None and self.states >= self.limits.max_states:
             raise Stop(f"max-states {self.limits.max_states} reached before the search finished")
-        return None
+        return False
 
     # ------------------------------------------------------------- liveness
 
@@ -680,8 +682,9 @@ class Coordinator:
     def _path(self, key: int) -> tuple[Counterexample, World]:
         """The steps from an initial world to the world with `key`, along recorded parents."""
         keys = [key]
-        while (parent := self._parent(keys[-1])) != ROOT:
-            keys.append(parent)
+        while keys[-1] != ROOT:
+            keys += self._lineage(keys[-1])
+        keys.pop()
         keys.reverse()
         initial = self.roots[keys[0]]
         world = self.system.initial_world(initial).world
@@ -695,9 +698,10 @@ class Coordinator:
             world = step.world
         return Counterexample(initial, tuple(steps)), world
 
-    def _parent(self, key: int) -> int:
-        parent = self.local.shard.visited.get(key)
-        return parent if parent is not None else (self.flow or self.backend).parent(key)
+    def _lineage(self, key: int) -> list[int]:
+        if key in self.local.shard.visited:  # found before the hand-over: so are its ancestors
+            return self.local.lineage(key)
+        return (self.flow or self.backend).lineage(key)
 
     def _progress(self) -> None:
         now = time.monotonic()

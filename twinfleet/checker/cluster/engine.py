@@ -228,9 +228,9 @@ class Shard:
         self.core.add(keys, parents)
         return len(self.core.visited)
 
-    def parent(self, key: int) -> int:
-        """`ShardCore.parent`."""
-        return self.core.parent(key)
+    def lineage(self, key: int, index: int, shards: int) -> list[int]:
+        """`ShardCore.lineage`."""
+        return self.core.lineage(key, index, shards)
 
     def nbytes(self) -> int:
         """`ShardCore.nbytes`."""
@@ -343,10 +343,10 @@ class FlowWorker:
         self.links.close()
         return 0
 
-    def parent(self, key: int) -> int:
-        """`ShardCore.parent` of this partition."""
+    def lineage(self, key: int) -> list[int]:
+        """`ShardCore.lineage` of this partition."""
         with self.lock:
-            return self.core.shard.parent(key)
+            return self.core.shard.lineage(key, self.core.index, self.core.workers)
 
     def nbytes(self) -> int:
         """`ShardCore.nbytes` of this partition."""
@@ -457,9 +457,10 @@ class RayBackend:
         self._moves = []
         return done[:n], done[n:2 * n]
 
-    def parent(self, key: int) -> int:
-        """`coordinator.Backend.parent`: asks the owning shard."""
-        return int(_get(self.shards[owner(key, self.workers)].parent.remote(key)))
+    def lineage(self, key: int) -> list[int]:
+        """`coordinator.Backend.lineage`: asks the owning shard."""
+        index = owner(key, self.workers)
+        return list(_get(self.shards[index].lineage.remote(key, index, self.workers)))
 
     def shard_bytes(self) -> list[int]:
         """`coordinator.Backend.shard_bytes`."""
@@ -553,9 +554,9 @@ class RayFlow:
         """`FlowBackend.status`."""
         return list(_get([a.status.remote() for a in self.actors]))
 
-    def parent(self, key: int) -> int:
-        """`FlowBackend.parent`: asks the owning worker."""
-        return int(_get(self.actors[owner(key, self.workers)].parent.remote(key)))
+    def lineage(self, key: int) -> list[int]:
+        """`FlowBackend.lineage`: asks the owning worker."""
+        return list(_get(self.actors[owner(key, self.workers)].lineage.remote(key)))
 
     def shard_bytes(self) -> list[int]:
         """`FlowBackend.shard_bytes`."""

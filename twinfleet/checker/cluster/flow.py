@@ -313,9 +313,10 @@ class LocalFlow:
         """`FlowBackend.status`."""
         return [core.status() for core in self.cores]
 
-    def parent(self, key: int) -> int:
-        """`FlowBackend.parent`."""
-        return self.cores[owner(key, self.workers)].shard.parent(key)
+    def lineage(self, key: int) -> list[int]:
+        """`FlowBackend.lineage`."""
+        index = owner(key, self.workers)
+        return self.cores[index].shard.lineage(key, index, self.workers)
 
     def shard_bytes(self) -> list[int]:
         """`FlowBackend.shard_bytes`."""
@@ -355,8 +356,9 @@ class FlowBackend(Protocol):
         """Every worker's counters."""
         ...
 
-    def parent(self, key: int) -> int:
-        """The parent key of a visited key."""
+    def lineage(self, key: int) -> list[int]:
+        """The parent of a visited key and its ancestors, one call's worth
+        (`ShardCore.lineage`): ends with ROOT or with a key to ask about next."""
         ...
 
     def shard_bytes(self) -> list[int]:

@@ -413,6 +413,16 @@ class ShardCore:
             raise KeyError(key)
         return parent
 
+    def lineage(self, key: int, index: int, shards: int) -> list[int]:
+        """The parent of a stored key and its ancestors while this partition (number
+        `index` of `shards`) holds them: ends with ROOT or with the first key another
+        partition holds. A counterexample's path is walked with one call per change of
+        partition instead of one per step (a call to a busy worker takes milliseconds)."""
+        found = [self.parent(key)]
+        while found[-1] != ROOT and owner(found[-1], shards) == index:
+            found.append(self.parent(found[-1]))
+        return found
+
     def dump(self) -> bytes:
         """The partition as one `pack_pairs` blob; an initial world's parent is written as
         0 (a checkpoint records which keys are initial, `visited_from` reads it back)."""
