@@ -31,7 +31,11 @@ def test_a_bounded_flood_that_makes_a_node_drop_samples_is_inconclusive(tmp_path
              {"name": "sink", "class": "Sink"}]
     path = write_scenario(tmp_path, "flood", nodes, [
         {"name": "counts", "kind": "invariant", "expr": "sink.count >= 0"}])
-    out = expect(run_launch(path, "--timeout", "3"), 3, "result: INCONCLUSIVE (sink dropped")
+    out = expect(run_launch(path, "--timeout", "3"), 3, "result: INCONCLUSIVE (")
+    result = next(line for line in out.splitlines() if "result: INCONCLUSIVE (" in line)
+    # the drops are a reason (on a loaded machine the flooder may also fall behind its
+    # timers, and that reason may come first)
+    assert "sink dropped" in result, out[-3000:]
     assert "PASSED" not in out
 
 
