@@ -7,8 +7,9 @@ Every operation takes a batch of keys and runs in vectorised probing rounds, so 
 shard answers a level's claims with a few numpy calls, not a loop of dict lookups
 in Python; a batch of at most `FEW` keys is probed key by key instead, since those
 numpy calls cost 0.2 ms together however few keys they take (a relaxed-order
-worker answers a claim batch of a few dozen keys at every turn of its loop). The key 0 marks an empty slot; a world whose key is 0 is kept beside the
-arrays. A parent key of 0 stands for "an initial world" (`ROOT`), as in the blobs of
+worker answers a claim batch of a few dozen keys at every turn of its loop).
+The key 0 marks an empty slot; a world whose key is 0 is kept beside the arrays.
+A parent key of 0 stands for "an initial world" (`ROOT`), as in the blobs of
 `dump`, which the coordinator reads with the keys of the initial worlds beside.
 """
 
