@@ -58,21 +58,16 @@ class VisitedTable:
         return slots, found
 
     def _slot(self, key: int) -> tuple[int, bool]:
-        """`_slots` of one key (none 0), probed in Python on views of the arrays."""
-        table, mask = self._keys.data, int(self._mask)
-        slot = key & mask
-        while (held := table[slot]) != key:
-            if not held:
-                return slot, False
-            slot = (slot + 1) & mask
-        return slot, True
+        """`_slots` of one key (none 0)."""
+        return _probe(self._keys.data, int(self._mask), key)
 
     def contains(self, keys: np.ndarray) -> np.ndarray:
         """Whether each of `keys` (uint64) is stored."""
         keys = np.asarray(keys, dtype=np.uint64)
         if len(keys) <= FEW:
-            return np.array([self._zero is not None if not k else self._slot(k)[1]
-                             for k in keys.tolist()], dtype=np.bool_)
+            table, mask, zero = self._keys.data, int(self._mask), self._zero is not None
+            return np.array([_probe(table, mask, k)[1] if k else zero for k in keys.tolist()],
+                            dtype=np.bool_)
         zero = keys == _EMPTY
         found = np.zeros(len(keys), dtype=np.bool_)
         found[~zero] = self._slots(keys[~zero])[1]
@@ -100,24 +95,22 @@ class VisitedTable:
         return stored
 
     def _add_few(self, keys: list[int], parents: list[int]) -> np.ndarray:
-        """`add` key by key (a batch of at most `FEW`)."""
+        """`add` key by key (a batch of at most `FEW`); the table grows first, so that the
+        slots probed stay where they are."""
         self._grow_for(self._n + len(keys))
         table, links, mask = self._keys.data, self._parents.data, int(self._mask)
         stored = []
         for key, parent in zip(keys, parents, strict=True):
-            new = False
             if not key:
                 new = self._zero is None
                 if new:
                     self._zero = parent
             else:
-                slot = key & mask
-                while (held := table[slot]) != key:
-                    if not held:
-                        table[slot], links[slot], new = key, parent, True
-                        self._n += 1
-                        break
-                    slot = (slot + 1) & mask
+                slot, found = _probe(table, mask, key)
+                new = not found
+                if new:
+                    table[slot], links[slot] = key, parent
+                    self._n += 1
             stored.append(new)
         return np.array(stored, dtype=np.bool_)
 
@@ -183,3 +176,15 @@ class VisitedTable:
             todo = todo[~placed[todo]]
             slots[todo] = (slots[todo] + np.uint64(1)) & mask
         self._n += len(keys)
+
+
+def _probe(table: memoryview, mask: int, key: int) -> tuple[int, bool]:
+    """Linear probing for one key (not 0) in Python, on a view of the keys' array (a view
+    reads a slot as a Python int, where the array would make a numpy scalar): its slot,
+    or the empty slot where it would go, and whether it is there."""
+    slot = key & mask
+    while (held := table[slot]) != key:
+        if not held:
+            return slot, False
+        slot = (slot + 1) & mask
+    return slot, True
