@@ -95,3 +95,26 @@ def test_a_violation_found_in_a_relaxed_order_is_a_path_of_the_system(tmp_path: 
     assert outcome.status == one.status and outcome.violation is not None
     assert one.violation is not None and outcome.violation.property == one.violation.property
     assert outcome.counterexample is not None  # `Coordinator._path` ran it again step by step
+
+
+def test_a_worker_takes_its_whole_queue_until_a_question_for_worlds_went_unanswered(
+        tmp_path: Path) -> None:
+    from twinfleet.checker.cluster.flow import FlowCore
+    from twinfleet.cli import main as cli
+
+    cli(["examples", "--copy", "c1a", str(tmp_path)])
+    system, props, _ = SystemSpec(str(tmp_path / "c1a.yaml"), None, None, (), ()).build()
+    core = FlowCore(system, props, 0, 2, batch=8)
+    world = next(iter(system.initial())).world
+    core.queue.extend((world, key, 0) for key in range(6))
+    assert [key for _, key, _ in core.next_batch()] == list(range(6)), "the whole queue"
+    core.queue.extend((world, key, 0) for key in range(20))
+    assert len(core.next_batch()) == 8, "no more than a batch"
+    core.queue.clear()
+    assert core.spare() == [] and core.left_hungry
+    core.queue.extend((world, key, 0) for key in range(5))
+    assert [key for _, key, _ in core.next_batch()] == [0, 1, 2], "half, rounded up"
+    assert [key for _, key, _ in core.spare()] == [4]
+    assert not core.left_hungry
+    core.queue.extend((world, key, 0) for key in range(7, 10))
+    assert len(core.next_batch()) == 4, "the whole queue again"

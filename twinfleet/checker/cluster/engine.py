@@ -311,7 +311,9 @@ class FlowWorker:
     def _claims(self, sender: int, batch: int, blob: bytes) -> bytes:
         if batch != ASK:
             with self.lock:
-                return self.core.claim(blob)
+                answer = self.core.claim(blob)
+                self.lock.notify()  # a loop refused worlds may ask again: the sender is busy
+                return answer
         with self.lock:
             spared = self.core.spare()
         return pickle.dumps(spared, protocol=pickle.HIGHEST_PROTOCOL)

@@ -103,6 +103,7 @@ class FlowCore:
         self.busy = False  # between `arrived` and `finish`
         self.asking = self.refused = False  # a question for worlds out; the last refused
         self.gifts = self.gifted = 0  # answers with worlds, and their worlds
+        self.left_hungry = False  # the last question for worlds got none from this worker
         self._batches = self._turns = self._asked = 0
 
     # ---------------------------------------------------------- the worker's own loop
@@ -125,12 +126,14 @@ class FlowCore:
             self.expander.keep(self.pending.pop(batch), mask, self.kept, self.queue)
 
     def next_batch(self) -> list[Item]:
-        """Up to `batch` worlds to expand, and no more than half the queue (rounded up),
-        so that a worker asking for worlds finds some and a short batch's claims leave
-        soon; the oldest first (the search stays close to breadth-first and so to the
-        outcome cache's times)."""
+        """Up to `batch` worlds to expand, the oldest first (the search stays close to
+        breadth-first and so to the outcome cache's times): the whole queue while nobody
+        asked for worlds in vain, so a narrow frontier takes few turns of the loop (each
+        has a cost of its own); half of it, rounded up, once this worker refused one
+        (`spare`), so that the next question finds some."""
         queue = self.queue
-        return [queue.popleft() for _ in range(min(self.batch, (len(queue) + 1) // 2))]
+        n = (len(queue) + 1) // 2 if self.left_hungry else len(queue)
+        return [queue.popleft() for _ in range(min(self.batch, n))]
 
     def expand(self, batch: list[Item]) -> tuple[Expansion, list[bytes]]:
         """Expand a batch (touches the system, not the partition nor the queue)."""
@@ -209,7 +212,9 @@ class FlowCore:
         self.received += 1
         self.sent += 1
         queue = self.queue
-        return [queue.pop() for _ in range(len(queue) // 2)]
+        spared = [queue.pop() for _ in range(len(queue) // 2)]
+        self.left_hungry = not spared
+        return spared
 
     def given(self, worlds: Sequence[Item]) -> None:
         """The answer to `ask`: worlds to expand, or none (refused)."""
