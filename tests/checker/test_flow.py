@@ -9,6 +9,7 @@ they are up (some levels later: real workers take a while to start).
 
 from __future__ import annotations
 
+from itertools import islice
 from pathlib import Path
 from typing import Any
 
@@ -97,7 +98,7 @@ def test_a_violation_found_in_a_relaxed_order_is_a_path_of_the_system(tmp_path: 
     assert outcome.counterexample is not None  # `Coordinator._path` ran it again step by step
 
 
-def test_a_worker_takes_its_whole_queue_until_a_question_for_worlds_went_unanswered(
+def test_a_worker_takes_its_batch_as_it_expands_and_a_question_gets_half_the_rest(
         tmp_path: Path) -> None:
     from twinfleet.checker.cluster.flow import FlowCore
     from twinfleet.cli import main as cli
@@ -106,15 +107,12 @@ def test_a_worker_takes_its_whole_queue_until_a_question_for_worlds_went_unanswe
     system, props, _ = SystemSpec(str(tmp_path / "c1a.yaml"), None, None, (), ()).build()
     core = FlowCore(system, props, 0, 2, batch=8)
     world = next(iter(system.initial())).world
-    core.queue.extend((world, key, 0) for key in range(6))
-    assert [key for _, key, _ in core.next_batch()] == list(range(6)), "the whole queue"
     core.queue.extend((world, key, 0) for key in range(20))
-    assert len(core.next_batch()) == 8, "no more than a batch"
+    batch = core.next_batch()
+    assert [key for _, key, _ in islice(batch, 2)] == [0, 1], "the oldest first"
+    assert len(core.queue) == 18, "taken one by one"
+    assert [key for _, key, _ in core.spare()] == list(range(19, 10, -1)), "half the rest"
+    assert [key for _, key, _ in batch] == list(range(2, 8)), "no more than a batch"
     core.queue.clear()
-    assert core.spare() == [] and core.left_hungry
-    core.queue.extend((world, key, 0) for key in range(5))
-    assert [key for _, key, _ in core.next_batch()] == [0, 1, 2], "half, rounded up"
-    assert [key for _, key, _ in core.spare()] == [4]
-    assert not core.left_hungry
-    core.queue.extend((world, key, 0) for key in range(7, 10))
-    assert len(core.next_batch()) == 4, "the whole queue again"
+    core.queue.extend((world, key, 0) for key in range(3))
+    assert [key for _, key, _ in core.next_batch()] == [0, 1, 2], "a short queue whole"

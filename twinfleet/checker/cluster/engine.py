@@ -296,10 +296,8 @@ class FlowWorker:
                     raise ClusterError(links.error)
                 answers = core.arrived()
             core.keep_answers(answers)
-            with lock:
-                batch = core.next_batch()
-            if batch:
-                expansion, blobs = core.expand(batch)
+            if core.queue:
+                expansion, blobs = core.expand(core.next_batch())
                 with lock:
                     own, out = core.settle(expansion, blobs)
                 for claims in out:

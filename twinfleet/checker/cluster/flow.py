@@ -26,9 +26,9 @@ from __future__ import annotations
 
 import random
 from collections import deque
-from collections.abc import Sequence
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
-from itertools import chain
+from itertools import chain, islice
 from typing import Protocol, final
 
 import numpy as np
@@ -103,16 +103,16 @@ class FlowCore:
         self.busy = False  # between `arrived` and `finish`
         self.asking = self.refused = False  # a question for worlds out; the last refused
         self.gifts = self.gifted = 0  # answers with worlds, and their worlds
-        self.left_hungry = False  # the last question for worlds got none from this worker
         self._batches = self._turns = self._asked = 0
 
     # ---------------------------------------------------------- the worker's own loop
     # A worker's loop calls, in turn: `arrived`, `keep_answers`, `next_batch`, `expand`,
     # `settle`, `keep_own`, `finish`. Where messages arrive on other threads, `arrived`,
-    # `next_batch`, `settle` and `finish` (and every message) need the worker's lock; the
-    # rest (expansion, property checks: the long parts) touch only what the loop owns,
-    # or the queue by single appends. From `arrived` to `finish` the worker is busy even
-    # when its queue is empty: the worlds it holds are in neither.
+    # `settle` and `finish` (and every message) need the worker's lock; the rest
+    # (expansion, property checks: the long parts) touch only what the loop owns, or the
+    # queue by single pops and appends (each one step for the interpreter). From
+    # `arrived` to `finish` the worker is busy even when its queue is empty: the worlds
+    # it holds are in neither.
 
     def arrived(self) -> list[tuple[int, bytes]]:
         """The answers that arrived since the last call; the worker is busy until `finish`."""
@@ -125,20 +125,23 @@ class FlowCore:
         for batch, mask in answers:
             self.expander.keep(self.pending.pop(batch), mask, self.kept, self.queue)
 
-    def next_batch(self) -> list[Item]:
+    def next_batch(self) -> Iterator[Item]:
         """Up to `batch` worlds to expand, the oldest first (the search stays close to
-        breadth-first and so to the outcome cache's times): the whole queue while nobody
-        asked for worlds in vain, so a narrow frontier takes few turns of the loop (each
-        has a cost of its own); half of it, rounded up, once this worker refused one
-        (`spare`), so that the next question finds some."""
+        breadth-first and so to the outcome cache's times), taken from the queue one by
+        one as `expand` reaches them: a worker asking for worlds meanwhile (`spare`) gets
+        half of what is left, and a narrow frontier still takes one turn of the loop
+        (each has a cost of its own)."""
         queue = self.queue
-        n = (len(queue) + 1) // 2 if self.left_hungry else len(queue)
-        return [queue.popleft() for _ in range(min(self.batch, n))]
+        for _ in range(self.batch):
+            try:
+                yield queue.popleft()  # one step, as `spare`'s pops on another thread
+            except IndexError:
+                return
 
-    def expand(self, batch: list[Item]) -> tuple[Expansion, list[bytes]]:
-        """Expand a batch (touches the system, not the partition nor the queue)."""
-        self.expander.frontier = batch
-        return self.expander.expand(None)
+    def expand(self, batch: Iterable[Item]) -> tuple[Expansion, list[bytes]]:
+        """Expand a batch (touches the system, not the partition; the queue only by the
+        batch's pops)."""
+        return self.expander.expand(None, items=batch)
 
     def settle(self, expansion: Expansion, blobs: list[bytes]
                ) -> tuple[tuple[list[tuple[World, int]], bytes] | None, list[Claims]]:
@@ -212,8 +215,12 @@ class FlowCore:
         self.received += 1
         self.sent += 1
         queue = self.queue
-        spared = [queue.pop() for _ in range(len(queue) // 2)]
-        self.left_hungry = not spared
+        spared = []
+        for _ in range(len(queue) // 2):
+            try:
+                spared.append(queue.pop())
+            except IndexError:  # the loop's batch took the rest meanwhile
+                break
         return spared
 
     def given(self, worlds: Sequence[Item]) -> None:
@@ -264,7 +271,7 @@ class LocalFlow:
         self._mail: list[tuple[int, Claims]] = []  # (sender, claims) in flight
         # (receiver, batch, mask or spared worlds) in flight
         self._answers: list[tuple[int, int, bytes | list[Item]]] = []
-        self._halfway: dict[int, tuple[list[tuple[int, bytes]], list[Item]]] = {}
+        self._halfway: dict[int, tuple[list[tuple[int, bytes]], Iterator[Item]]] = {}
 
     def ready(self) -> bool:
         """`FlowBackend.ready`: no for the first `late` polls."""
@@ -283,18 +290,23 @@ class LocalFlow:
         for i, core in enumerate(self.cores):
             answers, batch = self._halfway.pop(i) if i in self._halfway else \
                 (core.arrived(), core.next_batch())
-            if self._random.random() < 0.2:  # answers and worlds taken, the rest later
-                self._halfway[i] = (answers, batch)
+            if self._random.random() < 0.2:  # answers taken, the batch begun, the rest later
+                self._halfway[i] = (answers, self._begun(batch))
                 continue
             core.keep_answers(answers)
-            if batch:
-                own, out = core.settle(*core.expand(batch))
-                core.keep_own(own)
-                self._mail += [(i, c) for c in out]
+            own, out = core.settle(*core.expand(batch))
+            core.keep_own(own)
+            self._mail += [(i, c) for c in out]
             core.finish()
             if (peer := core.ask()) is not None:
                 self._mail.append((i, Claims(peer, ASK, b"")))
         self._deliver()
+
+    def _begun(self, batch: Iterator[Item]) -> Iterator[Item]:
+        """`batch` with a random number of its worlds taken already (as a worker's loop
+        takes them while questions for worlds arrive)."""
+        taken = list(islice(batch, self._random.randint(0, 3)))
+        return chain(taken, batch)
 
     def _deliver(self) -> None:
         """Deliver a random part of the messages in flight, in a random order."""

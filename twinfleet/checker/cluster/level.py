@@ -212,11 +212,12 @@ class Expander:
         self._probes = probes
         return [np.array(k, dtype=np.uint64).tobytes() for k in probes]
 
-    def _level(self, max_depth: int | None, stored: list[bytes] | None, out: Expansion
-               ) -> Iterator[tuple[int, int, Iterable[Transition]]]:
-        """(key, depth, transitions taken) of every frontier world expanded at this level."""
+    def _level(self, max_depth: int | None, stored: list[bytes] | None, out: Expansion,
+               items: Iterable[Item] | None) -> Iterator[tuple[int, int, Iterable[Transition]]]:
+        """(key, depth, transitions taken) of every frontier world expanded at this level
+        (or of `items`, unreduced)."""
         if self.reduction is None:
-            for world, key, depth in self.frontier:
+            for world, key, depth in self.frontier if items is None else items:
                 if max_depth is not None and depth >= max_depth:
                     out.pruned = True
                     continue
@@ -238,18 +239,18 @@ class Expander:
             yield key, depth, taken
         self._proposals, self._probes = [], []
 
-    def expand(self, max_depth: int | None, stored: list[bytes] | None = None
-               ) -> tuple[Expansion, list[bytes]]:
+    def expand(self, max_depth: int | None, stored: list[bytes] | None = None,
+               items: Iterable[Item] | None = None) -> tuple[Expansion, list[bytes]]:
         """Expand every frontier world (reduced: by the sets `propose` found, `stored`
-        the shards' answers); return the counts and one packed claim blob per shard (keys
-        then parent keys, uint64)."""
+        the shards' answers), or, unreduced, the worlds `items` yields instead; return the
+        counts and one packed claim blob per shard (keys then parent keys, uint64)."""
         out = Expansion()
         seen: set[int] = set()
         worlds: list[list[tuple[World, int]]] = [[] for _ in range(self.shards)]
         keys: list[list[int]] = [[] for _ in range(self.shards)]
         parents: list[list[int]] = [[] for _ in range(self.shards)]
         shards, graph = self.shards, self.graph
-        for key, depth, transitions in self._level(max_depth, stored, out):
+        for key, depth, transitions in self._level(max_depth, stored, out, items):
             if graph is not None:
                 graph.expanded.append(key)
                 graph.counts.append(0)
