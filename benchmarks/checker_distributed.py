@@ -159,26 +159,26 @@ def measure(path: Path, max_time: float, session: Callable[[], AbstractContextMa
     this machine's speed drifts by 10-20 % from minute to minute. Every distributed search
     gets a cluster started afresh (the single process runs while none is up), as `check
     --workers N` starts its own: its workers then take the processes Ray starts with the
-    cluster. A second search on one cluster waits for new processes, 0.3-0.5 s more here,
-    which a 4-s search feels."""
+    cluster. The row "again" is a second search on the cluster of the last `workers`
+    row, as with `--cluster`: its workers wait for new processes (0.3-0.5 s more here,
+    which a 4-s search feels)."""
     runs: dict[str, list[CheckResult]] = {}
 
-    def timed(name: str, **options: Any) -> None:
-        if options:
-            with session() as address:
-                options["cluster"] = address
-                runs.setdefault(name, []).append(check(path, CheckOptions(
-                    reduction=reduction, max_time_s=max_time, **options)))
-            return
-        runs.setdefault(name, []).append(
-            check(path, CheckOptions(reduction=reduction, max_time_s=max_time)))
+    def timed(name: str, **options: Any) -> CheckResult:
+        result = check(path, CheckOptions(reduction=reduction, max_time_s=max_time, **options))
+        runs.setdefault(name, []).append(result)
+        return result
 
     for _ in range(repeat):
         timed("one process")
         for n in workers:
-            timed(f"{label}, {n} worker(s)", workers=n, min_width=1)
+            with session() as address:
+                timed(f"{label}, {n} worker(s)", workers=n, cluster=address, min_width=1)
+                if n == workers[-1]:
+                    timed(f"{label}, {n}, again", workers=n, cluster=address, min_width=1)
         if default_width:
-            timed(f"{label}, 2, width {MIN_WIDTH}", workers=2)
+            with session() as address:
+                timed(f"{label}, 2, width {MIN_WIDTH}", workers=2, cluster=address)
     base = runs.pop("one process")
     print(row("one process", base, None), flush=True)
     for name, found in runs.items():

@@ -13,12 +13,14 @@ from itertools import islice
 from pathlib import Path
 from typing import Any
 
+import pytest
 from hypothesis import HealthCheck, assume, event, given, settings
 from hypothesis import strategies as st
 
 from tests.checker.program_systems import systems, write_scenario
 from twinfleet.checker import CheckOptions, check
-from twinfleet.checker.cluster.coordinator import Coordinator
+from twinfleet.checker.cluster import coordinator
+from twinfleet.checker.cluster.coordinator import DUMP_STATES, Coordinator
 from twinfleet.checker.cluster.flow import LocalFlow
 from twinfleet.checker.cluster.spec import SystemSpec
 from twinfleet.checker.outcome import Limits, Outcome
@@ -86,9 +88,12 @@ def test_a_shipped_case_keeps_its_counts_and_its_liveness_verdict(tmp_path: Path
     assert sum(s.sent for s in statuses) == sum(s.received for s in statuses)
 
 
-def test_a_violation_found_in_a_relaxed_order_is_a_path_of_the_system(tmp_path: Path) -> None:
+@pytest.mark.parametrize("dump_states", [0, DUMP_STATES], ids=["by-lineages", "dumped"])
+def test_a_violation_found_in_a_relaxed_order_is_a_path_of_the_system(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dump_states: int) -> None:
     from twinfleet.cli import main as cli
 
+    monkeypatch.setattr(coordinator, "DUMP_STATES", dump_states)
     cli(["examples", "--copy", "headon", str(tmp_path)])
     path = tmp_path / "headon.yaml"
     one = check(path, CheckOptions(reduction="none"))
