@@ -249,18 +249,21 @@ class Expander:
         worlds: list[list[tuple[World, int]]] = [[] for _ in range(self.shards)]
         keys: list[list[int]] = [[] for _ in range(self.shards)]
         parents: list[list[int]] = [[] for _ in range(self.shards)]
-        shards, graph = self.shards, self.graph
+        shards, graph, count = self.shards, self.graph, 0
+        # The inner loop of a worker: locals only, no call a transition can do without.
         for key, depth, transitions in self._level(max_depth, stored, out, items):
             if graph is not None:
                 graph.expanded.append(key)
                 graph.counts.append(0)
+            below = depth + 1
             for t in transitions:
-                out.transitions += 1
+                count += 1
                 if t.failure is not None:
                     if out.failure is None:
-                        out.failure = Failure(key, depth + 1)
+                        out.failure = Failure(key, below)
                     continue
-                child = cast(int, t.world.key)  # --exact-states never runs here
+                world = t.world
+                child: int = world.key  # type: ignore[assignment] # no --exact-states here
                 if graph is not None:
                     graph.counts[-1] += 1
                     graph.children.append(child)
@@ -268,9 +271,10 @@ class Expander:
                     continue
                 seen.add(child)
                 s = (child >> 40) % shards
-                worlds[s].append((t.world, depth + 1))
+                worlds[s].append((world, below))
                 keys[s].append(child)
                 parents[s].append(key)
+        out.transitions += count
         self.frontier = []
         self.pending = worlds
         out.claims = len(seen)
