@@ -2,9 +2,9 @@
 
 For each case, measured in this run: the single-process search (`twinfleet check`) and
 the distributed one on 1 and 2 Ray workers of a local cluster (one started before each
-distributed search: its start-up is not in the figures, its workers' is), from the first level (--min-width 1,
-the engine itself) and, on 2 workers, with the default --min-width (what `check --workers
-2` does: narrow levels stay in one process), each for `--max-time` seconds or to the end. Printed per case: states, transitions, transitions/s, the ratio to the single
+distributed search: its start-up is not in the figures, its workers' is), from the first
+level (--min-width 1, the engine itself) and, on 2 workers, with the default --min-width
+(what `check --workers 2` does: narrow levels stay in one process), each for `--max-time` seconds or to the end. Printed per case: states, transitions, transitions/s, the ratio to the single
 process, handler runs (outcome-cache misses, all processes) per transition against the
 single process's, levels, and for a reduced search that started again after learning a
 send, the rate of its last attempt (what it counts: the transitions since that restart)
@@ -164,10 +164,9 @@ def measure(path: Path, max_time: float, session: Callable[[], AbstractContextMa
     which a 4-s search feels)."""
     runs: dict[str, list[CheckResult]] = {}
 
-    def timed(name: str, **options: Any) -> CheckResult:
-        result = check(path, CheckOptions(reduction=reduction, max_time_s=max_time, **options))
-        runs.setdefault(name, []).append(result)
-        return result
+    def timed(name: str, **options: Any) -> None:
+        runs.setdefault(name, []).append(
+            check(path, CheckOptions(reduction=reduction, max_time_s=max_time, **options)))
 
     for _ in range(repeat):
         timed("one process")
