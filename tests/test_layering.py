@@ -3,13 +3,13 @@
 Every source file belongs to one layer, read from its folder under `twinfleet/`:
 
 - `runtime/<wing>/` for each wing of the runtime (`contract`, `scenario`, `core`, `host`,
-  `fleet`, `tools`, `cli`);
+  `access`, `fleet`, `tools`);
 - `checker/`, `sweep/` (many checks over a grid of parameters, on the checker's engines),
   `agreement/`, `nodes/`, `ros2/` (the ROS 2 bridge, beside the runtime: it
   speaks rmw_zenoh's protocol through the runtime's tools, and only it imports the ROS
   field's libraries, `ROS_LIBRARIES`, so the default install needs none of them);
 - `twinfleet/__init__.py` (the node API, which re-exports the contract);
-- the command line (`twinfleet/cli.py`, `twinfleet/__main__.py`) and the testing API
+- the command line (`twinfleet/cli/`, `twinfleet/__main__.py`) and the testing API
   (`twinfleet/testing.py`) on top.
 
 `RULES` names the layers each layer may import, with no exemptions; `PURE` the third-party
@@ -31,7 +31,7 @@ pytestmark = pytest.mark.timeout(60)
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = ROOT / "twinfleet"
-WINGS = ("contract", "scenario", "core", "host", "access", "fleet", "tools", "cli")
+WINGS = ("contract", "scenario", "core", "host", "access", "fleet", "tools")
 _BELOW_HOST = {"host", "core", "scenario", "contract"}
 RULES: dict[str, set[str]] = {
     "api": {"contract"},
@@ -42,7 +42,6 @@ RULES: dict[str, set[str]] = {
     "access": _BELOW_HOST,
     "fleet": {"access", *_BELOW_HOST},
     "tools": {"fleet", "access", *_BELOW_HOST},
-    "cli": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes", "ros2"},
     "checker": {"api", "contract", "scenario"},
     "sweep": {"api", "contract", "scenario", "checker"},
     "nodes": {"api", "contract"},
@@ -50,7 +49,7 @@ RULES: dict[str, set[str]] = {
     "ros2": {"api", "access", "fleet", "tools", *_BELOW_HOST},
     "runtime": set(),  # runtime/__init__.py: names its wings, imports none
     "maps": set(), "launch": set(),  # package data: shipped maps and scenarios
-    "top": {"api", "access", "fleet", "tools", *_BELOW_HOST, "cli", "checker", "agreement", "nodes", "ros2",
+    "top": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes", "ros2",
             "sweep", "top"},
 }
 #: `tools/` groups three wings of its own (tests/test_sizes.py measures each alone): the

@@ -3,7 +3,7 @@ list|info|type|echo|hz|pub`, `service list|call`, `param list|get`, `interface l
 
 Each command is a plain function taking a `Connection` (endpoint and fleet,
 from --connect or the fleet registry) and returning an exit code (0 ok, 2 bad
-input or no answer); `runtime.cli.commands` only parses arguments. What a monitor
+input or no answer); `twinfleet.cli.runtime_commands` only parses arguments. What a monitor
 knows comes from the fleet itself (`runtime.tools.monitor.graph`): liveliness tokens, the
 nodes' ``@info`` and ``@types`` queryables, and the samples; no node code is
 imported. A fleet or a topic that is not there is an error after the discovery

@@ -1,12 +1,4 @@
-"""The `twinfleet` command line, assembled from the commands each layer registers.
-
-    twinfleet launch|node|topic|service|param|interface|view|foxglove|record|play|export|bag
-                                                                  (twinfleet.runtime.cli.commands)
-    twinfleet render                                              (twinfleet.runtime.cli.render)
-    twinfleet check                                               (twinfleet.checker.commands)
-    twinfleet replay|validate|experiment|calibrate                (twinfleet.agreement.commands)
-    twinfleet ros2 bridge                                         (twinfleet.ros2.commands)
-    twinfleet sweep                                               (twinfleet.sweep.commands)
+"""The `twinfleet` command: the parser and `main` (the package docstring lists the commands).
 
 This module sits above every layer; each layer's `register(subparsers)` adds
 its own commands and imports its engines only when a command runs.
@@ -30,6 +22,8 @@ from collections.abc import Sequence
 
 from twinfleet.agreement import commands as agreement_commands
 from twinfleet.checker import commands as checker_commands
+from twinfleet.cli import render as render_command
+from twinfleet.cli import runtime_commands
 from twinfleet.ros2 import commands as ros2_commands
 from twinfleet.runtime.access.connection import (
     EXIT_BAD_INPUT,
@@ -37,8 +31,6 @@ from twinfleet.runtime.access.connection import (
     CommandError,
     error_prefix,
 )
-from twinfleet.runtime.cli import commands as runtime_commands
-from twinfleet.runtime.cli import render as render_command
 from twinfleet.sweep import commands as sweep_commands
 
 DESCRIPTION = """\

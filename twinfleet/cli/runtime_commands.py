@@ -12,8 +12,8 @@ SCENARIO is a scenario file or the name of a shipped example (`twinfleet example
 lists them). Monitors find the fleet in the fleet registry unless --connect is
 given (`runtime.access.connection.connection`). `register(subparsers)` adds the commands to
 the `twinfleet` command line (`twinfleet.cli`); `record`, `play`, `export` and
-`bag` come from `runtime.cli.recording_commands`, `view` and `foxglove` from
-`runtime.cli.viewer_commands`. Every command imports its engine
+`bag` come from `cli.recording_commands`, `view` and `foxglove` from
+`cli.viewer_commands`. Every command imports its engine
 when it runs.
 """
 
@@ -24,6 +24,7 @@ import asyncio
 import sys
 from typing import Any
 
+from twinfleet.cli import recording_commands, viewer_commands
 from twinfleet.runtime.access.connection import (
     CommandError,
     add_connection_arguments,
@@ -34,7 +35,6 @@ from twinfleet.runtime.access.connection import (
     import_modules,
     need_fleet,
 )
-from twinfleet.runtime.cli import recording_commands, viewer_commands
 from twinfleet.runtime.scenario.overrides import add_override_arguments, override_words
 
 
