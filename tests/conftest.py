@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import ctypes
 import os
+import sys
 import tempfile
 
 import pytest
@@ -15,6 +17,13 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
     tempfile.tempdir = None
 
 from tests.support import RUNTIME_DIR, pick_free_port  # noqa: E402
+
+# A test ends only the processes it started (tests/integration/itest_support.py `spawned_by`).
+# A node whose launcher was killed would be adopted by init and lost from view; as the
+# subreaper of everything it starts, this test process adopts such orphans itself instead.
+PR_SET_CHILD_SUBREAPER = 36
+if sys.platform == "linux":
+    ctypes.CDLL(None, use_errno=True).prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
 
 # Commands run in-process (`twinfleet.cli.main([...])`) read the fleet registry too: give them
 # the test session's private one, as `child_env` gives it to subprocesses, so that a fleet the

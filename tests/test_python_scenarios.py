@@ -193,7 +193,7 @@ def pong_report(scenario: Scenario) -> PongReport:
 @pytest.mark.timeout(90)
 @pytest.mark.parametrize("record", [False, True], ids=["private-file", "beside-the-event-log"])
 def test_a_python_scenario_runs_live(tmp_path: Path, record: bool) -> None:
-    from tests.integration.itest_support import poll, processes_mentioning
+    from tests.integration.itest_support import fleet_nodes, poll
     from twinfleet.runtime.fleet.launcher import format_result, run_fleet
 
     scenario = Scenario.build("pypong", [NodeEntry("ping", Ping, {"rounds": 3}),
@@ -216,5 +216,4 @@ def test_a_python_scenario_runs_live(tmp_path: Path, record: bool) -> None:
         header = json.loads(Path(events).read_text().splitlines()[0])
         assert header["scenario"] == f"{events}.scenario.yaml"
         assert load_scenario(header["scenario"]).node("ping").params == PingParams(rounds=3)
-    marker = f"{events}.scenario.yaml" if events is not None else "/pypong.yaml"
-    assert poll(lambda: not processes_mentioning(marker), 5)
+    assert poll(lambda: not fleet_nodes(), 5)

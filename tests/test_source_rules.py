@@ -82,3 +82,15 @@ def test_the_rules_catch_what_they_look_for(tmp_path):
     (tmp_path / "m.py").write_text("x = stats.get('gaps', 0)\ny = inspect.getsource(f)\n")
     assert len(_lines_with("stats.get(", tmp_path)) == 1
     assert len(_lines_with("inspect.getsource(", tmp_path)) == 1
+
+
+def test_no_test_finds_processes_to_end_by_their_command_line() -> None:
+    """Tests end only what they started (tests/integration/itest_support.py `spawned_by`):
+    a scan of every process's command line once ended another xdist worker's fleet that ran
+    the same shipped scenario."""
+    needles = ("processes_mentioning", "pkill", "killall", "pgrep")
+    offenders = [f"{path.relative_to(ROOT)}: {needle}"
+                 for path in sorted((ROOT / "tests").rglob("*.py"))
+                 if path.name != Path(__file__).name
+                 for needle in needles if needle in path.read_text()]
+    assert offenders == []

@@ -38,7 +38,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.integration.itest_support import kill_all, poll, processes_mentioning
+from tests.integration.itest_support import kill_all, orphaned_nodes, poll
 from tests.integration.user_project import expected_modules, logged_modules, write_project
 from tests.support import ROOT
 
@@ -262,13 +262,12 @@ def test_the_cluster_engine_without_ray_is_one_line(venv: Path, workdir: Path) -
 
 
 def test_launch_a_shipped_scenario_by_name(venv: Path, workdir: Path) -> None:
-    shipped = next(venv.glob("lib/python*/site-packages")) / "twinfleet" / "launch" / "c1a.yaml"
     try:
         result = run([str(venv / "bin" / "twinfleet"), "launch", "c1a", "--timeout", "6",
                       "--time-scale", "4"], workdir, timeout=60)
     finally:
-        poll(lambda: not processes_mentioning(str(shipped)), 10)
-        leftovers = processes_mentioning(str(shipped))
+        poll(lambda: not orphaned_nodes(), 10)
+        leftovers = orphaned_nodes()
         kill_all(leftovers)
     assert not leftovers
     out = result.stdout
@@ -384,9 +383,9 @@ def test_each_install_runs_a_users_nodes_runtime_checker_packages(installed: Ins
     try:
         launched = run([installed.bin("python"), "-m", "twinfleet", "launch", relative,
                         "--timeout", "2"], elsewhere, timeout=60)
-    finally:  # node processes name the scenario by its absolute path
-        poll(lambda: not processes_mentioning(str(scenario)), 10)
-        leftovers = processes_mentioning(str(scenario))
+    finally:
+        poll(lambda: not orphaned_nodes(), 10)
+        leftovers = orphaned_nodes()
         kill_all(leftovers)
     out = ok(launched)
     assert not leftovers

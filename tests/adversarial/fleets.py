@@ -53,7 +53,7 @@ def launch_command(scenario: Path, *args: str) -> list[str]:
 def launched(scenario: Path, *args: str) -> Iterator[subprocess.Popen[str]]:
     """`twinfleet launch` running in the background (stdout piped, stderr merged); every
     process of the scenario is killed on the way out."""
-    from tests.integration.itest_support import kill_all, processes_mentioning
+    from tests.integration.itest_support import kill_all, spawned_by
 
     proc = subprocess.Popen(launch_command(scenario, *args), stdout=subprocess.PIPE,
                             stderr=subprocess.STDOUT, text=True, env=child_env(), cwd=ROOT)
@@ -65,7 +65,7 @@ def launched(scenario: Path, *args: str) -> Iterator[subprocess.Popen[str]]:
         proc.wait(timeout=10)
         if proc.stdout is not None:
             proc.stdout.close()
-        kill_all(processes_mentioning(str(scenario)))
+        kill_all(spawned_by(proc.pid))
 
 
 def wait_for_line(proc: subprocess.Popen[str], text: str, seen: list[str]) -> bool:
@@ -80,14 +80,19 @@ def wait_for_line(proc: subprocess.Popen[str], text: str, seen: list[str]) -> bo
 
 def run_launch(scenario: Path, *args: str, timeout: float = 60.0) -> subprocess.CompletedProcess[str]:
     """`twinfleet launch SCENARIO ARGS` to its end (stderr merged into stdout)."""
-    from tests.integration.itest_support import kill_all, processes_mentioning
+    from tests.integration.itest_support import kill_all, spawned_by
 
-    try:
-        return subprocess.run(launch_command(scenario, *args), stdout=subprocess.PIPE,
-                              stderr=subprocess.STDOUT, text=True, timeout=timeout,
-                              env=child_env(), cwd=ROOT, check=False)
-    finally:
-        kill_all(processes_mentioning(str(scenario)))
+    command = launch_command(scenario, *args)
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                          env=child_env(), cwd=ROOT) as proc:
+        try:
+            out, _ = proc.communicate(timeout=timeout)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(timeout=10)
+            kill_all(spawned_by(proc.pid))
+    return subprocess.CompletedProcess(command, proc.returncode, out)
 
 
 def expect(run: subprocess.CompletedProcess[str], code: int, *texts: str) -> str:

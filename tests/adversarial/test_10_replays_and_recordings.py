@@ -14,7 +14,7 @@ import pytest
 
 from tests.adversarial.fleets import launch_command
 from tests.adversarial.harness import client, poll, running_fleet, stats, stop
-from tests.integration.itest_support import kill_all, processes_mentioning
+from tests.integration.itest_support import kill_all, spawned_by
 from tests.support import ROOT, child_env, pick_free_port
 from twinfleet.runtime.contract.messages import String, encode
 from twinfleet.runtime.tools.record.recorder import McapRecorder
@@ -107,7 +107,7 @@ def test_recorded_input_reaches_a_fleet_only_on_purpose(tmp_path, accept) -> Non
         time.sleep(0.5)
     finally:
         stop(proc)
-        kill_all(processes_mentioning(str(scenario)))
+        kill_all(spawned_by(proc.pid))
     out = log.read_text()
     counters = re.search(r"^\[ear\] stopped: (.*)$", out, re.M)
     assert counters, out

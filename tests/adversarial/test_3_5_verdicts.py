@@ -19,7 +19,7 @@ from tests.adversarial.fleets import (
     wait_for_line,
     write_scenario,
 )
-from tests.integration.itest_support import poll, processes_mentioning
+from tests.integration.itest_support import node_pid, poll, spawned_by
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 
@@ -56,8 +56,8 @@ def test_a_robot_stopped_and_continued_stalls_and_the_run_is_inconclusive(tmp_pa
     seen: list[str] = []
     with launched(path, "--time-scale", "4", "--timeout", "40") as proc:
         assert wait_for_line(proc, "[r2] t=", seen), "".join(seen)  # r2 started
-        pids = processes_mentioning(f"{path} --node r2")
-        assert len(pids) == 1
+        pids = [node_pid(spawned_by(proc.pid), "r2")]
+        assert pids[0] is not None
         time.sleep(0.5)  # r2 is on its way
         os.kill(pids[0], signal.SIGSTOP)
         try:
@@ -71,4 +71,4 @@ def test_a_robot_stopped_and_continued_stalls_and_the_run_is_inconclusive(tmp_pa
     # server may drop meanwhile)
     assert "result: INCONCLUSIVE (" in out, out[-2500:]
     assert re.search(r"r2 fell behind its timers by up to \d+ ms .*: it stalled\)", out), out[-2500:]
-    assert poll(lambda: not processes_mentioning(str(path)), 10)
+    assert poll(lambda: not spawned_by(proc.pid), 10)

@@ -1,4 +1,9 @@
-"""Helpers of the integration tests: ports, polling, /proc scans, CLI subprocesses."""
+"""Helpers of the integration tests: ports, polling, the processes a test started, CLI subprocesses.
+
+A test ends only what it started: `spawned_by(pid)` follows parent links (and a node's
+launcher, named in its environment) from a process the test spawned; nothing here finds
+processes by their command line, so a test never ends another test's fleet.
+"""
 
 from __future__ import annotations
 
@@ -12,6 +17,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 from tests.support import ROOT, child_env, pick_free_port  # noqa: F401 (re-exported)
+from twinfleet.runtime.fleet.node_main import PARENT_ENV
 
 
 def poll(predicate: Callable[[], object], timeout: float, interval: float = 0.05) -> bool:
@@ -25,20 +31,85 @@ def poll(predicate: Callable[[], object], timeout: float, interval: float = 0.05
         time.sleep(interval)
 
 
-def processes_mentioning(text: str) -> list[int]:
-    """PIDs of live processes whose command line contains `text` (a /proc scan, no psutil)."""
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit() or int(entry.name) == os.getpid():
-            continue
+def _parent(pid: int) -> int | None:
+    """The parent of a live, non-zombie process (None: gone, or a zombie)."""
+    try:
+        fields = (Path("/proc") / str(pid) / "stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        return None
+    return None if fields[0] == "Z" else int(fields[1])
+
+
+def _launcher_of(pid: int) -> int | None:
+    """The launcher a node process names in its environment (None: not a node process)."""
+    try:
+        environ = (Path("/proc") / str(pid) / "environ").read_bytes().split(b"\0")
+    except OSError:
+        return None
+    key = PARENT_ENV.encode() + b"="
+    return next((int(item[len(key):]) for item in environ if item.startswith(key)), None)
+
+
+def spawned_by(root: int) -> list[int]:
+    """Every live process that `root` started, transitively: its descendants, and the node
+    processes whose launcher was `root` or one of those (a node outlives a killed launcher;
+    tests/conftest.py makes the test process their subreaper, so they stay descendants of
+    the test process). Only descendants of the test process are ever considered.
+    """
+    parents = {pid: _parent(pid) for pid in _pids()}
+    mine = _descendants(parents, os.getpid())
+    launchers = {pid: _launcher_of(pid) for pid in mine}
+    found: set[int] = set()
+    frontier = {root}
+    while frontier:
+        frontier = {pid for pid in mine - found - frontier
+                    if parents[pid] in frontier or launchers[pid] in frontier}
+        found |= frontier
+    return sorted(found)
+
+
+def fleet_nodes() -> list[int]:
+    """The live node processes of the fleets this test process launched itself (`run_fleet`
+    called in-process); not those of a launcher it started as a subprocess."""
+    parents = {pid: _parent(pid) for pid in _pids()}
+    return sorted(pid for pid in _descendants(parents, os.getpid())
+                  if _launcher_of(pid) == os.getpid())
+
+
+def orphaned_nodes() -> list[int]:
+    """Node processes this test process started through a launcher that has ended (a
+    launcher run to its end with `subprocess.run` must leave none)."""
+    parents = {pid: _parent(pid) for pid in _pids()}
+    mine = _descendants(parents, os.getpid())
+    launchers = {pid: _launcher_of(pid) for pid in mine}
+    return sorted(pid for pid, launcher in launchers.items()
+                  if launcher is not None and launcher != os.getpid() and launcher not in mine)
+
+
+def _pids() -> list[int]:
+    return [int(entry.name) for entry in Path("/proc").iterdir() if entry.name.isdigit()]
+
+
+def _descendants(parents: dict[int, int | None], root: int) -> set[int]:
+    found: set[int] = set()
+    frontier = {root}
+    while frontier:
+        frontier = {pid for pid, parent in parents.items() if parent in frontier} - found
+        found |= frontier
+    return found
+
+
+def node_pid(pids: list[int], node: str) -> int | None:
+    """The node process running `node` among `pids` (processes the test started, from
+    `spawned_by` or `fleet_nodes`), or None."""
+    for pid in pids:
         try:
-            cmdline = (entry / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
-            state = (entry / "stat").read_text().split(")")[-1].split()[0]
+            argv = (Path("/proc") / str(pid) / "cmdline").read_bytes().split(b"\0")
         except OSError:
             continue
-        if text in cmdline and state != "Z":
-            pids.append(int(entry.name))
-    return pids
+        if b"--node" in argv[:-1] and argv[argv.index(b"--node") + 1] == node.encode():
+            return pid
+    return None
 
 
 def kill_all(pids: list[int]) -> None:
@@ -46,8 +117,6 @@ def kill_all(pids: list[int]) -> None:
     for pid in pids:
         with contextlib.suppress(ProcessLookupError):
             os.kill(pid, signal.SIGKILL)
-
-
 
 
 def run_cli(*args: str, timeout: float = 20.0) -> subprocess.CompletedProcess[str]:
@@ -73,8 +142,9 @@ def launch_in(runtime_dir: Path, log: Path, *args: str) -> subprocess.Popen:
                                 cwd=ROOT, start_new_session=True)
 
 
-def stop_launch(proc: subprocess.Popen, scenario: str) -> None:
-    """SIGINT a launcher, SIGKILL it after 15 s, then kill node processes it left behind."""
+def stop_launch(proc: subprocess.Popen) -> None:
+    """SIGINT a launcher, SIGKILL it after 15 s, then kill what it started and left behind."""
+    started = spawned_by(proc.pid)
     if proc.poll() is None:
         proc.send_signal(signal.SIGINT)
         try:
@@ -82,16 +152,4 @@ def stop_launch(proc: subprocess.Popen, scenario: str) -> None:
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait(timeout=5)
-    kill_all([p for p in processes_mentioning(scenario) if p != proc.pid])
-
-
-def node_pid(scenario: Path | str, node: str) -> int | None:
-    """PID of the live node process running `node` of `scenario` (a /proc scan)."""
-    for pid in processes_mentioning(str(scenario)):
-        try:
-            argv = (Path("/proc") / str(pid) / "cmdline").read_bytes().split(b"\0")
-        except OSError:
-            continue
-        if b"twinfleet.runtime.fleet.node_main" in argv and argv[argv.index(b"--node") + 1] == node.encode():
-            return pid
-    return None
+    kill_all(sorted(set(started) | set(spawned_by(proc.pid))))

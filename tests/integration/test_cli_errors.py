@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import json
 import os
-import signal
 import socket
 import subprocess
 from collections.abc import Iterator
@@ -49,22 +48,14 @@ def one_line_error(result: subprocess.CompletedProcess[str], *needles: str) -> s
 @pytest.fixture(scope="module")
 def demo(runtime_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator[Path]:
     log = tmp_path_factory.mktemp("demo") / "fleet.log"
-    for attempt in (1, 2):
-        proc = launch_in(runtime_dir, log, DEMO, "--timeout", "100")
-        poll(lambda p=proc: log.read_text().count("started") >= 4 or p.poll() is not None, 40)
-        # Twice in full CI runs (never alone) the launcher was SIGKILLed seconds after its
-        # start by no one this module knows: launched again once, so that a signal from
-        # outside is not read as a failure of the commands under test.
-        if proc.poll() != -signal.SIGKILL or attempt == 2:
-            break
-        print(f"the demo launcher was SIGKILLed from outside; launching it again:\n"
-              f"{log.read_text()}")
+    proc = launch_in(runtime_dir, log, DEMO, "--timeout", "100")
+    poll(lambda: log.read_text().count("started") >= 4 or proc.poll() is not None, 40)
     try:
         assert proc.poll() is None, log.read_text()
         assert log.read_text().count("started") >= 4, log.read_text()
         yield log
     finally:
-        stop_launch(proc, DEMO)
+        stop_launch(proc)
 
 
 @pytest.fixture

@@ -20,11 +20,13 @@ import pytest
 from itest_support import (
     ROOT,
     child_env,
+    fleet_nodes,
     kill_all,
+    orphaned_nodes,
     pick_free_port,
     poll,
-    processes_mentioning,
     run_cli,
+    spawned_by,
 )
 
 from tests.support import RunningFleet
@@ -65,7 +67,7 @@ def stop_fleet(fleet: RunningFleet) -> None:
         except subprocess.TimeoutExpired:
             fleet.proc.kill()
             fleet.proc.wait(timeout=5)
-    kill_all(processes_mentioning(str(fleet.scenario)))
+    kill_all(spawned_by(fleet.proc.pid))
 
 
 def wait_started(fleet: RunningFleet, n: int, timeout: float = 30.0) -> None:
@@ -199,7 +201,7 @@ def test_shutdown_topic_ends_the_run_cleanly(demo: RunningFleet) -> None:
     assert "run ended: shutdown requested by twinfleet-cli: all done" in out
     assert "Traceback" not in out
     assert re.search(r"\[listener\] stopped: .*gaps=0", out)
-    assert poll(lambda: not processes_mentioning(str(demo.scenario)), 5)
+    assert poll(lambda: not spawned_by(demo.proc.pid), 5)
 
 
 CRASH = """\
@@ -222,7 +224,7 @@ def test_node_crash_is_reported_and_launch_fails(tmp_path: Path) -> None:
         assert "run ended: node crasher failed (exit code 1)" in out
         assert "crasher: exit code 1 (FAILED)" in out
         assert "listener: exit code 0 (ok)" in out
-        assert poll(lambda: not processes_mentioning(str(fleet.scenario)), 5)
+        assert poll(lambda: not spawned_by(fleet.proc.pid), 5)
     finally:
         stop_fleet(fleet)
 
@@ -240,11 +242,11 @@ def test_signals_to_the_launcher_leave_no_process(tmp_path: Path, sig: signal.Si
     fleet = start_fleet(tmp_path, SMALL, "small", "--time-scale", "2")
     try:
         wait_started(fleet, 2)
-        assert len(processes_mentioning(str(fleet.scenario))) == 3  # launcher + 2 nodes
+        assert len(spawned_by(fleet.proc.pid)) == 2  # its 2 nodes
         fleet.proc.send_signal(sig)
         fleet.proc.wait(timeout=20)
-        assert poll(lambda: not processes_mentioning(str(fleet.scenario)), 10), \
-            processes_mentioning(str(fleet.scenario))
+        assert poll(lambda: not spawned_by(fleet.proc.pid), 10), \
+            spawned_by(fleet.proc.pid)
         if sig != signal.SIGKILL:  # the launcher ends the run and stops its nodes itself
             assert fleet.proc.returncode == 130, fleet.output()  # interrupted, not failed
             assert f"run ended: {sig.name} received" in fleet.output()
@@ -261,7 +263,7 @@ def test_bad_scenario_fails_before_anything_starts(tmp_path: Path) -> None:
     assert result.returncode == 2
     assert f"{bad}: nodes[0].class: unknown node class 'twinfleet.nodes.demo:Nope'" in result.stderr
     assert "Traceback" not in result.stderr
-    assert not processes_mentioning(str(bad))
+    assert not orphaned_nodes()
 
 
 RESPAWN = """\
@@ -298,4 +300,4 @@ def test_run_fleet_as_a_library_with_respawn_and_summary(tmp_path: Path) -> None
     assert result.exit_codes["talker"] == 0 and "talker" not in result.failed
     last = result.last_messages["/chatter"]
     assert isinstance(last, String) and last.data.startswith("hello ")
-    assert poll(lambda: not processes_mentioning(str(path)), 5)
+    assert poll(lambda: not fleet_nodes(), 5)

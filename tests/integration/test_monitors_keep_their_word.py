@@ -69,7 +69,7 @@ def test_echo_waits_for_the_fleet_and_pub_checks_the_type(tmp_path: Path) -> Non
         if echo.poll() is None:
             echo.kill()
         if proc is not None:
-            stop_launch(proc, DEMO)
+            stop_launch(proc)
 
 
 def test_monitors_find_a_played_recording_without_flags(tmp_path: Path) -> None:

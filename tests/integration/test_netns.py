@@ -33,7 +33,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import pytest
-from itest_support import ROOT, child_env, kill_all, poll, processes_mentioning
+from itest_support import ROOT, child_env, kill_all, poll, spawned_by
 
 from twinfleet.runtime.host.certs import fleet_authority
 
@@ -149,7 +149,7 @@ class Launch:
             except subprocess.TimeoutExpired:
                 self.proc.kill()
                 self.proc.wait(timeout=5)
-        kill_all(processes_mentioning(str(self.scenario)))
+        kill_all(spawned_by(self.proc.pid))
 
 
 def test_a_cut_link_is_detected_within_the_lease_and_recovers(tmp_path: Path,
@@ -192,7 +192,7 @@ nodes:
             launch.stop()
             assert launch.proc.returncode == 130, launch.output()  # Ctrl-C: interrupted
             assert "run ended: SIGINT received" in launch.output()
-            assert not processes_mentioning(str(launch.scenario))
+            assert not spawned_by(launch.proc.pid)
         lost_on_the_way = re.search(r"^\[watcher\] stopped: .*\bgaps=(\d+)", host_b.output(), re.M)
         assert lost_on_the_way and int(lost_on_the_way.group(1)) > 0  # the cut shows as gaps
     finally:

@@ -25,11 +25,12 @@ import zenoh
 from itest_support import (
     ROOT,
     child_env,
+    fleet_nodes,
     kill_all,
     node_pid,
     pick_free_port,
     poll,
-    processes_mentioning,
+    spawned_by,
 )
 
 from twinfleet.runtime.access.fleetauth import login_settings, registry_auth
@@ -119,7 +120,7 @@ def test_killed_node_is_detected_within_a_second_respawned_and_reported(tmp_path
             await out.wait_for(r"\[watcher\] t=\d+ alive node='r2'", timeout=30)
             await out.wait_for(r"\[r1\] t=-?\d+ started", timeout=30)
             for round_ in (1, 2):  # twice: the respawned process is watched like the first
-                pid = node_pid(path, "r1")
+                pid = node_pid(fleet_nodes(), "r1")
                 assert pid is not None, out.text()
                 killed = time.monotonic()
                 os.kill(pid, signal.SIGKILL)
@@ -138,7 +139,7 @@ def test_killed_node_is_detected_within_a_second_respawned_and_reported(tmp_path
     try:
         result = asyncio.run(body())
     finally:
-        kill_all(processes_mentioning(str(path)))
+        kill_all(fleet_nodes())
     shutdown_at = figures.pop("shutdown_at")
     print("\nliveliness figures:", json.dumps({k: round(v, 3) for k, v in figures.items()}))
     assert figures["detect_1_s"] < 1.0 and figures["detect_2_s"] < 1.0, figures
@@ -170,7 +171,7 @@ def test_killed_node_is_detected_within_a_second_respawned_and_reported(tmp_path
     last = events[-1]
     assert last["restarts"] == {"watcher": 0, "r1": 2, "r2": 0} and last["ok"] is True
     assert events[0]["versions"]["eclipse-zenoh"] != "not installed"
-    assert not processes_mentioning(str(path))
+    assert not fleet_nodes()
 
 
 LAUNCH_SCRIPT = """
@@ -194,20 +195,19 @@ nodes:
                                 env=child_env(), stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)
     try:
-        assert poll(lambda: node_pid(path, "r1") is not None, 30)
-        first = node_pid(path, "r1")
+        assert poll(lambda: node_pid(spawned_by(launcher.pid), "r1") is not None, 30)
+        first = node_pid(spawned_by(launcher.pid), "r1")
         os.kill(first, signal.SIGKILL)  # type: ignore[arg-type]
         assert poll(lambda: any(e["event"] == "respawn" for e in read_run_record(record)), 20)
-        assert poll(lambda: node_pid(path, "r1") not in (None, first), 20)
+        assert poll(lambda: node_pid(spawned_by(launcher.pid), "r1") not in (None, first), 20)
         launcher.kill()
         launcher.wait(timeout=10)
-        assert poll(lambda: not processes_mentioning(str(path)), 10), \
-            processes_mentioning(str(path))
+        assert poll(lambda: not spawned_by(launcher.pid), 10), spawned_by(launcher.pid)
     finally:
         if launcher.poll() is None:
             launcher.kill()
             launcher.wait(timeout=10)
-        kill_all(processes_mentioning(str(path)))
+        kill_all(spawned_by(launcher.pid))
     text = record.read_text()
     assert text.endswith("\n")  # every line was complete when the launcher died
     events = read_run_record(record)

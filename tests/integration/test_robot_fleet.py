@@ -6,7 +6,7 @@ import subprocess
 import sys
 
 import pytest
-from itest_support import ROOT, child_env, kill_all, processes_mentioning
+from itest_support import ROOT, child_env, kill_all, orphaned_nodes
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(150)]
 
@@ -25,7 +25,7 @@ def test_c1a_live_all_robots_arrive_without_collision(tmp_path):
         result = subprocess.run(cmd, capture_output=True, text=True, timeout=120, env=child_env(),
                                 cwd=ROOT, check=False)
     finally:
-        kill_all(processes_mentioning(scenario))
+        kill_all(orphaned_nodes())
     out = result.stdout
     assert "shutdown requested by map_server: all robots arrived" in out, out[-3000:]
     node_processes = {line.split("]")[0] for line in out.splitlines() if line.startswith("[r")}
@@ -36,4 +36,4 @@ def test_c1a_live_all_robots_arrive_without_collision(tmp_path):
     # the result is the live verdict on the scenario's properties, not the report's
     assert "result: PASSED (no_collision, no_livelock, all_arrive, no_handler_failure hold)" in out
     assert result.returncode == 0
-    assert not processes_mentioning(scenario)
+    assert not orphaned_nodes()

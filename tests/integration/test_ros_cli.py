@@ -43,7 +43,7 @@ def c1a(runtime_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterator
         assert proc.poll() is None, log.read_text()
         yield log
     finally:
-        stop_launch(proc, str(C1A))
+        stop_launch(proc)
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +57,7 @@ def demo(runtime_dir: Path, c1a: Path, tmp_path_factory: pytest.TempPathFactory)
         assert proc.poll() is None, log.read_text()
         yield log
     finally:
-        stop_launch(proc, scenario)
+        stop_launch(proc)
 
 
 def ok(result: subprocess.CompletedProcess[str]) -> str:

@@ -24,7 +24,7 @@ import re
 from pathlib import Path
 
 import pytest
-from itest_support import kill_all, pick_free_port, processes_mentioning
+from itest_support import fleet_nodes, kill_all, pick_free_port
 
 from twinfleet.runtime.fleet.launcher import run_fleet
 from twinfleet.runtime.fleet.run_record import read_run_record
@@ -72,7 +72,7 @@ def test_soak_reliable_topics_lose_nothing_and_memory_stays_bounded(tmp_path: Pa
     try:
         result = asyncio.run(body())
     finally:
-        kill_all(processes_mentioning(str(path)))
+        kill_all(fleet_nodes())
     text = out.getvalue()
     assert result.reason == "shutdown requested by sink: soak done", text  # type: ignore[attr-defined]
     events = read_run_record(record)
@@ -105,4 +105,4 @@ def test_soak_reliable_topics_lose_nothing_and_memory_stays_bounded(tmp_path: Pa
     assert fast + sink["dropped_best_effort"] <= PUBLISHERS * LIMIT
     assert blocks_growth < BLOCKS_GROWTH_LIMIT, figures
     assert rss_growth_mb < RSS_GROWTH_LIMIT_MB, figures
-    assert not processes_mentioning(str(path))
+    assert not fleet_nodes()

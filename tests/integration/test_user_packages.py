@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.integration.itest_support import kill_all, poll, processes_mentioning
+from tests.integration.itest_support import kill_all, orphaned_nodes, poll
 from tests.integration.user_project import (
     LISTENER_MARK,
     PINGER_MARK,
@@ -90,9 +90,9 @@ def test_launch_uses_the_users_packages(project: Path, elsewhere: Path) -> None:
     try:
         result = subprocess.run(argv, cwd=elsewhere, env=child_env(), stdout=subprocess.PIPE,
                                 stderr=subprocess.STDOUT, text=True, timeout=60, check=False)
-    finally:  # node processes name the scenario by its absolute path
-        poll(lambda: not processes_mentioning(str(scenario)), 10)
-        leftovers = processes_mentioning(str(scenario))
+    finally:
+        poll(lambda: not orphaned_nodes(), 10)
+        leftovers = orphaned_nodes()
         kill_all(leftovers)
     out = result.stdout
     assert not leftovers, out
