@@ -123,7 +123,7 @@ class MapServer(Node):
         st = self.state
         others = [OtherRobot(st.cells[j], st.dirs[j], st.velocities[j])
                   for j in range(len(st.cells)) if j != i and st.cells[j] != UNKNOWN]
-        return Path(self.planner.plan(others, tuple(req.start), tuple(req.goal)))
+        return Path(self.planner.plan(others, (req.start[0], req.start[1]), (req.goal[0], req.goal[1])))
 
     # KEEP_LAST MAX_ROBOTS: a pose of every robot may wait here at once (with the default 10,
     # a fleet of more than 10 robots reporting together would lose poses, live and checked).
@@ -163,7 +163,8 @@ class MapServer(Node):
     def _grid_message(self) -> OccupancyGrid:
         rows, cols = self.map.shape
         data = np.where(self.static, 100, 0).astype(np.uint8).tobytes()
-        return OccupancyGrid(cols, rows, self.map.resolution, tuple(self.map.origin), data)
+        x, y, theta = self.map.origin
+        return OccupancyGrid(cols, rows, self.map.resolution, (x, y, theta), data)
 
 
 def _put(values: tuple, i: int, value: object) -> tuple:

@@ -137,7 +137,7 @@ def read_pgm(path: str | Path) -> tuple[np.ndarray, int]:
             raise MapError(f"{path}: PGM data truncated: {len(raster)} bytes, expected {size}")
         if len(raster) > size:
             raise MapError(f"{path}: PGM size mismatch: {len(raster)} data bytes, expected {size}")
-        arr = np.frombuffer(raster, dtype=np.uint8).reshape(height, width).copy()
+        arr: np.ndarray = np.frombuffer(raster, dtype=np.uint8).reshape(height, width).copy()
     else:
         # ASCII rasters may carry comments too.
         words = re.sub(rb"#[^\r\n]*", b" ", data[end:]).split()

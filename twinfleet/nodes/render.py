@@ -126,7 +126,7 @@ def _draw_plan(draw: ImageDraw.ImageDraw, robot: RobotView, colour: tuple[int, i
 
 def _draw_collision(draw: ImageDraw.ImageDraw, view: FleetView, cell_px: int) -> None:
     where = {r.name: r.cell for r in view.robots if r.cell is not None}
-    centres = [_centre(where[n], cell_px) for n in view.collision if n in where]
+    centres = [_centre(where[n], cell_px) for n in view.collision or () if n in where]
     for x, y in centres:
         r = cell_px * 1.1
         draw.ellipse([x - r, y - r, x + r, y + r], outline=COLLISION, width=3)

@@ -60,7 +60,7 @@ class FleetReport:
         if isinstance(msg, Collision):
             self.collisions.append(msg)
         elif isinstance(msg, RobotPose) and msg.robot in self.records:
-            self._on_pose(self.records[msg.robot], tuple(msg.cell))
+            self._on_pose(self.records[msg.robot], (msg.cell[0], msg.cell[1]))
         elif isinstance(msg, RobotStatus) and msg.robot in self.records:
             self._on_status(self.records[msg.robot], msg)
 

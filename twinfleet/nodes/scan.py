@@ -75,6 +75,7 @@ def build_tables(
     Returns:
         The tables.
     """
+    max_cells: float
     if profile.scan_mode == "model":
         max_cells = profile.round(max_range_m / res)  # 40 with round_m
         half = profile.round(fov_deg / 2)  # 91

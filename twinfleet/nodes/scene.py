@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Mapping, Sequence
-from typing import Any, final
+from typing import Any, TypeGuard, final
 
 from twinfleet.nodes.msgs import (
     Collision,
@@ -51,7 +51,7 @@ def _type(cls: type) -> str:
     return str(cls.__message_type__)  # type: ignore[attr-defined]
 
 
-def is_cell(value: Any) -> bool:
+def is_cell(value: Any) -> TypeGuard[Sequence[int]]:
     """A (row, column) pair of ints."""
     return isinstance(value, list | tuple) and len(value) == 2 and all(
         isinstance(v, int) and not isinstance(v, bool) for v in value)
@@ -76,7 +76,7 @@ def _points(cells: Any) -> tuple[draw.Point, ...]:
     return tuple(point(c) for c in cells or () if is_cell(c))
 
 
-def _int(value: Any) -> bool:
+def _int(value: Any) -> TypeGuard[int]:
     return isinstance(value, int) and not isinstance(value, bool)
 
 

@@ -22,7 +22,7 @@ import ipaddress
 import secrets
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Final
+from typing import Any, Final
 
 VALIDITY: Final = datetime.timedelta(days=30)
 _SKEW: Final = datetime.timedelta(minutes=5)  # clocks of two hosts differ a little
@@ -36,20 +36,20 @@ class Pem:
     key: bytes
 
 
-def _new_key():  # type: ignore[no-untyped-def]
+def _new_key() -> Any:
     from cryptography.hazmat.primitives.asymmetric import ec
 
     return ec.generate_private_key(ec.SECP256R1())
 
 
-def _key_pem(key) -> bytes:  # type: ignore[no-untyped-def]
+def _key_pem(key: Any) -> bytes:
     from cryptography.hazmat.primitives import serialization
 
     return key.private_bytes(serialization.Encoding.PEM, serialization.PrivateFormat.PKCS8,
                              serialization.NoEncryption())
 
 
-def _builder(subject: str, issuer: str, public_key):  # type: ignore[no-untyped-def]
+def _builder(subject: str, issuer: str, public_key: Any) -> Any:
     from cryptography import x509
     from cryptography.x509.oid import NameOID
 
@@ -92,7 +92,7 @@ def server_certificate(authority: Pem, names: Sequence[str]) -> Pem:
             .add_extension(x509.BasicConstraints(ca=False, path_length=None), critical=True)
             .add_extension(x509.ExtendedKeyUsage([x509.ExtendedKeyUsageOID.SERVER_AUTH]),
                            critical=False)
-            .sign(ca_key, hashes.SHA256()))  # type: ignore[arg-type]
+            .sign(ca_key, hashes.SHA256()))
     return Pem(cert.public_bytes(serialization.Encoding.PEM), _key_pem(key))
 
 
@@ -103,7 +103,7 @@ def self_signed(names: Sequence[str]) -> tuple[Pem, bytes]:
     return server_certificate(authority, names), authority.certificate
 
 
-def _general_name(name: str):  # type: ignore[no-untyped-def]
+def _general_name(name: str) -> Any:
     from cryptography import x509
 
     try:
@@ -124,7 +124,7 @@ def host_names(host: str) -> list[str]:
     hostname = socket.gethostname()
     names.append(hostname)
     with contextlib.suppress(OSError):
-        names += [info[4][0] for info in socket.getaddrinfo(hostname, None)]
+        names += [str(info[4][0]) for info in socket.getaddrinfo(hostname, None)]
     names += _interface_addresses()
     names += ["localhost", "127.0.0.1", "::1"]
     return list(dict.fromkeys(n for n in names if n))

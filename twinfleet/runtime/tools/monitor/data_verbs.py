@@ -228,9 +228,9 @@ def topic_pub(conn: Connection, topic: str, type_name: str, data: dict[str, Any]
         tag = signer(conn.auth.key, key)  # the fleet's nodes take only signed samples
         pub = session.declare_publisher(key, congestion_control=zenoh.CongestionControl.BLOCK)
         deadline = time.monotonic() + wait_matched_s
-        while not pub.matching_status.matching and time.monotonic() < deadline:
+        while not _matched(pub) and time.monotonic() < deadline:
             time.sleep(POLL_S)
-        if not pub.matching_status.matching:
+        if not _matched(pub):
             print(f"warning: no subscriber on {topic} in fleet {conn.fleet!r} (waited "
                   f"{wait_matched_s:g} s); publishing anyway", file=err, flush=True)
         try:
@@ -310,3 +310,9 @@ def refuse_other_type(conn: Connection, name: str, type_name: str, *, service: b
                            f"{wanted} anyway")
     print(f"warning: {name} {what} {text}, not {wanted}; sending it anyway (--force): the "
           "nodes will refuse it", file=err, flush=True)
+
+
+def _matched(pub: Any) -> bool:
+    """Whether a subscriber matches `pub` (zenoh's stubs type `matching_status` as a bool; it
+    is a `MatchingStatus`)."""
+    return bool(pub.matching_status.matching)

@@ -23,6 +23,7 @@ import contextlib
 import json
 import time
 from collections.abc import Iterable
+from collections.abc import Set as AbstractSet
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -207,7 +208,7 @@ def envelope_type(payload: bytes) -> str | None:
 
 
 def sample_types(session: zenoh.Session, fleet: str, topics: Iterable[tuple[str, str]],
-                 timeout_s: float, latched: set[tuple[str, str]] = frozenset()
+                 timeout_s: float, latched: AbstractSet[tuple[str, str]] = frozenset()
                  ) -> dict[tuple[str, str], str]:
     """(fleet, topic) → message type, from the first sample of each topic within `timeout_s`."""
     wanted = set(topics)

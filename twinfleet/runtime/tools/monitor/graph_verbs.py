@@ -424,4 +424,4 @@ def field_type(schema: dict[str, Any]) -> str:
         const = ((schema.get("properties") or {}).get("_type") or {}).get("const")
         return const or "map"
     return {"string": "string", "integer": "int64", "number": "float64", "boolean": "bool",
-            "null": "none"}.get(kind, "any")
+            "null": "none"}.get(kind if isinstance(kind, str) else "", "any")

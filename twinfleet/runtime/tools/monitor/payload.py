@@ -59,7 +59,7 @@ def normalise_type(name: str, *, service: bool = False) -> str:
     return name
 
 
-_JSON_TYPES = {"string": str, "integer": int, "number": (int, float), "boolean": bool,
+_JSON_TYPES: dict[str, type | tuple[type, ...]] = {"string": str, "integer": int, "number": (int, float), "boolean": bool,
                "null": type(None), "array": (list, tuple), "object": dict}
 
 
@@ -95,8 +95,8 @@ def _check_value(type_name: str, where: str, value: Any, schema: Mapping[str, An
     expected = _JSON_TYPES.get(kind) if isinstance(kind, str) else None
     if expected is None:
         return
-    if not isinstance(value, expected) or (kind in ("integer", "number")
-                                           and isinstance(value, bool)):
+    matches = isinstance(value, expected)  # kept apart: `value` stays Any below
+    if not matches or (kind in ("integer", "number") and isinstance(value, bool)):
         raise PayloadError(f"{type_name}: field {where!r} must be {kind}, got {value!r}")
     if kind == "array":
         items = schema.get("prefixItems")

@@ -162,7 +162,7 @@ class FoxgloveBridge:
             self.channels[topic].log(self.last[topic], log_time=now)
 
 
-class _Listener:
+class _Listener(foxglove.ServerListener):
     """The server's subscribe callback hands a re-send to the loop (SDK threads never touch
     the bridge)."""
 

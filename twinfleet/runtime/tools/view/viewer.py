@@ -48,12 +48,12 @@ STATIC_DIR = Path(__file__).with_name("static")
 FLUSH_S = 0.05
 LINK_CHECK_S = 1.0
 
-_STATE = web.AppKey("state", object)  # LiveState | None
-_TRACE = web.AppKey("trace", object)  # trace document | None
+_STATE: web.AppKey[Any] = web.AppKey("state")  # LiveState | None
+_TRACE: web.AppKey[Any] = web.AppKey("trace")  # trace document | None
 _INFO = web.AppKey("info", dict)
-_SOCKETS = web.AppKey("sockets", weakref.WeakSet)
-_TAP = web.AppKey("tap", object)  # FleetTap | None
-_FINDER = web.AppKey("finder", object)  # SceneFinder | None
+_SOCKETS: web.AppKey[weakref.WeakSet[Any]] = web.AppKey("sockets")
+_TAP: web.AppKey[Any] = web.AppKey("tap")  # FleetTap | None
+_FINDER: web.AppKey[Any] = web.AppKey("finder")  # SceneFinder | None
 
 
 def make_app(*, state: LiveState | None = None, trace: dict[str, Any] | None = None,
@@ -105,7 +105,8 @@ async def _live(app: web.Application) -> AsyncIterator[None]:
 
 
 async def _close_sockets(app: web.Application) -> None:
-    for ws in list(app[_SOCKETS]):
+    sockets = app[_SOCKETS]
+    for ws in list(sockets):
         with contextlib.suppress(Exception):
             await ws.close()
 
@@ -164,7 +165,8 @@ async def _flush(app: web.Application) -> None:
             if update is None:
                 continue
             text = json.dumps(update)
-            for ws in list(app[_SOCKETS]):
+            sockets = app[_SOCKETS]
+            for ws in list(sockets):
                 if not ws.closed:
                     with contextlib.suppress(ConnectionError, RuntimeError):
                         await ws.send_str(text)

@@ -424,9 +424,13 @@ def start_map(scenario: Any, scene: draw.Scene | None) -> dict[str, Any] | None:
             node = node or cfg.instantiate()
             outcome = run_handler(node, spec.method, Context(node, 0))
             for effect in outcome.effects:
-                env = decode_envelope(encode(effect.msg)) if isinstance(effect, Publish) else None
+                if not isinstance(effect, Publish):
+                    continue
+                env = decode_envelope(encode(effect.msg))
+                if env is None:
+                    continue
                 grids = [d for d in scene.drawings(effect.topic, env["type"], env["data"])
-                         if isinstance(d, draw.Grid)] if env is not None else []
+                         if isinstance(d, draw.Grid)]
                 if grids:
                     return drawing_json(grids[0])
     return None
