@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import argparse
 import asyncio
-import os
 import sys
 from pathlib import Path
 from typing import Any
@@ -24,6 +23,7 @@ from twinfleet.runtime.access.connection import (
     error_prefix,
     import_modules,
 )
+from twinfleet.runtime.contract.environment import EnvVar, env_value
 
 
 def cmd_record(args: argparse.Namespace) -> int:
@@ -63,7 +63,7 @@ def cmd_record(args: argparse.Namespace) -> int:
 def _joined(args: argparse.Namespace):  # noqa: ANN202 - a cliargs.Connection
     """The running fleet `record` joins: --connect, else the one in the fleet registry."""
     if not args.connect:
-        args.connect = os.environ.get("TWINFLEET_CONNECT")
+        args.connect = env_value(EnvVar.CONNECT)
     try:
         return connection(args)
     except CommandError as exc:
@@ -203,11 +203,11 @@ def _add_record(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--connect", default=None, metavar="EP",
                    help="record the running fleet behind this Zenoh router (default without "
                         "SCENARIO: $TWINFLEET_CONNECT, else the fleet running on this machine)")
-    r.add_argument("--fleet", default=os.environ.get("TWINFLEET_FLEET", "*"),
+    r.add_argument("--fleet", default=env_value(EnvVar.FLEET) or "*",
                    help="with --connect: the fleet to record, '*' for every fleet "
                         "(default: $TWINFLEET_FLEET or %(default)s)")
     r.add_argument("--credentials", metavar="FILE",
-                   default=os.environ.get("TWINFLEET_CREDENTIALS"),
+                   default=env_value(EnvVar.CREDENTIALS),
                    help="with --connect: the fleet's credentials, a copy of its fleet registry "
                         "entry (owner-only JSON; default: $TWINFLEET_CREDENTIALS, else this "
                         "machine's registry, read again when the fleet is launched again)")

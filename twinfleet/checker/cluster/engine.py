@@ -47,6 +47,7 @@ from twinfleet.checker.collector import SEARCH_THRESHOLDS
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.system import System
+from twinfleet.runtime.contract.environment import EnvVar, env_value
 
 try:
     import ray
@@ -59,7 +60,7 @@ except ImportError:  # pragma: no cover - exercised in a subprocess without Ray
 
 def _worker_env() -> dict[str, str]:
     """Workers import node code as this process does: its working directory and path."""
-    path = [os.getcwd(), *filter(None, os.environ.get("PYTHONPATH", "").split(os.pathsep))]
+    path = [os.getcwd(), *filter(None, (env_value(EnvVar.PYTHONPATH) or "").split(os.pathsep))]
     return {"PYTHONPATH": os.pathsep.join(path), "RAY_USAGE_STATS_ENABLED": "0"}
 
 
@@ -96,7 +97,7 @@ def session(workers: int, address: str | None) -> Iterator[None]:
             # user set one: Ray lowers them by 15, and on a busy machine a search's
             # workers then lose the cores to everything else, where the same search in
             # one process would not.
-            niceness = os.environ.get("RAY_worker_niceness", "0")  # noqa: SIM112 - Ray's name
+            niceness = env_value(EnvVar.RAY_WORKER_NICENESS) or "0"
             with _environment({**_worker_env(), "RAY_worker_niceness": niceness}):
                 ray.init(address="local", num_cpus=max(2, workers), include_dashboard=False,
                          _node_ip_address="127.0.0.1", log_to_driver=False,

@@ -15,7 +15,6 @@ prints its text as one line on stderr and exits with its code (2).
 from __future__ import annotations
 
 import argparse
-import os
 import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -30,6 +29,7 @@ from twinfleet.runtime.access.fleetauth import (
     registry_auth,
     secure,
 )
+from twinfleet.runtime.contract.environment import EnvVar, env_value
 from twinfleet.runtime.contract.kinds import (  # noqa: F401 (the commands' exit codes, from here too)
     EXIT_BAD_INPUT,
     EXIT_CONTRACT_BREACH,
@@ -95,14 +95,14 @@ def add_connection_arguments(parser: argparse.ArgumentParser, *,
                              discovery: bool = False) -> None:
     """Add --connect and --fleet (and, with `discovery`, --query-timeout) to a command."""
     group = parser.add_argument_group("connection")
-    group.add_argument("--connect", metavar="EP", default=os.environ.get("TWINFLEET_CONNECT"),
+    group.add_argument("--connect", metavar="EP", default=env_value(EnvVar.CONNECT),
                        help="Zenoh endpoint of the fleet's router, e.g. tcp/10.0.0.2:7447 "
                             "(default: $TWINFLEET_CONNECT, else the fleet running on this machine, "
                             "found in the fleet registry)")
-    group.add_argument("--fleet", default=os.environ.get("TWINFLEET_FLEET", "*"),
+    group.add_argument("--fleet", default=env_value(EnvVar.FLEET) or "*",
                        help=fleet_help + " (default: $TWINFLEET_FLEET or %(default)s)")
     group.add_argument("--credentials", metavar="FILE",
-                       default=os.environ.get("TWINFLEET_CREDENTIALS"),
+                       default=env_value(EnvVar.CREDENTIALS),
                        help="the fleet's credentials: a copy of its fleet registry entry (owner-"
                             "only JSON; default: $TWINFLEET_CREDENTIALS, else the registry's "
                             "entry for the fleet or endpoint)")

@@ -45,14 +45,15 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Final
 
+from twinfleet.runtime.contract.environment import EnvVar, env_value
 from twinfleet.runtime.core.guard import BRIDGE_KEY_ENV, KEY_ENV, key_from_env, new_key
 
-ENV_USER: Final = "TWINFLEET_ZENOH_USER"
-ENV_PASSWORD: Final = "TWINFLEET_ZENOH_PASSWORD"
-ENV_TLS_CA: Final = "TWINFLEET_TLS_CA"  # the fleet authority's certificate, PEM
+ENV_USER: Final = EnvVar.ZENOH_USER
+ENV_PASSWORD: Final = EnvVar.ZENOH_PASSWORD
+ENV_TLS_CA: Final = EnvVar.TLS_CA  # the fleet authority's certificate, PEM
 SECURE_SCHEMES: Final = ("tls/", "quic/")
 #: set (to 1) for the nodes of a fleet launched to accept recorded input (``play --into-fleet``)
-ENV_ACCEPT_RECORDED: Final = "TWINFLEET_ACCEPT_RECORDED"
+ENV_ACCEPT_RECORDED: Final = EnvVar.ACCEPT_RECORDED
 NODE_USER: Final = "node"
 MONITOR_USER: Final = "monitor"
 _WRITES: Final = ["put", "delete", "reply", "declare_queryable", "liveliness_token"]
@@ -168,8 +169,7 @@ def remove_dir(path: Path | None) -> None:
 
 def node_login(env: Mapping[str, str] | None = None) -> Login | None:
     """The login the launcher gave this node process, or None."""
-    env = os.environ if env is None else env
-    user, password = env.get(ENV_USER), env.get(ENV_PASSWORD)
+    user, password = env_value(EnvVar.ZENOH_USER, env), env_value(EnvVar.ZENOH_PASSWORD, env)
     return Login(user, password) if user and password else None
 
 
@@ -180,12 +180,12 @@ def node_secrets(env: Mapping[str, str] | None = None) -> tuple[Login | None, by
 
 def accepts_recorded(env: Mapping[str, str] | None = None) -> bool:
     """True when this node process's fleet was launched with ``--accept-recorded``."""
-    return (os.environ if env is None else env).get(ENV_ACCEPT_RECORDED) == "1"
+    return env_value(EnvVar.ACCEPT_RECORDED, env) == "1"
 
 
 def node_tls(env: Mapping[str, str] | None = None) -> dict[str, Any]:
     """The client TLS config keys of a node process (the fleet authority in its environment)."""
-    ca = (os.environ if env is None else env).get(ENV_TLS_CA)
+    ca = env_value(EnvVar.TLS_CA, env)
     return tls_settings(ca.encode()) if ca else {}
 
 

@@ -38,8 +38,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from twinfleet.runtime.contract.environment import EnvVar, env_value
+
 FORMAT = "twinfleet-fleet/1"
-DIR_ENV = "TWINFLEET_RUNTIME_DIR"
+DIR_ENV = EnvVar.RUNTIME_DIR
 
 
 class RegistryError(ValueError):
@@ -68,11 +70,11 @@ class FleetEntry:
 
 def registry_dir(env: Mapping[str, str] | None = None) -> Path:
     """The per-user directory of fleet entries (not created)."""
-    env = os.environ if env is None else env
-    if env.get(DIR_ENV):
-        return Path(env[DIR_ENV])
-    if env.get("XDG_RUNTIME_DIR"):
-        return Path(env["XDG_RUNTIME_DIR"]) / "twinfleet"
+    own, xdg = env_value(EnvVar.RUNTIME_DIR, env), env_value(EnvVar.XDG_RUNTIME_DIR, env)
+    if own:
+        return Path(own)
+    if xdg:
+        return Path(xdg) / "twinfleet"
     return Path(tempfile.gettempdir()) / f"twinfleet-{os.getuid()}"
 
 

@@ -52,7 +52,6 @@ import dataclasses
 import hmac
 import itertools
 import math
-import os
 import secrets
 import struct
 import threading
@@ -63,12 +62,13 @@ from enum import IntEnum, unique
 from typing import Any, Final, NamedTuple, final
 
 from twinfleet.runtime.contract.dispatch import wrong_type_line
+from twinfleet.runtime.contract.environment import EnvVar, env_value
 from twinfleet.runtime.contract.messages import DecodeError
 from twinfleet.runtime.contract.names import OPERATOR_SENDER
 from twinfleet.runtime.core.statistics import Rejection
 
-KEY_ENV: Final = "TWINFLEET_FLEET_KEY"
-BRIDGE_KEY_ENV: Final = "TWINFLEET_BRIDGE_KEY"
+KEY_ENV: Final = EnvVar.FLEET_KEY
+BRIDGE_KEY_ENV: Final = EnvVar.BRIDGE_KEY
 TAG_BYTES: Final = 16
 DEFAULT_LIMIT: Final = 256 * 1024  # bytes: far above any pose, scan, path or status
 _SEP: Final = b"\0"
@@ -115,14 +115,14 @@ def new_key() -> bytes:
     return secrets.token_bytes(32)
 
 
-def key_from_env(env: Mapping[str, str] | None = None, name: str = KEY_ENV) -> bytes | None:
+def key_from_env(env: Mapping[str, str] | None = None, name: EnvVar = KEY_ENV) -> bytes | None:
     """The fleet key (or, with `name` = `BRIDGE_KEY_ENV`, the bridge key) the launcher passed
     in the environment, or None (an unsigned fleet; a fleet without a bridge).
 
     Raises:
         ValueError: the variable is set but is not hex.
     """
-    text = (os.environ if env is None else env).get(name, "")
+    text = env_value(name, env) or ""
     if not text:
         return None
     try:

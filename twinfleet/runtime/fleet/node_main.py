@@ -43,6 +43,7 @@ from collections.abc import Sequence
 import msgpack
 
 from twinfleet.runtime.access.fleetauth import accepts_recorded, node_secrets, node_tls
+from twinfleet.runtime.contract.environment import EnvVar, env_value
 from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.core.guard import BRIDGE_KEY_ENV, key_from_env
@@ -59,13 +60,13 @@ from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
 from twinfleet.runtime.scenario.spec import NodeConfig, Scenario, ScenarioError
 
 _PR_SET_PDEATHSIG = 1
-PARENT_ENV = "TWINFLEET_LAUNCHER_PID"
-LIMIT_ENV = "TWINFLEET_MAX_PAYLOAD"  # bytes a sample may have (set by the launcher)
+PARENT_ENV = EnvVar.LAUNCHER_PID
+LIMIT_ENV = EnvVar.MAX_PAYLOAD  # bytes a sample may have (set by the launcher)
 
 
 def die_with_parent() -> None:
     """Ask Linux to SIGTERM this process when the launcher dies (even by SIGKILL)."""
-    expected = os.environ.get(PARENT_ENV)
+    expected = env_value(PARENT_ENV)
     try:
         libc = ctypes.CDLL(None, use_errno=True)
         libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
@@ -185,7 +186,8 @@ def _transport(args: argparse.Namespace, external: frozenset[str]) -> ZenohTrans
     override."""
     login, key = node_secrets()
     bridge_key = key_from_env(name=BRIDGE_KEY_ENV)
-    limit = int(os.environ[LIMIT_ENV]) if os.environ.get(LIMIT_ENV) else None
+    limit_text = env_value(LIMIT_ENV)
+    limit = int(limit_text) if limit_text else None
     settings = {**(login.settings() if login else {}), **node_tls()}
     if limit is not None:  # Zenoh itself refuses larger frames (the router does too)
         settings["transport/link/rx/max_message_size"] = limit + 1024

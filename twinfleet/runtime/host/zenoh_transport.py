@@ -53,7 +53,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import os
 import time
 import traceback
 from collections import deque
@@ -63,6 +62,7 @@ from typing import Any, final
 import zenoh
 from zenoh import ext
 
+from twinfleet.runtime.contract.environment import EnvVar, env_value
 from twinfleet.runtime.contract.node import Durability, QoS, Reliability
 from twinfleet.runtime.core.guard import ReplayWindow, Role, opened, signer
 from twinfleet.runtime.core.statistics import Rejection
@@ -74,7 +74,7 @@ from twinfleet.runtime.host.transport import (
     TransportStatistics,
 )
 
-OVERRIDE_ENV = "TWINFLEET_ZENOH_CONFIG_OVERRIDE"
+OVERRIDE_ENV = EnvVar.ZENOH_CONFIG_OVERRIDE
 _LOCKED = ("scouting/multicast", "transport/shared_memory")
 
 
@@ -85,7 +85,7 @@ def config_overrides(text: str | None = None) -> list[tuple[str, str]]:
         ValueError: on a malformed entry or a key that would re-enable multicast
             scouting or shared memory.
     """
-    text = os.environ.get(OVERRIDE_ENV, "") if text is None else text
+    text = (env_value(OVERRIDE_ENV) or "") if text is None else text
     pairs = []
     for entry in filter(None, (e.strip() for e in text.split(";"))):
         key, sep, value = entry.partition("=")
