@@ -28,6 +28,7 @@ whether it will miss its deadline (see `Event.late`).
 
 from __future__ import annotations
 
+import functools
 import hashlib
 from array import array
 from collections.abc import Iterable
@@ -208,8 +209,14 @@ class World:
         self._digest = None
 
 
-_HEADERS: dict[tuple[EventKind, int, str, int, str], bytes] = {}
 _NO_ARGS = snapshot(())
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def _header(kind: EventKind, target: int, method: str, sender: int, reply_to: str) -> bytes:
+    # Bounded: one process may build many systems (a sweep, a test session), and a system
+    # has a few hundred distinct headers at most.
+    return snapshot((kind.value, target, method, sender, reply_to))
 
 
 def earliest_time(worlds: Iterable[World]) -> int | None:
@@ -225,11 +232,7 @@ def event_key(kind: EventKind, target: int, method: str, sender: int, reply_to: 
     msgpack values are self-delimiting, so the concatenation is unambiguous. The kind
     is encoded as its string value (what traces and logs show).
     """
-    head = (kind, target, method, sender, reply_to)
-    header = _HEADERS.get(head)
-    if header is None:
-        header = _HEADERS[head] = snapshot((kind.value, target, method, sender, reply_to))
-    return header + (snapshot(args) if args else _NO_ARGS)
+    return _header(kind, target, method, sender, reply_to) + (snapshot(args) if args else _NO_ARGS)
 
 
 def world_digest(states: tuple[bytes, ...], events: tuple[Event, ...],
