@@ -43,7 +43,8 @@ def free_port() -> int:
 # compete for this machine's cores, while the CPU-bound checker tests run beside them on the
 # other worker. A slow test that starts no fleet is not in it: the group is the suite's
 # longest chain of tests.
-LIVE_FOLDERS = frozenset({"adversarial", "agreement", "integration", "ros2", "viewer"})
+LIVE_FOLDERS = frozenset({"adversarial", "agreement", "conformance", "integration", "ros2",
+                          "viewer"})
 # The Ray tests (this folder, and tests marked `ray`) start clusters, not fleets: CPU-bound
 # like the checker tests, they form a group of their own (one Ray cluster at a time).
 RAY_FOLDERS = frozenset({"cluster"})
@@ -63,3 +64,25 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
             item.add_marker(pytest.mark.xdist_group("ray"))
         elif item.get_closest_marker("fleet") or folder in LIVE_FOLDERS:
             item.add_marker(pytest.mark.xdist_group("live"))
+        elif folder in UNIT_FOLDERS and not item.get_closest_marker("slow"):
+            item.add_marker(pytest.mark.unit)
+
+
+# The quick loop (`pytest -m unit`, under a minute on 2 cores): the tests of these folders
+# that are neither slow nor live nor Ray tests. A unit test opens no Zenoh session (the
+# fixture below refuses it): one that needs Zenoh is a `fleet` test.
+UNIT_FOLDERS = frozenset({"", "checker", "nodes", "runtime", "sweep", "fuzz"})
+
+
+@pytest.fixture(autouse=True)
+def _unit_tests_open_no_zenoh_session(request: pytest.FixtureRequest,
+                                      monkeypatch: pytest.MonkeyPatch) -> None:
+    if request.node.get_closest_marker("unit") is None:
+        return
+    import zenoh
+
+    def refuse(*_args: object, **_kwargs: object) -> None:
+        raise AssertionError(f"{request.node.nodeid} is a unit test but opens a Zenoh session:"
+                             " mark it `fleet` (tests/conftest.py)")
+
+    monkeypatch.setattr(zenoh, "open", refuse)

@@ -13,7 +13,7 @@ from twinfleet.checker.system import System
 from twinfleet.checker.trace import replay
 
 ROOT = Path(__file__).resolve().parents[1]
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
 
 def run(name: str, **options):

@@ -35,6 +35,7 @@ def _counts(result):
     (C1A, "bfs", 3_000),
     (C1A_REBECA, "dfs", 7_000),
 ])
+@pytest.mark.slow
 def test_resume_after_a_state_limit_matches_an_uninterrupted_search(tmp_path, path, search,
                                                                     stop_at):
     whole = check(path, CheckOptions(search=search))
@@ -50,6 +51,7 @@ def test_resume_after_a_state_limit_matches_an_uninterrupted_search(tmp_path, pa
     assert _counts(resumed) == _counts(whole)
 
 
+@pytest.mark.slow
 def test_resume_twice_and_from_a_periodic_checkpoint_of_a_killed_run(tmp_path, monkeypatch):
     whole = check(C1A_REBECA, CheckOptions())
     ckpt = tmp_path / "periodic.ckpt"
@@ -183,6 +185,7 @@ class Tally(Node):
 '''
 
 
+@pytest.mark.slow
 def test_a_checkpoint_of_the_users_own_nodes_resumes_from_another_folder(tmp_path):
     # The saved frontier holds messages of the user's classes: a resume that names only
     # the checkpoint must find their module beside the scenario, as the first run did.

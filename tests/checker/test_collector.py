@@ -28,6 +28,7 @@ def test_the_thresholds_come_back_even_after_an_error() -> None:
     assert gc.get_threshold() == before
 
 
+@pytest.mark.slow
 def test_a_check_searches_with_them(monkeypatch: pytest.MonkeyPatch) -> None:
     seen: list[tuple[int, ...]] = []
     run = Search.run

@@ -16,6 +16,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
+import pytest
 from hypothesis import HealthCheck, assume, given, settings
 from hypothesis import strategies as st
 
@@ -73,6 +74,7 @@ def _coordinated(path: Path, reduction: str, max_states: int,
 
 @settings(max_examples=150, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@pytest.mark.slow
 @given(doc=systems(), reduction=st.sampled_from(["none", "por"]), late=st.integers(0, 3))
 def test_moving_out_and_back_keeps_the_one_process_answers(tmp_path: Path, doc: dict[str, Any],
                                                             reduction: str, late: int) -> None:

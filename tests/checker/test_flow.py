@@ -49,6 +49,7 @@ def _relaxed(path: Path, workers: int, seed: int, max_states: int,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @given(doc=systems(), workers=st.integers(2, 3), seed=st.integers(0, 2**16),
        late=st.integers(0, 3))
+@pytest.mark.slow
 def test_any_delivery_order_keeps_the_bfs_answers(tmp_path: Path, doc: dict[str, Any],
                                                   workers: int, seed: int, late: int) -> None:
     path = write_scenario(doc, tmp_path / "generated.yaml")
@@ -73,6 +74,7 @@ def test_any_delivery_order_keeps_the_bfs_answers(tmp_path: Path, doc: dict[str,
             assert check(alone, CheckOptions(reduction="none")).status.value == "violated"
 
 
+@pytest.mark.slow
 def test_a_shipped_case_keeps_its_counts_and_its_liveness_verdict(tmp_path: Path) -> None:
     from twinfleet.cli import main as cli
 

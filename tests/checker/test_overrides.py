@@ -28,6 +28,7 @@ def _json(capsys: pytest.CaptureFixture[str]) -> dict:
     return json.loads(capsys.readouterr().out)
 
 
+@pytest.mark.slow
 def test_check_c1a_with_an_override_counts_as_the_file_with_that_speed(tmp_path, capsys):
     assert commands.main(["c1a", "r1.speed:=0.4", "--json"]) == 0
     overridden = _json(capsys)

@@ -19,6 +19,7 @@ from twinfleet.cli import main as cli
 
 @settings(max_examples=60, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
+@pytest.mark.slow
 @given(doc=systems())
 def test_walking_ahead_keeps_the_verdict_and_the_coordinator_walks_alike(
         tmp_path: Path, doc: dict[str, Any]) -> None:
@@ -37,6 +38,7 @@ def test_walking_ahead_keeps_the_verdict_and_the_coordinator_walks_alike(
             (reduced.statistics.states, reduced.statistics.transitions)
 
 
+@pytest.mark.slow
 def test_a_send_met_deep_is_learned_before_the_search_gets_there(tmp_path: Path) -> None:
     # headon with 0-1 ms latencies: a BFS learns its sends level by level and restarts
     # each time; walking ahead learns most of them at once, for the same graph.

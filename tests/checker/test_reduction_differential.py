@@ -94,6 +94,7 @@ def _size_event(states: int) -> None:
     event(f"states <= {bucket:,}")
 
 
+@pytest.mark.slow
 @settings(DIFFERENTIAL, max_examples=max(1, EXAMPLES // 3))  # the older check: 100 in CI
 @given(doc=systems())
 def test_bfs_and_dfs_agree_and_counterexamples_replay(workdir: Path, doc: dict[str, Any]) -> None:
@@ -115,6 +116,7 @@ def test_bfs_and_dfs_agree_and_counterexamples_replay(workdir: Path, doc: dict[s
         assert replay_confirms(found.result), found.result.summary()
 
 
+@pytest.mark.slow
 @settings(DIFFERENTIAL, max_examples=max(1, EXAMPLES // 10))
 @given(doc=systems(), search=st.sampled_from(["bfs", "dfs"]))
 def test_transition_cache_changes_nothing(workdir: Path, doc: dict[str, Any], search: str) -> None:

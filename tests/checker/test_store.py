@@ -82,6 +82,7 @@ def test_optimisations_match_the_unoptimised_search(tmp_path, model, semantics, 
         assert _summary(run(path, search=search, **options)) == expected, options
 
 
+@pytest.mark.slow
 def test_c1a_rebeca_counts_are_the_same_in_both_stores():
     # Without the transition cache the same search takes 5x as long: that it changes nothing
     # is checked on the models above and on generated systems (test_reduction_differential).
@@ -195,6 +196,7 @@ def test_edge_store_deduplicates_and_lasso_search_uses_it():
     assert find_lasso(store, "p") == ([0, 1, 3, 1], 1)
 
 
+@pytest.mark.slow
 def test_store_holds_far_fewer_bytes_per_state_than_the_exact_store(tmp_path):
     path = scenario(tmp_path, [node("c", "Counter", modulo=0)], name="big")
     scen = load(path)

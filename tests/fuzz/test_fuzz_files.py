@@ -120,6 +120,7 @@ TRACE_PATHS = [["format"], ["scenario"], ["semantics"], ["profile"], ["steps"], 
                ["steps", 3, "choices"], ["steps", 5, "digest"], ["property"], ["latency"]]
 
 
+@pytest.mark.slow
 @FUZZ
 @given(path=st.sampled_from(TRACE_PATHS), value=yaml_values)
 def test_fuzzed_traces_make_replay_and_render_exit_2_with_a_message(tmp_path, capsys, headon_trace,

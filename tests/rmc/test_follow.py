@@ -16,7 +16,7 @@ from tests.rmc.follower import follow, follow_case, scenario_path, trace_path
 from tests.rmc.rmc_trace import decode_cell, read_trace
 from twinfleet.nodes.map_server import MapServer
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
 CASES = ("c2a", "c2b", "c2c")
 #: RMC's reported steps of each counterexample (states in the trace minus one, plus

@@ -6,7 +6,7 @@ import pytest
 
 from tests.rmc.rmc_order import Heap, count_case
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
 #: What `std::priority_queue<N, vector<N>, greater<N>>` (g++ 12, libstdc++, this machine)
 #: pops for the push/pop sequence of `_drive` below, comparing the key only: equal keys

@@ -19,7 +19,7 @@ from tests.rmc.follower import DATA, follow
 from tests.rmc.rmc_trace import read_trace
 from twinfleet.checker.driver import CheckOptions, check
 
-pytestmark = pytest.mark.timeout(300)
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(300)]
 
 ROOT = Path(__file__).resolve().parents[2]
 #: The `main` of the model's latest version: not a paper case (speed, max wait, priority).

@@ -89,6 +89,7 @@ def router() -> Any:
         session.close()
 
 
+@pytest.mark.fleet
 def test_a_stalled_loop_drops_and_counts_samples_without_blocking_zenoh(router: str) -> None:
     """The loop sleeps while 300 samples arrive: 50 wait, 250 are counted as overflow."""
 

@@ -41,7 +41,7 @@ def router() -> Iterator[str]:
 Factory = Callable[[], Coroutine[Any, Any, Transport]]
 
 
-@pytest.fixture(params=["loopback", "zenoh"])
+@pytest.fixture(params=["loopback", pytest.param("zenoh", marks=pytest.mark.fleet)])
 def make(request: pytest.FixtureRequest) -> Factory:
     """A factory of opened transports that can talk to each other."""
     if request.param == "loopback":
