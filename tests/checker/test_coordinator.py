@@ -22,7 +22,8 @@ from hypothesis import strategies as st
 
 from tests.checker.program_systems import systems, write_scenario
 from twinfleet.checker import CheckOptions, check
-from twinfleet.checker.cluster.coordinator import Coordinator, LocalBackend
+from twinfleet.checker.cluster.backend import LocalBackend
+from twinfleet.checker.cluster.coordinator import Coordinator
 from twinfleet.checker.cluster.level import Item
 from twinfleet.checker.cluster.spec import SystemSpec
 from twinfleet.checker.outcome import Limits

@@ -19,9 +19,10 @@ from hypothesis import strategies as st
 
 from tests.checker.program_systems import systems, write_scenario
 from twinfleet.checker import CheckOptions, check
-from twinfleet.checker.cluster import coordinator
-from twinfleet.checker.cluster.coordinator import DUMP_STATES, Coordinator
+from twinfleet.checker.cluster import relaxed
+from twinfleet.checker.cluster.coordinator import Coordinator
 from twinfleet.checker.cluster.flow import LocalFlow
+from twinfleet.checker.cluster.relaxed import DUMP_STATES
 from twinfleet.checker.cluster.spec import SystemSpec
 from twinfleet.checker.outcome import Limits, Outcome
 from twinfleet.checker.properties import PropertySet
@@ -95,7 +96,7 @@ def test_a_violation_found_in_a_relaxed_order_is_a_path_of_the_system(
         tmp_path: Path, monkeypatch: pytest.MonkeyPatch, dump_states: int) -> None:
     from twinfleet.cli import main as cli
 
-    monkeypatch.setattr(coordinator, "DUMP_STATES", dump_states)
+    monkeypatch.setattr(relaxed, "DUMP_STATES", dump_states)
     cli(["examples", "--copy", "headon", str(tmp_path)])
     path = tmp_path / "headon.yaml"
     one = check(path, CheckOptions(reduction="none"))

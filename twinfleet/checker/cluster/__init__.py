@@ -22,13 +22,8 @@ from contextlib import ExitStack
 from dataclasses import dataclass
 from typing import Any, cast, final
 
-from twinfleet.checker.cluster.coordinator import (
-    ENGINE,
-    Backend,
-    Checkpointing,
-    Coordinator,
-    Traffic,
-)
+from twinfleet.checker.cluster.backend import Backend, Checkpointing, Traffic
+from twinfleet.checker.cluster.coordinator import ENGINE, Coordinator
 from twinfleet.checker.cluster.flow import FlowBackend
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint
 from twinfleet.checker.outcome import Limits, Outcome

@@ -33,30 +33,38 @@ number of workers, this process included.
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, field
-from typing import Any, Protocol, cast, final
+from typing import Any, cast, final
 
 from twinfleet.checker import checkpoint as ckpt
-from twinfleet.checker.cluster.flow import FlowBackend, FlowStatus
+from twinfleet.checker.cluster.backend import (
+    Backend,
+    Checkpointing,
+    Factory,
+    FlowFactory,
+    LocalBackend,
+    Traffic,
+    balance,
+)
+from twinfleet.checker.cluster.flow import FlowBackend
 from twinfleet.checker.cluster.level import (
     ROOT,
-    Acceptance,
-    Expander,
-    Expansion,
     Failure,
-    Graph,
-    Item,
     Learned,
-    ShardCore,
-    unpack,
     visited_from,
 )
+from twinfleet.checker.cluster.relaxed import run_relaxed, whole_lineage
+from twinfleet.checker.cluster.saving import (
+    add_learned_counts,
+    counters,
+    relearn,
+    restored_tally,
+    take_frontier,
+)
 from twinfleet.checker.cluster.spec import ClusterError
-from twinfleet.checker.cluster.visited import VisitedTable
-from twinfleet.checker.diagnosis import FIX_HIDDEN, ContractBreachError, breach_line
+from twinfleet.checker.cluster.tally import Tally
+from twinfleet.checker.cluster.walk import failing_step, gathered, walk
 from twinfleet.checker.outcome import (
     INTERRUPTED_REASON,
     Counterexample,
@@ -65,173 +73,17 @@ from twinfleet.checker.outcome import (
     Outcome,
     SearchStatistics,
     Stop,
-    peak_rss_mb,
 )
 from twinfleet.checker.paths import lasso_counterexample
 from twinfleet.checker.properties import PropertySet, PropertyViolation
-from twinfleet.checker.reduction import Reduction, ReductionStatistics
+from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.store import StateStore
 from twinfleet.checker.system import System
-from twinfleet.checker.world import World
-from twinfleet.runtime.contract.kinds import FailureKind, Status
+from twinfleet.runtime.contract.kinds import Status
 
-STEAL_MIN = 64  # frontier worlds two workers must differ by before some are moved
-POLL_S = 0.05  # a relaxed-order search's coordinator reads the workers this often
 START_POLL_S = 0.01  # how often a search that waits for its workers asks if they are up
-# Up to this many states (16 bytes each), a relaxed-order search's counterexample is
-# walked on every partition fetched at once rather than asked of the partitions step
-# by step (`_ancestry`).
-DUMP_STATES = 4_000_000
 PATIENCE = 16  # narrow levels in a row before the first return (doubled after each)
 ENGINE = "cluster"  # a checkpoint's meta["engine"]: written by this coordinator
-
-
-class Backend(Protocol):
-    """Where levels are expanded: this process, or a cluster of workers and shards."""
-
-    workers: int
-
-    def ready(self) -> bool:
-        """Whether every worker is up (raises ClusterError if one cannot start)."""
-        ...
-
-    def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
-        """Expand every worker's frontier by one level; claims answered, new worlds kept."""
-        ...
-
-    def lineage(self, key: int) -> list[int]:
-        """The parent of a visited key and its ancestors, one call's worth
-        (`ShardCore.lineage`): ends with ROOT or with a key to ask about next."""
-        ...
-
-    def shard_bytes(self) -> list[int]:
-        """Bytes held per shard."""
-        ...
-
-    def move(self, source: int, target: int, count: int) -> None:
-        """Move `count` frontier worlds from worker `source` to worker `target`."""
-        ...
-
-    def snapshot(self) -> tuple[list[bytes], list[bytes]]:
-        """Every worker's frontier (`Expander.packed`) and every shard's visited keys
-        (`ShardCore.dump`), between two levels."""
-        ...
-
-    def load(self, frontier: list[Item], visited: VisitedTable,
-             relation: tuple[Any, ...] | None) -> None:
-        """Take over a search begun in the coordinator: its frontier, its visited set and
-        (reduced) the send relation learned so far."""
-        ...
-
-    def reset(self, relation: tuple[Any, ...] | None) -> None:
-        """Forget the search (a reduced search starts again with `relation`)."""
-        ...
-
-    def graphs(self) -> list[Graph]:
-        """What every worker saw of the graph (`eventually` properties), at the end."""
-        ...
-
-    def take_back(self) -> tuple[list[Item], list[bytes]]:
-        """Every worker's frontier and every shard's visited keys (`ShardCore.dump`),
-        leaving them empty (the search goes on in the coordinator)."""
-        ...
-
-
-@final
-class LocalBackend:
-    """One expander and one shard in this process."""
-
-    workers = 1
-
-    def __init__(self, system: System, properties: PropertySet,
-                 reduction: Reduction | None = None) -> None:
-        self.expander = Expander(system, properties, 1, reduction)
-        self.shard = ShardCore()
-        self._fresh = True  # used as a cluster: the coordinator's relation not learned yet
-
-    def ready(self) -> bool:
-        """Always (`Backend.ready`)."""
-        return True
-
-    def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
-        """One level here (`Backend.level`)."""
-        stored = None
-        if self.expander.reduction is not None:
-            stored = self.shard.stored(self.expander.propose(max_depth))
-        expansion, blobs = self.expander.expand(max_depth, stored)
-        return [expansion], [self.expander.accept(self.shard.claim(blobs))]
-
-    def lineage(self, key: int) -> list[int]:
-        """`Backend.lineage`: all of it (one partition)."""
-        return self.shard.lineage(key, 0, 1)
-
-    def shard_bytes(self) -> list[int]:
-        """`Backend.shard_bytes`."""
-        return [self.shard.nbytes()]
-
-    def move(self, source: int, target: int, count: int) -> None:
-        """Nothing to move between one worker."""
-
-    def snapshot(self) -> tuple[list[bytes], list[bytes]]:
-        """`Backend.snapshot`."""
-        return [self.expander.packed()], [self.shard.dump()]
-
-    def load(self, frontier: list[Item], visited: VisitedTable,
-             relation: tuple[Any, ...] | None) -> None:
-        """`Backend.load`, as a cluster of one worker does it (the coordinator's own
-        backend is never loaded; a stand-in cluster in tests is)."""
-        if relation is not None and self._fresh:  # later loads: the same relation
-            self.expander.relearn(relation)
-        self._fresh = False
-        self.expander.frontier += frontier
-        self.shard.add(*visited.arrays())
-
-    def reset(self, relation: tuple[Any, ...] | None) -> None:
-        """`Backend.reset` (the coordinator makes a new local backend instead)."""
-        if relation is None:
-            self.expander.frontier = []
-        else:
-            self.expander.relearn(relation)
-        self.shard.clear()
-        self._fresh = False
-
-    def graphs(self) -> list[Graph]:
-        """`Backend.graphs`."""
-        return [] if self.expander.graph is None else [self.expander.graph]
-
-    def take_back(self) -> tuple[list[Item], list[bytes]]:
-        """`Backend.take_back`, as a cluster of one worker does it."""
-        frontier, self.expander.frontier = self.expander.frontier, []
-        return frontier, [self.shard.drain()]
-
-
-@final
-@dataclass
-class Traffic:
-    """What crossed between processes (for the benchmark and the progress line)."""
-
-    claims: int = 0  # (key, parent) pairs sent to shards
-    stolen: int = 0  # frontier worlds moved between workers
-    moves: int = 0  # blobs moved
-    levels: int = 0  # barriers
-    returns: int = 0  # times a narrowing search came back to the coordinator
-    new_per_worker: list[int] = field(default_factory=list)
-    handler_runs: list[int] = field(default_factory=list)  # per worker, so far
-
-
-Factory = Callable[[int], Backend]  # the cluster's backend, started empty (the frontier's width)
-FlowFactory = Callable[[int], FlowBackend]  # the same for a relaxed order
-
-
-@final
-@dataclass(frozen=True)
-class Checkpointing:
-    """Where a distributed search is saved, how often, and what the file records of the
-    check (`checker.checkpoint` meta: scenario, its hash, options)."""
-
-    path: str
-    every_s: float
-    meta: Mapping[str, Any]
 
 
 @final
@@ -285,8 +137,7 @@ class Coordinator:
         self._starting: Backend | FlowBackend | None = None  # the cluster's, once started
         self.roots: dict[int, tuple[int, ...]] = {}
         self.traffic = Traffic()
-        self.states = self.transitions = self.initial = self.depth = self.frontier = 0
-        self.peak_frontier = self.level = 0
+        self.tally = Tally()
         self.distributed_at: int | None = None  # the level where the cluster took over
         self._last_report = self._last_save = time.monotonic()
         self._elapsed_before = 0.0  # the time of the runs a restored checkpoint continues
@@ -321,19 +172,19 @@ class Coordinator:
             found = self._start()
             if found is not None:
                 return found
-        while self.frontier:
+        while self.tally.frontier:
             if self._probed():
                 found = self._start()
                 if found is not None:
                     return found
                 continue
             if self.backend is self.local and self.factory is not None and \
-                    self.frontier >= self.min_width and self._started():
+                    self.tally.frontier >= self.min_width and self._started():
                 if self.flow_factory is not None:
                     return self._flow()
                 self._to_cluster()
             elif self.backend is not self.local:
-                self._narrow = self._narrow + 1 if self.frontier < self.back_width else 0
+                self._narrow = self._narrow + 1 if self.tally.frontier < self.back_width else 0
                 if self._narrow >= self.patience << self.traffic.returns:
                     self._to_local()
             outcome = self._level()
@@ -348,7 +199,7 @@ class Coordinator:
         """Walk ahead once the search is large, at the level the one-process search does
         (`Reduction.probe`); True if that learned something and the search restarted."""
         reduction = self.reduction
-        if reduction is None or not reduction.probe(self.states, self.limits.max_depth) or \
+        if reduction is None or not reduction.probe(self.tally.states, self.limits.max_depth) or \
                 not reduction.stale:
             return False
         self._restart([])
@@ -362,10 +213,10 @@ class Coordinator:
         this waits for them."""
         if self._starting is None:
             if self.flow_factory is not None:
-                self._starting = self.flow_factory(self.frontier)
+                self._starting = self.flow_factory(self.tally.frontier)
             else:
                 assert self.factory is not None
-                self._starting = self.factory(self.frontier)
+                self._starting = self.factory(self.tally.frontier)
         while not self._starting.ready():
             if self.min_width > 1:
                 return False
@@ -373,7 +224,7 @@ class Coordinator:
             time.sleep(START_POLL_S)
         if self.report is not None and self.distributed_at is None:
             self.report(f"[check] {self._starting.workers} worker(s) up: the search moves "
-                        f"to them at depth {self.level}, frontier {self.frontier:,} wide")
+                        f"to them at depth {self.tally.level}, frontier {self.tally.frontier:,} wide")
         return True
 
     def _to_cluster(self) -> None:
@@ -384,7 +235,7 @@ class Coordinator:
         self.local.expander.frontier = []
         self.backend = self.cluster
         if self.distributed_at is None:
-            self.distributed_at = self.level
+            self.distributed_at = self.tally.level
 
     def _to_local(self) -> None:
         """Take the frontier and the visited set back from the cluster."""
@@ -412,15 +263,14 @@ class Coordinator:
         self.local = LocalBackend(self.system, self.properties, reduction)
         self.backend = self.local
         self.roots = {}
-        self.states = self.transitions = self.initial = self.depth = self.frontier = 0
-        self.peak_frontier = self.level = 0
+        self.tally = Tally()
         self._attempt = time.monotonic()
 
     def _start(self) -> Outcome | None:
         """The initial worlds, claimed and checked here."""
         shard, frontier = self.local.shard, self.local.expander.frontier
         for t in self.system.initial():
-            self.initial += 1
+            self.tally.initial += 1
             if t.failure is not None:
                 return self._violated(self.properties.check_failure(t.failure),
                                       Counterexample(t.step.choices, ()))
@@ -429,63 +279,41 @@ class Coordinator:
                 continue
             shard.visited.put(key, ROOT)
             self.roots[key] = t.step.choices
-            self.states += 1
+            self.tally.states += 1
             if self.local.expander.graph is not None:
                 self.local.expander.graph.keep(self.system, self.properties, t.world, key)
             violation = self.properties.check_world(self.system, t.world)
             if violation is not None:
                 return self._violated(violation, Counterexample(t.step.choices, ()))
             frontier.append((t.world, key, 0))
-        self.frontier = self.peak_frontier = len(frontier)
+        self.tally.frontier = self.tally.peak_frontier = len(frontier)
         return None
 
     def _level(self) -> Outcome | None:
         expansions, acceptances = self.backend.level(self.limits.max_depth)
-        t = self.traffic
-        t.levels += 1
-        self.level += 1
-        t.claims += sum(e.claims for e in expansions) if self.backend is not self.local else 0
-        if len(t.new_per_worker) < len(acceptances):
-            t.new_per_worker = [0] * len(acceptances)
-        if self.backend is not self.local:
-            t.handler_runs = [a.handler_runs for a in acceptances]
-        self.transitions += sum(e.transitions for e in expansions)
-        for i, a in enumerate(acceptances):
-            self.states += a.new
-            t.new_per_worker[i] += a.new
-            self.depth = max(self.depth, a.depth)
-        self.frontier = sum(a.frontier for a in acceptances)
-        self.peak_frontier = max(self.peak_frontier, self.frontier)
+        self.tally.add_level(expansions, acceptances, self.traffic,
+                             remote=self.backend is not self.local)
         found = self._found([e.failure for e in expansions], [a.violation for a in acceptances])
         if found is not None:
             return found
         learned = [a.learned for a in acceptances if a.learned is not None]
         if self.backend is not self.local:
-            self._count(learned)
+            add_learned_counts(self.reduction, learned)
         if any(found.grew() for found in learned):
             self._restart(learned)
             return self._start()
-        if any(e.pruned for e in expansions) and not self.frontier:
+        if any(e.pruned for e in expansions) and not self.tally.frontier:
             return self._outcome(Status.UNKNOWN, f"max-depth {self.limits.max_depth} "
                                  "reached before the search finished")
-        self._balance([a.frontier for a in acceptances])
-        if self.limits.max_states is not None and self.states >= self.limits.max_states:
+        balance(self.backend, [a.frontier for a in acceptances], self.traffic)
+        if self.limits.max_states is not None and self.tally.states >= self.limits.max_states:
             raise Stop(f"max-states {self.limits.max_states} reached before the search finished")
-        self.guard.tick(self.statistics)  # Ctrl-C, max-time
-        self._progress()
+        self._tick()
         return None
 
-    def _balance(self, sizes: list[int]) -> None:
-        """Move worlds from the busiest worker to the idlest (work sharing)."""
-        if len(sizes) < 2:
-            return
-        busy = max(range(len(sizes)), key=sizes.__getitem__)
-        idle = min(range(len(sizes)), key=sizes.__getitem__)
-        gap = sizes[busy] - sizes[idle]
-        if gap > STEAL_MIN:
-            self.backend.move(busy, idle, gap // 2)
-            self.traffic.stolen += gap // 2
-            self.traffic.moves += 1
+    def _tick(self) -> None:
+        self.guard.tick(self.statistics)  # Ctrl-C, max-time
+        self._progress()
 
     # ------------------------------------------------------------ relaxed order
 
@@ -493,29 +321,10 @@ class Coordinator:
         """The rest of the search on workers that do not wait for each other
         (`checker.cluster.flow`), to its end: no level, no return to this process."""
         flow = self.flow = cast(FlowBackend, self._starting)
-        self.distributed_at = self.level
+        self.distributed_at = self.tally.level
         flow.load(self.local.expander.frontier, self.local.shard.visited)
         self.local.expander.frontier = []
-        before = (self.states, self.transitions)
-        quiet: list[tuple[int, int]] | None = None
-        try:
-            while True:
-                flow.advance(POLL_S)
-                statuses = flow.status()
-                if self._flowed(statuses, *before):
-                    break
-                counts = [(s.sent, s.received) for s in statuses]
-                if all(s.idle for s in statuses) and \
-                        sum(s.sent for s in statuses) == sum(s.received for s in statuses):
-                    if counts == quiet:  # nothing moved between two reads: the end
-                        break
-                    quiet = counts
-                else:
-                    quiet = None
-                self.guard.tick(self.statistics)  # Ctrl-C, max-time
-                self._progress()
-        finally:
-            flow.stop()
+        statuses = run_relaxed(flow, self.tally, self.traffic, self.limits, self._tick)
         # The path is walked once the workers stopped: they would slow every call.
         found = self._found([s.failure for s in statuses], [s.violation for s in statuses])
         if found is not None:
@@ -523,24 +332,6 @@ class Coordinator:
         if self.properties.eventually:
             return self._liveness()
         return self._outcome(Status.HOLDS, "every property holds")
-
-    def _flowed(self, statuses: list[FlowStatus], states: int, transitions: int) -> bool:
-        """Count what the workers did; whether one found a violation or a failure."""
-        t = self.traffic
-        self.states = states + sum(s.new for s in statuses)
-        self.transitions = transitions + sum(s.transitions for s in statuses)
-        self.depth = max(self.depth, *(s.depth for s in statuses))
-        self.frontier = sum(s.queue for s in statuses)
-        self.peak_frontier = max(self.peak_frontier, self.frontier)
-        t.claims = sum(s.claims for s in statuses)
-        t.new_per_worker = [s.new for s in statuses]
-        t.stolen, t.moves = sum(s.gifted for s in statuses), sum(s.gifts for s in statuses)
-        t.handler_runs = [s.handler_runs for s in statuses]
-        if any(s.failure is not None or s.violation is not None for s in statuses):
-            return True
-        if self.limits.max_states is not None and self.states >= self.limits.max_states:
-            raise Stop(f"max-states {self.limits.max_states} reached before the search finished")
-        return False
 
     # ------------------------------------------------------------- liveness
 
@@ -555,48 +346,26 @@ class Coordinator:
         return self._outcome(Status.HOLDS, "every property holds")
 
     def _gathered(self) -> StateStore:
-        """The whole graph as a one-process search records it: ids, first-discovery
-        parents, roots, terminal worlds, the properties' bits and the successor ids."""
-        graph = Graph()
+        """The whole graph the workers saw, gathered here (`walk.gathered`)."""
         remote = self.flow if self.flow is not None else self.cluster
-        for part in (*self.local.graphs(), *(() if remote is None else remote.graphs())):
-            graph.extend(part)
+        parts = [*self.local.graphs(), *(() if remote is None else remote.graphs())]
         if self.flow is not None:
             visited = self.flow.visited()
         elif self.backend is self.local:
             visited = [self.local.shard.dump()]
         else:
             visited = self.backend.snapshot()[1]
-        store = graph.store(visited, self.roots, tuple(p.name for p in self.properties.eventually))
-        for key, choices in self.roots.items():
-            store.roots[store.find(key)] = choices
-        return store
+        return gathered(parts, visited, self.roots, self.properties)
 
     # ------------------------------------------------------------- answers
 
     def statistics(self) -> SearchStatistics:
         """The counters so far."""
-        n = self.states
-        return SearchStatistics(n, self.transitions, self.initial, self.depth, self.frontier,
-                                self._elapsed(), peak_rss_mb(),
-                                sum(self._shard_bytes()), 64, min(1.0, n * n / 2.0**65),
-                                self.peak_frontier,
-                                None if self._attempt is None else time.monotonic() - self._attempt)
+        attempt = None if self._attempt is None else time.monotonic() - self._attempt
+        return self.tally.statistics(self._elapsed(), self._shard_bytes(), attempt)
 
     def _shard_bytes(self) -> list[int]:
         return (self.flow or self.backend).shard_bytes()
-
-    def _count(self, learned: list[Learned]) -> None:
-        """Add the workers' reduction counters to this process's (the summary's)."""
-        if self.reduction is None:
-            return
-        stats = self.reduction.stats
-        for found in learned:
-            counted = dict(found.counted)
-            self.reduction.visibility.rises += counted.pop("rises", 0)
-            for name, value in counted.items():
-                setattr(stats, name, getattr(stats, name) + value)
-            self.reduction.relied |= found.relied
 
     def _elapsed(self) -> float:
         return self._elapsed_before + time.monotonic() - self.guard.started
@@ -619,17 +388,10 @@ class Coordinator:
         plan = self.checkpointing
         assert plan is not None
         frontier, visited = self.backend.snapshot()
-        counters = {"states": self.states, "transitions": self.transitions,
-                    "initial": self.initial, "depth": self.depth,
-                    "peak_frontier": self.peak_frontier, "level": self.level,
-                    "distributed_at": self.distributed_at, "elapsed": self._elapsed(),
-                    "roots": self.roots, "traffic": dataclasses.asdict(self.traffic),
-                    "publications": self._relation(),
-                    "reduction": None if self.reduction is None else
-                    self.reduction.statistics(),
-                    "relied": [] if self.reduction is None else sorted(self.reduction.relied)}
+        counted = counters(self.tally, self.traffic, self.roots, self.distributed_at,
+                           self._elapsed(), self.reduction)
         ckpt.save(plan.path, {**plan.meta, "engine": ENGINE}, {"visited": visited}, frontier,
-                  counters)
+                  counted)
         self._last_save = time.monotonic()
         self.saved = plan.path
         return plan.path
@@ -638,24 +400,13 @@ class Coordinator:
         """Continue a checkpoint `save` wrote (`checker.checkpoint.load`), on this process
         until the frontier is `min_width` wide, whatever number of workers wrote it."""
         c = data["counters"]
-        self.states, self.transitions = c["states"], c["transitions"]
-        self.initial, self.depth, self.level = c["initial"], c["depth"], c["level"]
-        self.peak_frontier = c["peak_frontier"]
+        self.tally = restored_tally(c)
         self._elapsed_before, self.roots = c["elapsed"], c["roots"]
         self.traffic = Traffic(**c["traffic"])
-        if self.reduction is not None and c.get("publications") is not None:
-            self.reduction.relearn(c["publications"])
-            self.reduction.stats = ReductionStatistics(**c["reduction"])
-            self.reduction.visibility.rises = self.reduction.stats.rises
-            self.reduction.relied = set(c.get("relied", ()))
+        relearn(self.reduction, c)
         self.local.shard.visited = visited_from(data["store"]["visited"], self.roots)
-        expander = self.local.expander
-        for blob in data["frontier"]:
-            frontier, graph = unpack(blob)
-            expander.frontier += frontier
-            if graph is not None and expander.graph is not None:
-                expander.graph.extend(graph)
-        self.frontier = len(expander.frontier)
+        take_frontier(self.local.expander, data["frontier"])
+        self.tally.frontier = len(self.local.expander.frontier)
         self._restored = True
 
     def _found(self, failures: list[Failure | None],
@@ -667,7 +418,8 @@ class Coordinator:
             return self._failed(failure.parent)
         violation = next((v for v in violations if v is not None), None)
         if violation is not None:
-            return self._violated(violation[0], self._path(violation[1])[0])
+            return self._violated(violation[0],
+                                  walk(self.system, self.roots, self._ancestry(), violation[1])[0])
         return None
 
     def _violated(self, violation: PropertyViolation, path: Counterexample) -> Outcome:
@@ -675,51 +427,16 @@ class Coordinator:
 
     def _failed(self, parent: int) -> Outcome:
         """A handler failed on a step from `parent`: the first failing step from there."""
-        path, world = self._path(parent)
-        for t in self.system.successors(world):
-            if t.failure is not None:
-                steps = (*path.steps, t.step)
-                return self._violated(self.properties.check_failure(t.failure),
-                                      Counterexample(path.initial, steps))
-        raise ContractBreachError(_NOT_AGAIN)
-
-    def _path(self, key: int) -> tuple[Counterexample, World]:
-        """The steps from an initial world to the world with `key`, along recorded parents."""
-        keys = [key]
-        lineage = self._ancestry()
-        while keys[-1] != ROOT:
-            keys += lineage(keys[-1])
-        keys.pop()
-        keys.reverse()
-        initial = self.roots[keys[0]]
-        world = self.system.initial_world(initial).world
-        steps = []
-        for nxt in keys[1:]:
-            step = next((t for t in self.system.successors(world)
-                         if t.failure is None and t.world.key == nxt), None)
-            if step is None:
-                raise ContractBreachError(_NOT_AGAIN)
-            steps.append(step.step)
-            world = step.world
-        return Counterexample(initial, tuple(steps)), world
+        path, world = walk(self.system, self.roots, self._ancestry(), parent)
+        return self._violated(*failing_step(self.system, self.properties, path, world))
 
     def _ancestry(self) -> Callable[[int], list[int]]:
-        """How `_path` finds a key's ancestors: on the whole visited set, fetched here in
-        one call per partition, when a relaxed-order search kept at most `DUMP_STATES`
-        (a path over two workers changes partition at about every other step, each
-        change a round trip: the crossing fleet's 615-step path took 0.26-0.29 s walked
-        so, 0.14-0.16 s fetched whole, the fetch 30 ms of it); else one call per change
-        of partition."""
-        if self.flow is None or self.states > DUMP_STATES:
-            return self._lineage
-        whole = visited_from(self.flow.visited(), self.roots)
-
-        def parent(key: int) -> list[int]:
-            found = whole.get(key)
-            if found is None:
-                raise ClusterError(f"the workers' visited sets lack a key of the path: {key}")
-            return [found]
-        return parent
+        """How `walk` finds a key's ancestors: after a relaxed order, on the whole visited set
+        if it is small enough (`relaxed.whole_lineage`); else one call per change of
+        partition."""
+        whole = None if self.flow is None else \
+            whole_lineage(self.flow, self.tally.states, self.roots)
+        return self._lineage if whole is None else whole
 
     def _lineage(self, key: int) -> list[int]:
         if key in self.local.shard.visited:  # found before the hand-over: so are its ancestors
@@ -731,18 +448,7 @@ class Coordinator:
         if self.report is None or now - self._last_report < self.interval:
             return
         self._last_report = now
-        elapsed = max(self._elapsed(), 1e-9)  # a resumed search's counts include the runs before
-        per = "/".join(f"{n / elapsed:,.0f}" for n in self.traffic.new_per_worker)
-        mem = "/".join(f"{b / 2**20:.0f}" for b in self._shard_bytes())
         where = "in this process" if self.backend is self.local and self.flow is None else \
             f"{(self.flow or self.backend).workers} worker(s)"
-        self.report(f"[check] {where}  states {self.states:,}  "
-                    f"transitions {self.transitions:,}  states/s per worker {per}  "
-                    f"depth {self.depth}  frontier {self.frontier:,}  shard memory {mem} MB  "
-                    f"{self._elapsed():.0f} s")
-
-
-_NOT_AGAIN = breach_line(
-    FailureKind.NONDETERMINISM, "", "(unknown)", "a path the search recorded does not run "
-    "again from its initial world: some handler depends on something outside self.state; "
-    f"rerun with --check-determinism to name it; fix: {FIX_HIDDEN}")
+        self.report(self.tally.progress_line(where, self.traffic, self._shard_bytes(),
+                                             self._elapsed()))

@@ -397,7 +397,7 @@ def _up(backend: RayBackend | RayFlow, starting: list[Any]) -> bool:
 
 @final
 class RayBackend:
-    """`coordinator.Backend` on `workers` Worker actors and as many Shard actors."""
+    """`backend.Backend` on `workers` Worker actors and as many Shard actors."""
 
     def __init__(self, spec: SystemSpec, expected: dict[str, str], workers: int) -> None:
         self.workers = workers
@@ -410,7 +410,7 @@ class RayBackend:
         self._moves: list[Any] = []  # moves made since the last level (`move`)
 
     def ready(self) -> bool:
-        """`coordinator.Backend.ready`, without waiting."""
+        """`backend.Backend.ready`, without waiting."""
         if self._starting and not _up(self, self._starting):
             return False
         self._starting = []
@@ -432,7 +432,7 @@ class RayBackend:
         return self
 
     def level(self, max_depth: int | None) -> tuple[list[Expansion], list[Acceptance]]:
-        """One level on the cluster (`coordinator.Backend.level`).
+        """One level on the cluster (`backend.Backend.level`).
 
         A reduced level asks each worker's cycle-proviso questions with one call per
         worker and shard, so a worker expands as soon as the shards have answered its
@@ -459,39 +459,39 @@ class RayBackend:
         return done[:n], done[n:2 * n]
 
     def lineage(self, key: int) -> list[int]:
-        """`coordinator.Backend.lineage`: asks the owning shard."""
+        """`backend.Backend.lineage`: asks the owning shard."""
         index = owner(key, self.workers)
         return list(_get(self.shards[index].lineage.remote(key, index, self.workers)))
 
     def shard_bytes(self) -> list[int]:
-        """`coordinator.Backend.shard_bytes`."""
+        """`backend.Backend.shard_bytes`."""
         return list(_get([s.nbytes.remote() for s in self.shards]))
 
     def move(self, source: int, target: int, count: int) -> None:
-        """`coordinator.Backend.move`: one blob, passed by reference, not waited for here
+        """`backend.Backend.move`: one blob, passed by reference, not waited for here
         (a worker runs its calls in order, so the next level's see the move; its failure
         comes out with that level's answers)."""
         self._moves.append(self.actors[target].take.remote(self.actors[source].give.remote(count)))
 
     def graphs(self) -> list[Graph]:
-        """`coordinator.Backend.graphs`."""
+        """`backend.Backend.graphs`."""
         found = [pickle.loads(b) for b in _get([a.graph.remote() for a in self.actors])]
         return [g for g in found if g is not None]
 
     def take_back(self) -> tuple[list[Item], list[bytes]]:
-        """`coordinator.Backend.take_back`: all frontiers given, all shards drained."""
+        """`backend.Backend.take_back`: all frontiers given, all shards drained."""
         given = _get([a.give.remote(1 << 62) for a in self.actors])
         visited = _get([s.drain.remote() for s in self.shards])
         return [item for blob in given for item in pickle.loads(blob)], list(visited)
 
     def reset(self, relation: tuple[Any, ...] | None) -> None:
-        """`coordinator.Backend.reset`: empty frontiers and shards."""
+        """`backend.Backend.reset`: empty frontiers and shards."""
         _get([a.relearn.remote(relation) for a in self.actors] +
              [s.clear.remote() for s in self.shards])
         self._fresh = False
 
     def snapshot(self) -> tuple[list[bytes], list[bytes]]:
-        """`coordinator.Backend.snapshot`: every worker's frontier and shard's keys."""
+        """`backend.Backend.snapshot`: every worker's frontier and shard's keys."""
         frontier = [a.packed.remote() for a in self.actors]
         visited = [s.dump.remote() for s in self.shards]
         return list(_get(frontier)), list(_get(visited))
