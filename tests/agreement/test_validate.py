@@ -615,3 +615,31 @@ def test_a_run_cut_off_by_a_crash_is_the_models_crash_before_it(tmp_path):
     assert result.ok, result.summary()
     assert result.explained == 2 and not result.violations, result.summary()
     assert v.validate(log, tmp_path / "hear.yaml").failure.reason == v.OUTSIDE
+
+
+def test_a_path_only_if_timing_is_ignored_is_not_valid_and_its_violation_comes_first(
+        tmp_path, capsys):
+    from twinfleet.cli import main
+
+    doc = yaml.safe_load(tickers(tmp_path).read_text())
+    doc["properties"] = [{"name": "a_first", "kind": "invariant", "expr": "b.ticks <= a.ticks"}]
+    scenario = tmp_path / "tickers.yaml"
+    scenario.write_text(yaml.safe_dump(doc))
+    records, nodes = walk_records(scenario, 8)
+    records[index_of(records, node="b", t=50)]["t"] = 20  # b's first tick before a's (a@30)
+    records.sort(key=lambda r: r["t"])
+    log = write_log(tmp_path / "e.jsonl", records, nodes)
+    assert main(["validate", str(log), str(scenario)]) == 3  # untimed: a path; exact: not
+    out = capsys.readouterr().out.splitlines()
+    assert out[0].startswith("OUTSIDE THE MODEL: property a_first at step 1 violated on a "
+                             "path only if timing is ignored"), out[0]
+    assert main(["validate", str(log), str(scenario), "--tolerance-ms", "20", "--json"]) == 3
+    assert json.loads(capsys.readouterr().out)["verdict"].startswith("OUTSIDE THE MODEL")
+    in_order = write_log(tmp_path / "exact.jsonl", walk_records(scenario, 8)[0], nodes)
+    assert main(["validate", str(in_order), str(scenario)]) == 0
+    assert capsys.readouterr().out.startswith("VALID: the live run is a path of the "
+                                              "checker's exact model")
+    capsys.readouterr()
+    assert main(["validate", str(in_order), str(scenario), "a.period_ms:=45"]) == 3  # applied
+    assert main(["validate", str(in_order), str(scenario), "a.perod_ms:=31"]) == 2
+    assert "did you mean 'period_ms'?" in capsys.readouterr().err

@@ -29,6 +29,7 @@ from twinfleet.agreement.table import to_markdown
 from twinfleet.checker.commands import add_replay_parser, replay_command
 from twinfleet.checker.options import Semantics
 from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from twinfleet.runtime.scenario.overrides import add_override_arguments
 
 _SEMANTICS = {"both": (Semantics.ROS, Semantics.REBECA), **{s.value: (s,) for s in Semantics}}
 
@@ -204,9 +205,14 @@ def _validate_parser(sub: Any) -> None:
                        description="Find an interleaving of the nodes' logged events that the "
                        "checker's transition relation can run, with the same arguments, "
                        "ctx.choose answers and node states; report the first step it cannot "
-                       "explain (exit 0 valid, 1 unexplained, 2 bad input).")
+                       "explain. The first line is the verdict: VALID (exit 0) a path of the "
+                       "checker's exact model, NOT EXPLAINED (exit 1) a step the checker "
+                       "cannot take, OUTSIDE THE MODEL (exit 3) a path only if timing is "
+                       "ignored (a property broken on it is no counterexample the checker "
+                       "missed); exit 2 bad input.")
     p.add_argument("events", help="event log written by `twinfleet launch --record-events FILE`")
     p.add_argument("scenario", help="the scenario YAML the run used")
+    add_override_arguments(p)  # the overrides the run was launched with
     p.add_argument("--tolerance-ms", type=int, default=None, metavar="T",
                    help="also judge timing: events whose model times differ by at most T ms may "
                         "run in either order; 0 = the checker's exact rules (default: judge "

@@ -91,6 +91,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, final
@@ -118,7 +119,6 @@ from twinfleet.agreement.validation import (
     Unexplained,
     Validation,
     earliest,
-    strict_line,
     timing_name,
 )
 from twinfleet.checker.choices import PrefixChooser, SplitChooser
@@ -128,9 +128,10 @@ from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.system import System
 from twinfleet.checker.transition import Crash, Drop, RunEvent
 from twinfleet.checker.world import World
-from twinfleet.runtime.contract.kinds import EventKind, FailureKind
+from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EventKind, FailureKind
 from twinfleet.runtime.contract.messages import NodeAlive
 from twinfleet.runtime.core.eventlog import payload_digest, state_digest
+from twinfleet.runtime.scenario.overrides import override_words
 
 __all__ = ["CHOICES", "ERROR", "NO_EVENT", "ORDER", "OUTSIDE", "PAYLOAD", "START", "STATE",
            "TIMING", "Unexplained", "Validation", "timing_name", "validate", "validate_command"]
@@ -138,7 +139,7 @@ __all__ = ["CHOICES", "ERROR", "NO_EVENT", "ORDER", "OUTSIDE", "PAYLOAD", "START
 
 def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
              semantics: str | None = None, tolerance_ms: int | None = 0, window_ms: int = 5,
-             max_backtracks: int = 20_000) -> Validation:
+             max_backtracks: int = 20_000, params: Sequence[str] = ()) -> Validation:
     """Check that the live run logged in `events` is a path of the scenario's System.
 
     Args:
@@ -148,6 +149,7 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
         tolerance_ms: the timing rule (module docstring): 0 strict, None untimed.
         window_ms: live events this close to the earliest next one may be taken first.
         max_backtracks: give up the interleaving search after this many dead ends.
+        params: the parameter overrides the run was launched with (``r1.speed:=0.4``).
 
     Raises:
         EventLogError, ScenarioError: unreadable inputs.
@@ -155,7 +157,7 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
     """
     started = time.monotonic()
     log = events if isinstance(events, EventLogFile) else load_events(events)
-    scenario = load(scenario_path, semantics=semantics)
+    scenario = load(scenario_path, semantics=semantics, params=params)
     system = System(scenario)
     refuse_unreplayable(system, gated=False)
     search = _Search(system, log, tolerance_ms, window_ms, max_backtracks)
@@ -480,28 +482,31 @@ class _Search:
 
 
 def validate_command(args: Any) -> int:
-    """`twinfleet validate EVENTS SCENARIO`: exit 0 valid, 1 a step is unexplained, 2 bad input.
+    """`twinfleet validate EVENTS SCENARIO [NAME:=VALUE...]`: exit 0 a path of the exact
+    model, 1 a step is unexplained, 2 bad input, 3 a path only if timing is ignored.
 
-    Without ``--tolerance-ms`` the verdict is the order-and-state check; the report
-    then also gives the first step outside the checker's exact timing rules.
+    Unless ``--tolerance-ms 0`` judged the run by the exact rules already, the run is
+    judged by them too, and the verdict (first line, and exit code) says which held.
     """
     try:
+        params = override_words("validate", args.overrides, args.param)
         log = load_events(args.events)
         result = validate(log, args.scenario, semantics=args.semantics,
-                          tolerance_ms=args.tolerance_ms, window_ms=args.window_ms)
+                          tolerance_ms=args.tolerance_ms, window_ms=args.window_ms,
+                          params=params)
         strict = None
-        if args.tolerance_ms is None:
+        if args.tolerance_ms != 0:
             strict = validate(log, args.scenario, semantics=args.semantics, tolerance_ms=0,
-                              window_ms=args.window_ms, max_backtracks=2_000)
+                              window_ms=args.window_ms, max_backtracks=2_000, params=params)
     except (*bad_input_errors(), EventLogError, ValueError, OSError) as exc:
         print(f"twinfleet validate: {exc}", file=sys.stderr)
-        return 2
+        return EXIT_BAD_INPUT
     if args.json:
         record = result.to_json()
         record["strict"] = None if strict is None else strict.to_json()
+        record["verdict"] = result.verdict(strict)
+        record["exit_code"] = result.exit_code(strict)
         print(json.dumps(record, indent=1))
     else:
-        print(result.summary())
-        if strict is not None:
-            print(strict_line(strict))
-    return 0 if result.ok else 1
+        print(result.summary(strict))
+    return result.exit_code(strict)

@@ -16,7 +16,12 @@ from typing import Any, final
 from twinfleet.agreement.events import LiveEvent, Signatures, live_signature
 from twinfleet.checker.system import System
 from twinfleet.checker.world import Event, World
-from twinfleet.runtime.contract.kinds import EventKind
+from twinfleet.runtime.contract.kinds import (
+    EXIT_FAILED,
+    EXIT_INCONCLUSIVE,
+    EXIT_OK,
+    EventKind,
+)
 from twinfleet.runtime.core.eventlog import summarise
 
 START = "startup"
@@ -85,17 +90,40 @@ class Validation:
         """True when every live event is explained."""
         return self.failure is None
 
-    def summary(self) -> str:
-        """A human-readable report."""
+    def exit_code(self, strict: Validation | None = None) -> int:
+        """0 a path of the exact model, 1 a step unexplained, 3 a path only if timing is
+        ignored (`strict`: the same run judged by the exact timing rules, when this one
+        was judged by a looser rule)."""
+        if not self.ok:
+            return EXIT_FAILED
+        return EXIT_OK if strict is None or strict.ok else EXIT_INCONCLUSIVE
+
+    def verdict(self, strict: Validation | None = None) -> str:
+        """The first line of the report: the verdict, and any property broken on the path
+        (before everything else, since a violation on a path the exact model cannot take
+        is no counterexample the checker missed)."""
+        if not self.ok:
+            return (f"NOT EXPLAINED: {self.explained} of {self.events} events explained; "
+                    "first unexplained step:")
+        broken = ", ".join(f"{prop} at step {step}" for step, prop, _ in self.violations)
+        if strict is None or strict.ok:
+            return ("VALID: the live run is a path of the checker's exact model: all "
+                    f"{self.events} events explained"
+                    + (f"; property {broken} violated on it" if broken else ""))
+        gave_up = strict.failure is not None and any(
+            n.startswith("the search gave up") for n in strict.failure.notes)
+        why = ("no path under the exact timing rules was found within the search's budget"
+               if gave_up else "the exact model cannot take it")
+        return ((f"OUTSIDE THE MODEL: property {broken} violated on a path only if timing is "
+                 f"ignored ({self.timing}); {why}") if broken else
+                (f"OUTSIDE THE MODEL: the live run is a path only if timing is ignored "
+                 f"({self.timing}): all {self.events} events explained; {why}"))
+
+    def summary(self, strict: Validation | None = None) -> str:
+        """A human-readable report, the verdict first (`strict`: as for `verdict`)."""
         head = (f"twinfleet validate {self.events_path} {self.scenario} "
                 f"(semantics {self.semantics}, timing {self.timing})")
-        if self.ok:
-            verdict = (f"VALID: the live run is a path of the checker's transition relation: "
-                       f"all {self.events} events explained")
-        else:
-            verdict = (f"NOT EXPLAINED: {self.explained} of {self.events} events explained; "
-                       "first unexplained step:")
-        lines = [head, verdict]
+        lines = [self.verdict(strict), head]
         if self.failure is not None:
             lines.append(self.failure.describe())
         if self.max_ahead_ms:
@@ -106,6 +134,8 @@ class Validation:
             lines.append("timing: every explained step was due at the model's t*")
         for step, prop, message in self.violations:
             lines.append(f"property {prop} violated on this path at step {step}: {message}")
+        if strict is not None:
+            lines.append(strict_line(strict))
         lines.append(f"time {self.elapsed_s:.2f} s, {self.backtracks} backtracks")
         return "\n".join(lines)
 

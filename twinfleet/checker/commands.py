@@ -199,17 +199,17 @@ def check_command(args: argparse.Namespace) -> int:
     if args.workers < 1 or args.min_width < 1:
         print("twinfleet check: --workers and --min-width must be at least 1", file=sys.stderr)
         return EXIT_BAD_INPUT
-    if args.statistical:
-        from twinfleet.checker.statistical_commands import statistical_command
-
-        return statistical_command(args, bad_input_errors())
-    if args.scenario is None and args.resume is None:
-        print("twinfleet check: give a scenario file, or --resume CHECKPOINT", file=sys.stderr)
-        return EXIT_BAD_INPUT
-    try:
+    try:  # read once, before any mode branches off: every mode checks what launch runs
         params = tuple(override_words("check", args.overrides, args.param))
     except ValueError as exc:
         print(f"twinfleet {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if args.statistical:
+        from twinfleet.checker.statistical_commands import statistical_command
+
+        return statistical_command(args, bad_input_errors(), params)
+    if args.scenario is None and args.resume is None:
+        print("twinfleet check: give a scenario file, or --resume CHECKPOINT", file=sys.stderr)
         return EXIT_BAD_INPUT
     from twinfleet.checker.diagnosis import ContractBreachError
     from twinfleet.checker.driver import CheckOptions, check

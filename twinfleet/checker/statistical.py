@@ -63,6 +63,7 @@ class StatisticalOptions:
     verify: bool = True
     profile: str | None = None
     semantics: str | None = None
+    params: tuple[str, ...] = ()  # parameter overrides, as `check` and `launch` take them
     until_decided: bool = False
     progress: Callable[[StatisticalResult], None] | None = field(default=None, compare=False)
 
@@ -81,6 +82,7 @@ class SimulationJob:
     max_steps: int
     verify: bool = True
     until_decided: bool = False
+    params: tuple[str, ...] = ()
 
     def __call__(self, indices: list[int]) -> list[Simulation]:
         return _simulator(self).batch(indices)
@@ -92,7 +94,8 @@ _SIMULATORS: dict[SimulationJob, Simulator] = {}  # one per job in each worker p
 def _simulator(job: SimulationJob) -> Simulator:
     sim = _SIMULATORS.get(job)
     if sim is None:
-        scenario = load(job.scenario, profile=job.profile, semantics=job.semantics)
+        scenario = load(job.scenario, profile=job.profile, semantics=job.semantics,
+                        params=job.params)
         system, props = timed_system(scenario, job.model, verify=job.verify)
         sim = _SIMULATORS[job] = Simulator(system, props, job.model, seed=job.seed,
                                            horizon_ms=job.horizon_ms, max_steps=job.max_steps,
@@ -210,12 +213,14 @@ class StatisticalResult:
 def check_statistical(scenario: str | Path, options: StatisticalOptions) -> StatisticalResult:
     """Estimate (or test) the probability of a violation of `scenario` (module docstring)."""
     path = resolve_scenario(scenario)
-    spec = load(path, profile=options.profile, semantics=options.semantics)
+    spec = load(path, profile=options.profile, semantics=options.semantics,
+                params=options.params)
     model = load_timing(options.timing)
     horizon = options.horizon_ms or int(1000 * (spec.live.timeout_s or 60))
     seed = options.seed if options.seed is not None else spec.seed
     job = SimulationJob(str(path.resolve()), options.profile, options.semantics, model, seed,
-                        horizon, options.max_steps, options.verify, options.until_decided)
+                        horizon, options.max_steps, options.verify, options.until_decided,
+                        options.params)
     sim = _simulator(job)  # here too: it writes the traces, and a bad scenario fails early
     result = StatisticalResult(spec.source, model.describe(), horizon, options.confidence,
                                options.workers, names=_names(sim.properties))
@@ -278,7 +283,7 @@ def _write_traces(sim: Simulator, result: StatisticalResult, path: Path,
             continue
         violation, cex = s.first
         trace = build_trace(sim.system, violation, cex, scenario_path=str(path.resolve()),
-                            search="statistical")
+                            search="statistical", params=list(options.params))
         trace["simulation"] = {"index": s.index, "seed": sim.seed,
                                "machine": platform.machine()}
         where = str(Path(options.traces_out) / f"{path.stem}.sim{s.index}.trace.json")

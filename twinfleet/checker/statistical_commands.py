@@ -27,10 +27,11 @@ def _progress(result: StatisticalResult) -> None:
           file=sys.stderr, end="" if tty else "\n", flush=True)
 
 
-def statistical_command(args: argparse.Namespace,
-                        bad_input: tuple[type[Exception], ...]) -> int:
+def statistical_command(args: argparse.Namespace, bad_input: tuple[type[Exception], ...],
+                        params: tuple[str, ...] = ()) -> int:
     """Run `check --statistical` for parsed arguments; return the exit code (`bad_input`:
-    the errors that mean bad input, exit 2)."""
+    the errors that mean bad input, exit 2; `params`: the parameter overrides, read by
+    `checker.commands` as for every other mode)."""
     from twinfleet.checker.simulate import ContractBreach
     from twinfleet.checker.statistical import StatisticalOptions, check_statistical
     from twinfleet.checker.timing import TimingError
@@ -45,7 +46,7 @@ def statistical_command(args: argparse.Namespace,
         assert_below=args.assert_below, indifference=args.indifference, alpha=args.alpha,
         beta=args.beta, workers=args.workers, cluster=args.cluster, timing=args.timing, traces_out=args.traces_out,
         max_traces=args.max_traces, max_time_s=args.max_time, verify=args.verify,
-        profile=args.profile,
+        profile=args.profile, params=params,
         semantics=args.semantics, progress=None if quiet else _progress)
     try:
         result = check_statistical(args.scenario, options)

@@ -162,6 +162,7 @@ def _validate(settings: SweepSettings) -> None:
 
     from twinfleet.runtime.scenario.overrides import scenario_common
     from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
+    from twinfleet.runtime.scenario.suggest import did_you_mean
     from twinfleet.sweep.grid import Target
 
     scenario = load_scenario(settings.scenario)
@@ -172,15 +173,17 @@ def _validate(settings: SweepSettings) -> None:
         node, _, key = name.rpartition(".")
         if target is Target.NODE and node not in fields:
             raise ScenarioError(f"{settings.scenario}: --param {name}: the scenario has no node "
-                                f"{node!r} (nodes: {', '.join(fields)})")
+                                f"{node!r} (nodes: {', '.join(fields)})"
+                                f"{did_you_mean(node, fields)}")
         if target is Target.NODE and key not in fields[node]:
             raise ScenarioError(f"{settings.scenario}: --param {name}: node {node} has no "
-                                f"parameter {key!r} (it has: {', '.join(fields[node])})")
+                                f"parameter {key!r} (it has: {', '.join(fields[node])})"
+                                f"{did_you_mean(key, fields[node])}")
         known = {f for names in fields.values() for f in names}
         if target in (Target.COMMON, Target.EVERY_NODE) and key not in known | (
                 common if target is Target.COMMON else set()):
             raise ScenarioError(f"{settings.scenario}: --param {name}: no node of the scenario "
-                                f"has parameter {key!r}")
+                                f"has parameter {key!r}{did_you_mean(key, known)}")
 
 
 def _run(args: argparse.Namespace, axes: tuple[Axis, ...], settings: SweepSettings,

@@ -22,6 +22,8 @@ from typing import TYPE_CHECKING, Any
 
 import yaml
 
+from twinfleet.runtime.scenario.suggest import did_you_mean
+
 if TYPE_CHECKING:
     from twinfleet.runtime.scenario.spec import Scenario
 
@@ -85,9 +87,9 @@ def overrides_doc(path: Path, params: Sequence[str]) -> dict[str, Any]:
             continue
         entry = next((n for n in nodes if isinstance(n, dict) and n.get("name") == node), None)
         if entry is None:
-            names = ", ".join(str(n.get("name")) for n in nodes if isinstance(n, dict))
+            names = [str(n.get("name")) for n in nodes if isinstance(n, dict)]
             raise ValueError(f"parameter override {text!r}: {path} has no node {node!r} "
-                             f"(nodes: {names})")
+                             f"(nodes: {', '.join(names)}){did_you_mean(node, names)}")
         entry["params"] = {**(entry.get("params") or {}), name: value}
     out: dict[str, Any] = {"nodes": nodes}
     if common:
@@ -112,10 +114,10 @@ def load_with_params(path: str | Path, params: Sequence[str] = (),
     except ValueError as exc:
         raise ScenarioError(str(exc)) from None
     fields = {f.name for cfg in scenario.nodes for f in dataclasses.fields(cfg.cls.Params)}
-    for name in (doc.get("params") or {}):
-        if name not in fields and name not in (scenario_common(scenario.path)):
+    for name in (doc.get("params") or {}):  # the file's own are declared (runtime.scenario.spec)
+        if name not in fields:
             raise ScenarioError(f"{scenario.path}: parameter override {name!r}: no node of the "
-                                "scenario has that parameter")
+                                f"scenario has that parameter{did_you_mean(name, fields)}")
     return load_scenario(scenario.path, {**(overrides or {}), **doc})
 
 

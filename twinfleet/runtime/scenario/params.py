@@ -16,6 +16,7 @@ from collections.abc import Mapping
 from typing import Any, NoReturn
 
 from twinfleet.runtime.scenario.config import ConfigError
+from twinfleet.runtime.scenario.suggest import did_you_mean
 
 
 def _fail(key: str, what: str) -> NoReturn:
@@ -40,7 +41,8 @@ def build_params(params_cls: type, given: Mapping[str, Any], common: Mapping[str
     for key in given:
         if key not in fields:
             expected = ", ".join(fields) or "no parameters"
-            _fail(f"{where}.{key}", f"unknown parameter of {params_cls.__name__}; expected {expected}")
+            _fail(f"{where}.{key}", f"unknown parameter of {params_cls.__name__}; expected "
+                  f"{expected}{did_you_mean(key, fields)}")
     values = {k: v for k, v in context.items() if k in fields and v is not None}
     values.update({k: v for k, v in common.items() if k in fields})
     values.update(given)

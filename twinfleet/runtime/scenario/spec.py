@@ -87,6 +87,7 @@ from twinfleet.runtime.scenario.examples import shipped_scenarios
 from twinfleet.runtime.scenario.params import build_params
 from twinfleet.runtime.scenario.property_eval import ExpressionError, parse_expression
 from twinfleet.runtime.scenario.scenes import SceneError, load_scene
+from twinfleet.runtime.scenario.suggest import did_you_mean
 
 PROFILES = ("fixed", "rebeca")
 SEMANTICS = ("ros", "rebeca")
@@ -331,6 +332,7 @@ def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
     _check_node_count(len(raw_nodes), doc.get("live"), err)
     context = {"map": str(map_path) if map_path else None, "profile": profile}
     nodes = tuple(_node(i, n, common, context, err) for i, n in enumerate(raw_nodes))
+    _check_common_params(common, nodes, err)
     names = [n.name for n in nodes]
     for dup in sorted({n for n in names if names.count(n) > 1}):
         err.fail("nodes", f"node name {dup!r} is used twice")
@@ -356,6 +358,19 @@ def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
                     seed=_get(doc, "seed", int, err, default=0), nodes=nodes,
                     properties=props, check=check, live=live, scene=_scene(doc, err),
                     ros2=_checked(ros2_config, err, doc["ros2"]) if "ros2" in doc else None)
+
+
+def _check_common_params(common: Mapping[str, Any], nodes: Sequence[NodeConfig],
+                         err: _Errors) -> None:
+    """Every key of the common `params:` is a parameter of some node: each node takes only
+    the keys its Params declares, so a misspelt one would otherwise reach no node and the
+    verdict would silently be that of the default value."""
+    declared = {f.name for cfg in nodes for f in dataclasses.fields(cfg.cls.Params)}
+    for key in common:
+        if key not in declared:
+            err.fail(f"params.{key}", "no node of the scenario declares this parameter; "
+                     f"expected one of {', '.join(sorted(declared)) or 'none'}"
+                     f"{did_you_mean(str(key), declared)}")
 
 
 def _scene(doc: Mapping[str, Any], err: _Errors) -> str | None:
@@ -398,7 +413,8 @@ class _Errors:
     def unknown_keys(self, doc: Mapping[str, Any], allowed: set[str], prefix: str) -> None:
         for key in doc:
             if key not in allowed:
-                self.fail(f"{prefix}{key}", f"unknown key; expected one of {', '.join(sorted(allowed))}")
+                self.fail(f"{prefix}{key}", f"unknown key; expected one of "
+                          f"{', '.join(sorted(allowed))}{did_you_mean(str(key), allowed)}")
 
 
 def _get(doc: Mapping[str, Any], key: str, typ: type, err: _Errors, *, default: Any = ...,

@@ -1,0 +1,99 @@
+"""One code path reads parameter overrides: every mode of `check`, `sweep` and `validate`
+counts an override on the command line as the same value written in the file, and refuses
+an unknown name with exit 2 and a "did you mean"; a misspelt key of the file's own common
+`params:` is refused too (issue 37, findings 1 and 2)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pytest
+
+from tests.checker.tpc import tpc_scenario
+from twinfleet.cli import main
+
+pytestmark = pytest.mark.timeout(120)
+
+STATISTICAL = ["--statistical", "--simulations", "64", "--seed", "7", "--json",
+               "--max-traces", "0"]
+
+
+def _json(capsys: pytest.CaptureFixture[str]) -> dict:
+    return json.loads(capsys.readouterr().out)
+
+
+def _counts(record: dict) -> list[tuple[str, int]]:
+    if "estimates" in record:
+        return [(e["property"], e["violations"]) for e in record["estimates"]]
+    return [("verdict", record["verdict"]), ("states", record["states"]),
+            ("transitions", record["transitions"])]
+
+
+@pytest.mark.parametrize("mode", [[], ["--workers", "2", "--min-width", "1"], STATISTICAL,
+                                  [*STATISTICAL, "--workers", "2"]],
+                         ids=["exhaustive", "exhaustive-workers", "statistical",
+                              "statistical-workers"])
+def test_an_override_counts_as_the_value_in_the_file(tmp_path, capsys, mode):
+    default = tpc_scenario(tmp_path, "default")
+    written = tpc_scenario(tmp_path, "written", vote_timeout_ms=1)
+    if "--json" not in mode:
+        mode = [*mode, "--json"]
+    assert main(["check", str(written), *mode]) == 1
+    in_file = _counts(_json(capsys))
+    assert main(["check", str(default), "vote_timeout_ms:=1", *mode]) == 1
+    assert _counts(_json(capsys)) == in_file
+    assert main(["check", str(default), "--param", "p1.vote_timeout_ms=1",
+                 "--param", "p2.vote_timeout_ms=1", *mode]) == 1
+    assert _counts(_json(capsys)) == in_file
+    main(["check", str(default), *mode])
+    assert _counts(_json(capsys)) != in_file  # the override changes the answer
+
+
+@pytest.mark.parametrize("mode", [[], ["--workers", "2"], ["--statistical"],
+                                  ["--statistical", "--workers", "2"], ["--strict"]])
+@pytest.mark.parametrize(("word", "says"), [
+    ("vote_timout_ms:=1", "did you mean 'vote_timeout_ms'?"),
+    ("coord.decison_timeout_ms:=1", "did you mean 'decision_timeout_ms'?"),
+    ("cord.decision_timeout_ms:=1", "did you mean 'coord'?"),
+])
+def test_an_unknown_override_is_exit_2_with_did_you_mean_in_every_mode(
+        tmp_path, capsys, mode, word, says):
+    path = tpc_scenario(tmp_path)
+    assert main(["check", str(path), word, *mode]) == 2
+    err = capsys.readouterr().err.strip()
+    assert says in err and len(err.splitlines()) == 1, err
+
+
+def test_sweep_refuses_an_unknown_name_with_did_you_mean(tmp_path, capsys):
+    path = tpc_scenario(tmp_path)
+    assert main(["sweep", str(path), "--param", "vote_timout_ms=1,2",
+                 "--out", str(tmp_path / "sweep")]) == 2
+    assert "did you mean 'vote_timeout_ms'?" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("mode", [[], ["--statistical"], ["--strict"]])
+def test_a_misspelt_common_param_in_the_file_is_exit_2_with_did_you_mean(tmp_path, capsys,
+                                                                          mode):
+    path = tpc_scenario(tmp_path, decison_timeout_ms=4)
+    assert main(["check", str(path), *mode]) == 2
+    err = capsys.readouterr().err.strip()
+    assert "params.decison_timeout_ms: no node of the scenario declares this parameter" in err
+    assert err.endswith("did you mean 'decision_timeout_ms'?") and len(err.splitlines()) == 1
+
+
+def test_launch_refuses_a_misspelt_common_param_before_starting(tmp_path, capsys):
+    path = tpc_scenario(tmp_path, decison_timeout_ms=4)
+    assert main(["launch", str(path)]) == 2
+    assert "did you mean 'decision_timeout_ms'?" in capsys.readouterr().err
+
+
+def test_a_statistical_trace_records_its_overrides_and_replays_with_them(tmp_path, capsys):
+    path = tpc_scenario(tmp_path)
+    out = tmp_path / "traces"
+    assert main(["check", str(path), "vote_timeout_ms:=1", "--statistical", "--simulations",
+                 "64", "--seed", "7", "--json", "--traces-out", str(out)]) == 1
+    traces = _json(capsys)["traces"]
+    assert traces and json.loads(Path(traces[0]).read_text())["params"] == ["vote_timeout_ms:=1"]
+    assert main(["replay", traces[0]]) == 1
+    assert "replay confirmed" in capsys.readouterr().out
