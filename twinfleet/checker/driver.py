@@ -37,6 +37,7 @@ from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.reduction import Reduction, describe, plan
 from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
+from twinfleet.checker.timing import AssumedTiming
 from twinfleet.checker.trace import build_trace
 from twinfleet.runtime.contract.kinds import FailureKind, Status
 from twinfleet.runtime.contract.node import NodeSpec
@@ -104,6 +105,7 @@ class CheckResult:
     params: tuple[str, ...] = ()  # the parameter overrides checked with
     engine: str | None = None  # where the search ran, when workers were asked for
     handler_runs: int = 0  # handlers run by this process (its outcome cache missed)
+    timing: AssumedTiming | None = None  # the latency and timer lateness the verdict assumed
 
     @property
     def rmc_transitions(self) -> int:
@@ -136,6 +138,7 @@ class CheckResult:
             "trace_steps": None if self.trace is None else len(self.trace["steps"]),
             "reduction": self.reduction, "reduction_statistics": self.reduction_statistics,
             "params": list(self.params), "engine": self.engine,
+            "timing": None if self.timing is None else self.timing.to_json(),
             "exit_code": self.exit_code,
         }
 
@@ -155,6 +158,7 @@ class CheckResult:
                                               if self.params else ""),
                  f"verdict: {verdict}",
                  "properties: " + "; ".join(self.properties),
+                 *([f"timing: {self.timing.line()}"] if self.timing is not None else []),
                  f"states {s.states:,}  transitions {s.transitions:,} "
                  f"(RMC-style {self.rmc_transitions:,})  depth {s.depth}  "
                  f"initial states {s.initial_states}",
@@ -277,7 +281,8 @@ def check(scenario: str | Path | Scenario | None,
                          reduction=describe(reduction, reduction_name, strategy),
                          reduction_statistics=None if reduction is None else
                          reduction.statistics(), params=tuple(meta["params"]), engine=engine,
-                         handler_runs=system.runner.handler_runs)
+                         handler_runs=system.runner.handler_runs,
+                         timing=_assumed_timing(scenario, system, options))
     if outcome.violation is not None and outcome.counterexample is not None:
         try:
             result.trace = build_trace(system, outcome.violation, outcome.counterexample,
@@ -348,6 +353,19 @@ def _timing_ranges(scenario: Scenario, options: CheckOptions) -> dict[str, Any]:
     default, per = load_timing(options.timing).ranges(set(topology.subscribers)
                                                       | set(topology.servers))
     return {"latency": default, "topic_latency": per}
+
+
+def _assumed_timing(scenario: Scenario, system: System, options: CheckOptions) -> AssumedTiming:
+    """The latency ranges the search branched on and where they come from (timers fire on
+    time in the exhaustive model)."""
+    if options.timing is not None:
+        source = f"the bounds of --timing {options.timing}, every value a branch"
+    elif scenario.check.latency:
+        source = "the scenario's check.latency, every value a branch"
+    else:
+        source = "the scenario, which sets no check.latency: every message is due when sent"
+    settings = system.settings
+    return AssumedTiming(settings.latency, settings.topic_latency, (0, 0), source)
 
 
 def _property_names(system: System, props: PropertySet) -> list[str]:

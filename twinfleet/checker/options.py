@@ -54,9 +54,11 @@ def add_statistical_arguments(p: argparse.ArgumentParser) -> None:
                    help="estimate probabilities by simulation instead of exploring every "
                    "interleaving")
     g.add_argument("--timing", default=None, metavar="FILE",
-                   help="timing model (`twinfleet calibrate`; default: the loopback model "
-                   "shipped with twinfleet). Without --statistical, its latency bounds become "
-                   "the exhaustive search's latency ranges (every value a branch)")
+                   help="timing model (`twinfleet calibrate`; default: the scenario's "
+                   "check.latency, each value equally likely, else the loopback model shipped "
+                   "with twinfleet, said on the first line). Without --statistical, its "
+                   "latency bounds become the exhaustive search's latency ranges (every "
+                   "value a branch)")
     g.add_argument("--simulations", type=int, default=None, metavar="N",
                    help="at most N simulations (default 1000; unbounded with --precision "
                    "or --assert-below, which stop by themselves)")

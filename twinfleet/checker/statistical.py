@@ -29,7 +29,7 @@ from twinfleet.checker.parallel import engine_for, split
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.simulate import Simulation, Simulator
 from twinfleet.checker.system import System
-from twinfleet.checker.timing import TimingModel, load_timing
+from twinfleet.checker.timing import DEFAULT_MODEL, AssumedTiming, TimingModel, load_timing
 from twinfleet.checker.trace import build_trace
 from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
 from twinfleet.runtime.contract.tracefile import write_trace
@@ -148,6 +148,10 @@ class StatisticalResult:
     elapsed_s: float = 0.0
     traces: list[str] = field(default_factory=list)
     stopped: str = ""
+    timing: AssumedTiming | None = None
+    replaced: str = ""  # said first: the model that replaced the scenario's timing, and why
+    params: tuple[str, ...] = ()
+    interrupted: bool = False
 
     def estimates(self, *, exact: bool = True) -> list[Estimate]:
         """Per property (then any property) its count and interval (Wilson if not exact)."""
@@ -179,10 +183,12 @@ class StatisticalResult:
         """The report `twinfleet check --statistical` prints."""
         n = len(self.simulations)
         rate = n / self.elapsed_s if self.elapsed_s else 0.0
-        lines = [f"statistical check of {self.scenario}: {n:,} simulations to "
-                 f"{self.horizon_ms / 1000:g} s of fleet time, {self.elapsed_s:.1f} s on "
-                 f"{self.workers} worker(s) ({rate:,.1f} simulations/s; {self.stopped})",
-                 f"timing: {self.model}",
+        with_ = f" with {' '.join(self.params)}" if self.params else ""
+        lines = [f"timing: {self.replaced}"] if self.replaced else []
+        lines += [f"statistical check of {self.scenario}{with_}: {n:,} simulations to "
+                  f"{self.horizon_ms / 1000:g} s of fleet time, {self.elapsed_s:.1f} s on "
+                  f"{self.workers} worker(s) ({rate:,.1f} simulations/s; {self.stopped})",
+                  f"timing: {self.model}",
                  f"P(violation within the horizon), {self.confidence:.0%} Clopper-Pearson:"]
         for e in self.estimates():
             lines.append(f"  {e.name:<24} {e.violations:>6} / {n:<6} {e.p:.4f} "
@@ -207,7 +213,10 @@ class StatisticalResult:
                 "sprt": None if self.sprt is None else {
                     "bound": self.sprt.bound, "decision": self.sprt.decision.value,
                     "n": self.sprt.n, "violations": self.sprt.k},
-                "traces": self.traces, "stopped": self.stopped}
+                "traces": self.traces, "stopped": self.stopped,
+                "timing": None if self.timing is None else self.timing.to_json(),
+                "timing_replaced": self.replaced or None, "params": list(self.params),
+                "interrupted": self.interrupted}
 
 
 def check_statistical(scenario: str | Path, options: StatisticalOptions) -> StatisticalResult:
@@ -215,7 +224,7 @@ def check_statistical(scenario: str | Path, options: StatisticalOptions) -> Stat
     path = resolve_scenario(scenario)
     spec = load(path, profile=options.profile, semantics=options.semantics,
                 params=options.params)
-    model = load_timing(options.timing)
+    model, source, replaced = statistical_timing(spec, options.timing)
     horizon = options.horizon_ms or int(1000 * (spec.live.timeout_s or 60))
     seed = options.seed if options.seed is not None else spec.seed
     job = SimulationJob(str(path.resolve()), options.profile, options.semantics, model, seed,
@@ -223,7 +232,9 @@ def check_statistical(scenario: str | Path, options: StatisticalOptions) -> Stat
                         options.params)
     sim = _simulator(job)  # here too: it writes the traces, and a bad scenario fails early
     result = StatisticalResult(spec.source, model.describe(), horizon, options.confidence,
-                               options.workers, names=_names(sim.properties))
+                               options.workers, names=_names(sim.properties),
+                               timing=model.assumed(source), replaced=replaced,
+                               params=options.params)
     if options.assert_below is not None:
         result.sprt = Sprt(options.assert_below,
                            options.indifference or options.assert_below / 2,
@@ -249,6 +260,23 @@ def check_statistical(scenario: str | Path, options: StatisticalOptions) -> Stat
     result.stopped = result.stopped or f"{limit:,} simulations"
     result.traces = _write_traces(sim, result, path, options)
     return result
+
+
+def statistical_timing(scenario: Scenario, timing: str | None) -> tuple[TimingModel, str, str]:
+    """The model simulations draw from, where it comes from, and (said first) what replaced
+    the scenario's timing: `timing` if given; else the scenario's `check.latency`, each
+    value of a range equally likely, as the exhaustive check branches on every value;
+    else (no latency at all would make every delivery a tie) the loopback model."""
+    if timing is not None:
+        return load_timing(timing), f"--timing {timing}", ""
+    latency = scenario.check.latency
+    if latency:
+        origin = "the scenario's check.latency"
+        return (TimingModel.from_ranges(latency.default, latency.names, origin), origin, "")
+    source = f"the loopback model shipped with twinfleet ({DEFAULT_MODEL})"
+    return (load_timing(None), source, f"{source} replaces the scenario's timing (it sets no "
+            "check.latency, so the exhaustive check delivers every message when sent); "
+            "give --timing FILE or check.latency to choose")
 
 
 def _names(props: PropertySet) -> list[str]:

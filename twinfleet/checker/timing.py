@@ -53,6 +53,7 @@ import yaml
 
 TIMING_FORMAT: Final = "twinfleet-timing/1"
 DEFAULT_MODEL: Final = "loopback.timing.yaml"
+Range = tuple[int, int]
 
 
 class TimingError(ValueError):
@@ -150,6 +151,7 @@ class TimingModel:
         machine: where it was measured.
         time_scale: the time scale of the runs it was fitted from (None: not measured).
         sources: the event logs it was fitted from.
+        origin: where a model not fitted from logs comes from (`from_ranges`).
     """
 
     default: Histogram = Histogram()
@@ -161,6 +163,20 @@ class TimingModel:
     sources: tuple[str, ...] = ()
     startup: Histogram | None = None
     startup_ms: int = 0
+    origin: str = ""
+
+    @classmethod
+    def from_ranges(cls, default: Range | None, channels: tuple[tuple[str, Range | None], ...],
+                    origin: str) -> TimingModel:
+        """A model drawing each latency uniformly from a checker's latency ranges (None: no
+        latency), timers on time: a scenario's `check.latency` as a distribution."""
+        return cls(_uniform(default), tuple((name, _uniform(span)) for name, span in channels),
+                   origin=origin)
+
+    def assumed(self, source: str) -> AssumedTiming:
+        """The timing this model assumes, as every summary states it."""
+        return AssumedTiming(self.default.bounds, tuple((n, h.bounds) for n, h in self.latency),
+                             self.timer_lateness.bounds, source)
 
     def starting(self, sent: int | None) -> bool:
         """Whether a message sent at fleet ms `sent` draws the start-up latency."""
@@ -201,6 +217,10 @@ class TimingModel:
     def describe(self) -> str:
         """One line: default latency bounds and mean, channels, lateness, machine, scale."""
         low, high = self.default.bounds
+        if self.origin:
+            return (f"latency {low}-{high} ms, each value equally likely "
+                    f"({len(self.latency)} channel(s) of their own), timers on time: "
+                    f"{self.origin}")
         scale = "unknown" if self.time_scale is None else f"{self.time_scale:g}"
         start = "" if self.startup is None else (
             f", {self.startup.bounds[0]}-{self.startup.bounds[1]} ms when sent in the first "
@@ -223,6 +243,42 @@ class TimingModel:
         if self.loss:
             doc["loss"] = dict(self.loss)
         return doc
+
+
+def _uniform(span: Range | None) -> Histogram:
+    low, high = span or (0, 0)
+    n = high - low + 1
+    return Histogram(tuple(range(low, high + 1)), (1.0 / n,) * n)
+
+
+def _span(span: Range | None) -> str:
+    low, high = span or (0, 0)
+    return f"{low} ms" if low == high else f"{low}-{high} ms"
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class AssumedTiming:
+    """The timing a verdict assumed: the latency range of every channel (`default`) and of
+    those with their own (`channels`), timer lateness, and where the figures come from.
+    Every summary states it: a HOLDS under no latency is no HOLDS under 5 ms."""
+
+    default: Range | None
+    channels: tuple[tuple[str, Range | None], ...] = ()
+    lateness: Range = (0, 0)
+    source: str = ""
+
+    def line(self) -> str:
+        """``latency 0-2 ms (/vote 1-3 ms), timers 0 ms late; from ...``."""
+        own = ", ".join(f"{name} {_span(span)}" for name, span in self.channels)
+        return (f"latency {_span(self.default)}" + (f" ({own})" if own else "")
+                + f", timers {_span(self.lateness)} late; from {self.source}")
+
+    def to_json(self) -> dict[str, Any]:
+        """The JSON record: ranges as [min, max] lists."""
+        return {"latency": {"default": list(self.default or (0, 0)),
+                            **{name: list(span or (0, 0)) for name, span in self.channels}},
+                "timer_lateness": list(self.lateness), "source": self.source}
 
 
 def save_timing(model: TimingModel, path: str | Path) -> None:
