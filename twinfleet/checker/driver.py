@@ -32,14 +32,14 @@ from twinfleet.checker.diagnosis import (
     breach_line,
 )
 from twinfleet.checker.options import MIN_WIDTH
-from twinfleet.checker.outcome import Limits, Outcome, SearchStatistics
+from twinfleet.checker.outcome import INTERRUPTED_REASON, Limits, Outcome, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.reduction import Reduction, describe, plan
 from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.timing import AssumedTiming
 from twinfleet.checker.trace import build_trace
-from twinfleet.runtime.contract.kinds import FailureKind, Status
+from twinfleet.runtime.contract.kinds import EXIT_INTERRUPTED, FailureKind, Status
 from twinfleet.runtime.contract.node import NodeSpec
 from twinfleet.runtime.contract.tracefile import write_trace
 from twinfleet.runtime.scenario.config import SEARCHES, CheckConfig
@@ -114,7 +114,10 @@ class CheckResult:
 
     @property
     def exit_code(self) -> int:
-        """0 holds, 1 violated, 2 no answer, 4 a node breaks the node contract."""
+        """0 holds, 1 violated, 2 no answer, 4 a node breaks the node contract, 130
+        interrupted (`twinfleet.cli` makes it 143 when the signal was SIGTERM)."""
+        if self.status is Status.UNKNOWN and self.reason == INTERRUPTED_REASON:
+            return EXIT_INTERRUPTED
         return self.status.exit_code
 
     def to_json(self) -> dict[str, Any]:

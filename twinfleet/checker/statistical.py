@@ -31,7 +31,12 @@ from twinfleet.checker.simulate import Simulation, Simulator
 from twinfleet.checker.system import System
 from twinfleet.checker.timing import DEFAULT_MODEL, AssumedTiming, TimingModel, load_timing
 from twinfleet.checker.trace import build_trace
-from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_OK
+from twinfleet.runtime.contract.kinds import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+)
 from twinfleet.runtime.contract.tracefile import write_trace
 from twinfleet.runtime.scenario.spec import Scenario, resolve_scenario
 
@@ -173,7 +178,10 @@ class StatisticalResult:
 
     @property
     def exit_code(self) -> int:
-        """0: below / no violation seen; 1: not below / a violation seen; 2: undecided."""
+        """0: below / no violation seen; 1: not below / a violation seen; 2: undecided;
+        130: interrupted (the estimate so far is still reported)."""
+        if self.interrupted:
+            return EXIT_INTERRUPTED
         if self.sprt is not None:
             return {Decision.BELOW: EXIT_OK, Decision.NOT_BELOW: EXIT_FAILED}.get(
                 self.sprt.decision, EXIT_BAD_INPUT)
@@ -255,6 +263,9 @@ def check_statistical(scenario: str | Path, options: StatisticalOptions) -> Stat
                 result.stopped = result.stopped or f"--max-time {options.max_time_s:g} s"
             if options.progress is not None:
                 options.progress(result)
+    except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (twinfleet.cli): keep the estimate so far
+        result.interrupted = True
+        result.stopped = "interrupted"
     finally:
         engine.close()
     result.stopped = result.stopped or f"{limit:,} simulations"

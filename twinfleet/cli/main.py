@@ -9,7 +9,8 @@ command can meet (a file that cannot be read, a corrupt recording, a Zenoh
 endpoint that does not answer) into one line and exit 2, and, as a last
 resort, any other exception, naming its type. ``--debug`` shows the traceback
 instead. Exit codes: 0 ok (every property holds), 1 a property is violated
-(FAILED), 2 bad input or no answer, 3 inconclusive, 130 interrupted.
+(FAILED), 2 bad input or no answer, 3 inconclusive, 130 interrupted (Ctrl-C), 143
+terminated (SIGTERM, handled as Ctrl-C: the same partial summary, `cli.interrupts`).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ from twinfleet.agreement import commands as agreement_commands
 from twinfleet.checker import commands as checker_commands
 from twinfleet.cli import render as render_command
 from twinfleet.cli import runtime_commands
+from twinfleet.cli.interrupts import Interrupts
 from twinfleet.ros2 import commands as ros2_commands
 from twinfleet.runtime.access.connection import (
     EXIT_BAD_INPUT,
@@ -49,7 +51,7 @@ Every command has --help."""
 
 EPILOG = ("exit codes: 0 ok / every property holds, 1 a property is violated (FAILED), "
           "2 bad input or no answer, 3 inconclusive, 4 a node breaks the node contract, "
-          "130 interrupted")
+          "130 interrupted (Ctrl-C), 143 terminated (SIGTERM); both after a partial summary")
 
 
 def _version() -> str:
@@ -81,6 +83,11 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Console script `twinfleet`: run the command; every error is one line (module docstring)."""
     args = build_parser().parse_args(argv)
+    with Interrupts() as interrupts:  # SIGTERM stops a command as Ctrl-C does, exit 143
+        return interrupts.exit_code(_run(args))
+
+
+def _run(args: argparse.Namespace) -> int:
     try:
         return int(args.func(args) or 0)
     except KeyboardInterrupt:

@@ -22,7 +22,8 @@ EXIT_FAILED: Final = 1  # a property is violated; the run FAILED
 EXIT_BAD_INPUT: Final = 2  # bad input, or no answer
 EXIT_INCONCLUSIVE: Final = 3  # the run cannot back a verdict (it says why)
 EXIT_CONTRACT_BREACH: Final = 4  # a user's node broke the node contract
-EXIT_INTERRUPTED: Final = 130  # Ctrl-C
+EXIT_INTERRUPTED: Final = 130  # Ctrl-C (SIGINT), as shells report 128 + the signal
+EXIT_TERMINATED: Final = 143  # SIGTERM (128 + 15), after the same partial summary as Ctrl-C
 
 
 @unique

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from twinfleet.runtime.access.connection import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-from twinfleet.runtime.contract.kinds import Status
+from twinfleet.runtime.contract.kinds import EXIT_TERMINATED, Status
 from twinfleet.runtime.core.statistics import NodeStatistics
 from twinfleet.runtime.fleet.live_verdict import RESULT_WORDS, Verdict
 from twinfleet.runtime.fleet.run_record import RunRecord
@@ -67,12 +67,12 @@ class FleetResult:
     @property
     def exit_code(self) -> int:
         """0 passed, 1 violated or a node failed, 2 a property raised, 3 inconclusive,
-        130 interrupted (`runtime.access.connection`)."""
-        if self.verdict is not None:
-            return self.verdict.exit_code
-        if self.interrupted:
-            return EXIT_INTERRUPTED
-        return EXIT_OK if self.passed else EXIT_FAILED
+        130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
+        code = self.verdict.exit_code if self.verdict is not None else (
+            EXIT_INTERRUPTED if self.interrupted else EXIT_OK if self.passed else EXIT_FAILED)
+        if code == EXIT_INTERRUPTED and self.reason.startswith("SIGTERM"):
+            return EXIT_TERMINATED  # 128 + 15, as for every other command
+        return code
 
 
 def ended_by_signal(reason: str) -> bool:
