@@ -27,7 +27,7 @@ from typing import Any
 from twinfleet.agreement import DEFAULT_TIME_SCALE
 from twinfleet.agreement.table import to_markdown
 from twinfleet.checker.commands import add_replay_parser, replay_command
-from twinfleet.checker.options import Semantics
+from twinfleet.checker.options import Semantics, add_check_arguments
 from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from twinfleet.runtime.scenario.overrides import add_override_arguments
 
@@ -102,10 +102,7 @@ def _experiment_parser(subparsers: Any) -> None:
                         "another (timing is what is being measured)")
     p.add_argument("--seed", type=int, default=None, metavar="S",
                    help="seed of the first live run (default: the scenario's seed)")
-    p.add_argument("--max-states", type=int, default=None, metavar="N",
-                   help="checker state limit (default: the scenario's check.max_states)")
-    p.add_argument("--max-time", type=float, default=None, metavar="S",
-                   help="checker time limit per semantics (default: the scenario's)")
+    add_check_arguments(p, limits_only=True)  # as `check` declares them
     p.add_argument("--horizon", type=float, default=180.0, metavar="S",
                    help="fleet seconds a live run may last before it counts as not arrived "
                         "(default: %(default)g)")

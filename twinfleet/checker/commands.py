@@ -18,8 +18,9 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from twinfleet.checker.options import (
-    REDUCTIONS,
+    SearchChoices,
     Semantics,
+    add_check_arguments,
     add_engine_arguments,
     add_statistical_arguments,
 )
@@ -58,20 +59,11 @@ def register(subparsers: Any) -> None:
                    help="scenario YAML file, or the name of a shipped example (optional "
                         "with --resume)")
     add_override_arguments(p)  # the same overrides as `launch`, validated the same way
-    p.add_argument("--search", choices=("bfs", "dfs", "random"), default=None,
-                   help="search order: bfs (shortest counterexample, default), dfs, or random "
-                        "walks; not given, an unreduced search on --workers runs in a relaxed "
-                        "order (same states and transitions, any counterexample)")
+    add_check_arguments(p)  # the search options `sweep` and `experiment` declare too
     p.add_argument("--walks", type=int, default=100, help="number of random walks (--search random)")
     p.add_argument("--seed", type=int, default=None,
                    help="seed of the random walks (default: the scenario's seed)")
-    p.add_argument("--max-states", type=int, default=None,
-                   help="stop after this many distinct states (default: check.max_states)")
-    p.add_argument("--max-time", type=float, default=None,
-                   help="stop after this many seconds (default: check.max_time_s)")
-    p.add_argument("--max-depth", type=int, default=None,
-                   help="do not expand worlds deeper than this many steps (random: walk length)")
-    p.add_argument("--semantics", choices=[s.value for s in Semantics], default=None,
+    p.add_argument("--semantics", type=Semantics, choices=tuple(Semantics), default=None,
                    help="message rules: ros (per-sender FIFO) or rebeca (RMC); default: scenario")
     p.add_argument("--profile", choices=("fixed", "rebeca"), default=None,
                    help="robot behaviour profile passed to the nodes; default: scenario")
@@ -86,26 +78,12 @@ def register(subparsers: Any) -> None:
                    help="verify every transition, not only new handler runs (finds a "
                    "handler that reads a counter another handler keeps outside self.state; "
                    "slower: turns off the transition cache)")
-    p.add_argument("--no-contract-checks", dest="verify", action="store_false",
-                   help="skip the node-contract checks that run by default (clocks and "
-                   "random sources probed, attributes outside self.state compared, every "
-                   "new handler run run twice and compared; 20-40%% of the search time "
-                   "on c1a). A breach ends the check with one line naming node, handler, "
-                   "what differed and the fix, exit 4")
     p.add_argument("--exact-states", action="store_true",
                    help="store 128-bit digests of full world encodings instead of 64-bit "
                    "digests (about 3x the memory per state; false merges ~n^2/2^129)")
     p.add_argument("--no-transition-cache", action="store_true",
                    help="re-run every handler instead of reusing the outcome of the same "
                    "(node state, event, time) (for comparison; same results, slower)")
-    p.add_argument("--reduction", choices=REDUCTIONS, default=None,
-                   help="partial-order reduction: por (explore one persistent set of "
-                   "simultaneous events per world; same verdicts, far fewer states for "
-                   "independent robots) or none (every interleaving). Default: por under ros, "
-                   "none under rebeca (its counts are compared with RMC's). It turns itself "
-                   "off, and says why in the summary, for settings it does not cover "
-                   "(check.queue_bound, properties reading now, --search random, rebeca "
-                   "node priorities)")
     p.add_argument("--checkpoint", default=None, metavar="FILE",
                    help="save the search to FILE periodically and when it stops early "
                    "(a limit or Ctrl-C); continue it with --resume FILE. A checkpoint is a "
@@ -218,15 +196,13 @@ def check_command(args: argparse.Namespace) -> int:
         return EXIT_BAD_INPUT
     stem = Path(args.scenario or args.resume).stem
     trace_out = args.trace_out or str(Path("out") / f"{stem}.trace.json")
-    options = CheckOptions(search=args.search, walks=args.walks, seed=args.seed,
-                           max_states=args.max_states, max_time_s=args.max_time,
-                           max_depth=args.max_depth, semantics=args.semantics,
-                           profile=args.profile, trace_out=trace_out,
+    options = CheckOptions(**SearchChoices.of(args).fields(), walks=args.walks, seed=args.seed,
+                           semantics=args.semantics, profile=args.profile, trace_out=trace_out,
                            debug_state=args.debug_state, exact_states=args.exact_states,
-                           check_determinism=args.check_determinism, verify=args.verify,
+                           check_determinism=args.check_determinism,
                            transition_cache=not args.no_transition_cache,
                            checkpoint=args.checkpoint, checkpoint_every_s=args.checkpoint_every,
-                           resume=args.resume, reduction=args.reduction, timing=args.timing,
+                           resume=args.resume, timing=args.timing,
                            params=params, workers=args.workers, cluster=args.cluster,
                            min_width=args.min_width,
                            report=None if args.quiet or args.json else _report_line,

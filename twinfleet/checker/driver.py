@@ -31,7 +31,7 @@ from twinfleet.checker.diagnosis import (
     ContractBreachError,
     breach_line,
 )
-from twinfleet.checker.options import MIN_WIDTH
+from twinfleet.checker.options import MIN_WIDTH, ReductionMode, SearchOrder, Semantics
 from twinfleet.checker.outcome import INTERRUPTED_REASON, Limits, Outcome, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.reduction import Reduction, describe, plan
@@ -52,15 +52,20 @@ from twinfleet.runtime.scenario.spec import Scenario, ScenarioError, resolve_sce
 @final
 @dataclass(frozen=True)
 class CheckOptions:
-    """How to check; None means "the scenario's `check:` setting, else the default"."""
+    """How to check; None means "the scenario's `check:` setting, else the default".
+    `search`, `semantics` and `reduction` may be given as their names ("dfs").
 
-    search: str | None = None
+    Raises:
+        ScenarioError: a search, semantics or reduction that does not exist.
+    """
+
+    search: SearchOrder | None = None
     walks: int = 100
     seed: int | None = None
     max_states: int | None = None
     max_time_s: float | None = None
     max_depth: int | None = None
-    semantics: str | None = None
+    semantics: Semantics | None = None
     profile: str | None = None
     trace_out: str | None = None
     debug_state: bool = False
@@ -71,7 +76,7 @@ class CheckOptions:
     checkpoint: str | None = None
     checkpoint_every_s: float = 300.0
     resume: str | None = None
-    reduction: str | None = None
+    reduction: ReductionMode | None = None
     timing: str | None = None  # a timing model whose bounds are the latency ranges
     params: tuple[str, ...] = ()  # parameter overrides, as `launch` takes them (r1.speed:=0.4)
     workers: int = 1  # Ray workers for the search (checker.cluster); 1 with no cluster: here
@@ -79,6 +84,17 @@ class CheckOptions:
     min_width: int = MIN_WIDTH  # frontier width at which a search moves to the cluster
     report: Callable[[str], None] | None = field(default=None, compare=False)
     progress: Callable[[SearchStatistics], None] | None = field(default=None, compare=False)
+
+    def __post_init__(self) -> None:
+        for name, kind in (("search", SearchOrder), ("semantics", Semantics),
+                           ("reduction", ReductionMode)):
+            value = getattr(self, name)
+            if value is not None and not isinstance(value, kind):
+                try:
+                    object.__setattr__(self, name, kind(value))
+                except ValueError:
+                    raise ScenarioError(f"{name}: expected one of "
+                                        f"{', '.join(kind)}, got {value!r}") from None
 
 
 @final

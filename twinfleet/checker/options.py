@@ -1,5 +1,7 @@
 """The checker's named choices, light enough for argument parsers: message semantics,
-reductions, and the options of statistical checking (`add_statistical_arguments`).
+search orders, reductions; the options every command that runs checks declares
+(`add_check_arguments`, read back by `SearchChoices.of`), and the options of
+statistical checking (`add_statistical_arguments`).
 
 Importing this module loads nothing else of the checker, so `twinfleet --help` and the
 commands' parsers can offer the choices without loading the search.
@@ -8,8 +10,10 @@ commands' parsers can offer the choices without loading the search.
 from __future__ import annotations
 
 import argparse
+from collections.abc import Sequence
+from dataclasses import dataclass
 from enum import StrEnum, unique
-from typing import Final
+from typing import Any, Final, final
 
 
 @unique
@@ -24,13 +28,96 @@ class Semantics(StrEnum):
     REBECA = "rebeca"  # the Timed Rebeca model checker's rules (Rules 3 and 4)
 
 
-POR: Final = "por"  # the partial-order reduction (docs/reduction.md)
-NONE: Final = "none"  # every interleaving
-REDUCTIONS: Final = (POR, NONE)
+@unique
+class SearchOrder(StrEnum):
+    """The order an exhaustive check explores worlds in (`--search`, `check.search`)."""
+
+    BFS = "bfs"  # breadth first: a shortest counterexample
+    DFS = "dfs"  # depth first
+    RANDOM = "random"  # random walks (finding nothing proves nothing)
+
+
+@unique
+class ReductionMode(StrEnum):
+    """Whether a search reduces the interleavings it explores (`--reduction`)."""
+
+    POR = "por"  # the partial-order reduction (docs/reduction.md)
+    NONE = "none"  # every interleaving
+
+
+POR: Final = ReductionMode.POR
+NONE: Final = ReductionMode.NONE
+REDUCTIONS: Final = tuple(ReductionMode)
 # Frontier worlds at which an exhaustive search moves to Ray workers. Each level there
 # costs 10-16 ms of round trips on a 2-core machine, against about 45 us a world in one
 # process: levels under a few hundred worlds are faster at home (docs/distributed.md).
 MIN_WIDTH: Final = 512
+
+
+def add_check_arguments(p: argparse.ArgumentParser, *,
+                        searches: Sequence[SearchOrder] = tuple(SearchOrder),
+                        limits_only: bool = False) -> None:
+    """Declare the options of the checks a command runs, for `check`, `sweep` and
+    `experiment` alike (`searches`: the orders the command offers; `limits_only`: only
+    --max-states and --max-time, for a command that fixes the rest). `SearchChoices.of`
+    reads them back."""
+    p.add_argument("--max-states", type=int, default=None, metavar="N",
+                   help="stop a search after N distinct states, with no answer (default: "
+                   "the scenario's check.max_states)")
+    p.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
+                   help="stop a search after SECONDS, with no answer (default: the "
+                   "scenario's check.max_time_s)")
+    if limits_only:
+        return
+    p.add_argument("--max-depth", type=int, default=None, metavar="N",
+                   help="do not expand worlds deeper than N steps (random: walk length)")
+    p.add_argument("--search", type=SearchOrder, choices=tuple(searches), default=None,
+                   help="search order: bfs (shortest counterexample, default), dfs"
+                   + (", or random walks" if SearchOrder.RANDOM in searches else "")
+                   + "; not given, an unreduced search on --workers runs in a relaxed "
+                   "order (same states and transitions, any counterexample)")
+    p.add_argument("--reduction", type=ReductionMode, choices=tuple(ReductionMode),
+                   default=None,
+                   help="partial-order reduction: por (explore one persistent set of "
+                   "simultaneous events per world; same verdicts, far fewer states for "
+                   "independent robots) or none (every interleaving). Default: por under ros, "
+                   "none under rebeca (its counts are compared with RMC's). It turns itself "
+                   "off, and says why in the summary, for settings it does not cover "
+                   "(check.queue_bound, properties reading now, --search random, rebeca "
+                   "node priorities)")
+    p.add_argument("--no-contract-checks", dest="verify", action="store_false",
+                   help="skip the node-contract checks that run by default (clocks and "
+                   "random sources probed, attributes outside self.state compared, every "
+                   "new handler run run twice and compared; 20-40%% of the search time "
+                   "on c1a). A breach ends the check with one line naming node, handler, "
+                   "what differed and the fix, exit 4")
+
+
+@final
+@dataclass(frozen=True)
+class SearchChoices:
+    """What `add_check_arguments` declared, as parsed (None: the scenario's, else the
+    default); `fields()` are `CheckOptions` keyword arguments of the same names."""
+
+    search: SearchOrder | None = None
+    reduction: ReductionMode | None = None
+    max_states: int | None = None
+    max_time_s: float | None = None
+    max_depth: int | None = None
+    verify: bool = True
+
+    @classmethod
+    def of(cls, args: argparse.Namespace) -> SearchChoices:
+        """The choices of parsed arguments (those a command did not declare: defaults)."""
+        return cls(getattr(args, "search", None), getattr(args, "reduction", None),
+                   args.max_states, args.max_time, getattr(args, "max_depth", None),
+                   getattr(args, "verify", True))
+
+    def fields(self) -> dict[str, Any]:
+        """The choices as keyword arguments (of `CheckOptions`, `SweepSettings`)."""
+        return {"search": self.search, "reduction": self.reduction,
+                "max_states": self.max_states, "max_time_s": self.max_time_s,
+                "max_depth": self.max_depth, "verify": self.verify}
 
 
 def _probability(text: str) -> float:

@@ -15,6 +15,7 @@ import sys
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from twinfleet.checker.options import SearchChoices, SearchOrder, add_check_arguments
 from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT
 from twinfleet.sweep.grid import Axis, GridError, Point, parse_axis, parse_grid, point_label
 
@@ -71,25 +72,9 @@ def register(subparsers: Any) -> None:
                    help="draw OUT/heatmap.png: X across, Y up, each cell coloured by "
                         "verdict (holds green, violated red, unknown grey; with more axes, a "
                         "cell shows the worst verdict over the other axes)")
-    _add_check_arguments(p)
+    add_check_arguments(p, searches=(SearchOrder.BFS, SearchOrder.DFS))  # as `check`'s
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=sweep_command)
-
-
-def _add_check_arguments(p: argparse.ArgumentParser) -> None:
-    """The options of `check` that every point's search takes."""
-    p.add_argument("--search", choices=("bfs", "dfs"), default=None,
-                   help="search order of every check (default: the scenario's, else bfs)")
-    p.add_argument("--reduction", choices=("por", "none"), default=None,
-                   help="partial-order reduction of every check (as `check --reduction`)")
-    p.add_argument("--max-states", type=int, default=None, metavar="N",
-                   help="stop a point's search after N distinct states (its verdict: unknown)")
-    p.add_argument("--max-time", type=float, default=None, metavar="SECONDS",
-                   help="stop a point's search after SECONDS (its verdict: unknown)")
-    p.add_argument("--max-depth", type=int, default=None, metavar="N",
-                   help="do not expand worlds deeper than N steps")
-    p.add_argument("--no-contract-checks", dest="verify", action="store_false",
-                   help="skip the node-contract checks of every point (as `check`)")
 
 
 def sweep_command(args: argparse.Namespace) -> int:
@@ -133,9 +118,8 @@ def _prepare(args: argparse.Namespace) -> tuple[tuple[Axis, ...], SweepSettings,
     out = Path(args.out or Path("out") / f"sweep-{scenario.stem}")
     settings = SweepSettings(
         str(scenario.resolve()), tuple((a.name, a.target) for a in (*axes, *fixed)),
-        fixed=tuple((a.name, a.values[0]) for a in fixed), search=args.search,
-        reduction=args.reduction, max_states=args.max_states, max_time_s=args.max_time,
-        max_depth=args.max_depth, verify=args.verify, trace_dir=str(out / "traces"))
+        fixed=tuple((a.name, a.values[0]) for a in fixed), **SearchChoices.of(args).fields(),
+        trace_dir=str(out / "traces"))
     return axes, settings, out
 
 

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, final
 
+from twinfleet.checker.options import ReductionMode, SearchOrder
 from twinfleet.sweep.grid import Point, Target, format_value
 
 
@@ -26,8 +27,8 @@ class SweepSettings:
     scenario: str  # a resolved scenario file
     targets: tuple[tuple[str, Target], ...]  # each axis name and what it sets
     fixed: Point = ()  # settings every point shares (`sweep c2a '*.allow_unsafe_speed:=true'`)
-    search: str | None = None
-    reduction: str | None = None
+    search: SearchOrder | None = None
+    reduction: ReductionMode | None = None
     max_states: int | None = None
     max_time_s: float | None = None
     max_depth: int | None = None
