@@ -51,3 +51,19 @@ def test_a_message_sent_in_the_window_draws_the_start_up_latency() -> None:
     assert chooser.branch(60, LatencySite("/x", 0, sent=10)) == 50
     assert chooser.branch(60, LatencySite("/x", 0, sent=20)) == 5
     assert chooser.branch(60, LatencySite("/x", 0)) == 5
+
+
+def test_calibrate_names_startup_ms_when_the_window_took_every_message(tmp_path: Path,
+                                                                       capsys) -> None:
+    from twinfleet.cli import main
+
+    log = tmp_path / "fast.events.jsonl"  # a protocol over within 20 fleet ms
+    lines = [{"format": EVENTS_FORMAT, "kind": "header", "node": "sink", "time_scale": 1.0}]
+    lines += [{"node": "sink", "kind": "delivery", "topic": "/x", "stamp": s, "t": s + 2}
+              for s in range(0, 16, 2)]
+    log.write_text("\n".join(json.dumps(x) for x in lines) + "\n")
+    assert main(["calibrate", str(log), "-o", str(tmp_path / "t.yaml")]) == 2
+    err = capsys.readouterr().err
+    assert "all 8 handled messages with a send stamp were sent in the first 20 fleet ms" in err
+    assert "--startup-ms" in err
+    assert main(["calibrate", str(log), "-o", str(tmp_path / "t.yaml"), "--startup-ms", "0"]) == 0

@@ -88,6 +88,11 @@ def calibrate(paths: Sequence[str | Path], *, min_samples: int = 30,
         raise TimingError(f"calibrate: the logs were recorded at different time scales "
                           f"({', '.join(f'{s:g}' for s in sorted(scales))}); fit each apart")
     pooled = [x for samples in latency.values() for x in samples]
+    if not pooled and startup:  # every stamped message fell in the start-up window
+        raise TimingError(f"calibrate: all {len(startup)} handled messages with a send stamp "
+                          f"were sent in the first {startup_ms} fleet ms, which --startup-ms "
+                          f"{startup_ms} sets apart as start-up: a protocol that ends that "
+                          "early needs a smaller --startup-ms (0: none)")
     if not pooled:
         raise TimingError("calibrate: the logs hold no handled message with a send stamp")
     own = tuple((name, Histogram.fit(samples)) for name, samples in sorted(latency.items())

@@ -258,27 +258,33 @@ def replay_command(args: argparse.Namespace) -> int:
     """Run `replay` for parsed arguments; return the exit code."""
     from twinfleet.checker.driver import system_for_trace
     from twinfleet.checker.trace import NondeterminismError, replay
-    from twinfleet.runtime.contract.tracefile import load_trace
+    from twinfleet.runtime.contract.tracefile import code_changes, load_trace
 
+    changed: list[str] = []
     try:
         trace = load_trace(args.trace)
         if trace.get("scenario_changed"):  # say so before a replay that may then diverge
             print(f"twinfleet replay: warning: {trace['scenario_changed']}", file=sys.stderr)
         system, props = system_for_trace(trace)
+        changed = code_changes(trace, {cfg.name: cfg.cls for cfg in system.scenario.nodes})
+        for line in changed:
+            print(f"twinfleet replay: warning: {line}", file=sys.stderr)
         result = replay(system, trace, props)
     # mypy reads no exception types out of a starred tuple (they are all Exception classes)
     except (*bad_input_errors(), NondeterminismError) as exc:  # type: ignore[misc]
-        print(f"twinfleet replay: {args.trace}: {exc}", file=sys.stderr)
+        print(f"twinfleet replay: {args.trace}: {''.join(f'{c}; ' for c in changed)}{exc}",
+              file=sys.stderr)
         return EXIT_BAD_INPUT
     except (KeyError, TypeError, ValueError, IndexError) as exc:  # fits no node of the scenario
-        print(f"twinfleet replay: {args.trace}: the trace does not fit its scenario "
-              f"({type(exc).__name__}: {exc})", file=sys.stderr)
+        print(f"twinfleet replay: {args.trace}: {''.join(f'{c}; ' for c in changed)}the trace "
+              f"does not fit its scenario ({type(exc).__name__}: {exc})", file=sys.stderr)
         return EXIT_BAD_INPUT
     if result.confirmed:
         print(f"replay confirmed: {result.property} violated after {result.steps} steps "
               f"({result.message})")
         return EXIT_FAILED
-    print(f"replay NOT confirmed: {result.property}: {result.message}")
+    cause = "".join(f"{line}; " for line in changed)  # the likely cause, first
+    print(f"replay NOT confirmed: {cause}{result.property}: {result.message}")
     return EXIT_BAD_INPUT  # not confirmed: no answer (module docstring)
 
 

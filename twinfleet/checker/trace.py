@@ -37,7 +37,7 @@ from twinfleet.checker.system import System
 from twinfleet.checker.transition import Action, Crash, Drop, RunEvent, Step, Transition
 from twinfleet.checker.world import ENVIRONMENT, World
 from twinfleet.runtime.contract.kinds import EventKind
-from twinfleet.runtime.contract.tracefile import TRACE_FORMAT
+from twinfleet.runtime.contract.tracefile import TRACE_FORMAT, code_sha256
 
 
 class NondeterminismError(RuntimeError):
@@ -108,6 +108,7 @@ def build_trace(system: System, violation: PropertyViolation, path: Counterexamp
         "global_priority": system.rules.global_priority,
         "debug_state": system.debug_state,
         "check_determinism": system.check_determinism,
+        "node_code": {cfg.name: code_sha256(cfg.cls) for cfg in system.scenario.nodes},
         "search": search,
         "property": {"name": violation.property, "kind": violation.kind},
         "shape": violation.shape,

@@ -6,7 +6,9 @@ not the messages a step sent. `walk` re-executes the trace on its system (as
 events off its transition, so every step comes out whole: its time, the node
 and handler that ran, the message it handled (kind, topic or service,
 sender), the messages it sent (to whom, on what, due when), the states it
-changed, its logs, and at the end the property the trace violates.
+changed, its logs, the faults it injected (a message dropped or duplicated, a
+node crashed: what the checker chose, so the reader sees why a message never
+arrived), and at the end the property the trace violates.
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ class Shown:
     changed: Mapping[str, Any]
     logs: tuple[str, ...]
     failure: str | None
+    faults: tuple[str, ...] = ()  # what the step's fault branches did: drops, duplicates, crashes
 
 
 @final
@@ -115,7 +118,8 @@ def _shown(system: System, names: Mapping[tuple[int, str], str], rec: Mapping[st
         names.get((ev.target, ev.method), "") if ev.kind.is_message else "", rec["args"],
         tuple(_sent(system, names, e) for e in sent), dict(rec.get("changed") or {}),
         tuple(_log_line(log) for log in rec.get("logs") or ()),
-        None if failure is None else f"{failure.get('kind', '')}: {failure.get('message', '')}")
+        None if failure is None else f"{failure.get('kind', '')}: {failure.get('message', '')}",
+        tuple(str(f) for f in rec.get("faults") or ()))
 
 
 def _sent(system: System, names: Mapping[tuple[int, str], str], e: Event) -> Sent:
@@ -136,6 +140,8 @@ def text_lines(shown: Walk) -> list[str]:
     out = [f"counterexample to {shown.property} ({shown.property_kind}), "
            f"{len(shown.steps)} steps; nodes: {', '.join(shown.nodes)}"]
     states = dict(shown.initial)
+    if shown.cycle_start == 0:
+        out.append("      (the cycle starts at the initial world)")
     for step in shown.steps:
         out += _step_lines(step, states)
         states.update(step.changed)
@@ -154,6 +160,7 @@ def _step_lines(step: Shown, states: Mapping[str, Any]) -> list[str]:
         where = f" on {s.name}" if s.name else ""
         lines.append(f"        sends {s.kind}{where} to {s.target}.{s.handler} "
                      f"(due t={s.due} ms)" + (f": {s.args}" if s.args else ""))
+    lines += [f"        FAULT {fault}" for fault in step.faults]
     for node, state in step.changed.items():
         lines.append(f"        state {node}: {_difference(states.get(node), state)}")
     lines += [f"        log {line}" for line in step.logs]

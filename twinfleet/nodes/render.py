@@ -221,7 +221,7 @@ def trace_views(scenario: Any, trace: Mapping[str, Any], *, scan_of: str | None 
     """One view per step of a checker trace (JSON), the last one showing the violation.
 
     Without `every_step`, only steps in which a robot's cell or heading changed,
-    and the last step, get a frame.
+    a fault was injected (a dropped message, a crash), and the last step, get a frame.
     """
     states = {name: _as_state(s) for name, s in trace["initial"]["states"].items()}
     views = [states_view(scenario, states, scan_of=scan_of, caption="t=0 ms: start")]
@@ -234,13 +234,14 @@ def trace_views(scenario: Any, trace: Mapping[str, Any], *, scan_of: str | None 
             moved |= old is None or getattr(old, "cell", None) != value.get("cell") \
                 or getattr(old, "dir", None) != value.get("dir")
         last = k == len(steps) - 1
-        if not (moved or every_step or last):
+        if not (moved or every_step or last or step.get("faults")):
             continue
         collision = None
         server = next((s for s in states.values() if hasattr(s, "collided")), None)
         if last and server is not None and server.collided:
             collision = tuple(server.collided[-1])
         caption = f"t={step['time']} ms  step {step['index']}: {step['node']}.{step['handler']}"
+        caption += "".join(f"  FAULT {fault}" for fault in step.get("faults") or ())
         if last:
             caption += f"  -- {trace.get('message', '')}"
         views.append(states_view(scenario, states, collision=collision, scan_of=scan_of,

@@ -15,11 +15,15 @@ it rewrites ``scenario`` to the file found and, when that file's digest is not
 the recorded one, sets ``scenario_changed`` to a one-line note the commands
 print (the scenario was edited since the trace was written, so the replay may
 diverge). ``params`` lists the parameter overrides the trace was found with.
+``node_code`` maps each node to the SHA-256 of its class's module source
+(`code_sha256`), so that a replay of edited node code says so first
+(`code_changes`) instead of only diverging.
 """
 
 from __future__ import annotations
 
 import hashlib
+import inspect
 import json
 import os
 from collections.abc import Mapping
@@ -47,6 +51,29 @@ def write_trace(trace: Mapping[str, Any], path: str | Path) -> None:
 def file_sha256(path: str | Path) -> str:
     """The SHA-256 of a file's bytes, in hex."""
     return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+def code_sha256(cls: type) -> str | None:
+    """The SHA-256 of the source file of the module that defines `cls` (None: built-in or
+    defined where no file holds it): a node's code, as a trace records it."""
+    try:
+        source = inspect.getsourcefile(cls)
+    except TypeError:
+        return None
+    return file_sha256(source) if source and Path(source).is_file() else None
+
+
+def code_changes(trace: Mapping[str, Any], classes: Mapping[str, type]) -> list[str]:
+    """One line per node (`classes`: node name → class, as loaded now) whose module's source
+    differs from the one the trace recorded (``node_code``): a replay of changed code may
+    diverge for that reason alone, so commands say it before anything else."""
+    out = []
+    for name, recorded in (trace.get("node_code") or {}).items():
+        cls = classes.get(name)
+        if cls is not None and recorded and code_sha256(cls) != recorded:
+            out.append(f"node {name}'s code changed since the trace "
+                       f"({inspect.getsourcefile(cls)})")
+    return out
 
 
 def _locate_scenario(trace: dict[str, Any], path: Path) -> None:

@@ -5,7 +5,8 @@ nodes, steps with what each handled and sent, changed states, the violated
 property), so any system can be drawn, with or without a map. `layout` turns
 it into drawing primitives — one lifeline per node, one row per step with a
 box on the node that ran, an arrow from the step that sent a message to the
-step that handled it, the fields that changed beside the box, the violated
+step that handled it, the fields that changed and the faults injected (a
+message dropped or duplicated, a node crashed) beside the box, the violated
 property at the foot in red — and `to_svg` / `to_png` paint the same
 primitives, so the two files always show the same chart.
 """
@@ -129,6 +130,9 @@ def _step_shapes(step: Mapping[str, Any], y: float, x: Mapping[str, float],
     note = "; ".join(f"{n}: {_fields(d)}" for n, d in step.get("changed", {}).items())
     if step.get("failure"):
         note = f"FAILED {step['failure']}" + (f"; {note}" if note else "")
+    faults = "; ".join(f"FAULT {f}" for f in step.get("faults") or ())
+    if faults:  # first: a dropped message is why an arrow never comes
+        note = faults + (f"; {note}" if note else "")
     if note:
         right = max(x.values()) + COLUMN_PX / 2
         out.append(Text(right, y - 6, _cut(note, 60), RED if violating else BLACK))

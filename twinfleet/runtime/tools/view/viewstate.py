@@ -360,7 +360,8 @@ def trace_document(path: str | Path) -> dict[str, Any]:
     scenario = load_scenario(trace["scenario"], {"profile": trace.get("profile", "fixed")})
     scene = load_scene(scenario.scene) if scenario.scene else None
     initial: Mapping[str, Any] = trace["initial"]["states"]
-    keep = ("index", "time", "node", "handler", "kind", "args", "changed", "logs", "failure")
+    keep = ("index", "time", "node", "handler", "kind", "args", "changed", "logs", "failure",
+            "faults")  # the faults too: a dropped message is why something never arrives
     steps = [{k: s.get(k) for k in keep} for s in trace["steps"]]
     return {"kind": "trace", "file": str(path), "scenario": scenario.name,
             "message": trace.get("message", ""), "property": trace.get("property"),

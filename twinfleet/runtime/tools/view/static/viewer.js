@@ -384,6 +384,7 @@
       }
     }
     for (const log of s.logs || []) lines.push(`  log ${JSON.stringify(log)}`);
+    for (const fault of s.faults || []) lines.push(`  FAULT ${fault}`);
     if (s.failure) lines.push(`  FAILURE ${JSON.stringify(s.failure)}`);
     if (k === view.trace.steps.length && view.trace.message) lines.push(`→ ${view.trace.message}`);
     return lines.join("\n");
