@@ -98,3 +98,27 @@ def test_a_lasso_shows_the_message_dropped_on_its_cycle(tmp_path, capsys):
     out = capsys.readouterr().out.splitlines()
     cycle = out.index("      (the cycle starts at the initial world)")
     assert "        FAULT /req to b: dropped" in out[cycle:], out
+
+
+def test_the_progress_line_says_when_the_reduction_restarts(tmp_path, capsys):
+    from tests.checker.tpc import tpc_scenario
+    from twinfleet.checker.commands import _progress
+    from twinfleet.checker.driver import load
+    from twinfleet.checker.outcome import Limits
+    from twinfleet.checker.properties import PropertySet
+    from twinfleet.checker.reduction import plan
+    from twinfleet.checker.search import Search
+    from twinfleet.checker.system import System
+
+    scenario = load(tpc_scenario(tmp_path, latency=(0, 2)))
+    props = PropertySet.from_scenario(scenario)
+    system = System(scenario, properties=props)
+    reduction, _ = plan(system, props, "bfs", None)
+    seen = []
+    Search(system, props, Limits(), progress=seen.append, progress_interval=0,
+           reduction=reduction).run("bfs")
+    before = next(k for k, s in enumerate(seen) if s.restarts)
+    assert seen[before].states < seen[before - 1].states  # the counts went back...
+    _progress(seen[before])
+    assert "(restart 1: the reduction learned a send and searches again from scratch" \
+        in capsys.readouterr().err  # ...and the line says why

@@ -295,3 +295,15 @@ def test_an_operators_refused_input_is_named_and_leaves_the_verdict_alone():
     assert v.status == Status.HOLDS, v
     assert v.details[-1] == ("external input: counter refused 2 samples an operator's "
                              "command sent (e.g. `twinfleet topic pub --force`)")
+
+
+@pytest.mark.parametrize(("prop", "shown"), [
+    ({"name": "small", "kind": "invariant", "expr": "now < 120 or counter.count < 3"},
+     "counter"),
+    ({"name": "e", "kind": "eventually", "expr": "nodes['other'].count > 99"}, "other"),
+])
+def test_a_violation_shows_the_states_its_property_reads_and_no_others(prop, shown):
+    v = judged(prop)
+    assert v.status is Status.VIOLATED, v
+    states = [d.split(":")[0] for d in v.details if d.endswith(")") and ": " in d]
+    assert states == [shown], v.details

@@ -62,6 +62,7 @@ class SearchStatistics:
     collision_probability: float = 0.0
     peak_frontier: int = 0
     attempt_s: float | None = None  # seconds since a reduced search last started again
+    restarts: int = 0  # times a reduced search started again from scratch (counts reset)
 
     @property
     def attempt_transitions_per_s(self) -> float:

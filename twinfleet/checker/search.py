@@ -136,7 +136,8 @@ class Search:
             self._elapsed_before + time.monotonic() - self.guard.started, peak_rss_mb(),
             store.nbytes(), store.digest_bits, store.collision_probability(hashed),
             c.peak_frontier,
-            None if self._attempt is None else time.monotonic() - self._attempt)
+            None if self._attempt is None else time.monotonic() - self._attempt,
+            0 if self.reduction is None else self.reduction.stats.restarts)
 
     def run(self, strategy: str = "bfs", *, walks: int = 100, seed: int = 0) -> Outcome:
         """Search with `strategy` ("bfs", "dfs" or "random") until a verdict or a limit."""

@@ -72,6 +72,7 @@ from twinfleet.runtime.scenario.property_eval import (
     parse_expression,
     time_limit,
 )
+from twinfleet.runtime.scenario.property_fields import nodes_read
 from twinfleet.runtime.scenario.spec import PropertyConfig, Scenario
 
 # The launcher's result line says these words (tests and users read them).
@@ -307,7 +308,15 @@ class LiveJudge:
         return None
 
     def _read_by(self, w: _Watch) -> Sequence[str]:
-        return self.names if w.reads is None else [n for n in self.names if n in w.reads]
+        """The nodes whose states a report of `w` shows: those its expression reads (a
+        property reading `now` is evaluated on every report, but reads no more nodes)."""
+        reads = w.reads if w.reads is not None or w.expr is None else \
+            nodes_read(w.expr.source, self.names)
+        return self.names if reads is None else [n for n in self.names if n in reads]
+
+    def _states(self, w: _Watch) -> tuple[str, ...]:
+        """The states of the nodes `w` reads, as a violation report shows them."""
+        return tuple(f"{n}: {repr(self.states[n])[:_STATE_CHARS]}" for n in self._read_by(w))
 
     def _violated(self, name: str, summary: str, report: StateReport | None,
                   nodes: Sequence[str]) -> None:
@@ -374,7 +383,8 @@ class LiveJudge:
             w = unmet[0]
             assert w.expr is not None
             return Verdict(Status.VIOLATED, f"{w.cfg.name} violated: {w.expr.source!r} never "
-                           f"held before the run ended ({end.reason})", self._unjudged(),
+                           f"held before the run ended ({end.reason})",
+                           (f"at the end, t={self.now} ms", *self._states(w), *self._unjudged()),
                            w.cfg.name)
         judged = [w.cfg.name for w in self.watches if w.cfg.kind in ("invariant", "eventually",
                                                                     "within")]

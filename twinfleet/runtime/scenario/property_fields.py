@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import ast
 import dataclasses
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from typing import Any
 
 from twinfleet.runtime.scenario.spec import Scenario, ScenarioError
@@ -39,6 +39,23 @@ def _node_reads(tree: ast.AST, names: frozenset[str]) -> Iterator[tuple[str, str
               and base.value.id == "nodes" and isinstance(base.slice, ast.Constant)
               and base.slice.value in names):
             yield str(base.slice.value), item.attr
+
+
+def nodes_read(source: str, node_names: Sequence[str]) -> frozenset[str] | None:
+    """The nodes whose states an expression reads, by name or as ``nodes['NAME']``; None
+    when it reads `nodes` any other way (a loop over it, a computed key): then any node.
+    ``now`` reads no node. A report of a violation shows these nodes' states."""
+    try:
+        tree = ast.parse(source, mode="eval")
+    except SyntaxError:
+        return None
+    names = frozenset(node_names) - _bound_names(tree)
+    read = {n.id for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id in names}
+    uses = sum(1 for n in ast.walk(tree) if isinstance(n, ast.Name) and n.id == "nodes")
+    keyed = [str(s.slice.value) for s in ast.walk(tree) if isinstance(s, ast.Subscript)
+             and isinstance(s.value, ast.Name) and s.value.id == "nodes"
+             and isinstance(s.slice, ast.Constant) and s.slice.value in names]
+    return None if uses > len(keyed) else frozenset(read | set(keyed))
 
 
 def _bound_names(tree: ast.AST) -> set[str]:
