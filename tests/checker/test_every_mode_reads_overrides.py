@@ -97,3 +97,18 @@ def test_a_statistical_trace_records_its_overrides_and_replays_with_them(tmp_pat
     assert traces and json.loads(Path(traces[0]).read_text())["params"] == ["vote_timeout_ms:=1"]
     assert main(["replay", traces[0]]) == 1
     assert "replay confirmed" in capsys.readouterr().out
+
+
+def test_experiment_checks_with_the_overrides_and_refuses_unknown_ones(tmp_path, capsys):
+    out = tmp_path / "exp"
+    common = ["--runs", "0", "--predict", "0", "--semantics", "ros", "--out", str(out)]
+    assert main(["experiment", "c1a", "r1.speed:=0.4", *common]) == 0
+    report = json.loads((out / "experiment.json").read_text())
+    assert report["options"]["params"] == ["r1.speed:=0.4"]
+    row = report["scenarios"]["c1a"]["row"]
+    assert row["parameters"].startswith(".4/")  # r1's speed, 0.5 in the file
+    capsys.readouterr()
+    assert main(["check", "c1a", "r1.speed:=0.4", "--semantics", "ros", "--json"]) == 0
+    assert row["ros_states"] == _json(capsys)["states"]
+    assert main(["experiment", "c1a", "r1.sped:=0.4", *common]) == 2
+    assert "did you mean 'speed'?" in capsys.readouterr().err

@@ -29,7 +29,11 @@ from twinfleet.agreement.table import to_markdown
 from twinfleet.checker.commands import add_replay_parser, replay_command
 from twinfleet.checker.options import Semantics, add_check_arguments
 from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-from twinfleet.runtime.scenario.overrides import add_override_arguments
+from twinfleet.runtime.scenario.overrides import (
+    add_override_arguments,
+    override_words,
+    split_words,
+)
 
 _SEMANTICS = {"both": (Semantics.ROS, Semantics.REBECA), **{s.value: (s,) for s in Semantics}}
 
@@ -86,7 +90,10 @@ def _experiment_parser(subparsers: Any) -> None:
         description="For each scenario: run the checker (both semantics by default) and N live "
         "runs with seeds S, S+1, ..., then print the paper's Table 4/5 rows with the paper's own "
         "figures beside ours, and write them as Markdown and CSV into --out.")
-    p.add_argument("scenarios", nargs="+", metavar="SCENARIO", help="scenario YAML files")
+    p.add_argument("scenarios", nargs="+", metavar="SCENARIO [NAME:=VALUE]",
+                   help="scenario YAML files, and parameter overrides for all of them "
+                   "(r1.speed:=0.4, as `check` takes them)")
+    add_override_arguments(p, words=False)
     p.add_argument("--runs", type=int, default=20, metavar="N",
                    help="live runs per scenario; 0 runs the checker only (default: %(default)s)")
     p.add_argument("--time-scale", type=float, default=DEFAULT_TIME_SCALE, metavar="K",
@@ -147,16 +154,25 @@ def experiment_command(args: argparse.Namespace) -> int:
         except TimingError as exc:
             print(f"twinfleet experiment: --timing: {exc}", file=sys.stderr)
             return EXIT_BAD_INPUT
+    scenarios, words = split_words(args.scenarios)
+    try:
+        params = tuple(override_words("experiment", words, args.param))
+    except ValueError as exc:
+        print(f"twinfleet {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    if not scenarios:
+        print("twinfleet experiment: give at least one scenario file", file=sys.stderr)
+        return EXIT_BAD_INPUT
     options = ExperimentOptions(runs=args.runs, time_scale=args.time_scale,
                                 semantics=_SEMANTICS[args.semantics], out=Path(args.out),
                                 seed=args.seed, max_states=args.max_states,
                                 max_time_s=args.max_time, horizon_s=args.horizon,
                                 stop_on_collision=not args.keep_going, predict=args.predict,
                                 timing=args.timing, confidence=args.confidence,
-                                workers=args.workers)
+                                workers=args.workers, params=params)
     command = command_line(args)
     try:
-        exp = run_experiment(args.scenarios, options, command=command)
+        exp = run_experiment(scenarios, options, command=command)
     except (*bad_input_errors(), ValueError) as exc:
         print(f"twinfleet experiment: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -170,7 +186,8 @@ def experiment_command(args: argparse.Namespace) -> int:
 
 def command_line(args: argparse.Namespace) -> str:
     """The `twinfleet experiment` command that reproduces these arguments, every option spelled."""
-    words = ["twinfleet", "experiment", *args.scenarios, "--runs", str(args.runs),
+    words = ["twinfleet", "experiment", *args.scenarios, *(f"--param={p}" for p in args.param),
+             "--runs", str(args.runs),
              "--time-scale", f"{args.time_scale:g}", "--semantics", args.semantics,
              "--out", args.out]
     for flag, value in (("--seed", args.seed), ("--max-states", args.max_states),

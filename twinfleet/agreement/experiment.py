@@ -41,7 +41,8 @@ from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.checker.options import Semantics
 from twinfleet.checker.outcome import INTERRUPTED_REASON, SearchStatistics
 from twinfleet.runtime.contract.kinds import Status
-from twinfleet.runtime.scenario.spec import Scenario, ScenarioError, load_scenario
+from twinfleet.runtime.scenario.overrides import load_with_params
+from twinfleet.runtime.scenario.spec import Scenario, ScenarioError
 
 SEMANTICS = (Semantics.ROS, Semantics.REBECA)
 _CHECK_PROGRESS_S = 5.0
@@ -67,6 +68,9 @@ class ExperimentOptions:
         timing: the timing model file of the prediction (None: the loopback model shipped).
         confidence: confidence of the predicted interval.
         workers: local processes for the prediction's simulations.
+        params: parameter overrides (``r1.speed:=0.4``) for every scenario: written into a
+            copy of it under out/scenarios/with-params, which every check, the prediction
+            and every live run then read, so all of them run the same values.
     """
 
     runs: int = 20
@@ -83,6 +87,7 @@ class ExperimentOptions:
     timing: str | None = None
     confidence: float = 0.99
     workers: int = 1
+    params: tuple[str, ...] = ()  # parameter overrides of every scenario, as `check` takes them
 
     def decisive(self) -> dict[str, Any]:
         """The options that change a case's checks and live runs (what a kept case must
@@ -90,7 +95,8 @@ class ExperimentOptions:
         return {"runs": self.runs, "time_scale": self.time_scale,
                 "semantics": list(self.semantics), "seed": self.seed,
                 "max_states": self.max_states, "max_time_s": self.max_time_s,
-                "horizon_s": self.horizon_s, "stop_on_collision": self.stop_on_collision}
+                "horizon_s": self.horizon_s, "stop_on_collision": self.stop_on_collision,
+                **({"params": list(self.params)} if self.params else {})}
 
     def predictive(self) -> dict[str, Any]:
         """The options that change a case's prediction besides: the timing model's
@@ -135,9 +141,10 @@ def stderr_progress(text: str) -> None:
     print(f"[experiment] {text}", file=sys.stderr, flush=True)
 
 
-def load_experiment_scenario(path: str | Path) -> Scenario:
-    """Load a scenario and insist it is a robot fleet (a map server with robots)."""
-    scenario = load_scenario(path)
+def load_experiment_scenario(path: str | Path, params: Sequence[str] = ()) -> Scenario:
+    """Load a scenario (with parameter overrides `params`) and insist it is a robot fleet
+    (a map server with robots)."""
+    scenario = load_with_params(path, params)
     if not robot_names(scenario):
         raise ScenarioError(f"{path}: nodes: the experiment needs a map server node with a "
                             "`robots` list (a robot fleet); this scenario has none")
@@ -166,7 +173,8 @@ def run_experiment(paths: Sequence[str | Path], options: ExperimentOptions, *,
     Raises:
         ScenarioError: a scenario is invalid (raised before anything runs).
     """
-    scenarios = [(p, load_experiment_scenario(p)) for p in paths]
+    scenarios = [_with_params(p, load_experiment_scenario(p, options.params), options)
+                 for p in paths]
     exp = Experiment(options, command)
     out = options.out
     (out / "logs").mkdir(parents=True, exist_ok=True)
@@ -198,6 +206,16 @@ def run_experiment(paths: Sequence[str | Path], options: ExperimentOptions, *,
         progress("interrupted: writing what was done")
     write_outputs(exp)
     return exp
+
+
+def _with_params(path: str | Path, scenario: Scenario,
+                 options: ExperimentOptions) -> tuple[str | Path, Scenario]:
+    """The scenario every part of a case reads: a copy with the overrides written in."""
+    if not options.params:
+        return path, scenario
+    copy = private_copy(scenario, options.out / "scenarios" / "with-params", options.params)
+    assert copy.path is not None
+    return copy.path, copy
 
 
 def _keep(exp: Experiment, row: Row, key: str, predicted: str) -> None:
@@ -407,7 +425,8 @@ def json_report(exp: Experiment) -> dict[str, Any]:
             "options": {"runs": o.runs, "time_scale": o.time_scale, "semantics": list(o.semantics),
                         "seed": o.seed, "max_states": o.max_states, "max_time_s": o.max_time_s,
                         "horizon_s": o.horizon_s, "predict": o.predict, "timing": o.timing,
-                        "confidence": o.confidence, "workers": o.workers},
+                        "confidence": o.confidence, "workers": o.workers,
+                        "params": list(o.params)},
             "scenarios": scenarios}
 
 

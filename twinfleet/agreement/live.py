@@ -21,7 +21,7 @@ import asyncio
 import contextlib
 import dataclasses
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from contextvars import ContextVar
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -38,6 +38,7 @@ from twinfleet.runtime.contract.messages import encode
 from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, free_port, run_fleet
 from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
+from twinfleet.runtime.scenario.overrides import load_with_params, overrides_doc
 from twinfleet.runtime.scenario.spec import Scenario, load_scenario
 
 REPORT_FACTORY = "twinfleet.agreement.live:timed_report_for"
@@ -177,8 +178,10 @@ class LiveRunResult:
         return data
 
 
-def private_copy(scenario: Scenario, directory: str | Path) -> Scenario:
-    """The scenario loaded from a copy in `directory`, its map path made absolute.
+def private_copy(scenario: Scenario, directory: str | Path,
+                 params: Sequence[str] = ()) -> Scenario:
+    """The scenario loaded from a copy in `directory`, its map path made absolute (and the
+    parameter overrides `params` written into it, `runtime.scenario.overrides`).
 
     Node processes are started with the scenario's path on their command line,
     and test suites find (and kill) a fleet's processes by that path; a copy
@@ -186,6 +189,9 @@ def private_copy(scenario: Scenario, directory: str | Path) -> Scenario:
     and freezes the file for the whole experiment.
     """
     doc = yaml.safe_load(Path(scenario.path).read_text())
+    if params:  # validated as every command validates them, then written in
+        load_with_params(scenario.path, params)
+        doc.update(overrides_doc(Path(scenario.path), params))
     if scenario.map_path is not None:
         doc["map"] = str(scenario.map_path)
     out = Path(directory) / Path(scenario.path).name

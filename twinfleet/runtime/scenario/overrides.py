@@ -28,11 +28,14 @@ if TYPE_CHECKING:
     from twinfleet.runtime.scenario.spec import Scenario
 
 
-def add_override_arguments(parser: argparse.ArgumentParser) -> None:
-    """Add the ``[NODE.]NAME:=VALUE`` words and ``--param`` to a command that takes a scenario."""
-    parser.add_argument("overrides", nargs="*", metavar="[NODE.]NAME:=VALUE",
-                        help="parameter overrides, ROS 2 style: r1.speed:=0.4 sets r1's speed, "
-                             "scan_rate_ms:=50 every node's (values are YAML)")
+def add_override_arguments(parser: argparse.ArgumentParser, *, words: bool = True) -> None:
+    """Add the ``[NODE.]NAME:=VALUE`` words and ``--param`` to a command that takes a scenario
+    (`words` False: only ``--param``, for a command whose own positional words take them,
+    `split_words`)."""
+    if words:
+        parser.add_argument("overrides", nargs="*", metavar="[NODE.]NAME:=VALUE",
+                            help="parameter overrides, ROS 2 style: r1.speed:=0.4 sets r1's "
+                                 "speed, scan_rate_ms:=50 every node's (values are YAML)")
     parser.add_argument("--param", action="append", default=[], metavar="[NODE.]NAME=VALUE",
                         help="a parameter override, as NAME:=VALUE (repeatable); `twinfleet "
                              "param get` shows the values in force in a running fleet")
@@ -49,6 +52,11 @@ def override_words(command: str, words: Sequence[str], flags: Sequence[str]) -> 
             raise ValueError(f"{command}: unexpected argument {word!r}; parameter overrides "
                              "look like r1.speed:=0.4")
     return [*words, *flags]
+
+
+def split_words(words: Sequence[str]) -> tuple[list[str], list[str]]:
+    """(the other words, the ``NAME:=VALUE`` overrides) of a list of positional words."""
+    return [w for w in words if ":=" not in w], [w for w in words if ":=" in w]
 
 
 def parse_param(text: str) -> tuple[str | None, str, Any]:
