@@ -56,3 +56,14 @@ class RunningFleet:
 
     def count(self, pattern: str) -> int:
         return len(re.findall(pattern, self.output()))
+
+
+def wait_for_line(proc: subprocess.Popen[str], text: str) -> None:
+    """Read `proc`'s stderr until a line holds `text` (fails the test if it ends first)."""
+    import pytest
+
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        if text in line:
+            return
+    pytest.fail(f"{text!r} never printed (exit {proc.poll()})")

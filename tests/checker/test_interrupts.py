@@ -17,6 +17,7 @@ import pytest
 from tests.checker.helpers import node, scenario
 from tests.checker.tpc import tpc_scenario
 from tests.support import ROOT, child_env
+from tests.support import wait_for_line as _wait_for_line
 
 pytestmark = pytest.mark.timeout(180)
 
@@ -32,14 +33,6 @@ def _twinfleet(*args: str) -> Iterator[subprocess.Popen[str]]:
         with contextlib.suppress(ProcessLookupError):
             proc.kill()
         proc.communicate(timeout=30)
-
-
-def _wait_for_line(proc: subprocess.Popen[str], text: str) -> None:
-    assert proc.stderr is not None
-    for line in proc.stderr:
-        if text in line:
-            return
-    pytest.fail(f"{text!r} never printed (exit {proc.poll()})")
 
 
 def _wait_for_file(proc: subprocess.Popen[str], path: Path) -> None:

@@ -24,6 +24,7 @@ import pytest
 
 from tests.cluster.test_distributed import assert_same_answer, safety_copy
 from tests.support import child_env
+from tests.support import wait_for_line as _wait_for
 from twinfleet.checker import CheckOptions, check
 from twinfleet.checker.checkpoint import CheckpointError
 from twinfleet.checker.cluster import engine_module
@@ -98,14 +99,6 @@ def _check_process(*args: str) -> subprocess.Popen[str]:
     return subprocess.Popen([sys.executable, "-m", "twinfleet", "check", *args],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env=child_env(), cwd=ROOT, start_new_session=True)
-
-
-def _wait_for(proc: subprocess.Popen[str], text: str) -> None:
-    assert proc.stderr is not None
-    for line in proc.stderr:
-        if text in line:
-            return
-    pytest.fail(f"{text!r} never printed (exit {proc.poll()})")
 
 
 def test_ctrl_c_stops_between_levels_with_a_checkpoint_that_resumes(tmp_path: Path) -> None:

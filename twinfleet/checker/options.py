@@ -114,7 +114,7 @@ class SearchChoices:
                    getattr(args, "verify", True))
 
     def fields(self) -> dict[str, Any]:
-        """The choices as keyword arguments (of `CheckOptions`, `SweepSettings`)."""
+        """The choices as keyword arguments of `CheckOptions`."""
         return {"search": self.search, "reduction": self.reduction,
                 "max_states": self.max_states, "max_time_s": self.max_time_s,
                 "max_depth": self.max_depth, "verify": self.verify}

@@ -38,10 +38,7 @@ def point_key(scenario: str, settings: SweepSettings, point: Point) -> str:
     """The cache key of one point (32 hex digits)."""
     record: dict[str, Any] = {
         "scenario": scenario, "point": [[n, v] for n, v in point],
-        "fixed": [[n, v] for n, v in settings.fixed],
-        "search": settings.search, "reduction": settings.reduction,
-        "max_states": settings.max_states, "max_time_s": settings.max_time_s,
-        "max_depth": settings.max_depth, "verify": settings.verify}
+        "fixed": [[n, v] for n, v in settings.fixed], **settings.check.fields()}
     text = json.dumps(record, sort_keys=True, default=repr)
     return hashlib.sha256(text.encode()).hexdigest()[:32]
 

@@ -118,7 +118,7 @@ def _prepare(args: argparse.Namespace) -> tuple[tuple[Axis, ...], SweepSettings,
     out = Path(args.out or Path("out") / f"sweep-{scenario.stem}")
     settings = SweepSettings(
         str(scenario.resolve()), tuple((a.name, a.target) for a in (*axes, *fixed)),
-        fixed=tuple((a.name, a.values[0]) for a in fixed), **SearchChoices.of(args).fields(),
+        fixed=tuple((a.name, a.values[0]) for a in fixed), check=SearchChoices.of(args),
         trace_dir=str(out / "traces"))
     return axes, settings, out
 
@@ -242,7 +242,8 @@ def _labels(point: Point) -> list[tuple[str, str]]:
 
 def _settings_record(settings: SweepSettings) -> dict[str, Any]:
     """What every point shared, for the JSON table."""
-    return {"fixed": dict(settings.fixed), "search": settings.search,
-            "reduction": settings.reduction, "max_states": settings.max_states,
-            "max_time_s": settings.max_time_s, "max_depth": settings.max_depth,
-            "contract_checks": settings.verify}
+    choices = settings.check
+    return {"fixed": dict(settings.fixed), "search": choices.search,
+            "reduction": choices.reduction, "max_states": choices.max_states,
+            "max_time_s": choices.max_time_s, "max_depth": choices.max_depth,
+            "contract_checks": choices.verify}

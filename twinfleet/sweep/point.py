@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, final
 
-from twinfleet.checker.options import ReductionMode, SearchOrder
+from twinfleet.checker.options import SearchChoices
 from twinfleet.sweep.grid import Point, Target, format_value
 
 
@@ -27,12 +27,7 @@ class SweepSettings:
     scenario: str  # a resolved scenario file
     targets: tuple[tuple[str, Target], ...]  # each axis name and what it sets
     fixed: Point = ()  # settings every point shares (`sweep c2a '*.allow_unsafe_speed:=true'`)
-    search: SearchOrder | None = None
-    reduction: ReductionMode | None = None
-    max_states: int | None = None
-    max_time_s: float | None = None
-    max_depth: int | None = None
-    verify: bool = True
+    check: SearchChoices = SearchChoices()  # how every point is searched, as `check` takes it
     trace_dir: str | None = None  # where a violating point's trace goes (replayable)
 
 
@@ -101,10 +96,7 @@ def _checked(settings: SweepSettings, point: Point, name: str) -> PointResult:
     trace_out = None
     if settings.trace_dir and name:
         trace_out = str(Path(settings.trace_dir) / f"{name}.trace.json")
-    options = CheckOptions(search=settings.search, reduction=settings.reduction,
-                           max_states=settings.max_states, max_time_s=settings.max_time_s,
-                           max_depth=settings.max_depth, verify=settings.verify,
-                           profile=chosen[Target.PROFILE], semantics=chosen[Target.SEMANTICS],
+    options = CheckOptions(**settings.check.fields(), profile=chosen[Target.PROFILE], semantics=chosen[Target.SEMANTICS],
                            params=tuple(params), trace_out=trace_out)
     check_block = {n.removeprefix("check."): v for n, v in settings.fixed + point
                    if targets[n] is Target.CHECK}
