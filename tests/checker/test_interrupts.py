@@ -93,3 +93,15 @@ def test_launch_reports_sigterm_as_143(reason, code):
     from twinfleet.runtime.fleet.fleet_result import FleetResult
 
     assert FleetResult("f", "tcp/127.0.0.1:7447", reason, {}, ()).exit_code == code
+
+
+@pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_sweep_stops_saying_what_is_cached(tmp_path, sig, code):
+    out = tmp_path / "sweep"
+    with _twinfleet("sweep", str(_endless(tmp_path)), "--param", "c.modulo=3,0", "--workers",
+                    "1", "--out", str(out)) as proc:
+        _wait_for_line(proc, "[sweep] 1/2")  # modulo 3 finished; modulo 0 never does
+        proc.send_signal(sig)
+        out_text, err = proc.communicate(timeout=60)
+    assert proc.returncode == code, (out_text, err)
+    assert f"interrupted; the finished points are cached under {out / 'points'}" in err

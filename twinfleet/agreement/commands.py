@@ -28,7 +28,13 @@ from twinfleet.agreement import DEFAULT_TIME_SCALE
 from twinfleet.agreement.table import to_markdown
 from twinfleet.checker.commands import add_replay_parser, replay_command
 from twinfleet.checker.options import Semantics, add_check_arguments
-from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
+from twinfleet.runtime.contract.kinds import (
+    EXIT_BAD_INPUT,
+    EXIT_FAILED,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_TERMINATED,
+)
 from twinfleet.runtime.scenario.overrides import (
     add_override_arguments,
     override_words,
@@ -179,8 +185,8 @@ def experiment_command(args: argparse.Namespace) -> int:
     print(to_markdown(exp.rows, options.semantics), end="")
     print(f"wrote {options.out / 'experiment.md'}, {options.out / 'experiment.csv'}, "
           f"{options.out / 'experiment.json'}; node output in {options.out / 'logs'}")
-    if exp.interrupted:
-        return EXIT_INTERRUPTED
+    if exp.interrupted:  # a live fleet takes the signal itself: SIGTERM is 143 there too
+        return EXIT_TERMINATED if exp.stopped_by.startswith("SIGTERM") else EXIT_INTERRUPTED
     return EXIT_FAILED if exp.contradictions else EXIT_OK
 
 

@@ -124,6 +124,7 @@ class Experiment:
     predictions: dict[str, dict[str, int | None]] = field(default_factory=dict)
     retried: list[tuple[str, int, str]] = field(default_factory=list)
     interrupted: bool = False
+    stopped_by: str = ""  # the end reason of the live run a signal stopped ("SIGTERM ...")
     started: float = field(default_factory=time.time)
 
     @property
@@ -201,8 +202,9 @@ def run_experiment(paths: Sequence[str | Path], options: ExperimentOptions, *,
             _predict(exp, row, path, progress)
             _live(exp, row, path, scenario, progress)
             _keep(exp, row, key, predicted)
-    except (KeyboardInterrupt, _Interrupted):
+    except (KeyboardInterrupt, _Interrupted) as exc:
         exp.interrupted = True
+        exp.stopped_by = str(exc)
         progress("interrupted: writing what was done")
     write_outputs(exp)
     return exp
@@ -303,7 +305,7 @@ def _live(exp: Experiment, row: Row, path: str | Path, scenario: Scenario,
                                               timeout_s=opts.run_timeout_s, out=log,
                                               stop_on_collision=opts.stop_on_collision))
                 if record.interrupted:
-                    raise _Interrupted
+                    raise _Interrupted(record.reason)
                 if not record.killed_from_outside or attempt == _RETRIES:
                     break
                 exp.retried.append((row.case, seed, record.reason))

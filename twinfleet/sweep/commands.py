@@ -16,7 +16,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from twinfleet.checker.options import SearchChoices, SearchOrder, add_check_arguments
-from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT
+from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_INTERRUPTED
 from twinfleet.sweep.grid import Axis, GridError, Point, parse_axis, parse_grid, point_label
 
 if TYPE_CHECKING:
@@ -92,6 +92,10 @@ def sweep_command(args: argparse.Namespace) -> int:
     except bad_input_errors() as exc:
         print(f"twinfleet sweep: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except KeyboardInterrupt:  # Ctrl-C or SIGTERM: each finished point had its line
+        print(f"twinfleet sweep: interrupted; the finished points are cached under "
+              f"{out / 'points'}: the same command checks only the others", file=sys.stderr)
+        return EXIT_INTERRUPTED
     _write(args, axes, settings, results, out)
     return 0
 
