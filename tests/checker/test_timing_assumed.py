@@ -56,3 +56,14 @@ def test_every_exhaustive_summary_states_the_timing_it_assumed(tmp_path, capsys)
     timing = json.loads(capsys.readouterr().out)["timing"]
     assert timing["latency"] == {"default": [0, 0]} and timing["timer_lateness"] == [0, 0]
     assert "sets no check.latency" in timing["source"]
+
+
+def test_the_statistical_text_summary_states_the_latency_per_channel_and_its_source(tmp_path,
+                                                                                  capsys):
+    path = tpc_scenario(tmp_path, vote_timeout_ms=3, latency=None)
+    doc = yaml.safe_load(path.read_text())
+    doc["check"] = {"latency": {"default": [0, 2], "/vote": [1, 3]}}
+    path.write_text(yaml.safe_dump(doc))
+    main(["check", str(path), *SIMULATE, "--quiet"])
+    assert ("  assumed: latency 0-2 ms (/vote 1-3 ms), timers 0 ms late; from the scenario's "
+            "check.latency") in capsys.readouterr().out.splitlines()

@@ -197,6 +197,7 @@ class StatisticalResult:
                   f"{self.horizon_ms / 1000:g} s of fleet time, {self.elapsed_s:.1f} s on "
                   f"{self.workers} worker(s) ({rate:,.1f} simulations/s; {self.stopped})",
                   f"timing: {self.model}",
+                  *([f"  assumed: {self.timing.line()}"] if self.timing is not None else []),
                  f"P(violation within the horizon), {self.confidence:.0%} Clopper-Pearson:"]
         for e in self.estimates():
             lines.append(f"  {e.name:<24} {e.violations:>6} / {n:<6} {e.p:.4f} "
