@@ -20,6 +20,7 @@ from tests.support import ROOT, child_env
 from tests.support import wait_for_line as _wait_for_line
 
 pytestmark = pytest.mark.timeout(180)
+SLOW = pytest.mark.slow  # a subprocess each: a second or two
 
 
 @contextlib.contextmanager
@@ -48,6 +49,7 @@ def _endless(tmp_path: Path) -> Path:
                     properties=[{"name": "small", "kind": "invariant", "expr": "c.count >= 0"}])
 
 
+@SLOW
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_check_stops_with_its_summary(tmp_path, sig, code):
     with _twinfleet("check", str(_endless(tmp_path))) as proc:
@@ -58,6 +60,7 @@ def test_check_stops_with_its_summary(tmp_path, sig, code):
     assert "verdict: UNKNOWN: interrupted" in out and "states " in out, out
 
 
+@SLOW
 def test_a_quiet_check_prints_its_summary_on_sigterm(tmp_path):
     saved = tmp_path / "endless.ckpt"
     with _twinfleet("check", str(_endless(tmp_path)), "--quiet", "--json", "--checkpoint",
@@ -71,6 +74,7 @@ def test_a_quiet_check_prints_its_summary_on_sigterm(tmp_path):
     assert record["exit_code"] == 130  # the command's own: SIGTERM is reported as 143
 
 
+@SLOW
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_statistical_prints_the_estimate_so_far_and_writes_its_traces(tmp_path, sig, code):
     path = tpc_scenario(tmp_path, vote_timeout_ms=1)
@@ -95,6 +99,7 @@ def test_launch_reports_sigterm_as_143(reason, code):
     assert FleetResult("f", "tcp/127.0.0.1:7447", reason, {}, ()).exit_code == code
 
 
+@SLOW
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_sweep_stops_saying_what_is_cached(tmp_path, sig, code):
     out = tmp_path / "sweep"
