@@ -53,6 +53,14 @@ def test_replay_says_first_that_a_nodes_code_changed_since_the_trace(tmp_path, c
     first = replayed.stderr.splitlines()[0]
     assert first == ("twinfleet replay: warning: node t's code changed since the trace "
                      f"({tmp_path / 'honest_tally.py'})"), replayed.stderr
+    assert "node t's code changed since the trace" in replayed.stdout + replayed.stderr.split(
+        "\n", 1)[1]  # and the verdict names it as the cause
+    live = subprocess.run([sys.executable, "-m", "twinfleet", "replay", str(trace), "--live"],
+                          capture_output=True, text=True, env=child_env(), cwd=tmp_path,
+                          timeout=60, check=False)  # refused before any fleet starts
+    assert live.returncode == 2, live
+    assert live.stderr.startswith("twinfleet replay --live: warning: node t's code changed"), \
+        live.stderr
     capsys.readouterr()
 
 

@@ -65,7 +65,7 @@ from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import DecodeError, decode
 from twinfleet.runtime.contract.node import QOS_DEFAULT
-from twinfleet.runtime.contract.tracefile import TraceError, load_trace
+from twinfleet.runtime.contract.tracefile import TraceError, code_changes, load_trace
 from twinfleet.runtime.core.eventlog import payload_digest, state_digest, summarise
 from twinfleet.runtime.fleet.launcher import Fleet, format_result, run_fleet
 from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key, parse_node_key, topic_key
@@ -478,8 +478,15 @@ def compare_node_logs(p: Plan, events_path: str) -> tuple[bool | None, str]:
 
 def live_replay_command(args: Any) -> int:
     """`twinfleet replay TRACE --live`: exit 1 when the violation is confirmed live, 2 when
-    not (or on bad input), like `replay`."""
+    not (or on bad input), like `replay`. A node whose code changed since the trace is
+    said first, as `replay` says it."""
     try:
+        trace = load_trace(args.trace)
+        if trace.get("scenario") is not None:  # else `plan` says it has no scenario file
+            scenario = load(trace["scenario"], profile=trace.get("profile"),
+                            params=trace.get("params") or ())
+            for line in code_changes(trace, {cfg.name: cfg.cls for cfg in scenario.nodes}):
+                print(f"twinfleet replay --live: warning: {line}", file=sys.stderr)
         result = asyncio.run(replay_live(args.trace, out=io.StringIO() if args.quiet
                                          else sys.stdout, handle_signals=True,
                                          cycles=getattr(args, "cycles", 0)))
