@@ -37,6 +37,7 @@ class Tally(Node):
 '''
 
 
+@pytest.mark.slow  # two subprocesses
 def test_replay_says_first_that_a_nodes_code_changed_since_the_trace(tmp_path, capsys):
     (tmp_path / "honest_tally.py").write_text("STEP = 1\n" + NODE)
     path = tmp_path / "tally.yaml"
