@@ -118,3 +118,13 @@ def test_experiment_checks_with_the_overrides_and_refuses_unknown_ones(tmp_path,
     assert row["ros_states"] == _json(capsys)["states"]
     assert main(["experiment", "c1a", "r1.sped:=0.4", *common]) == 2
     assert "did you mean 'speed'?" in capsys.readouterr().err
+
+
+def test_an_override_after_the_options_counts_too(tmp_path, capsys):
+    default = tpc_scenario(tmp_path, "default")
+    assert main(["check", str(default), "vote_timeout_ms:=1", *STATISTICAL]) == 1
+    before = _counts(_json(capsys))
+    assert main(["check", str(default), *STATISTICAL, "vote_timeout_ms:=1"]) == 1
+    assert _counts(_json(capsys)) == before
+    assert main(["check", str(default), "--quiet", "vote_timout_ms:=1"]) == 2
+    assert "did you mean 'vote_timeout_ms'?" in capsys.readouterr().err

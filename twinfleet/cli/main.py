@@ -82,9 +82,28 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Console script `twinfleet`: run the command; every error is one line (module docstring)."""
-    args = build_parser().parse_args(argv)
+    args = _parse(build_parser(), argv)
     with Interrupts() as interrupts:  # SIGTERM stops a command as Ctrl-C does, exit 143
         return interrupts.exit_code(_run(args))
+
+
+# The positional words that take ``NAME:=VALUE`` overrides, by the commands that have them.
+_OVERRIDE_WORDS = ("overrides", "fixed", "scenarios")
+
+
+def _parse(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argparse.Namespace:
+    """Parse the command line; ``NAME:=VALUE`` overrides may also come after options
+    (`check c1a --quiet r1.speed:=0.4`), where argparse would stop taking positional words:
+    they join the command's overrides, in order, so no placement drops or refuses one."""
+    args, extra = parser.parse_known_args(argv)
+    words = [w for w in extra if ":=" in w and not w.startswith("-")]
+    target = next((name for name in _OVERRIDE_WORDS if isinstance(getattr(args, name, None),
+                                                                  list)), None)
+    if extra != words or (words and target is None):
+        return parser.parse_args(argv)  # argparse's own error for what is left
+    if words:
+        setattr(args, str(target), [*getattr(args, str(target)), *words])
+    return args
 
 
 def _run(args: argparse.Namespace) -> int:
