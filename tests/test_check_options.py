@@ -49,5 +49,6 @@ def test_the_parsed_options_are_enums():
     options = CheckOptions(search="random", semantics="ros", reduction="por")  # type: ignore[arg-type]
     assert options.search is SearchOrder.RANDOM and options.semantics is Semantics.ROS
     assert options.reduction is ReductionMode.POR
-    with pytest.raises(ScenarioError, match="search: expected one of bfs, dfs, random"):
+    with pytest.raises(ScenarioError, match="unknown search 'breadth'; expected one of bfs, "
+                       "dfs, random"):
         CheckOptions(search="breadth")  # type: ignore[arg-type]

@@ -93,8 +93,8 @@ class CheckOptions:
                 try:
                     object.__setattr__(self, name, kind(value))
                 except ValueError:
-                    raise ScenarioError(f"{name}: expected one of "
-                                        f"{', '.join(kind)}, got {value!r}") from None
+                    raise ScenarioError(f"unknown {name} {value!r}; expected one of "
+                                        f"{', '.join(kind)}") from None
 
 
 @final
