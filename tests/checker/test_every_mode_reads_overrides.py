@@ -9,6 +9,7 @@ import json
 from pathlib import Path
 
 import pytest
+import yaml
 
 from tests.checker.tpc import tpc_scenario
 from twinfleet.cli import main
@@ -128,3 +129,18 @@ def test_an_override_after_the_options_counts_too(tmp_path, capsys):
     assert _counts(_json(capsys)) == before
     assert main(["check", str(default), "--quiet", "vote_timout_ms:=1"]) == 2
     assert "did you mean 'vote_timeout_ms'?" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize(("edit", "says"), [
+    ({"paramz": {}}, "paramz: unknown key; expected one of"),
+    ({"check": {"latncy": [0, 2]}}, "check.latncy: unknown key"),
+    ({"live": {"timeout": 1}}, "live.timeout: unknown key"),
+])
+def test_every_misspelt_key_of_the_file_says_did_you_mean(tmp_path, capsys, edit, says):
+    path = tpc_scenario(tmp_path)
+    doc = yaml.safe_load(path.read_text())
+    doc.update(edit)
+    path.write_text(yaml.safe_dump(doc))
+    assert main(["check", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert says in err and "; did you mean '" in err, err

@@ -24,6 +24,8 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Final, Generic, TypeVar, final
 
+from twinfleet.runtime.scenario.suggest import did_you_mean
+
 T = TypeVar("T")
 C = TypeVar("C")
 Range = tuple[int, int]
@@ -215,7 +217,8 @@ def from_mapping(cls: type[C], raw: Any, key: str) -> C:
         raise ConfigError(key, f"expected a mapping with {', '.join(names)}; got {raw!r}")
     for k in raw:
         if k not in names:
-            raise ConfigError(f"{key}.{k}", f"unknown key; expected one of {', '.join(sorted(names))}")
+            raise ConfigError(f"{key}.{k}", f"unknown key; expected one of "
+                              f"{', '.join(sorted(names))}{did_you_mean(str(k), names)}")
     required = [f.name for f in dataclasses.fields(cls)  # type: ignore[arg-type]
                 if f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
     for name in required:
