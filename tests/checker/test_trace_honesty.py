@@ -131,3 +131,23 @@ def test_the_progress_line_says_when_the_reduction_restarts(tmp_path, capsys):
     _progress(seen[before])
     assert "(restart 1: the reduction learned a send and searches again from scratch" \
         in capsys.readouterr().err  # ...and the line says why
+
+
+def test_the_map_render_gives_a_fault_its_frame_and_caption():
+    from twinfleet.checker.driver import load
+    from twinfleet.checker.system import System
+    from twinfleet.checker.trace import to_json_value
+    from twinfleet.nodes.render import trace_views
+    from twinfleet.runtime.scenario.examples import shipped_scenarios
+
+    scenario = load(shipped_scenarios()["c1a"])
+    system = System(scenario)
+    world = system.initial_world().world
+    initial = {n: to_json_value(s) for n, s in system.states_of(world).items()}
+    steps = [{"index": 1, "time": 5, "node": "r1", "handler": "on_scan", "changed": {},
+              "faults": ["/r1/scan to r1: dropped"]},
+             {"index": 2, "time": 9, "node": "r2", "handler": "tick", "changed": {}}]
+    views = trace_views(scenario, {"initial": {"states": initial}, "steps": steps,
+                                   "message": "m"})
+    assert len(views) == 3  # the start, the step with a fault (nothing moved), the last
+    assert "FAULT /r1/scan to r1: dropped" in views[1].caption
