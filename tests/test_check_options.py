@@ -52,3 +52,13 @@ def test_the_parsed_options_are_enums():
     with pytest.raises(ScenarioError, match="unknown search 'breadth'; expected one of bfs, "
                        "dfs, random"):
         CheckOptions(search="breadth")  # type: ignore[arg-type]
+
+
+def test_a_word_that_is_no_choice_is_argparses_own_error(capsys):
+    for argv, says in ((["check", "c1a", "--search", "bread"],
+                        "invalid choice: 'bread' (choose from bfs, dfs, random)"),
+                       (["sweep", "c1a", "--search", "random"],
+                        "invalid choice: 'random' (choose from bfs, dfs)")):
+        with pytest.raises(SystemExit) as exit_:
+            build_parser().parse_args(argv)
+        assert exit_.value.code == 2 and says in capsys.readouterr().err

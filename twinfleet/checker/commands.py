@@ -23,6 +23,7 @@ from twinfleet.checker.options import (
     add_check_arguments,
     add_engine_arguments,
     add_statistical_arguments,
+    choice_of,
 )
 from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_CONTRACT_BREACH, EXIT_FAILED
 from twinfleet.runtime.scenario.overrides import add_override_arguments, override_words
@@ -63,7 +64,8 @@ def register(subparsers: Any) -> None:
     p.add_argument("--walks", type=int, default=100, help="number of random walks (--search random)")
     p.add_argument("--seed", type=int, default=None,
                    help="seed of the random walks (default: the scenario's seed)")
-    p.add_argument("--semantics", type=Semantics, choices=tuple(Semantics), default=None,
+    p.add_argument("--semantics", type=choice_of(Semantics), choices=tuple(Semantics),
+                   default=None,
                    help="message rules: ros (per-sender FIFO) or rebeca (RMC); default: scenario")
     p.add_argument("--profile", choices=("fixed", "rebeca"), default=None,
                    help="robot behaviour profile passed to the nodes; default: scenario")

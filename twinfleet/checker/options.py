@@ -10,7 +10,7 @@ commands' parsers can offer the choices without loading the search.
 from __future__ import annotations
 
 import argparse
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum, unique
 from typing import Any, Final, final
@@ -54,6 +54,22 @@ REDUCTIONS: Final = tuple(ReductionMode)
 MIN_WIDTH: Final = 512
 
 
+def choice_of(kind: type[StrEnum], allowed: Sequence[StrEnum] | None = None
+              ) -> Callable[[str], StrEnum]:
+    """An argparse `type` reading a member of `kind` by its name (of `allowed`, if given),
+    refusing any other word in argparse's own terms, naming the choices."""
+    choices = tuple(kind) if allowed is None else tuple(allowed)
+
+    def parse(text: str) -> StrEnum:
+        if text not in choices:
+            raise argparse.ArgumentTypeError(f"invalid choice: {text!r} (choose from "
+                                             f"{', '.join(choices)})")
+        return kind(text)
+
+    parse.__name__ = kind.__name__
+    return parse
+
+
 def add_check_arguments(p: argparse.ArgumentParser, *,
                         searches: Sequence[SearchOrder] = tuple(SearchOrder),
                         limits_only: bool = False) -> None:
@@ -71,12 +87,13 @@ def add_check_arguments(p: argparse.ArgumentParser, *,
         return
     p.add_argument("--max-depth", type=int, default=None, metavar="N",
                    help="do not expand worlds deeper than N steps (random: walk length)")
-    p.add_argument("--search", type=SearchOrder, choices=tuple(searches), default=None,
+    p.add_argument("--search", type=choice_of(SearchOrder, searches), choices=tuple(searches),
+                   default=None,
                    help="search order: bfs (shortest counterexample, default), dfs"
                    + (", or random walks" if SearchOrder.RANDOM in searches else "")
                    + "; not given, an unreduced search on --workers runs in a relaxed "
                    "order (same states and transitions, any counterexample)")
-    p.add_argument("--reduction", type=ReductionMode, choices=tuple(ReductionMode),
+    p.add_argument("--reduction", type=choice_of(ReductionMode), choices=tuple(ReductionMode),
                    default=None,
                    help="partial-order reduction: por (explore one persistent set of "
                    "simultaneous events per world; same verdicts, far fewer states for "
