@@ -33,8 +33,8 @@ from twinfleet.runtime.contract.kinds import (
     EXIT_FAILED,
     EXIT_INTERRUPTED,
     EXIT_OK,
-    EXIT_TERMINATED,
 )
+from twinfleet.runtime.fleet.fleet_result import signal_exit_code
 from twinfleet.runtime.scenario.overrides import (
     add_override_arguments,
     override_words,
@@ -186,7 +186,7 @@ def experiment_command(args: argparse.Namespace) -> int:
     print(f"wrote {options.out / 'experiment.md'}, {options.out / 'experiment.csv'}, "
           f"{options.out / 'experiment.json'}; node output in {options.out / 'logs'}")
     if exp.interrupted:  # a live fleet takes the signal itself: SIGTERM is 143 there too
-        return EXIT_TERMINATED if exp.stopped_by.startswith("SIGTERM") else EXIT_INTERRUPTED
+        return signal_exit_code(exp.stopped_by) or EXIT_INTERRUPTED
     return EXIT_FAILED if exp.contradictions else EXIT_OK
 
 

@@ -67,6 +67,7 @@ from twinfleet.runtime.contract.messages import DecodeError, decode
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.contract.tracefile import TraceError, code_changes, load_trace
 from twinfleet.runtime.core.eventlog import payload_digest, state_digest, summarise
+from twinfleet.runtime.fleet.fleet_result import signal_exit_code
 from twinfleet.runtime.fleet.launcher import Fleet, format_result, run_fleet
 from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key, parse_node_key, topic_key
 from twinfleet.runtime.host.transport import Transport
@@ -494,4 +495,4 @@ def live_replay_command(args: Any) -> int:
         print(f"twinfleet replay --live: {exc}", file=sys.stderr)
         return 2
     print(result.summary() if not args.quiet else result.summary().splitlines()[-1])
-    return 1 if result.confirmed else 2
+    return signal_exit_code(result.fleet_reason) or (1 if result.confirmed else 2)

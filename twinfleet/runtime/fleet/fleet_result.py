@@ -70,9 +70,17 @@ class FleetResult:
         130 interrupted (Ctrl-C), 143 terminated (SIGTERM)."""
         code = self.verdict.exit_code if self.verdict is not None else (
             EXIT_INTERRUPTED if self.interrupted else EXIT_OK if self.passed else EXIT_FAILED)
-        if code == EXIT_INTERRUPTED and self.reason.startswith("SIGTERM"):
-            return EXIT_TERMINATED  # 128 + 15, as for every other command
+        if code == EXIT_INTERRUPTED:
+            return signal_exit_code(self.reason) or code  # SIGTERM: 143, as everywhere
         return code
+
+
+def signal_exit_code(reason: str) -> int | None:
+    """130 for a run ended by SIGINT (Ctrl-C), 143 (128 + 15) by SIGTERM, as every command
+    exits on them; None for a run that ended otherwise."""
+    if not ended_by_signal(reason):
+        return None
+    return EXIT_TERMINATED if reason.startswith("SIGTERM") else EXIT_INTERRUPTED
 
 
 def ended_by_signal(reason: str) -> bool:
