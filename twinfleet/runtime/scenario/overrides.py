@@ -2,10 +2,12 @@
 
 ``r1.speed:=0.4`` (or ``--param r1.speed=0.4``) sets parameter `speed` of node
 r1; ``scan_rate_ms:=50`` without a node sets the scenario's common ``params``.
-Values are YAML (``0.4``, ``[5, 5]``, ``true``). `launch`, `check`, node
-processes and the pytest API (`twinfleet.testing`) all load a scenario with its
-overrides through `load_with_params`, so a bad override is the same one-line
-error everywhere and what is checked is what is launched. A trace records the
+Values are YAML (``0.4``, ``[5, 5]``, ``true``). `launch`, `check` (every
+mode: exhaustive, on workers, statistical simulations in every process),
+`validate`, `experiment`, node processes and the pytest API (`twinfleet.testing`)
+all load a scenario with its overrides through `load_with_params`, so a bad
+override is the same one-line error everywhere (an unknown name ends with a
+"did you mean") and what is checked is what is launched. A trace records the
 overrides it was found with and `replay` applies them again.
 
 `add_override_arguments` defines the words and the flag on a command's parser
