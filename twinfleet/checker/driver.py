@@ -42,7 +42,7 @@ from twinfleet.checker.trace import build_trace
 from twinfleet.runtime.contract.kinds import EXIT_INTERRUPTED, FailureKind, Status
 from twinfleet.runtime.contract.node import NodeSpec
 from twinfleet.runtime.contract.tracefile import write_trace
-from twinfleet.runtime.scenario.config import SEARCHES, CheckConfig
+from twinfleet.runtime.scenario.config import SEARCHES, CheckConfig, Fairness
 from twinfleet.runtime.scenario.lint import lint_scenario
 from twinfleet.runtime.scenario.overrides import load
 from twinfleet.runtime.scenario.property_fields import check_property_fields
@@ -78,6 +78,7 @@ class CheckOptions:
     resume: str | None = None
     reduction: ReductionMode | None = None
     timing: str | None = None  # a timing model whose bounds are the latency ranges
+    fairness: Fairness | None = None  # what eventually counterexamples assume (check.fairness)
     params: tuple[str, ...] = ()  # parameter overrides, as `launch` takes them (r1.speed:=0.4)
     workers: int = 1  # Ray workers for the search (checker.cluster); 1 with no cluster: here
     cluster: str | None = None  # a Ray cluster to join instead of starting a local one
@@ -87,7 +88,7 @@ class CheckOptions:
 
     def __post_init__(self) -> None:
         for name, kind in (("search", SearchOrder), ("semantics", Semantics),
-                           ("reduction", ReductionMode)):
+                           ("reduction", ReductionMode), ("fairness", Fairness)):
             value = getattr(self, name)
             if value is not None and not isinstance(value, kind):
                 try:
@@ -119,6 +120,7 @@ class CheckResult:
     reduction: str = "none"
     reduction_statistics: dict[str, int] | None = None
     params: tuple[str, ...] = ()  # the parameter overrides checked with
+    fairness: str = "none"  # what a counterexample to an eventually property may assume
     engine: str | None = None  # where the search ran, when workers were asked for
     handler_runs: int = 0  # handlers run by this process (its outcome cache missed)
     timing: AssumedTiming | None = None  # the latency and timer lateness the verdict assumed
@@ -156,7 +158,7 @@ class CheckResult:
             "trace": self.trace_path,
             "trace_steps": None if self.trace is None else len(self.trace["steps"]),
             "reduction": self.reduction, "reduction_statistics": self.reduction_statistics,
-            "params": list(self.params), "engine": self.engine,
+            "params": list(self.params), "fairness": self.fairness, "engine": self.engine,
             "timing": None if self.timing is None else self.timing.to_json(),
             "exit_code": self.exit_code,
         }
@@ -299,7 +301,8 @@ def check(scenario: str | Path | Scenario | None,
                          resumed_from=options.resume, warnings=warnings,
                          reduction=describe(reduction, reduction_name, strategy),
                          reduction_statistics=None if reduction is None else
-                         reduction.statistics(), params=tuple(meta["params"]), engine=engine,
+                         reduction.statistics(), params=tuple(meta["params"]),
+                         fairness=scenario.check.fairness, engine=engine,
                          handler_runs=system.runner.handler_runs,
                          timing=_assumed_timing(scenario, system, options))
     if outcome.violation is not None and outcome.counterexample is not None:
@@ -441,7 +444,9 @@ def _scenario(scenario: Path | Scenario | None, options: CheckOptions,
     params = meta.get("params", options.params)
     if not isinstance(scenario, Scenario):
         assert scenario is not None  # check() refuses a missing scenario file first
-        return load(scenario, profile=profile, semantics=semantics, params=params)
+        return _with_fairness(load(scenario, profile=profile, semantics=semantics,
+                                   params=params), options.fairness)
+    scenario = _with_fairness(scenario, options.fairness)
     if params:
         raise ScenarioError(f"{scenario.source}: the parameters of a scenario built in Python "
                             "are given when it is built (Scenario.build(..., params=...))")
@@ -449,6 +454,14 @@ def _scenario(scenario: Path | Scenario | None, options: CheckOptions,
         raise ScenarioError(f"{scenario.source}: the profile of a scenario built in Python is "
                             "chosen when it is built (Scenario.build(..., profile=...))")
     return scenario if semantics is None else dataclasses.replace(scenario, semantics=semantics)
+
+
+def _with_fairness(scenario: Scenario, fairness: Fairness | None) -> Scenario:
+    """`scenario` with the fairness the options ask for (None: its own `check.fairness`)."""
+    if fairness is None:
+        return scenario
+    return dataclasses.replace(scenario, check=dataclasses.replace(scenario.check,
+                                                                   fairness=fairness))
 
 
 def _resume_path(path: Path | None, options: CheckOptions,

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 from enum import StrEnum, unique
 from typing import Any, Final, final
 
+from twinfleet.runtime.scenario.config import Fairness
+
 
 @unique
 class Semantics(StrEnum):
@@ -102,6 +104,13 @@ def add_check_arguments(p: argparse.ArgumentParser, *,
                    "off, and says why in the summary, for settings it does not cover "
                    "(check.queue_bound, properties reading now, --search random, rebeca "
                    "node priorities)")
+    p.add_argument("--fairness", type=choice_of(Fairness), choices=tuple(Fairness),
+                   default=None,
+                   help="what a counterexample to an eventually property may assume of lossy "
+                   "channels: none (any cycle on which it never holds, even one that drops "
+                   "the same message for ever) or weak (only a cycle on which every message "
+                   "dropped is also handled; docs/finite-state.md). Default: check.fairness, "
+                   "else none")
     p.add_argument("--no-contract-checks", dest="verify", action="store_false",
                    help="skip the node-contract checks that run by default (clocks and "
                    "random sources probed, attributes outside self.state compared, every "
@@ -122,19 +131,22 @@ class SearchChoices:
     max_time_s: float | None = None
     max_depth: int | None = None
     verify: bool = True
+    fairness: Fairness | None = None
 
     @classmethod
     def of(cls, args: argparse.Namespace) -> SearchChoices:
         """The choices of parsed arguments (those a command did not declare: defaults)."""
         return cls(getattr(args, "search", None), getattr(args, "reduction", None),
                    args.max_states, args.max_time, getattr(args, "max_depth", None),
-                   getattr(args, "verify", True))
+                   getattr(args, "verify", True), getattr(args, "fairness", None))
 
     def fields(self) -> dict[str, Any]:
         """The choices as keyword arguments of `CheckOptions`."""
+        # fairness only when given: a sweep's cache keys (sweep.cache) of earlier runs stay
+        fair = {} if self.fairness is None else {"fairness": self.fairness}
         return {"search": self.search, "reduction": self.reduction,
                 "max_states": self.max_states, "max_time_s": self.max_time_s,
-                "max_depth": self.max_depth, "verify": self.verify}
+                "max_depth": self.max_depth, "verify": self.verify, **fair}
 
 
 def _probability(text: str) -> float:

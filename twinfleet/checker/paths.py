@@ -9,12 +9,17 @@ restricted to states where the property's expression is false, colouring
 states on the stack grey, so a back edge closes a reachable cycle on which the
 expression never holds (a lasso) and a state with nothing pending ends a
 finite counterexample; `lasso_counterexample` turns what it finds into the
-violation and the `Counterexample` a search reports.
+violation and the `Counterexample` a search reports. Under weak fairness it asks
+`checker.fairness` instead, which needs the worlds of some states again
+(`world_at`).
 """
 
 from __future__ import annotations
 
+from functools import partial
+
 from twinfleet.checker.diagnosis import FIX_HIDDEN, ContractBreachError, breach_line
+from twinfleet.checker.fairness import fair_violation
 from twinfleet.checker.outcome import Counterexample
 from twinfleet.checker.properties import Property, PropertyViolation
 from twinfleet.checker.store import StateStore
@@ -22,6 +27,7 @@ from twinfleet.checker.system import System
 from twinfleet.checker.transition import Step, Transition
 from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import FailureKind
+from twinfleet.runtime.scenario.config import Fairness
 
 _GREY, _BLACK = 1, 2
 
@@ -39,6 +45,15 @@ def steps_along(system: System, store: StateStore, ids: list[int]) -> tuple[tupl
     return initial, steps
 
 
+def world_at(system: System, store: StateStore, sid: int) -> World:
+    """The world of state id `sid`, rebuilt along its parents from its initial world."""
+    ids = store.path_ids(sid)
+    world = system.initial_world(store.roots[ids[0]]).world
+    for nxt in ids[1:]:
+        world = _successor_to(system, store, world, nxt).world
+    return world
+
+
 def _successor_to(system: System, store: StateStore, world: World, sid: int) -> Transition:
     for t in system.successors(world):
         if t.failure is None and store.find(t.world.key) == sid:
@@ -54,20 +69,37 @@ def lasso_counterexample(system: System, store: StateStore, prop: Property
                          ) -> tuple[PropertyViolation, Counterexample] | None:
     """The violation of `eventually` property `prop` on the recorded graph, and the path
     that shows it (a lasso, or a path to a world with nothing pending); None if it holds."""
-    found = find_lasso(store, prop.name)
+    weak = prop.fairness is Fairness.WEAK
+    path = _fair_path(system, store, prop.name) if weak else _any_path(system, store, prop.name)
+    if path is None:
+        return None
+    start, n = path.cycle_start, len(path.steps)
+    assert prop.expr is not None
+    if start is None:
+        message = (f"{prop.expr.source!r} never holds on a path that ends with nothing "
+                   f"pending ({n} steps)")
+        return PropertyViolation(prop.name, prop.kind, message, "terminal"), path
+    assumed = ", every message dropped on it also handled (weak fairness)" if weak else ""
+    message = (f"{prop.expr.source!r} never holds on a reachable cycle "
+               f"(steps {start + 1}..{n} repeat for ever{assumed})")
+    return PropertyViolation(prop.name, prop.kind, message, "lasso"), path
+
+
+def _any_path(system: System, store: StateStore, prop: str) -> Counterexample | None:
+    found = find_lasso(store, prop)
     if found is None:
         return None
     ids, start = found
     initial, steps = steps_along(system, store, ids)
-    path = Counterexample(initial, tuple(steps), start)
-    assert prop.expr is not None
-    if start is None:
-        message = (f"{prop.expr.source!r} never holds on a path that ends with nothing "
-                   f"pending ({len(steps)} steps)")
-        return PropertyViolation(prop.name, prop.kind, message, "terminal"), path
-    message = (f"{prop.expr.source!r} never holds on a reachable cycle "
-               f"(steps {start + 1}..{len(steps)} repeat for ever)")
-    return PropertyViolation(prop.name, prop.kind, message, "lasso"), path
+    return Counterexample(initial, tuple(steps), start)
+
+
+def _fair_path(system: System, store: StateStore, prop: str) -> Counterexample | None:
+    fair = fair_violation(system, store, prop, partial(world_at, system, store))
+    if fair is None:
+        return None
+    initial, steps = steps_along(system, store, fair.stem)
+    return Counterexample(initial, (*steps, *fair.cycle), len(steps) if fair.cycle else None)
 
 
 def find_lasso(store: StateStore, prop: str) -> tuple[list[int], int | None] | None:

@@ -17,9 +17,11 @@ limit an evaluation still running when it expires raises
   deadlock, R11).
 - `eventually`: on every path `expr` holds at some point; violated by a lasso
   (a reachable cycle) or a path to a world with nothing pending, on which
-  `expr` never holds. Checked by `checker.search.find_lasso`. No fairness is
-  assumed, but the time rule (semantics Rule 1) already prevents starvation
-  across time.
+  `expr` never holds. Checked by `checker.paths.find_lasso`. No fairness is
+  assumed by default, but the time rule (semantics Rule 1) already prevents
+  starvation across time; with `check.fairness: weak` (`--fairness weak`) a
+  cycle counts only if every message dropped on it is also handled on it
+  (`checker.fairness`).
 - `within`: on every path `expr` holds at some world whose time is at most
   `within_ms`. Each world carries the names of the `within` properties not yet
   met on its path (`World.obligations`); it is violated in a world where one is
@@ -46,6 +48,7 @@ from typing import TYPE_CHECKING, Any, Protocol, final
 
 from twinfleet.checker.faults import parse_deadlines, parse_queue_bounds
 from twinfleet.runtime.contract.kinds import FailureKind
+from twinfleet.runtime.scenario.config import Fairness
 from twinfleet.runtime.scenario.property_eval import ExpressionError, Overtime, parse_expression
 from twinfleet.runtime.scenario.spec import Scenario
 
@@ -145,14 +148,17 @@ class Property:
     kind: str
     expr: Expr | None = None
     within_ms: int | None = None
+    fairness: Fairness = Fairness.NONE  # what an `eventually` counterexample may assume
 
     def describe(self) -> str:
-        """A one-line description: name, kind, expression."""
+        """A one-line description: name, kind, expression (and fairness, if assumed)."""
         text = f"{self.name} ({self.kind}"
         if self.expr is not None:
             text += f": {self.expr.source}"
         if self.within_ms is not None:
             text += f" within {self.within_ms} ms"
+        if self.kind == "eventually":
+            text += f", fairness {self.fairness}"
         return text + ")"
 
 
@@ -195,7 +201,8 @@ class PropertySet:
         for i, cfg in enumerate(scenario.properties):
             where = f"{scenario.path}:properties[{i}] ({cfg.name})"
             expr = Expr(cfg.expr, names, where) if cfg.expr is not None else None
-            props.append(Property(cfg.name, cfg.kind, expr, cfg.within_ms))
+            props.append(Property(cfg.name, cfg.kind, expr, cfg.within_ms,
+                                  scenario.check.fairness))
         default, per = parse_deadlines(scenario, None)
         deadlines = ", ".join([*([f"{default} ms"] if default is not None else []),
                                *(f"{k} {v} ms" for k, v in sorted(per.items()))])

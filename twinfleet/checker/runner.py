@@ -58,7 +58,7 @@ from twinfleet.checker.transition import (
     changed_attributes,
     fingerprint,
 )
-from twinfleet.checker.world import ENVIRONMENT, Event
+from twinfleet.checker.world import ENVIRONMENT, Event, event_key
 from twinfleet.runtime.contract.context import After, Call, Context, Fail, Log, Publish
 from twinfleet.runtime.contract.dispatch import (
     HandlerOutcome,
@@ -158,10 +158,10 @@ class Runner:
         kept = drawn.get((data, ev.key, _ANY_TIME)) or drawn.get((data, ev.key, ev.due))
         if kept is not None:
             new, effects, reply = kept
-            events, failure, logs, faults = self._effects(ev, effects, reply, chooser)
+            events, failure, logs, faults, lost = self._effects(ev, effects, reply, chooser)
             n = len(chooser.indices)
             return Variant(tuple(chooser.indices), tuple(chooser.options), new, tuple(events),
-                           failure, tuple(logs), tuple(faults), tuple(range(n)))
+                           failure, tuple(logs), tuple(faults), tuple(range(n)), tuple(lost))
         v = self._checked(ev, data, chooser)
         handled = self._handled
         # Kept only when every answer was drawn after the handler (no ctx.choose) and the
@@ -191,6 +191,7 @@ class Runner:
         logs: list[Log] = []
         faults: list[str] = []
         branches: list[int] = []
+        lost: list[bytes] = []
         for spec in topology.starts(j):
             v = self._checked(topology.start_event(j, spec, now), data, chooser)
             data, failure = v.state, v.failure
@@ -198,10 +199,11 @@ class Runner:
             logs += v.logs
             faults += v.faults
             branches += v.branches  # positions in the chooser, which the handlers share
+            lost += v.lost
             if failure is not None:
                 break
         return Variant(tuple(chooser.indices), tuple(chooser.options), data, tuple(events),
-                       failure, tuple(logs), tuple(faults), tuple(branches))
+                       failure, tuple(logs), tuple(faults), tuple(branches), tuple(lost))
 
     def _checked(self, ev: Event, data: bytes, chooser: ExploringChooser) -> Variant:
         """`_exec`, then (with `verify`) once more from the same state with the same
@@ -273,8 +275,8 @@ class Runner:
         self._current[i] = new
         handler_end = len(chooser.indices)
         try:
-            events, failure, logs, faults = self._effects(ev, outcome.effects, outcome.reply,
-                                                          chooser)
+            events, failure, logs, faults, lost = self._effects(ev, outcome.effects,
+                                                                outcome.reply, chooser)
         except ChoiceMismatch as exc:  # a forced latency or fault branch that does not exist
             return _failed(chooser, data, FailureKind.CHOICE_MISMATCH, node.name, ev.method,
                            str(exc))
@@ -282,7 +284,8 @@ class Runner:
             ctx.read_clock
         indices = tuple(chooser.indices)
         return Variant(indices, tuple(chooser.options), new, tuple(events), failure,
-                       tuple(logs), tuple(faults), tuple(range(handler_end, len(indices))))
+                       tuple(logs), tuple(faults), tuple(range(handler_end, len(indices))),
+                       tuple(lost))
 
     def _wrong_type(self, ev: Event, effects: Sequence[Any]
                     ) -> tuple[FailureKind, str, str, str] | None:
@@ -349,12 +352,14 @@ class Runner:
     # ------------------------------------------------------------- effects
 
     def _effects(self, ev: Event, effects: Sequence[Any], reply: Any, chooser: ExploringChooser
-                 ) -> tuple[list[Event], Failure | None, list[Log], list[str]]:
-        """The events a handler's effects create, in order (the rules of one transition)."""
+                 ) -> tuple[list[Event], Failure | None, list[Log], list[str], list[bytes]]:
+        """The events a handler's effects create, in order (the rules of one transition),
+        and the keys (`Event.key`) of the messages a fault branch lost."""
         i, now, topology = ev.target, ev.due, self.topology
         out: list[Event] = []
         faults: list[str] = []
         logs: list[Log] = []
+        lost_keys: list[bytes] = []
         if ev.kind is EventKind.PERIODIC:
             out.append(Event(now + topology.period(i, ev.method), EventKind.PERIODIC, i,
                              ev.method, i, (), ev.priority))
@@ -363,13 +368,20 @@ class Runner:
             match eff:
                 case Publish(topic=topic, msg=msg):
                     for j, method, prio in topology.subscribers.get(topic, ()):
-                        for _ in range(self._copies(topic, j, chooser, faults)):
+                        copies = self._copies(topic, j, chooser, faults)
+                        if not copies:
+                            lost_keys.append(event_key(EventKind.DELIVERY, j, method, i, "",
+                                                       (msg,)))
+                        for _ in range(copies):
                             out.append(self._message(now, topic, EventKind.DELIVERY, j, method,
                                                      i, (msg,), prio, "", chooser))
                 case Call(service=service, request=req, reply_to=reply_to, timeout_ms=timeout):
                     server = topology.servers.get(service)
                     lost = server is not None and self._copies(service, server[0], chooser,
                                                                faults) == 0
+                    if server is not None and lost:
+                        lost_keys.append(event_key(EventKind.REQUEST, server[0], server[1], i,
+                                                   reply_to, (req,)))
                     if server is None or lost:
                         err = CallError(service, "timeout" if lost else
                                         self.rules.no_server(chooser))
@@ -393,7 +405,7 @@ class Runner:
                                      (reply,), topology.priority(ev.sender, ev.reply_to), "",
                                      chooser))
         self.hashed += len(out)
-        return out, failure, logs, faults
+        return out, failure, logs, faults, lost_keys
 
     def _copies(self, name: str, j: int, chooser: ExploringChooser, faults: list[str]) -> int:
         """How many copies of one message on `name` to node `j` arrive (fault branches)."""

@@ -300,7 +300,7 @@ class System:
             states, changed = (*states[:i], v.state, *states[i + 1:]), (i,)
         new = self._world(ev.due, states, pending, world, world.crashes)
         return Transition(Step(action, v.choices, v.options), new, ev, v.failure, v.logs,
-                          v.faults, v.branches, v.events, changed)
+                          v.faults, v.branches, v.events, changed, v.lost)
 
     def _apply_drop(self, world: World, index: int) -> Transition:
         """KEEP_LAST drops pending delivery `index` (Rule 6): nothing runs, no state changes."""
@@ -327,7 +327,7 @@ class System:
         label = Event(now, EventKind.CRASH, j, "", ENVIRONMENT, (), 0)
         changed = (j,) if v.state is not world.states[j] else ()
         return Transition(Step(Crash(j), v.choices, v.options), new, label, v.failure, v.logs,
-                          (note, *v.faults), v.branches, v.events, changed)
+                          (note, *v.faults), v.branches, v.events, changed, v.lost)
 
     # -------------------------------------------------------------- reading
 

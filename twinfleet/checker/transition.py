@@ -102,6 +102,8 @@ class Transition:
         sent: the events the step added (before FIFO ranks and clamping), each with
             its target, priority and due time; for a crash, the restart's events.
         changed: indices of the nodes whose state the step changed.
+        lost: the keys (`Event.key`) of the messages a fault branch of the step lost
+            (what weak fairness, `checker.fairness`, must see delivered again).
     """
 
     step: Step
@@ -113,6 +115,7 @@ class Transition:
     branches: tuple[int, ...] = ()
     sent: tuple[Event, ...] = ()
     changed: tuple[int, ...] = ()
+    lost: tuple[bytes, ...] = ()
 
 
 @final
@@ -130,6 +133,7 @@ class Variant:
     # positions in `choices` of the checker's own branches on the effects (latency, drop,
     # duplicate); the others are the handler's ctx.choose answers
     branches: tuple[int, ...] = ()
+    lost: tuple[bytes, ...] = ()  # keys of the messages a drop branch lost (Transition.lost)
 
 
 def fingerprint(node: Node) -> dict[str, bytes]:

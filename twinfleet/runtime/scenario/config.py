@@ -22,6 +22,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from enum import StrEnum, unique
 from typing import Any, Final, Generic, TypeVar, final
 
 from twinfleet.runtime.scenario.suggest import did_you_mean
@@ -33,6 +34,15 @@ Range = tuple[int, int]
 
 SEARCHES: Final = ("bfs", "dfs", "random")
 DEFAULT: Final = "default"
+
+
+@unique
+class Fairness(StrEnum):
+    """What an `eventually` property's counterexample may assume of lossy channels
+    (`check.fairness`, `check --fairness`; defined in docs/finite-state.md)."""
+
+    NONE = "none"  # every reachable cycle on which the property never holds counts
+    WEAK = "weak"  # only a cycle on which every message dropped is also handled counts
 
 
 class ConfigError(ValueError):
@@ -112,8 +122,13 @@ class CheckConfig:
     deadline_ms: PerName[int] = PerName()
     queue_bound: PerName[int] = PerName()
     faults: FaultConfig = field(default_factory=FaultConfig)
+    fairness: Fairness = Fairness.NONE
 
     def __post_init__(self) -> None:
+        if self.fairness not in tuple(Fairness):
+            raise ConfigError("check.fairness", f"expected one of "
+                              f"{', '.join(Fairness)}, got {self.fairness!r}")
+        _set(self, "fairness", Fairness(self.fairness))
         if self.search is not None and self.search not in SEARCHES:
             raise ConfigError("check.search", f"expected one of {', '.join(SEARCHES)}, "
                               f"got {self.search!r}")
