@@ -168,8 +168,9 @@ def _progress(stats: SearchStatistics) -> None:
           f"transitions {stats.transitions:,}  {stats.states_per_s:,.0f} states/s  "
           f"depth {stats.depth}  frontier {stats.frontier:,}  mem {stats.peak_rss_mb:.0f} MB"
           + (f"  (restart {stats.restarts}: the reduction learned a send and searches again "
-             "from scratch; counts since)" if stats.restarts else ""),
-          file=sys.stderr, end="" if tty else "\n", flush=True)
+             "from scratch; counts since)" if stats.restarts else "")
+          + ("  growing: " + ", ".join(n.short() for n in stats.growth) if stats.growth
+             else ""), file=sys.stderr, end="" if tty else "\n", flush=True)
 
 
 def _report_line(line: str) -> None:

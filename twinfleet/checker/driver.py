@@ -31,6 +31,7 @@ from twinfleet.checker.diagnosis import (
     ContractBreachError,
     breach_line,
 )
+from twinfleet.checker.growth import HINT, GrowthNote
 from twinfleet.checker.options import MIN_WIDTH, ReductionMode, SearchOrder, Semantics
 from twinfleet.checker.outcome import INTERRUPTED_REASON, Limits, Outcome, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
@@ -160,6 +161,7 @@ class CheckResult:
             "reduction": self.reduction, "reduction_statistics": self.reduction_statistics,
             "params": list(self.params), "fairness": self.fairness, "engine": self.engine,
             "timing": None if self.timing is None else self.timing.to_json(),
+            "growth": [n.to_json() for n in self.growth_notes()],
             "exit_code": self.exit_code,
         }
 
@@ -191,6 +193,7 @@ class CheckResult:
                  f"({s.bytes_per_state:.0f} B/state, {s.digest_bits}-bit digests, "
                  f"collision probability <= {s.collision_probability:.1e})",
                  f"reduction: {self.reduction}"]
+        lines += self.growth_lines()
         if self.engine:
             lines.append(f"engine: {self.engine}")
         if self.resumed_from:
@@ -205,6 +208,28 @@ class CheckResult:
             if self.trace_path:
                 lines.append(f"reproduce with: twinfleet replay {self.trace_path}")
         return "\n".join(lines)
+
+
+    def growth_notes(self) -> tuple[GrowthNote, ...]:
+        """The fields that kept taking new values, when no limit but the search's end
+        should have stopped it (a search that finished has none to report)."""
+        return self.statistics.growth if self.status is Status.UNKNOWN else ()
+
+    def growth_lines(self) -> list[str]:
+        """Summary lines naming what kept the state space growing, or a hint when a limit
+        stopped a deep search and no field stood out."""
+        notes = self.growth_notes()
+        if notes:
+            return [f"state growth: {n.describe()}" for n in notes]
+        s = self.statistics
+        if self.status is Status.UNKNOWN and s.depth >= _DEEP and "max-depth" not in self.reason:
+            return [f"hint: the search was still going deeper (depth {s.depth:,}); if some "
+                    "state never repeats (a counter, a drifting float, a growing list), "
+                    f"{HINT}"]
+        return []
+
+
+_DEEP = 1_000  # a search stopped by a limit this deep gets the hint of `growth_lines`
 
 
 def system_for_trace(trace: Mapping[str, Any]) -> tuple[System, PropertySet]:

@@ -19,6 +19,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import Any, final
 
+from twinfleet.checker.growth import GrowthNote
 from twinfleet.checker.properties import PropertyViolation
 from twinfleet.checker.transition import Step
 from twinfleet.runtime.contract.kinds import Status
@@ -63,6 +64,7 @@ class SearchStatistics:
     peak_frontier: int = 0
     attempt_s: float | None = None  # seconds since a reduced search last started again
     restarts: int = 0  # times a reduced search started again from scratch (counts reset)
+    growth: tuple[GrowthNote, ...] = ()  # fields that keep taking new values (checker.growth)
 
     @property
     def attempt_transitions_per_s(self) -> float:

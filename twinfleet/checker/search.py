@@ -33,6 +33,7 @@ from functools import partial
 from typing import Any, final
 
 from twinfleet.checker import checkpoint
+from twinfleet.checker.growth import SAMPLE_MASK, GrowthWatch
 from twinfleet.checker.outcome import (
     INTERRUPTED_REASON,
     NO_LIMITS,
@@ -98,6 +99,7 @@ class Search:
         live = tuple(p.name for p in properties.eventually)
         self.store = StateStore(exact=system.exact_states, record_edges=bool(live), flags=live)
         self.counters = Counters()
+        self.growth = GrowthWatch(system.names, system.decode)
         self._frontier: deque[tuple[World, int, int]] = deque()
         self._expansions = 0
         self._next_forget = _FORGET_EVERY
@@ -137,7 +139,8 @@ class Search:
             store.nbytes(), store.digest_bits, store.collision_probability(hashed),
             c.peak_frontier,
             None if self._attempt is None else time.monotonic() - self._attempt,
-            0 if self.reduction is None else self.reduction.stats.restarts)
+            0 if self.reduction is None else self.reduction.stats.restarts,
+            growth=self.growth.notes())
 
     def run(self, strategy: str = "bfs", *, walks: int = 100, seed: int = 0) -> Outcome:
         """Search with `strategy` ("bfs", "dfs" or "random") until a verdict or a limit."""
@@ -264,6 +267,7 @@ class Search:
         self.store = StateStore(exact=self.store.exact, record_edges=self.store.edges is not None,
                                 flags=tuple(self.store.holds))
         self.counters = Counters()
+        self.growth = GrowthWatch(self.system.names, self.system.decode)
         self._frontier.clear()
         self._expansions = 0
         self._next_forget = _FORGET_EVERY
@@ -357,6 +361,8 @@ class Search:
         violation = self.properties.check_world(self.system, world)
         if violation is not None:
             raise Found(violation, self._path_to(sid))
+        if not sid & SAMPLE_MASK and self._expanding is not None:
+            self.growth.observe(self._expanding[0], t)
         frontier = self._frontier
         frontier.append((world, sid, depth))
         if len(frontier) > counters.peak_frontier:
