@@ -63,6 +63,10 @@ def test_cli_names_the_field_in_text_json_and_progress(tmp_path, capsys):
     assert "state growth: r1.resets took" in out
     assert main(["check", str(path), "--max-states", "3000", "--json"]) == 2
     assert json.loads(capsys.readouterr().out)["growth"][0]["node"] == "r1"
+    drift = _one(tmp_path, "Drifter", "timed")
+    assert main(["check", str(drift), "--max-time", "2", "--quiet"]) == 2
+    out = capsys.readouterr().out
+    assert "UNKNOWN: max-time 2 s" in out and "state growth: r1.heading took" in out
 
 
 def test_progress_line_names_the_field(tmp_path, capsys):
@@ -70,3 +74,13 @@ def test_progress_line_names_the_field(tmp_path, capsys):
     result = run(_one(tmp_path, "Resetter", "progress"), max_states=3000)
     _progress(result.statistics)
     assert "growing: r1.resets (" in capsys.readouterr().err
+
+
+def test_a_deep_search_stopped_with_nothing_named_gets_the_hint():
+    # C1a reduced is one path of 5,516 worlds; its fields take a few dozen values each
+    from twinfleet.checker.driver import CheckOptions, check
+
+    result = check("c1a", CheckOptions(max_states=1500, trace_out=None))
+    assert result.status is Status.UNKNOWN and result.statistics.depth >= 1000
+    assert result.growth_notes() == ()
+    assert "hint: the search was still going deeper (depth 1,4" in result.summary()

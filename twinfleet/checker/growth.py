@@ -40,8 +40,7 @@ from twinfleet.checker.world import World
 
 SAMPLE_MASK: Final = 7  # the search samples a new world when its id & SAMPLE_MASK == 0 (1 in 8)
 _K: Final = 1024  # hashes kept per field: exact counts below, about 3 % error above
-_MIN_VALUES: Final = 16  # fewer distinct values than this is never called growth
-_MIN_SAMPLES: Final = 32
+_MIN_VALUES: Final = 64  # fewer values is never called growth (C1a's robots reach ~30 cells)
 _STEPS: Final = 8  # different step sizes remembered per field
 _SHOWN: Final = 3  # fields named at most
 _MASK: Final = (1 << 64) - 1
@@ -160,7 +159,7 @@ class _Sketch:
 
     def growing(self) -> bool:
         values, _ = self.distinct()
-        if values < _MIN_VALUES or self.samples < _MIN_SAMPLES or len(self.marks) < 2:
+        if values < _MIN_VALUES or len(self.marks) < 2:
             return False
         # marks[-1] was taken at more than half the samples so far, marks[-2] at at most half
         new = values - self.marks[-2]
