@@ -32,9 +32,10 @@ and only when fairness was asked for.
 from __future__ import annotations
 
 from collections import deque
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Hashable, Iterable
 from dataclasses import dataclass
 from functools import partial
+from typing import TypeVar
 
 from twinfleet.checker.store import StateStore
 from twinfleet.checker.system import System
@@ -42,6 +43,7 @@ from twinfleet.checker.transition import Drop, RunEvent, Step
 from twinfleet.checker.world import World
 
 WorldOf = Callable[[int], World]
+N = TypeVar("N", bound=Hashable)
 
 
 @dataclass(frozen=True, slots=True)
@@ -76,7 +78,7 @@ def fair_violation(system: System, store: StateStore, prop: str, world_of: World
     if ends:
         return FairPath(_stem(parents, ends[0]), [])
     position = {s: i for i, s in enumerate(order)}
-    for component in _components(order, partial(_graph_successors, store, holds)):
+    for component in cyclic_components(order, partial(_graph_successors, store, holds)):
         edges = _labelled(system, store, set(component), world_of)
         if not edges:
             continue
@@ -119,15 +121,15 @@ def _stem(parents: dict[int, int], sid: int) -> list[int]:
     return path[::-1]
 
 
-def _components(nodes: Iterable[int], successors: Callable[[int], Iterable[int]]
-                ) -> list[list[int]]:
+def cyclic_components(nodes: Iterable[N], successors: Callable[[N], Iterable[N]]
+                      ) -> list[list[N]]:
     """The strongly connected components of the graph on `nodes` (Tarjan's algorithm,
-    iterative) that hold a cycle: two worlds or more, or one with a step to itself."""
-    index: dict[int, int] = {}
-    low: dict[int, int] = {}
-    on_stack: set[int] = set()
-    stack: list[int] = []
-    found: list[list[int]] = []
+    iterative) that hold a cycle: two nodes or more, or one with an edge to itself."""
+    index: dict[N, int] = {}
+    low: dict[N, int] = {}
+    on_stack: set[N] = set()
+    stack: list[N] = []
+    found: list[list[N]] = []
     for root in nodes:
         if root in index:
             continue
@@ -207,7 +209,7 @@ def _fair_part(edges: list[_Edge]) -> list[_Edge] | None:
         for e in kept:
             out.setdefault(e.source, []).append(e.target)
         nodes = sorted({e.source for e in kept} | {e.target for e in kept})
-        for component in _components(nodes, partial(_targets, out)):
+        for component in cyclic_components(nodes, partial(_targets, out)):
             inside = set(component)
             sub = [e for e in kept if e.source in inside and e.target in inside]
             if sub:
