@@ -29,6 +29,7 @@ YAML layout (every key but `nodes` optional)::
         drop: [/topic_or_service]  # each delivery: delivered | lost
         duplicate: [/topic]        # each delivery: delivered | delivered twice
         crash: {nodes: [r1], max: 1, durable: []}   # crash-and-restart branches
+      fairness: none               # weak: a lasso must handle every message it drops (docs/finite-state.md)
     live: {timeout_s: 120, stop_on_error: false, time_scale: 1.0,
            report: "twinfleet.nodes.report:report_for"}  # factory(scenario) -> report, see launcher
     ros2: {domain: 0, router: tcp/127.0.0.1:7447,       # launch runs the ROS 2 bridge too
