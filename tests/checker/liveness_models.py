@@ -8,7 +8,17 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from tests.checker.models import Num
-from twinfleet import CallError, Context, Node, handler, on_start, service, subscribe
+from twinfleet import (
+    CallError,
+    Context,
+    Node,
+    QoS,
+    every,
+    handler,
+    on_start,
+    service,
+    subscribe,
+)
 
 
 @dataclass
@@ -91,3 +101,31 @@ class Adder(Node):
     @service("/add_two")
     def add(self, ctx: Context, req: Num) -> Num:
         return Num(req.value + 1)
+
+
+class Pair(Node):
+    """Publishes /m 1 then /m 2 every 10 ms."""
+
+    @every(10)
+    def tick(self, ctx: Context) -> None:
+        ctx.publish("/m", Num(1))
+        ctx.publish("/m", Num(2))
+
+
+@dataclass
+class SeenState:
+    """State of KeepLast."""
+
+    got_first: bool = False
+
+
+class KeepLast(Node):
+    """Keeps one waiting /m (KEEP_LAST depth 1): when both wait, the first may be lost."""
+
+    def initial_state(self) -> SeenState:
+        return SeenState()
+
+    @subscribe("/m", qos=QoS(depth=1))
+    def on_m(self, ctx: Context, msg: Num) -> None:
+        if msg.value == 1:
+            self.state.got_first = True

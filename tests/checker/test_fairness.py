@@ -60,6 +60,17 @@ def test_lost_service_requests_hold_under_weak_fairness(tmp_path):
     assert run(path, fairness="weak").status == "holds"
 
 
+def test_keep_last_drops_count_as_drops(tmp_path):
+    # KEEP_LAST (depth 1) may throw /m 1 away every period while /m 2 waits behind it
+    nodes = [{"name": "pub", "class": L + "Pair"}, {"name": "sub", "class": L + "KeepLast"}]
+    path = scenario(tmp_path, nodes, name="keeplast", properties=[
+        {"name": "first", "kind": "eventually", "expr": "sub.got_first"}])
+    plain = run(path)
+    assert plain.status == "violated" and plain.violation.shape == "lasso"
+    assert any("KEEP_LAST" in f for s in plain.trace["steps"] for f in s.get("faults", []))
+    assert run(path, fairness="weak").status == "holds"
+
+
 def test_real_livelock_is_violated_under_weak_fairness(tmp_path):
     # the receiver handles every /req it gets but never acks one: a fair cycle
     result = run(_retry(tmp_path, wanted=2, name="livelock"), fairness="weak")
