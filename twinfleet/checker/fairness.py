@@ -71,7 +71,7 @@ def fair_violation(system: System, store: StateStore, prop: str, world_of: World
                    ) -> FairPath | None:
     """A path on which `prop` never holds ending in a fair cycle or a world with nothing
     pending; None if there is none (the property holds under weak fairness). `world_of`
-    rebuilds the world of a state id (`checker.paths.world_at`)."""
+    rebuilds the world of a state id (`checker.paths.world_finder`)."""
     holds, terminal = store.holds[prop], store.terminal
     parents, order = _reachable(store, holds)
     ends = [s for s in order if terminal[s]]

@@ -11,12 +11,12 @@ expression never holds (a lasso) and a state with nothing pending ends a
 finite counterexample; `lasso_counterexample` turns what it finds into the
 violation and the `Counterexample` a search reports. Under weak fairness it asks
 `checker.fairness` instead, which needs the worlds of some states again
-(`world_at`).
+(`world_finder`).
 """
 
 from __future__ import annotations
 
-from functools import partial
+from collections.abc import Callable
 
 from twinfleet.checker.diagnosis import FIX_HIDDEN, ContractBreachError, breach_line
 from twinfleet.checker.fairness import fair_violation
@@ -45,13 +45,27 @@ def steps_along(system: System, store: StateStore, ids: list[int]) -> tuple[tupl
     return initial, steps
 
 
-def world_at(system: System, store: StateStore, sid: int) -> World:
-    """The world of state id `sid`, rebuilt along its parents from its initial world."""
-    ids = store.path_ids(sid)
-    world = system.initial_world(store.roots[ids[0]]).world
-    for nxt in ids[1:]:
-        world = _successor_to(system, store, world, nxt).world
-    return world
+def world_finder(system: System, store: StateStore) -> Callable[[int], World]:
+    """A function giving the world of a state id, rebuilt along its parents from its
+    initial world; it keeps every world it rebuilt, so rebuilding many worlds re-runs
+    each step of their paths once (their paths share the parents' tree)."""
+    known: dict[int, World] = {}
+
+    def world_of(sid: int) -> World:
+        ids = store.path_ids(sid)
+        k = len(ids)
+        while k and ids[k - 1] not in known:
+            k -= 1
+        if k:
+            world = known[ids[k - 1]]
+        else:
+            world = known[ids[0]] = system.initial_world(store.roots[ids[0]]).world
+            k = 1
+        for nxt in ids[k:]:
+            world = known[nxt] = _successor_to(system, store, world, nxt).world
+        return world
+
+    return world_of
 
 
 def _successor_to(system: System, store: StateStore, world: World, sid: int) -> Transition:
@@ -95,7 +109,7 @@ def _any_path(system: System, store: StateStore, prop: str) -> Counterexample | 
 
 
 def _fair_path(system: System, store: StateStore, prop: str) -> Counterexample | None:
-    fair = fair_violation(system, store, prop, partial(world_at, system, store))
+    fair = fair_violation(system, store, prop, world_finder(system, store))
     if fair is None:
         return None
     initial, steps = steps_along(system, store, fair.stem)
