@@ -222,7 +222,8 @@ class CheckResult:
         if notes:
             return [f"state growth: {n.describe()}" for n in notes]
         s = self.statistics
-        if self.status is Status.UNKNOWN and s.depth >= _DEEP and "max-depth" not in self.reason:
+        if self.status is Status.UNKNOWN and s.depth >= _DEEP and self.search != "random" \
+                and "max-depth" not in self.reason:
             return [f"hint: the search was still going deeper (depth {s.depth:,}); if some "
                     "state never repeats (a counter, a drifting float, a growing list), "
                     f"{HINT}"]
