@@ -1,6 +1,6 @@
 """What the state-growth diagnosis (`checker.growth`) costs a search that finishes.
 
-Every search samples one new world in 8 for `GrowthWatch`. This script runs, in one
+Every search samples one new world in 16 for `GrowthWatch`. This script runs, in one
 process and alternating, each scenario's full check (its default reduction, BFS to
 the end) with the watch on and with `GrowthWatch.observe` replaced by a no-op (the
 sampling test itself stays: one `&` per new world), `--repeat` rounds. It prints per

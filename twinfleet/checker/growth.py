@@ -6,7 +6,7 @@ only grows or a time stamp kept in the state each give every world a new
 identity, and the search runs until a limit stops it. `GrowthWatch` names such
 fields while the search runs, cheaply:
 
-- It looks at one newly found world in 8 (`SAMPLE_MASK`; the search calls `observe`
+- It looks at one newly found world in 16 (`SAMPLE_MASK`; the search calls `observe`
   for it with the world it was found from), and only at the nodes whose state
   the step changed: the new and the old state are decoded (`System.decode`)
   and split into *fields* (`_fields`): the attributes of a dataclass (one level
@@ -38,7 +38,7 @@ from typing import Any, Final, final
 from twinfleet.checker.transition import Transition
 from twinfleet.checker.world import World
 
-SAMPLE_MASK: Final = 7  # the search samples a new world when its id & SAMPLE_MASK == 0 (1 in 8)
+SAMPLE_MASK: Final = 15  # the search samples a new world when its id & SAMPLE_MASK == 0 (1 in 16)
 _K: Final = 1024  # hashes kept per field: exact counts below, about 3 % error above
 _MIN_VALUES: Final = 64  # fewer values is never called growth (C1a's robots reach ~30 cells)
 _STEPS: Final = 8  # different step sizes remembered per field
