@@ -20,8 +20,9 @@ fields while the search runs, cheaply:
 - `notes` names the fields that still take new values: at least `_MIN_VALUES`
   distinct values, and either only ever moving one way while still finding new
   ones (a counter; in a wide search its values grow with the depth, not with
-  the number of states) or having found at least a quarter of their values in
-  the last half of the samples (their count keeps growing with the state count).
+  the number of states) or having found at least a quarter of their values
+  since they had half their samples or fewer (their count keeps growing with
+  the state count).
   A bounded field stops finding new values, so it drops out.
 
 The counts are of the sampled worlds: a lower bound of the values the field took.
