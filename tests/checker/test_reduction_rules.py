@@ -32,9 +32,10 @@ RULE_FUNCTIONS: tuple[Callable[..., Any], ...] = (
 )
 
 #: The fingerprint of `RULE_FUNCTIONS` as the closure was last reviewed for them: Rule 6
-#: (KEEP_LAST drops, BEST_EFFORT losses), calls with no server, and a latency branch that
-#: tells a sampler the send time (its branches and due times unchanged).
-PINNED = "34e032a2dd446c3e"
+#: (KEEP_LAST drops, BEST_EFFORT losses), calls with no server, a latency branch that
+#: tells a sampler the send time (its branches and due times unchanged), and the keys of
+#: the messages a drop branch lost, recorded for weak fairness (no event changed).
+PINNED = "ca5825689b0ac5c9"
 
 _SKIPPED = (tokenize.NL, tokenize.COMMENT)
 _STATEMENT_START = (tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT)
