@@ -209,7 +209,6 @@ class CheckResult:
                 lines.append(f"reproduce with: twinfleet replay {self.trace_path}")
         return "\n".join(lines)
 
-
     def growth_notes(self) -> tuple[GrowthNote, ...]:
         """The fields that kept taking new values, when no limit but the search's end
         should have stopped it (a search that finished has none to report)."""
