@@ -138,3 +138,18 @@ def test_the_cycle_takes_a_detour_to_handle_what_it_drops():
     assert walk[0].source == 0 and walk[-1].target == 0
     assert all(a.target == b.source for a, b in zip(walk, walk[1:], strict=False))
     assert any(b"m" in e.handled for e in walk)
+
+
+def test_the_check_options_of_every_command_carry_fairness():
+    # check, sweep and experiment declare their options in one function
+    import argparse
+
+    from twinfleet.checker.options import SearchChoices, add_check_arguments
+    from twinfleet.runtime.scenario.config import Fairness
+
+    parser = argparse.ArgumentParser()
+    add_check_arguments(parser)
+    weak = SearchChoices.of(parser.parse_args(["--fairness", "weak"]))
+    assert weak.fairness is Fairness.WEAK and weak.fields()["fairness"] is Fairness.WEAK
+    # not given: not in the fields, so a sweep's cache keys of earlier runs stay the same
+    assert "fairness" not in SearchChoices.of(parser.parse_args([])).fields()
