@@ -8,6 +8,8 @@ Every source file belongs to one layer, read from its folder under `twinfleet/`:
   `agreement/`, `nodes/`, `ros2/` (the ROS 2 bridge, beside the runtime: it
   speaks rmw_zenoh's protocol through the runtime's tools, and only it imports the ROS
   field's libraries, `ROS_LIBRARIES`, so the default install needs none of them);
+- `interfaces/` (ROS 2 message and service types from their definitions, above the
+  contract; it may import rosbags, whose parser and Jazzy store hold the definitions);
 - `twinfleet/__init__.py` (the node API, which re-exports the contract);
 - the command line (`twinfleet/cli/`, `twinfleet/__main__.py`) and the testing API
   (`twinfleet/testing.py`) on top.
@@ -48,11 +50,12 @@ RULES: dict[str, set[str]] = {
     "sweep": {"api", "contract", "scenario", "checker"},
     "nodes": {"api", "contract"},
     "agreement": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "nodes"},
-    "ros2": {"api", "access", "fleet", "tools", *_BELOW_HOST},
+    "interfaces": {"contract"},
+    "ros2": {"api", "access", "fleet", "tools", *_BELOW_HOST, "interfaces"},
     "runtime": set(),  # runtime/__init__.py: names its wings, imports none
     "maps": set(), "launch": set(),  # package data: shipped maps and scenarios
     "top": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes", "ros2",
-            "sweep", "top"},
+            "sweep", "interfaces", "top"},
 }
 #: `tools/` groups three wings of its own (tests/test_sizes.py measures each alone): the
 #: monitors lie below the recordings and the viewers, which use each other (the Foxglove
@@ -63,8 +66,10 @@ TOOLS_RULES: dict[str, set[str]] = {
     "view": {"monitor", "record"},
 }
 IO = {"asyncio", "zenoh", "aiohttp", "mcap", "foxglove"}
-#: the ROS field's libraries (the `ros2` extra): imported by the `ros2` layer only
+#: the ROS field's libraries (the `ros2` extra): imported by the `ros2` layer only, and rosbags
+#: (the definitions of ROS 2 messages) by the `interfaces` layer too
 ROS_LIBRARIES = {"rosbags", "mcap_ros2", "zenoh_ros2_sdk", "rclpy"}
+ROS_IMPORTERS = {"ros2": ROS_LIBRARIES, "interfaces": {"rosbags"}}
 PURE: dict[str, set[str]] = {
     "contract": IO, "scenario": IO, "core": IO, "checker": IO,
     "sweep": IO | {"ray"},  # Ray only through checker.parallel.engine_for
@@ -154,7 +159,7 @@ def test_layer_imports_only_what_lies_below_it(layer):
                 other = _layer(target) if target in SOURCES else None
                 if other is not None and other != layer and other not in RULES[layer]:
                     bad.append(f"{path.relative_to(ROOT)} imports {name} ({other})")
-            elif top in ROS_LIBRARIES and layer != "ros2":
+            elif top in ROS_LIBRARIES and top not in ROS_IMPORTERS.get(layer, ()):
                 bad.append(f"{path.relative_to(ROOT)} imports {name}: only twinfleet.ros2 may")
             elif top in PURE.get(layer, ()):
                 bad.append(f"{path.relative_to(ROOT)} imports {name}")

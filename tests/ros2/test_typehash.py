@@ -17,8 +17,8 @@ from pathlib import Path
 import pytest
 from rosbags.typesys import Stores, get_typestore
 
+from twinfleet.interfaces.typehash import rihs01, store_lookup
 from twinfleet.ros2.cdr import RosTypes
-from twinfleet.ros2.typehash import rihs01
 
 SHARE = Path(sys.prefix) / "share"
 MAPPED = ("nav_msgs/msg/OccupancyGrid", "geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Path",
@@ -42,7 +42,7 @@ def test_every_installed_jazzy_message_hashes_as_rosidl():
     for path in sorted(SHARE.glob("*/msg/*.json")):
         name = f"{path.parts[-3]}/msg/{path.stem}"
         if name in store.fielddefs:
-            assert rihs01(store, name) == _rosidl_hash(name), name
+            assert rihs01(name, store_lookup(store)) == _rosidl_hash(name), name
             checked.append(name)
     assert len(checked) > 100  # std, geometry, nav, sensor, builtin_interfaces, ...
 
@@ -51,8 +51,9 @@ def test_rosbags_own_hash_is_wrong_for_char_fields_and_ours_is_right():
     store = get_typestore(Stores.ROS2_JAZZY)
     rosidl = _rosidl_hash("std_msgs/msg/Char")
     assert store.hash_rihs01("std_msgs/msg/Char") != rosidl  # rosbags: char is type id 13
-    assert rihs01(store, "std_msgs/msg/Char") == rosidl
-    assert store.hash_rihs01("std_msgs/msg/String") == rihs01(store, "std_msgs/msg/String")
+    assert rihs01("std_msgs/msg/Char", store_lookup(store)) == rosidl
+    assert store.hash_rihs01("std_msgs/msg/String") == rihs01("std_msgs/msg/String",
+                                                             store_lookup(store))
 
 
 def test_a_char_field_inside_another_type_hashes_as_rosidl():
@@ -63,7 +64,8 @@ def test_a_char_field_inside_another_type_hashes_as_rosidl():
     store = get_typestore(Stores.EMPTY)
     text = (SHARE / "test_msgs" / "msg" / "BasicTypes.msg").read_text()
     store.register(get_types_from_msg(text, "test_msgs/msg/BasicTypes"))
-    assert rihs01(store, "test_msgs/msg/BasicTypes") == _rosidl_hash("test_msgs/msg/BasicTypes")
+    expected = _rosidl_hash("test_msgs/msg/BasicTypes")
+    assert rihs01("test_msgs/msg/BasicTypes", store_lookup(store)) == expected
 
 
 def test_kilted_hashes_equal_rosidls():
@@ -71,4 +73,4 @@ def test_kilted_hashes_equal_rosidls():
     store = get_typestore(Stores.ROS2_KILTED)
     assert "std_msgs/msg/Char" in golden
     for name, expected in golden.items():
-        assert rihs01(store, name) == expected, name
+        assert rihs01(name, store_lookup(store)) == expected, name

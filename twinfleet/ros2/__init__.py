@@ -6,7 +6,7 @@ it, and only it imports the ROS field's libraries (rosbags, mcap-ros2-support),
 installed with the ``twinfleet[ros2]`` extra.
 
 Modules: `wire` (rmw_zenoh's keys, liveliness tokens, QoS strings, attachments,
-sans I/O), `typehash` (RIHS01), `cdr` (messages as plain values ↔ CDR),
+sans I/O), `cdr` (messages as plain values ↔ CDR),
 `mapping` (a fleet's ROS 2 mapping by import name), `interfaces` (the other
 fleet types by their fields, and their package), `graph` (the bridge's ROS
 nodes and endpoints, inbound checks, sans I/O), `bridge` (the ROS 2 session),
@@ -16,4 +16,4 @@ rosbag2 folders), `commands` (the command line).
 """
 
 __all__ = ["bridge", "cdr", "commands", "graph", "graph_list", "interfaces", "live", "mapping",
-           "rosbag", "typehash", "wire"]
+           "rosbag", "wire"]

@@ -6,7 +6,7 @@ field names (``{"header": {"stamp": {"sec": 1, "nanosec": 0}, "frame_id":
 ``uint8``/``int8``/``byte`` sequences), and Python numbers. `RosTypes` turns
 them into rosbags' message objects and CDR (little-endian, with the
 encapsulation header ``00 01 00 00``) and back, and computes each type's
-RIHS01 hash (`typehash`). A field missing from a dict takes ROS's zero value
+RIHS01 hash (`twinfleet.interfaces.typehash`). A field missing from a dict takes ROS's zero value
 (0, "", empty sequence, a zero nested message), as a default-constructed ROS 2
 message has.
 
@@ -31,7 +31,7 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.base import Nodetype
 from rosbags.typesys.store import Typestore
 
-from twinfleet.ros2.typehash import rihs01
+from twinfleet.interfaces.typehash import rihs01, store_lookup
 
 _NUMPY = {"int8": np.int8, "uint8": np.uint8, "byte": np.uint8, "char": np.uint8,
           "int16": np.int16, "uint16": np.uint16, "int32": np.int32, "uint32": np.uint32,
@@ -58,7 +58,7 @@ class RosTypes:
     def type_hash(self, ros_type: str) -> str:
         """The RIHS01 hash a ROS 2 node announces for `ros_type`."""
         if ros_type not in self._hashes:
-            self._hashes[ros_type] = rihs01(self.store, ros_type)
+            self._hashes[ros_type] = rihs01(ros_type, store_lookup(self.store))
         return self._hashes[ros_type]
 
     def encode(self, ros_type: str, fields: Mapping[str, Any]) -> bytes:

@@ -14,7 +14,7 @@ package, ``Int64x2`` (one field, ``int64[2] values``). An annotation outside thi
 table (a union, a dict) makes the type not exportable: `InterfaceError` says which.
 
 `Interfaces` registers the types in a `cdr.RosTypes` store, so their RIHS01 hashes
-(`typehash`) are computed as the standard types' are, and converts a fleet
+(`twinfleet.interfaces.typehash`) are computed as the standard types' are, and converts a fleet
 message's plain fields into ROS fields. `write_package` writes a colcon package of
 them (``package.xml``, ``CMakeLists.txt``, ``msg/*.msg``): a ROS 2 workspace that
 builds it has the same types, with the same hashes, as the bridge announces.

@@ -6,7 +6,7 @@ recording's scene names it) and writes what comes out with rosbags' rosbag2
 writer: a folder with ``metadata.yaml`` and one MCAP file (profile ``ros2``,
 ``ros2msg`` schemas, ``cdr`` message encoding), one connection per ROS topic
 and type with its offered QoS (transient-local for the mapping's latched
-topics) and its RIHS01 hash as rosidl computes it (`typehash`: rosbags' own
+topics) and its RIHS01 hash as rosidl computes it (`twinfleet.interfaces.typehash`: rosbags' own
 hash is wrong for types with ``char`` fields, so the hash is passed in).
 Messages keep the recording's log time (receive time, ns).
 

@@ -5,8 +5,9 @@ document (ros2/rmw_zenoh, docs/design.md) describes it and docs/ros2.md restates
 
 * Data of a topic or service travels on ``<domain>/<name>/<dds type>/<type hash>``:
   the fully qualified name without its leading and trailing ``/``, the DDS type name
-  (``sensor_msgs::msg::dds_::LaserScan_``) and the RIHS01 hash (`typehash`). A key that
-  differs in any part matches nothing: a wrong hash is silence, not an error.
+  (``sensor_msgs::msg::dds_::LaserScan_``) and the RIHS01 hash
+  (`twinfleet.interfaces.typehash`). A key that differs in any part matches nothing: a
+  wrong hash is silence, not an error.
 * The ROS graph is a set of liveliness tokens under the hermetic ``@ros2_lv`` chunk, one
   per node (``NN``) and one per publisher, subscription, service and client
   (``MP MS SS SC``), each naming its session, node, entity and, for endpoints, the topic,

@@ -1,0 +1,132 @@
+"""Generated message classes: rosidl's constructor, freeze/thaw, the contract's codec, errors."""
+
+from __future__ import annotations
+
+import copy
+
+import pytest
+
+from twinfleet.interfaces import (
+    FieldValueError,
+    InterfaceError,
+    freeze,
+    from_fields,
+    load_interface,
+    message_type,
+    thaw,
+)
+from twinfleet.runtime.contract.messages import String, decode, encode, registered_types
+
+pytestmark = pytest.mark.timeout(60)
+
+geometry = load_interface("geometry_msgs", "msg")
+sensor = load_interface("sensor_msgs", "msg")
+std_msgs = load_interface("std_msgs", "msg")
+
+
+def test_constructor_is_keyword_only_with_defaults_and_nested_messages():
+    twist = geometry.Twist(linear=geometry.Vector3(x=1.0))
+    assert twist.linear.x == 1.0 and twist.angular == geometry.Vector3()
+    with pytest.raises(TypeError):
+        geometry.Twist(geometry.Vector3())  # positional, as rosidl refuses it
+    with pytest.raises(TypeError, match="has no field 'linear_x'"):
+        geometry.Twist(linear_x=1.0)
+    assert len(sensor.Imu().orientation_covariance) == 9
+    assert sensor.Imu().orientation_covariance is not sensor.Imu().orientation_covariance
+    assert not hasattr(geometry.Twist(), "__dict__")  # __slots__, as rosidl's
+
+
+def test_equality_and_repr_read_like_rosidl_s():
+    assert geometry.Vector3(x=1.0) == geometry.Vector3(x=1.0)
+    assert geometry.Vector3(x=1.0) != geometry.Vector3(x=2.0)
+    assert geometry.Point(x=1.0) != geometry.Vector3(x=1.0)  # same fields, other type
+    assert repr(geometry.Vector3()) == "geometry_msgs.msg.Vector3(x=0.0, y=0.0, z=0.0)"
+
+
+def test_freeze_makes_a_contract_message_that_the_codec_carries():
+    twist = geometry.Twist()
+    twist.linear.x = 0.5
+    frozen = freeze(twist)
+    assert type(frozen).__message_type__ == "geometry_msgs/Twist"
+    assert registered_types()["geometry_msgs/Twist"] is type(frozen)
+    assert decode(encode(frozen)).msg == frozen
+    with pytest.raises(AttributeError):
+        frozen.linear.x = 2.0  # frozen all the way down
+
+
+def test_thaw_gives_a_new_mutable_message_each_time():
+    frozen = freeze(sensor.Imu(orientation_covariance=[1.0] * 9))
+    first, second = thaw(frozen), thaw(frozen)
+    assert first == second and first is not second
+    first.orientation_covariance[0] = 5.0
+    assert second.orientation_covariance[0] == 1.0
+    assert freeze(first) != frozen and freeze(second) == frozen
+
+
+def test_publishing_copies_what_the_node_keeps_changing():
+    twist = geometry.Twist()
+    frozen = freeze(twist)
+    twist.linear.x = 3.0
+    assert frozen.linear.x == 0.0
+
+
+def test_the_contract_s_own_standard_types_are_shared_with_native_nodes():
+    assert type(freeze(std_msgs.String(data="hi"))) is String
+    assert thaw(String(data="hi")) == std_msgs.String(data="hi")
+
+
+@pytest.mark.parametrize(("build", "line"), [
+    (lambda: geometry.Twist(linear=geometry.Vector3(x="fast")),
+     "geometry_msgs/msg/Twist.linear.x: expected a number (float64), got 'fast'"),
+    (lambda: sensor.Imu(orientation_covariance=[0.0] * 8),
+     "sensor_msgs/msg/Imu.orientation_covariance: expected 9 values, got 8"),
+    (lambda: std_msgs.UInt8(data=256),
+     "std_msgs/msg/UInt8.data: 256 is out of range for uint8 (0..255)"),
+    (lambda: geometry.Twist(linear=geometry.Point()),
+     "geometry_msgs/msg/Twist.linear: expected a geometry_msgs/msg/Vector3, got Point"),
+])
+def test_a_wrong_value_is_one_line_at_freeze(build, line):
+    with pytest.raises(FieldValueError) as caught:
+        freeze(build())
+    assert str(caught.value) == line
+
+
+def test_bounded_sequences_are_checked():
+    params = load_interface("rcl_interfaces", "msg")
+    descriptor = params.ParameterDescriptor()
+    descriptor.integer_range = [params.IntegerRange(), params.IntegerRange()]
+    with pytest.raises(FieldValueError, match="integer_range: 2 values, more than the bound 1"):
+        freeze(descriptor)
+
+
+def test_services_have_request_and_response_classes():
+    srv = load_interface("std_srvs", "srv")
+    assert srv.SetBool.__ros_type__ == "std_srvs/srv/SetBool"
+    request = srv.SetBool.Request(data=True)
+    assert request.data is True and srv.SetBool.Response().message == ""
+    assert type(freeze(request)).__message_type__ == "std_srvs/SetBool_Request"
+
+
+def test_from_fields_reads_ros_users_yaml_values():
+    twist = from_fields("geometry_msgs/msg/Twist", {"linear": {"x": 1.0}})
+    assert twist == geometry.Twist(linear=geometry.Vector3(x=1.0))
+    with pytest.raises(FieldValueError, match=r"Twist\.linear: geometry_msgs/msg/Vector3 has no "
+                                              "field 'w'"):
+        from_fields("geometry_msgs/msg/Twist", {"linear": {"w": 1.0}})
+
+
+def test_unknown_interfaces_are_one_line_naming_what_to_install():
+    with pytest.raises(InterfaceError, match=r"unknown ROS 2 interface package nope_msgs\.msg: "
+                                             r"no definitions installed \(install "
+                                             r"ros-jazzy-nope-msgs"):
+        load_interface("nope_msgs", "msg")
+    with pytest.raises(AttributeError, match="geometry_msgs has no msg 'Twister'"):
+        _ = geometry.Twister
+    with pytest.raises(InterfaceError, match="package geometry_msgs has no such msg"):
+        message_type("geometry_msgs/msg/Twister")
+
+
+def test_deepcopy_keeps_the_class():
+    twist = geometry.Twist()
+    twist.linear.x = 1.0
+    assert copy.deepcopy(twist) == twist
