@@ -26,6 +26,7 @@ from twinfleet.checker import commands as checker_commands
 from twinfleet.cli import render as render_command
 from twinfleet.cli import runtime_commands
 from twinfleet.cli.interrupts import Interrupts
+from twinfleet.interfaces.guard import install as refuse_borrowed_ros_names
 from twinfleet.ros2 import commands as ros2_commands
 from twinfleet.runtime.access.connection import (
     EXIT_BAD_INPUT,
@@ -108,6 +109,7 @@ def _parse(parser: argparse.ArgumentParser, argv: Sequence[str] | None) -> argpa
 
 def _run(args: argparse.Namespace) -> int:
     try:
+        refuse_borrowed_ros_names()  # before any node module registers its message types
         return int(args.func(args) or 0)
     except KeyboardInterrupt:
         return EXIT_INTERRUPTED

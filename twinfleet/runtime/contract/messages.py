@@ -25,6 +25,7 @@ import msgpack
 T = TypeVar("T")
 
 _REGISTRY: dict[str, type] = {}
+_CHECKS: list[Callable[[str, type], None]] = []
 
 
 class DecodeError(ValueError):
@@ -40,6 +41,8 @@ def message(type_name: str) -> Callable[[type[T]], type[T]]:
     def register(cls: type[T]) -> type[T]:
         if not dataclasses.is_dataclass(cls):
             cls = dataclass(frozen=True, slots=True)(cls)
+        for check in _CHECKS:  # first: a check's reason says more than "registered twice"
+            check(type_name, cls)
         existing = _REGISTRY.get(type_name)
         if existing is not None and existing.__qualname__ != cls.__qualname__:
             raise TypeError(f"message type {type_name!r} registered twice")
@@ -48,6 +51,20 @@ def message(type_name: str) -> Callable[[type[T]], type[T]]:
         return cls
 
     return register
+
+
+def add_type_check(check: Callable[[str, type], None]) -> None:
+    """Run `check(type_name, cls)` on every registered type now and on each one registered
+    later; a check refuses a type by raising TypeError (one line: the user's error).
+
+    Layers above the contract add what the contract cannot know: a standard ROS 2 type's
+    name borrowed with other fields (`twinfleet.interfaces.guard`).
+    """
+    if check in _CHECKS:
+        return
+    for type_name, cls in list(_REGISTRY.items()):
+        check(type_name, cls)
+    _CHECKS.append(check)
 
 
 def is_message(obj: object) -> bool:
