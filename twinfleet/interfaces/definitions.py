@@ -281,6 +281,20 @@ def service_definitions(name: str) -> tuple[Definition, Definition]:
             _parse(response, f"{pkg}/srv/{short}_Response", str(path)))
 
 
+def ros_name(type_name: str) -> str | None:
+    """The ROS 2 name of a contract type name, or None: ``geometry_msgs/Twist`` →
+    ``geometry_msgs/msg/Twist``, ``std_srvs/SetBool_Request`` → ``std_srvs/srv/SetBool_Request``
+    (a ROS 2 name is its own)."""
+    parts = type_name.split("/")
+    if len(parts) == 3 and parts[1] in ("msg", "srv") and all(parts):
+        return type_name
+    if len(parts) != 2 or not all(parts):
+        return None
+    pkg, short = parts
+    kind = "srv" if short.endswith(("_Request", "_Response")) else "msg"
+    return f"{pkg}/{kind}/{short}"
+
+
 def _split(name: str) -> tuple[str, str, str]:
     parts = name.split("/")
     if len(parts) != 3 or parts[1] not in ("msg", "srv") or not all(parts):

@@ -28,6 +28,7 @@ from twinfleet.interfaces.definitions import (
     FieldType,
     InterfaceError,
     message_definition,
+    ros_name,
     standard_packages,
 )
 from twinfleet.runtime.contract.messages import add_type_check
@@ -45,7 +46,7 @@ def check_type(type_name: str, cls: type) -> None:
     """Raise TypeError (one line) if `cls` borrows a standard type's name with other fields."""
     if getattr(cls, "__ros_definition__", None) or cls.__module__.startswith("twinfleet."):
         return
-    ros_type = _ros_name(type_name)
+    ros_type = ros_name(type_name)
     if ros_type is None:
         return
     try:
@@ -65,19 +66,6 @@ def check_type(type_name: str, cls: type) -> None:
                         f"({_describe(definition)}); use the standard one (from "
                         f"{definition.package}.{ros_type.split('/')[1]} import "
                         f"{definition.short}) or name yours in a package of your own")
-
-
-def _ros_name(type_name: str) -> str | None:
-    parts = type_name.split("/")
-    if len(parts) == 3 and parts[1] in ("msg", "srv"):
-        return type_name
-    if len(parts) != 2:
-        return None
-    pkg, short = parts
-    for part in ("_Request", "_Response"):
-        if short.endswith(part):
-            return f"{pkg}/srv/{short}"
-    return f"{pkg}/msg/{short}"
 
 
 def _mismatch(cls: type, definition: Definition) -> str | None:
@@ -117,7 +105,7 @@ def _hint_kind(hint: Any) -> str | None:
         return "a sequence"
     nested = getattr(hint, "__message_type__", None)
     if isinstance(nested, str):
-        return f"a {_ros_name(nested) or nested}"
+        return f"a {ros_name(nested) or nested}"
     return None
 
 

@@ -2,7 +2,8 @@
 
 A message class that no mapping turns into a standard type is carried by its
 fields under a ROS-style name (``twinfleet_msgs/RobotStatus`` →
-``twinfleet_msgs/msg/RobotStatus``). Each field's annotation gives its ROS type:
+``twinfleet_msgs/msg/RobotStatus``); a standard ROS 2 type (``geometry_msgs/Twist``
+of `twinfleet.interfaces`) under its own name and hash. Each field's annotation gives its ROS type:
 
     int → int64    float → float64    str → string    bool → bool    bytes → uint8[]
     tuple[T, ...] → T[]               tuple[T, T] (one scalar type) → T[2]
@@ -30,6 +31,7 @@ from typing import Any
 
 from rosbags.typesys import get_types_from_msg
 
+from twinfleet.interfaces.plain import ros_fields, standard_type
 from twinfleet.ros2.cdr import RosTypes
 
 _SCALARS: dict[Any, str] = {int: "int64", float: "float64", str: "string", bool: "bool"}
@@ -110,12 +112,19 @@ class Interfaces:
         return lambda plain: self._convert[name](plain)
 
     def ros_type(self, type_name: str) -> str | None:
-        """The ROS 2 type a twinfleet type is carried as, or None (not exportable)."""
-        return ros_name(type_name) if type_name in self._convert else None
+        """The ROS 2 type a twinfleet type is carried as, or None (not exportable): a
+        standard ROS 2 type under its own name (`twinfleet.interfaces.plain`)."""
+        if type_name in self._convert:
+            return ros_name(type_name)
+        standard = standard_type(type_name)
+        return standard if standard is not None and self.types.known(standard) else None
 
     def fields(self, type_name: str, plain: Mapping[str, Any]) -> dict[str, Any]:
         """A fleet message's plain fields (an envelope's ``data``) as ROS 2 fields."""
-        return self._convert[type_name](plain)
+        convert = self._convert.get(type_name)
+        if convert is not None:
+            return convert(plain)
+        return ros_fields(self.ros_type(type_name) or "", plain)
 
     def package(self, pkg: str) -> dict[str, str]:
         """The .msg texts of package `pkg`, by message name."""

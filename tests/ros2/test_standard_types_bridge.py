@@ -1,0 +1,125 @@
+"""Standard ROS 2 types cross the bridge under their real names and RIHS01, with no mapping.
+
+A fleet message of a generated type (`twinfleet.interfaces`: geometry_msgs/Twist) or of
+the contract's own std_msgs/String reaches an independent ROS 2 peer — zenoh-ros2-sdk
+(not ours) in its own process, through a router on 127.0.0.1 (multicast off) — whose
+subscription key carries the hash it computes itself from rosidl's definitions: the
+sample arriving, decoded, is the proof that name, hash and CDR agree. The mapping the
+bridge is given maps nothing.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import queue
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+import zenoh
+
+from twinfleet.interfaces import freeze, load_interface
+from twinfleet.ros2.bridge import RosSide, ros_config
+from twinfleet.ros2.live import fleet_interfaces
+from twinfleet.runtime.contract.messages import String, encode
+from twinfleet.runtime.fleet.live_fleet import free_port
+from twinfleet.runtime.host.zenoh_transport import zenoh_config
+
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
+SHARE = Path(sys.prefix) / "share"
+
+
+class MapsNothing:
+    """A mapping that maps no type: what the bridge carries here, it carries by itself."""
+
+    latched: frozenset[str] = frozenset()
+    mapped_types: frozenset[str] = frozenset()
+
+    def outbound(self, topic, type_name, data, stamp_ms):
+        return ()
+
+
+def _rosidl_hash(package: str, name: str) -> str:
+    doc = json.loads((SHARE / package / "msg" / f"{name}.json").read_text())
+    return doc["type_hashes"][0]["hash_string"]
+
+
+def _events(proc, out: queue.Queue) -> None:
+    for line in proc.stdout:
+        if line.startswith("{"):
+            out.put(json.loads(line))
+
+
+def _wait(events: queue.Queue, kind: str, timeout: float = 20.0) -> dict:
+    end = time.monotonic() + timeout
+    while time.monotonic() < end:
+        try:
+            event = events.get(timeout=max(0.01, end - time.monotonic()))
+        except queue.Empty:
+            break
+        if event["event"] == kind:
+            return event
+    raise AssertionError(f"no {kind} event from the peer")
+
+
+def _until(events: queue.Queue, kind: str, side: RosSide, send) -> dict:
+    """Send until the peer hears it: its subscription reaches the router at a time no API of
+    the SDK tells."""
+    end = time.monotonic() + 20
+    while time.monotonic() < end:
+        send()
+        with contextlib.suppress(AssertionError):
+            return _wait(events, kind, timeout=0.3)
+    raise AssertionError(f"the peer never heard a {kind}")
+
+
+def test_a_twist_and_a_string_reach_a_ros2_peer_by_their_rosidl_hashes():
+    geometry = load_interface("geometry_msgs", "msg")
+    twist = freeze(geometry.Twist(linear=geometry.Vector3(x=1.0), angular=geometry.Vector3(z=0.5)))
+    port = free_port()
+    router = zenoh.open(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"], mode="router"))
+    session = zenoh.open(ros_config(f"tcp/127.0.0.1:{port}"))
+    side = RosSide(session, MapsNothing())
+    side.interfaces = fleet_interfaces(side.graph.types)
+    proc = None
+    try:
+        env = dict(os.environ, ZENOH_CONFIG_OVERRIDE="scouting/multicast/enabled=false")
+        proc = subprocess.Popen([sys.executable, str(Path(__file__).with_name("sdk_twist_peer.py")),
+                                 str(port)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
+                                text=True, env=env)
+        events: queue.Queue = queue.Queue()
+        threading.Thread(target=_events, args=(proc, events), daemon=True).start()
+        ready = _wait(events, "ready")
+        assert ready["twist_hash"] == _rosidl_hash("geometry_msgs", "Twist")
+        assert ready["string_hash"] == _rosidl_hash("std_msgs", "String")
+        heard = _until(events, "twist", side, lambda: side.deliver(
+            "twinfleet/f/cmd_vel", encode(twist, stamp_ms=10, sender="driver")))
+        assert heard["linear"] == [1.0, 0.0, 0.0] and heard["angular_z"] == 0.5
+        text = _until(events, "string", side, lambda: side.deliver(
+            "twinfleet/f/status", encode(String("ok"), stamp_ms=20, sender="driver")))
+        assert text["data"] == "ok"
+        keys = {d.endpoint.topic: d.key for d in side.graph.endpoints.values()}
+        assert keys["/cmd_vel"].endswith(
+            "/geometry_msgs::msg::dds_::Twist_/" + _rosidl_hash("geometry_msgs", "Twist"))
+        proc.stdin.write("topics\n")
+        proc.stdin.flush()
+        topics = dict(_wait(events, "topics")["topics"])
+        assert topics["/cmd_vel"] == ["geometry_msgs/msg/Twist"]
+        assert topics["/status"] == ["std_msgs/msg/String"]
+    finally:
+        if proc is not None:
+            with contextlib.suppress(Exception):
+                proc.stdin.write("quit\n")
+                proc.stdin.flush()
+            try:
+                proc.wait(timeout=10)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+        side.close()
+        session.close()
+        router.close()
