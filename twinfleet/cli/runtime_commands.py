@@ -248,7 +248,8 @@ def cmd_topic(args: argparse.Namespace) -> int:
     need_fleet(args, conn)
     data_verbs.refuse_other_type(conn, args.topic, args.type, force=args.force, timeout_s=wait)
     count = 1 if args.once else args.times
-    return data_verbs.topic_pub(conn, args.topic, args.type, parse_fields(args.data), out=out,
+    fields = ros_typed(args.type, parse_fields(args.data))
+    return data_verbs.topic_pub(conn, args.topic, args.type, fields, out=out,
                                   rate_hz=args.rate, count=None if count == 0 else count,
                                   timeout_s=wait)
 
@@ -261,6 +262,20 @@ def parse_fields(text: str) -> dict:
         return parse_data(text)
     except PayloadError as exc:
         raise CommandError(str(exc)) from None
+
+
+def ros_typed(type_name: str, fields: dict, *, service: bool = False) -> dict:
+    """`fields` as a standard ROS 2 type holds them, as ROS 2 users type them
+    (``{linear: {x: 1.0}}``: nested maps, the rest defaults; `twinfleet.interfaces.plain`);
+    the fields of any other type unchanged."""
+    from twinfleet.interfaces import FieldValueError, InterfaceError
+    from twinfleet.interfaces.plain import ros_typed as complete
+
+    try:
+        typed = complete(type_name, fields, service=service)
+    except (FieldValueError, InterfaceError) as exc:
+        raise CommandError(str(exc)) from None
+    return fields if typed is None else typed
 
 
 def cmd_service(args: argparse.Namespace) -> int:
@@ -278,7 +293,8 @@ def cmd_service(args: argparse.Namespace) -> int:
     need_fleet(args, conn)
     data_verbs.refuse_other_type(conn, args.service, args.type, service=True, force=args.force,
                                  timeout_s=args.query_timeout)
-    return data_verbs.service_call(conn, args.service, args.type, parse_fields(args.data),
+    fields = ros_typed(args.type, parse_fields(args.data), service=True)
+    return data_verbs.service_call(conn, args.service, args.type, fields,
                                      out=sys.stdout, timeout_s=args.timeout,
                                      discovery_s=args.query_timeout, full=args.full)
 
@@ -331,6 +347,13 @@ def cmd_interface(args: argparse.Namespace) -> int:
         from twinfleet.ros2.commands import interface_export_command
 
         return interface_export_command(args)
+    if args.action == "show":
+        from twinfleet.interfaces.show import definition_text
+
+        text = definition_text(args.type)  # a standard ROS 2 type: its definition decides
+        if text is not None:
+            print(text, end="", flush=True)
+            return 0
     import_modules(args.module)
     try:
         conn = connection(args)

@@ -13,6 +13,7 @@ implementation), `values` (field defaults, checks, freeze/thaw of one field),
 Public API: `load_interface(package, kind)` → a module-like namespace
 (``std_msgs.msg``), `freeze(msg)` → the frozen contract message, `thaw(frozen)`
 → a new mutable message, `message_type(ros_type)`, `service_type(ros_type)`,
+`contract_type(ros_type)` (the frozen class, for native nodes),
 `from_fields(ros_type, mapping)`, `InterfaceError`, `FieldValueError`.
 """
 
@@ -20,6 +21,7 @@ from twinfleet.interfaces.definitions import InterfaceError
 from twinfleet.interfaces.generate import (
     RosMessage,
     contract_name,
+    contract_type,
     freeze,
     from_fields,
     load_interface,
@@ -29,5 +31,5 @@ from twinfleet.interfaces.generate import (
 )
 from twinfleet.interfaces.values import FieldValueError
 
-__all__ = ["FieldValueError", "InterfaceError", "RosMessage", "contract_name", "freeze",
-           "from_fields", "load_interface", "message_type", "service_type", "thaw"]
+__all__ = ["FieldValueError", "InterfaceError", "RosMessage", "contract_name", "contract_type",
+           "freeze", "from_fields", "load_interface", "message_type", "service_type", "thaw"]

@@ -130,13 +130,6 @@ class Definition:
         """The names of the types its fields name."""
         return (f.type.base for f in self.fields if f.type.nested)
 
-    def msg_text(self) -> str:
-        """The definition as ``.msg`` text (constants, then fields with their defaults)."""
-        lines = [f"{c.base} {c.name}={c.value!r}" for c in self.constants]
-        lines += [f"{f.type.msg()} {f.name}" + ("" if f.default is None else f" {f.default!r}")
-                  for f in self.fields]
-        return "\n".join(lines) + "\n"
-
 
 def share_dirs() -> tuple[Path, ...]:
     """The ``share`` folders searched for interface packages, first match wins."""

@@ -131,8 +131,13 @@ def _frozen_class(definition: Definition, convs: tuple[Converter, ...]) -> type:
     return message(name)(cls)
 
 
-def _frozen_of(ros_type: str) -> type:
+def contract_type(ros_type: str) -> type:
+    """The frozen contract class of a ROS 2 message type: what a native twinfleet node
+    publishes and names in its handlers' annotations (``geometry_msgs/msg/Twist``)."""
     return message_type(ros_type)._frozen
+
+
+_frozen_of = contract_type
 
 
 def freeze(msg: Any) -> Any:
@@ -190,7 +195,7 @@ def from_fields(ros_type: str, fields: Mapping[str, Any], where: str = "") -> Ro
     for key, value in fields.items():
         conv = convs.get(key)
         if conv is None:
-            raise FieldValueError(f"{where}: {ros_type} has no field {key!r} (fields: "
+            raise FieldValueError(f"{where}: unknown field {key!r} (fields of {ros_type}: "
                                   f"{', '.join(convs) or 'none'})")
         t = conv.field.type
         if t.nested and t.container.value == "one":

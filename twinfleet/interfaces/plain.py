@@ -90,3 +90,21 @@ def typed_fields(ros_type: str, fields: Mapping[str, Any]) -> dict[str, Any]:
     plain = to_plain(freeze(from_fields(ros_type, fields)))
     plain.pop("_type")
     return dict(plain)
+
+
+def ros_typed(type_name: str, fields: Mapping[str, Any], *,
+              service: bool = False) -> dict[str, Any] | None:
+    """`typed_fields` of `type_name` as a command names it (``geometry_msgs/msg/Twist``,
+    ``geometry_msgs/Twist``; with `service`, ``std_srvs/srv/SetBool`` means its request),
+    or None when it names no standard ROS 2 type.
+
+    Raises:
+        FieldValueError or InterfaceError: one line.
+    """
+    parts = type_name.split("/")
+    if service and len(parts) == 3 and parts[1] == "srv":
+        type_name = f"{type_name}_Request"
+    elif service and len(parts) == 2 and not parts[1].endswith("_Request"):
+        type_name = f"{parts[0]}/srv/{parts[1]}_Request"
+    definition = _definition(type_name)
+    return None if definition is None else typed_fields(definition.name, fields)
