@@ -130,3 +130,11 @@ def test_deepcopy_keeps_the_class():
     twist = geometry.Twist()
     twist.linear.x = 1.0
     assert copy.deepcopy(twist) == twist
+
+
+def test_known_packages_are_the_store_s_and_the_installed_ones():
+    from twinfleet.interfaces.definitions import known_packages, standard_packages
+
+    known = known_packages()
+    assert {"std_msgs", "geometry_msgs", "tf2_msgs", "std_srvs", "test_msgs"} <= set(known)
+    assert "std_srvs" not in standard_packages() and "tf2_msgs" in standard_packages()

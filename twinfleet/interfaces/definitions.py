@@ -315,6 +315,16 @@ def package_types(package: str, kind: str) -> tuple[str, ...]:
     return tuple(sorted(found))
 
 
+def known_packages() -> tuple[str, ...]:
+    """Every package whose interfaces are known: rosbags' store and the installed packages
+    (an `import` of one of these in rclpy node code resolves to generated classes)."""
+    names = set(standard_packages())
+    for share in share_dirs():
+        names.update(p.parent.name for p in share.glob("*/msg") if p.is_dir())
+        names.update(p.parent.name for p in share.glob("*/srv") if p.is_dir())
+    return tuple(sorted(names))
+
+
 def standard_packages() -> frozenset[str]:
     """The packages of rosbags' Jazzy store: ROS 2's own (an empty set without rosbags)."""
     try:
