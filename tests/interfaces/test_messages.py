@@ -138,3 +138,30 @@ def test_known_packages_are_the_store_s_and_the_installed_ones():
     known = known_packages()
     assert {"std_msgs", "geometry_msgs", "tf2_msgs", "std_srvs", "test_msgs"} <= set(known)
     assert "std_srvs" not in standard_packages() and "tf2_msgs" in standard_packages()
+
+
+def test_freeze_converts_what_rclpy_accepts_and_refuses_the_rest():
+    import numpy as np
+
+    assert freeze(geometry.Vector3(x=1, y=np.float64(2.5))) == freeze(
+        geometry.Vector3(x=1.0, y=2.5))
+    assert type(freeze(geometry.Vector3(x=1)).x) is float
+    image = sensor.Image(data=b"\x00\x01\xff")  # uint8[] takes bytes, as rosidl's array('B')
+    assert freeze(image).data == (0, 1, 255)
+    assert freeze(sensor.Imu(orientation_covariance=tuple([2.0] * 9))).orientation_covariance \
+        == (2.0,) * 9
+    with pytest.raises(FieldValueError, match=r"Bool\.data: expected True or False, got 1"):
+        freeze(std_msgs.Bool(data=1))
+    with pytest.raises(FieldValueError, match=r"Image\.data\[1\]: 256 is out of range for uint8"):
+        freeze(sensor.Image(data=[0, 256]))
+    strings = load_interface("test_msgs", "msg").Strings(bounded_string_value="x" * 23)
+    with pytest.raises(FieldValueError, match="bounded_string_value: 23 characters, more than "
+                                              "the bound 22"):
+        freeze(strings)
+
+
+def test_empty_messages_construct_and_round_trip():
+    empty = std_msgs.Empty()
+    assert thaw(freeze(empty)) == empty
+    with pytest.raises(TypeError, match="has no field 'x'"):
+        std_msgs.Empty(x=1)

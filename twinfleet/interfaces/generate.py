@@ -22,10 +22,11 @@ from __future__ import annotations
 
 import dataclasses
 import types
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from functools import cache
 from typing import Any, ClassVar
 
+from twinfleet.interfaces.codegen import make_freeze, make_init, make_thaw
 from twinfleet.interfaces.definitions import (
     Definition,
     InterfaceError,
@@ -51,14 +52,11 @@ class RosMessage:
     __type_hash__: ClassVar[str]
     _converters: ClassVar[tuple[Converter, ...]]
     _frozen: ClassVar[type]
+    _freeze_fn: ClassVar[Callable[[Any, str], Any]]
+    _thaw_fn: ClassVar[Callable[[Any], Any]]
 
-    def __init__(self, **kwargs: Any) -> None:
-        for conv in self._converters:
-            name = conv.field.name
-            setattr(self, name, kwargs.pop(name) if name in kwargs else conv.default())
-        if kwargs:
-            raise TypeError(f"{self.__ros_type__} has no field {sorted(kwargs)[0]!r} (fields: "
-                            f"{', '.join(c.field.name for c in self._converters) or 'none'})")
+    def __init__(self, **fields: Any) -> None:  # each generated class has its own (codegen)
+        raise TypeError(f"{type(self).__name__} is not a generated message class")
 
     def __eq__(self, other: object) -> bool:
         if type(other) is not type(self):
@@ -103,8 +101,24 @@ def message_type(ros_type: str) -> type[RosMessage]:
     }
     cls: type[RosMessage] = type(definition.short, (RosMessage,), namespace)
     cls._frozen = _frozen_class(definition, convs)
+    cls.__init__ = make_init(convs, ros_type)  # type: ignore[method-assign]
+    cls._freeze_fn = make_freeze(convs, ros_type, cls._frozen, cls, _freeze_fn_of, _slow)
+    cls._thaw_fn = make_thaw(convs, cls, _thaw_fn_of)
     _MUTABLE_OF[cls._frozen] = cls
     return cls
+
+
+def _freeze_fn_of(ros_type: str) -> Callable[[Any, str], Any]:
+    return message_type(ros_type)._freeze_fn
+
+
+def _thaw_fn_of(ros_type: str) -> Callable[[Any], Any]:
+    return message_type(ros_type)._thaw_fn
+
+
+def _slow(value: Any, where: str, conv: Converter) -> Any:
+    """A field value the generated fast tests did not pass: converted, or refused."""
+    return conv.freeze(value, where, _freeze)
 
 
 _MUTABLE_OF: dict[type, type[RosMessage]] = {}
@@ -155,28 +169,13 @@ def freeze(msg: Any) -> Any:
 
 
 def _freeze(msg: Any, ros_type: str, where: str) -> Any:
-    cls = message_type(ros_type)
-    if type(msg) is not cls:
-        if type(msg) is cls._frozen:
-            return msg
-        raise FieldValueError(f"{where}: expected a {ros_type}, got {type(msg).__name__}")
-    values = {}
-    for conv in cls._converters:
-        name = conv.field.name
-        values[name] = conv.freeze(getattr(msg, name), where, _freeze)
-    return cls._frozen(**values)
+    return message_type(ros_type)._freeze_fn(msg, where)
 
 
 def thaw(frozen: Any) -> Any:
     """A new mutable message equal to a frozen one (a native twinfleet message: unchanged)."""
     cls = _MUTABLE_OF.get(type(frozen))
-    if cls is None:
-        return frozen
-    msg = cls.__new__(cls)
-    for conv in cls._converters:
-        name = conv.field.name
-        setattr(msg, name, conv.thaw(getattr(frozen, name), thaw))
-    return msg
+    return frozen if cls is None else cls._thaw_fn(frozen)
 
 
 def from_fields(ros_type: str, fields: Mapping[str, Any], where: str = "") -> RosMessage:

@@ -9,8 +9,9 @@ hold, with lists where rosidl uses numpy or `array.array` (docs/rclpy.md):
 
 Its frozen twin (the contract's message, `generate`) holds the same values with
 tuples for lists and frozen nested messages. `Converter` does one field:
-a default (new each time, as rosidl's constructor makes one), `freeze` (checks
-the value, one-line `FieldValueError` naming ``type.field``) and `thaw`.
+a default (new each time, as rosidl's constructor makes one) and `freeze` (checks
+the value, one-line `FieldValueError` naming ``type.field``): the slow path of the
+functions `codegen` writes per class, which also thaw.
 """
 
 from __future__ import annotations
@@ -112,7 +113,7 @@ def _expected(base: str) -> str:
 
 @dataclass(frozen=True, slots=True)
 class Converter:
-    """Default, freeze and thaw of one field (module docstring)."""
+    """Default and freeze of one field (module docstring)."""
 
     field: FieldDef
     mutable_of: Callable[[str], type]  # nested type name → its mutable class
@@ -152,13 +153,6 @@ class Converter:
             return tuple(freeze_nested(v, t.base, f"{where}[{i}]") for i, v in enumerate(items))
         return tuple(check_primitive(t.base, t.string_bound, v, f"{where}[{i}]")
                      for i, v in enumerate(items))
-
-    def thaw(self, value: Any, thaw_nested: Callable[[Any], Any]) -> Any:
-        """The mutable form of a frozen value (a new list, a new nested message)."""
-        t = self.field.type
-        if t.container is Container.ONE:
-            return thaw_nested(value) if t.nested else value
-        return [thaw_nested(v) for v in value] if t.nested else list(value)
 
     def frozen_default(self, frozen_of: Callable[[str], type]) -> Any:
         """The default of the frozen field (immutable, so one value serves every instance)."""
