@@ -33,6 +33,7 @@ from typing import Any
 #: the wheel that installs each package's definitions (the one-line hint when one is missing)
 WHEEL_OF = "ros-jazzy-{}"
 INSTALL_HINT = "pip install 'twinfleet[rclpy]'"
+NO_ROSBAGS = f"ROS 2 message definitions need rosbags, which is not installed: {INSTALL_HINT}"
 #: rosidl's Python type strings (`get_fields_and_field_types`) of the .msg primitive types
 ROSIDL_NAMES = {"bool": "boolean", "byte": "octet", "char": "uint8", "float32": "float",
                 "float64": "double"}
@@ -157,15 +158,17 @@ def _jazzy() -> dict[str, Any]:
     try:
         from rosbags.typesys import Stores, get_typestore
     except ImportError:
-        raise InterfaceError("ROS 2 message definitions need rosbags, which is not installed: "
-                             f"{INSTALL_HINT}") from None
+        raise InterfaceError(NO_ROSBAGS) from None
     return dict(get_typestore(Stores.ROS2_JAZZY).fielddefs)
 
 
 def _parse(text: str, name: str, source: str) -> Definition:
     """A definition from the body of a ``.msg`` file (rosbags' parser), defaults kept."""
-    from rosbags.typesys.base import BaseType, Cardinality
-    from rosbags.typesys.msg import MSGParser
+    try:
+        from rosbags.typesys.base import BaseType, Cardinality
+        from rosbags.typesys.msg import MSGParser
+    except ImportError:
+        raise InterfaceError(NO_ROSBAGS) from None
 
     pkg, _, short = name.split("/")
     try:  # named as a .msg, so that a bare nested name resolves in pkg/msg/ (as rosidl does)
