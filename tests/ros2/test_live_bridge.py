@@ -8,19 +8,13 @@ samples on /goal_pose are dropped and counted."""
 
 from __future__ import annotations
 
-import contextlib
-import json
-import os
 import queue
-import subprocess
-import sys
-import threading
 import time
-from pathlib import Path
 
 import pytest
 import zenoh
 
+from tests.ros2.peer_events import read_events, start_peer, stop_peer, wait_event
 from twinfleet.nodes.msgs import ObstacleScan, OccupancyGrid, RobotPose
 from twinfleet.nodes.ros2_mapping import RobotRos2Mapping
 from twinfleet.ros2.bridge import RosSide, ros_config
@@ -30,24 +24,6 @@ from twinfleet.runtime.host.zenoh_transport import zenoh_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 GRID = OccupancyGrid(4, 3, 0.5, (0.0, 0.0, 0.0), bytes([0, 100, 255, 0] * 3))
-
-
-def _events(proc, out: queue.Queue) -> None:
-    for line in proc.stdout:
-        if line.startswith("{"):
-            out.put(json.loads(line))
-
-
-def _wait(events: queue.Queue, kind: str, timeout: float = 20.0) -> dict:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        try:
-            event = events.get(timeout=max(0.01, end - time.monotonic()))
-        except queue.Empty:
-            break
-        if event["event"] == kind:
-            return event
-    raise AssertionError(f"no {kind} event from the peer")
 
 
 def test_an_independent_ros2_peer_sees_the_fleet_and_reaches_it(tmp_path):
@@ -62,31 +38,28 @@ def test_an_independent_ros2_peer_sees_the_fleet_and_reaches_it(tmp_path):
     try:
         side.deliver("twinfleet/f/map", encode(GRID, seq=1, stamp_ms=10))  # before the peer
         side.deliver("twinfleet/f/poses", encode(RobotPose("r1", (1, 1), 0, 1), stamp_ms=20))
-        env = dict(os.environ, ZENOH_CONFIG_OVERRIDE="scouting/multicast/enabled=false")
-        proc = subprocess.Popen([sys.executable, str(Path(__file__).with_name("sdk_peer.py")),
-                                 str(port)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                text=True, env=env)
+        proc = start_peer("sdk_peer.py", port)
         events: queue.Queue = queue.Queue()
-        threading.Thread(target=_events, args=(proc, events), daemon=True).start()
-        topics = dict((t, types) for t, types in _wait(events, "topics")["topics"])
+        read_events(proc, events)
+        topics = dict((t, types) for t, types in wait_event(events, "topics")["topics"])
         assert topics["/map"] == ["nav_msgs/msg/OccupancyGrid"]
         assert topics["/r1/pose"] == ["geometry_msgs/msg/PoseStamped"]
         assert topics["/goal_pose"] == ["geometry_msgs/msg/PoseStamped"]
-        grid = _wait(events, "map")  # published before the peer existed: from the cache
+        grid = wait_event(events, "map")  # published before the peer existed: from the cache
         assert (grid["width"], grid["height"], grid["resolution"]) == (4, 3, 0.5)
         assert grid["data"][:4] == [0, 100, -1, 0]
-        _wait(events, "ready")
+        wait_event(events, "ready")
         time.sleep(0.5)  # the peer's subscriptions reach the router (no matching API in the SDK)
         side.deliver("twinfleet/f/poses", encode(RobotPose("r1", (1, 2), 2, 1), stamp_ms=30))
-        pose = _wait(events, "pose")
+        pose = wait_event(events, "pose")
         assert pose["frame"] == "map" and (pose["x"], pose["y"]) == (1.25, 0.75)
         side.deliver("twinfleet/f/r1/scan", encode(ObstacleScan("r1", ((1, 3),)), stamp_ms=40))
-        scan = _wait(events, "scan")
+        scan = wait_event(events, "scan")
         assert scan["frame"] == "r1/base_link" and scan["beams"] == 360
         assert scan["finite"] == [pytest.approx(0.5)]
         proc.stdin.write("goal\n")
         proc.stdin.flush()
-        _wait(events, "goal_sent")
+        wait_event(events, "goal_sent")
         end = time.monotonic() + 10
         while not goals and time.monotonic() < end:
             time.sleep(0.02)
@@ -107,14 +80,7 @@ def test_an_independent_ros2_peer_sees_the_fleet_and_reaches_it(tmp_path):
                                             "bad attachment": 1}
         assert side.check.accepted == 1
     finally:
-        if proc is not None:
-            with contextlib.suppress(Exception):
-                proc.stdin.write("quit\n")
-                proc.stdin.flush()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+        stop_peer(proc)
         side.close()
         session.close()
         router.close()

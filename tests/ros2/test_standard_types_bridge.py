@@ -12,17 +12,15 @@ from __future__ import annotations
 
 import contextlib
 import json
-import os
 import queue
-import subprocess
 import sys
-import threading
 import time
 from pathlib import Path
 
 import pytest
 import zenoh
 
+from tests.ros2.peer_events import read_events, start_peer, stop_peer, wait_event
 from twinfleet.interfaces import freeze, load_interface
 from twinfleet.ros2.bridge import RosSide, ros_config
 from twinfleet.ros2.live import fleet_interfaces
@@ -49,24 +47,6 @@ def _rosidl_hash(package: str, name: str) -> str:
     return doc["type_hashes"][0]["hash_string"]
 
 
-def _events(proc, out: queue.Queue) -> None:
-    for line in proc.stdout:
-        if line.startswith("{"):
-            out.put(json.loads(line))
-
-
-def _wait(events: queue.Queue, kind: str, timeout: float = 20.0) -> dict:
-    end = time.monotonic() + timeout
-    while time.monotonic() < end:
-        try:
-            event = events.get(timeout=max(0.01, end - time.monotonic()))
-        except queue.Empty:
-            break
-        if event["event"] == kind:
-            return event
-    raise AssertionError(f"no {kind} event from the peer")
-
-
 def _until(events: queue.Queue, kind: str, side: RosSide, send) -> dict:
     """Send until the peer hears it: its subscription reaches the router at a time no API of
     the SDK tells."""
@@ -74,7 +54,7 @@ def _until(events: queue.Queue, kind: str, side: RosSide, send) -> dict:
     while time.monotonic() < end:
         send()
         with contextlib.suppress(AssertionError):
-            return _wait(events, kind, timeout=0.3)
+            return wait_event(events, kind, timeout=0.3)
     raise AssertionError(f"the peer never heard a {kind}")
 
 
@@ -88,13 +68,10 @@ def test_a_twist_and_a_string_reach_a_ros2_peer_by_their_rosidl_hashes():
     side.interfaces = fleet_interfaces(side.graph.types)
     proc = None
     try:
-        env = dict(os.environ, ZENOH_CONFIG_OVERRIDE="scouting/multicast/enabled=false")
-        proc = subprocess.Popen([sys.executable, str(Path(__file__).with_name("sdk_twist_peer.py")),
-                                 str(port)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                                text=True, env=env)
+        proc = start_peer("sdk_twist_peer.py", port)
         events: queue.Queue = queue.Queue()
-        threading.Thread(target=_events, args=(proc, events), daemon=True).start()
-        ready = _wait(events, "ready")
+        read_events(proc, events)
+        ready = wait_event(events, "ready")
         assert ready["twist_hash"] == _rosidl_hash("geometry_msgs", "Twist")
         assert ready["string_hash"] == _rosidl_hash("std_msgs", "String")
         heard = _until(events, "twist", side, lambda: side.deliver(
@@ -108,18 +85,11 @@ def test_a_twist_and_a_string_reach_a_ros2_peer_by_their_rosidl_hashes():
             "/geometry_msgs::msg::dds_::Twist_/" + _rosidl_hash("geometry_msgs", "Twist"))
         proc.stdin.write("topics\n")
         proc.stdin.flush()
-        topics = dict(_wait(events, "topics")["topics"])
+        topics = dict(wait_event(events, "topics")["topics"])
         assert topics["/cmd_vel"] == ["geometry_msgs/msg/Twist"]
         assert topics["/status"] == ["std_msgs/msg/String"]
     finally:
-        if proc is not None:
-            with contextlib.suppress(Exception):
-                proc.stdin.write("quit\n")
-                proc.stdin.flush()
-            try:
-                proc.wait(timeout=10)
-            except subprocess.TimeoutExpired:
-                proc.kill()
+        stop_peer(proc)
         side.close()
         session.close()
         router.close()
