@@ -17,19 +17,21 @@ import sys
 import time
 from pathlib import Path
 
+import msgpack
 import pytest
 import zenoh
 
 from tests.ros2.peer_events import read_events, start_peer, stop_peer, wait_event
-from twinfleet.interfaces import freeze, load_interface
+from twinfleet.interfaces import contract_type, freeze, load_interface
 from twinfleet.ros2.bridge import RosSide, ros_config
 from twinfleet.ros2.live import fleet_interfaces
-from twinfleet.runtime.contract.messages import String, encode
+from twinfleet.runtime.contract.messages import String, encode, message
 from twinfleet.runtime.fleet.live_fleet import free_port
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 SHARE = Path(sys.prefix) / "share"
+Time = contract_type("builtin_interfaces/msg/Time")
 
 
 class MapsNothing:
@@ -93,3 +95,27 @@ def test_a_twist_and_a_string_reach_a_ros2_peer_by_their_rosidl_hashes():
         side.close()
         session.close()
         router.close()
+
+
+def test_by_fields_types_name_standard_types_and_never_redefine_them():
+    """A fleet type by its fields may hold a standard type; the standard types themselves (a
+    service's request too) are not redefined by their fields, which the store would refuse."""
+    for package in ("std_srvs", "rcl_interfaces"):
+        srv = load_interface(package, "srv")
+        for name in srv.__all__:
+            getattr(srv, name)  # registers every request and response
+
+    @message("my_robot_msgs/StampedNote")
+    class StampedNote:
+        stamp: Time = Time()
+        note: str = ""
+
+    interfaces = fleet_interfaces()
+    assert interfaces.ros_type("my_robot_msgs/StampedNote") == "my_robot_msgs/msg/StampedNote"
+    assert interfaces.definitions["my_robot_msgs/msg/StampedNote"] == \
+        "builtin_interfaces/Time stamp\nstring note\n"
+    data = msgpack.unpackb(encode(StampedNote(Time(sec=3, nanosec=4), "hi")))["data"]
+    fields = interfaces.fields("my_robot_msgs/StampedNote", data)
+    cdr = interfaces.types.encode("my_robot_msgs/msg/StampedNote", fields)
+    assert interfaces.types.decode("my_robot_msgs/msg/StampedNote", cdr) == {
+        "stamp": {"sec": 3, "nanosec": 4}, "note": "hi"}

@@ -57,6 +57,8 @@ class Interfaces:
         self._convert: dict[str, Convert] = {}  # twinfleet type name → plain → ROS fields
         self.skipped: dict[str, str] = {}  # twinfleet type name → why it is not exported
         for name, cls in sorted(classes.items()):
+            if standard_type(name) is not None:
+                continue  # carried under its own name (`ros_type`), never redefined
             try:
                 self._define(name, cls)
             except InterfaceError as exc:
@@ -88,6 +90,9 @@ class Interfaces:
         if hint is bytes:
             return "uint8[]", bytes, {}
         message = getattr(hint, "__message_type__", None)
+        standard = standard_type(message) if isinstance(message, str) else None
+        if standard is not None:
+            return message, lambda plain: ros_fields(standard, plain), {}
         if isinstance(message, str):
             self._define(message, hint)
             return message, self._nested(message), {}
