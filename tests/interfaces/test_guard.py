@@ -3,11 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import subprocess
+import sys
 import textwrap
 
 import pytest
 import yaml
 
+from tests.support import ROOT
 from twinfleet.cli import main
 from twinfleet.interfaces.guard import check_type, install
 from twinfleet.runtime.contract.messages import String, message, registered_types
@@ -96,3 +99,25 @@ def test_loading_a_scenario_with_a_borrowed_name_is_one_line_exit_2(tmp_path, ca
     (line,) = [x for x in err.splitlines() if not x.startswith("warning:")]
     assert "flat_twist_nodes" in line and "geometry_msgs/Twist" in line
     assert "unlike the standard ROS 2 type geometry_msgs/msg/Twist" in line
+
+
+def test_types_of_other_packages_cost_no_rosbags_store():
+    """The guard asks about every type a command registers; the store's module imports every
+    older distribution's store (about 0.2 s), so its names are read from its source."""
+    code = ("import sys\n"
+            "from twinfleet.interfaces.guard import install\n"
+            "from twinfleet import message\n"
+            "install()\n"
+            "@message('my_robot_msgs/Status')\n"
+            "class Status:\n"
+            "    ok: bool = True\n"
+            "print(any(m.startswith('rosbags.typesys.stores') for m in sys.modules))\n")
+    proc = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True,
+                          cwd=ROOT, timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "False"
+    from rosbags.typesys import Stores, get_typestore
+
+    from twinfleet.interfaces.definitions import _store_names
+
+    assert _store_names() == frozenset(get_typestore(Stores.ROS2_JAZZY).fielddefs)

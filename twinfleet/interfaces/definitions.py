@@ -19,7 +19,9 @@ and ``pkg/srv/Name_Response``, as rosidl names them.
 
 from __future__ import annotations
 
+import contextlib
 import enum
+import importlib.util
 import os
 import re
 import sys
@@ -153,6 +155,25 @@ def _package_dir(package: str, kind: str) -> Path | None:
 
 
 @cache
+def _store_names() -> frozenset[str]:
+    """The type names of rosbags' Jazzy store, read from its module's source, not run: running
+    it imports every older distribution's store too (about 0.2 s), which a command that only
+    registers types of no ROS 2 package must not pay (the guard asks about every type)."""
+    spec = importlib.util.find_spec("rosbags")  # a top-level find imports nothing
+    if spec is None:
+        raise InterfaceError(NO_ROSBAGS)
+    names: set[str] = set()
+    for folder in spec.submodule_search_locations or ():  # rosbags is a namespace package
+        with contextlib.suppress(OSError):
+            source = Path(folder) / "typesys" / "stores" / "ros2_jazzy.py"
+            names.update(_STORE_KEY.findall(source.read_text()))
+    return frozenset(names or _jazzy())  # another layout of rosbags: run the store after all
+
+
+_STORE_KEY = re.compile(r"'([a-z][a-z0-9_]*/msg/[A-Za-z0-9_]+)'")
+
+
+@cache
 def _jazzy() -> dict[str, Any]:
     """rosbags' Jazzy field definitions (``pkg/msg/Name`` → (constants, fields))."""
     try:
@@ -231,9 +252,8 @@ def message_definition(name: str) -> Definition:
     path = folder / f"{short}.msg" if folder else None
     if path is not None and path.is_file():
         return _parse(path.read_text(), name, str(path))
-    store = _jazzy()
-    if name in store:
-        return from_store(name, store[name])
+    if name in _store_names():
+        return from_store(name, _jazzy()[name])
     raise InterfaceError(f"unknown ROS 2 message type {name!r}: " + _missing(pkg, "msg"))
 
 
@@ -314,7 +334,7 @@ def package_types(package: str, kind: str) -> tuple[str, ...]:
         found.update(p.stem for p in folder.glob(f"*.{kind}"))
     if kind == "msg":
         prefix = f"{package}/msg/"
-        found.update(n[len(prefix):] for n in _jazzy() if n.startswith(prefix))
+        found.update(n[len(prefix):] for n in _store_names() if n.startswith(prefix))
     return tuple(sorted(found))
 
 
@@ -331,6 +351,6 @@ def known_packages() -> tuple[str, ...]:
 def standard_packages() -> frozenset[str]:
     """The packages of rosbags' Jazzy store: ROS 2's own (an empty set without rosbags)."""
     try:
-        return frozenset(n.split("/")[0] for n in _jazzy())
+        return frozenset(n.split("/")[0] for n in _store_names())
     except InterfaceError:
         return frozenset()
