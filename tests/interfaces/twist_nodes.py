@@ -41,3 +41,13 @@ class Driver(Node):
     def tick(self, ctx: Context) -> None:
         ctx.publish("/odom_twist", Twist(linear=Vector3(x=0.5), angular=Vector3(z=-0.25)))
         ctx.after(200, self.tick)
+
+
+class MapsNothing:
+    """A ROS 2 mapping that maps no type: the bridge carries the standard types by itself."""
+
+    latched: frozenset[str] = frozenset()
+    mapped_types: frozenset[str] = frozenset()
+
+    def outbound(self, topic: str, type_name: str, data: object, stamp_ms: int) -> tuple:
+        return ()

@@ -39,10 +39,11 @@ def wait_event(events: queue.Queue, kind: str, timeout: float = 20.0) -> dict:
     raise AssertionError(f"no {kind} event from the peer")
 
 
-def start_peer(script: str, port: int) -> subprocess.Popen:
+def start_peer(script: str, port: int, *args: str) -> subprocess.Popen:
     """Run the peer `script` (a file of tests/ros2/) against the router on `port`."""
     env = dict(os.environ, ZENOH_CONFIG_OVERRIDE="scouting/multicast/enabled=false")
-    return subprocess.Popen([sys.executable, str(Path(__file__).with_name(script)), str(port)],
+    return subprocess.Popen([sys.executable, str(Path(__file__).with_name(script)), str(port),
+                             *args],
                             stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
 
 

@@ -2,8 +2,8 @@
 ours) in its own process, its definitions and hashes computed from the ros-jazzy packages'
 share/.
 
-Usage: python sdk_twist_peer.py PORT. It subscribes to /cmd_vel (geometry_msgs/msg/Twist)
-and /status (std_msgs/msg/String), prints one JSON line per event (its own type hash once,
+Usage: python sdk_twist_peer.py PORT [TOPIC]. It subscribes to TOPIC (default /cmd_vel;
+geometry_msgs/msg/Twist) and /status (std_msgs/msg/String), prints one JSON line per event (its own type hash once,
 then each message it decodes), lists the topics once asked on stdin ("topics"), and exits
 on "quit".
 """
@@ -17,6 +17,7 @@ from zenoh_ros2_sdk.message_registry import get_registry
 from zenoh_ros2_sdk.subscriber import ROS2Subscriber
 
 port = int(sys.argv[1])
+twist_topic = sys.argv[2] if len(sys.argv) > 2 else "/cmd_vel"
 get_registry(str(Path(sys.prefix) / "share"))
 
 
@@ -24,7 +25,7 @@ def say(**event):
     print(json.dumps(event), flush=True)
 
 
-twist = ROS2Subscriber("/cmd_vel", "geometry_msgs/msg/Twist", router_port=port,
+twist = ROS2Subscriber(twist_topic, "geometry_msgs/msg/Twist", router_port=port,
                        callback=lambda m: say(event="twist", linear=[m.linear.x, m.linear.y,
                                                                      m.linear.z],
                                               angular_z=m.angular.z))

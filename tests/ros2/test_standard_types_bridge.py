@@ -12,16 +12,22 @@ from __future__ import annotations
 
 import contextlib
 import json
+import os
 import queue
+import signal
+import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
 import msgpack
 import pytest
+import yaml
 import zenoh
 
 from tests.ros2.peer_events import read_events, start_peer, stop_peer, wait_event
+from tests.support import child_env
 from twinfleet.interfaces import contract_type, freeze, load_interface
 from twinfleet.ros2.bridge import RosSide, ros_config
 from twinfleet.ros2.live import fleet_interfaces
@@ -31,6 +37,7 @@ from twinfleet.runtime.host.zenoh_transport import zenoh_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]
 SHARE = Path(sys.prefix) / "share"
+NODES = "tests.interfaces.twist_nodes"
 Time = contract_type("builtin_interfaces/msg/Time")
 
 
@@ -119,3 +126,37 @@ def test_by_fields_types_name_standard_types_and_never_redefine_them():
     cdr = interfaces.types.encode("my_robot_msgs/msg/StampedNote", fields)
     assert interfaces.types.decode("my_robot_msgs/msg/StampedNote", cdr) == {
         "stamp": {"sec": 3, "nanosec": 4}, "note": "hi"}
+
+
+def test_a_launched_fleet_shows_its_twist_to_a_ros2_peer(tmp_path):
+    """`launch` with a `ros2:` section: the driver's geometry_msgs/Twist on /odom_twist reaches
+    zenoh-ros2-sdk under rosidl's name and hash; the mapping maps nothing."""
+    port = free_port()
+    scenario = tmp_path / "twist.yaml"
+    scenario.write_text(yaml.safe_dump({
+        "name": "twist_ros2", "nodes": [{"name": "driver", "class": f"{NODES}:Driver"}],
+        "ros2": {"router": f"tcp/127.0.0.1:{port}", "mapping": f"{NODES}:MapsNothing"}}))
+    router = zenoh.open(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"], mode="router"))
+    launcher = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", str(scenario),
+                                 "--timeout", "60"], stdout=subprocess.PIPE,
+                                stderr=subprocess.STDOUT, text=True, env=child_env(),
+                                start_new_session=True)
+    output: list[str] = []
+    threading.Thread(target=lambda: output.extend(launcher.stdout), daemon=True).start()
+    peer = None
+    try:
+        peer = start_peer("sdk_twist_peer.py", port, "/odom_twist")
+        events: queue.Queue = queue.Queue()
+        read_events(peer, events)
+        assert wait_event(events, "ready")["twist_hash"] == _rosidl_hash("geometry_msgs", "Twist")
+        heard = wait_event(events, "twist", timeout=40)
+        assert heard["linear"] == [0.5, 0.0, 0.0] and heard["angular_z"] == -0.25, output
+    finally:
+        stop_peer(peer)
+        if launcher.poll() is None:
+            launcher.send_signal(signal.SIGINT)
+            try:
+                launcher.wait(timeout=15)
+            except subprocess.TimeoutExpired:
+                os.killpg(launcher.pid, signal.SIGKILL)
+        router.close()
