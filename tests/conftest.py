@@ -71,7 +71,7 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
 # The quick loop (`pytest -m unit`, under a minute on 2 cores): the tests of these folders
 # that are neither slow nor live nor Ray tests. A unit test opens no Zenoh session (the
 # fixture below refuses it): one that needs Zenoh is a `fleet` test.
-UNIT_FOLDERS = frozenset({"", "checker", "nodes", "runtime", "sweep", "fuzz"})
+UNIT_FOLDERS = frozenset({"", "checker", "nodes", "runtime", "sweep", "fuzz", "interfaces"})
 
 
 @pytest.fixture(autouse=True)

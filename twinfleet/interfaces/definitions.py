@@ -32,6 +32,8 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+from twinfleet.runtime.contract.environment import EnvVar, env_value
+
 #: the wheel that installs each package's definitions (the one-line hint when one is missing)
 WHEEL_OF = "ros-jazzy-{}"
 INSTALL_HINT = "pip install 'twinfleet[rclpy]'"
@@ -137,7 +139,8 @@ class Definition:
 def share_dirs() -> tuple[Path, ...]:
     """The ``share`` folders searched for interface packages, first match wins."""
     prefixes = [sysconfig.get_path("data"), sys.prefix]
-    prefixes += [p for p in os.environ.get("AMENT_PREFIX_PATH", "").split(os.pathsep) if p]
+    ament = env_value(EnvVar.AMENT_PREFIX_PATH) or ""
+    prefixes += [p for p in ament.split(os.pathsep) if p]
     seen: list[Path] = []
     for prefix in prefixes:
         share = Path(prefix) / "share"

@@ -37,6 +37,7 @@ class EnvVar(StrEnum):
     XDG_RUNTIME_DIR = "XDG_RUNTIME_DIR"
     PYTHONPATH = "PYTHONPATH"
     RAY_WORKER_NICENESS = "RAY_worker_niceness"
+    AMENT_PREFIX_PATH = "AMENT_PREFIX_PATH"
 
 
 def env_value(var: EnvVar, env: Mapping[str, str] | None = None) -> str | None:
