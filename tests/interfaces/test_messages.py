@@ -165,3 +165,21 @@ def test_empty_messages_construct_and_round_trip():
     assert thaw(freeze(empty)) == empty
     with pytest.raises(TypeError, match="has no field 'x'"):
         std_msgs.Empty(x=1)
+
+
+def test_a_ros_installation_s_own_packages_load_from_ament_prefix_path(tmp_path, monkeypatch):
+    share = tmp_path / "install" / "share" / "my_robot_interfaces"
+    (share / "msg").mkdir(parents=True)
+    (share / "srv").mkdir()
+    (share / "msg" / "Battery.msg").write_text(
+        "uint8 FULL=100\nfloat32 volts 12.5  # nominal\nstd_msgs/Header header\nPose2[2] marks\n")
+    (share / "msg" / "Pose2.msg").write_text("float64 x\nfloat64 y\n")
+    (share / "srv" / "Dock.srv").write_text("string station\n---\nbool ok\n")
+    monkeypatch.setenv("AMENT_PREFIX_PATH", str(tmp_path / "install"))
+    battery = load_interface("my_robot_interfaces", "msg").Battery()
+    assert battery.volts == 12.5 and battery.FULL == 100 and len(battery.marks) == 2
+    assert battery.get_fields_and_field_types() == {
+        "volts": "float", "header": "std_msgs/Header", "marks": "my_robot_interfaces/Pose2[2]"}
+    dock = load_interface("my_robot_interfaces", "srv").Dock
+    assert dock.Request(station="a").station == "a" and dock.Response().ok is False
+    assert thaw(freeze(battery)) == battery
