@@ -113,6 +113,10 @@ def test_from_fields_reads_ros_users_yaml_values():
     with pytest.raises(FieldValueError, match=r"Twist\.linear: unknown field 'w' \(fields of "
                                               r"geometry_msgs/msg/Vector3: x, y, z\)"):
         from_fields("geometry_msgs/msg/Twist", {"linear": {"w": 1.0}})
+    path = from_fields("nav_msgs/msg/Path", {"poses": [{"pose": {"position": {"x": 2.0}}}]})
+    assert path.poses[0].pose.position.x == 2.0 and path.poses[0].pose.orientation.w == 1.0
+    with pytest.raises(FieldValueError, match=r"Path\.poses: expected a list, got \{'pose': 1\}"):
+        from_fields("nav_msgs/msg/Path", {"poses": {"pose": 1}})
 
 
 def test_unknown_interfaces_are_one_line_naming_what_to_install():

@@ -28,6 +28,7 @@ from typing import Any, ClassVar
 
 from twinfleet.interfaces.codegen import make_freeze, make_init, make_thaw
 from twinfleet.interfaces.definitions import (
+    Container,
     Definition,
     InterfaceError,
     message_definition,
@@ -197,9 +198,11 @@ def from_fields(ros_type: str, fields: Mapping[str, Any], where: str = "") -> Ro
             raise FieldValueError(f"{where}: unknown field {key!r} (fields of {ros_type}: "
                                   f"{', '.join(convs) or 'none'})")
         t = conv.field.type
-        if t.nested and t.container.value == "one":
+        if t.nested and t.container is Container.ONE:
             value = from_fields(t.base, value, f"{where}.{key}")
         elif t.nested:
+            if not isinstance(value, list | tuple):
+                raise FieldValueError(f"{where}.{key}: expected a list, got {value!r}")
             value = [from_fields(t.base, v, f"{where}.{key}[{i}]") for i, v in enumerate(value)]
         setattr(msg, key, value)
     return msg
