@@ -187,3 +187,31 @@ def test_a_ros_installation_s_own_packages_load_from_ament_prefix_path(tmp_path,
     dock = load_interface("my_robot_interfaces", "srv").Dock
     assert dock.Request(station="a").station == "a" and dock.Response().ok is False
     assert thaw(freeze(battery)) == battery
+
+
+def test_messages_pickle_into_a_fresh_process():
+    """Ray workers and checkpoints pickle what nodes hold and what travels; the classes are
+    generated, so they pickle by their type's name."""
+    import pickle
+    import subprocess
+    import sys
+
+    from tests.support import ROOT
+
+    twist = geometry.Twist(linear=geometry.Vector3(x=2.0))
+    blob = pickle.dumps([twist, freeze(twist), freeze(std_msgs.String(data="s"))])
+    code = ("import pickle, sys\n"
+            "mutable, frozen, text = pickle.loads(sys.stdin.buffer.read())\n"
+            "print(mutable.linear.x, frozen.linear.x, type(frozen).__message_type__, text.data)\n")
+    proc = subprocess.run([sys.executable, "-P", "-c", code], input=blob, capture_output=True,
+                          cwd=ROOT, timeout=60)
+    assert proc.returncode == 0, proc.stderr.decode()
+    assert proc.stdout.decode().split() == ["2.0", "2.0", "geometry_msgs/Twist", "s"]
+
+
+def test_copies_do_not_check_values():
+    twist = geometry.Twist()
+    twist.linear.x = "not yet a number"  # rclpy code may hold anything until it publishes
+    assert copy.deepcopy(twist).linear.x == "not yet a number"
+    shallow = copy.copy(twist)
+    assert shallow.linear is twist.linear and shallow == twist

@@ -20,6 +20,7 @@ For each ROS 2 message type two classes are made, once per process (cached):
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 import types
 from collections.abc import Callable, Mapping
@@ -72,6 +73,23 @@ class RosMessage:
         args = ", ".join(f"{c.field.name}={getattr(self, c.field.name)!r}"
                          for c in self._converters)
         return f"{pkg}.{kind}.{short}({args})"
+
+    def __copy__(self) -> RosMessage:
+        made = object.__new__(type(self))
+        for conv in self._converters:
+            setattr(made, conv.field.name, getattr(self, conv.field.name))
+        return made
+
+    def __deepcopy__(self, memo: dict[int, Any]) -> RosMessage:
+        made = object.__new__(type(self))
+        for conv in self._converters:
+            setattr(made, conv.field.name, copy.deepcopy(getattr(self, conv.field.name), memo))
+        return made
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        """Pickled by its type's name and frozen value: the class is generated, so no module
+        attribute names it (Ray workers and checkpoints pickle what nodes hold)."""
+        return (_thawed, (self.__ros_type__, freeze(self)))
 
     @classmethod
     def get_fields_and_field_types(cls) -> dict[str, str]:
@@ -143,7 +161,22 @@ def _frozen_class(definition: Definition, convs: tuple[Converter, ...]) -> type:
     cls.__module__ = __name__  # its annotations are classes, not text: no module to resolve in
     cls.__doc__ = f"ROS 2 {definition.name}, frozen (twinfleet.interfaces.generate)."
     cls.__ros_definition__ = definition.name  # type: ignore[attr-defined]
+    cls.__reduce__ = _reduce_frozen  # type: ignore[assignment]
     return message(name)(cls)
+
+
+def _reduce_frozen(frozen: Any) -> tuple[Any, ...]:
+    """A frozen message pickled by its type's name and field values (`RosMessage.__reduce__`)."""
+    ros_type = type(frozen).__ros_definition__
+    return (_frozen, (ros_type, tuple(getattr(frozen, f.name) for f in dataclasses.fields(frozen))))
+
+
+def _frozen(ros_type: str, values: tuple[Any, ...]) -> Any:
+    return contract_type(ros_type)(*values)
+
+
+def _thawed(ros_type: str, frozen: Any) -> Any:
+    return message_type(ros_type)._thaw_fn(frozen)
 
 
 def contract_type(ros_type: str) -> type:
