@@ -189,24 +189,31 @@ def test_a_ros_installation_s_own_packages_load_from_ament_prefix_path(tmp_path,
     assert thaw(freeze(battery)) == battery
 
 
-def test_messages_pickle_into_a_fresh_process():
-    """Ray workers and checkpoints pickle what nodes hold and what travels; the classes are
-    generated, so they pickle by their type's name."""
+def test_messages_pickle_and_snapshot_into_a_fresh_process():
+    """Ray workers and checkpoints pickle what nodes hold and what travels, and the checker's
+    state snapshot names a dataclass by module and qualified name: a generated class is
+    found again in a process that has not generated it yet."""
     import pickle
     import subprocess
     import sys
 
     from tests.support import ROOT
+    from twinfleet.runtime.contract.snapshot import snapshot
 
     twist = geometry.Twist(linear=geometry.Vector3(x=2.0))
-    blob = pickle.dumps([twist, freeze(twist), freeze(std_msgs.String(data="s"))])
+    blob = pickle.dumps([twist, freeze(twist), freeze(std_msgs.String(data="s")),
+                         snapshot({"last": freeze(twist), "imu": freeze(sensor.Imu())})])
     code = ("import pickle, sys\n"
-            "mutable, frozen, text = pickle.loads(sys.stdin.buffer.read())\n"
-            "print(mutable.linear.x, frozen.linear.x, type(frozen).__message_type__, text.data)\n")
+            "from twinfleet.runtime.contract.snapshot import restore\n"
+            "mutable, frozen, text, state = pickle.loads(sys.stdin.buffer.read())\n"
+            "state = restore(state)\n"
+            "print(mutable.linear.x, frozen.linear.x, type(frozen).__message_type__, text.data,\n"
+            "      state['last'] == frozen, state['imu'].orientation.w, repr(frozen)[:24])\n")
     proc = subprocess.run([sys.executable, "-P", "-c", code], input=blob, capture_output=True,
                           cwd=ROOT, timeout=60)
     assert proc.returncode == 0, proc.stderr.decode()
-    assert proc.stdout.decode().split() == ["2.0", "2.0", "geometry_msgs/Twist", "s"]
+    assert proc.stdout.decode().split() == ["2.0", "2.0", "geometry_msgs/Twist", "s", "True",
+                                            "1.0", "geometry_msgs.msg.Twist("]
 
 
 def test_copies_do_not_check_values():

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from twinfleet import Context, Node, handler, on_start, subscribe
 from twinfleet.interfaces import contract_type
@@ -28,6 +28,35 @@ class Follower(Node):
     def on_cmd(self, ctx: Context, msg: Twist) -> None:
         self.state.speed = msg.linear.x
         ctx.log("cmd", x=msg.linear.x, y=msg.linear.y)
+
+
+class TwoCommands(Node):
+    """Sends two Twists at start: the follower may take them in either order of arrival."""
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.publish("/cmd_vel", Twist(linear=Vector3(x=1.0)))
+        ctx.publish("/cmd_vel", Twist(linear=Vector3(x=2.0)))
+
+
+@dataclass
+class KeeperState:
+    """The last Twist heard, kept whole: a frozen message in the checker's state."""
+
+    last: Twist = field(default_factory=Twist)
+    heard: int = 0
+
+
+class Keeper(Node):
+    """Keeps the last Twist on /cmd_vel."""
+
+    def initial_state(self) -> KeeperState:
+        return KeeperState()
+
+    @subscribe("/cmd_vel")
+    def on_cmd(self, ctx: Context, msg: Twist) -> None:
+        self.state.last = msg
+        self.state.heard += 1
 
 
 class Driver(Node):

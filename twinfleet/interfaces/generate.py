@@ -39,6 +39,9 @@ from twinfleet.interfaces.typehash import rihs01
 from twinfleet.interfaces.values import Converter, FieldValueError, hint
 from twinfleet.runtime.contract.messages import message, registered_types
 
+#: the module whose attributes the frozen classes are (`twinfleet.interfaces.frozen`)
+FROZEN_MODULE = "twinfleet.interfaces.frozen"
+
 
 def contract_name(ros_type: str) -> str:
     """The contract's name of a ROS 2 type (``geometry_msgs/msg/Twist``): ``geometry_msgs/Twist``."""
@@ -158,21 +161,11 @@ def _frozen_class(definition: Definition, convs: tuple[Converter, ...]) -> type:
     spec = [(c.field.name, hint(c.field.type, frozen_of),
              dataclasses.field(default=c.frozen_default(frozen_of))) for c in convs]
     cls = dataclasses.make_dataclass(definition.short, spec, frozen=True, slots=True)
-    cls.__module__ = __name__  # its annotations are classes, not text: no module to resolve in
+    cls.__module__ = FROZEN_MODULE  # it finds the class by this name (snapshot, pickle)
+    cls.__qualname__ = definition.name.replace("/", ".")
     cls.__doc__ = f"ROS 2 {definition.name}, frozen (twinfleet.interfaces.generate)."
     cls.__ros_definition__ = definition.name  # type: ignore[attr-defined]
-    cls.__reduce__ = _reduce_frozen  # type: ignore[assignment]
     return message(name)(cls)
-
-
-def _reduce_frozen(frozen: Any) -> tuple[Any, ...]:
-    """A frozen message pickled by its type's name and field values (`RosMessage.__reduce__`)."""
-    ros_type = type(frozen).__ros_definition__
-    return (_frozen, (ros_type, tuple(getattr(frozen, f.name) for f in dataclasses.fields(frozen))))
-
-
-def _frozen(ros_type: str, values: tuple[Any, ...]) -> Any:
-    return contract_type(ros_type)(*values)
 
 
 def _thawed(ros_type: str, frozen: Any) -> Any:
