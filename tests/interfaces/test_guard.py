@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import dataclasses
-import subprocess
-import sys
 import textwrap
 
 import pytest
 import yaml
 
-from tests.support import ROOT
+from tests.interfaces.fresh import run_python
 from twinfleet.cli import main
 from twinfleet.interfaces.guard import check_type, install
 from twinfleet.runtime.contract.messages import String, message, registered_types
@@ -112,10 +110,9 @@ def test_types_of_other_packages_cost_no_rosbags_store():
             "class Status:\n"
             "    ok: bool = True\n"
             "print(any(m.startswith('rosbags.typesys.stores') for m in sys.modules))\n")
-    proc = subprocess.run([sys.executable, "-P", "-c", code], capture_output=True, text=True,
-                          cwd=ROOT, timeout=60)
-    assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip() == "False"
+    proc = run_python(code)
+    assert proc.returncode == 0, proc.stderr.decode()
+    assert proc.stdout.decode().strip() == "False"
     from rosbags.typesys import Stores, get_typestore
 
     from twinfleet.interfaces.definitions import _store_names

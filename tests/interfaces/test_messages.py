@@ -194,10 +194,8 @@ def test_messages_pickle_and_snapshot_into_a_fresh_process():
     state snapshot names a dataclass by module and qualified name: a generated class is
     found again in a process that has not generated it yet."""
     import pickle
-    import subprocess
-    import sys
 
-    from tests.support import ROOT
+    from tests.interfaces.fresh import run_python
     from twinfleet.runtime.contract.snapshot import snapshot
 
     twist = geometry.Twist(linear=geometry.Vector3(x=2.0))
@@ -209,8 +207,7 @@ def test_messages_pickle_and_snapshot_into_a_fresh_process():
             "state = restore(state)\n"
             "print(mutable.linear.x, frozen.linear.x, type(frozen).__message_type__, text.data,\n"
             "      state['last'] == frozen, state['imu'].orientation.w, repr(frozen)[:24])\n")
-    proc = subprocess.run([sys.executable, "-P", "-c", code], input=blob, capture_output=True,
-                          cwd=ROOT, timeout=60)
+    proc = run_python(code, blob)
     assert proc.returncode == 0, proc.stderr.decode()
     assert proc.stdout.decode().split() == ["2.0", "2.0", "geometry_msgs/Twist", "s", "True",
                                             "1.0", "geometry_msgs.msg.Twist("]
