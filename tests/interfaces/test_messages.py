@@ -219,3 +219,14 @@ def test_copies_do_not_check_values():
     assert copy.deepcopy(twist).linear.x == "not yet a number"
     shallow = copy.copy(twist)
     assert shallow.linear is twist.linear and shallow == twist
+
+
+def test_numpy_scalars_freeze_as_python_numbers():
+    import numpy as np
+
+    frozen = freeze(std_msgs.Int32(data=np.int64(5)))
+    assert frozen.data == 5 and type(frozen.data) is int
+    assert type(freeze(std_msgs.Float32(data=np.float32(1.5))).data) is float
+    with pytest.raises(FieldValueError, match=r"Int32\.data: expected an integer \(int32\), "
+                                              "got True"):
+        freeze(std_msgs.Int32(data=True))

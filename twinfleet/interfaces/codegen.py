@@ -18,10 +18,9 @@ from collections.abc import Callable
 from typing import Any
 
 from twinfleet.interfaces.definitions import Container, FieldType
-from twinfleet.interfaces.values import Converter, FieldValueError
+from twinfleet.interfaces.values import INT_RANGES, Converter, FieldValueError
 
 _FAST_TYPES = {"float32": "float", "float64": "float", "bool": "bool", "string": "str"}
-_INTS = {"int8", "uint8", "int16", "uint16", "int32", "uint32", "int64", "uint64", "char"}
 _MISSING = object()
 
 
@@ -32,10 +31,8 @@ def _scalar_test(t: FieldType, var: str) -> str | None:
         if t.string_bound:
             test += f" and len({var}) <= {t.string_bound}"
         return test
-    if t.base in _INTS:
-        from twinfleet.interfaces.values import _INT_RANGES
-
-        low, high = _INT_RANGES[t.base]
+    if t.base in INT_RANGES:
+        low, high = INT_RANGES[t.base]
         return f"type({var}) is int and {low} <= {var} <= {high}"
     return None
 

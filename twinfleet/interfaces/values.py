@@ -16,13 +16,15 @@ functions `codegen` writes per class, which also thaw.
 
 from __future__ import annotations
 
+import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from twinfleet.interfaces.definitions import Container, FieldDef, FieldType
 
-_INT_RANGES = {"int8": (-(2**7), 2**7 - 1), "uint8": (0, 2**8 - 1),
+#: the values each integer type holds (a .msg char is IDL uint8)
+INT_RANGES = {"int8": (-(2**7), 2**7 - 1), "uint8": (0, 2**8 - 1),
                "int16": (-(2**15), 2**15 - 1), "uint16": (0, 2**16 - 1),
                "int32": (-(2**31), 2**31 - 1), "uint32": (0, 2**32 - 1),
                "int64": (-(2**63), 2**63 - 1), "uint64": (0, 2**64 - 1),
@@ -78,10 +80,8 @@ def check_primitive(base: str, bound: int, value: Any, where: str) -> Any:
     """`value` as a field of primitive type `base` holds it, or FieldValueError."""
     kind = type(value)
     if base in _FLOATS:
-        if kind is float or (kind is int):
+        if isinstance(value, numbers.Real) and kind is not bool:  # ints, numpy scalars
             return float(value)
-        if isinstance(value, float | int) and not isinstance(value, bool):
-            return float(value)  # numpy scalars and the like
     elif base == "bool":
         if kind is bool:
             return value
@@ -94,12 +94,13 @@ def check_primitive(base: str, bound: int, value: Any, where: str) -> Any:
     elif base == "byte":
         if isinstance(value, bytes | bytearray) and len(value) == 1:
             return bytes(value)
-    elif isinstance(value, int) and not isinstance(value, bool):
-        low, high = _INT_RANGES[base]
-        if not low <= value <= high:
-            raise FieldValueError(f"{where}: {value} is out of range for {base} "
+    elif isinstance(value, numbers.Integral) and kind is not bool:
+        low, high = INT_RANGES[base]
+        number = int(value)
+        if not low <= number <= high:
+            raise FieldValueError(f"{where}: {number} is out of range for {base} "
                                   f"({low}..{high})")
-        return int(value)
+        return number
     raise FieldValueError(f"{where}: expected {_expected(base)}, got {value!r}")
 
 
@@ -146,9 +147,6 @@ class Converter:
             raise FieldValueError(f"{where}: expected {t.size} values, got {len(items)}")
         if t.container is Container.SEQUENCE and t.size and len(items) > t.size:
             raise FieldValueError(f"{where}: {len(items)} values, more than the bound {t.size}")
-        if isinstance(value, bytes | bytearray) and t.base in ("uint8", "char", "int8"):
-            items = list(value) if t.base != "int8" else [v - 256 if v > 127 else v
-                                                           for v in value]
         if t.nested:
             return tuple(freeze_nested(v, t.base, f"{where}[{i}]") for i, v in enumerate(items))
         return tuple(check_primitive(t.base, t.string_bound, v, f"{where}[{i}]")
