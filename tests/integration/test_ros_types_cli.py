@@ -36,7 +36,7 @@ def fleet(runtime_dir: Path, tmp_path_factory: pytest.TempPathFactory) -> Iterat
         assert proc.poll() is None, log.read_text()
         yield log
     finally:
-        stop_launch(proc, str(scenario))
+        stop_launch(proc)
 
 
 def ok(result) -> str:
