@@ -29,12 +29,16 @@ class WorldBuilder:
         reader: what property expressions read node states through (the system).
         properties: the properties whose `within` obligations worlds carry, or None.
         exact: key worlds by their 128-bit digest (`World.digest`).
+        keyed: key worlds as they are built; off, a world's key is computed if it is
+            read (a simulation follows one path and never looks a world up).
     """
 
-    def __init__(self, reader: States, properties: PropertySet | None, *, exact: bool) -> None:
+    def __init__(self, reader: States, properties: PropertySet | None, *, exact: bool,
+                 keyed: bool = True) -> None:
         self.reader = reader
         self.properties = properties
         self.exact = exact
+        self.keyed = keyed
         self._hashes: dict[bytes, bytes] = {}
         self.hashed = 0  # node-state content hashes computed: for the collision bound
 
@@ -48,6 +52,8 @@ class WorldBuilder:
         obligations: tuple[str, ...] = ()
         if self.properties is not None:
             obligations = self.properties.update(self.reader, parent, now, states, events)
+        if not self.keyed:
+            return World(now, states, events, obligations, crashes=crashes)
         if self.exact:
             digest = world_digest(states, events, obligations, crashes)
             return World(now, states, events, obligations, crashes=crashes, key=digest,

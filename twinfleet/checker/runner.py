@@ -79,6 +79,7 @@ _NO_PROBE = contextlib.nullcontext()
 _ADDRESS = re.compile(r" at 0x[0-9a-f]+")  # object addresses differ between two runs
 _DRAWN_LIMIT = 20_000  # handler outcomes kept per generation for simulations (two kept)
 _ANY_TIME = -1  # the time slot of a drawn-run key whose handler did not read the clock
+_KEY_LIMIT = 50_000  # message event keys kept by message identity before starting afresh
 
 # A handler run that reached its effects: (new node state, effects, service reply).
 _Handled = tuple[bytes, tuple[Any, ...], Any]
@@ -137,6 +138,7 @@ class Runner:
         self._handled: _Handled | None = None  # the last `_exec` that reached its effects
         self._read_clock = False  # whether that handler read the time
         self._drawn: GenerationCache[_Handled] = GenerationCache(_DRAWN_LIMIT)
+        self._keys: dict[tuple[int, EventKind, int, str, int, str], tuple[Any, bytes]] = {}
 
     def interned(self) -> int:
         """How many node-state encodings are interned."""
@@ -393,7 +395,8 @@ class Runner:
                                                  (req,), prio, reply_to, chooser))
                 case After(delay_ms=delay, handler=method, args=args):
                     out.append(Event(now + delay, EventKind.TIMER, i, method, i, args,
-                                     topology.priority(i, method)))
+                                     topology.priority(i, method),
+                                     key=self._key(EventKind.TIMER, i, method, i, "", args)))
                 case Fail(reason=reason):
                     failure = failure or Failure(FailureKind.HANDLER, self.names[i], ev.method,
                                                  f"ctx.fail: {reason}")
@@ -420,7 +423,25 @@ class Runner:
         """A message on topic/service `name`, with its latency branch and deadline."""
         due, deadline = self.rules.delivery(now, name, chooser)
         return Event(due, kind, target, method, sender, args, priority, reply_to,
+                     key=self._key(kind, target, method, sender, reply_to, args),
                      deadline=deadline)
+
+    def _key(self, kind: EventKind, target: int, method: str, sender: int, reply_to: str,
+             args: tuple[Any, ...]) -> bytes:
+        """`event_key` of an event, kept by the identity of its one argument (a message)
+        or of its arguments (a timer's): a kept handler run (`run_drawn`) sends the same
+        objects again, and encoding them was a sixth of a simulation's time. The entry
+        holds the object, so its id is not reused while the entry lives."""
+        anchor = args[0] if len(args) == 1 else args
+        slot = (id(anchor), kind, target, method, sender, reply_to)
+        found = self._keys.get(slot)
+        if found is not None:
+            return found[1]
+        key = event_key(kind, target, method, sender, reply_to, args)
+        if len(self._keys) >= _KEY_LIMIT:
+            self._keys.clear()
+        self._keys[slot] = (anchor, key)
+        return key
 
 
 def _comparable(v: Variant, first: int) -> tuple[Any, ...]:

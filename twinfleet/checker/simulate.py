@@ -85,6 +85,10 @@ class Simulator:
                                  node_names=properties.node_names,
                                  deadlines=properties.deadlines)
         self._cumulative: dict[tuple[str, int, int, bool], list[float]] = {}
+        # An expression without `now` is a function of node states alone: a step that
+        # changed no state cannot change its value (most steps of a fleet change none).
+        self._timeless = not any(p.expr is not None and p.expr.uses_now
+                                 for p in (*properties.invariants, *properties.eventually))
 
     def batch(self, indices: list[int]) -> list[Simulation]:
         """Simulations `indices`, in that order."""
@@ -100,6 +104,7 @@ class Simulator:
         world, steps = init.world, list[Step]()
         never = {p.name: p for p in self.properties.eventually if not self._holds(p.name, world)}
         ended = "step limit"
+        enabled = system.rules.enabled  # the RunEvents of `System.actions`, in its order
         while len(steps) < self.max_steps:
             if self.until_decided and (seen or (self.properties.eventually and not never)):
                 ended = "decided"
@@ -111,12 +116,13 @@ class Simulator:
             if nxt > self.horizon_ms:
                 ended = "horizon"
                 break
-            actions = [a for a in system.actions(world) if type(a) is RunEvent]
-            t = self._take(world, rng.choice(actions), self._chooser(rng))
+            index = rng.choice(enabled(world.events))
+            t = self._take(world, RunEvent(index), self._chooser(rng))
             steps.append(t.step)
             world = t.world
-            self._note(t, len(steps), seen)
-            for name in [n for n in never if self._holds(n, world)]:
+            moved = bool(t.changed) or not self._timeless
+            self._note(t, len(steps), seen, moved)
+            for name in [n for n in never if self._holds(n, world)] if moved else ():
                 del never[name]
         # A run decided by a violation says nothing about the `eventually`s it cut short.
         for name, prop in (() if ended == "decided" else never.items()):
@@ -135,8 +141,10 @@ class Simulator:
         assert prop.expr is not None
         return prop.expr.holds(self.system, world.states, world.now)  # type: ignore[attr-defined]
 
-    def _note(self, t: Transition, k: int, seen: dict[str, tuple[PropertyViolation, int]]) -> None:
-        """Record the properties first violated by the transition to step `k`."""
+    def _note(self, t: Transition, k: int, seen: dict[str, tuple[PropertyViolation, int]],
+              moved: bool = True) -> None:
+        """Record the properties first violated by the transition to step `k` (`moved`:
+        whether the invariants can have changed value since the step before)."""
         if t.failure is not None:
             if t.failure.kind in CONTRACT_KINDS:
                 raise ContractBreach(breach_line(t.failure.kind, t.failure.node,
@@ -144,7 +152,7 @@ class Simulator:
             violation = self.properties.check_failure(t.failure)
             seen.setdefault(violation.property, (violation, k))
         world, system = t.world, self.system
-        for prop in self.properties.invariants:
+        for prop in self.properties.invariants if moved else ():
             if prop.name not in seen:
                 assert prop.expr is not None
                 if not prop.expr.holds(system, world.states, world.now):

@@ -117,7 +117,7 @@ def timed_system(scenario: Scenario, model: TimingModel, *,
     channels = set(probe.topology.subscribers) | set(probe.topology.servers)
     default, per = model.ranges(channels)
     return System(scenario, latency=default, topic_latency=per, properties=props,
-                  verify=verify), props
+                  verify=verify, keyed=False), props
 
 
 @final

@@ -111,6 +111,7 @@ class System:
         transition_cache: reuse handler outcomes (see the module docstring).
         verify: verify every new handler run (`checker.diagnosis`; implied by
             `check_determinism`).
+        keyed: key every world as it is built (`WorldBuilder`); simulations turn it off.
     """
 
     def __init__(self, scenario: Scenario, *, semantics: Semantics | str | None = None,
@@ -119,7 +120,8 @@ class System:
                  global_priority: bool | None = None,
                  debug_state: bool = False, properties: PropertySet | None = None,
                  exact_states: bool = False, check_determinism: bool = False,
-                 transition_cache: bool = True, verify: bool = True) -> None:
+                 transition_cache: bool = True, verify: bool = True, keyed: bool = True
+                 ) -> None:
         self.scenario = scenario
         self.topology = Topology([cfg.instantiate() for cfg in scenario.nodes], scenario.path)
         self.nodes = self.topology.nodes
@@ -151,7 +153,7 @@ class System:
         self._memo: GenerationCache[list[Variant]] | None = (
             GenerationCache(_MEMO_LIMIT)
             if transition_cache and not debug_state and not check_determinism else None)
-        self._worlds = WorldBuilder(self, properties, exact=exact_states)
+        self._worlds = WorldBuilder(self, properties, exact=exact_states, keyed=keyed)
         self._world = self._worlds.world
         self._decoded: dict[bytes, Any] = {}
         #: zero-delay sends seen in every handler run computed (`checker.reduction`)

@@ -165,7 +165,7 @@ class World:
         key: the identity the search stores (see the module docstring).
     """
 
-    __slots__ = ("_digest", "crashes", "events", "key", "obligations", "now", "states")
+    __slots__ = ("_digest", "_key", "crashes", "events", "obligations", "now", "states")
 
     def __init__(self, now: int, states: tuple[bytes, ...], events: tuple[Event, ...],
                  obligations: tuple[str, ...] = (), *, crashes: int = 0,
@@ -176,10 +176,17 @@ class World:
         self.obligations = obligations
         self.crashes = crashes
         self._digest = digest
+        self._key = key
+
+    @property
+    def key(self) -> int | bytes:
+        """The identity the search stores (computed on first use when not given: a
+        simulation never reads it)."""
+        key = self._key
         if key is None:
-            hashes = [hashlib.blake2b(s, digest_size=8).digest() for s in states]
-            key = fast_key(hashes, events, obligations, crashes)
-        self.key = key
+            hashes = [hashlib.blake2b(s, digest_size=8).digest() for s in self.states]
+            key = self._key = fast_key(hashes, self.events, self.obligations, self.crashes)
+        return key
 
     @property
     def digest(self) -> bytes:
@@ -205,7 +212,7 @@ class World:
         return (self.now, self.states, self.events, self.obligations, self.crashes, self.key)
 
     def __setstate__(self, state: tuple[Any, ...]) -> None:
-        self.now, self.states, self.events, self.obligations, self.crashes, self.key = state
+        self.now, self.states, self.events, self.obligations, self.crashes, self._key = state
         self._digest = None
 
 
