@@ -11,6 +11,18 @@ histogram pools every channel. Messages sent in the fleet's first
 `startup_ms` fleet ms are fitted apart, into the start-up histogram (they take
 several times longer; `checker.timing`). The logs' time scale is recorded, and
 must be the same in every file: fleet ms at another scale are another clock.
+
+The deliveries of one publish (same file, sender, topic and sequence number,
+handled by several receivers) give `together`: per channel with at least
+`TOGETHER_MIN_PUBLISHES` such publishes (and pooled as "default"), the
+intraclass correlation of their latencies' normal scores (each latency mapped
+through its channel's mid-rank empirical CDF and the inverse normal CDF), the
+parameter of the Gaussian copula `checker.sampling` draws them through.
+
+Ties give `messages_first`: of every pair of a timer (or tick) and a message
+handled by one node at the timer's due ms, the fraction in which the message ran
+first (the node's own event order, ``i``); `checker.simulate` breaks such ties
+with it.
 """
 
 
@@ -18,9 +30,12 @@ from __future__ import annotations
 
 import json
 import platform
+from bisect import bisect_left, bisect_right
 from collections import defaultdict
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from statistics import NormalDist
+from typing import Any
 
 from twinfleet.checker.timing import Histogram, TimingError, TimingModel
 from twinfleet.runtime.contract.kinds import EventKind
@@ -30,6 +45,8 @@ _MESSAGES = {str(EventKind.DELIVERY), str(EventKind.REQUEST), str(EventKind.REPL
 _TIMED = {str(EventKind.TIMER), str(EventKind.PERIODIC)}
 STARTUP_MS = 20  # fleet ms: at time scale 2, the first scans and path requests of a fleet
 STARTUP_MIN_SAMPLES = 5  # fewer start-up latencies than this: no start-up histogram
+TOGETHER_MIN_PUBLISHES = 10  # fewer publishes of several deliveries: no correlation fitted
+_Publish = tuple[str, object, str, object]  # (file, sender, topic, sequence number)
 
 
 def machine() -> str:
@@ -63,6 +80,8 @@ def calibrate(paths: Sequence[str | Path], *, min_samples: int = 30,
     latency: defaultdict[str, list[int]] = defaultdict(list)
     startup: list[int] = []
     lateness: list[int] = []
+    copies: defaultdict[_Publish, list[int]] = defaultdict(list)
+    at_ms: defaultdict[tuple[object, int], list[tuple[int, bool]]] = defaultdict(list)
     scales: set[float] = set()
     for name in paths:
         path = Path(name)
@@ -80,8 +99,15 @@ def calibrate(paths: Sequence[str | Path], *, min_samples: int = 30,
             stamp = r.get("stamp")
             if kind in _MESSAGES and isinstance(stamp, int) and r.get("topic"):
                 (startup if stamp < startup_ms else latency[str(r["topic"])]).append(t - stamp)
+                if kind == str(EventKind.DELIVERY) and stamp >= startup_ms:
+                    copies[(str(path), r.get("sender"), str(r["topic"]),
+                            r.get("seq"))].append(t - stamp)
             elif kind in _TIMED and isinstance(r.get("due"), int):
                 lateness.append(t - int(r["due"]))  # type: ignore[call-overload]
+            if kind in _MESSAGES or (kind in _TIMED and r.get("due") == t):
+                order = r.get("i")
+                at_ms[(f"{path}:{r.get('node')}", t)].append(
+                    (order if isinstance(order, int) else len(at_ms), kind in _MESSAGES))
         if not headers:
             raise TimingError(f"{path}: not a {EVENTS_FORMAT} event log (no header)")
     if len(scales) > 1:
@@ -100,4 +126,46 @@ def calibrate(paths: Sequence[str | Path], *, min_samples: int = 30,
     start = Histogram.fit(startup) if len(startup) >= STARTUP_MIN_SAMPLES else None
     return TimingModel(Histogram.fit(pooled), own, Histogram.fit(lateness), (),
                        machine(), scales.pop() if scales else None,
-                       tuple(str(p) for p in paths), start, startup_ms if start else 0)
+                       tuple(str(p) for p in paths), start, startup_ms if start else 0,
+                       together=_together(latency, copies),
+                       **_ties(at_ms.values()))
+
+
+def _ties(moments: Iterable[list[tuple[int, bool]]]) -> dict[str, Any]:
+    """`messages_first`: the fraction of message-before-timer among a node's message/timer
+    pairs of one ms, and `tie_samples`: how many pairs (neither when there were none)."""
+    first = pairs = 0
+    for handled in moments:
+        for order, message in handled:
+            if message:
+                timers = [o for o, m in handled if not m]
+                pairs += len(timers)
+                first += sum(1 for o in timers if order < o)
+    return {"messages_first": round(first / pairs, 3), "tie_samples": pairs} if pairs else {}
+
+
+def _together(latency: dict[str, list[int]], copies: dict[_Publish, list[int]]
+              ) -> tuple[tuple[str, float], ...]:
+    """Per channel (and "default", pooled) the correlation of one publish's delivery
+    latencies (module docstring); channels with too few such publishes are left out."""
+    normal = NormalDist()
+    ordered = {name: sorted(samples) for name, samples in latency.items()}
+
+    def score(channel: str, x: int) -> float:
+        xs = ordered[channel]
+        below, upto = bisect_left(xs, x), bisect_right(xs, x)
+        return normal.inv_cdf((below + upto) / (2 * len(xs)))  # x is one of xs: in (0, 1)
+
+    sums: defaultdict[str, list[float]] = defaultdict(lambda: [0.0, 0.0, 0.0])
+    for (_, _, channel, _), lats in copies.items():
+        if len(lats) < 2:
+            continue
+        z = [score(channel, x) for x in lats]
+        cross = sum(a * b for i, a in enumerate(z) for b in z[i + 1:])
+        square = sum(a * a for a in z) * (len(z) - 1) / 2  # as many terms as `cross`
+        for key in (channel, "default"):
+            acc = sums[key]
+            acc[0], acc[1], acc[2] = acc[0] + cross, acc[1] + square, acc[2] + 1
+    return tuple(sorted((key, round(min(0.99, max(0.0, cross / square)), 3))
+                        for key, (cross, square, n) in sums.items()
+                        if n >= TOGETHER_MIN_PUBLISHES and square > 0))

@@ -28,6 +28,9 @@ class LatencySite:
     channel: str
     low: int
     sent: int | None = None  # the fleet ms the message was sent at
+    #: which publish of its handler run the message is a copy of (its effect's index;
+    #: None for a request or reply): one publish's deliveries share part of their delay
+    publish: int | None = None
 
 
 class ExploringChooser(Chooser, Protocol):

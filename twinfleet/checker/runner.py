@@ -366,7 +366,7 @@ class Runner:
             out.append(Event(now + topology.period(i, ev.method), EventKind.PERIODIC, i,
                              ev.method, i, (), ev.priority))
         failure = None
-        for eff in effects:
+        for k, eff in enumerate(effects):
             match eff:
                 case Publish(topic=topic, msg=msg):
                     for j, method, prio in topology.subscribers.get(topic, ()):
@@ -376,7 +376,7 @@ class Runner:
                                                        (msg,)))
                         for _ in range(copies):
                             out.append(self._message(now, topic, EventKind.DELIVERY, j, method,
-                                                     i, (msg,), prio, "", chooser))
+                                                     i, (msg,), prio, "", chooser, k))
                 case Call(service=service, request=req, reply_to=reply_to, timeout_ms=timeout):
                     server = topology.servers.get(service)
                     lost = server is not None and self._copies(service, server[0], chooser,
@@ -419,9 +419,10 @@ class Runner:
 
     def _message(self, now: int, name: str, kind: EventKind, target: int, method: str,
                  sender: int, args: tuple[Any, ...], priority: int, reply_to: str,
-                 chooser: ExploringChooser) -> Event:
-        """A message on topic/service `name`, with its latency branch and deadline."""
-        due, deadline = self.rules.delivery(now, name, chooser)
+                 chooser: ExploringChooser, publish: int | None = None) -> Event:
+        """A message on topic/service `name`, with its latency branch and deadline
+        (`publish`: the index of the publish effect it is a copy of)."""
+        due, deadline = self.rules.delivery(now, name, chooser, publish)
         return Event(due, kind, target, method, sender, args, priority, reply_to,
                      key=self._key(kind, target, method, sender, reply_to, args),
                      deadline=deadline)

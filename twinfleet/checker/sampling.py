@@ -3,7 +3,10 @@
 A handler's `ctx.choose(options)` is drawn uniformly; the checker's latency
 branches (`checker.choices.LatencySite`) are drawn from the timing model's
 histogram of their channel (of the start-up, for a message sent in the model's
-start-up window), restricted to the branch's range; its other
+start-up window), restricted to the branch's range, the copies of one publish
+through a Gaussian copula with the model's `together` correlation (one common
+normal draw per publish, one own per copy: each copy keeps its histogram);
+its other
 branches (drop, duplicate, no server) uniformly. Every answer is recorded as an
 index, as `PrefixChooser` records them, so a simulation's steps are ordinary
 trace steps that `twinfleet replay` re-takes.
@@ -11,6 +14,7 @@ trace steps that `twinfleet replay` re-takes.
 
 from __future__ import annotations
 
+import math
 import random
 from bisect import bisect_right
 from itertools import accumulate
@@ -24,14 +28,16 @@ from twinfleet.checker.timing import TimingModel
 class SamplingChooser:
     """Draws answers from `rng`: latencies by `model`, everything else uniformly."""
 
-    __slots__ = ("_cumulative", "_model", "_rng", "indices", "mismatch", "options")
+    __slots__ = ("_common", "_cumulative", "_model", "_rng", "indices", "mismatch", "options")
 
     def __init__(self, rng: random.Random, model: TimingModel,
-                 cumulative: dict[tuple[str, int, int, bool], list[float]] | None = None
-                 ) -> None:
+                 cumulative: dict[tuple[str, int, int, bool], tuple[list[float], float]]
+                 | None = None) -> None:
         self._rng, self._model = rng, model
-        #: cumulative weights per (channel, low, n, start-up): shared by one run's choosers
+        #: (cumulative weights, copula correlation) per (channel, low, n, start-up): shared
+        #: by one run's choosers
         self._cumulative = {} if cumulative is None else cumulative
+        self._common: dict[int, float] = {}  # the common normal draw of each publish
         self.indices: list[int] = []
         self.options: list[int] = []
         self.mismatch: ChoiceMismatch | None = None  # never: every answer exists
@@ -49,11 +55,26 @@ class SamplingChooser:
             return self.choose(n)
         model = self._model
         key = (site.channel, site.low, n, model.starting(site.sent))
-        cum = self._cumulative.get(key)
-        if cum is None:
+        found = self._cumulative.get(key)
+        if found is None:
             weights = model.latency_of(site.channel, site.sent).weights_over(site.low, n)
-            cum = self._cumulative[key] = list(accumulate(weights))
-        index = min(bisect_right(cum, self._rng.random() * cum[-1]), n - 1)
+            found = self._cumulative[key] = (list(accumulate(weights)),
+                                             model.together_of(site.channel))
+        cum, rho = found
+        if rho and site.publish is not None:
+            u = self._copula(site.publish, rho)
+        else:
+            u = self._rng.random()
+        index = min(bisect_right(cum, u * cum[-1]), n - 1)
         self.indices.append(index)
         self.options.append(n)
         return index
+
+    def _copula(self, publish: int, rho: float) -> float:
+        """A uniform draw for one copy of publish `publish`: the normal CDF of its
+        publish's common draw and its own, mixed to correlation `rho`."""
+        common = self._common.get(publish)
+        if common is None:
+            common = self._common[publish] = self._rng.gauss(0.0, 1.0)
+        z = math.sqrt(rho) * common + math.sqrt(1.0 - rho) * self._rng.gauss(0.0, 1.0)
+        return 0.5 * (1.0 + math.erf(z / math.sqrt(2.0)))

@@ -238,14 +238,17 @@ class Rules:
 
     # ------------------------------------------------------------ Rule 5
 
-    def delivery(self, now: int, name: str, chooser: ExploringChooser) -> tuple[int, int | None]:
-        """(due time, deadline or None) of a message on `name` sent at `now`; a latency
-        range makes the due time a branch of `chooser`."""
+    def delivery(self, now: int, name: str, chooser: ExploringChooser,
+                 publish: int | None = None) -> tuple[int, int | None]:
+        """(due time, deadline or None) of a message on `name` sent at `now` (a copy of
+        the handler's publish number `publish`, if it is one); a latency range makes the
+        due time a branch of `chooser`."""
         due = now
         span = self._ranges.get(name, self.settings.latency)
         if span is not None:
             low, high = span
-            due = now + low + (chooser.branch(high - low + 1, LatencySite(name, low, now))
+            due = now + low + (chooser.branch(high - low + 1,
+                                              LatencySite(name, low, now, publish))
                                if high > low else 0)
         settings = self.settings
         limit = settings.deadline_for(name) if settings.has_deadlines else None

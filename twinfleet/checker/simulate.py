@@ -4,7 +4,9 @@
 handlers' choices, then repeatedly takes one enabled event, drawn uniformly
 among those the rules enable (`System.actions`; KEEP_LAST drops and crash
 faults are not drawn: the model has no handler durations to make them
-likely), its `ctx.choose` answers and latencies drawn by a `SamplingChooser`,
+likely) — except that where the drawn event's node has both a message and a
+timer enabled, a model with `messages_first` draws which of the two kinds
+runs with that probability (`checker.timing`, "Ties at one millisecond") —, its `ctx.choose` answers and latencies drawn by a `SamplingChooser`,
 until nothing is pending, the next event lies beyond the horizon (fleet ms),
 or `max_steps` steps were taken. Every property is watched on the way: each
 invariant on its own, handler failures, `within`, queue bounds, deadlock and
@@ -31,6 +33,7 @@ from twinfleet.checker.sampling import SamplingChooser
 from twinfleet.checker.system import System
 from twinfleet.checker.timing import TimingModel
 from twinfleet.checker.transition import RunEvent, Step, Transition
+from twinfleet.checker.world import Event
 
 
 class ContractBreach(RuntimeError):
@@ -84,7 +87,8 @@ class Simulator:
                                  queue_bounds=properties.queue_bounds,
                                  node_names=properties.node_names,
                                  deadlines=properties.deadlines)
-        self._cumulative: dict[tuple[str, int, int, bool], list[float]] = {}
+        self._cumulative: dict[tuple[str, int, int, bool], tuple[list[float], float]] = {}
+        self._first = model.messages_first
         # An expression without `now` is a function of node states alone: a step that
         # changed no state cannot change its value (most steps of a fleet change none).
         self._timeless = not any(p.expr is not None and p.expr.uses_now
@@ -116,7 +120,10 @@ class Simulator:
             if nxt > self.horizon_ms:
                 ended = "horizon"
                 break
-            index = rng.choice(enabled(world.events))
+            picks = enabled(world.events)
+            index = rng.choice(picks)
+            if self._first is not None:
+                index = self._tie(rng, world.events, picks, index)
             t = self._take(world, RunEvent(index), self._chooser(rng))
             steps.append(t.step)
             world = t.world
@@ -132,6 +139,22 @@ class Simulator:
                 name, prop.kind, f"{source!r} never held by t={world.now} ms "
                 f"({ended})", shape), len(steps)))
         return self._result(index, init, steps, seen, world.now, ended)
+
+    def _tie(self, rng: random.Random, events: tuple[Event, ...], picks: list[int],
+             index: int) -> int:
+        """The event to run instead of the drawn `events[index]`: when its node has both
+        messages and timers among `picks`, one of the kind drawn by `messages_first`."""
+        target = events[index].target
+        mine = [i for i in picks if events[i].target == target]
+        if len(mine) == 1:
+            return index
+        messages = [i for i in mine if events[i].message]
+        if not messages or len(messages) == len(mine):
+            return index
+        assert self._first is not None
+        pool = messages if rng.random() < self._first else [
+            i for i in mine if not events[i].message]
+        return index if index in pool else rng.choice(pool)
 
     def _chooser(self, rng: random.Random) -> SamplingChooser:
         return SamplingChooser(rng, self.model, self._cumulative)
