@@ -1,5 +1,15 @@
-"""Statistical checking speed: simulations per second per worker for every paper case, and
-the time c2a takes to a 95 % interval of half-width <= 0.05 on 2 workers.
+"""Statistical checking speed: C1a before and after the engine's speed-ups, simulations per
+second per worker for every paper case, and the time c2a takes to a 95 % interval of
+half-width <= 0.05 on 2 workers.
+
+Part 0 runs `twinfleet check c1a --statistical` (the command's own engine and workers, the
+shipped loopback model, 120 s of fleet time per simulation) with the code of git revision
+`--before` (default 3ae704d, the engine before the speed-ups of issue 40; extracted with `git
+archive` into a temporary directory, run in a subprocess) and with this checkout, side by
+side in one run: `--rate-simulations` simulations on 1 worker, then 400 (`--estimate`) on
+`--workers` workers. It prints simulations/s of each, after / before, and whether the
+estimates of the 400 agree: each property's count after inside the 95 % interval before,
+and the same properties violated in every simulation.
 
 Part 1 runs `--simulations N` simulations of each case (C1a-C1c and C2a-C2c in the fixed
 profile, C2a-C2c in the rebeca profile) in this process, one worker, as `twinfleet check
@@ -16,6 +26,7 @@ time it took, and that time over the 10-minute target.
 
     PYTHONPATH=. python benchmarks/statistical_throughput.py [--simulations 8]
         [--cases c1a,c2a] [--workers 2] [--no-contract-checks] [--skip-precision]
+        [--before REV] [--rate-simulations 32] [--estimate 400] [--only-speedup]
 
 The machine's other load changes the figures: run it on an otherwise idle machine, or read
 the ratios.
@@ -24,6 +35,12 @@ the ratios.
 from __future__ import annotations
 
 import argparse
+import json
+import os
+import resource
+import subprocess
+import sys
+import tempfile
 import time
 from collections import Counter
 from pathlib import Path
@@ -62,16 +79,94 @@ def _same(a: list[Simulation], b: list[Simulation]) -> bool:
         (s.violated, s.steps, s.end_ms, s.ended, s.first) for s in b]
 
 
+# Run in a subprocess with one tree's code first on the path: c1a's simulations on W
+# workers, as JSON (wall s, simulations, per-simulation violated properties, estimates).
+_MEASURE = """
+import json, sys, tempfile, twinfleet
+from twinfleet.checker.statistical import StatisticalOptions, check_statistical
+assert twinfleet.__file__.startswith(sys.argv[1]), twinfleet.__file__
+with tempfile.TemporaryDirectory() as out:
+    r = check_statistical(sys.argv[1] + "/twinfleet/launch/c1a.yaml", StatisticalOptions(
+        simulations=int(sys.argv[2]), workers=int(sys.argv[3]), traces_out=out, max_traces=0))
+print(json.dumps({"wall": r.elapsed_s, "n": len(r.simulations),
+                  "violated": [list(s.violated) for s in r.simulations],
+                  "estimates": [[e.name, e.violations, e.n, e.low, e.high]
+                                for e in r.estimates()]}))
+"""
+
+
+def _measure(tree: Path, simulations: int, workers: int) -> dict[str, object]:
+    """One side's run; "cpu": CPU s of the whole process tree (start-up included), which a
+    machine shared with other work does not inflate as it does the wall time."""
+    env = {**os.environ, "PYTHONPATH": str(tree)}
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    done = subprocess.run([sys.executable, "-c", _MEASURE, str(tree), str(simulations),
+                           str(workers)], env=env, cwd=tree,  # `-c` puts the cwd first
+                          capture_output=True, text=True, check=False)
+    if done.returncode:
+        raise SystemExit(f"{tree}: the measurement failed: {done.stderr.strip()[-2000:]}")
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    result: dict[str, object] = json.loads(done.stdout.splitlines()[-1])
+    result["cpu"] = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
+    return result
+
+
+def _agree(before: dict[str, object], after: dict[str, object]) -> str:
+    """Whether each count after lies in the interval before, and the simulations agree."""
+    old = {e[0]: e for e in before["estimates"]}  # type: ignore[attr-defined]
+    inside = all(old[name][3] <= k / n <= old[name][4] if name in old else k == 0
+                 for name, k, n, _, _ in after["estimates"])  # type: ignore[attr-defined]
+    same = before["violated"] == after["violated"]
+    counts = ", ".join(f"{e[0]} {e[1]}/{e[2]}" for e in after["estimates"])  # type: ignore[attr-defined]
+    return (f"after: {counts}; every count after inside the 95 % interval before: {inside}; "
+            f"the same properties violated in every simulation: {same}")
+
+
+def speedup(before_rev: str, rate_n: int, estimate_n: int, workers: int) -> None:
+    """Part 0 (module docstring)."""
+    with tempfile.TemporaryDirectory(prefix="twinfleet-before-") as tmp:
+        archive = subprocess.run(["git", "-C", str(ROOT), "archive", before_rev],
+                                 capture_output=True, check=True).stdout
+        subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
+        trees = {"before": Path(tmp), "after": ROOT}
+        print(f"part 0: c1a, 120 s of fleet time per simulation, loopback model; before = "
+              f"{before_rev}, after = this checkout")
+        runs: dict[tuple[str, int], dict[str, object]] = {}
+        for label, n, w in (("1 worker", rate_n, 1), (f"{workers} workers", estimate_n, workers)):
+            for side, tree in trees.items():
+                runs[(side, w)] = _measure(tree, n, w)
+            wall = {side: n / runs[(side, w)]["wall"] for side in trees}  # type: ignore[operator]
+            cpu = {side: n * w / runs[(side, w)]["cpu"] for side in trees}  # type: ignore[operator]
+            print(f"{label:<10} {n:>4} simulations: wall: before {wall['before']:6.2f} sim/s, "
+                  f"after {wall['after']:6.2f} sim/s, after / before "
+                  f"{wall['after'] / wall['before']:.2f}; per CPU s x {w}: before "
+                  f"{cpu['before']:6.2f}, after {cpu['after']:6.2f}, after / before "
+                  f"{cpu['after'] / cpu['before']:.2f} (load average {os.getloadavg()[0]:.1f})",
+                  flush=True)
+        print(f"estimates of {estimate_n}: " + _agree(runs[("before", workers)],
+                                                      runs[("after", workers)]))
+
+
 def main() -> None:
-    """Run both parts and print their tables."""
+    """Run the parts and print their tables."""
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--simulations", type=int, default=8, help="per case in part 1")
     ap.add_argument("--cases", default=",".join(CASES), help="comma-separated case names")
     ap.add_argument("--workers", type=int, default=2, help="workers of part 2")
     ap.add_argument("--no-contract-checks", dest="verify", action="store_false",
                     help="skip the node-contract checks of every handler run (both parts)")
-    ap.add_argument("--skip-precision", action="store_true", help="part 1 only")
+    ap.add_argument("--skip-precision", action="store_true", help="skip part 2")
+    ap.add_argument("--before", default="3ae704d",
+                    help="part 0: the git revision whose engine is 'before' (default 3ae704d)")
+    ap.add_argument("--rate-simulations", type=int, default=32,
+                    help="part 0: simulations on 1 worker, each side")
+    ap.add_argument("--estimate", type=int, default=400,
+                    help="part 0: simulations on --workers workers whose estimates are compared")
+    ap.add_argument("--only-speedup", action="store_true", help="part 0 only")
     args = ap.parse_args()
+    speedup(args.before, args.rate_simulations, args.estimate, args.workers)
+    if args.only_speedup:
+        return
     cases = [c for c in args.cases.split(",") if c]
     cases.sort(key=lambda c: c != "c2a")  # c2a first: the reference of "vs c2a"
     print(f"part 1: {args.simulations} simulations per case, 1 worker, contract checks "

@@ -28,12 +28,14 @@ from typing import final
 
 from twinfleet.checker.diagnosis import CONTRACT_KINDS, breach_line
 from twinfleet.checker.outcome import Counterexample
-from twinfleet.checker.properties import PropertySet, PropertyViolation
+from twinfleet.checker.properties import Property, PropertySet, PropertyViolation
 from twinfleet.checker.sampling import SamplingChooser
 from twinfleet.checker.system import System
 from twinfleet.checker.timing import TimingModel
 from twinfleet.checker.transition import RunEvent, Step, Transition
 from twinfleet.checker.world import Event
+
+SETTLE_AFTER = 64  # steps that changed no node state before asking whether none can
 
 
 class ContractBreach(RuntimeError):
@@ -93,6 +95,12 @@ class Simulator:
         # changed no state cannot change its value (most steps of a fleet change none).
         self._timeless = not any(p.expr is not None and p.expr.uses_now
                                  for p in (*properties.invariants, *properties.eventually))
+        # A run may end early once no node state can change any more (`Runner.settled`):
+        # only where nothing but node states decides a property (no `within`, queue
+        # bound, deadline or `now`), and handler runs are kept.
+        self._settles = (reuse and self._timeless and not properties.within
+                         and not any(b is not None for b in properties.queue_bounds)
+                         and not system.settings.has_deadlines)
 
     def batch(self, indices: list[int]) -> list[Simulation]:
         """Simulations `indices`, in that order."""
@@ -107,7 +115,7 @@ class Simulator:
         self._note(init, 0, seen)
         world, steps = init.world, list[Step]()
         never = {p.name: p for p in self.properties.eventually if not self._holds(p.name, world)}
-        ended = "step limit"
+        ended, quiet = "step limit", 0
         enabled = system.rules.enabled  # the RunEvents of `System.actions`, in its order
         while len(steps) < self.max_steps:
             if self.until_decided and (seen or (self.properties.eventually and not never)):
@@ -120,6 +128,11 @@ class Simulator:
             if nxt > self.horizon_ms:
                 ended = "horizon"
                 break
+            if quiet >= SETTLE_AFTER:
+                if system.runner.settled(world.states, world.events):
+                    ended = "settled"
+                    break
+                quiet = 0
             picks = enabled(world.events)
             index = rng.choice(picks)
             if self._first is not None:
@@ -128,17 +141,25 @@ class Simulator:
             steps.append(t.step)
             world = t.world
             moved = bool(t.changed) or not self._timeless
+            quiet = 0 if moved or not self._settles else quiet + 1
             self._note(t, len(steps), seen, moved)
             for name in [n for n in never if self._holds(n, world)] if moved else ():
                 del never[name]
-        # A run decided by a violation says nothing about the `eventually`s it cut short.
-        for name, prop in (() if ended == "decided" else never.items()):
+        self._never(never, seen, ended, world.now, len(steps))
+        return self._result(index, init, steps, seen, world.now, ended)
+
+    def _never(self, never: dict[str, Property], seen: dict[str, tuple[PropertyViolation, int]],
+               ended: str, now: int, k: int) -> None:
+        """Record each `eventually` in `never` as violated at the end of the run."""
+        if ended == "decided":  # decided by a violation: the others were cut short
+            return
+        for name, prop in never.items():
             shape = "terminal" if ended == "nothing pending" else "horizon"
             source = prop.expr.source if prop.expr is not None else ""
+            when = (f"t={self.horizon_ms} ms (horizon; no node state could change after "
+                    f"t={now} ms)" if ended == "settled" else f"t={now} ms ({ended})")
             seen.setdefault(name, (PropertyViolation(
-                name, prop.kind, f"{source!r} never held by t={world.now} ms "
-                f"({ended})", shape), len(steps)))
-        return self._result(index, init, steps, seen, world.now, ended)
+                name, prop.kind, f"{source!r} never held by {when}", shape), k))
 
     def _tie(self, rng: random.Random, events: tuple[Event, ...], picks: list[int],
              index: int) -> int:
