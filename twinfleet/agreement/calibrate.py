@@ -33,6 +33,7 @@ import platform
 from bisect import bisect_left, bisect_right
 from collections import defaultdict
 from collections.abc import Iterable, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from statistics import NormalDist
 from typing import Any
@@ -72,63 +73,75 @@ def _records(path: Path) -> Iterable[dict[str, object]]:
             yield record
 
 
+@dataclass
+class _Samples:
+    """What the event logs hold for a model, gathered record by record."""
+
+    startup_ms: int
+    latency: defaultdict[str, list[int]] = field(default_factory=lambda: defaultdict(list))
+    startup: list[int] = field(default_factory=list)
+    lateness: list[int] = field(default_factory=list)
+    copies: defaultdict[_Publish, list[int]] = field(default_factory=lambda: defaultdict(list))
+    #: per (log and node, ms): (the node's event order, whether a message) of what it ran
+    at_ms: defaultdict[tuple[str, int], list[tuple[int, bool]]] = field(
+        default_factory=lambda: defaultdict(list))
+    scales: set[float] = field(default_factory=set)
+
+    def read(self, path: Path) -> None:
+        """Add one event log's records."""
+        headers = 0
+        for line, r in enumerate(_records(path)):
+            if r.get("format") == EVENTS_FORMAT:
+                headers += 1
+                if isinstance(r.get("time_scale"), int | float):
+                    self.scales.add(float(r["time_scale"]))  # type: ignore[arg-type]
+            elif isinstance(r.get("t"), int):
+                self._add(f"{path}", line, r)
+        if not headers:
+            raise TimingError(f"{path}: not a {EVENTS_FORMAT} event log (no header)")
+
+    def _add(self, log: str, line: int, r: dict[str, object]) -> None:
+        kind, t, stamp = r.get("kind"), int(r["t"]), r.get("stamp")  # type: ignore[call-overload]
+        if kind in _MESSAGES and isinstance(stamp, int) and r.get("topic"):
+            topic = str(r["topic"])
+            (self.startup if stamp < self.startup_ms else self.latency[topic]).append(t - stamp)
+            if kind == str(EventKind.DELIVERY) and stamp >= self.startup_ms:
+                self.copies[(log, r.get("sender"), topic, r.get("seq"))].append(t - stamp)
+        elif kind in _TIMED and isinstance(r.get("due"), int):
+            self.lateness.append(t - int(r["due"]))  # type: ignore[call-overload]
+        if kind in _MESSAGES or (kind in _TIMED and r.get("due") == t):
+            order = r.get("i")
+            self.at_ms[(f"{log}:{r.get('node')}", t)].append(
+                (order if isinstance(order, int) else line, kind in _MESSAGES))
+
+
 def calibrate(paths: Sequence[str | Path], *, min_samples: int = 30,
               startup_ms: int = STARTUP_MS) -> TimingModel:
     """Fit a `TimingModel` from event logs (module docstring)."""
     if not paths:
         raise TimingError("calibrate: give at least one event log")
-    latency: defaultdict[str, list[int]] = defaultdict(list)
-    startup: list[int] = []
-    lateness: list[int] = []
-    copies: defaultdict[_Publish, list[int]] = defaultdict(list)
-    at_ms: defaultdict[tuple[object, int], list[tuple[int, bool]]] = defaultdict(list)
-    scales: set[float] = set()
+    got = _Samples(startup_ms)
     for name in paths:
-        path = Path(name)
-        headers = 0
-        for r in _records(path):
-            kind = r.get("kind")
-            if r.get("format") == EVENTS_FORMAT:
-                headers += 1
-                if isinstance(r.get("time_scale"), int | float):
-                    scales.add(float(r["time_scale"]))  # type: ignore[arg-type]
-                continue
-            t = r.get("t")
-            if not isinstance(t, int):
-                continue
-            stamp = r.get("stamp")
-            if kind in _MESSAGES and isinstance(stamp, int) and r.get("topic"):
-                (startup if stamp < startup_ms else latency[str(r["topic"])]).append(t - stamp)
-                if kind == str(EventKind.DELIVERY) and stamp >= startup_ms:
-                    copies[(str(path), r.get("sender"), str(r["topic"]),
-                            r.get("seq"))].append(t - stamp)
-            elif kind in _TIMED and isinstance(r.get("due"), int):
-                lateness.append(t - int(r["due"]))  # type: ignore[call-overload]
-            if kind in _MESSAGES or (kind in _TIMED and r.get("due") == t):
-                order = r.get("i")
-                at_ms[(f"{path}:{r.get('node')}", t)].append(
-                    (order if isinstance(order, int) else len(at_ms), kind in _MESSAGES))
-        if not headers:
-            raise TimingError(f"{path}: not a {EVENTS_FORMAT} event log (no header)")
-    if len(scales) > 1:
+        got.read(Path(name))
+    if len(got.scales) > 1:
         raise TimingError(f"calibrate: the logs were recorded at different time scales "
-                          f"({', '.join(f'{s:g}' for s in sorted(scales))}); fit each apart")
-    pooled = [x for samples in latency.values() for x in samples]
-    if not pooled and startup:  # every stamped message fell in the start-up window
-        raise TimingError(f"calibrate: all {len(startup)} handled messages with a send stamp "
-                          f"were sent in the first {startup_ms} fleet ms, which --startup-ms "
-                          f"{startup_ms} sets apart as start-up: a protocol that ends that "
-                          "early needs a smaller --startup-ms (0: none)")
+                          f"({', '.join(f'{s:g}' for s in sorted(got.scales))}); fit each apart")
+    pooled = [x for samples in got.latency.values() for x in samples]
+    if not pooled and got.startup:  # every stamped message fell in the start-up window
+        raise TimingError(f"calibrate: all {len(got.startup)} handled messages with a send "
+                          f"stamp were sent in the first {startup_ms} fleet ms, which "
+                          f"--startup-ms {startup_ms} sets apart as start-up: a protocol that "
+                          "ends that early needs a smaller --startup-ms (0: none)")
     if not pooled:
         raise TimingError("calibrate: the logs hold no handled message with a send stamp")
-    own = tuple((name, Histogram.fit(samples)) for name, samples in sorted(latency.items())
+    own = tuple((name, Histogram.fit(samples)) for name, samples in sorted(got.latency.items())
                 if len(samples) >= min_samples)
-    start = Histogram.fit(startup) if len(startup) >= STARTUP_MIN_SAMPLES else None
-    return TimingModel(Histogram.fit(pooled), own, Histogram.fit(lateness), (),
-                       machine(), scales.pop() if scales else None,
+    start = Histogram.fit(got.startup) if len(got.startup) >= STARTUP_MIN_SAMPLES else None
+    return TimingModel(Histogram.fit(pooled), own, Histogram.fit(got.lateness), (),
+                       machine(), got.scales.pop() if got.scales else None,
                        tuple(str(p) for p in paths), start, startup_ms if start else 0,
-                       together=_together(latency, copies),
-                       **_ties(at_ms.values()))
+                       together=_together(got.latency, got.copies),
+                       **_ties(got.at_ms.values()))
 
 
 def _ties(moments: Iterable[list[tuple[int, bool]]]) -> dict[str, Any]:
