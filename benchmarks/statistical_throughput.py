@@ -37,7 +37,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -82,13 +81,14 @@ def _same(a: list[Simulation], b: list[Simulation]) -> bool:
 # Run in a subprocess with one tree's code first on the path: c1a's simulations on W
 # workers, as JSON (wall s, simulations, per-simulation violated properties, estimates).
 _MEASURE = """
-import json, sys, tempfile, twinfleet
+import json, sys, tempfile, time, twinfleet
 from twinfleet.checker.statistical import StatisticalOptions, check_statistical
 assert twinfleet.__file__.startswith(sys.argv[1]), twinfleet.__file__
+cpu = time.process_time()
 with tempfile.TemporaryDirectory() as out:
     r = check_statistical(sys.argv[1] + "/twinfleet/launch/c1a.yaml", StatisticalOptions(
         simulations=int(sys.argv[2]), workers=int(sys.argv[3]), traces_out=out, max_traces=0))
-print(json.dumps({"wall": r.elapsed_s, "n": len(r.simulations),
+print(json.dumps({"wall": r.elapsed_s, "n": len(r.simulations), "cpu": time.process_time() - cpu,
                   "violated": [list(s.violated) for s in r.simulations],
                   "estimates": [[e.name, e.violations, e.n, e.low, e.high]
                                 for e in r.estimates()]}))
@@ -96,18 +96,16 @@ print(json.dumps({"wall": r.elapsed_s, "n": len(r.simulations),
 
 
 def _measure(tree: Path, simulations: int, workers: int) -> dict[str, object]:
-    """One side's run; "cpu": CPU s of the whole process tree (start-up included), which a
-    machine shared with other work does not inflate as it does the wall time."""
+    """One side's run; "cpu": the CPU s of the command in its own process (all of it on 1
+    worker, which a machine shared with other work does not inflate as it does the wall
+    time; worker processes are not counted)."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
-    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     done = subprocess.run([sys.executable, "-c", _MEASURE, str(tree), str(simulations),
                            str(workers)], env=env, cwd=tree,  # `-c` puts the cwd first
                           capture_output=True, text=True, check=False)
     if done.returncode:
         raise SystemExit(f"{tree}: the measurement failed: {done.stderr.strip()[-2000:]}")
-    after = resource.getrusage(resource.RUSAGE_CHILDREN)
     result: dict[str, object] = json.loads(done.stdout.splitlines()[-1])
-    result["cpu"] = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     return result
 
 
@@ -136,13 +134,14 @@ def speedup(before_rev: str, rate_n: int, estimate_n: int, workers: int) -> None
             for side, tree in trees.items():
                 runs[(side, w)] = _measure(tree, n, w)
             wall = {side: n / runs[(side, w)]["wall"] for side in trees}  # type: ignore[operator]
-            cpu = {side: n * w / runs[(side, w)]["cpu"] for side in trees}  # type: ignore[operator]
+            cpu = {side: n / runs[(side, w)]["cpu"] for side in trees}  # type: ignore[operator]
+            per_cpu = "" if w > 1 else (
+                f"; per CPU s: before {cpu['before']:6.2f}, after {cpu['after']:6.2f}, after / "
+                f"before {cpu['after'] / cpu['before']:.2f}")
             print(f"{label:<10} {n:>4} simulations: wall: before {wall['before']:6.2f} sim/s, "
                   f"after {wall['after']:6.2f} sim/s, after / before "
-                  f"{wall['after'] / wall['before']:.2f}; per CPU s x {w}: before "
-                  f"{cpu['before']:6.2f}, after {cpu['after']:6.2f}, after / before "
-                  f"{cpu['after'] / cpu['before']:.2f} (load average {os.getloadavg()[0]:.1f})",
-                  flush=True)
+                  f"{wall['after'] / wall['before']:.2f}{per_cpu} (load average "
+                  f"{os.getloadavg()[0]:.1f})", flush=True)
         print(f"estimates of {estimate_n}: " + _agree(runs[("before", workers)],
                                                       runs[("after", workers)]))
 
