@@ -4,17 +4,21 @@
 handlers' choices, then repeatedly takes one enabled event, drawn uniformly
 among those the rules enable (`System.actions`; KEEP_LAST drops and crash
 faults are not drawn: the model has no handler durations to make them
-likely) — except that where the drawn event's node has both a message and a
-timer enabled, a model with `messages_first` draws which of the two kinds
-runs with that probability (`checker.timing`, "Ties at one millisecond") —, its `ctx.choose` answers and latencies drawn by a `SamplingChooser`,
+likely), its `ctx.choose` answers and latencies drawn by a `SamplingChooser`,
 until nothing is pending, the next event lies beyond the horizon (fleet ms),
-or `max_steps` steps were taken. Every property is watched on the way: each
+or `max_steps` steps were taken. Where the drawn event's node has both a
+message and a timer enabled, a model with `messages_first` draws which of the
+two kinds runs with that probability (`checker.timing`, ties at one ms).
+Every property is watched on the way: each
 invariant on its own, handler failures, `within`, queue bounds, deadlock and
 quiescence at an end with nothing pending; an `eventually` that held nowhere
 by the end is violated within the horizon. With `until_decided` a simulation
 also ends ("decided") at its first violation or once every `eventually`
 property has held, as a live run of `twinfleet experiment` does (its outcome
-is known; what follows would only cost time). The simulation's generator is
+is known; what follows would only cost time). A simulation also ends
+("settled") once no node state can change any more (`Runner.settled`), where
+only node states decide the properties: its results are those it would have
+had at its horizon. The simulation's generator is
 seeded from (seed, index) alone (`simulation_seed`), so simulation `i` is the
 same in any process and in any order.
 """
