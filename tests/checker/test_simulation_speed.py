@@ -68,6 +68,7 @@ def test_a_run_ends_once_no_state_can_change_with_the_results_of_the_whole_run()
     short, whole = _simulator(), _simulator(reuse=False)
     for i in range(2):
         a, b = short.run(i), whole.run(i)
+        assert a.index == b.index == i
         assert a.ended == "settled" and b.ended == "horizon"
         assert a.steps < 200 < 800 < b.steps
         assert a.violated == b.violated == ("six",)

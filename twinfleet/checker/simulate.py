@@ -138,10 +138,10 @@ class Simulator:
                     break
                 quiet = 0
             picks = enabled(world.events)
-            index = rng.choice(picks)
+            pick = rng.choice(picks)
             if self._first is not None:
-                index = self._tie(rng, world.events, picks, index)
-            t = self._take(world, RunEvent(index), self._chooser(rng))
+                pick = self._tie(rng, world.events, picks, pick)
+            t = self._take(world, RunEvent(pick), self._chooser(rng))
             steps.append(t.step)
             world = t.world
             moved = bool(t.changed) or not self._timeless
