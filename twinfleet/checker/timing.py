@@ -16,8 +16,8 @@ latency from `startup`, whatever its channel.
 Deliveries of one publish: a topic's subscribers receive one message at
 nearly the same moment (one send, one wake-up of the sender's session), so
 their latencies are far from independent (a two-phase commit's decision, three
-receivers: rank correlation 0.87, median spread 2 ms against 7 for independent
-draws). `together` holds, per channel (and "default" for the rest), the
+receivers: median spread 2 ms against 4 for independent draws from the same
+histogram). `together` holds, per channel (and "default" for the rest), the
 correlation of the normal scores of one publish's delivery latencies; a
 simulation draws them through a Gaussian copula with that correlation, so
 each delivery keeps its channel's histogram and the copies of one publish move
