@@ -35,7 +35,7 @@ from __future__ import annotations
 import contextlib
 import re
 from collections.abc import Sequence
-from typing import Any, NamedTuple, final
+from typing import Any, final
 
 from twinfleet.checker.cache import GenerationCache
 from twinfleet.checker.choices import ChoiceMismatch, ExploringChooser, PrefixChooser
@@ -83,17 +83,6 @@ _KEY_LIMIT = 50_000  # message event keys kept by message identity before starti
 
 # A handler run that reached its effects: (new node state, effects, service reply).
 _Handled = tuple[bytes, tuple[Any, ...], Any]
-
-
-class _Pending(NamedTuple):
-    """An event's identity apart from its time: what `Runner.settled` follows."""
-
-    target: int
-    kind: EventKind
-    method: str
-    sender: int
-    reply_to: str
-    key: bytes
 
 
 class _ClockContext(Context):
@@ -184,59 +173,11 @@ class Runner:
             drawn.put((data, ev.key, ev.due if self._read_clock else _ANY_TIME), handled)
         return v
 
-    def settled(self, states: tuple[bytes, ...], pending: Sequence[Event]) -> bool:
-        """Whether no node state can change and no handler fail from here, whatever the
-        timing, while something stays pending for ever: every event that `pending` can
-        lead to has a kept drawn run on its node's state (so it made no `ctx.choose` and
-        did not read the clock) that changed nothing, called no service and sent nothing
-        outside that set, and some timer among them re-arms itself. False: not known (a
-        run not kept, a state changed, a call, a `ctx.fail`, a late event, no timer
-        that keeps the fleet going)."""
-        todo = [_Pending(ev.target, ev.kind, ev.method, ev.sender, ev.reply_to, ev.key)
-                for ev in pending]
-        if any(ev.sk[3] for ev in pending):
-            return False
-        seen: set[_Pending] = set()
-        looping = False
-        while todo:
-            item = todo.pop()
-            if item in seen:
-                continue
-            seen.add(item)
-            data = states[item.target]
-            kept = self._drawn.get((data, item.key, _ANY_TIME))
-            if kept is None or (kept[0] is not data and kept[0] != data):
-                return False
-            follows = self._following(item, kept[1], kept[2])
-            if follows is None:
-                return False
-            looping = looping or item.kind is EventKind.PERIODIC or item in follows
-            todo += follows
-        return looping
-
-    def _following(self, item: _Pending, effects: Sequence[Any], reply: Any
-                   ) -> list[_Pending] | None:
-        """The events a kept run of `item` sends (None: it fails, or its calls' outcomes
-        depend on more than the kept run), in the identities `settled` follows."""
-        i, topology, out = item.target, self.topology, []
-        for eff in effects:
-            match eff:
-                case Publish(topic=topic, msg=msg):
-                    out += [_Pending(j, EventKind.DELIVERY, method, i, "",
-                                     self._key(EventKind.DELIVERY, j, method, i, "", (msg,)))
-                            for j, method, _ in topology.subscribers.get(topic, ())]
-                case Call():
-                    return None  # a call may time out: the outcome is not the kept run's
-                case After(handler=method, args=args):
-                    out.append(_Pending(i, EventKind.TIMER, method, i, "",
-                                        self._key(EventKind.TIMER, i, method, i, "", args)))
-                case Fail():
-                    return None
-        if item.kind is EventKind.REQUEST:
-            out.append(_Pending(item.sender, EventKind.REPLY, item.reply_to, i, "",
-                                self._key(EventKind.REPLY, item.sender, item.reply_to, i, "",
-                                          (reply,))))
-        return out
+    def kept(self, data: bytes, key: bytes) -> _Handled | None:
+        """The kept drawn run (new state, effects, reply) of the event whose untimed
+        identity is `key` on node state `data`, if one is kept that did not read the clock
+        (`checker.settled`)."""
+        return self._drawn.get((data, key, _ANY_TIME))
 
     def deadline_miss(self, ev: Event, data: bytes) -> Variant:
         """Taking `ev` after its deadline (Rule 5): nothing runs, the step fails."""
@@ -461,7 +402,7 @@ class Runner:
                 case After(delay_ms=delay, handler=method, args=args):
                     out.append(Event(now + delay, EventKind.TIMER, i, method, i, args,
                                      topology.priority(i, method),
-                                     key=self._key(EventKind.TIMER, i, method, i, "", args)))
+                                     key=self.key_of(EventKind.TIMER, i, method, i, "", args)))
                 case Fail(reason=reason):
                     failure = failure or Failure(FailureKind.HANDLER, self.names[i], ev.method,
                                                  f"ctx.fail: {reason}")
@@ -489,10 +430,10 @@ class Runner:
         (`publish`: the index of the publish effect it is a copy of)."""
         due, deadline = self.rules.delivery(now, name, chooser, publish)
         return Event(due, kind, target, method, sender, args, priority, reply_to,
-                     key=self._key(kind, target, method, sender, reply_to, args),
+                     key=self.key_of(kind, target, method, sender, reply_to, args),
                      deadline=deadline)
 
-    def _key(self, kind: EventKind, target: int, method: str, sender: int, reply_to: str,
+    def key_of(self, kind: EventKind, target: int, method: str, sender: int, reply_to: str,
              args: tuple[Any, ...]) -> bytes:
         """`event_key` of an event, kept by the identity of its one argument (a message)
         or of its arguments (a timer's): a kept handler run (`run_drawn`) sends the same

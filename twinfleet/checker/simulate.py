@@ -16,7 +16,7 @@ by the end is violated within the horizon. With `until_decided` a simulation
 also ends ("decided") at its first violation or once every `eventually`
 property has held, as a live run of `twinfleet experiment` does (its outcome
 is known; what follows would only cost time). A simulation also ends
-("settled") once no node state can change any more (`Runner.settled`), where
+("settled") once no node state can change any more (`checker.settled`), where
 only node states decide the properties: its results are those it would have
 had at its horizon. The simulation's generator is
 seeded from (seed, index) alone (`simulation_seed`), so simulation `i` is the
@@ -34,6 +34,7 @@ from twinfleet.checker.diagnosis import CONTRACT_KINDS, breach_line
 from twinfleet.checker.outcome import Counterexample
 from twinfleet.checker.properties import Property, PropertySet, PropertyViolation
 from twinfleet.checker.sampling import SamplingChooser
+from twinfleet.checker.settled import settled
 from twinfleet.checker.system import System
 from twinfleet.checker.timing import TimingModel
 from twinfleet.checker.transition import RunEvent, Step, Transition
@@ -99,7 +100,7 @@ class Simulator:
         # changed no state cannot change its value (most steps of a fleet change none).
         self._timeless = not any(p.expr is not None and p.expr.uses_now
                                  for p in (*properties.invariants, *properties.eventually))
-        # A run may end early once no node state can change any more (`Runner.settled`):
+        # A run may end early once no node state can change any more (`checker.settled`):
         # only where nothing but node states decides a property (no `within`, queue
         # bound, deadline or `now`), and handler runs are kept.
         self._settles = (reuse and self._timeless and not properties.within
@@ -133,7 +134,7 @@ class Simulator:
                 ended = "horizon"
                 break
             if quiet >= SETTLE_AFTER:
-                if system.runner.settled(world.states, world.events):
+                if settled(system.runner, world.states, world.events):
                     ended = "settled"
                     break
                 quiet = 0
