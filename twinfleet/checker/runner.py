@@ -37,11 +37,11 @@ import re
 from collections.abc import Sequence
 from typing import Any, final
 
+from twinfleet.checker.breaches import Breaches
 from twinfleet.checker.cache import GenerationCache
 from twinfleet.checker.choices import ChoiceMismatch, ExploringChooser, PrefixChooser
 from twinfleet.checker.diagnosis import (
     CONTRACT_KINDS,
-    FIX_CONTEXT,
     FIX_ENCODABLE,
     FIX_HIDDEN,
     FIX_STATE,
@@ -55,16 +55,12 @@ from twinfleet.checker.topology import Topology
 from twinfleet.checker.transition import (
     Failure,
     Variant,
-    changed_attributes,
     fingerprint,
 )
 from twinfleet.checker.world import ENVIRONMENT, Event, event_key
 from twinfleet.runtime.contract.context import After, Call, Context, Fail, Log, Publish
 from twinfleet.runtime.contract.dispatch import (
-    HandlerOutcome,
-    declared_message_type,
     run_handler,
-    wrong_type_line,
 )
 from twinfleet.runtime.contract.kinds import EventKind, FailureKind
 from twinfleet.runtime.contract.messages import CallError
@@ -125,7 +121,7 @@ class Runner:
         self.rules = rules
         self.nodes: tuple[Node, ...] = topology.nodes
         self.names = tuple(node.name for node in self.nodes)
-        self._declared_types: dict[tuple[int, str], type | None] = {}
+        self._breaches = Breaches(topology)
         self.debug_state = debug_state
         self.verify = verify
         self._probe = EnvironmentProbe() if verify else None
@@ -264,8 +260,7 @@ class Runner:
             return _failed(chooser, data, FailureKind.STATE_OUTSIDE, node.name, ev.method,
                            f"it changed {', '.join(stray)}, outside self.state; fix: "
                            f"{FIX_STATE}")
-        breach = self._breach(node, ev, attributes, before, outcome) or self._wrong_type(
-            ev, outcome.effects)
+        breach = self._breaches.of(node, ev, attributes, before, outcome)
         if breach is not None:
             return _failed(chooser, data, *breach)
         if chooser.mismatch is not None:  # even if the handler caught the exception
@@ -294,59 +289,6 @@ class Runner:
         return Variant(indices, tuple(chooser.options), new, tuple(events), failure,
                        tuple(logs), tuple(faults), tuple(range(handler_end, len(indices))),
                        tuple(lost))
-
-    def _wrong_type(self, ev: Event, effects: Sequence[Any]
-                    ) -> tuple[FailureKind, str, str, str] | None:
-        """A message sent whose type is not what a receiving handler declares: a breach
-        found at the send, in the words the live fleet uses for it (`wrong_type_line`)."""
-        topology, sender = self.topology, self.names[ev.target]
-        for eff in effects:
-            match eff:
-                case Publish(topic=name, msg=msg):
-                    receivers, call = tuple(topology.subscribers.get(name, ())), False
-                case Call(service=name, request=msg):
-                    server = topology.servers.get(name)
-                    receivers, call = ((server,) if server else ()), True
-                case _:
-                    continue
-            for j, method, _ in receivers:
-                expected = self._declared(j, method)
-                if expected is not None and type(msg) is not expected:
-                    return (FailureKind.CONTRACT, sender, ev.method, wrong_type_line(
-                        sender, name, msg, expected, f"{self.names[j]}.{method}", call=call))
-        return None
-
-    def _declared(self, j: int, method: str) -> type | None:
-        """The message class node j's handler `method` declares (looked up once)."""
-        key = (j, method)
-        if key not in self._declared_types:
-            self._declared_types[key] = declared_message_type(self.nodes[j], method)
-        return self._declared_types[key]
-
-    def _breach(self, node: Node, ev: Event, attributes: dict[str, Any] | None,
-                before: dict[str, bytes] | None, outcome: HandlerOutcome
-                ) -> tuple[FailureKind, str, str, str] | None:
-        """A contract breach of one handler run: a misused ctx, or attributes other than
-        `state` that changed (by identity; with `debug_state`, by value)."""
-        error = outcome.error
-        if error is not None and error.contract:
-            return (FailureKind.CONTRACT, node.name, ev.method,
-                    f"{error.message}; fix: {error.fix or FIX_CONTEXT}")
-        if attributes is not None:
-            now = vars(node)
-            stray = sorted(k for k in attributes.keys() | now.keys()
-                           if k != "state" and attributes.get(k) is not now.get(k))
-            if stray:
-                return (FailureKind.STATE_OUTSIDE, node.name, ev.method,
-                        f"it changed {', '.join('self.' + k for k in stray)}, outside "
-                        f"self.state; fix: {FIX_STATE}")
-        if before is not None:
-            stray = changed_attributes(before, fingerprint(node))
-            if stray:
-                return (FailureKind.STATE_OUTSIDE, node.name, ev.method,
-                        f"handler changed attribute(s) {', '.join(stray)} outside "
-                        f"self.state; fix: {FIX_STATE}")
-        return None
 
     def _intern(self, data: bytes) -> bytes:
         """The one bytes object kept for this node-state encoding."""

@@ -27,20 +27,16 @@ every handler run (one per choice variant, revisits included).
 from __future__ import annotations
 
 import time
-from collections import deque
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from functools import partial
-from typing import Any, final
+from typing import final
 
-from twinfleet.checker import checkpoint
-from twinfleet.checker.growth import SAMPLE_MASK, GrowthWatch
+from twinfleet.checker.growth import SAMPLE_MASK
 from twinfleet.checker.outcome import (
     INTERRUPTED_REASON,
     NO_LIMITS,
     Counterexample,
-    Counters,
     Found,
-    Guard,
     Limits,
     Outcome,
     SearchStatistics,
@@ -48,9 +44,8 @@ from twinfleet.checker.outcome import (
     peak_rss_mb,
 )
 from twinfleet.checker.paths import lasso_counterexample, steps_along
-from twinfleet.checker.properties import Property, PropertySet, PropertyViolation
-from twinfleet.checker.reduction import Reduction
-from twinfleet.checker.store import StateStore
+from twinfleet.checker.properties import Property, PropertySet
+from twinfleet.checker.search_state import FORGET_EVERY, SearchState
 from twinfleet.checker.system import System
 from twinfleet.checker.transition import Transition
 from twinfleet.checker.walks import RandomWalks
@@ -62,7 +57,6 @@ __all__ = ["Counterexample", "Limits", "Outcome", "Search", "SearchStatistics", 
            "peak_rss_mb", "random_walk"]
 
 _GRACE_S = 0.25  # after max-time, before a property still running is interrupted
-_FORGET_EVERY = 512  # expansions between two `System.forget_before` calls (at least)
 
 
 class _Restart(Exception):
@@ -70,77 +64,9 @@ class _Restart(Exception):
 
 
 @final
-class Search:
-    """One search over a `System` for a `PropertySet`.
-
-    Args:
-        system: the compiled scenario.
-        properties: what to check.
-        limits: state, time and depth limits.
-        progress: called with statistics at most every `progress_interval` seconds.
-        checkpoint: file to save the search to (periodically and when it stops early).
-        checkpoint_every_s: seconds between periodic checkpoints.
-        checkpoint_meta: what the checkpoint must record to be resumed (scenario, options).
-        handle_sigint: stop cleanly on the first Ctrl-C (main thread only).
-        reduction: expand worlds by persistent sets (`checker.reduction`); None: fully.
-    """
-
-    def __init__(self, system: System, properties: PropertySet, limits: Limits = NO_LIMITS, *,
-                 progress: Callable[[SearchStatistics], None] | None = None,
-                 progress_interval: float = 1.0, checkpoint: str | None = None,
-                 checkpoint_every_s: float = 300.0,
-                 checkpoint_meta: Mapping[str, Any] | None = None,
-                 handle_sigint: bool = True, reduction: Reduction | None = None) -> None:
-        self.system = system
-        self.reduction = reduction
-        self.properties = properties
-        self.guard = Guard(limits, progress, progress_interval, handle_sigint)
-        self._max_states = limits.max_states  # read once per new state
-        live = tuple(p.name for p in properties.eventually)
-        self.store = StateStore(exact=system.exact_states, record_edges=bool(live), flags=live)
-        self.counters = Counters()
-        self.growth = GrowthWatch(system.names, system.decode)
-        self._frontier: deque[tuple[World, int, int]] = deque()
-        self._expansions = 0
-        self._next_forget = _FORGET_EVERY
-        self._pruned = False
-        self._resumed = False
-        self._elapsed_before = 0.0
-        self._attempt: float | None = None  # when the search last started again (monotonic)
-        self._hashed_before = 0  # content hashes of the searches this one continues
-        self._expanding: tuple[World, int, int] | None = None
-        self._partial = 0
-        # BFS: the depth being expanded and the largest id of a world at most that deep
-        self._level: tuple[int, int] = (-1, -1)
-        self._checkpoint = checkpoint
-        self._checkpoint_every = checkpoint_every_s
-        self._checkpoint_meta = dict(checkpoint_meta or {})
-        self._lifo = False
-        self._strategy = "bfs"
-        self._last_checkpoint = time.monotonic()
-
-    @property
-    def limits(self) -> Limits:
-        """The search's limits (may be replaced before `run`)."""
-        return self.guard.limits
-
-    @limits.setter
-    def limits(self, limits: Limits) -> None:
-        self.guard.limits = limits
-        self._max_states = limits.max_states
-
-    def statistics(self) -> SearchStatistics:
-        """The counters so far."""
-        store, c = self.store, self.counters
-        hashed = 0 if store.exact else self.system.hashed + self._hashed_before
-        return SearchStatistics(
-            len(store), c.transitions, c.initial, c.depth, len(self._frontier),
-            self._elapsed_before + time.monotonic() - self.guard.started, peak_rss_mb(),
-            store.nbytes(), store.digest_bits, store.collision_probability(hashed),
-            c.peak_frontier,
-            None if self._attempt is None else time.monotonic() - self._attempt,
-            0 if self.reduction is None else self.reduction.stats.restarts,
-            growth=self.growth.notes())
+class Search(SearchState):
+    """One search over a `System` for a `PropertySet` (module docstring); its state,
+    statistics and checkpoints are `SearchState`'s, with the same arguments."""
 
     def run(self, strategy: str = "bfs", *, walks: int = 100, seed: int = 0) -> Outcome:
         """Search with `strategy` ("bfs", "dfs" or "random") until a verdict or a limit."""
@@ -175,73 +101,6 @@ class Search:
                 return self._stopped(f"max-time {limit:g} s reached while evaluating the "
                                      f"property {exc}", clean=False)
 
-    def _stopped(self, reason: str, *, clean: bool) -> Outcome:
-        """An early stop: put back a half-expanded world, then save a checkpoint if asked.
-
-        `Stop` is only raised where the store is consistent (between expansions,
-        or right after a state was added), so the world being expanded can be put
-        back and expanded again on resume: it re-finds the successors already
-        added as known states, in the same order.
-        """
-        saved = None
-        if clean and self._expanding is not None:
-            self.counters.transitions -= self._partial
-            if self._lifo:
-                self._frontier.append(self._expanding)
-            else:
-                self._frontier.appendleft(self._expanding)
-            self._expanding = None
-            self._partial = 0
-        if clean and self._checkpoint is not None and self._strategy != "random":
-            self.save(self._checkpoint)
-            saved = self._checkpoint
-        outcome = self._outcome(Status.UNKNOWN, reason)
-        outcome.checkpoint = saved
-        return outcome
-
-    def _outcome(self, status: Status, reason: str, violation: PropertyViolation | None = None,
-                 counterexample: Counterexample | None = None) -> Outcome:
-        return Outcome(status, reason, self.statistics(), violation, counterexample)
-
-    # ------------------------------------------------------ checkpoints
-
-    def save(self, path: str) -> None:
-        """Write the search (store, frontier, counters) to `path` atomically."""
-        c = self.counters
-        counters = {"transitions": c.transitions, "initial": c.initial, "depth": c.depth,
-                    "pruned": self._pruned, "peak_frontier": c.peak_frontier,
-                    "elapsed": self._elapsed_before + time.monotonic() - self.guard.started,
-                    "hashed": self.system.hashed + self._hashed_before,
-                    "strategy": "dfs" if self._lifo else "bfs", "level": self._level,
-                    "publications": self.system.publications.__getstate__(),
-                    "visibility": None if self.reduction is None else
-                    (self.reduction.visibility.rising, self.reduction.visibility.fell,
-                     self.reduction.visibility.pending_fall),
-                    "reduction": None if self.reduction is None else self.reduction.stats,
-                    "relied": [] if self.reduction is None else sorted(self.reduction.relied)}
-        checkpoint.save(path, self._checkpoint_meta, self.store, list(self._frontier), counters)
-        self._last_checkpoint = time.monotonic()
-
-    def restore(self, data: Mapping[str, Any]) -> None:
-        """Continue from a loaded checkpoint (`checker.checkpoint.load`)."""
-        self.store = data["store"]
-        self._frontier = deque(data["frontier"])
-        c = data["counters"]
-        self.counters = Counters(c["transitions"], c["initial"], c["depth"], c["peak_frontier"])
-        self._pruned = c["pruned"]
-        self._level = tuple(c.get("level", (-1, -1)))
-        self._elapsed_before = c["elapsed"]
-        self._hashed_before = c["hashed"]
-        if "publications" in c:  # what the reduced search so far relied on
-            self.system.publications.__setstate__(c["publications"])
-        if self.reduction is not None and c.get("reduction") is not None:
-            self.reduction.stats = c["reduction"]
-            self.reduction.relied = set(c.get("relied", ()))
-        if self.reduction is not None and c.get("visibility") is not None:
-            visibility = self.reduction.visibility
-            visibility.rising, visibility.fell, visibility.pending_fall = c["visibility"]
-        self._resumed = True
-
     # -------------------------------------------------------- safety search
 
     def _explore_until_stable(self) -> None:
@@ -261,20 +120,6 @@ class Search:
                 assert reduction is not None
                 reduction.restarted()
                 self._reset()
-
-    def _reset(self) -> None:
-        """Forget everything explored (a restart of a reduced search)."""
-        self.store = StateStore(exact=self.store.exact, record_edges=self.store.edges is not None,
-                                flags=tuple(self.store.holds))
-        self.counters = Counters()
-        self.growth = GrowthWatch(self.system.names, self.system.decode)
-        self._frontier.clear()
-        self._expansions = 0
-        self._next_forget = _FORGET_EVERY
-        self._pruned = False
-        self._resumed = False
-        self._level = (-1, -1)
-        self._attempt = time.monotonic()
 
     def _explore(self) -> None:
         max_depth = self.limits.max_depth
@@ -339,7 +184,7 @@ class Search:
         Runs every 512 expansions, or every len(frontier) when that is larger, so
         scanning the frontier costs O(1) per expansion.
         """
-        self._next_forget = self._expansions + max(_FORGET_EVERY, len(self._frontier))
+        self._next_forget = self._expansions + max(FORGET_EVERY, len(self._frontier))
         due = earliest_time(w for w, _, _ in self._frontier)
         if due is not None:
             self.system.forget_before(due)
