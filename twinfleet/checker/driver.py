@@ -270,30 +270,17 @@ def check(scenario: str | Path | Scenario | None,
 
     With `options.resume`, continue that checkpoint (`scenario` may then be None).
     """
-    data, path = None, _scenario_file(scenario)
-    if options.resume is not None:
-        data = ckpt.load(options.resume)
-        path = _resume_path(path, options, data["meta"])
-    if path is None and not isinstance(scenario, Scenario):
-        raise ScenarioError("no scenario file given (pass one, or --resume CHECKPOINT)")
+    scenario, path, data = _to_check(scenario, options)
     meta = data["meta"] if data is not None else {}
-    scenario = _scenario(scenario if isinstance(scenario, Scenario) else path, options, meta)
-    if path is None and options.checkpoint is not None:
-        raise ScenarioError(f"{scenario.source}: a checkpoint needs a scenario file")
     check_property_fields(scenario)
     props = PropertySet.from_scenario(scenario)
     warnings = [str(w) for w in lint_scenario(scenario)]
     flags = {key: meta.get(key, getattr(options, key)) for key in _SEARCH_FLAGS}
     system = System(scenario, properties=props, **flags, **_timing_ranges(scenario, options))
     asked = options.search or scenario.check.search
-    strategy = meta.get("strategy") or asked or "bfs"
-    if strategy not in SEARCHES:
-        raise ScenarioError(f"search: expected {', '.join(SEARCHES)}, got {strategy!r}")
-    try:
-        reduction, reduction_name = plan(system, props, strategy,
+    strategy = _strategy(meta.get("strategy") or asked or "bfs")
+    reduction, reduction_name = _planned(system, props, strategy,
                                          meta.get("reduction") or options.reduction)
-    except ValueError as exc:
-        raise ScenarioError(f"{scenario.source}: {exc}") from None
     meta = {"scenario": None if path is None else str(path.resolve()),
             "sha256": None if path is None else ckpt.file_sha256(path),
             "semantics": system.semantics.value, "profile": scenario.profile,
@@ -331,21 +318,66 @@ def check(scenario: str | Path | Scenario | None,
                          handler_runs=system.runner.handler_runs,
                          timing=_assumed_timing(scenario, system, options))
     if outcome.violation is not None and outcome.counterexample is not None:
-        try:
-            result.trace = build_trace(system, outcome.violation, outcome.counterexample,
-                                       scenario_path=meta["scenario"], search=strategy,
-                                       scenario_sha256=meta["sha256"], params=meta["params"])
-        except IndexError:  # the path's events are not there when it runs again
-            return _breach_result(scenario, system, strategy, props, breach_line(
-                FailureKind.NONDETERMINISM, "", "(unknown)", "the counterexample does not run "
-                "again from its initial world: some handler depends on something outside "
-                "self.state" + ("" if system.runner.verify else " (the contract checks were "
-                                "off: rerun without --no-contract-checks to name it)") +
-                f"; fix: {FIX_HIDDEN}"), search, warnings)
-        if options.trace_out:
-            write_trace(result.trace, options.trace_out)
-            result.trace_path = options.trace_out
+        breach = _traced(result, system, outcome, meta, options.trace_out)
+        if breach is not None:
+            return _breach_result(scenario, system, strategy, props, breach, search, warnings)
     return result
+
+
+def _to_check(scenario: str | Path | Scenario | None, options: CheckOptions
+              ) -> tuple[Scenario, Path | None, dict[str, Any] | None]:
+    """The scenario `check` is given, its file (if any) and the checkpoint it resumes
+    (if any), after checking that they fit together."""
+    data, path = None, _scenario_file(scenario)
+    if options.resume is not None:
+        data = ckpt.load(options.resume)
+        path = _resume_path(path, options, data["meta"])
+    if path is None and not isinstance(scenario, Scenario):
+        raise ScenarioError("no scenario file given (pass one, or --resume CHECKPOINT)")
+    meta = data["meta"] if data is not None else {}
+    scenario = _scenario(scenario if isinstance(scenario, Scenario) else path, options, meta)
+    if path is None and options.checkpoint is not None:
+        raise ScenarioError(f"{scenario.source}: a checkpoint needs a scenario file")
+    return scenario, path, data
+
+
+def _planned(system: System, props: PropertySet, strategy: str, asked: str | None
+             ) -> tuple[Reduction | None, str]:
+    """The reduction `checker.reduction.plan` makes for the search; one that does not fit
+    the scenario is bad input."""
+    try:
+        return plan(system, props, strategy, asked)
+    except ValueError as exc:
+        raise ScenarioError(f"{system.scenario.source}: {exc}") from None
+
+
+def _strategy(strategy: str) -> str:
+    """`strategy`, if it names a search."""
+    if strategy not in SEARCHES:
+        raise ScenarioError(f"search: expected {', '.join(SEARCHES)}, got {strategy!r}")
+    return strategy
+
+
+def _traced(result: CheckResult, system: System, outcome: Outcome, meta: Mapping[str, Any],
+            trace_out: str | None) -> str | None:
+    """Give `result` the trace of the outcome's counterexample, written to `trace_out` if
+    given; the breach line instead if the counterexample does not run again."""
+    assert outcome.violation is not None and outcome.counterexample is not None
+    try:
+        result.trace = build_trace(system, outcome.violation, outcome.counterexample,
+                                   scenario_path=meta["scenario"], search=result.search,
+                                   scenario_sha256=meta["sha256"], params=meta["params"])
+    except IndexError:  # the path's events are not there when it runs again
+        return breach_line(
+            FailureKind.NONDETERMINISM, "", "(unknown)", "the counterexample does not run "
+            "again from its initial world: some handler depends on something outside "
+            "self.state" + ("" if system.runner.verify else " (the contract checks were "
+                            "off: rerun without --no-contract-checks to name it)") +
+            f"; fix: {FIX_HIDDEN}")
+    if trace_out:
+        write_trace(result.trace, trace_out)
+        result.trace_path = trace_out
+    return None
 
 
 def _distributed_checkpoint(meta: Mapping[str, Any]) -> bool:
