@@ -5,9 +5,10 @@ coordinator counts of the traffic between them and how it saves a search.
 
 from __future__ import annotations
 
+import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol, final
+from typing import Any, Protocol, cast, final
 
 from twinfleet.checker.cluster.flow import FlowBackend
 from twinfleet.checker.cluster.level import (
@@ -17,12 +18,14 @@ from twinfleet.checker.cluster.level import (
     Graph,
     Item,
     ShardCore,
+    visited_from,
 )
 from twinfleet.checker.cluster.visited import VisitedTable
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.system import System
 
+START_POLL_S = 0.01  # how often a search that waits for its workers asks if they are up
 STEAL_MIN = 64  # frontier worlds two workers must differ by before some are moved
 
 
@@ -186,3 +189,141 @@ def balance(backend: Backend, sizes: list[int], traffic: Traffic) -> None:
         backend.move(busy, idle, gap // 2)
         traffic.stolen += gap // 2
         traffic.moves += 1
+
+
+@final
+class Placement:
+    """Where the coordinator's levels run, and when the search moves.
+
+    The search starts here (`local`). Once a level's frontier is `min_width` wide the
+    cluster's backend is started (once: a restart reuses it) while the search goes on
+    here, and when its workers are up the frontier and the visited set are handed to it
+    (`cluster`), or to the workers of a relaxed order (`flow`), which then keep the
+    rest of the search. A frontier narrower than `back_width` for `patience` levels in
+    a row comes back here, the patience doubling after each return (a move costs time
+    in proportion to the visited set).
+
+    Args:
+        system, properties, reduction: what a new local backend searches.
+        factory: starts the cluster's backend; None: everything in this process.
+        flow_factory: starts the workers of a relaxed order instead, or None.
+        min_width, back_width, patience: as `Coordinator` takes them.
+        tick: called while waiting for the workers (Ctrl-C, max-time).
+        report: called with a line when the workers are up, or None.
+    """
+
+    def __init__(self, system: System, properties: PropertySet, reduction: Reduction | None,
+                 factory: Factory | None, flow_factory: FlowFactory | None, *,
+                 min_width: int, back_width: int, patience: int, tick: Callable[[], None],
+                 report: Callable[[str], None] | None) -> None:
+        self.system, self.properties, self.reduction = system, properties, reduction
+        self.factory, self.flow_factory = factory, flow_factory
+        self.min_width, self.back_width = min_width, back_width
+        self.patience, self._narrow = patience, 0
+        self.tick, self.report = tick, report
+        self.local = LocalBackend(system, properties, reduction)
+        self.backend: Backend = self.local
+        self.cluster: Backend | None = None
+        self.flow: FlowBackend | None = None  # the relaxed order's workers, once searching
+        self._starting: Backend | FlowBackend | None = None  # the cluster's, once started
+        self.distributed_at: int | None = None  # the level where the cluster took over
+
+    @property
+    def current(self) -> Backend | FlowBackend:
+        """Where the search is now."""
+        return self.flow or self.backend
+
+    def before_level(self, width: int, level: int, roots: dict[int, tuple[int, ...]],
+                     traffic: Traffic) -> bool:
+        """Move the search to where a level `width` wide at depth `level` runs; True if
+        the relaxed order's workers are up to take the rest of it (`to_flow`)."""
+        if self.backend is self.local and self.factory is not None and \
+                width >= self.min_width and self._started(width, level):
+            if self.flow_factory is not None:
+                return True
+            self._to_cluster(level)
+        elif self.backend is not self.local:
+            self._narrow = self._narrow + 1 if width < self.back_width else 0
+            if self._narrow >= self.patience << traffic.returns:
+                self._to_local(roots, traffic)
+        return False
+
+    def _started(self, width: int, level: int) -> bool:
+        """Start the cluster's backend, once, and say whether its workers are up. They
+        start while the search goes on here (a worker process takes a second or two to
+        import the node code and build its system: time this process spends searching),
+        except with `min_width` 1, which asks for the whole search on the workers: then
+        this waits for them."""
+        if self._starting is None:
+            if self.flow_factory is not None:
+                self._starting = self.flow_factory(width)
+            else:
+                assert self.factory is not None
+                self._starting = self.factory(width)
+        while not self._starting.ready():
+            if self.min_width > 1:
+                return False
+            self.tick()
+            time.sleep(START_POLL_S)
+        if self.report is not None and self.distributed_at is None:
+            self.report(f"[check] {self._starting.workers} worker(s) up: the search moves "
+                        f"to them at depth {level}, frontier {width:,} wide")
+        return True
+
+    def _to_cluster(self, level: int) -> None:
+        """Hand the frontier and the visited set to the cluster's backend."""
+        self.cluster = cast(Backend, self._starting)
+        self.cluster.load(self.local.expander.frontier, self.local.shard.visited,
+                          self.relation())
+        self.local.expander.frontier = []
+        self.backend = self.cluster
+        if self.distributed_at is None:
+            self.distributed_at = level
+
+    def _to_local(self, roots: dict[int, tuple[int, ...]], traffic: Traffic) -> None:
+        """Take the frontier and the visited set back from the cluster."""
+        frontier, visited = self.backend.take_back()
+        self.local.expander.frontier = frontier
+        self.local.shard.visited = visited_from(visited, roots)
+        self.backend = self.local
+        traffic.returns += 1
+        self._narrow = 0
+
+    def to_flow(self, level: int) -> FlowBackend:
+        """Hand the frontier and the visited set to the relaxed order's workers, for good."""
+        flow = self.flow = cast(FlowBackend, self._starting)
+        self.distributed_at = level
+        flow.load(self.local.expander.frontier, self.local.shard.visited)
+        self.local.expander.frontier = []
+        return flow
+
+    def relation(self) -> tuple[Any, ...] | None:
+        """The send relation a reduced search learned so far (None: no reduction)."""
+        return None if self.reduction is None else self.reduction.learned_state()
+
+    def restart(self) -> None:
+        """Search from scratch here with what the reduction learned; the cluster, if it
+        took part, forgets its search."""
+        if self.cluster is not None:
+            self.cluster.reset(self.relation())
+        self.local = LocalBackend(self.system, self.properties, self.reduction)
+        self.backend = self.local
+
+    def graph(self) -> tuple[list[Graph], list[bytes]]:
+        """What every worker saw of the graph and every shard's visited keys, at the end
+        (`walk.gathered`)."""
+        remote = self.flow if self.flow is not None else self.cluster
+        parts = [*self.local.graphs(), *(() if remote is None else remote.graphs())]
+        if self.flow is not None:
+            visited = self.flow.visited()
+        elif self.backend is self.local:
+            visited = [self.local.shard.dump()]
+        else:
+            visited = self.backend.snapshot()[1]
+        return parts, visited
+
+    def lineage(self, key: int) -> list[int]:
+        """`Backend.lineage` from where `key` was found."""
+        if key in self.local.shard.visited:  # found before the hand-over: so are its ancestors
+            return self.local.lineage(key)
+        return self.current.lineage(key)

@@ -11,7 +11,8 @@ few worlds. For the same reason a search whose frontier stays narrower than
 `min_width` for `patience` levels comes back here, frontier and
 visited set, until it widens again (the workers keep what they recorded of
 the graph); a move costs time in proportion to the visited set, so each return
-doubles the patience the next one needs. Every level ends with a barrier, so the search is a strict BFS:
+doubles the patience the next one needs (`checker.cluster.backend.Placement` decides where
+each level runs). Every level ends with a barrier, so the search is a strict BFS:
 the same states, transitions and depth as `checker.search` for any number of
 workers, and a counterexample of the same length. After each level the
 coordinator moves frontier worlds from the busiest worker to the idlest when
@@ -35,15 +36,15 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Mapping
+from functools import partial
 from typing import Any, cast, final
 
 from twinfleet.checker import checkpoint as ckpt
 from twinfleet.checker.cluster.backend import (
-    Backend,
     Checkpointing,
     Factory,
     FlowFactory,
-    LocalBackend,
+    Placement,
     Traffic,
     balance,
 )
@@ -77,11 +78,9 @@ from twinfleet.checker.outcome import (
 from twinfleet.checker.paths import lasso_counterexample
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.reduction import Reduction
-from twinfleet.checker.store import StateStore
 from twinfleet.checker.system import System
 from twinfleet.runtime.contract.kinds import Status
 
-START_POLL_S = 0.01  # how often a search that waits for its workers asks if they are up
 PATIENCE = 16  # narrow levels in a row before the first return (doubled after each)
 ENGINE = "cluster"  # a checkpoint's meta["engine"]: written by this coordinator
 
@@ -119,9 +118,6 @@ class Coordinator:
             raise ValueError("a relaxed order needs a search without reduction, depth bound "
                              "or checkpoints")
         self.system, self.properties, self.limits = system, properties, limits
-        self.factory, self.min_width = factory, min_width
-        self.back_width = min_width if back_width is None else back_width
-        self.patience, self._narrow = patience, 0
         self.report, self.interval = report, interval
         self.checkpointing = checkpointing
         self.reduction = reduction
@@ -129,21 +125,29 @@ class Coordinator:
             reduction.freeze()
             reduction.begin()
         self.guard = Guard(limits, None, interval, handle_sigint=True)
-        self.local = LocalBackend(system, properties, reduction)
-        self.backend: Backend = self.local
-        self.cluster: Backend | None = None
-        self.flow_factory = flow
-        self.flow: FlowBackend | None = None  # the relaxed order's workers, once searching
-        self._starting: Backend | FlowBackend | None = None  # the cluster's, once started
+        self.place = Placement(system, properties, reduction, factory, flow,
+                               min_width=min_width,
+                               back_width=min_width if back_width is None else back_width,
+                               patience=patience, tick=partial(self.guard.tick, self.statistics),
+                               report=report)
         self.roots: dict[int, tuple[int, ...]] = {}
         self.traffic = Traffic()
         self.tally = Tally()
-        self.distributed_at: int | None = None  # the level where the cluster took over
         self._last_report = self._last_save = time.monotonic()
         self._elapsed_before = 0.0  # the time of the runs a restored checkpoint continues
         self._restored = False
         self._attempt: float | None = None  # when the search last started again (monotonic)
         self.saved: str | None = None  # the checkpoint file, once written
+
+    @property
+    def distributed_at(self) -> int | None:
+        """The level where the cluster took over, if it did."""
+        return self.place.distributed_at
+
+    @property
+    def flow(self) -> FlowBackend | None:
+        """The relaxed order's workers, if they took over the search."""
+        return self.place.flow
 
     # ------------------------------------------------------------------ run
 
@@ -178,15 +182,9 @@ class Coordinator:
                 if found is not None:
                     return found
                 continue
-            if self.backend is self.local and self.factory is not None and \
-                    self.tally.frontier >= self.min_width and self._started():
-                if self.flow_factory is not None:
-                    return self._flow()
-                self._to_cluster()
-            elif self.backend is not self.local:
-                self._narrow = self._narrow + 1 if self.tally.frontier < self.back_width else 0
-                if self._narrow >= self.patience << self.traffic.returns:
-                    self._to_local()
+            if self.place.before_level(self.tally.frontier, self.tally.level, self.roots,
+                                       self.traffic):
+                return self._flow()
             outcome = self._level()
             if outcome is not None:
                 return outcome
@@ -205,50 +203,6 @@ class Coordinator:
         self._restart([])
         return True
 
-    def _started(self) -> bool:
-        """Start the cluster's backend, once, and say whether its workers are up. They
-        start while the search goes on here (a worker process takes a second or two to
-        import the node code and build its system: time this process spends searching),
-        except with `min_width` 1, which asks for the whole search on the workers: then
-        this waits for them."""
-        if self._starting is None:
-            if self.flow_factory is not None:
-                self._starting = self.flow_factory(self.tally.frontier)
-            else:
-                assert self.factory is not None
-                self._starting = self.factory(self.tally.frontier)
-        while not self._starting.ready():
-            if self.min_width > 1:
-                return False
-            self.guard.tick(self.statistics)  # Ctrl-C, max-time
-            time.sleep(START_POLL_S)
-        if self.report is not None and self.distributed_at is None:
-            self.report(f"[check] {self._starting.workers} worker(s) up: the search moves "
-                        f"to them at depth {self.tally.level}, frontier {self.tally.frontier:,} wide")
-        return True
-
-    def _to_cluster(self) -> None:
-        """Hand the frontier and the visited set to the cluster's backend."""
-        self.cluster = cast(Backend, self._starting)
-        self.cluster.load(self.local.expander.frontier, self.local.shard.visited,
-                          self._relation())
-        self.local.expander.frontier = []
-        self.backend = self.cluster
-        if self.distributed_at is None:
-            self.distributed_at = self.tally.level
-
-    def _to_local(self) -> None:
-        """Take the frontier and the visited set back from the cluster."""
-        frontier, visited = self.backend.take_back()
-        self.local.expander.frontier = frontier
-        self.local.shard.visited = visited_from(visited, self.roots)
-        self.backend = self.local
-        self.traffic.returns += 1
-        self._narrow = 0
-
-    def _relation(self) -> tuple[Any, ...] | None:
-        return None if self.reduction is None else self.reduction.learned_state()
-
     def _restart(self, learned: list[Learned]) -> None:
         """Some worker learned a send: merge what all learned and search from scratch."""
         reduction = self.reduction
@@ -258,17 +212,14 @@ class Coordinator:
             reduction.visibility.commit(found.fell)
         reduction.restarted()
         reduction.begin()
-        if self.cluster is not None:
-            self.cluster.reset(self._relation())
-        self.local = LocalBackend(self.system, self.properties, reduction)
-        self.backend = self.local
+        self.place.restart()
         self.roots = {}
         self.tally = Tally()
         self._attempt = time.monotonic()
 
     def _start(self) -> Outcome | None:
         """The initial worlds, claimed and checked here."""
-        shard, frontier = self.local.shard, self.local.expander.frontier
+        shard, frontier = self.place.local.shard, self.place.local.expander.frontier
         for t in self.system.initial():
             self.tally.initial += 1
             if t.failure is not None:
@@ -280,8 +231,8 @@ class Coordinator:
             shard.visited.put(key, ROOT)
             self.roots[key] = t.step.choices
             self.tally.states += 1
-            if self.local.expander.graph is not None:
-                self.local.expander.graph.keep(self.system, self.properties, t.world, key)
+            if self.place.local.expander.graph is not None:
+                self.place.local.expander.graph.keep(self.system, self.properties, t.world, key)
             violation = self.properties.check_world(self.system, t.world)
             if violation is not None:
                 return self._violated(violation, Counterexample(t.step.choices, ()))
@@ -290,14 +241,14 @@ class Coordinator:
         return None
 
     def _level(self) -> Outcome | None:
-        expansions, acceptances = self.backend.level(self.limits.max_depth)
+        expansions, acceptances = self.place.backend.level(self.limits.max_depth)
         self.tally.add_level(expansions, acceptances, self.traffic,
-                             remote=self.backend is not self.local)
+                             remote=self.place.backend is not self.place.local)
         found = self._found([e.failure for e in expansions], [a.violation for a in acceptances])
         if found is not None:
             return found
         learned = [a.learned for a in acceptances if a.learned is not None]
-        if self.backend is not self.local:
+        if self.place.backend is not self.place.local:
             add_learned_counts(self.reduction, learned)
         if any(found.grew() for found in learned):
             self._restart(learned)
@@ -305,7 +256,7 @@ class Coordinator:
         if any(e.pruned for e in expansions) and not self.tally.frontier:
             return self._outcome(Status.UNKNOWN, f"max-depth {self.limits.max_depth} "
                                  "reached before the search finished")
-        balance(self.backend, [a.frontier for a in acceptances], self.traffic)
+        balance(self.place.backend, [a.frontier for a in acceptances], self.traffic)
         if self.limits.max_states is not None and self.tally.states >= self.limits.max_states:
             raise Stop(f"max-states {self.limits.max_states} reached before the search finished")
         self._tick()
@@ -320,10 +271,7 @@ class Coordinator:
     def _flow(self) -> Outcome:
         """The rest of the search on workers that do not wait for each other
         (`checker.cluster.flow`), to its end: no level, no return to this process."""
-        flow = self.flow = cast(FlowBackend, self._starting)
-        self.distributed_at = self.tally.level
-        flow.load(self.local.expander.frontier, self.local.shard.visited)
-        self.local.expander.frontier = []
+        flow = self.place.to_flow(self.tally.level)
         statuses = run_relaxed(flow, self.tally, self.traffic, self.limits, self._tick)
         # The path is walked once the workers stopped: they would slow every call.
         found = self._found([s.failure for s in statuses], [s.violation for s in statuses])
@@ -338,24 +286,12 @@ class Coordinator:
     def _liveness(self) -> Outcome:
         """Every `eventually` property, by the lasso search of one process, on the graph
         the workers saw, gathered here (`checker.paths`)."""
-        store = self._gathered()
+        store = gathered(*self.place.graph(), self.roots, self.properties)
         for prop in self.properties.eventually:
             found = lasso_counterexample(self.system, store, prop)
             if found is not None:
                 return self._violated(*found)
         return self._outcome(Status.HOLDS, "every property holds")
-
-    def _gathered(self) -> StateStore:
-        """The whole graph the workers saw, gathered here (`walk.gathered`)."""
-        remote = self.flow if self.flow is not None else self.cluster
-        parts = [*self.local.graphs(), *(() if remote is None else remote.graphs())]
-        if self.flow is not None:
-            visited = self.flow.visited()
-        elif self.backend is self.local:
-            visited = [self.local.shard.dump()]
-        else:
-            visited = self.backend.snapshot()[1]
-        return gathered(parts, visited, self.roots, self.properties)
 
     # ------------------------------------------------------------- answers
 
@@ -365,7 +301,7 @@ class Coordinator:
         return self.tally.statistics(self._elapsed(), self._shard_bytes(), attempt)
 
     def _shard_bytes(self) -> list[int]:
-        return (self.flow or self.backend).shard_bytes()
+        return self.place.current.shard_bytes()
 
     def _elapsed(self) -> float:
         return self._elapsed_before + time.monotonic() - self.guard.started
@@ -387,8 +323,8 @@ class Coordinator:
         """Write the search as it stands between two levels to the checkpoint file."""
         plan = self.checkpointing
         assert plan is not None
-        frontier, visited = self.backend.snapshot()
-        counted = counters(self.tally, self.traffic, self.roots, self.distributed_at,
+        frontier, visited = self.place.backend.snapshot()
+        counted = counters(self.tally, self.traffic, self.roots, self.place.distributed_at,
                            self._elapsed(), self.reduction)
         ckpt.save(plan.path, {**plan.meta, "engine": ENGINE}, {"visited": visited}, frontier,
                   counted)
@@ -404,9 +340,9 @@ class Coordinator:
         self._elapsed_before, self.roots = c["elapsed"], c["roots"]
         self.traffic = Traffic(**c["traffic"])
         relearn(self.reduction, c)
-        self.local.shard.visited = visited_from(data["store"]["visited"], self.roots)
-        take_frontier(self.local.expander, data["frontier"])
-        self.tally.frontier = len(self.local.expander.frontier)
+        self.place.local.shard.visited = visited_from(data["store"]["visited"], self.roots)
+        take_frontier(self.place.local.expander, data["frontier"])
+        self.tally.frontier = len(self.place.local.expander.frontier)
         self._restored = True
 
     def _found(self, failures: list[Failure | None],
@@ -434,21 +370,17 @@ class Coordinator:
         """How `walk` finds a key's ancestors: after a relaxed order, on the whole visited set
         if it is small enough (`relaxed.whole_lineage`); else one call per change of
         partition."""
-        whole = None if self.flow is None else \
-            whole_lineage(self.flow, self.tally.states, self.roots)
-        return self._lineage if whole is None else whole
-
-    def _lineage(self, key: int) -> list[int]:
-        if key in self.local.shard.visited:  # found before the hand-over: so are its ancestors
-            return self.local.lineage(key)
-        return (self.flow or self.backend).lineage(key)
+        whole = None if self.place.flow is None else \
+            whole_lineage(self.place.flow, self.tally.states, self.roots)
+        return self.place.lineage if whole is None else whole
 
     def _progress(self) -> None:
         now = time.monotonic()
         if self.report is None or now - self._last_report < self.interval:
             return
         self._last_report = now
-        where = "in this process" if self.backend is self.local and self.flow is None else \
-            f"{(self.flow or self.backend).workers} worker(s)"
+        place = self.place
+        where = "in this process" if place.current is place.local else \
+            f"{place.current.workers} worker(s)"
         self.report(self.tally.progress_line(where, self.traffic, self._shard_bytes(),
                                              self._elapsed()))
