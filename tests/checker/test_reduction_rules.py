@@ -33,9 +33,11 @@ RULE_FUNCTIONS: tuple[Callable[..., Any], ...] = (
 
 #: The fingerprint of `RULE_FUNCTIONS` as the closure was last reviewed for them: Rule 6
 #: (KEEP_LAST drops, BEST_EFFORT losses), calls with no server, a latency branch that
-#: tells a sampler the send time (its branches and due times unchanged), and the keys of
-#: the messages a drop branch lost, recorded for weak fairness (no event changed).
-PINNED = "ca5825689b0ac5c9"
+#: tells a sampler the send time (its branches and due times unchanged), the keys of
+#: the messages a drop branch lost, recorded for weak fairness (no event changed), and a
+#: latency site that also names the publish a delivery copies plus event keys computed as
+#: the event is made (for simulations: the same branches, due times and keys as before).
+PINNED = "1fe6e9e308f567f6"
 
 _SKIPPED = (tokenize.NL, tokenize.COMMENT)
 _STATEMENT_START = (tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT)
