@@ -1,0 +1,138 @@
+"""Coroutine callbacks: run to the first pending `await`, kept as values, resumed by
+re-execution.
+
+A coroutine cannot be copied, and the checker must resume one suspended callback in
+many successor states. So a suspended callback is kept as what made it (`Suspended`:
+the callback, its arguments, the state the node was in when it began, the results of
+the awaits it passed and the times its steps read) and resumed by running it again:
+the node's attributes and the engine's state are set back to the start state, the
+callback runs with every effect discarded, each `await` is fed its recorded result,
+and when it reaches the await that is now answered, the node's current attributes
+and engine state are put back and the coroutine goes on with the new result, for real.
+Node code is deterministic (the contract's probes check it), so the re-run takes the
+same path and rebuilds the coroutine's local variables.
+
+What this assumes, beside determinism: a local variable that refers to a mutable
+attribute of the node (``items = self.items``) across an `await` refers, after a
+resume, to the copy of the start state, not to the node's attribute (read attributes
+through `self` after an await; docs/rclpy.md).
+"""
+
+from __future__ import annotations
+
+import inspect
+from collections.abc import Callable, Coroutine
+from typing import TYPE_CHECKING, Any
+
+from twinfleet.rclpy import state as state_codec
+from twinfleet.rclpy.entities import ServiceEntry, Suspended
+from twinfleet.runtime.contract.context import Context, ContractError
+
+if TYPE_CHECKING:
+    from twinfleet.rclpy.engine import Engine
+
+
+class Tasks:
+    """The coroutine part of one node's engine."""
+
+    def __init__(self, engine: Engine) -> None:
+        self.engine = engine
+
+    def start(self, callback: Callable[..., Any], args: tuple[Any, ...], group: int | None) -> None:
+        """Run a ready callback; a coroutine callback may end up suspended."""
+        if not inspect.iscoroutinefunction(callback) and not inspect.iscoroutinefunction(
+                getattr(callback, "func", None)):
+            result = callback(*args)
+            if inspect.iscoroutine(result):  # e.g. a lambda returning a coroutine
+                self._first_step(result, callback, args, group)
+            return
+        self._first_step(None, callback, args, group)
+
+    def _first_step(self, coro: Coroutine[Any, Any, Any] | None, callback: Callable[..., Any],
+                    args: tuple[Any, ...], group: int | None) -> None:
+        engine = self.engine
+        record = Suspended(callback, state_codec.encode_args(engine, args), group,
+                           state_codec.snapshot_state(engine))
+        if coro is None:
+            coro = callback(*args)
+        self.step(coro, record, None)
+
+    def step(self, coro: Coroutine[Any, Any, Any], record: Suspended, value: Any) -> None:
+        """Run `coro` from its current await (fed `value`) to its end or its next await."""
+        engine = self.engine
+        engine.clock_read = False
+        try:
+            awaited = coro.send(value)
+        except StopIteration:
+            return
+        record.clocks.append(engine.ctx.now() if engine.clock_read and engine.ctx else None)
+        self._check_awaitable(awaited, record)
+        record.awaiting = awaited
+        engine.dyn.tasks.append(record)
+
+    def _check_awaitable(self, awaited: Any, record: Suspended) -> None:
+        from twinfleet.rclpy.api.task import Future
+        if not isinstance(awaited, Future):
+            name = getattr(record.callback, "__qualname__", repr(record.callback))
+            raise ContractError(
+                f"{self.engine.name}: callback {name} awaited {awaited!r:.60}, not an rclpy "
+                "future", "await only futures of rclpy (client.call_async(...)); asyncio and "
+                "other event loops do not run inside a node")
+
+    def resume_awaiting(self, future: Any) -> None:
+        """Resume every coroutine awaiting `future` (just completed)."""
+        engine = self.engine
+        while True:
+            waiting = next((t for t in engine.dyn.tasks if t.awaiting is future), None)
+            if waiting is None:
+                return
+            engine.dyn.tasks.remove(waiting)
+            value = future.result()
+            coro = self.rebuild(waiting)
+            waiting.results.append(value)
+            self.step(coro, waiting, value)
+
+    def rebuild(self, record: Suspended) -> Coroutine[Any, Any, Any]:
+        """The coroutine of `record`, run again up to its last await (module docstring)."""
+        engine = self.engine
+        node = engine.node
+        saved_attrs, saved_dyn, saved_ctx = node.__dict__, engine.dyn, engine.ctx
+        saved_clock = engine.clock_read
+        start = state_codec.restore_state(record.start)
+        scratch = Context(engine.adapter, 0)
+        try:
+            state_codec.apply_state(engine, start, fresh_dict=True)
+            engine.ctx = scratch
+            args = state_codec.decode_args(engine, record.args)
+            coro = record.callback(*args)
+            value: Any = None
+            for i, clock in enumerate(record.clocks):
+                scratch.now_ms = 0 if clock is None else clock
+                awaited = coro.send(value)
+                if i < len(record.results):
+                    value = record.results[i]
+                _ = awaited
+        except StopIteration:
+            raise ContractError(
+                f"{engine.name}: re-running a suspended callback from its start state took "
+                "another path", "a callback must depend only on the node's attributes, its "
+                "arguments and what its awaits return") from None
+        finally:
+            node.__dict__ = saved_attrs
+            engine.dyn, engine.ctx, engine.clock_read = saved_dyn, saved_ctx, saved_clock
+        return coro
+
+    def serve(self, entry: ServiceEntry, request: Any) -> Any:
+        """Answer a request now; a service callback that suspends cannot be answered later."""
+        response = entry.srv_type.Response()
+        result = entry.callback(request, response)
+        if inspect.iscoroutine(result):
+            try:
+                result.send(None)
+            except StopIteration as stop:
+                return stop.value
+            result.close()
+            raise RuntimeError(f"{self.engine.name}: service {entry.name!r}: its callback "
+                               "awaited a pending future; twinfleet cannot defer a service "
+                               "reply yet")
+        return result

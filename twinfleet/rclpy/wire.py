@@ -1,0 +1,42 @@
+"""ROS messages at the node's edge: mutable ones in node code, frozen contract values in
+effects, events and states. The classes and the conversion are `twinfleet.interfaces`'s
+(generated from the ROS 2 definitions); this module is the one place that calls them.
+"""
+
+from __future__ import annotations
+
+import types
+from typing import Any
+
+
+def load_interface(package: str, kind: str) -> types.ModuleType:
+    """The module of a ROS interface package, e.g. (``std_msgs``, ``msg``)."""
+    from twinfleet.interfaces import load_interface as load
+    return load(package, kind)
+
+
+def freeze(msg: Any) -> Any:
+    """The frozen contract value of a mutable message (a copy: later changes do not leak)."""
+    from twinfleet.interfaces import freeze as frozen
+    return frozen(msg)
+
+
+def thaw(frozen: Any) -> Any:
+    """A fresh mutable message from a frozen one (each callback gets its own)."""
+    from twinfleet.interfaces import thaw as thawed
+    return thawed(frozen)
+
+
+def is_ros_message(value: Any) -> bool:
+    """True for instances of generated mutable message classes."""
+    cls = type(value)
+    return hasattr(cls, "get_fields_and_field_types") and not hasattr(cls, "__message_type__")
+
+
+def is_known_package(name: str) -> bool:
+    """True when `name` is an interface package twinfleet can generate (std_msgs, ...)."""
+    try:
+        from twinfleet.interfaces import known_packages
+    except ImportError:
+        return False
+    return name in known_packages()
