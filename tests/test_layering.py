@@ -40,7 +40,7 @@ _BELOW_HOST = {"host", "core", "scenario", "contract"}
 RULES: dict[str, set[str]] = {
     "api": {"contract"},
     "contract": set(),
-    "scenario": {"contract"},
+    "scenario": {"contract", "rclpy"},
     "core": {"contract"},
     "host": {"core", "scenario", "contract"},
     "access": _BELOW_HOST,
@@ -51,6 +51,7 @@ RULES: dict[str, set[str]] = {
     "nodes": {"api", "contract"},
     "agreement": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "nodes"},
     "interfaces": {"contract"},
+    "rclpy": {"contract", "interfaces"},
     "ros2": {"api", "access", "fleet", "tools", *_BELOW_HOST, "interfaces"},
     "runtime": set(),  # runtime/__init__.py: names its wings, imports none
     "maps": set(), "launch": set(),  # package data: shipped maps and scenarios
@@ -71,7 +72,7 @@ IO = {"asyncio", "zenoh", "aiohttp", "mcap", "foxglove"}
 ROS_LIBRARIES = {"rosbags", "mcap_ros2", "zenoh_ros2_sdk", "rclpy"}
 ROS_IMPORTERS = {"ros2": ROS_LIBRARIES, "interfaces": {"rosbags"}}
 PURE: dict[str, set[str]] = {
-    "contract": IO, "scenario": IO, "core": IO, "checker": IO,
+    "contract": IO, "scenario": IO, "core": IO, "checker": IO, "rclpy": IO,
     "sweep": IO | {"ray"},  # Ray only through checker.parallel.engine_for
     "nodes": {"random", "time", "asyncio", "threading", "socket", "zenoh"},
 }

@@ -113,7 +113,7 @@ class RosFinder(importlib.abc.MetaPathFinder):
 def importing() -> Iterator[None]:
     """Import node code with twinfleet's rclpy and messages in place (module docstring)."""
     finder = RosFinder()
-    saved = {k: v for k, v in sys.modules.items() if _ros_name(k)}
+    saved = {k: v for k, v in list(sys.modules.items()) if _ros_name(k)}
     for name in saved:
         del sys.modules[name]
     sys.meta_path.insert(0, finder)
@@ -121,7 +121,7 @@ def importing() -> Iterator[None]:
         yield
     finally:
         sys.meta_path.remove(finder)
-        for name in [k for k in sys.modules if _ros_name(k) or k.partition(".")[0] in finder.tops]:
+        for name in [k for k in list(sys.modules) if _ros_name(k) or k.partition(".")[0] in finder.tops]:
             del sys.modules[name]
         sys.modules.update(saved)
 

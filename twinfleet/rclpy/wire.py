@@ -5,6 +5,7 @@ effects, events and states. The classes and the conversion are `twinfleet.interf
 
 from __future__ import annotations
 
+import functools
 import types
 from typing import Any
 
@@ -28,15 +29,22 @@ def thaw(frozen: Any) -> Any:
 
 
 def is_ros_message(value: Any) -> bool:
-    """True for instances of generated mutable message classes."""
-    cls = type(value)
-    return hasattr(cls, "get_fields_and_field_types") and not hasattr(cls, "__message_type__")
+    """True for instances of the generated mutable message classes."""
+    return isinstance(value, _ros_message_class())
+
+
+@functools.cache
+def _ros_message_class() -> type:
+    from twinfleet.interfaces import RosMessage
+    return RosMessage
+
+
+@functools.cache
+def _known_packages() -> frozenset[str]:
+    from twinfleet.interfaces.definitions import known_packages
+    return frozenset(known_packages())
 
 
 def is_known_package(name: str) -> bool:
-    """True when `name` is an interface package twinfleet can generate (std_msgs, ...)."""
-    try:
-        from twinfleet.interfaces import known_packages
-    except ImportError:
-        return False
-    return name in known_packages()
+    """True when `name` is an interface package twinfleet generates (std_msgs, ...)."""
+    return name in _known_packages()

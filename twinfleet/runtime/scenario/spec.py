@@ -517,12 +517,19 @@ def _import_attr(path: str, err: _Errors, key: str, what: str = "name") -> Any:
 
 def _node_class(value: Any, err: _Errors, key: str) -> tuple[type[Node], str]:
     """The node class an entry names ("module:Class" or the class itself) and its path."""
+    from twinfleet.rclpy.loader import contract_class, importing
+
     if isinstance(value, str):
-        cls, path = _import_attr(value, err, key, "node class"), value
+        with importing():  # node code's `import rclpy` and ROS messages: docs/rclpy.md
+            cls, path = _import_attr(value, err, key, "node class"), value
     elif isinstance(value, type):
         cls, path = value, f"{value.__module__}:{value.__qualname__}"
     else:
         err.fail(key, f"expected 'module:Class' or a Node subclass, got {value!r}")
+    try:
+        cls = contract_class(cls)  # an rclpy Node subclass becomes its contract adapter
+    except Exception as exc:  # its __init__ ran once to learn its entities, and raised
+        err.fail(key, f"{path!r}: building the rclpy node raised {type(exc).__name__}: {exc}")
     if not (isinstance(cls, type) and issubclass(cls, Node)):
         err.fail(key, f"{path!r} is not a subclass of twinfleet.Node")
     return cls, path
