@@ -92,12 +92,12 @@ class TaskRecord:
     """A suspended coroutine callback (`entities.Suspended`) as values."""
 
     callback: Any
-    args: bytes
-    group: int | None
-    start: bytes
+    group: int | None  # the index of the group it holds busy (0: the node's default group)
+    awaiting: Any
     results: tuple[Any, ...]
     clocks: tuple[int | None, ...]
-    awaiting: Any
+    args: bytes
+    start: bytes
 
 
 @dataclass(frozen=True, slots=True)
@@ -176,8 +176,8 @@ def capture(engine: Engine) -> RclpyState:
     timers = tuple(None if t is None else (t.period_ms, enc(t.callback), t.group, t.canceled,
                                            t.pending, t.destroyed) for t in dyn.timers)
     waiting = tuple((w.kind.value, w.index, tuple(enc(a) for a in w.args)) for w in dyn.waiting)
-    tasks = tuple(TaskRecord(enc(t.callback), t.args, t.group, t.start, tuple(enc(r) for r in
-                             t.results), tuple(t.clocks), enc(t.awaiting)) for t in dyn.tasks)
+    tasks = tuple(TaskRecord(enc(t.callback), t.group, enc(t.awaiting), tuple(enc(r) for r in
+                             t.results), tuple(t.clocks), t.args, t.start) for t in dyn.tasks)
     calls = tuple(tuple(enc(f) for f in c) for c in dyn.calls)
     on_set = tuple(enc(cb) for cb in dyn.on_set)
     params = {k: enc(v) for k, v in dyn.params.items()}

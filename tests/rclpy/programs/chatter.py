@@ -41,14 +41,12 @@ class Listener(Node):
 
 
 def main():
-    rclpy.init()
-    node = {"talker": Talker, "listener": Listener}[sys.argv[1]]()
-    try:
-        rclpy.spin(node)
-    except KeyboardInterrupt:
-        pass
-    node.destroy_node()
-    rclpy.try_shutdown()
+    import oracle_main
+
+    which = [{"talker": Talker, "listener": Listener}[a] for a in sys.argv[1:] if not a.startswith("-")
+             and a in ("talker", "listener")]
+    oracle_main.run(which or [Talker, Listener], ["sent", "heard"],
+                    done=lambda nodes: any(len(getattr(n, "heard", ())) >= 3 for n in nodes))
 
 
 if __name__ == "__main__":
