@@ -66,7 +66,7 @@ class RclpyAdapter(ContractNode):
         """The rclpy node's state after its `__init__`."""
         return capture(self._tf_engine)
 
-    @property  # type: ignore[override]
+    @property
     def state(self) -> RclpyState:
         """The rclpy node's attributes and the engine's records, as one value."""
         return capture(self._tf_engine)

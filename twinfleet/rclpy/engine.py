@@ -22,7 +22,7 @@ from contextlib import contextmanager
 from dataclasses import dataclass, field
 from typing import Any
 
-from twinfleet.rclpy import wire
+from twinfleet.rclpy import current, wire
 from twinfleet.rclpy.entities import (
     ClientEntry,
     Dynamic,
@@ -33,19 +33,12 @@ from twinfleet.rclpy.entities import (
     TimerSlot,
     Waiting,
 )
+from twinfleet.rclpy.tasks import Tasks
 from twinfleet.runtime.contract.context import Context, ContractError
 from twinfleet.runtime.contract.messages import CallError
 
 #: How long a `call_async` waits for its reply: rclpy's own calls never time out.
 CALL_TIMEOUT_MS = 3_600_000
-
-_ACTIVE: list[Engine] = []
-
-
-def active_engine() -> Engine | None:
-    """The engine whose callback is running (futures made by node code find it so)."""
-    return _ACTIVE[-1] if _ACTIVE else None
-
 
 @dataclass
 class Construction:
@@ -100,7 +93,6 @@ class Engine:
         self.declared: dict[str, Any] = {}  # parameter name -> (descriptor, type)
         self.overrides: dict[str, Any] = {}  # the launch's parameter values
         self.handles: dict[tuple[str, int], Any] = {("node", 0): node}
-        from twinfleet.rclpy.tasks import Tasks
         self.tasks = Tasks(self)
 
     def handle(self, kind: str, index: int) -> Any:
@@ -130,10 +122,11 @@ class Engine:
         if kind is EntityKind.TIMER:
             slot = self.dyn.timers[index]
             return 0 if slot is None else slot.group
-        table: list[Any] = {EntityKind.SUBSCRIPTION: self.subscriptions,
-                            EntityKind.SERVICE: self.services,
-                            EntityKind.CLIENT: self.clients}[kind]
-        return int(table[index].group)
+        if kind is EntityKind.SUBSCRIPTION:
+            return self.subscriptions[index].group
+        if kind is EntityKind.SERVICE:
+            return self.services[index].group
+        return self.clients[index].group
 
     # ------------------------------------------------------------------ handlers
 
@@ -141,13 +134,13 @@ class Engine:
     def handling(self, ctx: Context) -> Iterator[None]:
         """Run node code for one contract handler: effects go to `ctx`; sleeping is refused."""
         self.ctx, sleep = ctx, _time.sleep
-        _ACTIVE.append(self)
+        current.enter(self)
         _time.sleep = _blocked_sleep
         try:
             yield
         finally:
             _time.sleep = sleep
-            _ACTIVE.pop()
+            current.leave()
             self.ctx = None
 
     def start(self, ctx: Context) -> None:

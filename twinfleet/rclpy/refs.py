@@ -92,13 +92,13 @@ def encode_callable(fn: Any, node: object, encode: Encode) -> Any:
 def decode_callable(ref: Any, node: object, decode: Decode) -> Callable[..., Any]:
     """The callable `ref` stands for, bound to `node` where it names a method."""
     if isinstance(ref, MethodRef):
-        return getattr(node, ref.name)  # type: ignore[no-any-return]
+        return getattr(node, ref.name)
     if isinstance(ref, PartialRef):
         return functools.partial(decode_callable(ref.func, node, decode),
                                  *(decode(a) for a in ref.args),
                                  **{k: decode(v) for k, v in ref.kwargs})
     if isinstance(ref, FunctionRef):
-        return _lookup(ref.module, ref.qualname)  # type: ignore[no-any-return]
+        return _lookup(ref.module, ref.qualname)
     if isinstance(ref, ClosureRef):
         code = _closure_code(ref.module, ref.outer, ref.name, ref.line)
         module = importlib.import_module(ref.module)

@@ -23,15 +23,16 @@ from __future__ import annotations
 import types
 from dataclasses import dataclass
 from functools import partial
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from twinfleet.rclpy import refs, wire
+from twinfleet.rclpy.api.callback_groups import CallbackGroup
+from twinfleet.rclpy.api.task import Future
 from twinfleet.rclpy.entities import EntityKind, Suspended, TimerSlot, Waiting
 from twinfleet.runtime.contract.messages import from_plain, to_plain
 from twinfleet.runtime.contract.snapshot import restore, snapshot
 
-if TYPE_CHECKING:
-    from twinfleet.rclpy.engine import Engine
+Engine = Any  # twinfleet.rclpy.engine.Engine (which imports this module)
 
 _PLAIN = frozenset({int, float, bool, str, bytes, type(None)})
 
@@ -141,13 +142,15 @@ class _Encoder:
             return kind(self(v) for v in value)
         ref = getattr(value, "_tf_ref", None)
         if ref is not None and not isinstance(value, type) and (handle := ref()) is not None:
-            return handle
+            return HandleRef(*handle)
         if wire.is_ros_message(value):
             return MsgValue(to_plain(wire.freeze(value)))
         if hasattr(kind, "__message_type__"):
             return FrozenMsg(to_plain(value))
-        if _is_future(value):
+        if isinstance(value, Future):
             return self.future(value)
+        if isinstance(value, CallbackGroup):
+            return HandleRef("group", self.engine.group_index(value))
         if isinstance(value, types.FunctionType | types.MethodType | partial):
             return refs.encode_callable(value, self.engine.node, self)
         return value
@@ -160,11 +163,6 @@ class _Encoder:
             number = self.numbers[id(fut)] = len(self.futures)
             self.futures.append(fut)
         return FutureRef(number)
-
-
-def _is_future(value: Any) -> bool:
-    from twinfleet.rclpy.api.task import Future
-    return isinstance(value, Future)
 
 
 def capture(engine: Engine) -> RclpyState:
@@ -216,7 +214,6 @@ class _Decoder:
         if kind is FutureRef:
             return self.futures[value.index]
         if kind is DoneFuture:
-            from twinfleet.rclpy.api.task import Future
             fut = Future()
             fut._result, fut._state = self(value.result), 1
             return fut
@@ -227,7 +224,6 @@ class _Decoder:
 
 def apply_state(engine: Engine, st: RclpyState, *, fresh_dict: bool = False) -> None:
     """Put `st` into the node and its engine (a fresh attribute dict when asked)."""
-    from twinfleet.rclpy.api.task import Future
     futures = [Future() for _ in st.futures]
     dec = _Decoder(engine, futures)
     for fut, rec in zip(futures, st.futures, strict=True):

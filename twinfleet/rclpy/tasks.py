@@ -22,14 +22,14 @@ from __future__ import annotations
 
 import inspect
 from collections.abc import Callable, Coroutine
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from twinfleet.rclpy import state as state_codec
+from twinfleet.rclpy.api.task import Future
 from twinfleet.rclpy.entities import ServiceEntry, Suspended
 from twinfleet.runtime.contract.context import Context, ContractError
 
-if TYPE_CHECKING:
-    from twinfleet.rclpy.engine import Engine
+Engine = Any  # twinfleet.rclpy.engine.Engine (which imports this module)
 
 
 class Tasks:
@@ -71,7 +71,6 @@ class Tasks:
         engine.dyn.tasks.append(record)
 
     def _check_awaitable(self, awaited: Any, record: Suspended) -> None:
-        from twinfleet.rclpy.api.task import Future
         if not isinstance(awaited, Future):
             name = getattr(record.callback, "__qualname__", repr(record.callback))
             raise ContractError(
@@ -124,7 +123,7 @@ class Tasks:
 
     def serve(self, entry: ServiceEntry, request: Any) -> Any:
         """Answer a request now; a service callback that suspends cannot be answered later."""
-        response = entry.srv_type.Response()
+        response = getattr(entry.srv_type, "Response")()  # noqa: B009  (a generated class)
         result = entry.callback(request, response)
         if inspect.iscoroutine(result):
             try:

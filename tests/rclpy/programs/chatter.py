@@ -6,7 +6,6 @@ twinfleet (a scenario names ``chatter:Talker`` and ``chatter:Listener``).
 
 import sys
 
-import rclpy
 from rclpy.node import Node
 from std_msgs.msg import String
 

@@ -11,7 +11,6 @@ and the node hangs after its first call, under real rclpy and under twinfleet al
 
 import sys
 
-import rclpy
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
 from std_srvs.srv import SetBool

@@ -33,7 +33,7 @@ def try_shutdown(*, context: Any = None, uninstall_handlers: bool | None = None)
 
 def ok(*, context: Any = None) -> bool:
     """True between `init` and `shutdown`, and always inside a node twinfleet runs."""
-    from twinfleet.rclpy.engine import active_engine
+    from twinfleet.rclpy.current import active_engine
     return _STATE["ok"] or active_engine() is not None
 
 

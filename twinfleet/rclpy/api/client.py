@@ -15,9 +15,8 @@ class Client:
         self._engine, self._index = engine, index
         engine.handles[("client", index)] = self
 
-    def _tf_ref(self) -> Any:
-        from twinfleet.rclpy.state import HandleRef
-        return HandleRef("client", self._index)
+    def _tf_ref(self) -> tuple[str, int] | None:
+        return ("client", self._index)
 
     @property
     def srv_name(self) -> str:
@@ -27,7 +26,7 @@ class Client:
     @property
     def srv_type(self) -> type:
         """The service class."""
-        return self._engine.clients[self._index].srv_type  # type: ignore[no-any-return]
+        return self._engine.clients[self._index].srv_type
 
     def call_async(self, request: Any) -> Future:
         """Send `request`; the future completes with the response when it arrives."""

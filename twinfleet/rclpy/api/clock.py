@@ -25,9 +25,8 @@ class Clock:
         self.clock_type = clock_type
         self._now_ms = now_ms or (lambda: 0)
 
-    def _tf_ref(self) -> object:
-        from twinfleet.rclpy.state import HandleRef
-        return HandleRef("clock", 0)
+    def _tf_ref(self) -> tuple[str, int]:
+        return ("clock", 0)
 
     def now(self) -> Time:
         """The current time: milliseconds since the fleet's start, as nanoseconds."""

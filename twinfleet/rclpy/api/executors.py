@@ -7,8 +7,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from twinfleet.rclpy.engine import active_engine
 from twinfleet.rclpy.api.exceptions import NotSupportedError
+from twinfleet.rclpy.current import active_engine
 from twinfleet.runtime.contract.context import ContractError
 
 

@@ -31,9 +31,8 @@ class RcutilsLogger:
         self._engine = engine
         self._level = LoggingSeverity.INFO
 
-    def _tf_ref(self) -> Any:
-        from twinfleet.rclpy.state import HandleRef
-        return HandleRef("logger", 0) if self._engine is not None else None
+    def _tf_ref(self) -> tuple[str, int] | None:
+        return ("logger", 0) if self._engine is not None else None
 
     def get_child(self, name: str) -> RcutilsLogger:
         """The logger ``<name of this>.<name>``."""
@@ -59,7 +58,7 @@ class RcutilsLogger:
         severity = LoggingSeverity(severity)
         if not self.is_enabled_for(severity):
             return False
-        from twinfleet.rclpy.engine import active_engine
+        from twinfleet.rclpy.current import active_engine
         engine = self._engine or active_engine()
         if engine is not None:
             engine.log(severity.name, self.name, str(message))

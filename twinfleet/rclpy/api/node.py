@@ -61,9 +61,8 @@ class Node(ParametersMixin):
             for key, value in engine.overrides.items():
                 self.declare_parameter(key, value)
 
-    def _tf_ref(self) -> Any:
-        from twinfleet.rclpy.state import HandleRef
-        return HandleRef("node", 0)
+    def _tf_ref(self) -> tuple[str, int] | None:
+        return ("node", 0)
 
     # --------------------------------------------------------------- names, clock, logger
 
@@ -81,16 +80,16 @@ class Node(ParametersMixin):
 
     def get_logger(self) -> RcutilsLogger:
         """The node's logger; lines keep their severity in the event log."""
-        return self._tf_engine.handles[("logger", 0)]  # type: ignore[no-any-return]
+        return self._tf_engine.handles[("logger", 0)]
 
     def get_clock(self) -> Clock:
         """The node's clock: the fleet's time (logical in the checker)."""
-        return self._tf_engine.handles[("clock", 0)]  # type: ignore[no-any-return]
+        return self._tf_engine.handles[("clock", 0)]
 
     @property
     def default_callback_group(self) -> CallbackGroup:
         """The mutually exclusive group of callbacks made without a group."""
-        return self._tf_engine.groups[0]  # type: ignore[no-any-return]
+        return self._tf_engine.groups[0]
 
     @property
     def executor(self) -> None:

@@ -12,9 +12,8 @@ class Publisher:
         self._engine, self._index = engine, index
         engine.handles[("publisher", index)] = self
 
-    def _tf_ref(self) -> Any:
-        from twinfleet.rclpy.state import HandleRef
-        return HandleRef("publisher", self._index)
+    def _tf_ref(self) -> tuple[str, int] | None:
+        return ("publisher", self._index)
 
     @property
     def topic_name(self) -> str:
@@ -24,7 +23,7 @@ class Publisher:
     @property
     def msg_type(self) -> type:
         """The message class."""
-        return self._engine.publishers[self._index].msg_type  # type: ignore[no-any-return]
+        return self._engine.publishers[self._index].msg_type
 
     def publish(self, msg: Any) -> None:
         """Publish a copy of `msg`."""

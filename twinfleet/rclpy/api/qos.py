@@ -10,7 +10,8 @@ from __future__ import annotations
 from enum import Enum, IntEnum
 from typing import Any
 
-from twinfleet.runtime.contract.node import QoS, Durability as _Durability
+from twinfleet.runtime.contract.node import Durability as _Durability
+from twinfleet.runtime.contract.node import QoS
 from twinfleet.runtime.contract.node import Reliability as _Reliability
 
 #: The depth a KEEP_ALL queue gets: bounded, so that a checker state stays finite.

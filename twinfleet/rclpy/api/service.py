@@ -12,9 +12,8 @@ class Service:
         self._engine, self._index = engine, index
         engine.handles[("service", index)] = self
 
-    def _tf_ref(self) -> Any:
-        from twinfleet.rclpy.state import HandleRef
-        return HandleRef("service", self._index)
+    def _tf_ref(self) -> tuple[str, int] | None:
+        return ("service", self._index)
 
     @property
     def srv_name(self) -> str:

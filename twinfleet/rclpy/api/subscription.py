@@ -12,9 +12,8 @@ class Subscription:
         self._engine, self._index = engine, index
         engine.handles[("subscription", index)] = self
 
-    def _tf_ref(self) -> Any:
-        from twinfleet.rclpy.state import HandleRef
-        return HandleRef("subscription", self._index)
+    def _tf_ref(self) -> tuple[str, int] | None:
+        return ("subscription", self._index)
 
     @property
     def topic_name(self) -> str:

@@ -89,7 +89,7 @@ class Future:
         return True
 
     def _completed(self) -> None:
-        from twinfleet.rclpy.engine import active_engine
+        from twinfleet.rclpy.current import active_engine
         engine = self._engine or active_engine()
         callbacks, self._callbacks = self._callbacks, []
         if engine is None:

@@ -14,9 +14,8 @@ class Timer:
         self._engine, self._index = engine, index
         engine.handles[("timer", index)] = self
 
-    def _tf_ref(self) -> Any:
-        from twinfleet.rclpy.state import HandleRef
-        return HandleRef("timer", self._index)
+    def _tf_ref(self) -> tuple[str, int] | None:
+        return ("timer", self._index)
 
     @property
     def timer_period_ns(self) -> int:
