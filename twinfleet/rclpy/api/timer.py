@@ -48,6 +48,11 @@ class Rate:
 
     def __init__(self, engine: Any, frequency: float) -> None:
         self._engine, self.frequency = engine, frequency
+        self._index = sum(1 for kind, _ in engine.handles if kind == "rate")
+        engine.handles[("rate", self._index)] = self
+
+    def _tf_ref(self) -> tuple[str, int]:
+        return ("rate", self._index)
 
     def sleep(self) -> None:
         """Refused: sleeping blocks rclpy's executor."""
