@@ -12,6 +12,8 @@ import os
 import random
 import subprocess
 import sys
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -20,17 +22,58 @@ from tests.support import child_env
 PROGRAMS = Path(__file__).resolve().parent / "programs"
 
 
-def real_rclpy(program: str, *args: str, timeout_s: float = 60.0) -> dict[str, Any]:
-    """Run ``programs/<program>.py ARGS`` under real rclpy; what it printed after RESULT."""
+def _ros_env(domain: int) -> dict[str, str]:
     env = child_env()
     env.update(RMW_IMPLEMENTATION="rmw_fastrtps_cpp", ROS_AUTOMATIC_DISCOVERY_RANGE="LOCALHOST",
-               ROS_DOMAIN_ID=str(random.randint(1, 100)))
+               ROS_DOMAIN_ID=str(domain))
+    return env
+
+
+def _result(returncode: int, stdout: str, stderr: str) -> dict[str, Any]:
+    lines = [ln for ln in stdout.splitlines() if ln.startswith("RESULT ")]
+    assert returncode == 0 and lines, f"exit {returncode}\n{stdout}\n{stderr}"
+    return json.loads(lines[-1].removeprefix("RESULT "))  # type: ignore[no-any-return]
+
+
+def real_rclpy(program: str, *args: str, timeout_s: float = 60.0,
+               domain: int | None = None) -> dict[str, Any]:
+    """Run ``programs/<program>.py ARGS`` under real rclpy; what it printed after RESULT."""
+    env = _ros_env(domain or random.randint(1, 100))
     proc = subprocess.run([sys.executable, str(PROGRAMS / f"{program}.py"), *args],
                           capture_output=True, text=True, timeout=timeout_s, env=env,
                           cwd=PROGRAMS, check=False)
-    lines = [ln for ln in proc.stdout.splitlines() if ln.startswith("RESULT ")]
-    assert proc.returncode == 0 and lines, f"exit {proc.returncode}\n{proc.stdout}\n{proc.stderr}"
-    return json.loads(lines[-1].removeprefix("RESULT "))  # type: ignore[no-any-return]
+    return _result(proc.returncode, proc.stdout, proc.stderr)
+
+
+class Background:
+    """A real-rclpy program running beside the test (`real_rclpy_background`)."""
+
+    def __init__(self, proc: subprocess.Popen[str], domain: int) -> None:
+        self.proc, self.domain = proc, domain
+
+    def result(self, timeout_s: float = 60.0) -> dict[str, Any]:
+        """Wait for the program's end; what it printed after RESULT."""
+        stdout, stderr = self.proc.communicate(timeout=timeout_s)
+        return _result(self.proc.returncode, stdout, stderr)
+
+
+@contextmanager
+def real_rclpy_background(program: str, *args: str) -> Iterator[Background]:
+    """Start ``programs/<program>.py ARGS`` under real rclpy; stopped if still running at
+    the end of the block's caller's test (killed, never left behind)."""
+    domain = random.randint(1, 100)
+    proc = subprocess.Popen([sys.executable, str(PROGRAMS / f"{program}.py"), *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env=_ros_env(domain), cwd=PROGRAMS)
+    try:
+        yield Background(proc, domain)
+    finally:
+        if proc.poll() is None:
+            try:
+                proc.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                proc.wait()
 
 
 def twinfleet(*args: str, timeout_s: float = 120.0) -> subprocess.CompletedProcess[str]:

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.rclpy.oracle import PROGRAMS, launch, real_rclpy
+from tests.rclpy.oracle import PROGRAMS, launch, real_rclpy, real_rclpy_background
 from twinfleet import testing
 
 pytestmark = pytest.mark.timeout(300)
@@ -30,6 +30,12 @@ def test_done_callback_checks():
 
 def test_await_in_reentrant_group_checks():
     report = check("toggle_await.yaml")
+    assert report.holds, report.explain()
+
+
+@pytest.mark.parametrize("scenario", ["tuning.yaml", "blinking.yaml", "chatter_lab.yaml"])
+def test_parameters_timers_and_remapping_check(scenario):
+    report = check(scenario)
     assert report.holds, report.explain()
 
 
@@ -60,8 +66,33 @@ def test_toggle_under_real_rclpy():
 
 
 @pytest.mark.slow
+def test_parameters_under_real_rclpy():
+    tuned = real_rclpy("tuning", "--ros-args", "-p", "gain:=0.5")["tuner"]
+    assert tuned == {"initial": [0.5, "auto"], "final": [2.0, "manual"],
+                     "outcomes": [["gain", True], ["gain", False], ["mode", True]]}
+
+
+@pytest.mark.slow
+def test_timers_under_real_rclpy():
+    assert real_rclpy("blinking")["blinker"] == {"events": ["a", "a", "b", "a", "a"],
+                                                "canceled": [True, True]}
+
+
+@pytest.mark.slow
+def test_node_per_process_under_real_rclpy():
+    """As `ros2 run` starts them: one process per node, renamed and parametrised by
+    --ros-args; the scenario chatter_lab.yaml says the same with name, namespace, params."""
+    with real_rclpy_background("chatter", "listener", "--ros-args", "-r", "__ns:=/lab") as heard:
+        talker = real_rclpy("chatter", "talker", "--ros-args", "-r", "__ns:=/lab", "-r",
+                            "__node:=speaker", "-p", "limit:=2", domain=heard.domain)
+    assert talker == {"speaker": {"sent": 2}}
+    assert heard.result() == {"listener": {"heard": ["hello 1", "hello 2"]}}
+
+
+@pytest.mark.slow
 @pytest.mark.fleet
-@pytest.mark.parametrize("scenario", ["chatter.yaml", "toggle_done.yaml", "toggle_await.yaml"])
+@pytest.mark.parametrize("scenario", ["chatter.yaml", "toggle_done.yaml", "toggle_await.yaml",
+                                      "tuning.yaml", "blinking.yaml", "chatter_lab.yaml"])
 def test_live_fleet_agrees(scenario):
     run = launch(scenario)
     assert "result: PASSED" in run.stdout, run.stdout + run.stderr
