@@ -1,0 +1,51 @@
+"""The 97-line rclpy turtle system (programs/turtle_system.py) runs as written under every
+command: check, replay of its counterexample, --statistical, sweep, and launch."""
+
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from tests.rclpy.oracle import launch, twinfleet
+
+pytestmark = pytest.mark.timeout(300)
+
+
+def test_check_holds():
+    run = twinfleet("check", "turtle_system.yaml")
+    assert run.returncode == 0 and "verdict: HOLDS" in run.stdout, run.stdout + run.stderr
+    assert "states 40 " in run.stdout
+
+
+def test_a_violation_replays(tmp_path):
+    trace = tmp_path / "fence.trace.json"
+    run = twinfleet("check", "turtle_system.yaml", "controller.goal:=5", "--trace-out", str(trace))
+    assert run.returncode == 1 and "VIOLATED fence" in run.stdout, run.stdout + run.stderr
+    replay = twinfleet("replay", str(trace))
+    assert replay.returncode == 1 and "replay confirmed: fence violated" in replay.stdout, (
+        replay.stdout + replay.stderr)
+
+
+def test_statistical():
+    run = twinfleet("check", "turtle_system.yaml", "--statistical", "--simulations", "50")
+    assert run.returncode == 0, run.stdout + run.stderr
+    assert "50 simulations" in run.stdout and "0 / 50" in run.stdout
+
+
+def test_sweep(tmp_path):
+    run = twinfleet("sweep", "turtle_system.yaml", "--param", "controller.goal=4,5",
+                    "--param", "controller.step=1,2", "--workers", "1", "--out", str(tmp_path))
+    assert run.returncode in (0, 1), run.stdout + run.stderr
+    points = json.loads((tmp_path / "sweep.json").read_text())
+    verdicts = {(p["params"]["controller.goal"], p["params"]["controller.step"]): p["verdict"]
+                for p in points["points"]}
+    assert verdicts == {(4, 1): "holds", (4, 2): "holds", (5, 1): "violated",
+                        (5, 2): "violated"}, points
+
+
+@pytest.mark.slow
+@pytest.mark.fleet
+def test_launch():
+    run = launch("turtle_system.yaml")
+    assert run.returncode == 0 and "result: PASSED" in run.stdout, run.stdout + run.stderr
