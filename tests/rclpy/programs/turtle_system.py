@@ -3,6 +3,8 @@ turtle (a simulated robot) moves on each command and reports its pose, a /reset 
 puts it back, the controller calls it with a done callback and drives two laps, and a
 safety monitor keeps the farthest pose seen. Parameters: goal and step."""
 
+import contextlib
+
 import rclpy
 from geometry_msgs.msg import Pose2D, Twist
 from rcl_interfaces.msg import SetParametersResult
@@ -86,10 +88,8 @@ def main():
     executor = rclpy.executors.SingleThreadedExecutor()
     for node in nodes:
         executor.add_node(node)
-    try:
+    with contextlib.suppress(KeyboardInterrupt):
         executor.spin()
-    except KeyboardInterrupt:
-        pass
     rclpy.try_shutdown()
 
 
