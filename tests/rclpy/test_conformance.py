@@ -46,7 +46,7 @@ def test_await_in_default_group_hangs_in_the_checker():
     assert report.trace is not None
     last = [s["changed"]["awaiting"] for s in report.trace["steps"] if "awaiting" in s["changed"]]
     task = last[-1]["tasks"][0]  # the suspended callback, holding the default group (0)
-    assert task["callback"] == {"name": "tick"} and task["group"] == 0
+    assert task["callback"] == "tick" and task["group"] == 0
     assert [w[0] for w in last[-1]["waiting"]] == ["client", "timer"]  # held back by it
     assert last[-1]["attrs"]["calls"] == 1
 

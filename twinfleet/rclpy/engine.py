@@ -73,6 +73,25 @@ def _blocked_sleep(*_args: Any) -> None:
                         "use a timer (node.create_timer) and continue in its callback")
 
 
+class _Handling:
+    """The context of `Engine.handling` (a class: it runs around every handler)."""
+
+    __slots__ = ("engine", "ctx", "sleep")
+
+    def __init__(self, engine: Engine, ctx: Context) -> None:
+        self.engine, self.ctx = engine, ctx
+
+    def __enter__(self) -> None:
+        self.engine.ctx = self.ctx
+        current.enter(self.engine)
+        self.sleep, _time.sleep = _time.sleep, _blocked_sleep
+
+    def __exit__(self, *_exc: object) -> None:
+        _time.sleep = self.sleep
+        current.leave()
+        self.engine.ctx = None
+
+
 class Engine:
     """rclpy's executor semantics for one node (module docstring)."""
 
@@ -130,18 +149,9 @@ class Engine:
 
     # ------------------------------------------------------------------ handlers
 
-    @contextmanager
-    def handling(self, ctx: Context) -> Iterator[None]:
+    def handling(self, ctx: Context) -> _Handling:
         """Run node code for one contract handler: effects go to `ctx`; sleeping is refused."""
-        self.ctx, sleep = ctx, _time.sleep
-        current.enter(self)
-        _time.sleep = _blocked_sleep
-        try:
-            yield
-        finally:
-            _time.sleep = sleep
-            current.leave()
-            self.ctx = None
+        return _Handling(self, ctx)
 
     def start(self, ctx: Context) -> None:
         """The node starts: the effects of its `__init__`, then its timers' first firings."""

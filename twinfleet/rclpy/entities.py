@@ -76,6 +76,7 @@ class TimerSlot:
     canceled: bool = False
     pending: int = 0
     destroyed: bool = False
+    ref: Any = None  # the callback as a state holds it (twinfleet.rclpy.state), once known
 
 
 @dataclass(frozen=True, slots=True)

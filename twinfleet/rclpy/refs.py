@@ -69,8 +69,11 @@ class PartialRef:
     kwargs: tuple[tuple[str, Any], ...]
 
 
-def encode_callable(fn: Any, node: object, encode: Encode) -> Any:
-    """The value that stands for `fn` in a state (see the module docstring)."""
+def encode_callable(fn: Any, node: object, encode: Encode, *, bare: bool = False) -> Any:
+    """The value that stands for `fn` in a state (see the module docstring); with `bare`,
+    a method of the node is its name alone (where nothing but callbacks is kept)."""
+    if bare and isinstance(fn, types.MethodType) and fn.__self__ is node:
+        return fn.__func__.__name__
     if isinstance(fn, functools.partial):
         return PartialRef(encode_callable(fn.func, node, encode), tuple(encode(a) for a in fn.args),
                           tuple(sorted((k, encode(v)) for k, v in fn.keywords.items())))
@@ -90,7 +93,10 @@ def encode_callable(fn: Any, node: object, encode: Encode) -> Any:
 
 
 def decode_callable(ref: Any, node: object, decode: Decode) -> Callable[..., Any]:
-    """The callable `ref` stands for, bound to `node` where it names a method."""
+    """The callable `ref` stands for, bound to `node` where it names a method (a bare
+    name too)."""
+    if isinstance(ref, str):
+        return getattr(node, ref)  # type: ignore[no-any-return]
     if isinstance(ref, MethodRef):
         return getattr(node, ref.name)
     if isinstance(ref, PartialRef):

@@ -6,13 +6,18 @@ instance attribute of the rclpy node, encoded, and the engine's `Dynamic` part a
 frozen records. Encoding keeps what the checker must compare and nothing else:
 
 - plain values, lists, tuples, dicts, sets, numpy arrays, dataclasses: as they are;
-- ROS messages (mutable, rosidl-like): their frozen contract value, thawed fresh on
-  the way back (`MsgValue`);
-- the framework's handles (publishers, timers, clients, groups, the node itself):
-  a reference by kind and index (`HandleRef`), the same object on the way back;
+- ROS messages (mutable, rosidl-like): their frozen contract value, as msgpack bytes of
+  its plain form, thawed fresh on the way back (`MsgValue`);
+- the framework's handles (publishers, timers, clients, groups, the node itself): not
+  state; an attribute that holds one is listed by name, kind and index (`handles`), and
+  one inside a value is a `HandleRef`; the same object comes back;
 - futures: numbered in the order they are met (`FutureRef`), so two states whose
   futures differ only in creation order encode alike; their records follow;
 - callables: as `twinfleet.rclpy.refs` writes them.
+
+The engine's records are lists of plain values, not dataclasses: the checker encodes a
+state after every handler, and each dataclass or tuple costs an extension object of
+its own (`twinfleet.runtime.contract.snapshot`).
 
 Property expressions read attributes of the node: `RclpyState` answers them
 (``monitor.inside`` reads the attribute ``inside``).
@@ -20,10 +25,13 @@ Property expressions read attributes of the node: `RclpyState` answers them
 
 from __future__ import annotations
 
+import functools
 import types
 from dataclasses import dataclass
 from functools import partial
 from typing import Any
+
+import msgpack
 
 from twinfleet.rclpy import refs, wire
 from twinfleet.rclpy.api.callback_groups import CallbackGroup
@@ -39,30 +47,29 @@ _PLAIN = frozenset({int, float, bool, str, bytes, type(None)})
 
 @dataclass(frozen=True, slots=True)
 class HandleRef:
-    """A framework object of the node: kind ('node', 'publisher', 'timer', ...) and index."""
+    """A framework object of the node inside a value: kind ('publisher', 'timer', ...), index."""
 
     kind: str
     index: int
 
 
+def _pack_message(frozen: Any) -> bytes:
+    # to_plain lists fields in declaration order: equal messages give equal bytes
+    return msgpack.packb(to_plain(frozen), use_bin_type=True)  # type: ignore[no-any-return]
+
+
+def _unpack_message(data: bytes) -> Any:
+    return from_plain(msgpack.unpackb(data, raw=False))
+
+
 @dataclass(frozen=True, slots=True)
 class MsgValue:
-    """A mutable ROS message, as its frozen value's plain form."""
+    """A mutable ROS message: the msgpack bytes of its frozen value's plain form."""
 
-    plain: Any
+    data: bytes
 
     def __getattr__(self, name: str) -> Any:  # property expressions read its fields
-        value = self.plain.get(name) if isinstance(self.plain, dict) else None
-        if value is None and not (isinstance(self.plain, dict) and name in self.plain):
-            raise AttributeError(name)
-        return from_plain(value)
-
-
-@dataclass(frozen=True, slots=True)
-class FrozenMsg:
-    """A frozen contract message (a sample waiting for its group), in plain form."""
-
-    plain: Any
+        return getattr(_unpack_message(object.__getattribute__(self, "data")), name)
 
 
 @dataclass(frozen=True, slots=True)
@@ -80,44 +87,39 @@ class DoneFuture:
 
 
 @dataclass(frozen=True, slots=True)
-class FutureRecord:
-    """A future: 0 pending, 1 finished, 2 cancelled; result; done callbacks."""
-
-    status: int
-    result: Any
-    callbacks: tuple[Any, ...]
-
-
-@dataclass(frozen=True, slots=True)
-class TaskRecord:
-    """A suspended coroutine callback (`entities.Suspended`) as values."""
-
-    callback: Any
-    group: int | None  # the index of the group it holds busy (0: the node's default group)
-    awaiting: Any
-    results: tuple[Any, ...]
-    clocks: tuple[int | None, ...]
-    args: bytes
-    start: bytes
-
-
-@dataclass(frozen=True, slots=True)
 class RclpyState:
-    """The state of an rclpy node (module docstring)."""
+    """The state of an rclpy node (module docstring).
 
-    attrs: dict[str, Any]
-    timers: tuple[Any, ...]
-    params: dict[str, Any]
-    waiting: tuple[tuple[str, int, tuple[Any, ...]], ...]
-    tasks: tuple[TaskRecord, ...]
-    calls: tuple[tuple[Any, ...], ...]
-    on_set: tuple[Any, ...]
-    futures: tuple[FutureRecord, ...]
+    Attributes:
+        attrs: ``[name, value]`` of the node's instance attributes but its handles, encoded,
+            sorted by name.
+        handles: ``name=kind:index`` for each attribute that holds a handle, sorted.
+        timers: per timer slot ``[period_ms, callback, group, canceled, pending, destroyed]``
+            (None: a free slot).
+        params: ``[name, value]`` of each declared parameter, sorted by name.
+        waiting: ``[kind, index, [sample bytes]]`` of each callback held back by its group.
+        tasks: each suspended coroutine callback: ``callback``, ``group`` (held busy),
+            ``awaiting`` (a future's number), ``results`` and ``clocks`` of its steps so
+            far, ``args`` and ``start`` (snapshot bytes of the state it began in).
+        calls: per client, the numbers of the futures of its calls without reply, in order.
+        on_set: the on-set-parameters callbacks.
+        futures: per future ``[status (0 pending, 1 done, 2 cancelled), result, callbacks]``.
+    """
+
+    attrs: list[Any]
+    handles: str
+    timers: list[Any]
+    params: list[Any]
+    waiting: list[Any]
+    tasks: list[Any]
+    calls: list[Any]
+    on_set: list[Any]
+    futures: list[Any]
 
     def __getattr__(self, name: str) -> Any:  # property expressions: node.attribute
-        attrs = object.__getattribute__(self, "attrs")
-        if name in attrs:
-            return attrs[name]
+        for key, value in object.__getattribute__(self, "attrs"):
+            if key == name:
+                return value
         raise AttributeError(name)
 
 
@@ -140,24 +142,25 @@ class _Encoder:
             return {self(k): self(v) for k, v in value.items()}
         if kind is set or kind is frozenset:
             return kind(self(v) for v in value)
-        ref = getattr(value, "_tf_ref", None)
-        if ref is not None and not isinstance(value, type) and (handle := ref()) is not None:
+        handle = _handle(value)
+        if handle is not None:
             return HandleRef(*handle)
         if wire.is_ros_message(value):
-            return MsgValue(to_plain(wire.freeze(value)))
-        if hasattr(kind, "__message_type__"):
-            return FrozenMsg(to_plain(value))
+            return MsgValue(_pack_message(wire.freeze(value)))
         if isinstance(value, Future):
-            return self.future(value)
+            return self.future(value) if not self.done_futures else DoneFuture(
+                self(value.result()))
         if isinstance(value, CallbackGroup):
             return HandleRef("group", self.engine.group_index(value))
         if isinstance(value, types.FunctionType | types.MethodType | partial):
             return refs.encode_callable(value, self.engine.node, self)
         return value
 
-    def future(self, fut: Any) -> Any:
-        if self.done_futures:
-            return DoneFuture(self(fut.result()))
+    def callback(self, fn: Any) -> Any:
+        """A callback where only callbacks go: a method of the node is its bare name."""
+        return refs.encode_callable(fn, self.engine.node, self, bare=True)
+
+    def future(self, fut: Any) -> FutureRef:
         number = self.numbers.get(id(fut))
         if number is None:
             number = self.numbers[id(fut)] = len(self.futures)
@@ -165,27 +168,69 @@ class _Encoder:
         return FutureRef(number)
 
 
+def _handle(value: Any) -> tuple[str, int] | None:
+    ref = getattr(value, "_tf_ref", None)
+    if ref is None or isinstance(value, type):
+        return None
+    return ref()  # type: ignore[no-any-return]
+
+
+def _timer_record(enc: _Encoder, slot: TimerSlot) -> Any:
+    """A timer as one readable line when its callback is a method of the node (the usual
+    case: one string is cheaper to encode than a list), else as a list."""
+    if slot.ref is None:
+        slot.ref = enc.callback(slot.callback)
+    fields = [slot.period_ms, slot.ref, slot.group, slot.canceled, slot.pending, slot.destroyed]
+    if type(slot.ref) is not str:
+        return fields
+    flags = "".join(f" {flag}" for flag, on in (("canceled", slot.canceled),
+                                                ("destroyed", slot.destroyed)) if on)
+    return f"every {slot.period_ms} ms: {slot.ref} (group {slot.group}), {slot.pending} " \
+           f"firing(s) scheduled{flags}"
+
+
+def _timer_slot(dec: _Decoder, record: Any) -> TimerSlot:
+    if type(record) is not str:
+        period, ref, group, canceled, pending, destroyed = record
+        return TimerSlot(period, dec.callback(ref), group, canceled, pending, destroyed, ref)
+    words = record.split()
+    ref = words[3]
+    return TimerSlot(int(words[1]), dec.callback(ref), int(words[5].rstrip("),")),
+                     "canceled" in words[7:], int(words[6]), "destroyed" in words[7:], ref)
+
+
 def capture(engine: Engine) -> RclpyState:
     """The node's state now."""
     enc = _Encoder(engine)
+    attrs: list[Any] = []
+    handles: list[str] = []
     node_dict = engine.node.__dict__
-    attrs = {k: enc(v) for k, v in node_dict.items() if k != "_tf_engine"}
+    for key in sorted(node_dict):
+        value = node_dict[key]
+        if type(value) in _PLAIN:
+            attrs.append([key, value])
+            continue
+        handle = _handle(value) if key != "_tf_engine" else ("engine", 0)
+        if handle is None:
+            attrs.append([key, enc(value)])
+        elif key != "_tf_engine":
+            handles.append(f"{key}={handle[0]}:{handle[1]}")
     dyn = engine.dyn
-    timers = tuple(None if t is None else (t.period_ms, enc(t.callback), t.group, t.canceled,
-                                           t.pending, t.destroyed) for t in dyn.timers)
-    waiting = tuple((w.kind.value, w.index, tuple(enc(a) for a in w.args)) for w in dyn.waiting)
-    tasks = tuple(TaskRecord(enc(t.callback), t.group, enc(t.awaiting), tuple(enc(r) for r in
-                             t.results), tuple(t.clocks), t.args, t.start) for t in dyn.tasks)
-    calls = tuple(tuple(enc(f) for f in c) for c in dyn.calls)
-    on_set = tuple(enc(cb) for cb in dyn.on_set)
-    params = {k: enc(v) for k, v in dyn.params.items()}
-    records: list[FutureRecord] = []
+    timers = [None if t is None else _timer_record(enc, t) for t in dyn.timers]
+    waiting = [[w.kind.value, w.index, [_pack_message(a) for a in w.args]] for w in dyn.waiting]
+    tasks = [{"callback": enc.callback(t.callback), "group": t.group,
+              "awaiting": enc.future(t.awaiting).index, "results": [enc(r) for r in t.results],
+              "clocks": list(t.clocks), "args": t.args, "start": t.start} for t in dyn.tasks]
+    calls = [[enc.future(f).index for f in c] for c in dyn.calls]
+    on_set = [enc.callback(cb) for cb in dyn.on_set]
+    params = [[k, enc(dyn.params[k])] for k in sorted(dyn.params)]
+    records: list[Any] = []
     while len(records) < len(enc.futures):  # records may meet further futures
         fut = enc.futures[len(records)]
         status = 0 if not fut.done() else (2 if fut.cancelled() else 1)
-        records.append(FutureRecord(status, enc(fut._result),
-                                    tuple(enc(cb) for cb in fut._callbacks)))
-    return RclpyState(attrs, timers, params, waiting, tasks, calls, on_set, tuple(records))
+        records.append([status, enc(fut._result), [enc.callback(cb) for cb in fut._callbacks]])
+    return RclpyState(attrs, " ".join(handles), timers, params, waiting, tasks, calls,
+                      on_set, records)
 
 
 class _Decoder:
@@ -206,9 +251,7 @@ class _Decoder:
         if kind is set or kind is frozenset:
             return kind(self(v) for v in value)
         if kind is MsgValue:
-            return wire.thaw(from_plain(value.plain))
-        if kind is FrozenMsg:
-            return from_plain(value.plain)
+            return wire.thaw(_unpack_message(value.data))
         if kind is HandleRef:
             return self.engine.handle(value.kind, value.index)
         if kind is FutureRef:
@@ -221,15 +264,30 @@ class _Decoder:
             return refs.decode_callable(value, self.engine.node, self)
         return value
 
+    def callback(self, ref: Any) -> Any:
+        return refs.decode_callable(ref, self.engine.node, self)
+
+
+@functools.lru_cache(maxsize=256)
+def _handle_list(handles: str) -> tuple[tuple[str, str, int], ...]:
+    out = []
+    for item in handles.split():
+        key, _, ref = item.partition("=")
+        kind, _, index = ref.partition(":")
+        out.append((key, kind, int(index)))
+    return tuple(out)
+
 
 def apply_state(engine: Engine, st: RclpyState, *, fresh_dict: bool = False) -> None:
     """Put `st` into the node and its engine (a fresh attribute dict when asked)."""
     futures = [Future() for _ in st.futures]
     dec = _Decoder(engine, futures)
-    for fut, rec in zip(futures, st.futures, strict=True):
-        fut._state, fut._result, fut._engine = rec.status, dec(rec.result), engine
-        fut._callbacks = [dec(cb) for cb in rec.callbacks]
-    attrs = {k: dec(v) for k, v in st.attrs.items()}
+    for fut, (status, result, callbacks) in zip(futures, st.futures, strict=True):
+        fut._state, fut._result, fut._engine = status, dec(result), engine
+        fut._callbacks = [dec.callback(cb) for cb in callbacks]
+    attrs = {k: dec(v) for k, v in st.attrs}
+    for key, kind, index in _handle_list(st.handles):
+        attrs[key] = engine.handle(kind, index)
     attrs["_tf_engine"] = engine
     if fresh_dict:
         engine.node.__dict__ = attrs
@@ -238,15 +296,15 @@ def apply_state(engine: Engine, st: RclpyState, *, fresh_dict: bool = False) -> 
         node_dict.clear()
         node_dict.update(attrs)
     dyn = type(engine.dyn)()
-    dyn.timers = [None if t is None else TimerSlot(t[0], dec(t[1]), t[2], t[3], t[4], t[5])
-                  for t in st.timers]
-    dyn.params = {k: dec(v) for k, v in st.params.items()}
-    dyn.waiting = [Waiting(EntityKind(k), i, tuple(dec(a) for a in args))
+    dyn.timers = [None if t is None else _timer_slot(dec, t) for t in st.timers]
+    dyn.params = {k: dec(v) for k, v in st.params}
+    dyn.waiting = [Waiting(EntityKind(k), i, tuple(_unpack_message(a) for a in args))
                    for k, i, args in st.waiting]
-    dyn.tasks = [Suspended(dec(t.callback), t.args, t.group, t.start, [dec(r) for r in t.results],
-                           list(t.clocks), dec(t.awaiting)) for t in st.tasks]
-    dyn.calls = [[dec(f) for f in c] for c in st.calls]
-    dyn.on_set = [dec(cb) for cb in st.on_set]
+    dyn.tasks = [Suspended(dec.callback(t["callback"]), t["args"], t["group"], t["start"],
+                           [dec(r) for r in t["results"]], list(t["clocks"]),
+                           futures[t["awaiting"]]) for t in st.tasks]
+    dyn.calls = [[futures[n] for n in c] for c in st.calls]
+    dyn.on_set = [dec.callback(cb) for cb in st.on_set]
     engine.dyn = dyn
 
 

@@ -32,6 +32,18 @@ from twinfleet.runtime.contract.context import Context, ContractError
 Engine = Any  # twinfleet.rclpy.engine.Engine (which imports this module)
 
 
+_ASYNC: dict[Any, bool] = {}
+
+
+def _is_async(callback: Callable[..., Any]) -> bool:
+    """True for a coroutine function (a bound method, a partial of one), cached per function."""
+    key = getattr(callback, "__func__", None) or getattr(callback, "func", None) or callback
+    known = _ASYNC.get(key)
+    if known is None:
+        known = _ASYNC[key] = inspect.iscoroutinefunction(key)
+    return known
+
+
 class Tasks:
     """The coroutine part of one node's engine."""
 
@@ -40,8 +52,7 @@ class Tasks:
 
     def start(self, callback: Callable[..., Any], args: tuple[Any, ...], group: int | None) -> None:
         """Run a ready callback; a coroutine callback may end up suspended."""
-        if not inspect.iscoroutinefunction(callback) and not inspect.iscoroutinefunction(
-                getattr(callback, "func", None)):
+        if not _is_async(callback):
             result = callback(*args)
             if inspect.iscoroutine(result):  # e.g. a lambda returning a coroutine
                 self._first_step(result, callback, args, group)
