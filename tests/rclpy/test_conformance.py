@@ -48,7 +48,7 @@ def test_await_in_default_group_hangs_in_the_checker():
     task = last[-1]["tasks"][0]  # the suspended callback, holding the default group (0)
     assert task["callback"] == "tick" and task["group"] == 0
     assert [w[0] for w in last[-1]["waiting"]] == ["client", "timer"]  # held back by it
-    assert last[-1]["attrs"]["calls"] == 1
+    assert dict(last[-1]["attrs"])["calls"] == 1
 
 
 @pytest.mark.slow

@@ -96,7 +96,7 @@ def decode_callable(ref: Any, node: object, decode: Decode) -> Callable[..., Any
     """The callable `ref` stands for, bound to `node` where it names a method (a bare
     name too)."""
     if isinstance(ref, str):
-        return getattr(node, ref)  # type: ignore[no-any-return]
+        return getattr(node, ref)
     if isinstance(ref, MethodRef):
         return getattr(node, ref.name)
     if isinstance(ref, PartialRef):

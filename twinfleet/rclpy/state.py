@@ -15,9 +15,12 @@ frozen records. Encoding keeps what the checker must compare and nothing else:
   futures differ only in creation order encode alike; their records follow;
 - callables: as `twinfleet.rclpy.refs` writes them.
 
-The engine's records are lists of plain values, not dataclasses: the checker encodes a
-state after every handler, and each dataclass or tuple costs an extension object of
-its own (`twinfleet.runtime.contract.snapshot`).
+The checker encodes a state after every handler, so `RclpyState` takes the snapshot's
+flat path (`__snapshot_flat__`): its records are plain values built in a fixed order,
+packed as they are, and every array comes back as a tuple. A user's lists therefore
+stay plain arrays (read back as lists), while a user's tuples and dicts are wrapped
+(`TupleValue`, `DictValue`, a dict with its items sorted) so that the difference and
+a canonical order survive.
 
 Property expressions read attributes of the node: `RclpyState` answers them
 (``monitor.inside`` reads the attribute ``inside``).
@@ -27,9 +30,10 @@ from __future__ import annotations
 
 import functools
 import types
+from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import partial
-from typing import Any
+from typing import Any, ClassVar
 
 import msgpack
 
@@ -55,7 +59,7 @@ class HandleRef:
 
 def _pack_message(frozen: Any) -> bytes:
     # to_plain lists fields in declaration order: equal messages give equal bytes
-    return msgpack.packb(to_plain(frozen), use_bin_type=True)  # type: ignore[no-any-return]
+    return msgpack.packb(to_plain(frozen), use_bin_type=True)
 
 
 def _unpack_message(data: bytes) -> Any:
@@ -70,6 +74,20 @@ class MsgValue:
 
     def __getattr__(self, name: str) -> Any:  # property expressions read its fields
         return getattr(_unpack_message(object.__getattribute__(self, "data")), name)
+
+
+@dataclass(frozen=True, slots=True)
+class TupleValue:
+    """A user's tuple (arrays of the flat encoding read back as lists)."""
+
+    items: tuple[Any, ...]
+
+
+@dataclass(frozen=True, slots=True)
+class DictValue:
+    """A user's dict, its items sorted by the encoded key."""
+
+    items: tuple[Any, ...]
 
 
 @dataclass(frozen=True, slots=True)
@@ -106,21 +124,36 @@ class RclpyState:
         futures: per future ``[status (0 pending, 1 done, 2 cancelled), result, callbacks]``.
     """
 
-    attrs: list[Any]
+    __snapshot_flat__: ClassVar[bool] = True
+
+    attrs: Sequence[Any]
     handles: str
-    timers: list[Any]
-    params: list[Any]
-    waiting: list[Any]
-    tasks: list[Any]
-    calls: list[Any]
-    on_set: list[Any]
-    futures: list[Any]
+    timers: Sequence[Any]
+    params: Sequence[Any]
+    waiting: Sequence[Any]
+    tasks: Sequence[Any]
+    calls: Sequence[Any]
+    on_set: Sequence[Any]
+    futures: Sequence[Any]
 
     def __getattr__(self, name: str) -> Any:  # property expressions: node.attribute
         for key, value in object.__getattribute__(self, "attrs"):
             if key == name:
-                return value
+                return plain_view(value)
         raise AttributeError(name)
+
+
+def plain_view(value: Any) -> Any:
+    """An encoded attribute as the node had it (lists, tuples and dicts again); messages,
+    handles and futures stay as their encoded stand-ins (fields of a message read through)."""
+    kind = type(value)
+    if kind is tuple or kind is list:
+        return [plain_view(v) for v in value]
+    if kind is TupleValue:
+        return tuple(plain_view(v) for v in value.items)
+    if kind is DictValue:
+        return {plain_view(k): plain_view(v) for k, v in value.items}
+    return value
 
 
 class _Encoder:
@@ -137,9 +170,10 @@ class _Encoder:
         if kind is list:
             return [self(v) for v in value]
         if kind is tuple:
-            return tuple(self(v) for v in value)
+            return TupleValue(tuple(self(v) for v in value))
         if kind is dict:
-            return {self(k): self(v) for k, v in value.items()}
+            items = ((self(k), self(v)) for k, v in value.items())
+            return DictValue(tuple(sorted(items, key=lambda kv: snapshot(kv[0]))))
         if kind is set or kind is frozenset:
             return kind(self(v) for v in value)
         handle = _handle(value)
@@ -172,7 +206,7 @@ def _handle(value: Any) -> tuple[str, int] | None:
     ref = getattr(value, "_tf_ref", None)
     if ref is None or isinstance(value, type):
         return None
-    return ref()  # type: ignore[no-any-return]
+    return ref()
 
 
 def _timer_record(enc: _Encoder, slot: TimerSlot) -> Any:
@@ -180,23 +214,34 @@ def _timer_record(enc: _Encoder, slot: TimerSlot) -> Any:
     case: one string is cheaper to encode than a list), else as a list."""
     if slot.ref is None:
         slot.ref = enc.callback(slot.callback)
-    fields = [slot.period_ms, slot.ref, slot.group, slot.canceled, slot.pending, slot.destroyed]
     if type(slot.ref) is not str:
-        return fields
-    flags = "".join(f" {flag}" for flag, on in (("canceled", slot.canceled),
-                                                ("destroyed", slot.destroyed)) if on)
-    return f"every {slot.period_ms} ms: {slot.ref} (group {slot.group}), {slot.pending} " \
-           f"firing(s) scheduled{flags}"
+        return [slot.period_ms, slot.ref, slot.group, slot.canceled, slot.pending,
+                slot.destroyed]
+    return _timer_line(slot.period_ms, slot.ref, slot.group, slot.canceled, slot.pending,
+                       slot.destroyed)
+
+
+@functools.lru_cache(maxsize=1024)
+def _timer_line(period_ms: int, ref: str, group: int, canceled: bool, pending: int,
+                destroyed: bool) -> str:
+    flags = "".join(f" {flag}" for flag, on in (("canceled", canceled),
+                                                ("destroyed", destroyed)) if on)
+    return f"every {period_ms} ms: {ref} (group {group}), {pending} firing(s) scheduled{flags}"
 
 
 def _timer_slot(dec: _Decoder, record: Any) -> TimerSlot:
     if type(record) is not str:
         period, ref, group, canceled, pending, destroyed = record
         return TimerSlot(period, dec.callback(ref), group, canceled, pending, destroyed, ref)
-    words = record.split()
-    ref = words[3]
-    return TimerSlot(int(words[1]), dec.callback(ref), int(words[5].rstrip("),")),
-                     "canceled" in words[7:], int(words[6]), "destroyed" in words[7:], ref)
+    period, ref, group, canceled, pending, destroyed = _parse_timer_line(record)
+    return TimerSlot(period, dec.callback(ref), group, canceled, pending, destroyed, ref)
+
+
+@functools.lru_cache(maxsize=1024)
+def _parse_timer_line(line: str) -> tuple[int, str, int, bool, int, bool]:
+    words = line.split()
+    return (int(words[1]), words[3], int(words[5].rstrip("),")), "canceled" in words[7:],
+            int(words[6]), "destroyed" in words[7:])
 
 
 def capture(engine: Engine) -> RclpyState:
@@ -210,10 +255,16 @@ def capture(engine: Engine) -> RclpyState:
         if type(value) in _PLAIN:
             attrs.append([key, value])
             continue
-        handle = _handle(value) if key != "_tf_engine" else ("engine", 0)
+        if key == "_tf_engine":
+            continue
+        named = getattr(value, "_tf_key", None)
+        if named is not None:
+            handles.append(f"{key}={named}")
+            continue
+        handle = _handle(value)
         if handle is None:
             attrs.append([key, enc(value)])
-        elif key != "_tf_engine":
+        else:
             handles.append(f"{key}={handle[0]}:{handle[1]}")
     dyn = engine.dyn
     timers = [None if t is None else _timer_record(enc, t) for t in dyn.timers]
@@ -242,12 +293,12 @@ class _Decoder:
         kind = type(value)
         if kind in _PLAIN:
             return value
-        if kind is list:
+        if kind is list or kind is tuple:  # the flat encoding reads arrays back as tuples
             return [self(v) for v in value]
-        if kind is tuple:
-            return tuple(self(v) for v in value)
-        if kind is dict:
-            return {self(k): self(v) for k, v in value.items()}
+        if kind is TupleValue:
+            return tuple(self(v) for v in value.items)
+        if kind is DictValue:
+            return {self(k): self(v) for k, v in value.items}
         if kind is set or kind is frozenset:
             return kind(self(v) for v in value)
         if kind is MsgValue:
@@ -327,4 +378,4 @@ def encode_args(engine: Engine, args: tuple[Any, ...]) -> bytes:
 
 def decode_args(engine: Engine, data: bytes) -> tuple[Any, ...]:
     """Fresh arguments from `encode_args` bytes."""
-    return tuple(_Decoder(engine, [])(restore(data)))
+    return tuple(_Decoder(engine, [])(restore(data)))  # a TupleValue: decoded as a tuple

@@ -14,6 +14,7 @@ class Client:
     def __init__(self, engine: Any, index: int) -> None:
         self._engine, self._index = engine, index
         engine.handles[("client", index)] = self
+        self._tf_key = f"client:{index}"  # how a state names it (twinfleet.rclpy.state)
 
     def _tf_ref(self) -> tuple[str, int] | None:
         return ("client", self._index)

@@ -11,6 +11,7 @@ class Publisher:
     def __init__(self, engine: Any, index: int) -> None:
         self._engine, self._index = engine, index
         engine.handles[("publisher", index)] = self
+        self._tf_key = f"publisher:{index}"  # how a state names it (twinfleet.rclpy.state)
 
     def _tf_ref(self) -> tuple[str, int] | None:
         return ("publisher", self._index)

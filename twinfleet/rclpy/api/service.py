@@ -11,6 +11,7 @@ class Service:
     def __init__(self, engine: Any, index: int) -> None:
         self._engine, self._index = engine, index
         engine.handles[("service", index)] = self
+        self._tf_key = f"service:{index}"  # how a state names it (twinfleet.rclpy.state)
 
     def _tf_ref(self) -> tuple[str, int] | None:
         return ("service", self._index)

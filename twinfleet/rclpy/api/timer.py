@@ -13,6 +13,7 @@ class Timer:
     def __init__(self, engine: Any, index: int) -> None:
         self._engine, self._index = engine, index
         engine.handles[("timer", index)] = self
+        self._tf_key = f"timer:{index}"  # how a state names it (twinfleet.rclpy.state)
 
     def _tf_ref(self) -> tuple[str, int] | None:
         return ("timer", self._index)

@@ -7,7 +7,10 @@ comes back as itself). msgpack arrays are lists; tuples, dicts, sets, numpy
 arrays and dataclasses travel as msgpack extension types. A dataclass whose
 fields are all *declared* as plain values and tuples takes a fast path: its
 arrays travel natively and come back as tuples (a value that breaks its own
-declaration, a list in a tuple field, comes back as a tuple).
+declaration, a list in a tuple field, comes back as a tuple). A dataclass that sets
+the class attribute ``__snapshot_flat__ = True`` takes that path whatever its hints say:
+it promises values whose loose encoding is already canonical (no dict whose order may
+vary) and reads every array back as a tuple (the rclpy wing's node state does).
 """
 
 from __future__ import annotations
@@ -89,7 +92,10 @@ def _field_names(cls: type) -> tuple[str, ...]:
 
 @cache
 def _tuples_only(cls: type) -> bool:
-    """True when every field is declared as plain values, tuples of them, or Optional."""
+    """True when every field is declared as plain values, tuples of them, or Optional (or
+    the class says its values are packed loosely: `__snapshot_flat__`)."""
+    if cls.__dict__.get("__snapshot_flat__", False):
+        return True
     try:
         hints = typing.get_type_hints(cls)
     except Exception:  # unresolvable annotations: take the general path
