@@ -14,8 +14,8 @@ import rclpy
 from rclpy.executors import SingleThreadedExecutor
 
 
-def _wait_matched(nodes, deadline):
-    pending = [p for n in nodes for p in n.publishers if p.topic_name != "/rosout"
+def _wait_matched(nodes, deadline, publishers):
+    pending = [p for n in nodes for p in n.publishers if publishers and p.topic_name != "/rosout"
                and not p.topic_name.endswith("/parameter_events")]
     clients = [c for n in nodes for c in n.clients]
     while time.monotonic() < deadline:
@@ -26,11 +26,12 @@ def _wait_matched(nodes, deadline):
     raise SystemExit("discovery did not match in time")
 
 
-def run(classes, report, done=lambda nodes: False, timeout_s=5.0):
-    """Run `classes` (node classes) until `done` or `timeout_s`; print their `report`."""
+def run(classes, report, done=lambda nodes: False, timeout_s=5.0, wait_publishers=True):
+    """Run `classes` (node classes) until `done` or `timeout_s`; print their `report`.
+    With `wait_publishers` false, no publisher waits for a subscriber (none will come)."""
     rclpy.init(args=sys.argv)
     nodes = [cls() for cls in classes]
-    _wait_matched(nodes, time.monotonic() + 20.0)
+    _wait_matched(nodes, time.monotonic() + 20.0, wait_publishers)
     executor = SingleThreadedExecutor()
     for node in nodes:
         executor.add_node(node)
