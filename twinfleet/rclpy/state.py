@@ -68,12 +68,13 @@ def _unpack_message(data: bytes) -> Any:
 
 @dataclass(frozen=True, slots=True)
 class MsgValue:
-    """A mutable ROS message: the msgpack bytes of its frozen value's plain form."""
+    """A mutable ROS message: the msgpack bytes of its frozen value's plain form (the name
+    ends in ``_`` so that it never hides a field of the message: ``last.data``)."""
 
-    data: bytes
+    packed_: bytes
 
     def __getattr__(self, name: str) -> Any:  # property expressions read its fields
-        return getattr(_unpack_message(object.__getattribute__(self, "data")), name)
+        return getattr(_unpack_message(object.__getattribute__(self, "packed_")), name)
 
 
 @dataclass(frozen=True, slots=True)
@@ -302,7 +303,7 @@ class _Decoder:
         if kind is set or kind is frozenset:
             return kind(self(v) for v in value)
         if kind is MsgValue:
-            return wire.thaw(_unpack_message(value.data))
+            return wire.thaw(_unpack_message(value.packed_))
         if kind is HandleRef:
             return self.engine.handle(value.kind, value.index)
         if kind is FutureRef:
