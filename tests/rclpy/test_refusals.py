@@ -46,3 +46,12 @@ def test_unsupported_parts_are_named_in_one_line(tmp_path, module):
     lines = [ln for ln in (run.stdout + run.stderr).splitlines() if ln.strip()]
     assert len(lines) == 1 and "not supported by twinfleet's rclpy yet" in lines[0], lines
     assert module.split(".")[-1] in lines[0]
+
+
+def test_params_are_the_declared_parameters(tmp_path):
+    scenario = tmp_path / "s.yaml"
+    scenario.write_text("name: s\nnodes:\n  - {name: t, class: 'chatter:Talker', "
+                        "params: {limt: 2}}\n")
+    run = twinfleet("check", str(scenario))
+    assert run.returncode == 2, run.stdout + run.stderr
+    assert "nodes[0].params.limt: unknown parameter" in run.stderr and "limit" in run.stderr
