@@ -324,11 +324,9 @@ def cmd_param(args: argparse.Namespace) -> int:
     """`twinfleet param list|get|dump|set`."""
     from twinfleet.runtime.tools.monitor import graph_verbs
 
-    if args.action == "set":  # before connecting: the answer is the same for every fleet
-        raise CommandError(f"parameters are fixed for a launch (the checker checks the values a "
-                           f"run starts with); set them when launching: twinfleet launch "
-                           f"SCENARIO {args.node.lstrip('/')}.{args.name}:={args.value}")
     conn = connection(args)
+    if args.action == "set":
+        return _param_set(args, conn)
     if args.action == "get":
         return graph_verbs.param_get(conn, args.node, args.name, out=sys.stdout,
                                  timeout_s=args.query_timeout)
@@ -336,6 +334,27 @@ def cmd_param(args: argparse.Namespace) -> int:
         return graph_verbs.param_dump(conn, args.node, out=sys.stdout,
                                       timeout_s=args.query_timeout)
     return graph_verbs.param_list(conn, args.node, out=sys.stdout, timeout_s=args.query_timeout)
+
+
+def _param_set(args: argparse.Namespace, conn: Any) -> int:
+    """`param set`: an rclpy node's own service sets it live (docs/rclpy.md); a native node's
+    parameters are fixed for a launch."""
+    from twinfleet.rclpy.param_service import SetParameter
+    from twinfleet.runtime.contract.messages import type_name_of
+    from twinfleet.runtime.tools.monitor import data_verbs
+
+    node = args.node.strip("/")
+    try:
+        return data_verbs.service_call(
+            conn, f"/{node}/set_parameter", type_name_of(SetParameter),
+            {"name": args.name, "value": args.value}, out=sys.stdout,
+            timeout_s=args.query_timeout, discovery_s=args.query_timeout)
+    except CommandError as exc:
+        if "no server" not in str(exc):
+            raise
+    raise CommandError(f"node {node!r} is not an rclpy node: its parameters are fixed for a "
+                       f"launch (the checker checks the values a run starts with); set them "
+                       f"when launching: twinfleet launch SCENARIO {node}.{args.name}:={args.value}")
 
 
 def cmd_interface(args: argparse.Namespace) -> int:
@@ -568,10 +587,11 @@ def _param_parser(sub: argparse._SubParsersAction) -> None:
                  ("name", {"help": "parameter name, e.g. speed"})]),
         "dump": ("print a node's parameters in force as a ROS 2 parameter file (YAML)",
                  [("node", {"help": "node name, e.g. r1"})]),
-        "set": ("not available: parameters are fixed per launch (says how to override them)",
+        "set": ("set a parameter of a running rclpy node (its on-set callbacks may refuse); "
+                "a native node's parameters are fixed per launch (says how to override them)",
                 [("node", {"help": "node name, e.g. r1"}),
                  ("name", {"help": "parameter name, e.g. speed"}),
-                 ("value", {"help": "the value you wanted"})])})
+                 ("value", {"help": "the value, as YAML (3.0, true, auto, [1, 2])"})])})
 
 
 def _interface_parser(sub: argparse._SubParsersAction) -> None:

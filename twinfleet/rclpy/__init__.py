@@ -6,4 +6,5 @@ Imports the contract only (and `twinfleet.interfaces` for messages); the scenari
 imports the loader when a scenario's `class:` names an rclpy node (docs/rclpy.md).
 """
 
-__all__ = ["adapter", "api", "engine", "entities", "loader", "refs", "state", "tasks", "wire"]
+__all__ = ["adapter", "api", "current", "engine", "entities", "loader", "param_service", "refs",
+           "state", "tasks", "wire"]

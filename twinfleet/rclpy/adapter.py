@@ -25,6 +25,7 @@ import keyword
 from collections.abc import Callable
 from typing import Any, ClassVar
 
+from twinfleet.rclpy import param_service
 from twinfleet.rclpy.engine import Construction, Engine, building
 from twinfleet.rclpy.state import RclpyState, apply_state, capture
 from twinfleet.runtime.contract.context import Context
@@ -87,6 +88,12 @@ class RclpyAdapter(ContractNode):
     @handler
     def _tf_timer(self, ctx: Context, index: int) -> None:
         self._tf_engine.on_timer(ctx, index)
+
+    @service(param_service.SERVICE)
+    def _tf_set_parameter(self, ctx: Context,
+                          request: param_service.SetParameter) -> param_service.SetParameterResult:
+        with self._tf_engine.handling(ctx):
+            return param_service.set_parameter(self._tf_engine.node, request)
 
 
 def _parameter_value(value: Any) -> Any:
