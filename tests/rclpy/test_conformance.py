@@ -4,9 +4,14 @@ agree, and the checker's verdict says the same for every interleaving."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import time
+
 import pytest
 
-from tests.rclpy.oracle import PROGRAMS, launch, real_rclpy, real_rclpy_background
+from tests.rclpy.oracle import PROGRAMS, launch, real_rclpy, real_rclpy_background, twinfleet
+from tests.support import child_env
 from twinfleet import testing
 
 pytestmark = pytest.mark.timeout(300)
@@ -104,3 +109,34 @@ def test_live_fleet_hangs_in_the_default_group():
     run = launch("toggle_hang.yaml", timeout_s=3.0)
     assert run.returncode == 1 and "result: FAILED" in run.stdout, run.stdout + run.stderr
     assert "awaiting" in run.stdout
+
+
+@pytest.mark.slow
+def test_transient_local_late_joiner_under_real_rclpy():
+    with real_rclpy_background("latched") as mapper:
+        time.sleep(1.5)  # the late joiner: started once the mapper has published both
+        reader = real_rclpy("latched", "reader", domain=mapper.domain)
+    assert reader == {"reader": {"maps": ["map v2"]}}
+    assert mapper.result() == {"mapper": {"versions": 2}}
+
+
+@pytest.mark.slow
+@pytest.mark.fleet
+def test_transient_local_late_joiner_live():
+    fleet = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", "latched.yaml",
+                              "--timeout", "30"], cwd=PROGRAMS, env=child_env(),
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert fleet.stdout is not None
+        for line in fleet.stdout:  # the late joiner starts once both versions went out
+            if "published held" in line:
+                break
+        echo = twinfleet("topic", "echo", "/map", "--once", "--fleet", "latched", timeout_s=30.0)
+        assert echo.stdout.startswith("data: map v2"), echo
+    finally:
+        fleet.terminate()
+        try:
+            fleet.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            fleet.kill()
+            fleet.wait()
