@@ -4,10 +4,13 @@ command: check, replay of its counterexample, --statistical, sweep, and launch."
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 
 import pytest
 
-from tests.rclpy.oracle import launch, twinfleet
+from tests.rclpy.oracle import PROGRAMS, launch, twinfleet
+from tests.support import child_env
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -49,3 +52,31 @@ def test_sweep(tmp_path):
 def test_launch():
     run = launch("turtle_system.yaml")
     assert run.returncode == 0 and "result: PASSED" in run.stdout, run.stdout + run.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.fleet
+def test_interface_show_and_topic_pub_reach_an_rclpy_fleet():
+    shown = twinfleet("interface", "show", "geometry_msgs/msg/Twist")
+    assert "geometry_msgs/Vector3 linear" in shown.stdout, shown.stdout + shown.stderr
+    fleet = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", "turtle_system.yaml",
+                              "--timeout", "8"], cwd=PROGRAMS, env=child_env(),
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        assert fleet.stdout is not None
+        seen = []
+        for line in fleet.stdout:  # two laps done: the controller stops commanding
+            seen.append(line)
+            if "two_laps held" in line:
+                break
+        pub = twinfleet("topic", "pub", "/cmd_vel", "geometry_msgs/msg/Twist",
+                        "{linear: {x: 5.0}}", "--once", "--fleet", "turtle_system",
+                        timeout_s=30.0)
+        assert pub.returncode == 0, pub.stdout + pub.stderr
+        out, _ = fleet.communicate(timeout=60)
+    finally:
+        if fleet.poll() is None:
+            fleet.kill()
+            fleet.wait()
+    # the turtle moved 5 on the outside command; the monitor saw it past the goal
+    assert "within_goal violated" in out and "('farthest', 5)" in out, "".join(seen) + out
