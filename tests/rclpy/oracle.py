@@ -89,6 +89,36 @@ def launch(scenario: str, *args: str, timeout_s: float = 20.0) -> subprocess.Com
                      timeout_s=timeout_s + 60.0)
 
 
+@contextmanager
+def running_fleet(scenario: str, timeout_s: float = 30.0) -> Iterator[subprocess.Popen[str]]:
+    """`twinfleet launch SCENARIO` in the background (its output on the process's stdout,
+    merged); stopped at the end of the block, killed if it will not stop."""
+    fleet = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", scenario,
+                              "--timeout", str(timeout_s)], cwd=PROGRAMS, env=child_env(),
+                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        yield fleet
+    finally:
+        if fleet.poll() is None:
+            fleet.terminate()
+            try:
+                fleet.wait(timeout=30)
+            except subprocess.TimeoutExpired:
+                fleet.kill()
+                fleet.wait()
+
+
+def wait_for_line(fleet: subprocess.Popen[str], text: str) -> list[str]:
+    """Read the fleet's output up to the first line holding `text`; the lines read."""
+    assert fleet.stdout is not None
+    seen = []
+    for line in fleet.stdout:
+        seen.append(line)
+        if text in line:
+            return seen
+    raise AssertionError(f"the fleet ended before printing {text!r}:\n{''.join(seen)}")
+
+
 def in_process_env() -> None:
     """Let in-process checks import the programs as a scenario in their folder does."""
     if str(PROGRAMS) not in sys.path:

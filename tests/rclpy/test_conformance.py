@@ -4,14 +4,19 @@ agree, and the checker's verdict says the same for every interleaving."""
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import time
 
 import pytest
 
-from tests.rclpy.oracle import PROGRAMS, launch, real_rclpy, real_rclpy_background, twinfleet
-from tests.support import child_env
+from tests.rclpy.oracle import (
+    PROGRAMS,
+    launch,
+    real_rclpy,
+    real_rclpy_background,
+    running_fleet,
+    twinfleet,
+    wait_for_line,
+)
 from twinfleet import testing
 
 pytestmark = pytest.mark.timeout(300)
@@ -123,20 +128,7 @@ def test_transient_local_late_joiner_under_real_rclpy():
 @pytest.mark.slow
 @pytest.mark.fleet
 def test_transient_local_late_joiner_live():
-    fleet = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", "latched.yaml",
-                              "--timeout", "30"], cwd=PROGRAMS, env=child_env(),
-                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        assert fleet.stdout is not None
-        for line in fleet.stdout:  # the late joiner starts once both versions went out
-            if "published held" in line:
-                break
+    with running_fleet("latched.yaml") as fleet:
+        wait_for_line(fleet, "published held")  # the late joiner: after both versions
         echo = twinfleet("topic", "echo", "/map", "--once", "--fleet", "latched", timeout_s=30.0)
-        assert echo.stdout.startswith("data: map v2"), echo
-    finally:
-        fleet.terminate()
-        try:
-            fleet.wait(timeout=30)
-        except subprocess.TimeoutExpired:
-            fleet.kill()
-            fleet.wait()
+    assert echo.stdout.startswith("data: map v2"), echo

@@ -4,13 +4,10 @@ command: check, replay of its counterexample, --statistical, sweep, and launch."
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 
 import pytest
 
-from tests.rclpy.oracle import PROGRAMS, launch, twinfleet
-from tests.support import child_env
+from tests.rclpy.oracle import launch, running_fleet, twinfleet, wait_for_line
 
 pytestmark = pytest.mark.timeout(300)
 
@@ -59,24 +56,12 @@ def test_launch():
 def test_interface_show_and_topic_pub_reach_an_rclpy_fleet():
     shown = twinfleet("interface", "show", "geometry_msgs/msg/Twist")
     assert "geometry_msgs/Vector3 linear" in shown.stdout, shown.stdout + shown.stderr
-    fleet = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", "turtle_system.yaml",
-                              "--timeout", "8"], cwd=PROGRAMS, env=child_env(),
-                             stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        assert fleet.stdout is not None
-        seen = []
-        for line in fleet.stdout:  # two laps done: the controller stops commanding
-            seen.append(line)
-            if "two_laps held" in line:
-                break
+    with running_fleet("turtle_system.yaml", timeout_s=8.0) as fleet:
+        wait_for_line(fleet, "two_laps held")  # two laps done: the controller stops commanding
         pub = twinfleet("topic", "pub", "/cmd_vel", "geometry_msgs/msg/Twist",
                         "{linear: {x: 5.0}}", "--once", "--fleet", "turtle_system",
                         timeout_s=30.0)
         assert pub.returncode == 0, pub.stdout + pub.stderr
         out, _ = fleet.communicate(timeout=60)
-    finally:
-        if fleet.poll() is None:
-            fleet.kill()
-            fleet.wait()
     # the turtle moved 5 on the outside command; the monitor saw it past the goal
-    assert "within_goal violated" in out and "('farthest', 5)" in out, "".join(seen) + out
+    assert "within_goal violated" in out and "('farthest', 5)" in out, out
