@@ -44,3 +44,15 @@ def test_state_round_trips_through_snapshot_bytes():
     assert rclpy_node.pending is engine.dyn.calls[0][0]  # one future, found from both
     assert rclpy_node.last.data == "none" and type(rclpy_node.last).__name__ == "String"
     assert len(rclpy_node.pending._callbacks) == 1
+
+
+def test_clock_time_duration_and_logger():
+    system = testing.system({"c": "clocked:Clocked"}, [testing.invariant(
+        "not_yet", "not (len(c.stamps) == 2 and c.qos_depth == 5 and "
+                   "c.stamps[1] == [0, 500000000, 1000000000])")])
+    report = testing.check(system)  # the second tick (t=500 ms) reaches it: a violation
+    assert report.violated, report.explain()
+    assert report.trace is not None
+    logs = [log for step in report.trace["steps"] for log in step["logs"]]
+    assert len(logs) == 2 and all("WARN" in str(log) and "tick at" in str(log) for log in logs)
+    assert not any("not shown" in str(log) for log in logs)  # DEBUG is below INFO

@@ -63,3 +63,30 @@ def get_global_executor() -> Any:
     """A single-threaded executor."""
     from twinfleet.rclpy.api.executors import SingleThreadedExecutor
     return SingleThreadedExecutor()
+
+
+# As real rclpy's package does, make its modules attributes of `rclpy` (`rclpy.qos.QoSProfile`
+# after a bare `import rclpy`).
+from twinfleet.rclpy.api import (  # noqa: E402
+    callback_groups,
+    client,
+    clock,
+    duration,
+    exceptions,
+    executors,
+    logging,
+    node,
+    parameter,
+    publisher,
+    qos,
+    service,
+    subscription,
+    task,
+    time,
+    timer,
+)
+
+__all__ = ["callback_groups", "client", "clock", "create_node", "duration", "exceptions",
+           "executors", "get_global_executor", "init", "logging", "node", "ok", "parameter",
+           "publisher", "qos", "service", "shutdown", "spin", "spin_once",
+           "spin_until_future_complete", "subscription", "task", "time", "timer", "try_shutdown"]
