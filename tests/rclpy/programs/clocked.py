@@ -2,8 +2,8 @@
 as an attribute of a bare `import rclpy`."""
 
 import rclpy
-from rclpy.node import Node
 from rclpy.duration import Duration
+from rclpy.node import Node
 from std_msgs.msg import Header
 
 
