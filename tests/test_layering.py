@@ -56,7 +56,7 @@ RULES: dict[str, set[str]] = {
     "runtime": set(),  # runtime/__init__.py: names its wings, imports none
     "maps": set(), "launch": set(),  # package data: shipped maps and scenarios
     "top": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes", "ros2",
-            "sweep", "interfaces", "top"},
+            "sweep", "interfaces", "rclpy", "top"},
 }
 #: `tools/` groups three wings of its own (tests/test_sizes.py measures each alone): the
 #: monitors lie below the recordings and the viewers, which use each other (the Foxglove

@@ -38,7 +38,7 @@ def importable_class_path(cls: type, where: str) -> str:
             found = getattr(found, part)
     except (ImportError, AttributeError):
         found = None
-    if found is not cls and getattr(cls, "rclpy_class", None) is not found:  # or its adapter
+    if found is None or (found is not cls and getattr(cls, "rclpy_class", None) is not found):
         raise ScenarioError(f"{where}: node class {path} does not import back under that name; "
                             "node processes need an importable module:qualname")
     return path
