@@ -45,6 +45,11 @@ def _known_packages() -> frozenset[str]:
     return frozenset(known_packages())
 
 
+#: How ROS 2 interface packages are named; other names are not looked up (that would load
+#: the definitions, rosbags' store included, for every module a node imports).
+INTERFACE_SUFFIXES = ("_msgs", "_srvs", "_interfaces")
+
+
 def is_known_package(name: str) -> bool:
     """True when `name` is an interface package twinfleet generates (std_msgs, ...)."""
-    return name in _known_packages()
+    return name.endswith(INTERFACE_SUFFIXES) and name in _known_packages()
