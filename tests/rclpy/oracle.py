@@ -90,11 +90,12 @@ def launch(scenario: str, *args: str, timeout_s: float = 20.0) -> subprocess.Com
 
 
 @contextmanager
-def running_fleet(scenario: str, timeout_s: float = 30.0) -> Iterator[subprocess.Popen[str]]:
-    """`twinfleet launch SCENARIO` in the background (its output on the process's stdout,
-    merged); stopped at the end of the block, killed if it will not stop."""
+def running_fleet(scenario: str, timeout_s: float = 30.0,
+                  *args: str) -> Iterator[subprocess.Popen[str]]:
+    """`twinfleet launch SCENARIO ARGS` in the background (its output on the process's
+    stdout, merged); stopped at the end of the block, killed if it will not stop."""
     fleet = subprocess.Popen([sys.executable, "-m", "twinfleet", "launch", scenario,
-                              "--timeout", str(timeout_s)], cwd=PROGRAMS, env=child_env(),
+                              "--timeout", str(timeout_s), *args], cwd=PROGRAMS, env=child_env(),
                              stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     try:
         yield fleet

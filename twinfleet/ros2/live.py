@@ -37,6 +37,7 @@ from twinfleet.ros2.interfaces import Interfaces, ros_name
 from twinfleet.ros2.mapping import (
     InboundMapping,
     MappingError,
+    NoMapping,
     Ros2Mapping,
     load_mapping,
     mapping_of_scene,
@@ -209,10 +210,7 @@ class FleetBridge:
         s = self.settings
         view = _look(session, s.fleet)
         name = s.mapping or mapping_of_scene(view.scene)
-        if name is None:
-            raise BridgeError(f"fleet {s.fleet!r}: its scene names no ROS 2 mapping; give one "
-                              "(--mapping module:Name)")
-        mapping = load_mapping(name)
+        mapping = NoMapping() if name is None else load_mapping(name)  # standard types carry
         assert self._ros is not None
         self.side = RosSide(self._ros, mapping, domain=s.domain, on_inbound=self._on_inbound)
         self.side.interfaces = fleet_interfaces(self.side.graph.types)

@@ -18,7 +18,9 @@ ValueError with the reason it is dropped for): `InboundMapping`.
 
 It is named by import name (``module:Name``, a class made with no arguments);
 the default is the one the fleet's scene names in its ``ros2`` attribute
-(``RobotScene.ros2``), so the shipped robot scenarios need no option.
+(``RobotScene.ros2``), so the shipped robot scenarios need no option. A fleet
+whose scene names none (an rclpy fleet speaks standard types already) gets
+`NoMapping`: every type is carried as it is.
 """
 
 from __future__ import annotations
@@ -45,6 +47,19 @@ class Ros2Mapping(Protocol):
                  stamp_ms: int) -> Sequence[Output]:
         """The ROS 2 messages one fleet message becomes."""
         ...
+
+
+class NoMapping:
+    """The mapping of a fleet that needs none: it maps no type, so the bridge carries each
+    standard type under its own name and every other type by its fields."""
+
+    latched: frozenset[str] = frozenset()
+    mapped_types: frozenset[str] = frozenset()
+
+    def outbound(self, topic: str, type_name: str, data: Mapping[str, Any],
+                 stamp_ms: int) -> Sequence[Output]:
+        """Nothing: no type is mapped."""
+        return ()
 
 
 @runtime_checkable
