@@ -4,12 +4,14 @@
 its own name (the *probe*) to learn what its `__init__` creates, and declares to the
 contract, as the native decorators do at class creation:
 
-- each subscription as an ``@subscribe(topic, qos=...)`` handler ``_tf_sub_<i>``;
-- each service as an ``@service(name)`` handler ``_tf_srv_<i>``;
-- each client's replies as a ``@handler`` ``_tf_reply_<i>`` (the target of `ctx.call`);
-- timers as ``ctx.after`` events of one ``@handler`` ``_tf_timer(index)``, scheduled
-  by ``@on_start`` and by each firing, so they can be cancelled, reset and made at
-  run time;
+- each subscription as an ``@subscribe(topic, qos=...)`` handler and each service as an
+  ``@service(name)`` handler, named after the rclpy callback (``on_pose``) so that traces
+  and logs read as the node's code does (``sub_<i>``/``srv_<i>`` when the name is taken
+  or not a plain public name);
+- each client's replies as a ``@handler`` ``reply_<i>`` (the target of `ctx.call`);
+- timers as ``ctx.after`` events of one ``@handler`` ``timer(index)``, scheduled by
+  ``@on_start`` and by each firing, so they can be cancelled, reset and made at run
+  time;
 - its publishers' QoS as `publications`, its declared parameters as the `Params`
   dataclass the scenario's `params:` are checked against.
 
@@ -82,15 +84,17 @@ class RclpyAdapter(ContractNode):
         return self._tf_engine.node
 
     @on_start
-    def _tf_start(self, ctx: Context) -> None:
+    def start(self, ctx: Context) -> None:
+        """The node starts: what its __init__ published, its timers' first firings."""
         self._tf_engine.start(ctx)
 
     @handler
-    def _tf_timer(self, ctx: Context, index: int) -> None:
+    def timer(self, ctx: Context, index: int) -> None:
+        """Timer `index` of the rclpy node fires."""
         self._tf_engine.on_timer(ctx, index)
 
     @service(param_service.SERVICE)
-    def _tf_set_parameter(self, ctx: Context,
+    def set_parameter(self, ctx: Context,
                           request: param_service.SetParameter) -> param_service.SetParameterResult:
         with self._tf_engine.handling(ctx):
             return param_service.set_parameter(self._tf_engine.node, request)
@@ -123,11 +127,13 @@ def adapt(cls: type) -> type[RclpyAdapter]:
         "publications": {p.topic: p.qos for p in engine.publishers},
     }
     for i, sub in enumerate(engine.subscriptions):
-        namespace[f"_tf_sub_{i}"] = subscribe(sub.topic, qos=sub.qos)(_on_message(i))
+        name = _handler_name(sub.callback, f"sub_{i}", namespace)
+        namespace[name] = subscribe(sub.topic, qos=sub.qos)(_on_message(i, name))
     for i, srv in enumerate(engine.services):
-        namespace[f"_tf_srv_{i}"] = service(srv.name)(_on_request(i))
+        name = _handler_name(srv.callback, f"srv_{i}", namespace)
+        namespace[name] = service(srv.name)(_on_request(i, name))
     for i in range(len(engine.clients)):
-        namespace[f"_tf_reply_{i}"] = handler(_on_reply(i))
+        namespace[f"reply_{i}"] = handler(_on_reply(i))
     made = _ADAPTED[cls] = type(cls.__name__, (RclpyAdapter,), namespace)
     return made
 
@@ -137,22 +143,31 @@ def _named(fn: Callable[..., Any], name: str) -> Callable[..., Any]:
     return fn
 
 
-def _on_message(i: int) -> Callable[..., Any]:
+def _handler_name(callback: Any, fallback: str, taken: dict[str, Any]) -> str:
+    """The rclpy callback's own name when it is free on the adapter, else `fallback`."""
+    name = getattr(getattr(callback, "__func__", callback), "__name__", "")
+    if (not name.isidentifier() or name.startswith("_") or keyword.iskeyword(name)
+            or name in taken or hasattr(RclpyAdapter, name)):
+        return fallback
+    return name
+
+
+def _on_message(i: int, name: str) -> Callable[..., Any]:
     def method(self: RclpyAdapter, ctx: Context, msg: Any) -> None:
         self._tf_engine.on_message(ctx, i, msg)
-    return _named(method, f"_tf_sub_{i}")
+    return _named(method, name)
 
 
-def _on_request(i: int) -> Callable[..., Any]:
+def _on_request(i: int, name: str) -> Callable[..., Any]:
     def method(self: RclpyAdapter, ctx: Context, request: Any) -> Any:
         return self._tf_engine.on_request(ctx, i, request)
-    return _named(method, f"_tf_srv_{i}")
+    return _named(method, name)
 
 
 def _on_reply(i: int) -> Callable[..., Any]:
     def method(self: RclpyAdapter, ctx: Context, reply: Any) -> None:
         self._tf_engine.on_reply(ctx, i, reply)
-    return _named(method, f"_tf_reply_{i}")
+    return _named(method, f"reply_{i}")
 
 
 _HINTS = {bool: bool, int: int, float: float, str: str, bytes: bytes}

@@ -287,7 +287,7 @@ class Engine:
         frozen = wire.freeze(request)
         future._engine = self
         self.dyn.calls[index].append(future)
-        method = getattr(self.adapter, f"_tf_reply_{index}")
+        method = getattr(self.adapter, f"reply_{index}")
         self.effect(lambda ctx: ctx.call(entry.name, frozen, method, timeout_ms=CALL_TIMEOUT_MS))
 
     def log(self, severity: str, logger: str, text: str) -> None:
@@ -318,7 +318,7 @@ class Engine:
         slot = self.dyn.timers[index]
         assert slot is not None and self.ctx is not None
         slot.pending += 1
-        self.ctx.after(slot.period_ms, self.adapter._tf_timer, index)
+        self.ctx.after(slot.period_ms, self.adapter.timer, index)
 
     def timer_slot(self, index: int) -> TimerSlot:
         """Timer `index` (which the caller holds a handle of)."""

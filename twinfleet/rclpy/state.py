@@ -116,7 +116,8 @@ class RclpyState:
         timers: per timer slot ``[period_ms, callback, group, canceled, pending, destroyed]``
             (None: a free slot).
         params: ``[name, value]`` of each declared parameter, sorted by name.
-        waiting: ``[kind, index, [sample bytes]]`` of each callback held back by its group.
+        waiting: ``[kind, index, [sample]]`` of each callback held back by its group (a sample
+            as the plain form of the frozen message).
         tasks: each suspended coroutine callback: ``callback``, ``group`` (held busy),
             ``awaiting`` (a future's number), ``results`` and ``clocks`` of its steps so
             far, ``args`` and ``start`` (snapshot bytes of the state it began in).
@@ -269,7 +270,8 @@ def capture(engine: Engine) -> RclpyState:
             handles.append(f"{key}={handle[0]}:{handle[1]}")
     dyn = engine.dyn
     timers = [None if t is None else _timer_record(enc, t) for t in dyn.timers]
-    waiting = [[w.kind.value, w.index, [_pack_message(a) for a in w.args]] for w in dyn.waiting]
+    # a waiting sample as its plain form (fields in declaration order: canonical as it is)
+    waiting = [[w.kind.value, w.index, [to_plain(a) for a in w.args]] for w in dyn.waiting]
     tasks = [{"callback": enc.callback(t.callback), "group": t.group,
               "awaiting": enc.future(t.awaiting).index, "results": [enc(r) for r in t.results],
               "clocks": list(t.clocks), "args": t.args, "start": t.start} for t in dyn.tasks]
@@ -350,7 +352,7 @@ def apply_state(engine: Engine, st: RclpyState, *, fresh_dict: bool = False) -> 
     dyn = type(engine.dyn)()
     dyn.timers = [None if t is None else _timer_slot(dec, t) for t in st.timers]
     dyn.params = {k: dec(v) for k, v in st.params}
-    dyn.waiting = [Waiting(EntityKind(k), i, tuple(_unpack_message(a) for a in args))
+    dyn.waiting = [Waiting(EntityKind(k), i, tuple(from_plain(a) for a in args))
                    for k, i, args in st.waiting]
     dyn.tasks = [Suspended(dec.callback(t["callback"]), t["args"], t["group"], t["start"],
                            [dec(r) for r in t["results"]], list(t["clocks"]),

@@ -36,11 +36,15 @@ _ASYNC: dict[Any, bool] = {}
 
 
 def _is_async(callback: Callable[..., Any]) -> bool:
-    """True for a coroutine function (a bound method, a partial of one), cached per function."""
-    key = getattr(callback, "__func__", None) or getattr(callback, "func", None) or callback
+    """True for a coroutine function (a bound method, a partial of one), cached per code
+    object (lambdas and closures are new function objects each time)."""
+    fn = getattr(callback, "__func__", None) or getattr(callback, "func", None) or callback
+    key = getattr(fn, "__code__", None)
+    if key is None:
+        return inspect.iscoroutinefunction(fn)
     known = _ASYNC.get(key)
     if known is None:
-        known = _ASYNC[key] = inspect.iscoroutinefunction(key)
+        known = _ASYNC[key] = inspect.iscoroutinefunction(fn)
     return known
 
 
