@@ -1,5 +1,6 @@
 """The 97-line rclpy turtle system (programs/turtle_system.py) runs as written under every
-command: check, replay of its counterexample, --statistical, sweep, and launch."""
+command: check, replay of its counterexample, --statistical, sweep, launch, and validate
+of a live run against the checker's model."""
 
 from __future__ import annotations
 
@@ -65,3 +66,13 @@ def test_interface_show_and_topic_pub_reach_an_rclpy_fleet():
         out, _ = fleet.communicate(timeout=60)
     # the turtle moved 5 on the outside command; the monitor saw it past the goal
     assert "within_goal violated" in out and "('farthest', 5)" in out, out
+
+
+@pytest.mark.slow
+@pytest.mark.fleet
+def test_validate_explains_a_live_run(tmp_path):
+    events = tmp_path / "turtle.events.jsonl"
+    run = launch("turtle_system.yaml", "--record-events", str(events))
+    assert run.returncode == 0, run.stdout + run.stderr
+    valid = twinfleet("validate", str(events), "turtle_system.yaml")
+    assert valid.returncode == 0 and valid.stdout.startswith("VALID"), valid.stdout + valid.stderr
