@@ -55,3 +55,52 @@ def test_lost_update_is_found_and_replayed(tmp_path):
 def test_real_rclpy_agrees():
     assert real_rclpy("interleave")["stepper"]["log"] == REAL_ORDER
     assert real_rclpy("interleave", "tally")["tally"] == {"total": 1, "finished": 2}
+
+
+GATE_ORDERS = (["run", "other", "poke"], ["run", "poke", "other"])
+
+
+def gate(*properties: testing.PropertyConfig) -> testing.CheckReport:
+    return testing.check(testing.system({"pinger": "interleave:Pinger", "gate": "interleave:Gate"},
+                                        list(properties)))
+
+
+@pytest.mark.parametrize("order", GATE_ORDERS)
+def test_callbacks_held_by_a_busy_group_run_in_every_order(order):
+    """While `run` awaits in the default group, the second timer and the poke wait; when it
+    ends, the checker explores both orders (rclpy's order in one wait set is no promise)."""
+    report = gate(testing.invariant("not_this_order", f"gate.order != {order}"))
+    assert report.violated, report.explain()
+
+
+@pytest.mark.slow
+def test_real_rclpy_takes_one_of_the_explored_orders():
+    assert real_rclpy("interleave", "gate")["gate"]["order"] in GATE_ORDERS
+
+
+class Pick:
+    """Answers ctx.choose with one index."""
+
+    def __init__(self, index: int) -> None:
+        self.index = index
+
+    def choose(self, n: int) -> int:
+        return self.index
+
+
+@pytest.mark.parametrize(("index", "order"), [(0, GATE_ORDERS[0]), (1, GATE_ORDERS[1])])
+def test_a_freed_group_lets_the_chooser_order_its_waiting_callbacks(index, order):
+    from twinfleet.interfaces import freeze, load_interface
+    from twinfleet.runtime.contract.context import Context
+
+    node = testing.system({"pinger": "interleave:Pinger", "gate": "interleave:Gate"}).node(
+        "gate").instantiate()
+    node.start(Context(node, 0))
+    node.timer(Context(node, 100), 0)  # run: calls, suspends holding the default group
+    node.timer(Context(node, 100), 1)  # other: waits
+    node.on_poke(Context(node, 100), freeze(load_interface("std_msgs", "msg").String(data="p")))
+    assert [w.kind.value for w in node._tf_engine.dyn.waiting] == ["timer", "subscription"]
+    reply = freeze(load_interface("std_srvs", "srv").Trigger.Response(success=True))
+    ctx = Context(node, 100, Pick(index))
+    node.reply_0(ctx, reply)  # run ends; the group frees; the chooser picks who goes first
+    assert ctx.choices == [index] and node.rclpy_node.order == order

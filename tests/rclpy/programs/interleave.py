@@ -76,16 +76,42 @@ class Tally(Node):
         self.finished += 1
 
 
+class Gate(Node):
+    """A coroutine holds the default group while a timer and a sample become ready; when it
+    ends, both run, in an order rclpy does not promise."""
+
+    def __init__(self):
+        super().__init__("gate")
+        self.order = []
+        self.client = self.create_client(Trigger, "ping", callback_group=ReentrantCallbackGroup())
+        self.create_subscription(String, "poke", self.on_poke, 10)
+        self.first = self.create_timer(0.1, self.run)
+        self.second = self.create_timer(0.1, self.other)
+
+    async def run(self):
+        self.first.cancel()
+        await self.client.call_async(Trigger.Request())
+        self.order.append("run")
+
+    def other(self):
+        self.second.cancel()
+        self.order.append("other")
+
+    def on_poke(self, msg):
+        self.order.append("poke")
+
+
 def main():
     import sys
 
     import oracle_main
 
-    node = Tally if "tally" in sys.argv else Stepper
-    oracle_main.run([Pinger, node], ["log", "total", "finished"],
+    node = Tally if "tally" in sys.argv else Gate if "gate" in sys.argv else Stepper
+    oracle_main.run([Pinger, node], ["log", "total", "finished", "order"],
                     done=lambda nodes: len(getattr(nodes[1], "log", ())) >= 4
-                    or getattr(nodes[1], "finished", 0) >= 2, timeout_s=3.0,
-                    wait_publishers=node is Stepper)
+                    or getattr(nodes[1], "finished", 0) >= 2
+                    or len(getattr(nodes[1], "order", ())) >= 3, timeout_s=3.0,
+                    wait_publishers=node is not Tally)
 
 
 if __name__ == "__main__":
