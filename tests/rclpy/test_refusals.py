@@ -55,3 +55,28 @@ def test_params_are_the_declared_parameters(tmp_path):
     run = twinfleet("check", str(scenario))
     assert run.returncode == 2, run.stdout + run.stderr
     assert "nodes[0].params.limt: unknown parameter" in run.stderr and "limit" in run.stderr
+
+
+def test_only_the_node_codes_thread_may_not_sleep():
+    import threading
+    import time
+
+    from twinfleet.runtime.contract.context import Context, ContractError
+
+    node = testing.system({"s": "blocking:Sleeper"}).node("s").instantiate()
+    errors: list[BaseException] = []
+
+    def other() -> None:
+        try:
+            time.sleep(0)
+        except BaseException as exc:  # noqa: BLE001  (what the other thread met, for the test)
+            errors.append(exc)
+
+    with node._tf_engine.handling(Context(node, 0)):
+        thread = threading.Thread(target=other)
+        thread.start()
+        thread.join()
+        with pytest.raises(ContractError, match="time.sleep"):
+            time.sleep(0)
+    assert errors == []
+    time.sleep(0)  # put back after the handler

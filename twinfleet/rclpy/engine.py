@@ -16,11 +16,12 @@ which together are the adapter's `state` (`twinfleet.rclpy.state`).
 
 from __future__ import annotations
 
+import threading
 import time as _time
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Any, SupportsIndex
 
 from twinfleet.rclpy import current, wire
 from twinfleet.rclpy.entities import (
@@ -68,15 +69,12 @@ def construction() -> Construction:
     return _BUILDING[-1] if _BUILDING else Construction()
 
 
-def _blocked_sleep(*_args: Any) -> None:
-    raise ContractError("time.sleep() blocks the executor inside an rclpy callback",
-                        "use a timer (node.create_timer) and continue in its callback")
-
-
 class _Handling:
-    """The context of `Engine.handling` (a class: it runs around every handler)."""
+    """The context of `Engine.handling` (a class: it runs around every handler). While node
+    code runs, `time.sleep` called from its thread is the contract breach that names the
+    rclpy idiom; another thread's call goes to the sleep in place before."""
 
-    __slots__ = ("engine", "ctx", "sleep")
+    __slots__ = ("engine", "ctx", "sleep", "thread")
 
     def __init__(self, engine: Engine, ctx: Context) -> None:
         self.engine, self.ctx = engine, ctx
@@ -84,12 +82,21 @@ class _Handling:
     def __enter__(self) -> None:
         self.engine.ctx = self.ctx
         current.enter(self.engine)
-        self.sleep, _time.sleep = _time.sleep, _blocked_sleep
+        self.thread = threading.get_ident()
+        self.sleep, _time.sleep = _time.sleep, self.blocked_sleep
 
     def __exit__(self, *_exc: object) -> None:
         _time.sleep = self.sleep
         current.leave()
         self.engine.ctx = None
+
+    def blocked_sleep(self, seconds: float | SupportsIndex) -> None:
+        """`time.sleep` while node code runs."""
+        if threading.get_ident() != self.thread:
+            self.sleep(seconds)
+            return
+        raise ContractError("time.sleep() blocks the executor inside an rclpy callback",
+                            "use a timer (node.create_timer) and continue in its callback")
 
 
 class Engine:
