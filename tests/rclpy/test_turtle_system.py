@@ -1,6 +1,6 @@
 """The 97-line rclpy turtle system (programs/turtle_system.py) runs as written under every
-command: check, replay of its counterexample, --statistical, sweep, launch, and validate
-of a live run against the checker's model."""
+command: check, replay of its counterexample (and on the live fleet), --statistical,
+sweep, launch, and validate of a live run against the checker's model."""
 
 from __future__ import annotations
 
@@ -76,3 +76,13 @@ def test_validate_explains_a_live_run(tmp_path):
     assert run.returncode == 0, run.stdout + run.stderr
     valid = twinfleet("validate", str(events), "turtle_system.yaml")
     assert valid.returncode == 0 and valid.stdout.startswith("VALID"), valid.stdout + valid.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.fleet
+def test_a_violation_replays_on_the_live_fleet(tmp_path):
+    trace = tmp_path / "fence.trace.json"
+    twinfleet("check", "turtle_system.yaml", "controller.goal:=5", "--trace-out", str(trace))
+    live = twinfleet("replay", str(trace), "--live", timeout_s=180.0)
+    assert "live replay CONFIRMED: fence" in live.stdout, live.stdout + live.stderr
+    assert "final node states: equal to the checker's final world" in live.stdout
