@@ -81,6 +81,7 @@ class _Handling:
 
     def __enter__(self) -> None:
         self.engine.ctx = self.ctx
+        self.engine.synced = None  # node code may change the engine's records
         current.enter(self.engine)
         self.thread = threading.get_ident()
         self.sleep, _time.sleep = _time.sleep, self.blocked_sleep
@@ -114,6 +115,7 @@ class Engine:
         self.services: list[ServiceEntry] = []
         self.clients: list[ClientEntry] = []
         self.dyn = Dynamic()
+        self.synced: Any = None  # the records `dyn` holds, when known (twinfleet.rclpy.state)
         self.at_start: list[Callable[[Context], None]] = []  # effects of __init__
         self.clock_read = False
         self.declared: dict[str, Any] = {}  # parameter name -> (descriptor, type)

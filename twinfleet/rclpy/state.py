@@ -268,23 +268,29 @@ def capture(engine: Engine) -> RclpyState:
             attrs.append([key, enc(value)])
         else:
             handles.append(f"{key}={handle[0]}:{handle[1]}")
+    # The records are tuples, as the flat encoding reads them back: a state set back that
+    # equals the one just captured is then found equal, and the engine's part is kept.
     dyn = engine.dyn
-    timers = [None if t is None else _timer_record(enc, t) for t in dyn.timers]
+    timers = tuple(None if t is None else _timer_record(enc, t) for t in dyn.timers)
     # a waiting sample as its plain form (fields in declaration order: canonical as it is)
-    waiting = [[w.kind.value, w.index, [to_plain(a) for a in w.args]] for w in dyn.waiting]
-    tasks = [{"callback": enc.callback(t.callback), "group": t.group,
-              "awaiting": enc.future(t.awaiting).index, "results": [enc(r) for r in t.results],
-              "clocks": list(t.clocks), "args": t.args, "start": t.start} for t in dyn.tasks]
-    calls = [[enc.future(f).index for f in c] for c in dyn.calls]
-    on_set = [enc.callback(cb) for cb in dyn.on_set]
-    params = [[k, enc(dyn.params[k])] for k in sorted(dyn.params)]
+    waiting = tuple((w.kind.value, w.index, tuple(to_plain(a) for a in w.args))
+                    for w in dyn.waiting)
+    tasks = tuple({"callback": enc.callback(t.callback), "group": t.group,
+                   "awaiting": enc.future(t.awaiting).index,
+                   "results": tuple(enc(r) for r in t.results), "clocks": tuple(t.clocks),
+                   "args": t.args, "start": t.start} for t in dyn.tasks)
+    calls = tuple(tuple(enc.future(f).index for f in c) for c in dyn.calls)
+    on_set = tuple(enc.callback(cb) for cb in dyn.on_set)
+    params = tuple((k, enc(dyn.params[k])) for k in sorted(dyn.params))
     records: list[Any] = []
     while len(records) < len(enc.futures):  # records may meet further futures
         fut = enc.futures[len(records)]
         status = 0 if not fut.done() else (2 if fut.cancelled() else 1)
-        records.append([status, enc(fut._result), [enc.callback(cb) for cb in fut._callbacks]])
-    return RclpyState(attrs, " ".join(handles), timers, params, waiting, tasks, calls,
-                      on_set, records)
+        records.append((status, enc(fut._result), tuple(enc.callback(cb)
+                                                          for cb in fut._callbacks)))
+    engine.synced = None if records else (timers, params, waiting, tasks, calls, on_set)
+    return RclpyState(tuple(attrs), " ".join(handles), timers, params, waiting, tasks, calls,
+                      on_set, tuple(records))
 
 
 class _Decoder:
@@ -349,6 +355,9 @@ def apply_state(engine: Engine, st: RclpyState, *, fresh_dict: bool = False) -> 
         node_dict = engine.node.__dict__
         node_dict.clear()
         node_dict.update(attrs)
+    records = (st.timers, st.params, st.waiting, st.tasks, st.calls, st.on_set)
+    if not st.futures and not fresh_dict and engine.synced == records:
+        return  # the engine's part is the one captured last, untouched since
     dyn = type(engine.dyn)()
     dyn.timers = [None if t is None else _timer_slot(dec, t) for t in st.timers]
     dyn.params = {k: dec(v) for k, v in st.params}
@@ -360,6 +369,7 @@ def apply_state(engine: Engine, st: RclpyState, *, fresh_dict: bool = False) -> 
     dyn.calls = [[futures[n] for n in c] for c in st.calls]
     dyn.on_set = [dec.callback(cb) for cb in st.on_set]
     engine.dyn = dyn
+    engine.synced = None if st.futures or fresh_dict else records
 
 
 def snapshot_state(engine: Engine) -> bytes:
