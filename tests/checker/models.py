@@ -489,6 +489,35 @@ class Counter(Node):
         self.state.count = count
 
 
+@dataclass
+class Looks:
+    """The ticks a node counted, and how many it had at t=90 (-1: not yet looked)."""
+
+    ticks: int = 0
+    seen: int = -1
+
+
+class TickCounter(Node):
+    """Counts its `@every(20)` ticks until it looks at t=90: four on time (20 to 80),
+    fewer for a late node that skipped periods (Rule 7)."""
+
+    def initial_state(self) -> Looks:
+        return Looks()
+
+    @on_start
+    def start(self, ctx: Context) -> None:
+        ctx.after(90, self.look)
+
+    @every(20)
+    def tick(self, ctx: Context) -> None:
+        if self.state.seen < 0:
+            self.state.ticks += 1
+
+    @handler()
+    def look(self, ctx: Context) -> None:
+        self.state.seen = self.state.ticks
+
+
 # --------------------------------------------------------------- services
 
 

@@ -33,6 +33,20 @@ class LatencySite:
     publish: int | None = None
 
 
+@final
+@dataclass(frozen=True, slots=True)
+class LatenessSite:
+    """What a timer-lateness branch decides: the next tick of an `@every` timer, branch k
+    being taken for a lateness from `least[k]` ms up to `least[k + 1]` (the last up to
+    any). Exhaustive choosers ignore it; a sampling chooser weighs the branches by the
+    timing model's timer lateness."""
+
+    least: tuple[int, ...]
+
+
+Site = LatencySite | LatenessSite  # what a sampling chooser weighs a branch by
+
+
 class ExploringChooser(Chooser, Protocol):
     """A `Chooser` (what answers `ctx.choose`) that the checker explores with: `branch`
     for the checker's own branches on its effects (latency, drop, duplicate), the
@@ -48,8 +62,8 @@ class ExploringChooser(Chooser, Protocol):
         """An index in range(n) for a handler's choice point."""
         ...
 
-    def branch(self, n: int, site: LatencySite | None = None) -> int:
-        """An index in range(n) for one of the checker's branches (`site`: a latency's)."""
+    def branch(self, n: int, site: Site | None = None) -> int:
+        """An index in range(n) for one of the checker's branches (`site`: a latency's or a timer's)."""
         ...
 
 
@@ -81,7 +95,7 @@ class PrefixChooser:
         self.options.append(n)
         return index
 
-    def branch(self, n: int, site: LatencySite | None = None) -> int:
+    def branch(self, n: int, site: Site | None = None) -> int:
         """The checker's own branches (latency, faults) are choice points too."""
         return self.choose(n)
 
@@ -126,7 +140,7 @@ class SplitChooser:
         """The recorded answer of this handler choice point (0 past the record)."""
         return self._answer(n, self._answers, self.handler_indices, self.handler_options)
 
-    def branch(self, n: int, site: LatencySite | None = None) -> int:
+    def branch(self, n: int, site: Site | None = None) -> int:
         """The forced index of this branch of the checker (0 past the prefix)."""
         return self._answer(n, self._prefix, self.branch_indices, self.branch_options)
 
@@ -167,7 +181,7 @@ class RandomChooser:
         self.options.append(n)
         return index
 
-    def branch(self, n: int, site: LatencySite | None = None) -> int:
+    def branch(self, n: int, site: Site | None = None) -> int:
         """A uniform index for one of the checker's branches."""
         return self.choose(n)
 

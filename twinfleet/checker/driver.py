@@ -435,8 +435,8 @@ def _timing_ranges(scenario: Scenario, options: CheckOptions) -> dict[str, Any]:
 
 
 def _assumed_timing(scenario: Scenario, system: System, options: CheckOptions) -> AssumedTiming:
-    """The latency ranges the search branched on and where they come from (timers fire on
-    time in the exhaustive model)."""
+    """The latency ranges and timer lateness the search branched on and where they come
+    from."""
     if options.timing is not None:
         source = f"the bounds of --timing {options.timing}, every value a branch"
     elif scenario.check.latency:
@@ -444,7 +444,8 @@ def _assumed_timing(scenario: Scenario, system: System, options: CheckOptions) -
     else:
         source = "the scenario, which sets no check.latency: every message is due when sent"
     settings = system.settings
-    return AssumedTiming(settings.latency, settings.topic_latency, (0, 0), source)
+    return AssumedTiming(settings.latency, settings.topic_latency,
+                         settings.timer_lateness or (0, 0), source)
 
 
 def _property_names(system: System, props: PropertySet) -> list[str]:

@@ -14,6 +14,7 @@ as nodes resolve them, e.g. ``/r1/scan``, ``/poses``, ``/generate_path``)::
         /r1/scan: [0, 20]
       deadline_ms: 50                  # every message must be handled within 50 ms of its send
       deadline_ms: {default: 100, /r1/scan: 50}
+      timer_lateness: [0, 50]          # an @every tick may leave its queue 0..50 ms late
       queue_bound: 8                   # at most 8 pending events at any node
       queue_bound: {default: 8, map_server: 20}
       faults:
@@ -36,6 +37,12 @@ crash itself is `checker.system`'s `Crash` action):
   the message is taken, as RMC does. Since time passes only when nothing is
   due, a message can be late only through latency or FIFO clamping.
   Requests and replies use their service's name.
+- `timer_lateness`: how late a node may take an `@every` tick, as a node
+  process under load does. A tick late by a period or more than the next one
+  makes the runtime skip the missed periods (`runtime.contract.rules`), so
+  where the range allows that, the next tick's due time is a branch: one
+  period on, or each later tick the range reaches (Rule 7 of
+  `checker.semantics`). Below twice the period nothing changes.
 - `queue_bound`: a world in which a node has more pending events (messages,
   timers, periodic timers, replies) than its bound is a *queue overflow*
   (property `queue_bound`). Mapping keys are node names; `default` applies to
@@ -101,6 +108,7 @@ class CheckSettings:
     drop: frozenset[str] = frozenset()
     duplicate: frozenset[str] = frozenset()
     crash: CrashFaults | None = None
+    timer_lateness: tuple[int, int] | None = None
 
     def deadline_for(self, name: str) -> int | None:
         """The deadline (ms after sending) of messages on topic/service `name`, or None."""
@@ -183,7 +191,8 @@ def parse_faults(scenario: Scenario, topics: set[str], services: set[str]) -> tu
 
 def parse_settings(scenario: Scenario, topics: set[str], services: set[str], *,
                    latency: tuple[int, int] | None | Sequence[int] = (),
-                   topic_latency: Sequence[tuple[str, tuple[int, int]]] = ()) -> CheckSettings:
+                   topic_latency: Sequence[tuple[str, tuple[int, int]]] = (),
+                   timer_lateness: tuple[int, int] | None = None) -> CheckSettings:
     """Every optional setting, validated against the scenario's topics and services.
 
     Args:
@@ -194,6 +203,8 @@ def parse_settings(scenario: Scenario, topics: set[str], services: set[str], *,
             default, an empty tuple, means "take the scenario's").
         topic_latency: per topic or service ranges overriding the scenario's for those
             names (a timing model's bounds, `checker.timing`).
+        timer_lateness: a lateness range of `@every` ticks overriding the scenario's
+            `check.timer_lateness` (a timing model's bounds).
     """
     default, per_topic = parse_latency(scenario, topics | services)
     if latency != ():
@@ -206,4 +217,5 @@ def parse_settings(scenario: Scenario, topics: set[str], services: set[str], *,
     deadline_default, deadlines = parse_deadlines(scenario, topics | services)
     drop, dup, crash = parse_faults(scenario, topics, services)
     return CheckSettings(default, per_topic, deadline_default, deadlines,
-                         parse_queue_bounds(scenario), drop, dup, crash)
+                         parse_queue_bounds(scenario), drop, dup, crash,
+                         timer_lateness or scenario.check.timer_lateness)

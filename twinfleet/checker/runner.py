@@ -311,8 +311,8 @@ class Runner:
         logs: list[Log] = []
         lost_keys: list[bytes] = []
         if ev.kind is EventKind.PERIODIC:
-            out.append(Event(now + topology.period(i, ev.method), EventKind.PERIODIC, i,
-                             ev.method, i, (), ev.priority))
+            out.append(Event(self.rules.tick_after(now, topology.period(i, ev.method), chooser),
+                             EventKind.PERIODIC, i, ev.method, i, (), ev.priority))
         failure = None
         for k, eff in enumerate(effects):
             match eff:

@@ -75,7 +75,9 @@ Rule 6 (QoS). A subscription declared `qos=QoS(depth=d)` (KEEP_LAST, default
     a publisher's order). With one sender per subscription this is exactly
     the live rule; with several, which waiting message is oldest is an order
     the world does not keep, so any sender's oldest may go (more behaviours,
-    never fewer). Below the depth nothing is ever dropped, in either driver.
+    never fewer). Below the depth nothing is ever dropped, in either driver
+    (the depth and the count are `runtime.contract.rules`' KEEP_LAST rule, which
+    the live core applies too).
     BEST_EFFORT (on the subscription, or in the publishing node's
     `publications`) makes each delivery to that subscription a branch:
     delivered or lost (`Rules.copies`), as Zenoh's `CongestionControl.DROP`
@@ -83,6 +85,16 @@ Rule 6 (QoS). A subscription declared `qos=QoS(depth=d)` (KEEP_LAST, default
     TRANSIENT_LOCAL ones of nodes that may crash (`checker.topology`). Both
     parts of the rule read only the target node's own pending deliveries: a
     node's enabling stays decidable per node.
+
+Rule 7 (timers). An `@every` tick, when it runs, arms the next one a period
+    later. Live, a node that takes a tick a period or more later than the next
+    one was due skips the missed periods (`runtime.contract.rules.next_tick`).
+    With a timer lateness range (`check.timer_lateness`, or a timing model's
+    under `--statistical`) whose top reaches that far, the next tick's due time
+    is a branch (`Rules.tick_after`): one period on, or each later tick of the
+    timer's grid the range reaches, as `runtime.contract.rules.next_ticks` lists
+    them. Without one (the default) a tick is always taken on time: one branch,
+    the next tick one period on.
 
 Relaxed timing (`Rules.enabled_within`), used only to compare a live run with
 the model (`agreement.validate`). A live clock is continuous, so events the
@@ -101,11 +113,12 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, final
 
-from twinfleet.checker.choices import ExploringChooser, LatencySite
+from twinfleet.checker.choices import ExploringChooser, LatencySite, LatenessSite
 from twinfleet.checker.faults import DROP, DUPLICATE, CheckSettings
 from twinfleet.checker.options import Semantics
 from twinfleet.checker.world import Event
 from twinfleet.runtime.contract.kinds import EventKind
+from twinfleet.runtime.contract.rules import keep_last_excess, next_ticks
 
 if TYPE_CHECKING:
     from twinfleet.checker.world import World
@@ -292,9 +305,25 @@ class Rules:
                 waiting.setdefault((ev.target, ev.method), []).append(i)
         depths, out = self.depths, []
         for sub, found in waiting.items():
-            if len(found) > depths.get(sub, len(found)):
+            if keep_last_excess(len(found), depths.get(sub, len(found))):
                 out += _stream_heads(events, found) if self.fifo else found
         return sorted(out)
+
+    # ------------------------------------------------------------ Rule 7
+
+    def tick_after(self, due: int, timer: tuple[int, int], chooser: ExploringChooser) -> int:
+        """The due time of the tick after an `@every` tick due at `due` with `timer`'s
+        (period, phase): one period on, or, where the timer lateness reaches so far, a
+        branch of `chooser` over the ticks a late node skips to (Rule 7)."""
+        period = timer[0]
+        lateness = self.settings.timer_lateness
+        if lateness is None or lateness[1] < 2 * period:  # never a period behind
+            return due + period
+        ticks = next_ticks(due, *timer, lateness)
+        if len(ticks) == 1:
+            return ticks[0][0]
+        k = chooser.branch(len(ticks), LatenessSite(tuple(late for _, late in ticks)))
+        return ticks[k][0]
 
     def crashable(self, world: World) -> tuple[int, ...]:
         """The nodes that may crash in `world`: none with nothing pending or once the path

@@ -110,13 +110,14 @@ def _simulator(job: SimulationJob) -> Simulator:
 
 def timed_system(scenario: Scenario, model: TimingModel, *,
                  verify: bool = True) -> tuple[System, PropertySet]:
-    """The scenario's `System` with the model's bounds as its latency ranges (`verify`:
-    the node-contract checks of every handler run, `checker.diagnosis`)."""
+    """The scenario's `System` with the model's bounds as its latency ranges and its timer
+    lateness (`verify`: the node-contract checks of every handler run, `checker.diagnosis`)."""
     props = PropertySet.from_scenario(scenario)
     probe = System(scenario, properties=props)
     channels = set(probe.topology.subscribers) | set(probe.topology.servers)
     default, per = model.ranges(channels)
-    return System(scenario, latency=default, topic_latency=per, properties=props,
+    return System(scenario, latency=default, topic_latency=per,
+                  timer_lateness=model.timer_lateness.bounds, properties=props,
                   verify=verify, keyed=False), props
 
 

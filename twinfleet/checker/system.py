@@ -101,6 +101,8 @@ class System:
         latency: (min, max) delivery delay branches; default `check.latency`.
         topic_latency: (topic or service, (min, max)) ranges overriding the scenario's
             for those names (a timing model's bounds, `checker.timing`).
+        timer_lateness: (min, max) lateness of `@every` ticks (Rule 7 of
+            `checker.semantics`); default `check.timer_lateness`.
         global_priority: rebeca's `@globalPriority`; default `check.global_priority`.
         debug_state: detect handlers that change node attributes other than `state`.
         properties: the properties (`checker.properties.PropertySet`) whose `within`
@@ -117,6 +119,7 @@ class System:
     def __init__(self, scenario: Scenario, *, semantics: Semantics | str | None = None,
                  latency: tuple[int, int] | None = None,
                  topic_latency: tuple[tuple[str, tuple[int, int]], ...] = (),
+                 timer_lateness: tuple[int, int] | None = None,
                  global_priority: bool | None = None,
                  debug_state: bool = False, properties: PropertySet | None = None,
                  exact_states: bool = False, check_determinism: bool = False,
@@ -130,7 +133,8 @@ class System:
         self.settings = parse_settings(scenario, set(self.topology.subscribers),
                                        set(self.topology.servers),
                                        latency=() if latency is None else latency,
-                                       topic_latency=topic_latency)
+                                       topic_latency=topic_latency,
+                                       timer_lateness=timer_lateness)
         self.topic_latency = topic_latency
         if self.settings.crash is not None:
             self.topology.refuse_late_joiners(self.settings.crash.nodes, scenario.path)

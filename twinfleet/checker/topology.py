@@ -23,6 +23,7 @@ from twinfleet.runtime.contract.node import (
     Node,
     Reliability,
 )
+from twinfleet.runtime.contract.rules import first_tick, keep_last_depth
 from twinfleet.runtime.contract.snapshot import SnapshotError, snapshot
 from twinfleet.runtime.scenario.spec import ScenarioError
 
@@ -48,7 +49,7 @@ class Topology:
         self.servers: dict[str, Target] = {}
         self.service_of: dict[tuple[int, str], str] = {}
         self._priorities: list[dict[str, int]] = []
-        self._periods: dict[tuple[int, str], int] = {}
+        self._periods: dict[tuple[int, str], tuple[int, int]] = {}  # (period, phase)
         self.depths: dict[tuple[int, str], int] = {}  # KEEP_LAST depth per (node, handler)
         self.lossy: set[tuple[str, int]] = set()  # (topic, subscriber) BEST_EFFORT on a side
         self.liveliness: list[Target] = []  # the `/_liveliness` subscribers
@@ -61,7 +62,7 @@ class Topology:
             for h in spec.of_kind("subscribe"):
                 topic = node.resolve(h.name or "")
                 self.subscribers.setdefault(topic, []).append((i, h.method, h.priority))
-                self.depths[(i, h.method)] = max(1, h.qos.depth)
+                self.depths[(i, h.method)] = keep_last_depth(h.qos.depth)
             for h in spec.of_kind("service"):
                 name = node.resolve(h.name or "")
                 if name in self.servers:
@@ -71,7 +72,7 @@ class Topology:
                 self.servers[name] = (i, h.method, h.priority)
                 self.service_of[(i, h.method)] = name
             for h in spec.of_kind("every"):
-                self._periods[(i, h.method)] = node.period_ms(h)
+                self._periods[(i, h.method)] = (node.period_ms(h), h.phase_ms)
         self._qos(where)
 
     def _qos(self, where: object) -> None:
@@ -131,14 +132,15 @@ class Topology:
         """Handler priority of `method` on node index `node` (0 if undeclared)."""
         return self._priorities[node].get(method, 0)
 
-    def period(self, node: int, method: str) -> int:
-        """The period in ms of the `@every` handler `method` of node `node`."""
+    def period(self, node: int, method: str) -> tuple[int, int]:
+        """(period, phase) in ms of the `@every` handler `method` of node `node`."""
         return self._periods[(node, method)]
 
     def periodic(self, node: int, now: int) -> Iterator[Event]:
-        """The first firing after `now` of each `@every` timer of node `node`."""
+        """The first firing after `now` of each `@every` timer of node `node`, as live
+        (`runtime.contract.rules.first_tick`)."""
         for h in self.nodes[node].spec().of_kind("every"):
-            yield Event(now + h.phase_ms + self._periods[(node, h.method)], EventKind.PERIODIC,
+            yield Event(first_tick(*self._periods[(node, h.method)], now), EventKind.PERIODIC,
                         node, h.method, node, (), h.priority)
 
     def starts(self, node: int) -> tuple[HandlerSpec, ...]:

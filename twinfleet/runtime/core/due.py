@@ -6,8 +6,9 @@ moved to the inbox; an entry leaves the heap when it falls due or when the
 replay gate takes it, and then
 
 * a PERIODIC tick arms the next one, one period later — or, when the node is
-  so far behind that the next one is already past (a suspended process), the
-  first one after now, skipping the missed periods;
+  so far behind that the next one is a period or more past (a suspended
+  process), the first one after now, skipping the missed periods (the rule is
+  `runtime.contract.rules.next_tick`, which the checker applies too);
 * a TIMEOUT ends its call: a reply that comes later is ignored. A TIMEOUT whose
   call got its answer first is void and never leaves the heap as an event.
 """
@@ -23,12 +24,8 @@ from twinfleet.runtime.contract.context import Call
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import CallError
 from twinfleet.runtime.contract.node import HandlerSpec, Node
+from twinfleet.runtime.contract.rules import first_tick, next_tick
 from twinfleet.runtime.core.events import Event
-
-
-def first_due(period: int, phase: int, now_ms: int) -> int:
-    """The first tick of an `@every(period, phase_ms=phase)` timer strictly after `now_ms`."""
-    return phase + max(1, (now_ms - phase) // period + 1) * period
 
 
 @final
@@ -58,7 +55,7 @@ class DueEntries:
             period = self.node.period_ms(spec)
             self._periods[spec.method] = (period, spec.phase_ms)
             self.arm(Event(EventKind.PERIODIC, spec.method, (), self.name,
-                           due=first_due(period, spec.phase_ms, now_ms)))
+                           due=first_tick(period, spec.phase_ms, now_ms)))
 
     def arm(self, entry: Event) -> None:
         """Add a timed entry (its `due` set)."""
@@ -121,8 +118,6 @@ class DueEntries:
             return self._calls.pop(entry.call, None) is not None  # type: ignore[arg-type]
         if entry.kind is EventKind.PERIODIC and entry.due is not None:
             period, phase = self._periods[entry.handler]
-            due = entry.due + period
-            if due + period <= now_ms:  # far behind (suspended process): skip missed periods
-                due = first_due(period, phase, now_ms)
-            self.arm(Event(EventKind.PERIODIC, entry.handler, (), self.name, due=due))
+            self.arm(Event(EventKind.PERIODIC, entry.handler, (), self.name,
+                           due=next_tick(entry.due, period, phase, now_ms)))
         return True

@@ -22,7 +22,8 @@ and never touches a socket:
    `ctx.after` does not drift.
 3. KEEP_LAST. Each subscription keeps at most ``qos.depth`` received but not
    yet handled messages; when one arrives with ``depth`` waiting, the oldest
-   waiting one is dropped and counted (``dropped_keep_last``). The inbox holds
+   waiting one is dropped and counted (``dropped_keep_last``; the rule is
+   `runtime.contract.rules`, shared with the checker). The inbox holds
    one slot per waiting message and a slot runs the oldest waiting message of
    its subscription, so a drop costs no inbox search.
 4. Gaps. Every decoded sample's sequence number is checked against the last
@@ -87,6 +88,7 @@ from twinfleet.runtime.contract.messages import (
 )
 from twinfleet.runtime.contract.names import OPERATOR_SENDER
 from twinfleet.runtime.contract.node import LIVELINESS_TOPIC, HandlerSpec, Node, Reliability
+from twinfleet.runtime.contract.rules import keep_last_depth, keep_last_excess
 from twinfleet.runtime.core.choosers import RecordingChooser, SeededChooser, derive_seed
 from twinfleet.runtime.core.due import DueEntries
 from twinfleet.runtime.core.events import Event
@@ -140,14 +142,16 @@ Receive = Callable[[bytes, int], bool]
 class _Subscription:
     """One declared subscription: its handler and its KEEP_LAST queue of waiting samples."""
 
-    __slots__ = ("admit", "gap_counter", "lossless", "method", "priority", "topic", "waiting")
+    __slots__ = ("admit", "depth", "gap_counter", "lossless", "method", "priority", "topic",
+                 "waiting")
 
     def __init__(self, spec: HandlerSpec, topic: str, keep_last: bool, admit: Admission) -> None:
         self.method, self.priority, self.topic, self.admit = spec.method, spec.priority, topic, admit
         reliable = spec.qos.reliability is Reliability.RELIABLE
         self.gap_counter = "gaps" if reliable else "best_effort"  # a bug vs. drops by design
         self.lossless = reliable  # RELIABLE declares that every message matters
-        self.waiting: deque[_Sample] = deque(maxlen=max(1, spec.qos.depth) if keep_last else None)
+        self.depth = keep_last_depth(spec.qos.depth) if keep_last else None
+        self.waiting: deque[_Sample] = deque(maxlen=self.depth)
 
     def entry(self, sample: _Sample) -> Event:
         msg, stamp, seq, sender = sample
@@ -162,7 +166,7 @@ class _Subscription:
         # append and a heap push, with no attribute chains.
         sub, push = self, heapq.heappush
         waiting, priority, gap_counter = self.waiting, self.priority, self.gap_counter
-        lossless, admit = self.lossless, self.admit
+        lossless, admit, depth = self.lossless, self.admit, self.depth
 
         def receive(payload: bytes, arrival_ms: int) -> bool:
             n["received"] += 1
@@ -187,8 +191,8 @@ class _Subscription:
                 else:  # not a loss: a sender that lies about its numbers, or a corrupt one
                     n["seq_jumps"] += 1
             last_seq[sender] = seq
-            if len(waiting) == waiting.maxlen:  # KEEP_LAST: the oldest waiting sample goes
-                waiting.append(sample)
+            if depth is not None and keep_last_excess(len(waiting) + 1, depth):
+                waiting.append(sample)  # the deque's maxlen drops the oldest waiting one
                 n["keep_last"] += 1
                 n["lossless"] += lossless
                 return False

@@ -123,6 +123,7 @@ class CheckConfig:
     queue_bound: PerName[int] = PerName()
     faults: FaultConfig = field(default_factory=FaultConfig)
     fairness: Fairness = Fairness.NONE
+    timer_lateness: Range | None = None
 
     def __post_init__(self) -> None:
         if self.fairness not in tuple(Fairness):
@@ -135,6 +136,7 @@ class CheckConfig:
         for name in ("max_states", "max_depth"):
             _optional(self, "check", name, _count)
         _optional(self, "check", "max_time_s", _seconds)
+        _optional(self, "check", "timer_lateness", _range)
         _bool("check.global_priority", self.global_priority)
         _set(self, "latency", _per_name("check.latency", self.latency, _range))
         _set(self, "deadline_ms", _per_name("check.deadline_ms", self.deadline_ms, _ms))
