@@ -29,6 +29,7 @@ from twinfleet.agreement.live_replay import plan
 from twinfleet.checker.choices import PrefixChooser
 from twinfleet.checker.driver import CheckOptions, check, load
 from twinfleet.checker.system import System
+from twinfleet.checker.transition import RunEvent
 from twinfleet.runtime.contract.snapshot import snapshot
 from twinfleet.runtime.core.eventlog import EventLog, payload_digest, state_digest
 from twinfleet.runtime.host.clock import ManualClock
@@ -643,3 +644,39 @@ def test_a_path_only_if_timing_is_ignored_is_not_valid_and_its_violation_comes_f
     assert main(["validate", str(in_order), str(scenario), "a.period_ms:=45"]) == 3  # applied
     assert main(["validate", str(in_order), str(scenario), "a.perod_ms:=31"]) == 2
     assert "did you mean 'period_ms'?" in capsys.readouterr().err
+
+
+def ticker(tmp_path: Path, name: str, **check_settings: Any) -> Path:
+    """The conformance ticker (every 20 ms from 25, its first three tick times kept)."""
+    doc = {"name": name, "nodes": [{"name": "ticker",
+                                    "class": "tests.conformance.systems:Ticker"}],
+           "properties": [{"name": "on_the_period", "kind": "invariant",
+                           "expr": "ticker.at == (25, 45, 65)[:len(ticker.at)]"}],
+           "check": check_settings}
+    path = tmp_path / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(doc))
+    return path
+
+
+def test_a_run_that_skipped_missed_ticks_is_a_path_of_the_untimed_checker(tmp_path):
+    # A live ticker whose tick due at 45 was taken 40-45 ms late: it skipped the ticks at
+    # 65 and 85 and ticked next at 105 (Rule 7). Its log, made from the checker's own step with
+    # that branch (a node that stores its tick times: a search merges such worlds).
+    system = System(load(ticker(tmp_path, "late", timer_lateness=[0, 45])))
+    (world,) = [t.world for t in system.initial()]
+    records = []
+    for i, branch in enumerate((0, 1, 0)):
+        due = world.events[0].due
+        world = system.step(world, RunEvent(0), PrefixChooser((branch,))).world
+        records.append({"node": "ticker", "i": i, "t": due, "due": due, "kind": "periodic",
+                        "handler": "tick", "sender": "ticker", "args": payload_digest(()),
+                        "digest": state_digest(world.states[0])})
+    assert [r["due"] for r in records] == [25, 45, 105]
+    log = write_log(tmp_path / "e.jsonl", records, ["ticker"])
+    plain = ticker(tmp_path, "plain")  # a scenario that says nothing of timer lateness
+    assert v.skipped_lateness(System(load(plain)), load_events(log)) == 40
+    untimed = v.validate(log, plain, tolerance_ms=None)
+    assert untimed.ok, untimed.summary()
+    assert [name for _, name, _ in untimed.violations] == ["on_the_period"]
+    # Strictly, the model's timers are on time: the skip is not its path.
+    assert not v.validate(log, plain, tolerance_ms=0).ok

@@ -24,8 +24,9 @@ under the scenario's message rules) can run:
    handler failed, and give the node the live state digest.
 3. Search. Candidates are tried in live-time order, depth first, with
    backtracking (a choice between two candidates can matter: an event may
-   add a higher-priority event for another node). Pairs (world, positions)
-   are visited once. The run is a path when every live event is explained;
+   add a higher-priority event for another node). Triples (world, positions,
+   the world's time) are visited once: a world's key is up to time shift, and
+   a node that stored a tick's `ctx.now()` makes worlds a shift apart differ. The run is a path when every live event is explained;
    otherwise the report takes the deepest prefix found and names, of the
    live events that could not be taken after it, the earliest one, and why.
 
@@ -40,7 +41,10 @@ earliest-sent pending message of its *stream* under ``ros`` (messages of one
 kind from one sender to one handler of one node), so events whose model
 times differ by at most T ms may run in either order. ``None`` (untimed): the
 same with T infinite, a check of causality, per-stream order and state,
-blind to the model's timing. Whatever the rule, the report gives
+blind to the model's timing; its timers may also be as late as the run's
+skipped `@every` periods show (`skipped_lateness`: a node that fell a period
+or more behind skips the missed ticks, Rule 7 of `checker.semantics`, and the
+checker branches over them). Whatever the rule, the report gives
 how far ahead of the model's clock the path had to run events (``ahead``:
 the event's logical due time minus t*): the timing gap between run and model.
 
@@ -159,6 +163,10 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
     log = events if isinstance(events, EventLogFile) else load_events(events)
     scenario = load(scenario_path, semantics=semantics, params=params)
     system = System(scenario)
+    late = skipped_lateness(system, log) if tolerance_ms is None else 0
+    if late:  # untimed: as late as the run's skipped ticks show (Rule 7)
+        low, high = scenario.check.timer_lateness or (0, 0)
+        system = System(scenario, timer_lateness=(low, max(high, late)))
     refuse_unreplayable(system, gated=False)
     search = _Search(system, log, tolerance_ms, window_ms, max_backtracks)
     events_count = sum(1 for e in log.events if e.kind is not EventKind.START)
@@ -169,11 +177,33 @@ def validate(events: str | Path | EventLogFile, scenario_path: str | Path, *,
     return result
 
 
+def skipped_lateness(system: System, log: EventLogFile) -> int:
+    """The least timer lateness that explains every skip of missed `@every` periods in
+    `log` (0: none): a tick due at d whose next logged tick is at d' > d + period was
+    taken at least d' - period - d ms late (`runtime.contract.rules.next_tick`)."""
+    late = 0
+    for name, events in log.by_node().items():
+        i = system.index.get(name)
+        last: dict[str, int] = {}
+        for ev in events:
+            if ev.kind is EventKind.CRASH:  # a new process arms its timers afresh
+                last.clear()
+            if ev.kind is not EventKind.PERIODIC or ev.due is None or i is None:
+                continue
+            period = system.topology.period(i, ev.handler)[0]
+            before = last.get(ev.handler)
+            if before is not None and ev.due - before > period:
+                late = max(late, ev.due - before - period)
+            last[ev.handler] = ev.due
+    return late
+
+
 Option = tuple[int, int, tuple[int, ...]]  # (node, pending event, branch prefix)
 DROPPED = -1  # the `node` of an option that drops the pending event (KEEP_LAST)
 RESTART = -1  # the `pending event` of an option that crashes and restarts the node
 LEFT = -2  # the `pending event` of an option that takes a peer leaving at shutdown
 CUT = -3  # the `pending event` of an option that takes a run as cut off by the crash after it
+_Seen = tuple[bytes, tuple[int, ...], int | None]  # `_Frame.seen`
 
 
 @final
@@ -186,6 +216,14 @@ class _Frame:
     ahead: int = 0  # how far ahead of t* the step that made this world ran
     label: str = ""  # that step's live event
     next: int = 0
+
+    @property
+    def seen(self) -> _Seen:
+        """What the search visits once: the world, the live positions and the world's
+        time. A world's key is up to time shift, but a node may have stored the time
+        (`ctx.now()` of a tick), so worlds a shift apart (a tick on time, or late with the
+        missed periods skipped) may have different futures: they are kept apart."""
+        return self.world.key, self.pos, self.world.next_time
 
 
 @final
@@ -214,7 +252,7 @@ class _Search:
         if outside is not None:
             result.failure = outside
             return
-        visited: set[tuple[bytes, tuple[int, ...]]] = set()
+        visited: set[_Seen] = set()
         branches: tuple[int, ...] | None = ()
         while branches is not None:  # one initial world per branch of the start messages
             root, branches = self._start(branches)
@@ -222,9 +260,9 @@ class _Search:
                 if self._best[1] is None:
                     self._best = (0, root)
                 continue
-            if (root.world.key, root.pos) in visited:
+            if root.seen in visited:
                 continue
-            visited.add((root.world.key, root.pos))
+            visited.add(root.seen)
             found = self._search(root, visited, result)
             if found is not None:
                 self._finish(result, found, None)
@@ -236,7 +274,7 @@ class _Search:
             return
         self._finish(result, self._deepest, self._best[1])
 
-    def _search(self, root: _Frame, visited: set[tuple[bytes, tuple[int, ...]]],
+    def _search(self, root: _Frame, visited: set[_Seen],
                 result: Validation) -> list[_Frame] | None:
         """Depth-first from `root`: the whole path if one explains every live event, else
         None (`_best` and `_deepest` then hold the deepest dead end so far)."""
@@ -264,7 +302,7 @@ class _Search:
             if isinstance(child, Unexplained):
                 frame.why.append(child)
                 continue
-            key = (child.world.key, child.pos)
+            key = child.seen
             if key not in visited:
                 visited.add(key)
                 stack.append(child)
