@@ -508,16 +508,22 @@ class LateListener(Node):
         self.state.heard = True
 
 
-def sender_listener(tmp_path: Path, name: str, sender: str = "Sender",
-                    **check_settings: Any) -> Path:
-    doc = {"name": name, "nodes": [{"name": "s", "class": f"test_validate:{sender}"},
-                                   {"name": "l", "class": "test_validate:LateListener"}],
-           "properties": [{"name": "heard_first", "kind": "invariant",
-                           "expr": "l.heard or not l.ticked"}],
+def one_invariant(tmp_path: Path, name: str, nodes: dict[str, str], invariant: str,
+                  expr: str, check_settings: dict[str, Any]) -> Path:
+    """A scenario of `nodes` (name: class) with one invariant, written to `tmp_path`."""
+    doc = {"name": name, "nodes": [{"name": n, "class": c} for n, c in nodes.items()],
+           "properties": [{"name": invariant, "kind": "invariant", "expr": expr}],
            "check": check_settings}
     path = tmp_path / f"{name}.yaml"
     path.write_text(yaml.safe_dump(doc))
     return path
+
+
+def sender_listener(tmp_path: Path, name: str, sender: str = "Sender",
+                    **check_settings: Any) -> Path:
+    return one_invariant(tmp_path, name, {"s": f"test_validate:{sender}",
+                                          "l": "test_validate:LateListener"},
+                         "heard_first", "l.heard or not l.ticked", check_settings)
 
 
 def test_latency_branches_explain_a_late_delivery_strictly(tmp_path):
@@ -648,14 +654,9 @@ def test_a_path_only_if_timing_is_ignored_is_not_valid_and_its_violation_comes_f
 
 def ticker(tmp_path: Path, name: str, **check_settings: Any) -> Path:
     """The conformance ticker (every 20 ms from 25, its first three tick times kept)."""
-    doc = {"name": name, "nodes": [{"name": "ticker",
-                                    "class": "tests.conformance.systems:Ticker"}],
-           "properties": [{"name": "on_the_period", "kind": "invariant",
-                           "expr": "ticker.at == (25, 45, 65)[:len(ticker.at)]"}],
-           "check": check_settings}
-    path = tmp_path / f"{name}.yaml"
-    path.write_text(yaml.safe_dump(doc))
-    return path
+    return one_invariant(tmp_path, name, {"ticker": "tests.conformance.systems:Ticker"},
+                         "on_the_period", "ticker.at == (25, 45, 65)[:len(ticker.at)]",
+                         check_settings)
 
 
 def test_a_run_that_skipped_missed_ticks_is_a_path_of_the_untimed_checker(tmp_path):
