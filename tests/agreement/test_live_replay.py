@@ -293,6 +293,10 @@ def test_duplicates_are_refused_and_start_message_branches_are_granted(tmp_path)
         plan(fault_trace(tmp_path, "dup", [{"name": "once", "kind": "invariant",
                                              "expr": "pong.received <= ping.sent"}],
                          faults={"duplicate": ["/ping"]}))
+    with pytest.raises(ValueError, match="timer_lateness cannot be replayed live"):
+        plan(fault_trace(tmp_path, "late_timer", [{"name": "one", "kind": "invariant",
+                                                    "expr": "ping.sent < 2"}],
+                         timer_lateness=[0, 45]))
     # Ping's @on_start publishes the first /ping: its delay is the grant's to take too
     early = plan(fault_trace(tmp_path, "early", LATE, latency={"/ping": [0, 3]}))
     assert all(g.choices == () for g in [*early.starts, *early.steps])

@@ -244,10 +244,14 @@ def refuse_unreplayable(system: System, *, gated: bool) -> None:
     allows may explain what the live run did, and a live restart is a crash fault.
     A gated replay (``gated=True``) takes latency and drop branches itself — it
     grants a delivery at its delayed time, or never — but cannot make Zenoh
-    deliver a message twice (its crash steps are refused one by one).
+    deliver a message twice nor a node late for its timers (its crash steps are
+    refused one by one).
     """
     s = system.settings
     if gated and s.duplicate:
         raise ValueError(f"{system.scenario.path}: check.faults.duplicate cannot be replayed "
                          "live (a live message arrives once)")
+    if gated and s.timer_lateness is not None:
+        raise ValueError(f"{system.scenario.path}: check.timer_lateness cannot be replayed "
+                         "live (the gate grants a tick when it is due)")
 
