@@ -73,3 +73,17 @@ def test_a_robot_collision_is_the_no_collision_invariant_violated(tmp_path):
                  "result: FAILED (no_collision violated: invariant 'map_server.collisions == 0'",
                  "after delivery on /poses from r")
     assert "map_server: MapServerState(" in out and "collisions=1" in out
+
+
+@pytest.mark.parametrize("how", ["flag", "scenario"])
+def test_stop_on_violation_ends_the_run_at_its_first_violation(tmp_path, how):
+    # the counter reaches 5 after 250 ms; without the stop the run would last its 30 s
+    live = {"stop": "violation"} if how == "scenario" else {}
+    path = write_scenario(tmp_path, f"stops_{how}", COUNTER, [
+        {"name": "stays_small", "kind": "invariant", "expr": "counter.count < 5"}],
+        **({"live": live} if live else {}))
+    flags = ("--stop-on-violation",) if how == "flag" else ()
+    run = run_launch(path, "--timeout", "30", *flags, timeout=40)
+    out = expect(run, 1, "run ended: stopped at the first violation (stays_small, at t=",
+                 "result: FAILED (stays_small violated: invariant 'counter.count < 5' is false")
+    assert "timeout after" not in out, out[-3000:]

@@ -78,7 +78,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
                                            bridge=bridge is not None, driver=bridge,
                                            accept_recorded=args.accept_recorded,
                                            node_args=["--verbose"] if args.verbose else [],
-                                           until_settled=args.until_settled or None))
+                                           until_settled=args.until_settled or None,
+                                           until_violation=args.stop_on_violation or None))
         except FleetConflict as exc:
             raise CommandError(str(exc)) from None
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE
@@ -405,6 +406,10 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--until-settled", action="store_true",
                    help="end the run once every eventually property has held (as the scenario's "
                         "live.stop: settled does); each one's time of holding is printed anyway")
+    p.add_argument("--stop-on-violation", action="store_true",
+                   help="end the run at the first violation the live verdict sees, with that "
+                        "verdict (as the scenario's live.stop: violation does; default: run on "
+                        "to the timeout, so the summary covers the whole run)")
     p.add_argument("-v", "--verbose", action="store_true",
                    help="print every node's full counters at the end (default: a table of "
                         "the counters that are not zero; full counters when something went "

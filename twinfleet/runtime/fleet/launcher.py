@@ -78,7 +78,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                     judge: bool = True, auth: fleetauth.MonitorAuth | None = None,
                     bridge: bool = False, startup_s: float = STARTUP_S,
                     accept_recorded: bool = False,
-                    until_settled: bool | None = None) -> FleetResult:
+                    until_settled: bool | None = None,
+                    until_violation: bool | None = None) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
@@ -105,6 +106,7 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         accept_recorded: the nodes take recorded input ``twinfleet play --into-fleet``
             signs (the verdict says so); otherwise they drop it.
         until_settled: end once every eventually property held (default: ``live.stop``).
+        until_violation: end at the first violation the judge sees (default: ``live.stop``).
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
@@ -116,7 +118,9 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                   events_dir=fresh_parts_dir(record_events) if record_events else None,
                   keep_scenario_beside=record_events or run_record, judge=judge, auth=auth,
                   bridge=bridge, accept_recorded=accept_recorded,
-                  until_settled=live.stop == "settled" if until_settled is None else until_settled)
+                  until_settled=live.stop == "settled" if until_settled is None else until_settled,
+                  until_violation=(live.stop == "violation" if until_violation is None
+                                   else until_violation))
     started = time.monotonic()
     async with _Launch(fleet, record_events, handle_signals) as launch:
         reason, running = await launch.until_end((startup_s, timeout_s), params, driver)

@@ -80,9 +80,9 @@ class Fleet:
                  events_dir: Path | None = None, keep_scenario_beside: str | None = None,
                  judge: bool = True, auth: fleetauth.MonitorAuth | None = None,
                  bridge: bool = False, accept_recorded: bool = False,
-                 until_settled: bool = False) -> None:
+                 until_settled: bool = False, until_violation: bool = False) -> None:
         self.time_scale, self.seed, self.out = time_scale, seed, out
-        self.until_settled = until_settled
+        self.until_settled, self.until_violation = until_settled, until_violation
         self.accept_recorded = accept_recorded
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
@@ -186,6 +186,9 @@ class Fleet:
             self.log(f"ignored a malformed state report on {key}: {exc}")
             return
         self.judge.on_report(report)
+        if self.until_violation and self.judge.violations:
+            self.end(f"stopped at the first violation ({self.judge.violations[0][0]}, at "
+                     f"t={self.judge.now} ms)")
         if self.until_settled and self.judge.settled():
             self.end(f"settled: every eventually property held (the last at t="
                      f"{max(self.judge.held_at.values())} ms)")

@@ -33,6 +33,7 @@ Range = tuple[int, int]
 """A latency range in ms, ``(min, max)`` with ``0 <= min <= max``."""
 
 SEARCHES: Final = ("bfs", "dfs", "random")
+LIVE_STOPS: Final = ("timeout", "settled", "violation")  # `live.stop`: what ends a live run
 DEFAULT: Final = "default"
 
 
@@ -157,13 +158,15 @@ class LiveConfig:
     max_payload_bytes: int | None = None  # per sample; default sized to the map (runtime.core.guard)
     max_nodes: int = 100  # nodes a scenario may have (checked first by runtime.scenario.spec)
     # "settled": end the run once every eventually (and within) property has held;
+    # "violation": end it at the first violation the live verdict sees;
     # "timeout": run until the timeout, a shutdown request, a failure or Ctrl-C
     stop: str = "timeout"
 
     def __post_init__(self) -> None:
         _optional(self, "live", "timeout_s", _positive)
-        if self.stop not in ("timeout", "settled"):
-            raise ConfigError("live.stop", f"expected timeout or settled, got {self.stop!r}")
+        if self.stop not in LIVE_STOPS:
+            raise ConfigError("live.stop", f"expected one of {', '.join(LIVE_STOPS)}, "
+                                           f"got {self.stop!r}")
         if self.max_payload_bytes is not None and (
                 type(self.max_payload_bytes) is not int or self.max_payload_bytes < 1024):
             raise ConfigError("live.max_payload_bytes",
