@@ -116,7 +116,7 @@ def test_recorded_input_reaches_a_fleet_only_on_purpose(tmp_path, accept) -> Non
     heard = out.count("heard data='recorded")
     if accept:
         assert (values["played"], values["rejected_recorded"], heard) == (str(NOTES), "0", NOTES)
-        assert "recorded input was injected (twinfleet play --into-fleet): ear took 5" in out
+        assert "ear: 5 recorded samples from twinfleet play --into-fleet" in out
     else:
         assert (values["played"], values["rejected_recorded"], heard) == ("0", str(NOTES), 0)
-        assert "recorded input was injected" not in out
+        assert "took external input" not in out

@@ -95,3 +95,28 @@ def test_monitors_find_a_played_recording_without_flags(tmp_path: Path) -> None:
         if play.poll() is None:
             play.terminate()
         _finish(play, 20)
+
+
+def test_operator_input_that_nodes_take_is_named_by_the_verdict(tmp_path: Path) -> None:
+    runtime = tmp_path / "xdg"
+    runtime.mkdir()
+    log = tmp_path / "demo.log"
+    proc = launch_in(runtime, log, DEMO, "--timeout", "15")
+    try:
+        heard = run_cli_in(runtime, "topic", "echo", "/chatter", "--once", "--wait",
+                           "--wait-timeout", "40", timeout=60)
+        assert heard.returncode == 0, heard
+        sent = run_cli_in(runtime, "topic", "pub", "/chatter", "std_msgs/msg/String",
+                          "{data: from outside}")
+        assert sent.returncode == 0, sent
+        called = run_cli_in(runtime, "service", "call", "/add_two_ints",
+                            "example_interfaces/srv/AddTwoInts", "{a: 1, b: 2}")
+        assert called.returncode == 0 and "sum: 3" in called.stdout, called
+        assert poll(lambda: "result:" in log.read_text(), 40), log.read_text()
+        text = log.read_text()
+        assert "result: PASSED" in text, text
+        assert ("took external input (from outside the fleet; the checked model has no such "
+                "input): adder: 1 on /add_two_ints from an operator's command (topic pub, "
+                "service call); listener: 1 on /chatter from an operator's command") in text, text
+    finally:
+        stop_launch(proc, DEMO)

@@ -188,7 +188,7 @@ def test_a_launched_fleet_is_a_citizen_of_a_ros2_network(tmp_path):
     assert "forwarded 1, dropped 4" in summary, summary
     for reason in ("no attachment 1", "malformed 1", "not finite 1", "outside the map 1"):
         assert reason in summary, summary
-    assert "took external input (samples from outside the fleet, through the bridge): r1 1" \
-        in out, out[-3000:]
+    assert ("took external input (from outside the fleet; the checked model has no such "
+            "input): r1: 1 on /r1/goal from the ROS 2 bridge") in out, out[-3000:]
     r1_stopped = next(line for line in seen if line.startswith("[r1] stopped:"))
     assert "external_input=1 " in r1_stopped and "rejected_forged=0" in r1_stopped

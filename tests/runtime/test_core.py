@@ -19,6 +19,7 @@ from twinfleet import (
 )
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import DecodeError, NodeAlive, Violation, decode, encode
+from twinfleet.runtime.contract.names import BRIDGE_SENDER, OPERATOR_SENDER
 from twinfleet.runtime.core.choosers import RecordingChooser
 from twinfleet.runtime.core.events import Event
 from twinfleet.runtime.core.node_core import MAX_GAP, Handled, NodeCore
@@ -30,6 +31,7 @@ from twinfleet.runtime.core.outbox import (
     ReplyOutput,
     StopOutput,
 )
+from twinfleet.runtime.core.statistics import Outside
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -447,3 +449,18 @@ def test_the_core_knows_no_asyncio_and_does_no_io(module):
     calls = {n.func.id for n in ast.walk(tree) if isinstance(n, ast.Call)
              and isinstance(n.func, ast.Name)}
     assert not calls & {"open", "print", "input"}
+
+
+def test_what_came_from_outside_the_fleet_is_counted_per_source_and_name():
+    recorder = started(Recorder("busy"))
+    drain(recorder, 0)
+    recorder.receiver("on_low")(sample(1, sender=OPERATOR_SENDER), 1)
+    recorder.receiver("on_low")(sample(2, seq=2, sender="a"), 1)  # a fleet node: not counted
+    recorder.receiver("on_high")(sample(3, sender=BRIDGE_SENDER), 1)
+    drain(recorder, 1)
+    doubler = started(Doubler("d"))
+    doubler.receive_request("double", encode(Num(2), sender=OPERATOR_SENDER), "r", 0)
+    drain(doubler, 0)
+    assert recorder.statistics().outside_input == (
+        (Outside.OPERATOR, "/low", 1), (Outside.BRIDGE, "/high", 1))
+    assert doubler.statistics().outside_input == ((Outside.OPERATOR, "/double", 1),)

@@ -13,7 +13,7 @@ from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.contract.messages import encode
 from twinfleet.runtime.core.node_core import NodeCore
 from twinfleet.runtime.core.state_report import StateReport, StateReporter, decode_report
-from twinfleet.runtime.core.statistics import NodeStatistics, Rejection
+from twinfleet.runtime.core.statistics import NodeStatistics, Outside, Rejection
 from twinfleet.runtime.fleet.live_verdict import LiveJudge, RunEnd, stall_floor_ms
 from twinfleet.runtime.scenario.spec import NodeEntry, Scenario
 
@@ -156,8 +156,9 @@ def test_recorded_input_played_into_the_fleet_is_said_first():
     v = fleet.judge.verdict(RunEnd("timeout", statistics={"counter": NodeStatistics(played=7),
                                                             "other": NodeStatistics()}))
     assert v.status == Status.HOLDS, v
-    assert v.details[0] == ("recorded input was injected (twinfleet play --into-fleet): "
-                            "counter took 7 recorded samples")
+    assert v.details[0] == ("took external input (from outside the fleet; the checked model "
+                            "has no such input): counter: 7 recorded samples from twinfleet "
+                            "play --into-fleet")
 
 
 def test_statistics_that_count_no_loss_leave_the_verdict_alone():
@@ -180,7 +181,24 @@ def test_a_run_that_took_external_input_says_so_and_is_judged_as_any_other():
     v = fleet.judge.verdict(RunEnd("timeout", statistics={"counter": fed,
                                                           "other": NodeStatistics()}))
     assert v.status == Status.HOLDS and v.summary == plain.summary
-    assert v.details[-1].startswith("took external input") and "counter 2" in v.details[-1]
+    assert v.details[0].startswith("took external input") and \
+        "counter: 2 samples from the ROS 2 bridge" in v.details[0]
+
+
+def test_every_source_of_outside_input_is_named_in_one_line_with_its_topics():
+    fleet = Fleet(scenario({"name": "ok", "kind": "invariant", "expr": "counter.count >= 0"}))
+    fleet.run(300)
+    fed = NodeStatistics(external_input=1, played=3, outside_input=(
+        (Outside.BRIDGE, "/goal", 1), (Outside.OPERATOR, "/chatter", 2),
+        (Outside.OPERATOR, "/add", 1)))
+    v = fleet.judge.verdict(RunEnd("timeout", statistics={"counter": fed,
+                                                          "other": NodeStatistics()}))
+    assert v.status == Status.HOLDS, v
+    assert v.details[0] == (
+        "took external input (from outside the fleet; the checked model has no such input): "
+        "counter: 1 on /goal from the ROS 2 bridge, 2 on /chatter from an operator's command "
+        "(topic pub, service call), 1 on /add from an operator's command (topic pub, service "
+        "call), 3 recorded samples from twinfleet play --into-fleet")
 
 
 def test_statistics_the_launcher_could_not_read_make_it_inconclusive():

@@ -18,6 +18,7 @@ from twinfleet.runtime.core.node_core import NodeCore
 from twinfleet.runtime.core.statistics import (
     WIRE_NAMES,
     NodeStatistics,
+    Outside,
     Rejection,
     StatisticsError,
 )
@@ -47,7 +48,7 @@ BUSY = NodeStatistics(received=12, dropped_undecodable=1, handler_errors=2, fail
 NOT_JUDGED = {"rejected_external", "external_input", "received", "dropped_undecodable", "handler_errors", "failures", "inbox_depth",
               "timers_pending", "published", "handled", "dropped_keep_last",
               "dropped_best_effort", "sequence_jumps", "max_lateness_ms", "stall_threshold_ms",
-              "played"}  # played: said in the verdict's details, never inconclusive
+              "played", "outside_input"}  # said in the verdict's details, never inconclusive
 
 
 def test_the_wire_form_reads_back_as_the_same_record():
@@ -60,11 +61,20 @@ def test_the_wire_form_keeps_the_printed_counter_names_in_order():
     wire = BUSY.to_dict()
     assert set(wire) == WIRE_NAMES
     assert list(wire)[:3] == ["received", "dropped_undecodable", "handler_errors"]
-    assert list(wire)[-7:] == ["rejected_forged", "rejected_invalid", "rejected_oversize",
+    assert list(wire)[-8:] == ["rejected_forged", "rejected_invalid", "rejected_oversize",
                                "rejected_wrong_type", "rejected_replayed", "rejected_recorded",
-                               "wrong_types"]
+                               "wrong_types", "outside_input"]
     assert BUSY.line().startswith("received=12 dropped_undecodable=1 handler_errors=2 ")
     assert " rejected_oversize=19 rejected_wrong_type=20 " in BUSY.line()
+
+
+def test_outside_input_reads_back_and_a_bad_entry_is_refused():
+    fed = NodeStatistics(outside_input=((Outside.OPERATOR, "/chatter", 2),))
+    assert NodeStatistics.from_dict(fed.to_dict()) == fed
+    assert fed.to_dict()["outside_input"] == [["OPERATOR", "/chatter", 2]]
+    for bad in ([["SOMEONE", "/chatter", 2]], [["OPERATOR", "/chatter", "2"]], "x"):
+        with pytest.raises(StatisticsError, match="outside_input must be a list"):
+            NodeStatistics.from_dict({**fed.to_dict(), "outside_input": bad})
 
 
 def test_an_unknown_counter_is_refused_not_ignored():

@@ -44,6 +44,7 @@ from twinfleet.ros2.mapping import (
 )
 from twinfleet.runtime.access.fleetauth import MonitorAuth
 from twinfleet.runtime.contract.messages import encode, registered_types
+from twinfleet.runtime.contract.names import BRIDGE_SENDER
 from twinfleet.runtime.core.guard import Rejected, check_message, signer
 from twinfleet.runtime.host.keys import (
     KeyKind,
@@ -55,7 +56,7 @@ from twinfleet.runtime.host.keys import (
 )
 from twinfleet.runtime.tools.monitor.tap import FleetTap, tap_config
 
-SENDER = "ros2_bridge"  # the envelope sender of what the bridge forwards into the fleet
+SENDER = BRIDGE_SENDER  # the envelope sender of what the bridge forwards into the fleet
 RETRY_S = 0.5
 QUERY_S = 1.0
 

@@ -17,6 +17,8 @@ _TOKEN = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 #: envelopes it sends: a node tells input from outside the fleet by it (`NodeStatistics.
 #: rejected_external`), and a live verdict names such input instead of blaming the fleet.
 OPERATOR_SENDER = "twinfleet-cli"
+#: The sender the ROS 2 bridge writes into what it forwards into a fleet (its inbound routes).
+BRIDGE_SENDER = "ros2_bridge"
 
 
 class InvalidName(ValueError):

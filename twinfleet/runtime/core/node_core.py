@@ -94,7 +94,12 @@ from twinfleet.runtime.core.due import DueEntries
 from twinfleet.runtime.core.events import Event
 from twinfleet.runtime.core.guard import Admission, Rejected, WrongTypes, check_message
 from twinfleet.runtime.core.outbox import LogOutput, Outbox, Output, ReplyOutput
-from twinfleet.runtime.core.statistics import NodeStatistics, Rejection
+from twinfleet.runtime.core.statistics import (
+    OUTSIDE_SENDERS,
+    NodeStatistics,
+    Outside,
+    Rejection,
+)
 
 MAX_GAP: Final = 1 << 16  # a larger leap in one sender's sequence numbers is not a loss
 _BEFORE_ALL: Final = -(1 << 62)  # inbox arrival key of start handlers
@@ -274,6 +279,7 @@ class NodeCore:
         self._n = dict.fromkeys(_COUNTERS, 0)
         self._rejected = dict.fromkeys(Rejection, 0)  # the core's own: invalid, wrong type
         self._wrong = WrongTypes()
+        self._outside: dict[tuple[Outside, str], int] = {}  # handled input from outside
         self._outbox = Outbox(node.name, self.due, self._n, stop_on_error=stop_on_error)
         self._subs: dict[str, _Subscription] = {}
         self._liveliness: HandlerSpec | None = None
@@ -430,6 +436,8 @@ class NodeCore:
         if type(work) is _Subscription:
             sample = work.waiting.popleft()
             if not self._observers:  # the hot path: no Event, no record
+                if sample[3] in OUTSIDE_SENDERS:
+                    self._came_in(sample[3], work.topic)
                 return self._execute(work.method, (sample[0],), now_ms, self._random, None)[0]
             return self._run(work.entry(sample), now_ms, None)
         if work.due is not None and work.kind in _TIMED:
@@ -472,6 +480,8 @@ class NodeCore:
             raise ValueError(f"{self.node.name}: {entry.kind} {entry.handler} is not pending")
 
     def _run(self, entry: Event, now: int, chooser: Chooser | None) -> Sequence[Output]:
+        if entry.sender in OUTSIDE_SENDERS:
+            self._came_in(entry.sender, entry.topic)
         observers = self._observers
         if not observers:
             return self._execute(entry.handler, entry.args, now, chooser or self._random,
@@ -485,6 +495,11 @@ class NodeCore:
         for observer in observers:
             observer.handled(record)
         return outputs
+
+    def _came_in(self, sender: str, name: str) -> None:
+        """Count one handled input from outside the fleet (the verdict names it)."""
+        key = (OUTSIDE_SENDERS[sender], name)
+        self._outside[key] = self._outside.get(key, 0) + 1
 
     def _execute(self, method: str, args: tuple[Any, ...], now: int, chooser: Chooser,
                  responder: Any) -> tuple[Sequence[Output], list[Effect], HandlerError | None]:
@@ -530,4 +545,5 @@ class NodeCore:
             max_lateness_ms=n["max_late"],
             stall_threshold_ms=self.stall_threshold() if self.stall_ms is not None else 0,
             rejected_external=n["external"], external_input=external, played=played,
-            rejected=rejected, wrong_types=self._wrong.lines())
+            rejected=rejected, wrong_types=self._wrong.lines(),
+            outside_input=tuple(sorted((*key, k) for key, k in self._outside.items())))

@@ -11,7 +11,8 @@ any handler ran, per `Rejection`. The same record is printed on the node's
 renamed here is a type error there, not a counter the verdict stops seeing.
 
 The wire form is flat: one integer per counter, a rejection reason as
-``rejected_<reason>`` (`Rejection.counter`). `from_dict` is strict: a map with
+``rejected_<reason>`` (`Rejection.counter`), the wrong-type lines as a list, and
+the input from outside the fleet as ``[source, name, count]`` triples. `from_dict` is strict: a map with
 a counter this version does not know, or without one it expects, is refused
 with `StatisticsError` rather than read as zero, so a node and a launcher of
 different versions say so instead of passing a run on counters nobody read.
@@ -25,6 +26,8 @@ from dataclasses import dataclass, field
 from enum import StrEnum, unique
 from types import MappingProxyType
 from typing import Any, Final, final
+
+from twinfleet.runtime.contract.names import BRIDGE_SENDER, OPERATOR_SENDER
 
 _REJECTED: Final = "rejected_"  # the wire prefix of a rejection reason's counter
 
@@ -44,6 +47,21 @@ class Rejection(StrEnum):
     def counter(self) -> str:
         """This reason's counter name in the wire form and the printed statistics."""
         return f"{_REJECTED}{self.value}"
+
+
+@unique
+class Outside(StrEnum):
+    """Where input from outside the fleet that a node's handlers took came from: the
+    envelope's sender says it (`OUTSIDE_SENDERS`)."""
+
+    OPERATOR = "an operator's command (topic pub, service call)"
+    BRIDGE = "the ROS 2 bridge"
+
+
+#: The envelope senders that are not fleet nodes, and what each stands for.
+OUTSIDE_SENDERS: Final = {OPERATOR_SENDER: Outside.OPERATOR, BRIDGE_SENDER: Outside.BRIDGE}
+#: Handled input from outside the fleet: (source, topic or service, handler runs).
+OutsideInput = tuple[Outside, str, int]
 
 
 class StatisticsError(ValueError):
@@ -87,6 +105,8 @@ class NodeStatistics:
         wrong_types: one line per (sender, topic) whose messages were of a type the
             receiving handler does not take (`contract.dispatch.wrong_type_line`, with the
             count): a breach of the node contract by the sender, which the verdict names.
+        outside_input: the messages and requests from outside the fleet its handlers
+            took, per (source, topic or service), sorted: the verdict names them.
     """
 
     received: int = 0
@@ -111,6 +131,7 @@ class NodeStatistics:
     played: int = 0
     rejected: Mapping[Rejection, int] = field(default_factory=dict)
     wrong_types: tuple[str, ...] = ()
+    outside_input: tuple[OutsideInput, ...] = ()
 
     def __post_init__(self) -> None:
         # Every reason present, read-only: readers index it without a default, and a
@@ -128,6 +149,7 @@ class NodeStatistics:
         out: dict[str, Any] = {name: getattr(self, name) for name in _SCALARS}
         out.update((reason.counter, count) for reason, count in self.rejected.items())
         out[_LINES] = list(self.wrong_types)
+        out[_OUTSIDE] = [[source.name, name, count] for source, name, count in self.outside_input]
         return out
 
     @classmethod
@@ -143,7 +165,7 @@ class NodeStatistics:
                                   f"{type(data).__name__}")
         _check_names(data.keys())
         for name, value in data.items():
-            if name != _LINES and type(value) is not int:
+            if name not in (_LINES, _OUTSIDE) and type(value) is not int:
                 raise StatisticsError(f"node statistics: {name} must be an integer, "
                                       f"got {value!r:.40}")
         lines = data[_LINES]
@@ -152,7 +174,7 @@ class NodeStatistics:
                                   f"got {lines!r:.40}")
         rejected = {reason: data[reason.counter] for reason in Rejection}
         return cls(**{name: data[name] for name in _SCALARS}, rejected=rejected,
-                   wrong_types=tuple(lines))
+                   wrong_types=tuple(lines), outside_input=_outside(data[_OUTSIDE]))
 
     def troubled(self) -> bool:
         """Whether a counter says something went wrong: a loss, a refusal, an error, a
@@ -163,21 +185,37 @@ class NodeStatistics:
     def nonzero(self) -> str:
         """The counters that are not zero, as ``name=value`` words (settings left out)."""
         return " ".join(f"{k}={v}" for k, v in self.to_dict().items()
-                        if v and k not in (_LINES, "stall_threshold_ms"))
+                        if v and k not in (_LINES, _OUTSIDE, "stall_threshold_ms"))
 
     def line(self) -> str:
         """The counters as ``name=value`` words (the ``stopped:`` line, ``node list
         --stats``)."""
-        return " ".join(f"{k}={v}" for k, v in self.to_dict().items() if k != _LINES)
+        return " ".join(f"{k}={v}" for k, v in self.to_dict().items()
+                        if k not in (_LINES, _OUTSIDE))
 
 
 _LINES: Final = "wrong_types"
+_OUTSIDE: Final = "outside_input"
 _TROUBLE: Final = ("dropped_undecodable", "handler_errors", "failures", "gaps",
                    "dropped_overflow", "dropped_best_effort", "sequence_jumps",
                    "dropped_lossless", "stalls", "rejected_external")
 _SCALARS: Final = tuple(f.name for f in dataclasses.fields(NodeStatistics)
-                        if f.name not in ("rejected", _LINES))
-WIRE_NAMES: Final = frozenset((*_SCALARS, *(reason.counter for reason in Rejection), _LINES))
+                        if f.name not in ("rejected", _LINES, _OUTSIDE))
+WIRE_NAMES: Final = frozenset((*_SCALARS, *(reason.counter for reason in Rejection), _LINES,
+                               _OUTSIDE))
+
+
+def _outside(raw: Any) -> tuple[OutsideInput, ...]:
+    """`outside_input` from its wire form, strictly."""
+    out = []
+    for entry in raw if isinstance(raw, list | tuple) else [None]:
+        if (not isinstance(entry, list | tuple) or len(entry) != 3
+                or entry[0] not in Outside.__members__ or not isinstance(entry[1], str)
+                or type(entry[2]) is not int):
+            raise StatisticsError(f"node statistics: {_OUTSIDE} must be a list of [source, "
+                                  f"name, count], got {raw!r:.60}")
+        out.append((Outside[entry[0]], entry[1], entry[2]))
+    return tuple(out)
 
 
 def _check_names(names: Any) -> None:

@@ -43,11 +43,14 @@ took longer than its evaluation budget. Such a run is inconclusive even when
 a property was seen violated (listed in the details): a robot that teleported
 after a stall collides because of the stall, not of its code.
 
-External input. A fleet launched with a bridge (``launch --ros2``) may take samples
-from outside it on the topics its nodes declare external (a robot's goal from RViz:
-`runtime.core.guard`). They do not change how a run is judged — they are inputs, as a
-scenario's parameters are — but a verdict whose nodes counted any says so in a detail
-line (`external_input_line`): the run is then not one the checked model describes.
+External input. A fleet may take input from outside it: an operator's `topic pub` or
+`service call` (signed with the owner's operator login, sender `OPERATOR_SENDER`), the
+ROS 2 bridge on the topics its nodes declare external (a robot's goal from RViz:
+`runtime.core.guard`), recorded samples `play --into-fleet` injects. They do not change
+how a run is judged — they are inputs, as a scenario's parameters are — but a verdict
+whose nodes took any says so first, in one detail line naming each node, what came in
+on which topic or service and from where (`external_input_line`): the run is then not
+one the checked model describes.
 
 Result (`Verdict.status`, a `runtime.contract.kinds.Status`, and its exit code):
 ``holds`` 0, ``violated`` 1 (the property named), ``error`` 2 (a property raised:
@@ -65,7 +68,7 @@ from typing import Any, Final, final
 from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.contract.snapshot import restore
 from twinfleet.runtime.core.state_report import StateReport
-from twinfleet.runtime.core.statistics import NodeStatistics
+from twinfleet.runtime.core.statistics import NodeStatistics, Outside
 from twinfleet.runtime.scenario.property_eval import (
     Expression,
     Overtime,
@@ -164,13 +167,23 @@ def statistics_reasons(node: str, stats: NodeStatistics) -> list[str]:
 
 
 def external_input_line(statistics: Mapping[str, NodeStatistics]) -> str | None:
-    """The detail line of a run whose nodes took external input, or None."""
-    taken = [f"{node} {stats.external_input}" for node, stats in sorted(statistics.items())
-             if stats.external_input]
+    """The detail line of a run whose nodes took input from outside the fleet, or None."""
+    taken = [f"{node}: {', '.join(came)}" for node, stats in sorted(statistics.items())
+             if (came := _came_in(stats))]
     if not taken:
         return None
-    return (f"took external input (samples from outside the fleet, through the bridge): "
-            f"{', '.join(taken)}; the checked model has no such input")
+    return (f"took external input (from outside the fleet; the checked model has no such "
+            f"input): {'; '.join(taken)}")
+
+
+def _came_in(stats: NodeStatistics) -> list[str]:
+    """What one node took from outside the fleet, in words."""
+    came = [f"{k} on {name} from {source}" for source, name, k in stats.outside_input]
+    if stats.external_input and not any(s is Outside.BRIDGE for s, _, _ in stats.outside_input):
+        came.append(f"{stats.external_input} samples from {Outside.BRIDGE}")
+    if stats.played:
+        came.append(f"{stats.played} recorded samples from twinfleet play --into-fleet")
+    return came
 
 
 def _after(report: StateReport | None) -> str:
@@ -328,25 +341,19 @@ class LiveJudge:
 
     def verdict(self, end: RunEnd) -> Verdict:
         """The run's result (`_decide`), with detail lines for input from outside the fleet,
-        which neither voids nor decides the verdict: recorded input played into the fleet
-        (``play --into-fleet``, a fleet launched with ``--accept-recorded``: said first, as
-        what the run shows was partly not the nodes' own doing), samples an operator's
-        command sent that nodes refused, and samples the ROS 2 bridge brought in on
-        declared external topics."""
+        which neither voids nor decides the verdict: what the nodes took from outside
+        (`external_input_line`: said first, as what the run shows was partly not the
+        nodes' own doing), and samples an operator's command sent that nodes refused."""
         decided = self._decide(end)
-        played = {n: s.played for n, s in end.statistics.items() if s.played}
-        first = (("recorded input was injected (twinfleet play --into-fleet): "
-                  + ", ".join(f"{n} took {k} recorded samples" for n, k in sorted(played.items())),)
-                 if played else ())
+        taken = external_input_line(end.statistics)
+        first = (taken,) if taken is not None else ()
         refused = tuple(f"external input: {node} refused {stats.rejected_external} samples "
                         "an operator's command sent (e.g. `twinfleet topic pub --force`)"
                         for node, stats in sorted(end.statistics.items())
                         if stats.rejected_external)
-        taken = external_input_line(end.statistics)
-        last = (*refused, *((taken,) if taken is not None else ()))
-        if not first and not last:
+        if not first and not refused:
             return decided
-        return dataclasses.replace(decided, details=(*first, *decided.details, *last))
+        return dataclasses.replace(decided, details=(*first, *decided.details, *refused))
 
     def _decide(self, end: RunEnd) -> Verdict:
         """The run's result: a property that raised; a message of a type its handler does
