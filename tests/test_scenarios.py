@@ -9,6 +9,7 @@ import pytest
 import yaml
 
 from twinfleet.cli import main as cli
+from twinfleet.runtime.fleet.launcher import wall_limit
 from twinfleet.runtime.scenario.config import (
     CheckConfig,
     CrashConfig,
@@ -17,6 +18,7 @@ from twinfleet.runtime.scenario.config import (
     PerName,
 )
 from twinfleet.runtime.scenario.examples import shipped_scenarios
+from twinfleet.runtime.scenario.lint import lint_scenario
 from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario, resolve_scenario
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -124,9 +126,14 @@ def mutate(path: str, value):
                                                                      r"number of crashes >= 1"),
         ("check", {"faults": {"crash": {"nodes": ["r1"], "durable": ["r7"]}}},
          r"check\.faults\.crash: 'r7' is not a node"),
-        ("live", {"timeout": 3}, r"live\.timeout: unknown key; expected one of max_nodes, max_payload_bytes, report, "
-                                 r"stop, stop_on_error, summary_topics, time_scale, timeout_s"),
-        ("live", {"timeout_s": 0}, r"live\.timeout_s: expected a number > 0"),
+        ("live", {"timeout": 3}, r"live\.timeout: unknown key; expected one of horizon_s, max_nodes, "
+                                 r"max_payload_bytes, report, stop, stop_on_error, summary_topics, "
+                                 r"time_scale, timeout_s, wall_timeout_s"),
+        ("live", {"horizon_s": -1}, r"live\.horizon_s: expected a number > 0"),
+        ("live", {"timeout_s": 3, "wall_timeout_s": 4}, r"live\.timeout_s: give "
+                                                        r"live\.wall_timeout_s only"),
+        ("live", {"stop": "never"}, r"live\.stop: expected one of timeout, settled, violation"),
+        ("live", {"wall_timeout_s": 0}, r"live\.wall_timeout_s: expected a number > 0"),
         ("live", {"time_scale": "fast"}, r"live\.time_scale: expected a number > 0"),
         ("live", {"stop_on_error": 1}, r"live\.stop_on_error: expected true or false"),
         ("live", {"report": "nodes.report"}, r"live\.report: expected 'module:factory'"),
@@ -150,6 +157,27 @@ def test_bad_scenario_names_file_key_and_rule(tmp_path, path, value, expected):
     assert str(bad) in str(info.value)
 
 
+def test_the_old_timeout_key_is_read_as_wall_time_with_a_one_line_warning(tmp_path):
+    old = load_scenario(write(tmp_path, {**GOOD, "live": {"timeout_s": 30}}))
+    assert (old.live.wall_timeout_s, old.live.horizon_s, old.live.timeout_s) == (30.0, None, None)
+    (warning,) = [str(w) for w in lint_scenario(old) if "timeout_s" in str(w)]
+    assert "\n" not in warning and warning.startswith(f"warning: {old.path}: live.timeout_s is "
+                                                      "deprecated: taken as live.wall_timeout_s")
+    assert "live.horizon_s" in warning
+    new = load_scenario(write(tmp_path, {**GOOD, "live": {"horizon_s": 30}}))
+    assert not [w for w in lint_scenario(new) if "timeout_s" in str(w)]
+
+
+def test_a_launch_ends_at_the_first_of_its_wall_timeout_and_its_fleet_time_horizon():
+    assert wall_limit(None, None, 5)[0] is None
+    assert wall_limit(20, None, 5) == (20, "timeout after 20 s")
+    assert wall_limit(None, 120, 5) == (24, "the fleet-time horizon of 120 s (24 s of wall "
+                                            "time at time scale 5)")
+    assert wall_limit(20, 120, 5)[0] == 20 and wall_limit(30, 120, 5)[0] == 24
+    for scenario in shipped_scenarios().values():  # each shipped scenario says fleet seconds
+        assert load_scenario(scenario).live.horizon_s is not None, scenario
+
+
 def test_unreadable_and_non_yaml_files(tmp_path):
     with pytest.raises(ScenarioError, match="cannot read scenario file: no such file"):
         load_scenario(tmp_path / "missing.yaml")
@@ -166,7 +194,7 @@ def test_check_and_live_sections_become_typed_frozen_config(tmp_path):
                                                                          "/r1/scan": [0, 0]},
                              "deadline_ms": 50, "queue_bound": {"default": 8, "r1": 20},
                              "faults": {"drop": ["/poses"], "crash": {"nodes": ["r1"]}}},
-           "live": {"timeout_s": 30, "summary_topics": ["/poses"]}}
+           "live": {"wall_timeout_s": 30, "summary_topics": ["/poses"]}}
     scenario = load_scenario(write(tmp_path, doc))
     check, live = scenario.check, scenario.live
     assert check == CheckConfig(max_states=500, max_time_s=2.0,

@@ -67,7 +67,7 @@ def test_a_parameter_read_as_state_says_properties_read_state(project: Path) -> 
 def test_strict_turns_a_lint_warning_into_exit_2(project: Path) -> None:
     lonely = project / "lonely.yaml"  # a robot that calls a service nobody serves
     lonely.write_text(yaml.safe_dump({"name": "lonely", "nodes": [
-        {"name": "a", "class": "station_nodes:Asker"}], "live": {"timeout_s": 1}}))
+        {"name": "a", "class": "station_nodes:Asker"}], "live": {"wall_timeout_s": 1}}))
     for command in ("check", "launch"):
         code, _, err = run(command, str(lonely), "--strict")
         assert code == 2, err

@@ -45,7 +45,7 @@ nodes:
     params: {{start: [25, 5], goal: [25, {goal}], speed: 1.0, max_wait_ms: 1500}}}}
 properties:
 - {{name: no_collision, kind: invariant, expr: "map_server.collisions == 0"}}
-live: {{timeout_s: 60, time_scale: {scale}, report: "twinfleet.nodes.report:report_for"}}
+live: {{wall_timeout_s: 60, time_scale: {scale}, report: "twinfleet.nodes.report:report_for"}}
 """
 
 

@@ -50,7 +50,7 @@ class Case:
     def scenario(self, tmp_path: Path, name: str) -> Path:
         doc = {"name": f"conf-{name.replace('_', '-')}", "semantics": "ros", "seed": 1,
                "nodes": self.nodes, "properties": self.properties,
-               "live": {"timeout_s": 20, "time_scale": 10.0}}
+               "live": {"wall_timeout_s": 20, "time_scale": 10.0}}
         if self.check:
             doc["check"] = self.check
         path = tmp_path / f"{name}.yaml"

@@ -41,7 +41,7 @@ nodes:
   - {name: listener, class: "twinfleet.nodes.demo:Listener"}
   - {name: adder, class: "twinfleet.nodes.demo:Adder"}
   - {name: caller, class: "twinfleet.nodes.demo:Caller", params: {period_ms: 200}}
-live: {timeout_s: 90}
+live: {wall_timeout_s: 90}
 """
 
 
@@ -209,7 +209,7 @@ name: crash
 nodes:
   - {name: crasher, class: "twinfleet.nodes.demo:Crasher", params: {crash_after_ms: 200}}
   - {name: listener, class: "twinfleet.nodes.demo:Listener"}
-live: {timeout_s: 30, stop_on_error: true}
+live: {wall_timeout_s: 30, stop_on_error: true}
 """
 
 

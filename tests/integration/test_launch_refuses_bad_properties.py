@@ -47,7 +47,7 @@ nodes:
   - {name: r2, class: "robots:Robot"}
 properties:
   - {name: charged, kind: invariant, expr: "r1.batery > 10 and r2.battery > 10"}
-live: {timeout_s: 8}
+live: {wall_timeout_s: 8}
 '''
 
 

@@ -87,3 +87,13 @@ def test_stop_on_violation_ends_the_run_at_its_first_violation(tmp_path, how):
     out = expect(run, 1, "run ended: stopped at the first violation (stays_small, at t=",
                  "result: FAILED (stays_small violated: invariant 'counter.count < 5' is false")
     assert "timeout after" not in out, out[-3000:]
+
+
+def test_a_fleet_time_horizon_ends_the_run_at_any_time_scale(tmp_path):
+    path = write_scenario(tmp_path, "horizon", COUNTER, [
+        {"name": "counts", "kind": "eventually", "expr": "counter.count >= 3"}],
+        live={"horizon_s": 4, "wall_timeout_s": 30})
+    out = expect(run_launch(path, "--time-scale", "8", timeout=40), 0,
+                 "run ended: the fleet-time horizon of 4 s (0.5 s of wall time at time scale 8)",
+                 "result: PASSED")
+    assert "timeout after" not in out

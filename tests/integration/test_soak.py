@@ -48,7 +48,7 @@ def scenario_text() -> str:
     return (f"name: soak\nnodes:\n"
             f'  - {{name: sink, class: "{NODES}:Sink", '
             f"params: {{expected: {PUBLISHERS * LIMIT}, rounds: {ROUNDS}}}}}\n"
-            f"{pubs}\nlive: {{timeout_s: 60}}\n")
+            f"{pubs}\nlive: {{wall_timeout_s: 60}}\n")
 
 
 def logged(text: str, event: str) -> list[dict[str, int]]:

@@ -53,7 +53,7 @@ SCENARIO = '''name: wrongtype
 nodes:
   - {name: station, class: "charging.nodes:Station"}
   - {name: monitor, class: "charging.nodes:Monitor"}
-live: {timeout_s: 1.5}
+live: {wall_timeout_s: 1.5}
 '''
 
 LINE = ("wrong message type: station published on /station_status std_msgs/String, but "

@@ -66,7 +66,7 @@ def test_a_viewer_follows_the_fleet_launched_again(cli, tmp_path):
     # the walkers publish the robot case's poses: the robot scene draws them
     scenario.write_text("name: walk\nscene: twinfleet.nodes.scene:RobotScene\nnodes:\n" + "".join(
         f'  - {{name: w{i}, class: "walkers:Walker", params: {{row: {i}}}}}\n'
-        for i in (1, 2, 3)) + "live: {timeout_s: 3}\n")
+        for i in (1, 2, 3)) + "live: {wall_timeout_s: 3}\n")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     port = free_port()
     viewer = cli("view", "--port", str(port), "--connect", endpoint, "--fleet", "walk",
@@ -102,7 +102,7 @@ def test_a_recording_follows_the_fleet_launched_again(cli, tmp_path):
     scenario = tmp_path / "walk.yaml"
     scenario.write_text("name: walk\nnodes:\n" + "".join(
         f'  - {{name: w{i}, class: "walkers:Walker", params: {{row: {i}}}}}\n'
-        for i in (1, 2, 3)) + "live: {timeout_s: 3}\n")
+        for i in (1, 2, 3)) + "live: {wall_timeout_s: 3}\n")
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     first = cli("launch", str(scenario), "--listen", endpoint, log="first.log")
     poll(lambda: first.log.read_text().count("started") >= 3, 30, "the first run's nodes")

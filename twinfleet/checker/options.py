@@ -179,7 +179,7 @@ def add_statistical_arguments(p: argparse.ArgumentParser) -> None:
                    help="at most N simulations (default 1000; unbounded with --precision "
                    "or --assert-below, which stop by themselves)")
     g.add_argument("--horizon-ms", type=int, default=None, metavar="MS",
-                   help="simulate up to this fleet time (default: live.timeout_s, else 60 s)")
+                   help="simulate up to this fleet time (default: live.horizon_s, else 60 s)")
     g.add_argument("--max-steps", type=int, default=1_000_000,
                    help="steps per simulation at most (default 1,000,000)")
     g.add_argument("--confidence", type=_probability, default=0.95,

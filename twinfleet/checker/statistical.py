@@ -235,7 +235,7 @@ def check_statistical(scenario: str | Path, options: StatisticalOptions) -> Stat
     spec = load(path, profile=options.profile, semantics=options.semantics,
                 params=options.params)
     model, source, replaced = statistical_timing(spec, options.timing)
-    horizon = options.horizon_ms or int(1000 * (spec.live.timeout_s or 60))
+    horizon = options.horizon_ms or int(1000 * (spec.live.horizon_s or 60))
     seed = options.seed if options.seed is not None else spec.seed
     job = SimulationJob(str(path.resolve()), options.profile, options.semantics, model, seed,
                         horizon, options.max_steps, options.verify, options.until_decided,

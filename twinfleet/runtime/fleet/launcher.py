@@ -87,7 +87,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             to a file for the node processes, `live_fleet.launchable`).
         time_scale, seed: fleet speed-up and seed (default: the scenario's).
         timeout_s: wall seconds the run lasts once every node is alive (from the fleet's
-            epoch; default: `live.timeout_s`, else none).
+            epoch; default: `live.wall_timeout_s`, else none); ``live.horizon_s`` fleet
+            seconds end it too (`wall_limit`).
         connect, listen: join this router; else the embedded one's endpoint.
         out, handle_signals: where output goes; end on SIGINT/SIGTERM (main thread only).
         run_record: write the run as JSON lines to this file (`runtime.fleet.run_record`).
@@ -110,7 +111,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
-    timeout_s = timeout_s if timeout_s is not None else live.timeout_s
+    limit = wall_limit(timeout_s if timeout_s is not None else live.wall_timeout_s,
+                       live.horizon_s, time_scale)
     seed = scenario.seed if seed is None else seed
     record = RunRecord(run_record) if run_record else None
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
@@ -123,13 +125,26 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                                    else until_violation))
     started = time.monotonic()
     async with _Launch(fleet, record_events, handle_signals) as launch:
-        reason, running = await launch.until_end((startup_s, timeout_s), params, driver)
+        reason, running = await launch.until_end((startup_s, *limit), params, driver)
     result = _result(fleet, reason, running, time.monotonic() - started)
     if record is not None:
         record_summary(record, result)
         record.close()
     launch.raise_driver_failure()
     return result
+
+
+def wall_limit(wall_timeout_s: float | None, horizon_s: float | None,
+               time_scale: float) -> tuple[float | None, str]:
+    """Wall seconds a run lasts from its epoch — the wall timeout, or the fleet-time horizon
+    at this time scale if that comes first (None: no limit) — and the end reason then."""
+    horizon = None if horizon_s is None else horizon_s / time_scale
+    if horizon is not None and (wall_timeout_s is None or horizon < wall_timeout_s):
+        return horizon, (f"the fleet-time horizon of {horizon_s:g} s "
+                         f"({horizon:g} s of wall time at time scale {time_scale:g})")
+    if wall_timeout_s is None:
+        return None, "no limit"
+    return wall_timeout_s, f"timeout after {wall_timeout_s:g} s"
 
 
 @final
@@ -148,10 +163,10 @@ class _Launch:
     async def __aenter__(self) -> _Launch:
         return self
 
-    async def until_end(self, limits: tuple[float, float | None], params: Sequence[str],
+    async def until_end(self, limits: tuple[float, float | None, str], params: Sequence[str],
                         driver: Callable[[Fleet], Awaitable[str]] | None) -> tuple[str, list[str]]:
         """Open the fleet, register it, start its nodes (and the driver) and wait for the
-        end (`limits`: start-up and timeout seconds); return why the run ended and which
+        end (`limits`: start-up and timeout seconds, the reason of the timeout); return why the run ended and which
         nodes were still running then."""
         fleet = self.fleet
         if fleet.record is not None:
@@ -237,7 +252,8 @@ def _record_start(record: RunRecord, fleet: Fleet, *, timeout_s: float | None) -
                         for c in scenario.nodes])
 
 
-async def _until_end(fleet: Fleet, startup_s: float, timeout_s: float | None) -> str:
+async def _until_end(fleet: Fleet, startup_s: float, timeout_s: float | None,
+                     timed_out: str) -> str:
     """Why the run ended: what `fleet.end` was told, the start-up limit (some node not alive
     after `startup_s`), or the timeout, which counts from the epoch (every node alive): a
     loaded machine's slow imports are not the run's time."""
@@ -254,7 +270,7 @@ async def _until_end(fleet: Fleet, startup_s: float, timeout_s: float | None) ->
     try:
         reason = await asyncio.wait_for(asyncio.shield(fleet.ended), timeout_s)
     except TimeoutError:
-        reason = f"timeout after {timeout_s:g} s"
+        reason = timed_out
     fleet.log(f"run ended: {reason}")
     return reason
 

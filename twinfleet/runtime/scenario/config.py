@@ -13,8 +13,8 @@ builds a `System`; rules that need the node list (is ``r1`` a node?) are the
 scenario's (`runtime.scenario.spec`).
 
 The meaning of each checker setting is documented in `checker.faults`; the
-live settings in `runtime.fleet.launcher` (report, summary topics, timeout, time
-scale) and `runtime.fleet.node_main` (stop_on_error, time scale).
+live settings in `runtime.fleet.launcher` (report, summary topics, wall timeout,
+horizon, time scale) and `runtime.fleet.node_main` (stop_on_error, time scale).
 """
 
 from __future__ import annotations
@@ -148,9 +148,16 @@ class CheckConfig:
 @final
 @dataclass(frozen=True, slots=True)
 class LiveConfig:
-    """`live:`, the launcher's and the node processes' settings."""
+    """`live:`, the launcher's and the node processes' settings.
 
-    timeout_s: float | None = None
+    Two limits, each with one meaning: `wall_timeout_s`, wall seconds a launch runs once
+    its fleet is up, and `horizon_s`, fleet seconds a run covers (a launch ends there
+    too, at any time scale; the statistical checker simulates that far). `timeout_s` is
+    the old key: it is taken as `wall_timeout_s` (the lint says so in one line)."""
+
+    wall_timeout_s: float | None = None
+    horizon_s: float | None = None
+    timeout_s: float | None = None  # deprecated: moved into wall_timeout_s when built
     stop_on_error: bool = False
     time_scale: float = 1.0
     report: str | None = None
@@ -163,7 +170,14 @@ class LiveConfig:
     stop: str = "timeout"
 
     def __post_init__(self) -> None:
-        _optional(self, "live", "timeout_s", _positive)
+        for name in ("wall_timeout_s", "horizon_s", "timeout_s"):
+            _optional(self, "live", name, _positive)
+        if self.timeout_s is not None:
+            if self.wall_timeout_s is not None:
+                raise ConfigError("live.timeout_s", "give live.wall_timeout_s only (timeout_s "
+                                                    "is its old name)")
+            _set(self, "wall_timeout_s", self.timeout_s)
+            _set(self, "timeout_s", None)
         if self.stop not in LIVE_STOPS:
             raise ConfigError("live.stop", f"expected one of {', '.join(LIVE_STOPS)}, "
                                            f"got {self.stop!r}")

@@ -1,7 +1,7 @@
 """Load-time warnings about a scenario's node code: sources of nondeterminism, and names
-that nothing answers.
+that nothing answers; and about deprecated keys in its file (`lint_settings`).
 
-Two lints, both read the source (`ast`), run nothing, and give warnings, not
+Two lints of the code, both read the source (`ast`), run nothing, and give warnings, not
 errors (the checker's contract checks, `checker.diagnosis`, are what decide):
 
 - **Imports.** A node module that imports `random`, `time`, `datetime`,
@@ -34,6 +34,8 @@ from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import final
+
+import yaml
 
 from twinfleet.runtime.contract.names import InvalidName, resolve
 from twinfleet.runtime.contract.node import Node, NodeSpec
@@ -271,7 +273,25 @@ def _pattern(arg: ast.expr) -> str:
 
 
 def lint_scenario(scenario: Scenario) -> list[LintWarning]:
-    """Every load-time warning for a scenario's nodes."""
+    """Every load-time warning for a scenario: its nodes, and old keys in its file."""
     nodes = [(cfg.name, cfg.namespace, cfg.cls) for cfg in scenario.nodes]
     classes = list(dict.fromkeys(cls for _, _, cls in nodes))
-    return lint_nodes(classes) + lint_topics(nodes)
+    return lint_settings(scenario.path) + lint_nodes(classes) + lint_topics(nodes)
+
+
+def lint_settings(path: Path | None) -> list[LintWarning]:
+    """A scenario file's deprecated keys, each with what it was taken as (the loader has
+    already moved it: `LiveConfig`)."""
+    if path is None or path.suffix not in (".yaml", ".yml"):
+        return []
+    try:
+        doc = yaml.safe_load(path.read_text())
+    except (OSError, yaml.YAMLError):
+        return []
+    live = doc.get("live") if isinstance(doc, dict) else None
+    if not isinstance(live, dict) or "timeout_s" not in live:
+        return []
+    return [LintWarning(str(path), "live.timeout_s is deprecated: taken as "
+                        "live.wall_timeout_s (wall seconds a launch runs once its fleet is "
+                        "up); for fleet seconds (at any time scale; the statistical "
+                        "checker's horizon) write live.horizon_s")]

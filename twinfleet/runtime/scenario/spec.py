@@ -30,7 +30,7 @@ YAML layout (every key but `nodes` optional)::
         duplicate: [/topic]        # each delivery: delivered | delivered twice
         crash: {nodes: [r1], max: 1, durable: []}   # crash-and-restart branches
       fairness: none               # weak: a lasso must handle every message it drops (docs/finite-state.md)
-    live: {timeout_s: 120, stop_on_error: false, time_scale: 1.0,
+    live: {horizon_s: 120, wall_timeout_s: 600, stop_on_error: false, time_scale: 1.0,
            report: "twinfleet.nodes.report:report_for"}  # factory(scenario) -> report, see launcher
     ros2: {domain: 0, router: tcp/127.0.0.1:7447,       # launch runs the ROS 2 bridge too
            inbound: {/goal_pose: /r1/goal}}            # ROS 2 topic -> fleet topic (docs/ros2.md)
