@@ -144,11 +144,15 @@ def _launch_access(args: argparse.Namespace) -> Any:
 def _ros2_driver(args: argparse.Namespace, scenario: Any) -> Any:
     """The ROS 2 bridge's driver for `run_fleet` when asked for (``--ros2``, a ``ros2:``
     section), else None."""
-    if not (args.ros2 or args.ros2_router or scenario.ros2 is not None):
+    if not (args.ros2 or args.ros2_router or args.ros2_mapping or scenario.ros2 is not None):
         return None
+    from pathlib import Path
+
     from twinfleet.ros2.commands import launch_driver
 
-    return launch_driver(scenario.ros2, router=args.ros2_router)
+    near = ([scenario.path.parent] if scenario.path is not None else []) + [Path.cwd()]
+    return launch_driver(scenario.ros2, router=args.ros2_router, mapping=args.ros2_mapping,
+                         near=near)
 
 
 _SEVERITY = (0, 3, 2, 1, 130)  # ok < inconclusive < bad input < failed < interrupted
@@ -443,7 +447,12 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                         "it uses): the nodes take the bridge's input on their external topics")
     p.add_argument("--ros2-router", default=None, metavar="EP",
                    help="with --ros2: the ROS 2 network's router (default: the ros2: section's, "
-                        "else tcp/127.0.0.1:7447, rmw_zenohd's)")
+                        "else tcp/127.0.0.1:7447, rmw_zenohd's); a bridge that never reaches "
+                        "it makes the run INCONCLUSIVE")
+    p.add_argument("--ros2-mapping", default=None, metavar="MODULE:NAME",
+                   help="with --ros2: the fleet's ROS 2 mapping, found as node classes are "
+                        "(the scenario's folder, the working directory; default: the ros2: "
+                        "section's, else the scene's, else none: every message by its fields)")
     p.set_defaults(func=cmd_launch)
 
 

@@ -32,7 +32,7 @@ import zenoh
 from zenoh import ext
 
 from twinfleet.ros2.graph import BridgeGraph, Declared, Inbound
-from twinfleet.ros2.interfaces import Interfaces
+from twinfleet.ros2.interfaces import Interfaces, ros_messages
 from twinfleet.ros2.mapping import Ros2Mapping
 from twinfleet.ros2.wire import EntityKind
 from twinfleet.runtime.host.keys import ANY, topic_in_fleet
@@ -84,14 +84,8 @@ class RosSide:
             return 0
         if not isinstance(env, dict) or not isinstance(env.get("data"), dict):
             return 0
-        type_name = str(env.get("type"))
-        outputs = list(self.mapping.outbound(where.topic, type_name, env["data"],
-                                             int(env.get("stamp_ms") or 0)))
-        by_fields = self.interfaces.ros_type(type_name) if self.interfaces else None
-        if by_fields is not None and type_name not in self.mapping.mapped_types and \
-                self.interfaces is not None:
-            with contextlib.suppress(KeyError, TypeError, ValueError):  # not of its type's shape
-                outputs = [(where.topic, by_fields, self.interfaces.fields(type_name, env["data"]))]
+        outputs = ros_messages(self.mapping, self.interfaces, where.topic, str(env.get("type")),
+                               env["data"], int(env.get("stamp_ms") or 0))
         sender = env.get("sender") if isinstance(env.get("sender"), str) else None
         for topic, ros_type, fields in outputs:
             self.publish(topic, ros_type, fields, owner=sender or None)

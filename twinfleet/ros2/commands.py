@@ -121,7 +121,7 @@ def bridge_command(args: argparse.Namespace) -> int:
     except ValueError as exc:
         raise CommandError(str(exc)) from None
     bridge = FleetBridge(BridgeSettings(conn.fleet, conn.endpoint, conn.auth, args.domain,
-                                        args.router, routes, args.mapping))
+                                        args.router, routes, args.mapping, (Path.cwd(),)))
 
     async def run() -> None:
         loop = asyncio.get_running_loop()
@@ -136,11 +136,15 @@ def bridge_command(args: argparse.Namespace) -> int:
     return 0
 
 
-def launch_driver(config: Ros2Config | None, *, router: str | None = None) -> Any:
+def launch_driver(config: Ros2Config | None, *, router: str | None = None,
+                  mapping: str | None = None, near: Sequence[Path] = ()) -> Any:
     """The `run_fleet` driver of `launch --ros2`: the bridge with the scenario's ``ros2:``
-    settings (default ones without), `router` overriding the section's."""
+    settings (default ones without), `router` and `mapping` overriding the section's. A
+    named mapping is loaded here, before the fleet starts (its module searched in `near`
+    too, as node classes are): one that does not load is a one-line error at once."""
     _need_libraries()
     from twinfleet.ros2 import live
+    from twinfleet.ros2.mapping import MappingError, load_mapping
 
     config = config or Ros2Config()
     try:
@@ -148,9 +152,16 @@ def launch_driver(config: Ros2Config | None, *, router: str | None = None) -> An
             config = dataclasses.replace(config, router=router)
     except ValueError as exc:  # ConfigError: says which setting
         raise CommandError(f"--ros2-router: {exc}") from None
+    name = mapping or config.mapping
+    if name is not None:
+        try:
+            load_mapping(name, near)
+        except MappingError as exc:
+            raise CommandError(f"{'--ros2-mapping' if mapping else 'ros2.mapping'}: "
+                               f"{exc}") from None
     routes: Sequence[tuple[str, str]] = config.inbound
     return live.launch_driver(dict(routes), domain=config.domain, router=config.router,
-                              mapping=config.mapping)
+                              mapping=name, near=tuple(near))
 
 
 def interface_export_command(args: argparse.Namespace) -> int:

@@ -33,6 +33,8 @@ from rosbags.typesys import get_types_from_msg
 
 from twinfleet.interfaces.plain import ros_fields, standard_type
 from twinfleet.ros2.cdr import RosTypes
+from twinfleet.ros2.mapping import Output, Ros2Mapping
+from twinfleet.runtime.contract.messages import registered_types
 
 _SCALARS: dict[Any, str] = {int: "int64", float: "float64", str: "string", bool: "bool"}
 Convert = typing.Callable[[Any], Any]
@@ -136,6 +138,32 @@ class Interfaces:
         prefix = f"{pkg}/msg/"
         return {t[len(prefix):]: text for t, text in self.definitions.items()
                 if t.startswith(prefix)}
+
+
+def fleet_interfaces(types: RosTypes | None = None) -> Interfaces:
+    """The by-fields ROS 2 interfaces of the message types this process knows: those of
+    the fleet's own packages (not the framework's ``twinfleet/`` types, not the types a
+    standard ROS 2 package already defines)."""
+    store = types or RosTypes()
+    classes = {name: cls for name, cls in registered_types().items()
+               if not name.startswith("twinfleet/") and not store.known(ros_name(name))}
+    return Interfaces(classes, store)
+
+
+def ros_messages(mapping: Ros2Mapping, interfaces: Interfaces | None, topic: str,
+                 type_name: str, data: Mapping[str, Any], stamp_ms: int) -> list[Output]:
+    """What one fleet message is in ROS 2: what the mapping makes of it, or, for a type it
+    does not map, the message by its fields on the same topic (none for a type without
+    interface or data not of its type's shape)."""
+    if type_name in mapping.mapped_types or interfaces is None:
+        return list(mapping.outbound(topic, type_name, data, stamp_ms))
+    by_fields = interfaces.ros_type(type_name)
+    if by_fields is None:
+        return list(mapping.outbound(topic, type_name, data, stamp_ms))
+    try:
+        return [(topic, by_fields, interfaces.fields(type_name, data))]
+    except (KeyError, TypeError, ValueError):  # not of its type's shape
+        return []
 
 
 def _same(value: Any) -> Any:

@@ -25,15 +25,15 @@ import contextlib
 import sys
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any, TextIO
 
 import msgpack
 import zenoh
 
 from twinfleet.ros2.bridge import DEFAULT_ROUTER, RosSide, ros_config
-from twinfleet.ros2.cdr import RosTypes
 from twinfleet.ros2.graph import Inbound
-from twinfleet.ros2.interfaces import Interfaces, ros_name
+from twinfleet.ros2.interfaces import fleet_interfaces
 from twinfleet.ros2.mapping import (
     InboundMapping,
     MappingError,
@@ -43,7 +43,7 @@ from twinfleet.ros2.mapping import (
     mapping_of_scene,
 )
 from twinfleet.runtime.access.fleetauth import MonitorAuth
-from twinfleet.runtime.contract.messages import encode, registered_types
+from twinfleet.runtime.contract.messages import encode
 from twinfleet.runtime.contract.names import BRIDGE_SENDER
 from twinfleet.runtime.core.guard import Rejected, check_message, signer
 from twinfleet.runtime.host.keys import (
@@ -61,16 +61,6 @@ RETRY_S = 0.5
 QUERY_S = 1.0
 
 
-def fleet_interfaces(types: RosTypes | None = None) -> Interfaces:
-    """The by-fields ROS 2 interfaces of the message types this process knows: those of
-    the fleet's own packages (not the framework's ``twinfleet/`` types, not the types a
-    standard ROS 2 package already defines)."""
-    store = types or RosTypes()
-    classes = {name: cls for name, cls in registered_types().items()
-               if not name.startswith("twinfleet/") and not store.known(ros_name(name))}
-    return Interfaces(classes, store)
-
-
 class BridgeError(ValueError):
     """The bridge cannot run as asked; the text says why."""
 
@@ -85,7 +75,8 @@ class BridgeSettings:
     domain: int = 0
     router: str = DEFAULT_ROUTER  # the ROS 2 network's
     routes: Mapping[str, str] = field(default_factory=dict)  # ROS 2 topic → fleet topic
-    mapping: str | None = None  # module:Name; default: the one the fleet's scene names
+    mapping: str | None = None  # module:Name; default: the scene's, else `NoMapping`
+    near: tuple[Path, ...] = ()  # folders the mapping's module is searched in too
 
 
 class Forwarder:
@@ -166,6 +157,7 @@ class FleetBridge:
         self.tap: FleetTap | None = None
         self.stop = asyncio.Event()
         self.ready = asyncio.Event()
+        self.reached = False  # whether the ROS 2 router answered
         self._ros: zenoh.Session | None = None
         self._watch: Any = None
         self._reported: set[str] = set()
@@ -181,6 +173,7 @@ class FleetBridge:
             self._ros = await self._open_ros()
             if self._ros is None:
                 return
+            self.reached = True
             operator = MonitorAuth(operator=s.auth.operator or s.auth.monitor)
             self.tap = FleetTap(lambda: tap_config(s.endpoint, operator), s.fleet, self._deliver)
             self._loop = asyncio.get_running_loop()
@@ -211,7 +204,8 @@ class FleetBridge:
         s = self.settings
         view = _look(session, s.fleet)
         name = s.mapping or mapping_of_scene(view.scene)
-        mapping = NoMapping() if name is None else load_mapping(name)  # standard types carry
+        mapping = load_mapping(name, s.near) if name is not None else NoMapping(
+            frozenset(view.latched))  # standard types as they are, the others by fields
         assert self._ros is not None
         self.side = RosSide(self._ros, mapping, domain=s.domain, on_inbound=self._on_inbound)
         self.side.interfaces = fleet_interfaces(self.side.graph.types)
@@ -318,22 +312,29 @@ class FleetBridge:
 
 
 def launch_driver(routes: Mapping[str, str], *, domain: int, router: str,
-                  mapping: str | None) -> Any:
+                  mapping: str | None, near: tuple[Path, ...] = ()) -> Any:
     """A `run_fleet` driver that runs the bridge beside the fleet it launched, until the run
-    ends (the fleet's credentials are the launcher's own, bridge key included)."""
+    ends (the fleet's credentials are the launcher's own, bridge key included). A bridge
+    that fails, or never reaches its router, makes the run INCONCLUSIVE with that reason
+    (`Fleet.unmet`): the run was asked to be on ROS 2 and was not."""
     from twinfleet.runtime.fleet.live_fleet import Fleet
 
     async def drive(fleet: Fleet) -> str:
         creds = fleet.creds
         auth = MonitorAuth(creds.key, creds.node, creds.monitor, creds.bridge)
         settings = BridgeSettings(fleet.scenario.fleet, fleet.endpoint, auth, domain, router,
-                                  routes, mapping)
+                                  routes, mapping, near)
         bridge = FleetBridge(settings, fleet.out)
-        await fleet.all_alive.wait()  # every node's subscriptions are known then
         try:
+            await fleet.all_alive.wait()  # every node's subscriptions are known then
             await bridge.run()
         except (BridgeError, MappingError) as exc:
+            fleet.unmet.append(f"the ROS 2 bridge failed: {exc}")
             return f"ros2 bridge: {exc}"
+        finally:
+            if fleet.all_alive.is_set() and not bridge.reached and not fleet.unmet:
+                fleet.unmet.append(f"the ROS 2 bridge never reached its router at {router} "
+                                   "(is rmw_zenohd running there?)")
         return "ros2 bridge stopped"
 
     return drive

@@ -16,17 +16,22 @@ A mapping that takes messages from ROS 2 into the fleet also has
 and ``inbound(fleet_topic, ros_type, fields)`` (the fleet message, or
 ValueError with the reason it is dropped for): `InboundMapping`.
 
-It is named by import name (``module:Name``, a class made with no arguments);
-the default is the one the fleet's scene names in its ``ros2`` attribute
-(``RobotScene.ros2``), so the shipped robot scenarios need no option. A fleet
-whose scene names none (an rclpy fleet speaks standard types already) gets
-`NoMapping`: every type is carried as it is.
+It is named by import name (``module:Name``, a class made with no arguments),
+resolved as node classes are (the scenario's folder and the working directory are
+searched too: `load_mapping`); the default is the one the fleet's scene names in
+its ``ros2`` attribute (``RobotScene.ros2``), so the shipped robot scenarios need no
+option. A fleet with neither needs none: `NoMapping` maps no type, and the bridge and
+the bag export carry each standard type under its own name and every other type by
+its fields (`interfaces`).
 """
 
 from __future__ import annotations
 
 import importlib
-from collections.abc import Mapping, Sequence
+import sys
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
 Output = tuple[str, str, dict[str, Any]]
@@ -49,19 +54,6 @@ class Ros2Mapping(Protocol):
         ...
 
 
-class NoMapping:
-    """The mapping of a fleet that needs none: it maps no type, so the bridge carries each
-    standard type under its own name and every other type by its fields."""
-
-    latched: frozenset[str] = frozenset()
-    mapped_types: frozenset[str] = frozenset()
-
-    def outbound(self, topic: str, type_name: str, data: Mapping[str, Any],
-                 stamp_ms: int) -> Sequence[Output]:
-        """Nothing: no type is mapped."""
-        return ()
-
-
 @runtime_checkable
 class InboundMapping(Protocol):
     """A mapping that also takes ROS 2 messages into the fleet (module docstring)."""
@@ -75,8 +67,28 @@ class InboundMapping(Protocol):
         ...
 
 
-def load_mapping(name: str) -> Ros2Mapping:
-    """A new mapping of the kind `name` (``module:Name``) names.
+@dataclass(frozen=True)
+class NoMapping:
+    """The mapping of a fleet that needs none: it maps no type, so the bridge carries each
+    standard type under its own name and every other type by its fields; `latched` are
+    the fleet's own latched topics."""
+
+    latched: frozenset[str] = frozenset()
+    mapped_types: frozenset[str] = frozenset()
+
+    def outbound(self, topic: str, type_name: str, data: Mapping[str, Any],
+                 stamp_ms: int) -> Sequence[Output]:
+        """Nothing: no type is mapped."""
+        return ()
+
+
+NO_MAPPING = "no mapping"  # how an export without a mapping names the one it used
+
+
+def load_mapping(name: str, near: Iterable[Path] = ()) -> Ros2Mapping:
+    """A new mapping of the kind `name` (``module:Name``) names, its module searched in
+    the folders `near` too (a scenario's folder, the working directory), as a scenario's
+    node classes are.
 
     Raises:
         MappingError: the name is malformed, does not import, or does not make a mapping.
@@ -84,6 +96,9 @@ def load_mapping(name: str) -> Ros2Mapping:
     module_name, _, attr = name.partition(":")
     if not module_name or not attr:
         raise MappingError(f"expected 'module:Mapping', got {name!r}")
+    for folder in near:
+        if str(folder) not in sys.path:
+            sys.path.append(str(folder))
     try:
         made = getattr(importlib.import_module(module_name), attr)()
     except (ImportError, AttributeError) as exc:

@@ -316,7 +316,7 @@ def _verdict(fleet: Fleet, reason: str, running: Sequence[str],
                  failed={n: codes.get(n) for n in fleet.failed}, statistics=fleet.statistics,
                  running=tuple(running), dropped_reports=dropped,
                  not_up=() if fleet.all_alive.is_set() else tuple(sorted(fleet.unseen)),
-                 unreadable=fleet.unreadable_statistics)
+                 unreadable=fleet.unreadable_statistics, unmet=tuple(fleet.unmet))
     return fleet.judge.verdict(end)
 
 

@@ -133,6 +133,9 @@ class RunEnd:
     unreadable: Mapping[str, str] = field(default_factory=dict)
     dropped_reports: int = 0  # state reports the launcher's own hand-off dropped
     not_up: Sequence[str] = ()  # nodes not alive yet when the run ended (before the epoch)
+    # what the run was launched with that did not work (a ROS 2 bridge that never reached
+    # its router): the run is not the one asked for
+    unmet: Sequence[str] = ()
 
 
 def stall_floor_ms(time_scale: float = 1.0) -> int:
@@ -401,6 +404,7 @@ class LiveJudge:
     def inconclusive_reasons(self, end: RunEnd) -> list[str]:
         """Why the run cannot back a verdict (module docstring); empty when it can."""
         reasons = [w.broken for w in self.watches if w.broken not in (None, "decided", "error")]
+        reasons += end.unmet
         if end.not_up:
             reasons.append(f"the run ended before the fleet was up ({end.reason}; not alive "
                            f"yet: {', '.join(end.not_up)}): nothing ran to judge")
