@@ -285,9 +285,10 @@ def _add_export(sub: argparse._SubParsersAction) -> None:
     export.add_argument("--ros2", action="store_true",
                         help="write a rosbag2 folder instead (metadata.yaml + MCAP, ROS 2 standard "
                              "types in CDR) for `ros2 bag info/play`; needs twinfleet[ros2]")
-    export.add_argument("--mapping", default=None, metavar="MODULE:NAME",
-                        help="with --ros2: the fleet's ROS 2 mapping (default: the one the "
-                             "recording's scene names)")
+    export.add_argument("--mapping", "--ros2-mapping", default=None, metavar="MODULE:NAME",
+                        help="with --ros2: the fleet's ROS 2 mapping, its module found in the "
+                             "working directory too (default: the one the recording's scene "
+                             "names, else none: every message by its fields)")
 
 
 def _file_command(parent: argparse._SubParsersAction, name: str, func: Any, text: str,

@@ -42,12 +42,17 @@ def export_rosbag2_command(args: argparse.Namespace) -> int:
     from twinfleet.ros2.rosbag import ExportError, export_rosbag2
 
     try:
-        written = export_rosbag2(args.file, args.output, mapping=args.mapping)
+        written = export_rosbag2(args.file, args.output, mapping=args.mapping,
+                                 near=(Path.cwd(),))
     except (ExportError, MappingError, OSError) as exc:
         raise CommandError(f"export --ros2: {exc}") from None
     topics = ", ".join(f"{t} ({n})" for (t, _), n in sorted(written.counts.items()))
     print(f"wrote {args.output}: rosbag2 (MCAP, CDR), {written.messages} messages on "
-          f"{len(written.counts)} topics via {written.mapping}: {topics or 'none'}", flush=True)
+          f"{len(written.counts)} topics via {written.mapping}, stamped with fleet time: "
+          f"{topics or 'none'}", flush=True)
+    if written.left_out:
+        print("left out (no ROS 2 form): " + ", ".join(
+            f"{t} ({n})" for t, n in sorted(written.left_out.items())), file=sys.stderr)
     return 0
 
 

@@ -140,30 +140,42 @@ class Interfaces:
                 if t.startswith(prefix)}
 
 
-def fleet_interfaces(types: RosTypes | None = None) -> Interfaces:
-    """The by-fields ROS 2 interfaces of the message types this process knows: those of
-    the fleet's own packages (not the framework's ``twinfleet/`` types, not the types a
-    standard ROS 2 package already defines)."""
+def fleet_interfaces(types: RosTypes | None = None,
+                     others: Mapping[str, type] | None = None) -> Interfaces:
+    """The by-fields ROS 2 interfaces of the message types this process knows (and of
+    `others`, classes of types it does not: `schema_types`): those of the fleet's own
+    packages (not the framework's ``twinfleet/`` types, not the types a standard ROS 2
+    package already defines)."""
     store = types or RosTypes()
-    classes = {name: cls for name, cls in registered_types().items()
+    known = {**(others or {}), **registered_types()}
+    classes = {name: cls for name, cls in known.items()
                if not name.startswith("twinfleet/") and not store.known(ros_name(name))}
     return Interfaces(classes, store)
 
 
 def ros_messages(mapping: Ros2Mapping, interfaces: Interfaces | None, topic: str,
                  type_name: str, data: Mapping[str, Any], stamp_ms: int) -> list[Output]:
-    """What one fleet message is in ROS 2: what the mapping makes of it, or, for a type it
-    does not map, the message by its fields on the same topic (none for a type without
-    interface or data not of its type's shape)."""
-    if type_name in mapping.mapped_types or interfaces is None:
-        return list(mapping.outbound(topic, type_name, data, stamp_ms))
-    by_fields = interfaces.ros_type(type_name)
-    if by_fields is None:
-        return list(mapping.outbound(topic, type_name, data, stamp_ms))
-    try:
-        return [(topic, by_fields, interfaces.fields(type_name, data))]
-    except (KeyError, TypeError, ValueError):  # not of its type's shape
-        return []
+    """What one fleet message is in ROS 2: for a type the mapping does not map, the message
+    by its fields on its own topic; else what the mapping makes of it, and, when that is
+    all on other topics (``/poses`` → ``/r1/pose`` and ``/tf``), the message by its fields
+    on its own topic too, so that every fleet topic is there under its name. Nothing for
+    a type without interface or data not of its type's shape."""
+    by_fields = interfaces.ros_type(type_name) if interfaces is not None else None
+
+    def own() -> list[Output]:
+        if by_fields is None or interfaces is None:
+            return []
+        try:
+            return [(topic, by_fields, interfaces.fields(type_name, data))]
+        except (KeyError, TypeError, ValueError):  # not of its type's shape
+            return []
+
+    if type_name not in mapping.mapped_types and by_fields is not None:
+        return own()
+    outputs = list(mapping.outbound(topic, type_name, data, stamp_ms))
+    if outputs and all(t != topic for t, _, _ in outputs):
+        outputs += own()
+    return outputs
 
 
 def _same(value: Any) -> Any:
