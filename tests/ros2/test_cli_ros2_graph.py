@@ -81,3 +81,56 @@ def test_tokens_that_are_not_rmw_zenohs_are_skipped():
     graph = RosGraph.of(["@ros2_lv/0/zid/1/1/NN/%/%/talker", "@ros2_lv/0/broken",
                          "twinfleet/f/@node/r1"])
     assert graph.nodes == {"/talker"} and not graph.types
+
+
+ODD_PEER = """
+import sys, threading
+from zenoh_ros2_sdk.message_registry import get_registry
+from zenoh_ros2_sdk.publisher import ROS2Publisher
+get_registry(sys.argv[2])
+pub = ROS2Publisher("/odd", "echo_test_msgs/msg/Odd", node_name="odd", router_port=int(sys.argv[1]))
+stop = threading.Event()
+def talk():
+    while not stop.wait(0.02):
+        pub.publish(value=7)
+talker = threading.Thread(target=talk)
+talker.start()
+print("ready", flush=True)
+sys.stdin.read()
+stop.set()
+talker.join()
+pub.close()
+"""
+
+
+def test_echo_once_of_a_type_not_decodable_here_is_one_line_and_exit_1(tmp_path, capsys):
+    # a type only the peer knows (its .msg written here): many samples, one line, then the end
+    msg = tmp_path / "echo_test_msgs" / "msg"
+    msg.mkdir(parents=True)
+    (msg / "Odd.msg").write_text("int32 value\n")
+    port = pick_free_port()
+    router = zenoh.open(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"], mode="router"))
+    env = dict(child_env(), ZENOH_CONFIG_OVERRIDE="scouting/multicast/enabled=false")
+    peer = subprocess.Popen([sys.executable, "-c", ODD_PEER, str(port), str(tmp_path)],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
+    try:
+        assert peer.stdout.readline().strip() == "ready"
+        ep = ["--connect", f"tcp/127.0.0.1:{port}"]
+        assert main(["topic", "echo", "/odd", *ep, "--ros2-domain", "0", "--once",
+                     "--duration", "20"]) == 1
+        captured = capsys.readouterr()
+        assert captured.out == ""
+        (line,) = captured.err.splitlines()
+        assert line.startswith("/odd: a sample is not decodable here (") and \
+            "echo_test_msgs/msg/Odd" in line, line
+        assert main(["topic", "echo", "/odd", *ep, "--ros2-domain", "0", "--duration", "1"]) == 1
+        lines = capsys.readouterr().err.splitlines()
+        assert len(lines) == 2 and lines[1].startswith("/odd: ") and \
+            lines[1].endswith(" samples were not decodable here"), lines
+    finally:
+        peer.stdin.close()
+        try:
+            peer.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            peer.kill()
+        router.close()

@@ -216,7 +216,9 @@ def ros_echo(conn: Connection, domain: int, topic: str, *, count: int | None = N
              duration_s: float | None = None) -> int:
     """`twinfleet topic echo TOPIC --ros2-domain N`: each sample of a ROS 2 topic, its CDR
     decoded by the type its key names, one YAML document each, until `count` or
-    `duration_s` (or Ctrl-C)."""
+    `duration_s` (or Ctrl-C). A sample this process cannot decode is one line on stderr
+    (the first of each reason) and counts toward `count`; the exit code is then 1
+    (`EchoTally`)."""
     _need_libraries()
     import queue
     import time
@@ -228,16 +230,17 @@ def ros_echo(conn: Connection, domain: int, topic: str, *, count: int | None = N
     from twinfleet.ros2.live import fleet_interfaces
     from twinfleet.ros2.wire import WireError, ros_type_name
     from twinfleet.runtime.access.connection import zenoh_conf
+    from twinfleet.runtime.tools.monitor.data_verbs import EchoTally
 
     types = fleet_interfaces().types  # standard types and the bridge's by-fields ones
     samples: queue.Queue[tuple[str, bytes]] = queue.Queue()
     expr = f"{domain}/{topic.strip('/')}/*/*"
     end = time.monotonic() + duration_s if duration_s is not None else None
-    shown = 0
+    tally = EchoTally(topic, sys.stderr)
     with zenoh.open(zenoh_conf(conn.endpoint, conn.auth)) as session:
         session.declare_subscriber(expr, lambda s: samples.put((str(s.key_expr),
                                                                 s.payload.to_bytes())))
-        while (count is None or shown < count) and (end is None or time.monotonic() < end):
+        while (count is None or tally.seen < count) and (end is None or time.monotonic() < end):
             try:
                 key, payload = samples.get(timeout=0.2)
             except queue.Empty:
@@ -246,11 +249,11 @@ def ros_echo(conn: Connection, domain: int, topic: str, *, count: int | None = N
                 ros_type = ros_type_name(key.split("/")[-2])
                 fields = types.decode(ros_type, payload)
             except (WireError, MessageError, IndexError) as exc:
-                print(f"# {key}: not decodable here ({exc})", flush=True)
+                tally.undecodable(str(exc))
                 continue
             print(yaml.safe_dump(_plain(fields), sort_keys=False) + "---", flush=True)
-            shown += 1
-    return 0
+            tally.shown += 1
+    return tally.exit_code()
 
 
 def _plain(value: Any) -> Any:

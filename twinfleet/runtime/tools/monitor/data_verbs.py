@@ -18,7 +18,7 @@ import sys
 import time
 from collections import deque
 from collections.abc import Sequence
-from typing import Any, TextIO
+from typing import Any, TextIO, final
 
 import msgpack
 import yaml
@@ -74,6 +74,38 @@ def field_of(payload: bytes, path: str, *, full: bool = False) -> Any:
     return value
 
 
+@final
+class EchoTally:
+    """What an echo printed and what it could not decode. An undecodable sample is one line
+    on `err`, the first of each reason only (a stream of them would drown the output); it
+    counts as a sample for ``--once``/``--count``, and the echo then ends with exit 1."""
+
+    def __init__(self, topic: str, err: TextIO) -> None:
+        self.topic, self.err = topic, err
+        self.shown = 0
+        self.bad: dict[str, int] = {}  # reason -> samples
+
+    @property
+    def seen(self) -> int:
+        """Samples taken, decodable or not."""
+        return self.shown + sum(self.bad.values())
+
+    def undecodable(self, reason: str) -> None:
+        """Count one sample that could not be decoded (say the first of its reason)."""
+        if reason not in self.bad:
+            print(f"{self.topic}: a sample is not decodable here ({reason})", file=self.err,
+                  flush=True)
+        self.bad[reason] = self.bad.get(reason, 0) + 1
+
+    def exit_code(self) -> int:
+        """0, or 1 when some sample was not decodable (the total said, if more than one)."""
+        total = sum(self.bad.values())
+        if total > 1:
+            print(f"{self.topic}: {total} samples were not decodable here", file=self.err,
+                  flush=True)
+        return 1 if total else 0
+
+
 def topic_echo(conn: Connection, topic: str, *, out: TextIO, count: int | None = None,
                duration_s: float | None = None, field: str | None = None, wait: bool = False,
                timeout_s: float = 1.0, err: TextIO = sys.stderr, full: bool = False) -> int:
@@ -81,10 +113,11 @@ def topic_echo(conn: Connection, topic: str, *, out: TextIO, count: int | None =
     field only, bare; `full`: the whole envelope).
 
     A latched topic's last sample arrives at once, however late the echo starts.
-    Returns 0, or 2 when the topic is unknown (no publisher, no subscriber; with
-    `wait`, a warning and a wait instead) or `count` samples did not arrive in time.
+    Returns 0, 1 when a sample was not decodable (`EchoTally`), or 2 when the topic is
+    unknown (no publisher, no subscriber; with `wait`, a warning and a wait instead) or
+    `count` samples did not arrive in time.
     """
-    seen = 0
+    tally = EchoTally(topic, err)
     deadline = None if duration_s is None else time.monotonic() + duration_s
     with open_session(conn) as session:
         graph = graph_of(session, conn, timeout_s, warn=err if wait else None)
@@ -95,19 +128,20 @@ def topic_echo(conn: Connection, topic: str, *, out: TextIO, count: int | None =
             s.payload.to_bytes()), history=True)
         try:
             _check_echo_topic(conn, graph, where, latched, wait, timeout_s, err, samples)
-            while (count is None or seen < count) and (deadline is None or time.monotonic() < deadline):
-                while samples and (count is None or seen < count):
-                    _print_sample(out, samples.popleft(), field, where[1], full)
-                    seen += 1
+            while (count is None or tally.seen < count) and (
+                    deadline is None or time.monotonic() < deadline):
+                while samples and (count is None or tally.seen < count):
+                    _print_sample(out, samples.popleft(), field, where[1], full, tally)
                 out.flush()
                 time.sleep(POLL_S)
         except KeyboardInterrupt:
             pass
         finally:
             sub.undeclare()
-    if count is not None and seen < count:
-        raise CommandError(f"{where[1]}: {seen} of {count} messages within {duration_s:g} s")
-    return 0
+    if count is not None and tally.seen < count:
+        raise CommandError(f"{where[1]}: {tally.seen} of {count} messages within "
+                           f"{duration_s:g} s")
+    return tally.exit_code()
 
 
 def _check_echo_topic(conn: Connection, graph: g.Graph, where: tuple[str, str],
@@ -129,7 +163,13 @@ def _check_echo_topic(conn: Connection, graph: g.Graph, where: tuple[str, str],
 
 
 def _print_sample(out: TextIO, payload: bytes, field: str | None, topic: str,
-                  full: bool) -> None:
+                  full: bool, tally: EchoTally) -> None:
+    try:
+        msgpack.unpackb(payload, raw=False, strict_map_key=False)
+    except Exception as exc:  # msgpack raises several unrelated types
+        tally.undecodable(f"not a twinfleet envelope: {exc}")
+        return
+    tally.shown += 1
     if field is None:
         out.write(render_envelope(payload, full=full) + "---\n")
         return
