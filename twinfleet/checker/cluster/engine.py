@@ -41,6 +41,7 @@ from twinfleet.checker.cluster.level import (
     split,
 )
 from twinfleet.checker.cluster.links import TOKEN_BYTES, Links
+from twinfleet.checker.cluster.ray_log import ray_notices
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint, mismatch
 from twinfleet.checker.cluster.visited import VisitedTable
 from twinfleet.checker.collector import SEARCH_THRESHOLDS
@@ -88,6 +89,17 @@ def session(workers: int, address: str | None) -> Iterator[None]:
         return
     if address is not None:
         _answers(address)
+    with ray_notices():
+        _init(workers, address)
+    try:
+        yield
+    finally:
+        with ray_notices():
+            ray.shutdown()
+
+
+def _init(workers: int, address: str | None) -> None:
+    """`ray.init` for `session`; ClusterError if it fails."""
     try:
         if address is None:
             # A local cluster's processes inherit the path from this one: with a job's
@@ -110,10 +122,6 @@ def session(workers: int, address: str | None) -> Iterator[None]:
         where = "a local cluster" if address is None else f"cluster {address}"
         raise ClusterError(f"cannot connect to {where}: {first} (a cluster started with "
                            "`ray start --head` needs the same RAY_AUTH_TOKEN here)") from None
-    try:
-        yield
-    finally:
-        ray.shutdown()
 
 
 def _answers(address: str) -> None:

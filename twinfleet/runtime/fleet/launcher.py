@@ -86,9 +86,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         scenario: a validated scenario (`load_scenario`, or `Scenario.build`: then written
             to a file for the node processes, `live_fleet.launchable`).
         time_scale, seed: fleet speed-up and seed (default: the scenario's).
-        timeout_s: wall seconds the run lasts once every node is alive (from the fleet's
-            epoch; default: `live.wall_timeout_s`, else none); ``live.horizon_s`` fleet
-            seconds end it too (`wall_limit`).
+        timeout_s: wall seconds the run lasts from the fleet's epoch (default:
+            `live.wall_timeout_s`); ``live.horizon_s`` fleet seconds end it too (`wall_limit`).
         connect, listen: join this router; else the embedded one's endpoint.
         out, handle_signals: where output goes; end on SIGINT/SIGTERM (main thread only).
         run_record: write the run as JSON lines to this file (`runtime.fleet.run_record`).
@@ -106,13 +105,10 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
             INCONCLUSIVE, never a node's failure.
         accept_recorded: the nodes take recorded input ``twinfleet play --into-fleet``
             signs (the verdict says so); otherwise they drop it.
-        until_settled: end once every eventually property held (default: ``live.stop``).
-        until_violation: end at the first violation the judge sees (default: ``live.stop``).
+        until_settled, until_violation: end when every eventually held, at a violation.
     """
     live = scenario.live
     time_scale = float(time_scale if time_scale is not None else live.time_scale)
-    limit = wall_limit(timeout_s if timeout_s is not None else live.wall_timeout_s,
-                       live.horizon_s, time_scale)
     seed = scenario.seed if seed is None else seed
     record = RunRecord(run_record) if run_record else None
     fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
@@ -120,11 +116,11 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                   events_dir=fresh_parts_dir(record_events) if record_events else None,
                   keep_scenario_beside=record_events or run_record, judge=judge, auth=auth,
                   bridge=bridge, accept_recorded=accept_recorded,
-                  until_settled=live.stop == "settled" if until_settled is None else until_settled,
-                  until_violation=(live.stop == "violation" if until_violation is None
-                                   else until_violation))
+                  **_stops(live.stop, until_settled, until_violation))
     started = time.monotonic()
     async with _Launch(fleet, record_events, handle_signals) as launch:
+        limit = wall_limit(live.wall_timeout_s if timeout_s is None else timeout_s,
+                           live.horizon_s, time_scale)
         reason, running = await launch.until_end((startup_s, *limit), params, driver)
     result = _result(fleet, reason, running, time.monotonic() - started)
     if record is not None:
@@ -132,6 +128,14 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         record.close()
     launch.raise_driver_failure()
     return result
+
+
+def _stops(stop: str, until_settled: bool | None,
+           until_violation: bool | None) -> dict[str, bool]:
+    """The fleet's stop conditions: those given, else the scenario's ``live.stop``."""
+    return {"until_settled": stop == "settled" if until_settled is None else until_settled,
+            "until_violation": stop == "violation" if until_violation is None
+            else until_violation}
 
 
 def wall_limit(wall_timeout_s: float | None, horizon_s: float | None,

@@ -130,9 +130,7 @@ class Fleet:
         self.statistics: dict[str, NodeStatistics] = {}
         self.unreadable_statistics: dict[str, str] = {}  # node -> why `from_dict` refused them
         self.invalid = 0  # report samples refused by `guard.check_message`
-        #: what the run was launched with that did not work (a driver says it): the verdict
-        #: is INCONCLUSIVE with it (`live_verdict.RunEnd.unmet`)
-        self.unmet: list[str] = []
+        self.unmet: list[str] = []  # what a driver could not do: `RunEnd.unmet`
         self._finishing = False
         self.scenario, self._private_dir = launchable(scenario, keep_scenario_beside)
 
