@@ -63,7 +63,7 @@ def cmd_launch(args: argparse.Namespace) -> int:
     from twinfleet.runtime.fleet.launcher import FleetConflict, format_result, run_fleet
     bridge = _ros2_driver(args, scenario)
 
-    worst, passed = 0, 0
+    worst, codes = 0, []
     for run in range(args.runs):
         seed = (args.seed if args.seed is not None else scenario.seed) + run
         if args.runs > 1:
@@ -90,13 +90,25 @@ def cmd_launch(args: argparse.Namespace) -> int:
         for line in format_result(result):
             print(f"[launcher] {line}", flush=True)
         worst = _worse(worst, result.exit_code)
-        passed += result.passed
+        codes.append(result.exit_code)
         if result.interrupted:
             break
     if args.runs > 1:
-        print(f"[launcher] {scenario.name}: {passed}/{args.runs} passed, "
-              f"{args.runs - passed}/{args.runs} failed", flush=True)
+        print(f"[launcher] {runs_summary(scenario.name, codes, args.runs)}", flush=True)
     return worst
+
+
+_OUTCOMES = ((0, "passed"), (1, "failed"), (3, "inconclusive"))
+
+
+def runs_summary(name: str, codes: list[int], runs: int) -> str:
+    """The line after ``launch --runs N``: how many runs passed, failed (a property
+    violated) and were inconclusive, each said; another end (interrupted, an error) too."""
+    counts = [(sum(c == code for c in codes), what) for code, what in _OUTCOMES]
+    counts += [(sum(c not in dict(_OUTCOMES) for c in codes), "ended otherwise"),
+               (runs - len(codes), "not run")]
+    words = [f"{n}/{runs} {what}" for i, (n, what) in enumerate(counts) if n or i < 2]
+    return f"{name}: {', '.join(words)}"
 
 
 def _launchable(args: argparse.Namespace, params: Any) -> Any:
