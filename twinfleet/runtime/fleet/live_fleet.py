@@ -87,7 +87,7 @@ class Fleet:
         self.record = record
         self.node_args, self.events_dir = tuple(node_args), events_dir
         self.connect = connect
-        self.listen = listen or f"tcp/127.0.0.1:{free_port()}"
+        self.listen = with_free_port(listen) if listen else f"tcp/127.0.0.1:{free_port()}"
         # where this machine's nodes and monitors reach the router (a wildcard listen address
         # is not one a certificate can name)
         self.endpoint = connect or local_endpoint(self.listen)
@@ -366,6 +366,21 @@ def endpoint_host(endpoint: str) -> str:
     """The host part of a Zenoh endpoint (``tls/10.0.0.1:7447`` → ``10.0.0.1``)."""
     address = endpoint.split("#", 1)[0].partition("/")[2]
     return address.rsplit(":", 1)[0]
+
+
+def with_free_port(endpoint: str) -> str:
+    """`endpoint` with port 0 replaced by a port of its host that was free a moment ago:
+    the router listens there, and the nodes, monitors and registry are told that port (a
+    router left to pick its own would listen where nobody is told)."""
+    address, sep, options = endpoint.partition("#")
+    head, _, port = address.rpartition(":")
+    if port != "0":
+        return endpoint
+    host = endpoint_host(endpoint).strip("[]")
+    family = socket.AF_INET6 if ":" in host else socket.AF_INET
+    with socket.socket(family) as s:
+        s.bind((host, 0))
+        return f"{head}:{s.getsockname()[1]}{sep}{options}"
 
 
 def local_endpoint(listen: str) -> str:

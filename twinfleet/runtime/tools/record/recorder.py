@@ -203,8 +203,9 @@ async def record_scenario(scenario: Any, path: str | Path, *, time_scale: float 
     Returns the launcher's `FleetResult` and the (closed) recorder with its counts.
     """
     from twinfleet.runtime.fleet.launcher import free_port, run_fleet
+    from twinfleet.runtime.fleet.live_fleet import with_free_port
 
-    endpoint = listen or f"tcp/127.0.0.1:{free_port()}"
+    endpoint = with_free_port(listen) if listen else f"tcp/127.0.0.1:{free_port()}"
     failed = asyncio.Event()
     latched = tuple(latched_topics(scenario))
     recorder = McapRecorder(open(path, "wb"),  # noqa: SIM115 - closed by recorder.close()
