@@ -268,3 +268,10 @@ def test_examples_sharing_a_map_keep_the_first_copy(tmp_path, capsys, monkeypatc
     assert "kept existing map50.yaml" in out and "wrote c1a_rebeca.yaml" in out
     assert (tmp_path / "map50.yaml").read_text().endswith("# edited\n")
     assert load_scenario("c1a_rebeca.yaml").map_path == tmp_path / "map50.yaml"
+
+
+def test_a_mistyped_class_name_gets_a_did_you_mean(tmp_path):
+    doc = {"name": "typo", "nodes": [{"name": "l", "class": "twinfleet.nodes.demo:Listenr"}]}
+    with pytest.raises(ScenarioError, match=r"unknown node class 'twinfleet\.nodes\.demo:Listenr'"
+                                            r" .*; did you mean twinfleet\.nodes\.demo:Listener\?"):
+        load_scenario(write(tmp_path, doc))

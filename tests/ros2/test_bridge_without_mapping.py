@@ -155,6 +155,7 @@ def test_a_mapping_that_does_not_load_is_one_line_before_anything_starts(tmp_pat
     assert proc.returncode == 2, out
     assert len(out.strip().splitlines()) == 1, out
     assert "--ros2-mapping: unknown ROS 2 mapping 'turtle_map:Mapin'" in out, out
+    assert out.strip().endswith("; did you mean turtle_map:Mapping?"), out
     assert "[launcher]" not in out
 
 

@@ -27,6 +27,7 @@ its fields (`interfaces`).
 
 from __future__ import annotations
 
+import difflib
 import importlib
 import sys
 from collections.abc import Iterable, Mapping, Sequence
@@ -100,9 +101,14 @@ def load_mapping(name: str, near: Iterable[Path] = ()) -> Ros2Mapping:
         if str(folder) not in sys.path:
             sys.path.append(str(folder))
     try:
-        made = getattr(importlib.import_module(module_name), attr)()
-    except (ImportError, AttributeError) as exc:
+        module = importlib.import_module(module_name)
+        made = getattr(module, attr)()
+    except ImportError as exc:
         raise MappingError(f"unknown ROS 2 mapping {name!r} ({exc})") from None
+    except AttributeError as exc:
+        close = difflib.get_close_matches(attr, [n for n in vars(module) if n[:1] != "_"], n=1)
+        hint = f"; did you mean {module_name}:{close[0]}?" if close else ""
+        raise MappingError(f"unknown ROS 2 mapping {name!r} ({exc}){hint}") from None
     except Exception as exc:  # the user's module or constructor: say what it raised
         raise MappingError(f"{name}: {type(exc).__name__}: {exc}") from None
     if not isinstance(made, Ros2Mapping):

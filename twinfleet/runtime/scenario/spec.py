@@ -59,6 +59,7 @@ raised before anything starts.
 from __future__ import annotations
 
 import dataclasses
+import difflib
 import importlib
 import inspect
 import math
@@ -505,14 +506,21 @@ def _import_attr(path: str, err: _Errors, key: str, what: str = "name") -> Any:
     if not attr:
         err.fail(key, f"expected 'module:{what.split()[-1].capitalize()}', got {path!r}")
     try:
-        return getattr(importlib.import_module(module_name), attr)
-    except (ImportError, AttributeError) as exc:
+        module = importlib.import_module(module_name)
+    except ImportError as exc:
         err.fail(key, f"unknown {what} {path!r} ({exc})")
     except RecursionError:
         err.fail(key, f"importing {module_name!r} for {what} {path!r} recursed too deeply")
     except Exception as exc:  # the module itself raised while it was imported
         err.fail(key, f"importing {module_name!r} for {what} {path!r} raised "
                       f"{type(exc).__name__}: {exc}")
+    try:
+        return getattr(module, attr)
+    except AttributeError as exc:
+        close = difflib.get_close_matches(attr, [n for n in vars(module) if not n.startswith("_")],
+                                          n=1)
+        hint = f"; did you mean {module_name}:{close[0]}?" if close else ""
+        err.fail(key, f"unknown {what} {path!r} ({exc}){hint}")
 
 
 def _node_class(value: Any, err: _Errors, key: str) -> tuple[type[Node], str]:
