@@ -104,6 +104,8 @@ def test_topic_list_with_types_matches_the_readme(runtime_dir, c1a):
     assert listed["/map"] == "twinfleet_msgs/OccupancyGrid"
     assert listed["/poses"] == "twinfleet_msgs/RobotPose"
     assert listed["/r1/scan"] == "twinfleet_msgs/ObstacleScan"
+    # nobody publishes a goal: its type is the robots' subscription's, before any message
+    assert listed["/r1/goal"] == "twinfleet_msgs/Goal" and "no message yet" not in out, out
     readme = (ROOT / "README.md").read_text()
     block = readme.split("<!-- topics:c1a -->")[1].split("<!-- /topics -->")[0]
     documented = dict(re.findall(r"^\| `(\S+)` \| `(\S+)` \|", block, re.M))

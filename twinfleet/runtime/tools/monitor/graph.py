@@ -240,10 +240,13 @@ def topic_types(session: zenoh.Session, fleet: str, topics: Iterable[tuple[str, 
                 timeout_s: float, infos: dict[tuple[str, str], dict[str, Any]] | None = None
                 ) -> dict[tuple[str, str], str]:
     """(fleet, topic) → type: what the publishing nodes say (``@info`` ``publications``), else
-    the first sample within `timeout_s` (a publisher that is not a twinfleet node)."""
+    the type the subscribing nodes declare they take (``subscription_types``, from their
+    handlers' annotations: known before any message), else the first sample within
+    `timeout_s` (a publisher that is not a twinfleet node)."""
     infos = node_infos(session, fleet, timeout_s) if infos is None else infos
-    said = {(f, topic): kind for (f, _), info in infos.items()
-            for topic, kind in (info.get("publications") or {}).items() if kind != "?"}
+    said = {(f, topic): kind for table in ("subscription_types", "publications")
+            for (f, _), info in infos.items()
+            for topic, kind in (info.get(table) or {}).items() if kind != "?"}
     wanted = list(topics)
     found = {t: said[t] for t in wanted if t in said}
     rest = [t for t in wanted if t not in found]

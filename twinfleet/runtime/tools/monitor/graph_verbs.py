@@ -171,7 +171,7 @@ def topic_list(conn: Connection, *, out: TextIO, verbose: bool = False, types: b
         graph = graph_of(session, conn, timeout_s)
         found = {}
         if types:
-            found = g.topic_types(session, conn.fleet, list(graph.publishers), timeout_s)
+            found = g.topic_types(session, conn.fleet, list(graph.topics()), timeout_s)
     for fleet, topic in graph.topics():
         line = _shown(conn, fleet, topic)
         if types:
