@@ -29,6 +29,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="draw a trace as a message-sequence chart even when its scenario has "
                         "a map (one lifeline per node, messages with their times, the fields "
                         "each step changed, the violated property in red)")
+    p.add_argument("--steps", metavar="A..B", default=None, type=_steps,
+                   help="with a chart: draw steps A to B only (1-based, inclusive; messages "
+                        "sent before A start at the top, those handled after B end at the "
+                        "foot); default: every step, a trace longer than 60 steps in pages "
+                        "FILE-1.png, FILE-2.png, ...")
     p.add_argument("--scan-of", metavar="ROBOT", default=None,
                    help="draw the scan rays of this robot (e.g. r1)")
     p.add_argument("--every-step", action="store_true",
@@ -52,10 +57,18 @@ def cmd_render(args: argparse.Namespace) -> int:
             except TraceError as exc:
                 raise ValueError(str(exc)) from None
             scenario = load_scenario(trace["scenario"], {"profile": trace.get("profile") or "fixed"})
-            if args.chart or scenario.scene is None or args.output.endswith(".svg"):
-                return _chart(trace, args.output)
+            no_map = _no_map(scenario)
+            if args.chart or args.steps or no_map or args.output.endswith(".svg"):
+                if no_map and not args.chart:
+                    print(f"drawn as a sequence chart: {no_map}")
+                return _chart(trace, args.output, args.steps)
         else:
             trace, scenario = None, load_scenario(source)
+            no_map = _no_map(scenario)
+            if no_map:
+                raise ValueError(f"{source}: nothing to draw: {no_map}; a trace of it "
+                                 "(`twinfleet check SCENARIO --trace-out T.json`) is drawn as "
+                                 "a sequence chart (`twinfleet render T.json -o chart.png`)")
         from twinfleet.nodes.render import save_pictures, scenario_view, trace_views
 
         views = (trace_views(scenario, trace, scan_of=args.scan_of, every_step=args.every_step)
@@ -72,6 +85,25 @@ def cmd_render(args: argparse.Namespace) -> int:
     return 0
 
 
+def _steps(text: str) -> tuple[int, int]:
+    """``A..B`` as (A, B), 1 <= A <= B."""
+    first, sep, last = text.partition("..")
+    if not (sep and first.isdigit() and last.isdigit() and 1 <= int(first) <= int(last)):
+        raise argparse.ArgumentTypeError(f"expected A..B with 1 <= A <= B (e.g. 40..80), "
+                                         f"got {text!r}")
+    return int(first), int(last)
+
+
+def _no_map(scenario: Any) -> str | None:
+    """Why a scenario's fleet cannot be drawn on a map, in its user's words (None: it can)."""
+    if scenario.scene is None:
+        return "the scenario names no scene (`scene:`), so there is no map to draw its fleet on"
+    if not any(hasattr(c.params, "robots") for c in scenario.nodes):
+        return (f"no node of {scenario.name} serves a map with robots on it (the robot "
+                "scene draws a map server and its robots)")
+    return None
+
+
 def walk_json(trace: dict[str, Any]) -> dict[str, Any]:
     """A trace re-executed and described step by step, as plain JSON values."""
     from twinfleet.checker.driver import system_for_trace
@@ -81,7 +113,7 @@ def walk_json(trace: dict[str, Any]) -> dict[str, Any]:
     return walk(system, trace).to_json()
 
 
-def _chart(trace: dict[str, Any], output: str) -> int:
+def _chart(trace: dict[str, Any], output: str, window: tuple[int, int] | None) -> int:
     from twinfleet.checker.trace import NondeterminismError
     from twinfleet.runtime.tools.view.sequence_chart import save_chart
 
@@ -91,7 +123,12 @@ def _chart(trace: dict[str, Any], output: str) -> int:
         steps = walk_json(trace)
     except NondeterminismError as exc:
         raise ValueError(f"the trace does not replay: {exc}") from None
-    save_chart(steps, output)
-    print(f"wrote {output} (sequence chart, {len(steps['steps'])} steps, "
-          f"{len(steps['nodes'])} lifelines)")
+    total = len(steps["steps"])
+    if window is not None and window[1] > total:
+        raise ValueError(f"--steps {window[0]}..{window[1]}: the trace has {total} steps")
+    written = save_chart(steps, output, window)
+    shown = f", steps {window[0]}..{window[1]}" if window else ""
+    pages = f" in {len(written)} pages: {written[0]} ... {written[-1]}" if len(written) > 1 else ""
+    print(f"wrote {output if len(written) == 1 else written[0].parent} (sequence chart, "
+          f"{total} steps{shown}, {len(steps['nodes'])} lifelines){pages}")
     return 0

@@ -161,7 +161,9 @@ def shadow_corners(cell: Cell, direction: int, half_len_px: float, half_wid_px: 
 def _fleet_nodes(scenario: Any) -> tuple[Any, list[Any]]:
     servers = [c for c in scenario.nodes if hasattr(c.params, "robots")]
     if not servers:
-        raise ValueError(f"{scenario.path}: no map server (a node with params.robots) to draw")
+        raise ValueError(f"{scenario.path}: no node of {scenario.name} serves a map with "
+                         "robots on it, so there is no map to draw (a trace of it is drawn as "
+                         "a sequence chart)")
     server = servers[0]
     robots = [scenario.node(name) for name in server.params.robots]
     return server, robots
