@@ -5,8 +5,10 @@ domain's are not listed."""
 
 from __future__ import annotations
 
+import contextlib
 import subprocess
 import sys
+from collections.abc import Iterator
 
 import pytest
 import zenoh
@@ -46,15 +48,30 @@ pub.close()
 """
 
 
-def test_node_and_topic_list_show_ros2_nodes_on_the_same_network(capsys):
+@contextlib.contextmanager
+def peer_on_router(script: str, *args: str) -> Iterator[list[str]]:
+    """A Zenoh router on a free port and a zenoh-ros2-sdk peer running `script` there (it
+    prints "ready"); the monitors' connection arguments; both stopped on the way out."""
     port = pick_free_port()
     router = zenoh.open(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"], mode="router"))
     env = dict(child_env(), ZENOH_CONFIG_OVERRIDE="scouting/multicast/enabled=false")
-    peer = subprocess.Popen([sys.executable, "-c", PEER, str(port)], stdin=subprocess.PIPE,
-                            stdout=subprocess.PIPE, text=True, env=env)
+    peer = subprocess.Popen([sys.executable, "-c", script, str(port), *args],
+                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
     try:
-        assert peer.stdout.readline().strip() == "ready"
-        ep = ["--connect", f"tcp/127.0.0.1:{port}"]
+        assert peer.stdout is not None and peer.stdout.readline().strip() == "ready"
+        yield ["--connect", f"tcp/127.0.0.1:{port}"]
+    finally:
+        assert peer.stdin is not None
+        peer.stdin.close()
+        try:
+            peer.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            peer.kill()
+        router.close()
+
+
+def test_node_and_topic_list_show_ros2_nodes_on_the_same_network(capsys):
+    with peer_on_router(PEER) as ep:
         assert main(["node", "list", *ep, "--ros2-domain", "0"]) == 0
         nodes = capsys.readouterr().out.splitlines()
         assert "/talker  (ros2)" in nodes and "/listener  (ros2)" in nodes
@@ -68,13 +85,6 @@ def test_node_and_topic_list_show_ros2_nodes_on_the_same_network(capsys):
                      "--duration", "10"]) == 0
         docs = [d for d in capsys.readouterr().out.split("---") if d.strip()]
         assert len(docs) == 2 and all(d.strip().startswith("data: hello ") for d in docs)
-    finally:
-        peer.stdin.close()
-        try:
-            peer.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            peer.kill()
-        router.close()
 
 
 def test_tokens_that_are_not_rmw_zenohs_are_skipped():
@@ -108,14 +118,7 @@ def test_echo_once_of_a_type_not_decodable_here_is_one_line_and_exit_1(tmp_path,
     msg = tmp_path / "echo_test_msgs" / "msg"
     msg.mkdir(parents=True)
     (msg / "Odd.msg").write_text("int32 value\n")
-    port = pick_free_port()
-    router = zenoh.open(zenoh_config(listen=[f"tcp/127.0.0.1:{port}"], mode="router"))
-    env = dict(child_env(), ZENOH_CONFIG_OVERRIDE="scouting/multicast/enabled=false")
-    peer = subprocess.Popen([sys.executable, "-c", ODD_PEER, str(port), str(tmp_path)],
-                            stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True, env=env)
-    try:
-        assert peer.stdout.readline().strip() == "ready"
-        ep = ["--connect", f"tcp/127.0.0.1:{port}"]
+    with peer_on_router(ODD_PEER, str(tmp_path)) as ep:
         assert main(["topic", "echo", "/odd", *ep, "--ros2-domain", "0", "--once",
                      "--duration", "20"]) == 1
         captured = capsys.readouterr()
@@ -127,10 +130,3 @@ def test_echo_once_of_a_type_not_decodable_here_is_one_line_and_exit_1(tmp_path,
         lines = capsys.readouterr().err.splitlines()
         assert len(lines) == 2 and lines[1].startswith("/odd: ") and \
             lines[1].endswith(" samples were not decodable here"), lines
-    finally:
-        peer.stdin.close()
-        try:
-            peer.wait(timeout=10)
-        except subprocess.TimeoutExpired:
-            peer.kill()
-        router.close()
