@@ -19,8 +19,26 @@ from twinfleet.ros2.graph_list import RosGraph
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(60)]
+# The end of each peer script: call speak(i) every PERIOD s until stdin closes, then close.
+UNTIL_STDIN_CLOSES = """
+import threading
+stop = threading.Event()
+def talk():
+    i = 0
+    while not stop.wait(PERIOD):
+        speak(i)
+        i += 1
+talker = threading.Thread(target=talk)
+talker.start()
+print("ready", flush=True)
+sys.stdin.read()
+stop.set()
+talker.join()
+for endpoint in ENDPOINTS:
+    endpoint.close()
+"""
 PEER = """
-import sys, time
+import sys
 from pathlib import Path
 from zenoh_ros2_sdk.message_registry import get_registry
 from zenoh_ros2_sdk.publisher import ROS2Publisher
@@ -30,22 +48,10 @@ port = int(sys.argv[1])
 pub = ROS2Publisher("/chatter", "std_msgs/msg/String", node_name="talker", router_port=port)
 sub = ROS2Subscriber("/chatter", "std_msgs/msg/String", node_name="listener",
                      router_port=port, callback=lambda m: None)
-import threading
-stop = threading.Event()
-def talk():
-    i = 0
-    while not stop.wait(0.05):
-        pub.publish(data=f"hello {i}")
-        i += 1
-talker = threading.Thread(target=talk)
-talker.start()
-print("ready", flush=True)
-sys.stdin.read()
-stop.set()
-talker.join()
-sub.close()
-pub.close()
-"""
+PERIOD, ENDPOINTS = 0.05, (sub, pub)
+def speak(i):
+    pub.publish(data=f"hello {i}")
+""" + UNTIL_STDIN_CLOSES
 
 
 @contextlib.contextmanager
@@ -94,23 +100,15 @@ def test_tokens_that_are_not_rmw_zenohs_are_skipped():
 
 
 ODD_PEER = """
-import sys, threading
+import sys
 from zenoh_ros2_sdk.message_registry import get_registry
 from zenoh_ros2_sdk.publisher import ROS2Publisher
 get_registry(sys.argv[2])
 pub = ROS2Publisher("/odd", "echo_test_msgs/msg/Odd", node_name="odd", router_port=int(sys.argv[1]))
-stop = threading.Event()
-def talk():
-    while not stop.wait(0.02):
-        pub.publish(value=7)
-talker = threading.Thread(target=talk)
-talker.start()
-print("ready", flush=True)
-sys.stdin.read()
-stop.set()
-talker.join()
-pub.close()
-"""
+PERIOD, ENDPOINTS = 0.02, (pub,)
+def speak(i):
+    pub.publish(value=7)
+""" + UNTIL_STDIN_CLOSES
 
 
 def test_echo_once_of_a_type_not_decodable_here_is_one_line_and_exit_1(tmp_path, capsys):
