@@ -432,9 +432,9 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                         "wrong)")
     p.add_argument("--timeout", type=float, default=None, metavar="S",
                    help="end the run S wall seconds after every node is alive (the fleet's "
-                        "epoch; default: live.wall_timeout_s, else never; live.horizon_s fleet "
-                        "seconds end it too, at any time scale); a fleet not up within "
-                        "60 s ends INCONCLUSIVE")
+                        "epoch), instead of the scenario's limits (default: live.wall_timeout_s "
+                        "wall seconds or live.horizon_s fleet seconds, whichever comes first, "
+                        "else never); a fleet not up within 60 s ends INCONCLUSIVE")
     p.add_argument("--seed", type=int, default=None, help="fleet seed (default: the scenario's)")
     p.add_argument("--runs", type=int, default=1, metavar="N",
                    help="run the fleet N times with seeds S, S+1, ... (default: 1)")

@@ -86,8 +86,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
         scenario: a validated scenario (`load_scenario`, or `Scenario.build`: then written
             to a file for the node processes, `live_fleet.launchable`).
         time_scale, seed: fleet speed-up and seed (default: the scenario's).
-        timeout_s: wall seconds the run lasts from the fleet's epoch (default:
-            `live.wall_timeout_s`); ``live.horizon_s`` fleet seconds end it too (`wall_limit`).
+        timeout_s: wall seconds the run lasts from the fleet's epoch, instead of the
+            scenario's `live.wall_timeout_s` and ``live.horizon_s`` (`wall_limit`).
         connect, listen: join this router; else the embedded one's endpoint.
         out, handle_signals: where output goes; end on SIGINT/SIGTERM (main thread only).
         run_record: write the run as JSON lines to this file (`runtime.fleet.run_record`).
@@ -119,8 +119,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
                   **_stops(live.stop, until_settled, until_violation))
     started = time.monotonic()
     async with _Launch(fleet, record_events, handle_signals) as launch:
-        limit = wall_limit(live.wall_timeout_s if timeout_s is None else timeout_s,
-                           live.horizon_s, time_scale)
+        limit = wall_limit(live.wall_timeout_s, live.horizon_s, time_scale) \
+            if timeout_s is None else wall_limit(timeout_s, None, time_scale)
         reason, running = await launch.until_end((startup_s, *limit), params, driver)
     result = _result(fleet, reason, running, time.monotonic() - started)
     if record is not None:
