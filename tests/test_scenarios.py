@@ -203,7 +203,7 @@ def test_check_and_live_sections_become_typed_frozen_config(tmp_path):
                                 faults=FaultConfig(drop=("/poses",), crash=CrashConfig(("r1",))))
     assert isinstance(check.max_time_s, float) and check.search is None
     assert check.queue_bound.get("r1") == 20 and check.queue_bound.get("map_server") == 8
-    assert live == LiveConfig(timeout_s=30.0, summary_topics=("/poses",))
+    assert live == LiveConfig(wall_timeout_s=30.0, summary_topics=("/poses",))
     with pytest.raises(AttributeError):
         check.max_states = 1  # type: ignore[misc]
     defaults = load_scenario(write(tmp_path, GOOD))
@@ -273,5 +273,5 @@ def test_examples_sharing_a_map_keep_the_first_copy(tmp_path, capsys, monkeypatc
 def test_a_mistyped_class_name_gets_a_did_you_mean(tmp_path):
     doc = {"name": "typo", "nodes": [{"name": "l", "class": "twinfleet.nodes.demo:Listenr"}]}
     with pytest.raises(ScenarioError, match=r"unknown node class 'twinfleet\.nodes\.demo:Listenr'"
-                                            r" .*; did you mean twinfleet\.nodes\.demo:Listener\?"):
+                                            r" .*; did you mean 'twinfleet\.nodes\.demo:Listener'\?"):
         load_scenario(write(tmp_path, doc))

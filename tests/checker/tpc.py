@@ -113,7 +113,7 @@ def tpc_scenario(folder: Path, name: str = "tpc", *, latency: tuple[int, int] | 
                   {"name": "p1", "class": "tests.checker.tpc:Participant"},
                   {"name": "p2", "class": "tests.checker.tpc:Participant"}],
         "properties": [{"name": "atomic", "kind": "invariant", "expr": ATOMIC}],
-        "live": {"timeout_s": 1}}
+        "live": {"wall_timeout_s": 1}}
     if latency is not None:
         doc["check"] = {"latency": list(latency)}
     path = folder / f"{name}.yaml"

@@ -119,4 +119,4 @@ def test_operator_input_that_nodes_take_is_named_by_the_verdict(tmp_path: Path) 
                 "input): adder: 1 on /add_two_ints from an operator's command (topic pub, "
                 "service call); listener: 1 on /chatter from an operator's command") in text, text
     finally:
-        stop_launch(proc, DEMO)
+        stop_launch(proc)

@@ -20,7 +20,7 @@ import pytest
 import yaml
 import zenoh
 
-from tests.integration.itest_support import kill_all, processes_mentioning
+from tests.integration.itest_support import kill_all, spawned_by
 from tests.support import child_env, pick_free_port
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
 
@@ -80,7 +80,9 @@ def _launch(scenario: Path, cwd: Path, *args: str) -> subprocess.Popen[str]:
                             env=child_env(), cwd=cwd)
 
 
-def _stop(proc: subprocess.Popen[str], scenario: Path) -> str:
+def _stop(proc: subprocess.Popen[str]) -> str:
+    """SIGINT the launcher, and end what it started and left behind."""
+    started = spawned_by(proc.pid)
     if proc.poll() is None:
         proc.send_signal(signal.SIGINT)
     try:
@@ -88,7 +90,7 @@ def _stop(proc: subprocess.Popen[str], scenario: Path) -> str:
     except subprocess.TimeoutExpired:
         proc.kill()
         out, _ = proc.communicate(timeout=5)
-    kill_all(processes_mentioning(str(scenario)))
+    kill_all(sorted(set(started) | set(spawned_by(proc.pid))))
     return out or ""
 
 
@@ -124,7 +126,7 @@ def test_a_fleet_of_its_own_types_is_on_ros2_with_no_mapping_written(tmp_path):
         assert (sample["y"], sample["theta"], sample["name"]) == (2.0, 0.25, "turtle1"), sample
         assert sample["x"] > 0 and sample["x"] % 0.5 == 0, sample
     finally:
-        _stop(launcher, scenario)
+        _stop(launcher)
         router.close()
         reader.join(10)
         while not lines.empty():
@@ -142,7 +144,7 @@ def test_a_bridge_that_never_reaches_its_router_makes_the_run_inconclusive(tmp_p
     # the mapping lives beside the scenario: found from another working directory
     proc = _launch(scenario, elsewhere, "--ros2", "--ros2-router", dead, "--ros2-mapping",
                    "turtle_map:Mapping", "--timeout", "2")
-    out = _stop_after(proc, scenario, 60)
+    out = _stop_after(proc, 60)
     assert proc.returncode == 3, out[-3000:]
     assert (f"result: INCONCLUSIVE (the ROS 2 bridge never reached its router at {dead}"
             in out), out[-3000:]
@@ -151,15 +153,16 @@ def test_a_bridge_that_never_reaches_its_router_makes_the_run_inconclusive(tmp_p
 def test_a_mapping_that_does_not_load_is_one_line_before_anything_starts(tmp_path):
     scenario = _fleet(tmp_path / "turtle")
     proc = _launch(scenario, tmp_path, "--ros2", "--ros2-mapping", "turtle_map:Mapin")
-    out = _stop_after(proc, scenario, 60)
+    out = _stop_after(proc, 60)
     assert proc.returncode == 2, out
     assert len(out.strip().splitlines()) == 1, out
     assert "--ros2-mapping: unknown ROS 2 mapping 'turtle_map:Mapin'" in out, out
-    assert out.strip().endswith("; did you mean turtle_map:Mapping?"), out
+    assert out.strip().endswith("; did you mean 'turtle_map:Mapping'?"), out
     assert "[launcher]" not in out
 
 
-def _stop_after(proc: subprocess.Popen[str], scenario: Path, timeout: float) -> str:
+def _stop_after(proc: subprocess.Popen[str], timeout: float) -> str:
+    """The launcher's output once it ended (killed after `timeout`), what it started ended."""
     try:
         out, _ = proc.communicate(timeout=timeout)
         return out
@@ -167,4 +170,4 @@ def _stop_after(proc: subprocess.Popen[str], scenario: Path, timeout: float) -> 
         if proc.poll() is None:
             proc.kill()
             proc.communicate(timeout=5)
-        kill_all(processes_mentioning(str(scenario)))
+        kill_all(spawned_by(proc.pid))

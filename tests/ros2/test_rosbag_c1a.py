@@ -13,7 +13,7 @@ import pytest
 from mcap.reader import make_reader
 from rosbags.rosbag2 import Reader
 
-from tests.integration.itest_support import kill_all, processes_mentioning
+from tests.integration.itest_support import kill_all, spawned_by
 from tests.support import child_env
 from twinfleet.cli import main
 
@@ -22,14 +22,18 @@ pytestmark = [pytest.mark.slow, pytest.mark.fleet, pytest.mark.timeout(120)]
 
 def test_a_recorded_c1a_run_is_a_bag_with_every_topic_counted_in_fleet_time(tmp_path, capsys):
     run = tmp_path / "c1a.mcap"
-    try:
-        done = subprocess.run([sys.executable, "-m", "twinfleet", "record", "c1a",
-                               "--time-scale", "5", "--duration", "4", "-o", str(run)],
-                              capture_output=True, text=True, timeout=90, env=child_env(),
-                              cwd=tmp_path)
-    finally:
-        kill_all(processes_mentioning(str(run)))
-    assert run.exists(), done.stdout[-2000:] + done.stderr[-2000:]
+    with subprocess.Popen([sys.executable, "-m", "twinfleet", "record", "c1a", "--time-scale",
+                           "5", "--duration", "4", "-o", str(run)], stdout=subprocess.PIPE,
+                          stderr=subprocess.STDOUT, text=True, env=child_env(),
+                          cwd=tmp_path) as proc:
+        try:
+            out, _ = proc.communicate(timeout=90)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait(timeout=10)
+            kill_all(spawned_by(proc.pid))
+    assert run.exists(), out[-3000:]
     recorded: dict[str, list[int]] = defaultdict(list)  # topic -> fleet ns of its messages
     with run.open("rb") as f:
         for _, channel, message in make_reader(f).iter_messages(log_time_order=True):

@@ -27,13 +27,14 @@ its fields (`interfaces`).
 
 from __future__ import annotations
 
-import difflib
 import importlib
 import sys
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
+
+from twinfleet.runtime.scenario.suggest import did_you_mean
 
 Output = tuple[str, str, dict[str, Any]]
 
@@ -106,9 +107,9 @@ def load_mapping(name: str, near: Iterable[Path] = ()) -> Ros2Mapping:
     except ImportError as exc:
         raise MappingError(f"unknown ROS 2 mapping {name!r} ({exc})") from None
     except AttributeError as exc:
-        close = difflib.get_close_matches(attr, [n for n in vars(module) if n[:1] != "_"], n=1)
-        hint = f"; did you mean {module_name}:{close[0]}?" if close else ""
-        raise MappingError(f"unknown ROS 2 mapping {name!r} ({exc}){hint}") from None
+        names = [f"{module_name}:{n}" for n in vars(module) if not n.startswith("_")]
+        raise MappingError(f"unknown ROS 2 mapping {name!r} ({exc})"
+                           f"{did_you_mean(name, names)}") from None
     except Exception as exc:  # the user's module or constructor: say what it raised
         raise MappingError(f"{name}: {type(exc).__name__}: {exc}") from None
     if not isinstance(made, Ros2Mapping):

@@ -59,7 +59,6 @@ raised before anything starts.
 from __future__ import annotations
 
 import dataclasses
-import difflib
 import importlib
 import inspect
 import math
@@ -517,10 +516,8 @@ def _import_attr(path: str, err: _Errors, key: str, what: str = "name") -> Any:
     try:
         return getattr(module, attr)
     except AttributeError as exc:
-        close = difflib.get_close_matches(attr, [n for n in vars(module) if not n.startswith("_")],
-                                          n=1)
-        hint = f"; did you mean {module_name}:{close[0]}?" if close else ""
-        err.fail(key, f"unknown {what} {path!r} ({exc}){hint}")
+        names = [f"{module_name}:{n}" for n in vars(module) if not n.startswith("_")]
+        err.fail(key, f"unknown {what} {path!r} ({exc}){did_you_mean(path, names)}")
 
 
 def _node_class(value: Any, err: _Errors, key: str) -> tuple[type[Node], str]:
