@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from twinfleet.cli.runtime_commands import runs_summary
+from twinfleet.runtime.fleet.fleet_result import runs_summary
 
 
 def test_inconclusive_runs_are_not_counted_as_failed():

@@ -9,7 +9,7 @@ import os
 import sys
 import tempfile
 
-from twinfleet.checker.cluster.ray_log import ray_log_path, ray_notices
+from twinfleet.checker.cluster.ray_host import ray_log_path, ray_notices
 
 
 def test_ray_notices_go_to_the_log_not_to_stderr(tmp_path, monkeypatch, capfd):

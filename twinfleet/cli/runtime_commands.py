@@ -25,6 +25,7 @@ import sys
 from typing import Any
 
 from twinfleet.cli import recording_commands, viewer_commands
+from twinfleet.ros2.commands import add_launch_ros2_arguments, launch_bridge
 from twinfleet.runtime.access.connection import (
     CommandError,
     add_connection_arguments,
@@ -60,8 +61,9 @@ def cmd_launch(args: argparse.Namespace) -> int:
         return 2
     import zenoh
 
+    from twinfleet.runtime.fleet.fleet_result import runs_summary
     from twinfleet.runtime.fleet.launcher import FleetConflict, format_result, run_fleet
-    bridge = _ros2_driver(args, scenario)
+    bridge = launch_bridge(args, scenario)
 
     worst, codes = 0, []
     for run in range(args.runs):
@@ -96,19 +98,6 @@ def cmd_launch(args: argparse.Namespace) -> int:
     if args.runs > 1:
         print(f"[launcher] {runs_summary(scenario.name, codes, args.runs)}", flush=True)
     return worst
-
-
-_OUTCOMES = ((0, "passed"), (1, "failed"), (3, "inconclusive"))
-
-
-def runs_summary(name: str, codes: list[int], runs: int) -> str:
-    """The line after ``launch --runs N``: how many runs passed, failed (a property
-    violated) and were inconclusive, each said; another end (interrupted, an error) too."""
-    counts = [(sum(c == code for c in codes), what) for code, what in _OUTCOMES]
-    counts += [(sum(c not in dict(_OUTCOMES) for c in codes), "ended otherwise"),
-               (runs - len(codes), "not run")]
-    words = [f"{n}/{runs} {what}" for i, (n, what) in enumerate(counts) if n or i < 2]
-    return f"{name}: {', '.join(words)}"
 
 
 def _launchable(args: argparse.Namespace, params: Any) -> Any:
@@ -151,20 +140,6 @@ def _launch_access(args: argparse.Namespace) -> Any:
         return read_credentials(args.credentials)[1] if args.credentials else None
     except CredentialsError as exc:
         raise CommandError(str(exc)) from None
-
-
-def _ros2_driver(args: argparse.Namespace, scenario: Any) -> Any:
-    """The ROS 2 bridge's driver for `run_fleet` when asked for (``--ros2``, a ``ros2:``
-    section), else None."""
-    if not (args.ros2 or args.ros2_router or args.ros2_mapping or scenario.ros2 is not None):
-        return None
-    from pathlib import Path
-
-    from twinfleet.ros2.commands import launch_driver
-
-    near = ([scenario.path.parent] if scenario.path is not None else []) + [Path.cwd()]
-    return launch_driver(scenario.ros2, router=args.ros2_router, mapping=args.ros2_mapping,
-                         near=near)
 
 
 _SEVERITY = (0, 3, 2, 1, 130)  # ok < inconclusive < bad input < failed < interrupted
@@ -453,18 +428,7 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                    help="write every event each node dispatches to FILE as JSON lines (handler, "
                         "kind, sender, seq, stamp, choices, state digest), for `twinfleet "
                         "validate FILE SCENARIO`; with --runs N, FILE.1 ... FILE.N")
-    p.add_argument("--ros2", action="store_true",
-                   help="run the ROS 2 bridge beside the fleet (docs/ros2.md; also when the "
-                        "scenario has a ros2: section, whose domain, router and inbound topics "
-                        "it uses): the nodes take the bridge's input on their external topics")
-    p.add_argument("--ros2-router", default=None, metavar="EP",
-                   help="with --ros2: the ROS 2 network's router (default: the ros2: section's, "
-                        "else tcp/127.0.0.1:7447, rmw_zenohd's); a bridge that never reaches "
-                        "it makes the run INCONCLUSIVE")
-    p.add_argument("--ros2-mapping", default=None, metavar="MODULE:NAME",
-                   help="with --ros2: the fleet's ROS 2 mapping, found as node classes are "
-                        "(the scenario's folder, the working directory; default: the ros2: "
-                        "section's, else the scene's, else none: every message by its fields)")
+    add_launch_ros2_arguments(p)
     p.set_defaults(func=cmd_launch)
 
 

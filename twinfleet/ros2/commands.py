@@ -141,6 +141,33 @@ def bridge_command(args: argparse.Namespace) -> int:
     return 0
 
 
+def add_launch_ros2_arguments(p: argparse.ArgumentParser) -> None:
+    """`launch`'s ROS 2 options: --ros2, --ros2-router, --ros2-mapping."""
+    p.add_argument("--ros2", action="store_true",
+                   help="run the ROS 2 bridge beside the fleet (docs/ros2.md; also when the "
+                        "scenario has a ros2: section, whose domain, router and inbound topics "
+                        "it uses): the nodes take the bridge's input on their external topics")
+    p.add_argument("--ros2-router", default=None, metavar="EP",
+                   help="with --ros2: the ROS 2 network's router (default: the ros2: section's, "
+                        "else tcp/127.0.0.1:7447, rmw_zenohd's); a bridge that never reaches "
+                        "it makes the run INCONCLUSIVE")
+    p.add_argument("--ros2-mapping", default=None, metavar="MODULE:NAME",
+                   help="with --ros2: the fleet's ROS 2 mapping, found as node classes are "
+                        "(the scenario's folder, the working directory; default: the ros2: "
+                        "section's, else the scene's, else none: every message by its fields)")
+
+
+def launch_bridge(args: argparse.Namespace, scenario: Any) -> Any:
+    """The ROS 2 bridge's driver for `launch` when asked for (``--ros2`` and its options, a
+    ``ros2:`` section), else None; a named mapping is found as node classes are (the
+    scenario's folder, the working directory)."""
+    if not (args.ros2 or args.ros2_router or args.ros2_mapping or scenario.ros2 is not None):
+        return None
+    near = ([scenario.path.parent] if scenario.path is not None else []) + [Path.cwd()]
+    return launch_driver(scenario.ros2, router=args.ros2_router, mapping=args.ros2_mapping,
+                         near=near)
+
+
 def launch_driver(config: Ros2Config | None, *, router: str | None = None,
                   mapping: str | None = None, near: Sequence[Path] = ()) -> Any:
     """The `run_fleet` driver of `launch --ros2`: the bridge with the scenario's ``ros2:``

@@ -20,7 +20,6 @@ import os
 import pickle
 import re
 import secrets
-import socket
 import sys
 import threading
 from collections.abc import Iterator, Sequence
@@ -41,7 +40,7 @@ from twinfleet.checker.cluster.level import (
     split,
 )
 from twinfleet.checker.cluster.links import TOKEN_BYTES, Links
-from twinfleet.checker.cluster.ray_log import ray_notices
+from twinfleet.checker.cluster.ray_host import answers, environment, ray_notices, worker_env
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint, mismatch
 from twinfleet.checker.cluster.visited import VisitedTable
 from twinfleet.checker.collector import SEARCH_THRESHOLDS
@@ -59,28 +58,6 @@ except ImportError:  # pragma: no cover - exercised in a subprocess without Ray
 
 
 
-def _worker_env() -> dict[str, str]:
-    """Workers import node code as this process does: its working directory and path."""
-    path = [os.getcwd(), *filter(None, (env_value(EnvVar.PYTHONPATH) or "").split(os.pathsep))]
-    return {"PYTHONPATH": os.pathsep.join(path), "RAY_USAGE_STATS_ENABLED": "0"}
-
-
-@contextmanager
-def _environment(values: dict[str, str]) -> Iterator[None]:
-    """`values` in this process's environment while the block runs, the old ones back
-    after."""
-    before = {name: os.environ.get(name) for name in values}
-    os.environ.update(values)
-    try:
-        yield
-    finally:
-        for name, value in before.items():
-            if value is None:
-                os.environ.pop(name, None)
-            else:
-                os.environ[name] = value
-
-
 @contextmanager
 def session(workers: int, address: str | None) -> Iterator[None]:
     """A Ray connection for the command (module docstring); ClusterError if none."""
@@ -88,7 +65,7 @@ def session(workers: int, address: str | None) -> Iterator[None]:
         yield
         return
     if address is not None:
-        _answers(address)
+        answers(address)
     with ray_notices():
         _init(workers, address)
     try:
@@ -110,32 +87,18 @@ def _init(workers: int, address: str | None) -> None:
             # workers then lose the cores to everything else, where the same search in
             # one process would not.
             niceness = env_value(EnvVar.RAY_WORKER_NICENESS) or "0"
-            with _environment({**_worker_env(), "RAY_worker_niceness": niceness}):
+            with environment({**worker_env(), "RAY_worker_niceness": niceness}):
                 ray.init(address="local", num_cpus=max(2, workers), include_dashboard=False,
                          _node_ip_address="127.0.0.1", log_to_driver=False,
                          configure_logging=False)
         else:
             ray.init(address=address, log_to_driver=False, configure_logging=False,
-                     runtime_env={"env_vars": _worker_env()})
+                     runtime_env={"env_vars": worker_env()})
     except Exception as exc:  # noqa: BLE001 - Ray raises many types for one bad address
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         where = "a local cluster" if address is None else f"cluster {address}"
         raise ClusterError(f"cannot connect to {where}: {first} (a cluster started with "
                            "`ray start --head` needs the same RAY_AUTH_TOKEN here)") from None
-
-
-def _answers(address: str) -> None:
-    """ClusterError unless something accepts a connection at `address` (HOST:PORT): Ray
-    itself keeps retrying an address where nothing listens."""
-    host, _, port = address.rpartition(":")
-    if not host or not port.isdigit():
-        raise ClusterError(f"--cluster {address}: expected HOST:PORT, the address "
-                           "`ray start --head` prints")
-    try:
-        socket.create_connection((host, int(port)), timeout=5).close()
-    except OSError as exc:
-        raise ClusterError(f"cannot connect to cluster {address}: "
-                           f"{exc.strerror or exc}") from None
 
 
 def _built(spec: SystemSpec, expected: dict[str, str]

@@ -7,7 +7,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from twinfleet.runtime.access.connection import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
-from twinfleet.runtime.contract.kinds import EXIT_TERMINATED, Status
+from twinfleet.runtime.contract.kinds import EXIT_INCONCLUSIVE, EXIT_TERMINATED, Status
 from twinfleet.runtime.core.statistics import NodeStatistics
 from twinfleet.runtime.fleet.live_verdict import RESULT_WORDS, Verdict
 from twinfleet.runtime.fleet.run_record import RunRecord
@@ -73,6 +73,19 @@ class FleetResult:
         if code == EXIT_INTERRUPTED:
             return signal_exit_code(self.reason) or code  # SIGTERM: 143, as everywhere
         return code
+
+
+_OUTCOMES = ((EXIT_OK, "passed"), (EXIT_FAILED, "failed"), (EXIT_INCONCLUSIVE, "inconclusive"))
+
+
+def runs_summary(name: str, codes: list[int], runs: int) -> str:
+    """The line after ``launch --runs N``: how many runs passed, failed (a property
+    violated) and were inconclusive, each said; another end (interrupted, an error) too."""
+    counts = [(sum(c == code for c in codes), what) for code, what in _OUTCOMES]
+    counts += [(sum(c not in dict(_OUTCOMES) for c in codes), "ended otherwise"),
+               (runs - len(codes), "not run")]
+    words = [f"{n}/{runs} {what}" for i, (n, what) in enumerate(counts) if n or i < 2]
+    return f"{name}: {', '.join(words)}"
 
 
 def signal_exit_code(reason: str) -> int | None:
