@@ -201,7 +201,7 @@ def own_types(tmp_path):
 def test_a_fleets_own_types_need_no_mapping_and_no_import(own_types, tmp_path, capsys):
     bag = tmp_path / "bag"
     assert main(["export", str(own_types), "--ros2", "-o", str(bag)]) == 0
-    assert "via by fields, stamped with fleet time" in capsys.readouterr().out
+    assert "via no mapping, stamped with fleet time" in capsys.readouterr().out
     store = get_typestore(Stores.ROS2_JAZZY)
     with Reader(bag) as reader:
         conns = {c.topic: c for c in reader.connections}

@@ -52,8 +52,8 @@ from rosbags.rosbag2 import Reader, StoragePlugin, Writer
 from twinfleet.ros2.cdr import MessageError, RosTypes
 from twinfleet.ros2.interfaces import Interfaces, fleet_interfaces, ros_messages, ros_name
 from twinfleet.ros2.mapping import (
-    BY_FIELDS,
-    ByFields,
+    NO_MAPPING,
+    NoMapping,
     Output,
     Ros2Mapping,
     load_mapping,
@@ -155,7 +155,7 @@ def export_rosbag2(source: str | Path, target: str | Path, *, mapping: str | Non
         raise ExportError(f"{target} exists already: a bag export needs a new folder")
     recording = read_recording(source)
     name = mapping or mapping_of_scene(recording.scene)
-    table: Ros2Mapping = load_mapping(name, near) if name else ByFields(recording.latched)
+    table: Ros2Mapping = load_mapping(name, near) if name else NoMapping(recording.latched)
     types = types or RosTypes()
     interfaces = fleet_interfaces(types, schema_classes(recording.schemas))
     _prime(table, source, recording.latched)
@@ -172,7 +172,7 @@ def export_rosbag2(source: str | Path, target: str | Path, *, mapping: str | Non
                 bag.write(output, stamp * NS_PER_MS)
     finally:
         bag.writer.close()
-    return BagWritten(bag.counts, name or BY_FIELDS, bag.left_out)
+    return BagWritten(bag.counts, name or NO_MAPPING, bag.left_out)
 
 
 def _prime(table: Ros2Mapping, source: Path, latched: frozenset[str]) -> None:
