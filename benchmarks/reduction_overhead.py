@@ -1,33 +1,38 @@
-"""What the partial-order reduction's bookkeeping costs per transition (docs/reduction.md).
+"""Does the partial-order reduction pay for itself? `por` against `none`, side by side.
 
-"Reduced transitions/s over unreduced transitions/s" mixes two things: the
-reduction's own work per world (the closure, visibility, the cycle proviso,
-restarts) and the kind of transition it leaves (nearly every one reaches a new
-world and needs a fresh handler run, while 96 % of the unreduced search's
-transitions on C1a are cache hits). This script separates them, in one
-process, on each scenario (default `launch/c1a.yaml`, BFS to the end):
+Every scenario the script can find is checked both ways in one process, the modes
+taking turns within each round so that a slow spell of the shared machine hits both:
 
-- `none`: the unreduced search;
-- `bookkeeping`: every world's persistent set is computed exactly as `por`
-  computes it (variants, closure, visibility, pair checks of declared
-  commuting handlers), then the world is expanded fully anyway and its
-  transitions checked for falling goal atoms, as `por` checks them: the same transitions as `none`, plus all of the bookkeeping,
-  so its transitions/s over `none`'s is the cost;
-- `por`: the reduced search.
+- the shipped examples (`twinfleet/launch/*.yaml`; `demo` never ends, and under `rebeca`
+  the reduction is off by plan, which the row says instead of timing identical work);
+- the scenarios under `tests/data` (the station, the two-phase commit with 0-2 ms of
+  latency: a protocol where `por` has little to prune);
+- the generated systems of the differential tests (`tests/checker/program_systems.py`,
+  derandomized: the same systems each run), plain and crowded, as two rows whose time
+  is the sum over their systems (each takes milliseconds alone); a system that reaches
+  the tests' 3,000-world limit is left out, as there.
 
-    python3 benchmarks/reduction_overhead.py [SCENARIO ...] [--repeat 3]
+Time is the CPU time (`time.process_time`) of the `check` call, System build included,
+the fastest of `--repeat` rounds per mode: on a machine shared by several jobs, CPU time
+does not count the waits for a core. Printed per row: states and seconds of each mode,
+their ratio (`por` seconds over `none` seconds: above 1 the reduction cost time), the
+spread of the per-round ratios, and what the reduction did; the worst ratio last.
 
-Each round runs every mode once, `--repeat` rounds, and the fastest run of a
-mode counts (the machine may be shared); the per-round ratios of `bookkeeping`
-to `none` are printed too, with their median. Printed: states, transitions, seconds, transitions/s, and the ratios
-against `none`.
+    python3 benchmarks/reduction_overhead.py [SCENARIO ...] [--repeat 3] [--generated 100]
+
+`--bookkeeping SCENARIO` instead measures what the reduction's work per world costs:
+every world's persistent set is computed as `por` computes it, then the world is
+expanded fully anyway (the transitions of `none` plus all of the bookkeeping).
 """
 
 from __future__ import annotations
 
 import argparse
 import sys
-from collections.abc import Sequence
+import tempfile
+import time
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -35,18 +40,146 @@ ROOT = Path(__file__).resolve().parents[1]
 if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
-from twinfleet.checker.driver import load  # noqa: E402
+from twinfleet.checker.driver import CheckOptions, check, load  # noqa: E402
 from twinfleet.checker.properties import PropertySet  # noqa: E402
-from twinfleet.checker.reduction import Reduction  # noqa: E402
+from twinfleet.checker.reduction import Reduction, plan  # noqa: E402
 from twinfleet.checker.search import Search  # noqa: E402
 from twinfleet.checker.system import System  # noqa: E402
+
+LAUNCH = ROOT / "twinfleet" / "launch"
+DATA = ROOT / "tests" / "data"
+NEVER_ENDS = {"demo"}  # its talker counts for ever
+GENERATED_LIMIT = 3_000  # the differential tests' state limit
+
+
+@dataclass
+class Run:
+    """One mode's fastest run of a row and its per-round times."""
+
+    states: int = 0
+    seconds: float = float("inf")
+    rounds: list[float] | None = None
+    reduction: str = ""
+    aside: int = 0  # systems of a generated row where the reduction stepped aside
+
+
+def check_time(path: Path, mode: str, max_states: int | None = None) -> tuple[int, float, str]:
+    """(states, CPU seconds, the summary's reduction line) of one check of `path`; states
+    -1 when it reached `max_states`."""
+    started = time.process_time()
+    result = check(path, CheckOptions(reduction=mode, max_states=max_states))
+    seconds = time.process_time() - started
+    hit = max_states is not None and result.statistics.states >= max_states
+    return (-1 if hit else result.statistics.states), seconds, result.reduction
+
+
+def reduction_off(path: Path) -> str | None:
+    """Why `por` would not run on `path` at all (decided before any search), or None."""
+    scenario = load(str(path))
+    props = PropertySet.from_scenario(scenario)
+    reduction, name = plan(System(scenario, properties=props), props, "bfs", "por")
+    return None if reduction is not None else name
+
+
+def rounds(paths: Sequence[Path], repeat: int, max_states: int | None = None
+           ) -> dict[str, Run] | None:
+    """Check every path of a row in both modes, `repeat` rounds; None if a path of a single
+    row hits the limit. Several paths (generated systems) add up, leaving out those at the
+    limit."""
+    runs = {mode: Run(rounds=[]) for mode in ("none", "por")}
+    kept = list(paths)
+    for round_no in range(repeat):
+        totals = {"none": 0.0, "por": 0.0}
+        for path in list(kept):
+            done = {mode: check_time(path, mode, max_states) for mode in ("none", "por")}
+            if any(states < 0 for states, _, _ in done.values()):
+                kept.remove(path)
+                continue
+            for mode, (states, seconds, line) in done.items():
+                totals[mode] += seconds
+                run = runs[mode]
+                if round_no == 0:
+                    run.states += states
+                    run.aside += "stepped aside" in line
+                run.reduction = line if len(paths) == 1 else f"{run.aside} stepped aside"
+        if not kept:
+            return None
+        for mode, total in totals.items():
+            runs[mode].seconds = min(runs[mode].seconds, total)
+            assert runs[mode].rounds is not None
+            runs[mode].rounds.append(total)
+    return runs
+
+
+def row(name: str, runs: dict[str, Run]) -> float:
+    """Print one row; return its ratio."""
+    none, por = runs["none"], runs["por"]
+    ratio = por.seconds / max(none.seconds, 1e-9)
+    per_round = sorted(p / max(n, 1e-9) for p, n in zip(por.rounds or (), none.rounds or (),
+                                                        strict=True))
+    spread = f"{per_round[0]:.2f}-{per_round[-1]:.2f}"
+    did = por.reduction if len(por.reduction) < 70 else por.reduction[:67] + "..."
+    print(f"{name:<22}{none.states:>9,}{none.seconds:>8.2f}{por.states:>9,}{por.seconds:>8.2f}"
+          f"{ratio:>7.2f}  {spread:<11}{did}", flush=True)
+    return ratio
+
+
+def generated(count: int, crowded: bool, folder: Path) -> list[Path]:
+    """`count` systems of the differential tests' strategy, derandomized, written out."""
+    from hypothesis import HealthCheck, given, settings
+
+    from tests.checker.program_systems import systems, write_scenario
+
+    docs: list[dict[str, Any]] = []
+
+    @settings(max_examples=count, derandomize=True, database=None, deadline=None,
+              suppress_health_check=list(HealthCheck))
+    @given(doc=systems(crowded=crowded))
+    def draw(doc: dict[str, Any]) -> None:
+        docs.append(doc)
+
+    draw()
+    kind = "crowded" if crowded else "plain"
+    return [write_scenario(doc, folder / f"{kind}{i}.yaml") for i, doc in enumerate(docs)]
+
+
+def shipped() -> Iterable[Path]:
+    """The scenarios of the package and of the tests' data."""
+    yield from sorted(p for p in LAUNCH.glob("*.yaml") if p.stem not in NEVER_ENDS)
+    yield from sorted(p for p in DATA.glob("*/*.yaml"))
+
+
+def compare(args: argparse.Namespace) -> int:
+    print(f"{'scenario':<22}{'none st.':>9}{'none s':>8}{'por st.':>9}{'por s':>8}{'ratio':>7}"
+          f"  {'rounds':<11}reduction")
+    worst: tuple[float, str] = (0.0, "")
+    for path in args.scenarios or list(shipped()):
+        off = reduction_off(path)
+        if off is not None:
+            print(f"{path.stem:<22}{'':>42}  {'':<11}{off}: the same search either way")
+            continue
+        runs = rounds([path], args.repeat)
+        assert runs is not None
+        worst = max(worst, (row(path.stem, runs), path.stem))
+    if args.generated and not args.scenarios:
+        with tempfile.TemporaryDirectory() as tmp:
+            for crowded in (False, True):
+                count = args.generated if not crowded else max(1, args.generated // 3)
+                paths = generated(count, crowded, Path(tmp))
+                runs = rounds(paths, args.repeat, GENERATED_LIMIT)
+                if runs is not None:
+                    name = f"generated {'crowded' if crowded else 'plain'} ({count})"
+                    worst = max(worst, (row(name, runs), name))
+    print(f"worst ratio (por seconds / none seconds): {worst[0]:.2f} ({worst[1]}); "
+          f"target <= 1.10")
+    return 0
 
 
 class BookkeepingOnly(Reduction):
     """Computes every world's persistent set like `por`, then expands the world fully.
 
-    It never restarts: it prunes nothing, so a grown send relation invalidates nothing
-    (`por`'s own restarts, in its first few hundred worlds, are in the `por` row).
+    It never restarts and never steps aside: it prunes nothing, so a grown send relation
+    invalidates nothing.
     """
 
     def successors(self, world: Any, find: Any, done: int | None) -> list[Any]:
@@ -58,51 +191,49 @@ class BookkeepingOnly(Reduction):
     def stale(self) -> bool:
         return False
 
-
-def run_once(path: str, mode: str) -> tuple[int, int, float]:
-    """(states, transitions, seconds) of one BFS of `path` in `mode`."""
-    scenario = load(path)
-    props = PropertySet.from_scenario(scenario)
-    system = System(scenario, properties=props)
-    reduction = {"none": None, "bookkeeping": BookkeepingOnly, "por": Reduction}[mode]
-    search = Search(system, props, handle_sigint=False,
-                    reduction=None if reduction is None else reduction(system, props))
-    s = search.run("bfs").statistics
-    return s.states, s.transitions, s.elapsed_s
+    def steps_aside(self) -> bool:
+        return False
 
 
-MODES = ("none", "bookkeeping", "por")
+def bookkeeping(path: Path, repeat: int) -> int:
+    """Print `none`, `bookkeeping` and `por` transitions/s on one scenario."""
+    modes: dict[str, Callable[[System, PropertySet], Reduction] | None] = {
+        "none": None, "bookkeeping": BookkeepingOnly, "por": Reduction}
+    best: dict[str, tuple[int, int, float]] = {}
+    for _ in range(repeat):
+        for mode, make in modes.items():
+            scenario = load(str(path))
+            props = PropertySet.from_scenario(scenario)
+            system = System(scenario, properties=props)
+            started = time.process_time()
+            s = Search(system, props, handle_sigint=False,
+                       reduction=None if make is None else make(system, props)).run("bfs")
+            seconds = time.process_time() - started
+            if mode not in best or seconds < best[mode][2]:
+                best[mode] = (s.statistics.states, s.statistics.transitions, seconds)
+    print(f"{'mode':<13}{'states':>9}{'transitions':>13}{'s':>7}{'tr/s':>9}{'x tr/s':>8}")
+    base = best["none"][1] / best["none"][2]
+    for mode, (states, transitions, seconds) in best.items():
+        rate = transitions / max(seconds, 1e-9)
+        print(f"{mode:<13}{states:>9,}{transitions:>13,}{seconds:>7.2f}{rate:>9,.0f}"
+              f"{rate / base:>8.2f}")
+    return 0
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("scenarios", nargs="*", default=[str(ROOT / "twinfleet" / "launch" / "c1a.yaml")])
+    parser.add_argument("scenarios", nargs="*", type=Path,
+                        help="scenario files (default: every one found, and generated ones)")
     parser.add_argument("--repeat", type=int, default=3,
-                        help="rounds; each round runs every mode once (fastest counts)")
+                        help="rounds; each runs every mode once, the fastest counts")
+    parser.add_argument("--generated", type=int, default=100,
+                        help="generated plain systems (a third as many crowded ones); 0: none")
+    parser.add_argument("--bookkeeping", type=Path, metavar="SCENARIO",
+                        help="measure the reduction's work per world on SCENARIO instead")
     args = parser.parse_args(argv)
-    print(f"{'scenario':<12}{'mode':<13}{'states':>9}{'transitions':>13}{'s':>7}"
-          f"{'tr/s':>9}{'x tr/s':>8}{'x time':>8}")
-    for path in args.scenarios:
-        # Modes take turns within a round, so a slow spell of a shared machine hits all of
-        # them; each round's bookkeeping/none ratio is kept too (its median is printed).
-        runs: dict[str, list[tuple[int, int, float]]] = {m: [] for m in MODES}
-        for _ in range(args.repeat):
-            for mode in MODES:
-                runs[mode].append(run_once(path, mode))
-        base = None
-        for mode in MODES:
-            states, transitions, seconds = min(runs[mode], key=lambda r: r[2])
-            rate = transitions / max(seconds, 1e-6)
-            base = base or (rate, seconds)
-            print(f"{Path(path).stem:<12}{mode:<13}{states:>9,}{transitions:>13,}{seconds:>7.2f}"
-                  f"{rate:>9,.0f}{rate / base[0]:>8.2f}{base[1] / seconds:>8.2f}")
-        ratios = sorted(n[2] / b[2] for n, b in zip(runs["none"], runs["bookkeeping"],
-                                                     strict=True))
-        print(f"{Path(path).stem:<12}bookkeeping/none per round: "
-              f"{', '.join(f'{r:.2f}' for r in ratios)} (median {ratios[len(ratios) // 2]:.2f})")
-    print("x tr/s: transitions/s over `none`'s (bookkeeping: the reduction's cost per "
-          "transition; target >= 0.8); x time: `none`'s seconds over this mode's.")
-    return 0
+    if args.bookkeeping is not None:
+        return bookkeeping(args.bookkeeping, args.repeat)
+    return compare(args)
 
 
 if __name__ == "__main__":

@@ -118,7 +118,11 @@ class Search(SearchState):
                 return
             except _Restart:
                 assert reduction is not None
-                reduction.restarted()
+                if reduction.aside:  # it did not pay: the rest of the run is unreduced
+                    self._aside = reduction.aside
+                    self.reduction = reduction = None
+                else:
+                    reduction.restarted()
                 self._reset()
 
     def _explore(self) -> None:
@@ -158,21 +162,25 @@ class Search(SearchState):
                 edges.set(sid, children)
             self._expanding = None
             self._partial = 0
-            if lifo and reduction is not None and reduction.stale:
+            if lifo and reduction is not None and (reduction.stale or reduction.steps_aside()):
                 raise _Restart
             self._expansions += 1
             if self._expansions >= self._next_forget:
                 self._forget()
             tick()
         if reduction is not None and reduction.stale:
+            reduction.steps_aside()  # a search that did not pay starts again unreduced
             raise _Restart
 
     def _next_level(self, depth: int) -> None:
         """A BFS starts expanding the worlds of `depth`: every world at most that deep is
         stored. Restart if the level before learned a send, or a walk ahead, once the search
-        is large, did (`Reduction.probe`)."""
+        is large, did (`Reduction.probe`); start again unreduced if the reduction does
+        not pay (`Reduction.steps_aside`)."""
         reduction = self.reduction
         if reduction is not None:
+            if reduction.steps_aside():
+                raise _Restart
             reduction.probe(len(self.store), self.limits.max_depth)
             if reduction.stale:
                 raise _Restart

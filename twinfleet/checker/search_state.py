@@ -72,6 +72,7 @@ class SearchState:
         self._resumed = False
         self._elapsed_before = 0.0
         self._attempt: float | None = None  # when the search last started again (monotonic)
+        self._aside: str | None = None  # why the reduction stepped aside (`Search`)
         self._hashed_before = 0  # content hashes of the searches this one continues
         self._expanding: tuple[World, int, int] | None = None
         self._partial = 0
@@ -150,6 +151,7 @@ class SearchState:
                     (self.reduction.visibility.rising, self.reduction.visibility.fell,
                      self.reduction.visibility.pending_fall),
                     "reduction": None if self.reduction is None else self.reduction.stats,
+                    "aside": self._aside,
                     "relied": [] if self.reduction is None else sorted(self.reduction.relied)}
         checkpoint.save(path, self._checkpoint_meta, self.store, list(self._frontier), counters)
         self._last_checkpoint = time.monotonic()
@@ -172,6 +174,9 @@ class SearchState:
         if self.reduction is not None and c.get("visibility") is not None:
             visibility = self.reduction.visibility
             visibility.rising, visibility.fell, visibility.pending_fall = c["visibility"]
+        if self.reduction is not None and c.get("aside"):
+            self.reduction.aside, self._aside = c["aside"], c["aside"]
+            self.reduction = None
         self._resumed = True
 
     def _reset(self) -> None:
