@@ -352,6 +352,12 @@ class System:
         """Fresh decoded state objects of every node, by name."""
         return {name: restore(data) for name, data in zip(self.names, world.states, strict=True)}
 
+    def widen_cache(self, limit: int) -> None:
+        """Keep up to `limit` handler outcomes per cache generation: a reduced search, which
+        starts again from time 0 when its send relation grows, needs old ones again."""
+        if self._memo is not None and self._memo.limit < limit:
+            self._memo.limit = limit
+
     def forget_before(self, time_ms: int) -> int:
         """Drop cached handler outcomes of events due before `time_ms`; return how many
         (a search passes its frontier's smallest t*: no world left to expand uses them)."""
