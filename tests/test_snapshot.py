@@ -8,7 +8,7 @@ import numpy as np
 from hypothesis import given
 from hypothesis import strategies as st
 
-from twinfleet.runtime.contract.snapshot import restore, snapshot
+from twinfleet.runtime.contract.snapshot import _canonical, _flat, _pack, restore, snapshot
 
 Cell = tuple[int, int]
 
@@ -76,3 +76,19 @@ def test_any_plain_value_round_trips_canonically(value):
     back = restore(snapshot(value))
     assert snapshot(back) == snapshot(value)
     assert back == value
+
+
+@dataclass
+class One:
+    only: int = 7
+
+
+def test_flat_dataclasses_take_the_fast_path_with_the_general_paths_bytes():
+    # A flat dataclass (a node state, a message) is encoded without the general dispatch,
+    # answered once per type; its bytes are those the general path gives (`_pack` with the
+    # `_default` hook), at the top, inside a tuple (an event's args) and with one field.
+    assert _flat(Flat) is not None and _flat(One) is not None
+    assert _flat(General) is None and _flat(tuple) is None
+    for value in (Flat((3, 4), ((1, 2),), "r1", 1.5, True, 2), One(), (Flat(), One(3))):
+        assert snapshot(value) == _pack(_canonical(value))
+        assert restore(snapshot(value)) == value

@@ -19,7 +19,9 @@ import dataclasses
 import importlib
 import types
 import typing
+from collections.abc import Callable
 from functools import cache
+from operator import attrgetter
 from typing import Any
 
 import msgpack
@@ -34,6 +36,9 @@ class SnapshotError(TypeError):
 
 
 def _default(obj: Any) -> msgpack.ExtType:
+    flat = _flat(type(obj))
+    if flat is not None:  # the commonest case first (node states, messages)
+        return msgpack.ExtType(_FLAT_DATACLASS, _pack_loose([flat[0], flat[1](obj)]))
     if isinstance(obj, _SortedItems):
         return msgpack.ExtType(_DICT, _pack([list(kv) for kv in obj]))
     if isinstance(obj, tuple):
@@ -90,6 +95,30 @@ def _field_names(cls: type) -> tuple[str, ...]:
     return tuple(f.name for f in dataclasses.fields(cls))
 
 
+_Flat = tuple[str, Callable[[Any], list[Any]]]
+_FLAT: dict[type, _Flat | None] = {}
+
+
+def _flat(cls: type) -> _Flat | None:
+    """For a dataclass whose fields are all declared as plain values and tuples (the fast
+    path, `_tuples_only`): its class path and a function reading its field values; else
+    None. Asked for every value encoded, so answered once per type."""
+    try:
+        return _FLAT[cls]
+    except KeyError:
+        pass
+    found: _Flat | None = None
+    if dataclasses.is_dataclass(cls) and _tuples_only(cls):
+        names = _field_names(cls)
+        if len(names) >= 2:
+            getter = attrgetter(*names)
+            found = _class_path(cls), lambda obj: list(getter(obj))
+        else:
+            found = _class_path(cls), lambda obj: [getattr(obj, name) for name in names]
+    _FLAT[cls] = found
+    return found
+
+
 @cache
 def _tuples_only(cls: type) -> bool:
     """True when every field is declared as plain values, tuples of them, or Optional (or
@@ -136,8 +165,8 @@ def _ext_hook(code: int, data: bytes) -> Any:
         path, values = value
         cls = _class_named(path)
         obj = cls.__new__(cls)
-        for f, v in zip(dataclasses.fields(cls), values, strict=True):
-            object.__setattr__(obj, f.name, v)
+        for name, v in zip(_field_names(cls), values, strict=True):
+            object.__setattr__(obj, name, v)
         return obj
     raise SnapshotError(f"unknown snapshot extension code {code}")
 
@@ -152,6 +181,11 @@ def _unpack_tuples(data: bytes) -> Any:
 
 def snapshot(value: Any) -> bytes:
     """Encode `value` canonically (equal values give equal bytes)."""
+    flat = _flat(type(value))
+    if flat is not None:  # the bytes `_default` gives it, without the general dispatch
+        return msgpack.packb(msgpack.ExtType(_FLAT_DATACLASS,
+                                             _pack_loose([flat[0], flat[1](value)])),
+                             use_bin_type=True)
     return _pack(_canonical(value))
 
 
