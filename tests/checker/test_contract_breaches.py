@@ -146,3 +146,25 @@ def test_the_console_script_reports_it_in_its_own_process(tmp_path):
     assert run.returncode == 4, run.stderr
     assert "node n1, handler begin (@on_start): it called random.random()" in run.stderr
     assert "Traceback" not in run.stderr and run.stdout == ""
+
+
+def test_a_sound_handler_is_run_twice_and_its_second_run_builds_no_events(monkeypatch):
+    # Every fresh handler run is verified by a second run from the same state; when the
+    # handler keeps the contract, that second run compares the new state, effects and reply
+    # with the first's (`Runner._same_again`) instead of building and hashing its events
+    # again: every verified run takes the full path once.
+    from twinfleet.checker.runner import Runner
+
+    full = 0
+    exec_ = Runner._exec
+
+    def counting(self, *args):
+        nonlocal full
+        full += 1
+        return exec_(self, *args)
+
+    monkeypatch.setattr(Runner, "_exec", counting)
+    protocol = Path(__file__).resolve().parents[1] / "data" / "two_phase" / "two_phase_small.yaml"
+    result = check(protocol, CheckOptions(reduction="none"))
+    assert result.status == "holds" and result.handler_runs > 100
+    assert result.handler_runs == 2 * full
