@@ -132,8 +132,10 @@ def test_unknown_reduction_is_bad_input(tmp_path):
     ("none", (14, 19, 20)),
     # Reduced: the chain first (pong's and ping's events alone: nothing else can send to
     # them at the instant), the flag last: 8 states, 7 transitions. The send relation is
-    # learned on the way: pong's on_ping sends to ping (restart 1), ping's on_pong to pong
-    # (restart 2); the third search knows both from its start.
+    # learned on the way: pong's on_ping sends to ping (restart 1); the walk on from the
+    # level where that was seen (`Reduction.walk_on`) meets ping's on_pong sending to pong
+    # too, so the second search knows both from its start (without the walk, a second
+    # restart learned it).
     ("por", (8, 7, 8)),
 ])
 def test_send_relation_is_learned_with_restarts(tmp_path, reduction, expected):
@@ -143,8 +145,8 @@ def test_send_relation_is_learned_with_restarts(tmp_path, reduction, expected):
     assert counts(result) == expected
     if reduction == "por":
         assert result.reduction_statistics is not None
-        assert result.reduction_statistics["restarts"] == 2
-        assert "2 restarts" in result.reduction
+        assert result.reduction_statistics["restarts"] == 1
+        assert "1 restart;" in result.reduction
         # the rate counts the last attempt's transitions over the time since it began
         s = result.statistics
         assert s.attempt_s is not None and 0 < s.attempt_s <= s.elapsed_s
@@ -264,13 +266,14 @@ def test_steps_aside_only_when_few_worlds_are_reduced(tmp_path, reduced, full, a
     assert describe(reduction, "por").startswith("none (por stepped aside") is aside
 
 
-def test_restarts_run_the_handlers_of_the_first_levels_from_the_cache():
+def test_restarts_run_the_handlers_of_the_first_levels_from_the_cache(monkeypatch):
     # C2c's reduced search restarts 18 times, each from time 0. Its handler outcomes stay
     # cached across restarts (the search does not forget those older than its frontier
     # while it reduces), so it runs handlers about as often as a search that knew the send
     # relation from the start (measured: 1,984 runs against 1,552; when the outcomes older
     # than the frontier were forgotten, 4,054 against 2,566).
     path = Path(__file__).resolve().parents[2] / "twinfleet" / "launch" / "c2c.yaml"
+    monkeypatch.setattr(Reduction, "walk_on", lambda *_: None)  # the restarts of old
 
     def search(learned: tuple[object, ...] | None) -> tuple[int, Reduction]:
         scenario_ = load(str(path))
@@ -286,3 +289,20 @@ def test_restarts_run_the_handlers_of_the_first_levels_from_the_cache():
     knowing, again = search(reduction.learned_state())
     assert reduction.stats.restarts > 10 and again.stats.restarts == 0
     assert restarting < 1.4 * knowing
+
+
+def test_a_restart_walks_on_and_learns_the_sends_of_deeper_levels_at_once(monkeypatch):
+    # headon, reduced: a BFS learned its sends level by level and restarted 11 times, 5 of
+    # them after its first 100 worlds. Walking on from the level where a restart comes
+    # learns what deeper levels send, for the same graph and trace.
+    path = Path(__file__).resolve().parents[2] / "twinfleet" / "launch" / "headon.yaml"
+    walking = check(path, CheckOptions(reduction="por"))
+    monkeypatch.setattr(Reduction, "walk_on", lambda *_: None)
+    level_by_level = check(path, CheckOptions(reduction="por"))
+    assert walking.status == level_by_level.status == "violated"
+    assert counts(walking) == counts(level_by_level)
+    assert walking.trace == level_by_level.trace
+    assert walking.reduction_statistics is not None
+    assert level_by_level.reduction_statistics is not None
+    assert walking.reduction_statistics["restarts"] <= 3
+    assert level_by_level.reduction_statistics["restarts"] >= 10

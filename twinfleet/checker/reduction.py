@@ -79,13 +79,16 @@ PROBE_STATES: Final = 50_000
 PROBE_SHARE: Final = 8
 PROBE_WALKS: Final = 2
 PROBE_SEED: Final = 1
+WALK_ON_STEPS: Final = 64  # fewest steps walked on at a restart (`Reduction.walk_on`)
 # The reduction steps aside (`Reduction.steps_aside`) when, after at least ASIDE_WORLDS
-# expanded worlds, fewer than ASIDE_SHARE of them were reduced: its bookkeeping costs a
+# expanded worlds, fewer than ASIDE_SHARE of them were reduced (every shipped case judged
+# at 300 worlds keeps its reduction; at 1,000 the small two-phase commit lost a third of
+# its search before stepping aside): its bookkeeping costs a
 # quarter to a third of an unreduced world (benchmarks/reduction_overhead.py), and a graph
 # where so few worlds are reduced is hardly smaller than the full one (a two-phase commit
 # with 0-2 ms of latency: 6 % reduced, 0.5 % fewer states, twice the time). The paper's
 # cases reduce 60-75 % of their worlds from the first levels on.
-ASIDE_WORLDS: Final = 1_000
+ASIDE_WORLDS: Final = 300
 ASIDE_SHARE: Final = 0.2
 # Handler outcomes a reduced search keeps per cache generation (`System.widen_cache`): its
 # restarts run the handlers of the first levels again (C1a: 1.53 -> 1.22 s of CPU with the
@@ -153,8 +156,9 @@ class ReductionStatistics:
     pairs: int = 0  # pairs of such events checked in both orders
     refuted: int = 0  # of those, pairs that did not commute (the node then gave all)
     rises: int = 0  # events not visible only because they make a rising goal's atoms rise
-    probes: int = 0  # walks taken ahead of the search (`Reduction.probe`), kept by restarts
+    probes: int = 0  # walks taken ahead of the search (`probe`, `walk_on`), kept by restarts
     probe_steps: int = 0  # their steps
+    ahead: int = 0  # 1 once the search walked ahead at `PROBE_STATES` worlds (`probe`)
     aside: int = 0  # worlds expanded when the reduction stepped aside (0: it did not)
 
     def to_json(self) -> dict[str, int]:
@@ -235,7 +239,7 @@ class Reduction:
         self.visibility.commit()
         s = self.stats
         self.stats = ReductionStatistics(restarts=s.restarts + 1, probes=s.probes,
-                                         probe_steps=s.probe_steps)
+                                         probe_steps=s.probe_steps, ahead=s.ahead)
         self.visibility.rises = 0
 
     def probe(self, stored: int, max_depth: int | None) -> bool:
@@ -256,21 +260,38 @@ class Reduction:
         transitions), so what the walks learn the search could learn; a search that
         probes at the same level of the same graph learns the same, in one process or
         on workers. The walks' own counters are not the search's: they are put back."""
-        if self.stats.probes or stored < PROBE_STATES:
+        if self.stats.ahead or stored < PROBE_STATES:
             return False
+        self.stats.ahead = 1
+        starts = [t.world for t in self.system.initial() if t.failure is None]
+        self._walks(starts, stored // PROBE_SHARE, max_depth)
+        return True
+
+    def walk_on(self, worlds: list[World], stored: int, max_depth: int | None) -> None:
+        """At a restart, walk the reduced graph on from the last of the `worlds` the search
+        had left to expand (its deepest), as many steps as it had stored worlds (at least
+        `WALK_ON_STEPS`, at most `PROBE_STATES`): the sends deeper levels would make are
+        learned now, for this restart, instead of a restart each (head-on: 11 restarts, 5
+        of them after its first 100 worlds, each searching those again; now 2, as in
+        every shipped case, where C1a had 17 and C2c 18). Sound as `probe`: the walks
+        take transitions of persistent sets of reachable worlds, and the relation only
+        holds sends that reachable transitions made."""
+        self._walks(worlds[::-1], min(max(stored, WALK_ON_STEPS), PROBE_STATES), max_depth)
+
+    def _walks(self, starts: list[World], budget: int, max_depth: int | None) -> None:
+        """One seeded walk (`_walk`) from each of the first `PROBE_WALKS` of `starts`,
+        `budget` steps in all; the walks' own counters are put back, and they are counted
+        as walks ahead."""
         counted, relied, rises = dataclasses.replace(self.stats), set(self.relied), \
             self.visibility.rises
         rng = random.Random(PROBE_SEED)
-        budget, walks = stored // PROBE_SHARE, 0
-        starts = [t.world for t in self.system.initial() if t.failure is None][:PROBE_WALKS]
-        for start in starts:
+        left, walks = budget, 0
+        for start in starts[:PROBE_WALKS]:
             walks += 1
-            budget -= self._walk(start, rng, budget if max_depth is None
-                                 else min(budget, max_depth))
+            left -= self._walk(start, rng, left if max_depth is None else min(left, max_depth))
         self.stats, self.relied, self.visibility.rises = counted, relied, rises
-        self.stats.probes += max(walks, 1)  # once per search, even with no initial world
-        self.stats.probe_steps += stored // PROBE_SHARE - budget
-        return True
+        self.stats.probes += max(walks, 1)
+        self.stats.probe_steps += budget - left
 
     def _walk(self, world: World, rng: random.Random, limit: int) -> int:
         """Steps of one walk from `world` until nothing is pending, a world of the walk

@@ -122,6 +122,8 @@ class Search(SearchState):
                     self._aside = reduction.aside
                     self.reduction = reduction = None
                 else:
+                    reduction.walk_on([w for w, _, _ in self._frontier], len(self.store),
+                                      self.limits.max_depth)
                     reduction.restarted()
                 self._reset()
 
@@ -147,7 +149,11 @@ class Search(SearchState):
             item = pop()
             world, sid, depth = item
             if not lifo and depth > self._level[0]:
-                self._next_level(depth)
+                try:
+                    self._next_level(depth)
+                except _Restart:
+                    frontier.appendleft(item)  # the level whole, for `Reduction.walk_on`
+                    raise
             if max_depth is not None and depth >= max_depth:
                 self._pruned = True
                 continue
