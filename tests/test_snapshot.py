@@ -89,6 +89,7 @@ def test_flat_dataclasses_take_the_fast_path_with_the_general_paths_bytes():
     # `_default` hook), at the top, inside a tuple (an event's args) and with one field.
     assert _flat(Flat) is not None and _flat(One) is not None
     assert _flat(General) is None and _flat(tuple) is None
-    for value in (Flat((3, 4), ((1, 2),), "r1", 1.5, True, 2), One(), (Flat(), One(3))):
+    for value in (Flat((3, 4), ((1, 2),), "r1", 1.5, True, 2), One(), (Flat(), One(3)),
+                  (One(), 1, "a", None, 2.5, True, b"x"), (), (One(), (1, 2)), (1, [2])):
         assert snapshot(value) == _pack(_canonical(value))
         assert restore(snapshot(value)) == value

@@ -181,12 +181,34 @@ def _unpack_tuples(data: bytes) -> Any:
 
 def snapshot(value: Any) -> bytes:
     """Encode `value` canonically (equal values give equal bytes)."""
-    flat = _flat(type(value))
+    kind = type(value)
+    if kind is tuple:  # an event's args: messages, timer arguments
+        items = _flat_items(value)
+        if items is not None:
+            return msgpack.packb(msgpack.ExtType(_TUPLE, msgpack.packb(items, use_bin_type=True)),
+                                 use_bin_type=True)
+    flat = _flat(kind)
     if flat is not None:  # the bytes `_default` gives it, without the general dispatch
         return msgpack.packb(msgpack.ExtType(_FLAT_DATACLASS,
                                              _pack_loose([flat[0], flat[1](value)])),
                              use_bin_type=True)
     return _pack(_canonical(value))
+
+
+def _flat_items(values: tuple[Any, ...]) -> list[Any] | None:
+    """The items of a tuple as the general path packs them, if each is a flat dataclass (its
+    extension) or a plain value (itself); else None."""
+    items: list[Any] = []
+    for v in values:
+        kind = type(v)
+        if kind in _PLAIN:
+            items.append(v)
+            continue
+        flat = _flat(kind)
+        if flat is None:
+            return None
+        items.append(msgpack.ExtType(_FLAT_DATACLASS, _pack_loose([flat[0], flat[1](v)])))
+    return items
 
 
 def restore(data: bytes) -> Any:
