@@ -79,7 +79,7 @@ PROBE_STATES: Final = 50_000
 PROBE_SHARE: Final = 8
 PROBE_WALKS: Final = 2
 PROBE_SEED: Final = 1
-WALK_ON_STEPS: Final = 64  # fewest steps walked on at a restart (`Reduction.walk_on`)
+WALK_ON_STEPS: Final = 512  # fewest steps walked on at a restart (`Reduction.walk_on`)
 # The reduction steps aside (`Reduction.steps_aside`) when, after at least ASIDE_WORLDS
 # expanded worlds, fewer than ASIDE_SHARE of them were reduced (every shipped case judged
 # at 300 worlds keeps its reduction; at 1,000 the small two-phase commit lost a third of
