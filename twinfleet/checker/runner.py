@@ -246,12 +246,8 @@ class Runner:
         self.handler_runs += 1
         end = v.branches[0] if v.branches else len(v.choices)  # the handler's own answers
         chooser = PrefixChooser(v.choices[first:end])
-        ctx = _ClockContext(node, ev.due, chooser)
-        self._current[i] = None  # the state object is about to change
+        outcome, _ = self._invoke(node, ev, chooser)
         probe = self._probe
-        with probe or _NO_PROBE:
-            outcome = run_handler(node, ev.method, ctx, ev.args,
-                                  expects_reply=ev.kind is EventKind.REQUEST)
         if outcome.error is not None or chooser.mismatch is not None or \
                 (probe is not None and probe.calls) or \
                 tuple(chooser.indices) != v.choices[first:end]:
@@ -264,6 +260,16 @@ class Runner:
         if same:
             self._current[i] = handled[0]
         return same
+
+    def _invoke(self, node: Node, ev: Event, chooser: ExploringChooser
+                ) -> tuple[HandlerOutcome, _ClockContext]:
+        """Run `ev`'s handler on `node` (its state loaded), under the probe if any."""
+        ctx = _ClockContext(node, ev.due, chooser)
+        self._current[ev.target] = None  # the state object is about to change
+        with self._probe or _NO_PROBE:
+            outcome = run_handler(node, ev.method, ctx, ev.args,
+                                  expects_reply=ev.kind is EventKind.REQUEST)
+        return outcome, ctx
 
     def _load(self, i: int, data: bytes) -> Node:
         node = self.nodes[i]
@@ -283,12 +289,8 @@ class Runner:
         scope = None if self._scopes is None else self._scopes[i]
         held = None if scope is None else scope.take()
         self._handled = None
-        ctx = _ClockContext(node, ev.due, chooser)
-        self._current[i] = None  # the state object is about to change
+        outcome, ctx = self._invoke(node, ev, chooser)
         probe = self._probe
-        with probe or _NO_PROBE:
-            outcome = run_handler(node, ev.method, ctx, ev.args,
-                                  expects_reply=ev.kind is EventKind.REQUEST)
         if probe is not None and probe.calls:
             return _failed(chooser, data, FailureKind.CONTRACT, node.name, ev.method,
                            environment_message(probe.calls))
