@@ -306,3 +306,14 @@ def test_a_restart_walks_on_and_learns_the_sends_of_deeper_levels_at_once(monkey
     assert level_by_level.reduction_statistics is not None
     assert walking.reduction_statistics["restarts"] <= 3
     assert level_by_level.reduction_statistics["restarts"] >= 10
+
+
+def test_a_checkpoint_keeps_the_step_aside(tmp_path):
+    # Stopped after the reduction stepped aside, the search resumes unreduced and ends with
+    # the unreduced counts, saying so.
+    saved = str(tmp_path / "search.ckpt")
+    stopped = check(TWO_PHASE, CheckOptions(max_states=1_500, checkpoint=saved))
+    assert stopped.status == "unknown" and "stepped aside" in stopped.reduction
+    resumed = check(TWO_PHASE, CheckOptions(resume=saved))
+    assert resumed.status == "holds" and "stepped aside" in resumed.reduction
+    assert counts(resumed) == counts(check(TWO_PHASE, CheckOptions(reduction="none")))
