@@ -59,9 +59,7 @@ from twinfleet.checker.transition import (
 )
 from twinfleet.checker.world import ENVIRONMENT, Event, event_key
 from twinfleet.runtime.contract.context import After, Call, Context, Fail, Log, Publish
-from twinfleet.runtime.contract.dispatch import (
-    run_handler,
-)
+from twinfleet.runtime.contract.dispatch import HandlerOutcome, run_handler
 from twinfleet.runtime.contract.kinds import EventKind, FailureKind
 from twinfleet.runtime.contract.messages import CallError
 from twinfleet.runtime.contract.node import Node
@@ -220,7 +218,7 @@ class Runner:
         handled = self._handled
         self._current[ev.target] = None  # restore the node state from the bytes again
         if v.failure is None and handled is not None and \
-                self._same_again(ev, data, v, first, handled):
+                _same_again(self, ev, data, v, first, handled):
             return v
         self._current[ev.target] = None
         again = self._exec(ev, data, PrefixChooser(v.choices[first:]))
@@ -233,33 +231,6 @@ class Runner:
         return _failed(chooser, data, FailureKind.NONDETERMINISM, self.names[ev.target],
                        ev.method, f"running it twice from the same state gave different "
                        f"results: {diff}; fix: {FIX_HIDDEN}")
-
-    def _same_again(self, ev: Event, data: bytes, v: Variant, first: int,
-                    handled: _Handled) -> bool:
-        """True if `ev`'s handler, run once more from `data` with the same answers, gives
-        what its first run `v` gave (`handled`: its new state, effects and reply), compared
-        as canonical bytes. The verification's usual case, without rebuilding the events
-        (about a quarter of c1a_rebeca's search was that second run); False sends
-        `_checked` to the full second run, which names what differs."""
-        i = ev.target
-        node = self._load(i, data)
-        self.handler_runs += 1
-        end = v.branches[0] if v.branches else len(v.choices)  # the handler's own answers
-        chooser = PrefixChooser(v.choices[first:end])
-        outcome, _ = self._invoke(node, ev, chooser)
-        probe = self._probe
-        if outcome.error is not None or chooser.mismatch is not None or \
-                (probe is not None and probe.calls) or \
-                tuple(chooser.indices) != v.choices[first:end]:
-            return False
-        try:
-            same = snapshot(node.state) == handled[0] and \
-                _equal((tuple(outcome.effects), outcome.reply), (handled[1], handled[2]))
-        except SnapshotError:
-            return False
-        if same:
-            self._current[i] = handled[0]
-        return same
 
     def _invoke(self, node: Node, ev: Event, chooser: ExploringChooser
                 ) -> tuple[HandlerOutcome, _ClockContext]:
@@ -429,6 +400,33 @@ class Runner:
             self._keys.clear()
         self._keys[slot] = (anchor, key)
         return key
+
+
+def _same_again(runner: Runner, ev: Event, data: bytes, v: Variant, first: int,
+                handled: _Handled) -> bool:
+    """True if `ev`'s handler, run once more from `data` with the same answers, gives what
+    its first run `v` gave (`handled`: its new state, effects and reply). The verification's
+    usual case (`Runner._checked`), without rebuilding the events (about a quarter of
+    c1a_rebeca's search was that second run); False sends `_checked` to the full second
+    run, which names what differs."""
+    i = ev.target
+    node = runner._load(i, data)
+    runner.handler_runs += 1
+    end = v.branches[0] if v.branches else len(v.choices)  # the handler's own answers
+    chooser = PrefixChooser(v.choices[first:end])
+    outcome, _ = runner._invoke(node, ev, chooser)
+    probe = runner._probe
+    if outcome.error is not None or chooser.mismatch is not None or \
+            (probe is not None and probe.calls) or tuple(chooser.indices) != v.choices[first:end]:
+        return False
+    try:
+        same = snapshot(node.state) == handled[0] and \
+            _equal((tuple(outcome.effects), outcome.reply), (handled[1], handled[2]))
+    except SnapshotError:
+        return False
+    if same:
+        runner._current[i] = handled[0]
+    return same
 
 
 def _equal(a: Any, b: Any) -> bool:
