@@ -105,6 +105,7 @@ class RosSide:
         self.published += 1
 
     def _declare_publisher(self, declared: Declared) -> None:
+        pub: zenoh.Publisher | ext.AdvancedPublisher
         if declared.endpoint.qos.depth == 1 and declared.endpoint.topic in self.mapping.latched:
             pub = ext.declare_advanced_publisher(
                 self.session, declared.key, cache=ext.CacheConfig(max_samples=1),

@@ -80,10 +80,10 @@ class Interfaces:
         self.definitions.update(helpers)
         self.definitions[ros_name(name)] = "\n".join(lines) + "\n"
 
-        def convert(plain: Any) -> dict[str, Any]:
+        def to_ros(plain: Any) -> dict[str, Any]:
             return {k: c(plain[k]) for k, c in converts.items() if k in plain}
 
-        self._convert[name] = convert
+        self._convert[name] = to_ros
 
     def _field(self, pkg: str, hint: Any, where: str) -> tuple[str, Convert, dict[str, str]]:
         """(.msg type, plain → ROS value, helper types) of one annotation."""
@@ -94,7 +94,7 @@ class Interfaces:
         message = getattr(hint, "__message_type__", None)
         standard = standard_type(message) if isinstance(message, str) else None
         if standard is not None:
-            return message, lambda plain: ros_fields(standard, plain), {}
+            return str(message), lambda plain: ros_fields(standard, plain), {}
         if isinstance(message, str):
             self._define(message, hint)
             return message, self._nested(message), {}

@@ -93,7 +93,7 @@ class Forwarder:
         self._signers: dict[str, Callable[[bytes], bytes | None]] = {}
 
     def forward(self, ros_topic: str, ros_type: str,
-                fields: Mapping[str, Any]) -> tuple[str, bytes, bytes] | None:
+                fields: Mapping[str, Any]) -> tuple[str, bytes, bytes | None] | None:
         """(fleet key, payload, attachment) of one checked ROS 2 message, or None (counted)."""
         fleet_topic = self.routes[ros_topic]
         try:

@@ -47,8 +47,15 @@ class MappingError(ValueError):
 class Ros2Mapping(Protocol):
     """How one kind of fleet looks in ROS 2 (module docstring)."""
 
-    latched: frozenset[str]
-    mapped_types: frozenset[str]
+    @property
+    def latched(self) -> frozenset[str]:
+        """The fleet topics that are TRANSIENT_LOCAL on ROS 2."""
+        ...
+
+    @property
+    def mapped_types(self) -> frozenset[str]:
+        """The fleet types this mapping turns into standard messages."""
+        ...
 
     def outbound(self, topic: str, type_name: str, data: Mapping[str, Any],
                  stamp_ms: int) -> Sequence[Output]:

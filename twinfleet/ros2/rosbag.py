@@ -33,7 +33,7 @@ import json
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, TextIO
+from typing import Any, Literal, TextIO
 
 import msgpack
 import yaml
@@ -61,7 +61,7 @@ from twinfleet.ros2.mapping import (
 )
 from twinfleet.ros2.schema_types import schema_classes
 
-BAG_VERSION = 9
+BAG_VERSION: Literal[8, 9] = 9
 
 
 class ExportError(ValueError):
@@ -248,5 +248,5 @@ def print_bag_info(path: str | Path, out: TextIO) -> None:
         width = max((len(c.topic) for c in reader.connections), default=0)
         for c in sorted(reader.connections, key=lambda c: c.topic):
             lines.append(f"  {c.topic:<{width}}  {c.msgtype}  {c.msgcount} msgs  "
-                         f"{c.digest}  serialization: {c.ext.serialization_format}")
+                         f"{c.digest}  serialization: {getattr(c.ext, 'serialization_format', 'cdr')}")
     print("\n".join(lines), file=out, flush=True)

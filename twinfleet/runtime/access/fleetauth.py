@@ -95,7 +95,7 @@ class FleetCredentials:
 
     def node_env(self) -> dict[str, str]:
         """What a node process needs in its environment."""
-        env = {KEY_ENV: self.key.hex(), ENV_USER: self.node.user,
+        env: dict[str, str] = {KEY_ENV: self.key.hex(), ENV_USER: self.node.user,
                ENV_PASSWORD: self.node.password}
         if self.bridge is not None:
             env[BRIDGE_KEY_ENV] = self.bridge.hex()
