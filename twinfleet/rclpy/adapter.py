@@ -83,6 +83,11 @@ class RclpyAdapter(ContractNode):
         """The rclpy node object this adapter runs."""
         return self._tf_engine.node
 
+    def live_params(self) -> dict[str, Any]:
+        """The parameters in force (those `param set` changed too), for ``param get``."""
+        return {name: _parameter_value(value)
+                for name, value in dict(self._tf_engine.dyn.params).items()}
+
     @on_start
     def start(self, ctx: Context) -> None:
         """The node starts: what its __init__ published, its timers' first firings."""

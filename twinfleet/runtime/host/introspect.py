@@ -5,7 +5,7 @@ Every node process serves ``twinfleet/<fleet>/@info/<node>``
 entry and the node class's declared handlers (`node_description`)::
 
     {"name", "namespace", "class", "pid",
-     "params":        {name: value},            # the node's Params, overrides applied
+     "params":        {name: value},            # in force when asked (`params_in_force`)
      "subscriptions": {"/listener/chatter": qos}, "services": ["/add_two_ints"],
      "subscription_types": {"/listener/chatter": "std_msgs/String"},
      "service_types": {"/add_two_ints": ["example_interfaces/AddTwoInts_Request",
@@ -146,6 +146,16 @@ def node_description(node: Any, class_path: str) -> dict[str, Any]:
                                 for t, q in spec.publications.items()}}
 
 
+def params_in_force(node: Any, at_start: dict[str, Any]) -> dict[str, Any]:
+    """The node's parameters now: a node whose parameters change while it runs (an rclpy
+    node takes `param set`) says so through ``live_params()``; the others keep the values
+    they were launched with, `at_start`."""
+    live = getattr(node, "live_params", None)
+    if live is None:
+        return at_start
+    return {str(k): plain_value(v) for k, v in live().items()}
+
+
 def _client(name: str, params: Any) -> str:
     """A service a node's code calls, a parameter's value where it names one."""
     if name.startswith("params."):
@@ -181,7 +191,9 @@ def serve_info(transport: Any, fleet: str, node: Any, class_path: str) -> None:
     transport.publisher = publisher
 
     def respond_info(_request: bytes, respond: Any) -> None:
-        respond(msgpack.packb({**base, "publications": dict(published)}, use_bin_type=True), "")
+        described = {**base, "params": params_in_force(node, base["params"]),
+                     "publications": dict(published)}
+        respond(msgpack.packb(described, use_bin_type=True), "")
 
     transport.serve(node_key(fleet, KeyKind.INFO, node.name), respond_info)
 
