@@ -207,6 +207,7 @@ class CheckResult:
                          f"{self.trace['shape']})")
             if self.trace_path:
                 lines.append(f"reproduce with: twinfleet replay {self.trace_path}")
+                lines.append(f"read it step by step: twinfleet trace show {self.trace_path}")
         return "\n".join(lines)
 
     def growth_notes(self) -> tuple[GrowthNote, ...]:

@@ -173,8 +173,30 @@ def _difference(before: Any, after: Any) -> str:
     """`field before -> after` for each field that changed (the whole state otherwise)."""
     if not (isinstance(before, Mapping) and isinstance(after, Mapping)):
         return f"{after}"
-    changed = [f"{k} {before.get(k)!r} -> {v!r}" for k, v in after.items() if before.get(k) != v]
+    changed = [line for k, v in after.items() if before.get(k) != v
+               for line in _field_change(k, before.get(k), v)]
     return ", ".join(changed) or "(same fields, new object)"
+
+
+def _field_change(key: str, before: Any, after: Any) -> list[str]:
+    """`key before -> after`; a field holding attributes by name (an rclpy node's ``attrs``)
+    as the attributes that changed, `key.name before -> after`, rather than all of them."""
+    old, new = _named(before), _named(after)
+    if old is None or new is None:
+        return [f"{key} {before!r} -> {after!r}"]
+    names = dict.fromkeys([*old, *new])
+    return [f"{key}.{n} {old.get(n)!r} -> {new.get(n)!r}" for n in names
+            if old.get(n) != new.get(n)]
+
+
+def _named(value: Any) -> dict[str, Any] | None:
+    """A list of distinct-named ``[name, value]`` pairs, as a map (else None)."""
+    if not (isinstance(value, list) and value):
+        return None
+    if not all(isinstance(p, list) and len(p) == 2 and isinstance(p[0], str) for p in value):
+        return None
+    named = {p[0]: p[1] for p in value}
+    return named if len(named) == len(value) else None
 
 
 __all__ = ["Sent", "Shown", "Walk", "text_lines", "walk"]
