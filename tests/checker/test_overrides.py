@@ -49,7 +49,9 @@ def test_check_c1a_with_an_override_counts_as_the_file_with_that_speed(tmp_path,
 
 
 @pytest.mark.parametrize(("words", "says"), [
-    (["c.nosuch:=1"], "params.nosuch: unknown parameter of CounterParams; expected"),
+    (["c.nosuch:=1"], "parameter override 'c.nosuch:=1': node 'c' has no parameter 'nosuch' "
+                      "(it has: period_ms, modulo, cap)"),
+    (["c.modul:=1"], "node 'c' has no parameter 'modul' (it has: period_ms, modulo, cap); did you mean 'modulo'?"),
     (["zz.modulo:=1"], "has no node 'zz'"),
     (["modulo"], "unexpected argument 'modulo'"),
     (["--param", "c.modulo"], "expected [NODE.]NAME=VALUE"),

@@ -123,12 +123,29 @@ def load_with_params(path: str | Path, params: Sequence[str] = (),
         doc = overrides_doc(scenario.path, params)
     except ValueError as exc:
         raise ScenarioError(str(exc)) from None
+    _check_node_overrides(scenario, params)
     fields = {f.name for cfg in scenario.nodes for f in dataclasses.fields(cfg.cls.Params)}
     for name in (doc.get("params") or {}):  # the file's own are declared (runtime.scenario.spec)
         if name not in fields:
             raise ScenarioError(f"{scenario.path}: parameter override {name!r}: no node of the "
                                 f"scenario has that parameter{did_you_mean(name, fields)}")
     return load_scenario(scenario.path, {**(overrides or {}), **doc})
+
+
+def _check_node_overrides(scenario: Scenario, params: Sequence[str]) -> None:
+    """A ``NODE.NAME`` override names a parameter NODE declares: the error quotes the
+    override the user typed, not the scenario file's key it would have been merged into."""
+    from twinfleet.runtime.scenario.spec import ScenarioError
+
+    declared = {cfg.name: [f.name for f in dataclasses.fields(cfg.cls.Params)]
+                for cfg in scenario.nodes}
+    for text in params:
+        node, name, _value = parse_param(text)
+        known = declared.get(node or "")
+        if known is not None and name not in known:
+            raise ScenarioError(
+                f"parameter override {text!r}: node {node!r} has no parameter {name!r} "
+                f"(it has: {', '.join(known) or 'none'}){did_you_mean(name, known)}")
 
 
 def load(path: str | Path, *, profile: str | None = None, semantics: str | None = None,
