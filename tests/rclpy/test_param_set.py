@@ -21,8 +21,10 @@ def test_param_set_reaches_the_on_set_callback():
         wait_for_line(fleet, "tuned held")
         refused = _set("tuner", "gain", "--", "-2.0")
         accepted = _set("tuner", "gain", "3.0")
+        got = twinfleet("param", "get", "--fleet", "tuning", "tuner", "gain", timeout_s=30.0)
         unknown = _set("tuner", "nope", "1")
     assert "successful: false" in refused.stdout, refused.stdout + refused.stderr
     assert "gain must be >= 0" in refused.stdout
     assert "successful: true" in accepted.stdout, accepted.stdout + accepted.stderr
+    assert got.stdout.strip() == "Double value is: 3.0", got.stdout + got.stderr
     assert "is not declared" in unknown.stdout, unknown.stdout + unknown.stderr
