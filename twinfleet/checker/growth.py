@@ -10,7 +10,8 @@ fields while the search runs, cheaply:
   for it with the world it was found from), and only at the nodes whose state
   the step changed: the new and the old state are decoded (`System.decode`)
   and split into *fields* (`_fields`): the attributes of a dataclass (one level
-  of nested dataclasses, as ``pose.x``), the keys of a dict, and for a list,
+  of nested dataclasses, as ``pose.x``), the keys of a dict or of a sequence of
+  ``(name, value)`` pairs (an rclpy node's ``attrs.count``), and for a list,
   tuple, set or dict also its length (``len(log)``); a tuple of plain values
   is also a value (``pose``).
 - Per (node, field) a `_Sketch` keeps a K-minimum-values sketch of the values'
@@ -244,6 +245,21 @@ def _fields(state: Any, prefix: str = "", depth: int = 0) -> Iterator[tuple[str,
             yield f"len({name})", len(value)
             if isinstance(value, tuple) and all(isinstance(v, _SCALARS) for v in value):
                 yield name, value
+            pairs = named_pairs(value) if depth == 0 and name else None
+            if pairs is not None:  # attributes kept by name (an rclpy node's attrs)
+                yield from _fields(pairs, name, 1)
         elif depth == 0 and (dataclasses.is_dataclass(value) or isinstance(value, dict)) \
                 and not isinstance(value, type) and name:
             yield from _fields(value, name, 1)
+
+
+def named_pairs(value: Any) -> dict[str, Any] | None:
+    """A list or tuple of distinct-named ``(name, value)`` pairs as a map, else None: how a
+    state keeps attributes by name (an rclpy node's ``attrs``), read field by field."""
+    if not (isinstance(value, (list, tuple)) and value):
+        return None
+    if not all(isinstance(p, (list, tuple)) and len(p) == 2 and isinstance(p[0], str)
+               for p in value):
+        return None
+    named = {p[0]: p[1] for p in value}
+    return named if len(named) == len(value) else None

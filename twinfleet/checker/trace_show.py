@@ -17,6 +17,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any, final
 
+from twinfleet.checker.growth import named_pairs
 from twinfleet.checker.system import System
 from twinfleet.checker.trace import NondeterminismError, recorded_step, replay_step, to_json_value
 from twinfleet.checker.world import Event
@@ -181,22 +182,12 @@ def _difference(before: Any, after: Any) -> str:
 def _field_change(key: str, before: Any, after: Any) -> list[str]:
     """`key before -> after`; a field holding attributes by name (an rclpy node's ``attrs``)
     as the attributes that changed, `key.name before -> after`, rather than all of them."""
-    old, new = _named(before), _named(after)
+    old, new = named_pairs(before), named_pairs(after)
     if old is None or new is None:
         return [f"{key} {before!r} -> {after!r}"]
     names = dict.fromkeys([*old, *new])
     return [f"{key}.{n} {old.get(n)!r} -> {new.get(n)!r}" for n in names
             if old.get(n) != new.get(n)]
-
-
-def _named(value: Any) -> dict[str, Any] | None:
-    """A list of distinct-named ``[name, value]`` pairs, as a map (else None)."""
-    if not (isinstance(value, list) and value):
-        return None
-    if not all(isinstance(p, list) and len(p) == 2 and isinstance(p[0], str) for p in value):
-        return None
-    named = {p[0]: p[1] for p in value}
-    return named if len(named) == len(value) else None
 
 
 __all__ = ["Sent", "Shown", "Walk", "text_lines", "walk"]
