@@ -46,6 +46,8 @@ def test_unsupported_parts_are_named_in_one_line(tmp_path, module):
     lines = [ln for ln in (run.stdout + run.stderr).splitlines() if ln.strip()]
     assert len(lines) == 1 and "not supported by twinfleet's rclpy yet" in lines[0], lines
     assert module.split(".")[-1] in lines[0]
+    assert "nodes[0].class: cannot load node class 'uses_it:N': importing 'uses_it' failed" \
+        in lines[0], lines  # the class exists: it is not called unknown
 
 
 def test_params_are_the_declared_parameters(tmp_path):

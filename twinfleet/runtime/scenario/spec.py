@@ -506,8 +506,10 @@ def _import_attr(path: str, err: _Errors, key: str, what: str = "name") -> Any:
         err.fail(key, f"expected 'module:{what.split()[-1].capitalize()}', got {path!r}")
     try:
         module = importlib.import_module(module_name)
-    except ImportError as exc:
+    except ModuleNotFoundError as exc:
         err.fail(key, f"unknown {what} {path!r} ({exc})")
+    except ImportError as exc:  # the module exists; an import of its own was refused
+        err.fail(key, f"cannot load {what} {path!r}: importing {module_name!r} failed: {exc}")
     except RecursionError:
         err.fail(key, f"importing {module_name!r} for {what} {path!r} recursed too deeply")
     except Exception as exc:  # the module itself raised while it was imported
