@@ -17,6 +17,7 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
     tempfile.tempdir = None
 
 from tests.support import RUNTIME_DIR, pick_free_port  # noqa: E402
+from twinfleet.runtime.scenario.examples import add_examples  # noqa: E402
 
 # A test ends only the processes it started (tests/integration/itest_support.py `spawned_by`).
 # A node whose launcher was killed would be adopted by init and lost from view; as the
@@ -30,6 +31,9 @@ if sys.platform == "linux":
 # developer (or another test session on this machine) runs is never found by a test.
 os.environ["XDG_RUNTIME_DIR"] = RUNTIME_DIR
 os.environ.pop("TWINFLEET_RUNTIME_DIR", None)
+
+# Tests load the shipped examples by name, as the command line does (which adds them).
+add_examples("twinfleet.launch")
 
 
 @pytest.fixture

@@ -14,6 +14,12 @@ Every source file belongs to one layer, read from its folder under `twinfleet/`:
 - the command line (`twinfleet/cli/`, `twinfleet/__main__.py`) and the testing API
   (`twinfleet/testing.py`) on top.
 
+An import is seen wherever it is written: `import` statements (inside functions too),
+`importlib.import_module("...")` / `__import__("...")`, and any string constant that names a
+module of ours (`"twinfleet.nodes.msgs"`, `"twinfleet.nodes.scene:RobotScene"`), which code
+resolves at run time; a prefix a name is compared with (`.startswith("twinfleet.runtime")`)
+is not an import.
+
 `RULES` names the layers each layer may import, with no exemptions; `PURE` the third-party
 modules a layer must not import (checked on the source here, and on what a fresh interpreter
 loads in `test_pure_layers_load_no_io`). No two source files import each other, directly or
@@ -56,15 +62,17 @@ RULES: dict[str, set[str]] = {
     "runtime": set(),  # runtime/__init__.py: names its wings, imports none
     "maps": set(), "launch": set(),  # package data: shipped maps and scenarios
     "top": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes", "ros2",
-            "sweep", "interfaces", "rclpy", "top"},
+            "sweep", "interfaces", "rclpy", "top", "launch"},  # the top names the shipped examples
 }
-#: `tools/` groups three wings of its own (tests/test_sizes.py measures each alone): the
-#: monitors lie below the recordings and the viewers, which use each other (the Foxglove
-#: export draws with the viewers' scene; the Foxglove bridge encodes as the export does).
+#: `tools/` groups four wings of its own (tests/test_sizes.py measures each alone): the
+#: monitors and the forms (JSON and Foxglove forms of the fleet's data) lie below the
+#: recordings and the viewers, which share what they share through those two and never
+#: import each other.
 TOOLS_RULES: dict[str, set[str]] = {
     "monitor": set(),
-    "record": {"monitor", "view"},
-    "view": {"monitor", "record"},
+    "forms": set(),
+    "record": {"monitor", "forms"},
+    "view": {"monitor", "forms"},
 }
 IO = {"asyncio", "zenoh", "aiohttp", "mcap", "foxglove"}
 #: the ROS field's libraries (the `ros2` extra): imported by the `ros2` layer only, and rosbags
@@ -107,7 +115,9 @@ def _imported(path: Path) -> set[str]:
     `from a import b` names `a.b` when that is a source module, else `a`.
     """
     found: set[str] = set()
-    for item in ast.walk(ast.parse(path.read_text(), filename=str(path))):
+    tree = ast.parse(path.read_text(), filename=str(path))
+    compared = _prefix_tests(tree)
+    for item in ast.walk(tree):
         if isinstance(item, ast.Import):
             found.update(alias.name for alias in item.names)
         elif isinstance(item, ast.ImportFrom) and item.module:
@@ -122,7 +132,31 @@ def _imported(path: Path) -> set[str]:
               and item.args and isinstance(item.args[0], ast.Constant)
               and isinstance(item.args[0].value, str)):
             found.add(item.args[0].value)
+        elif isinstance(item, ast.Constant) and isinstance(item.value, str) \
+                and id(item) not in compared:
+            found.update(_named_modules(item.value))
     return found
+
+
+def _prefix_tests(tree: ast.AST) -> set[int]:
+    """The string constants a name is compared with (``m.__module__.startswith("pkg")``):
+    they name a package to tell code apart by, not one to import."""
+    return {id(arg) for item in ast.walk(tree) if isinstance(item, ast.Call)
+            and isinstance(item.func, ast.Attribute) and item.func.attr == "startswith"
+            for arg in item.args}
+
+
+def _named_modules(text: str) -> set[str]:
+    """Modules of ours a string names as code would resolve it ("pkg.mod" or "pkg.mod:Name").
+
+    Only a whole string counts: prose in a docstring that mentions a module is not an import.
+    """
+    name = text.strip().split(":", 1)[0]
+    if not name.startswith("twinfleet.") or not all(p.isidentifier() for p in name.split(".")):
+        return set()
+    while name and name not in SOURCES:
+        name = name.rpartition(".")[0]
+    return {name} if name.count(".") else set()
 
 
 def test_every_source_file_has_a_layer():
@@ -239,6 +273,16 @@ def test_help_loads_neither_zenoh_nor_the_checker():
                           cwd=ROOT.parent, timeout=60)
     assert proc.returncode == 0, proc.stderr
     assert proc.stdout.split() == ["False", "False"]
+
+
+def test_the_scanner_sees_modules_named_in_strings(tmp_path):
+    sample = tmp_path / "m.py"
+    sample.write_text('SCENE = "twinfleet.nodes.scene:RobotScene"\n'
+                      'MSGS = "twinfleet.nodes.msgs"\n'
+                      'PROSE = "see twinfleet.nodes.msgs for the types"\n'
+                      'OURS = type(1).__module__.startswith("twinfleet.runtime")\n')
+    assert _imported(sample) == {"twinfleet.nodes.scene", "twinfleet.nodes.msgs"}
+    assert "nodes" not in RULES["host"]
 
 
 def test_the_scanner_sees_imports_inside_functions(tmp_path):

@@ -7,8 +7,8 @@ enough to read whole.
 - no class over `CLASS_LINES` lines, measured the same way from its ``class`` line;
 - no wing of the runtime (`twinfleet/runtime/`) over `WING_LINES` lines, its
   sub-packages included. A wing that only groups sub-packages (`GROUPS`: `tools/` holds
-  `monitor/`, `record/` and `view/` and no module but its ``__init__``) is measured per
-  sub-package: each is a wing of its own here, as in tests/test_layering.py
+  `monitor/`, `forms/`, `record/` and `view/` and no module but its ``__init__``) is
+  measured per sub-package: each is a wing of its own here, as in tests/test_layering.py
   (`TOOLS_RULES`).
 
 Every module under the package is measured, whatever folder it is in (a new folder is

@@ -46,6 +46,7 @@ from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.contract.tracefile import write_trace
 from twinfleet.runtime.fleet.launcher import FleetResult, run_fleet
 from twinfleet.runtime.host.keys import topic_key
+from twinfleet.runtime.scenario.examples import add_examples
 from twinfleet.runtime.scenario.scenario_file import write_scenario
 from twinfleet.runtime.scenario.spec import NodeEntry, PropertyConfig, Scenario
 
@@ -53,6 +54,10 @@ __all__ = ["CheckReport", "LiveFleet", "check", "eventually", "invariant", "live
            "no_failure", "run_live", "system", "within"]
 
 # ------------------------------------------------------------------ building
+
+
+#: the robots' example scenarios, loadable by name here as on the command line
+add_examples("twinfleet.launch")
 
 
 def invariant(name: str, expr: str) -> PropertyConfig:

@@ -67,7 +67,6 @@ import math
 from collections import Counter
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any, Final, final
 
@@ -337,7 +336,7 @@ def save_timing(model: TimingModel, path: str | Path) -> None:
 def load_timing(path: str | Path | None) -> TimingModel:
     """Read a timing model file; None reads the loopback model shipped with the package."""
     if path is None:
-        text = resources.files("twinfleet.checker").joinpath(DEFAULT_MODEL).read_text()
+        text = Path(__file__).with_name(DEFAULT_MODEL).read_text()  # package data beside us
         return parse_timing(yaml.safe_load(text), DEFAULT_MODEL)
     try:
         doc = yaml.safe_load(Path(path).read_text())

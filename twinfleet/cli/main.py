@@ -34,7 +34,12 @@ from twinfleet.runtime.access.connection import (
     CommandError,
     error_prefix,
 )
+from twinfleet.runtime.scenario.examples import add_examples
 from twinfleet.sweep import commands as sweep_commands
+
+#: the robots' example scenarios (package data), loadable by name: ``twinfleet check c1a``
+EXAMPLES = "twinfleet.launch"
+add_examples(EXAMPLES)
 
 DESCRIPTION = """\
 twinfleet runs a fleet of robot nodes (or any nodes you write in Python) as separate

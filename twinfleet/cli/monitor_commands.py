@@ -180,6 +180,9 @@ def _param_set(args: argparse.Namespace, conn: Any) -> int:
                        f"when launching: twinfleet launch SCENARIO {node}.{args.name}:={args.value}")
 
 
+MESSAGES = "twinfleet.nodes.msgs"  # what `interface export` writes without --module
+
+
 def cmd_interface(args: argparse.Namespace) -> int:
     """`twinfleet interface list|show`: types of this process, and of the fleet when one runs;
     `interface export --ros2 DIR`: a ROS 2 package of them (`twinfleet.ros2.interfaces`)."""
@@ -188,6 +191,7 @@ def cmd_interface(args: argparse.Namespace) -> int:
     if args.action == "export":
         from twinfleet.ros2.commands import interface_export_command
 
+        args.module = args.module or [MESSAGES]
         return interface_export_command(args)
     if args.action == "show":
         from twinfleet.interfaces.show import definition_text

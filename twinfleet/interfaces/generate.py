@@ -27,6 +27,7 @@ from collections.abc import Callable, Mapping
 from functools import cache
 from typing import Any, ClassVar
 
+from twinfleet.interfaces import frozen
 from twinfleet.interfaces.codegen import make_freeze, make_init, make_thaw
 from twinfleet.interfaces.definitions import (
     Container,
@@ -40,7 +41,7 @@ from twinfleet.interfaces.values import Converter, FieldValueError, hint
 from twinfleet.runtime.contract.messages import message, registered_types
 
 #: the module whose attributes the frozen classes are (`twinfleet.interfaces.frozen`)
-FROZEN_MODULE = "twinfleet.interfaces.frozen"
+FROZEN_MODULE = frozen.__name__
 
 
 def contract_name(ros_type: str) -> str:
@@ -286,3 +287,6 @@ def _no_package(package: str, kind: str) -> str:
 
     return (f"no definitions installed (install {WHEEL_OF.format(package.replace('_', '-'))}, "
             f"or {INSTALL_HINT})")
+
+
+frozen.answer_with(contract_type)  # the frozen module answers its names with our classes

@@ -197,7 +197,7 @@ def launch_driver(config: Ros2Config | None, *, router: str | None = None,
 
 
 def interface_export_command(args: argparse.Namespace) -> int:
-    """`twinfleet interface export --ros2 DIR`."""
+    """`twinfleet interface export --ros2 DIR`: the types of the modules `args.module` names."""
     if not args.ros2:
         raise CommandError("interface export writes a ROS 2 package: give --ros2")
     _need_libraries()
@@ -205,7 +205,7 @@ def interface_export_command(args: argparse.Namespace) -> int:
     from twinfleet.ros2.live import fleet_interfaces
     from twinfleet.runtime.access.connection import import_modules
 
-    import_modules(args.module or ["twinfleet.nodes.msgs"])
+    import_modules(args.module)
     interfaces = fleet_interfaces()
     try:
         written = write_package(interfaces, args.package, args.dir)

@@ -1,10 +1,12 @@
-"""The example scenarios shipped in the package, found by name (`twinfleet examples`).
+"""Example scenarios found by name (`twinfleet examples`, ``twinfleet check c1a``).
 
-They are package data: `twinfleet.launch` holds the scenario files and
-`twinfleet.maps` the maps they name as ``../maps/<map>.yaml``, so the same
-relative path works in a checkout and in an installed wheel.
+Examples are package data: a package of scenario files, named to `add_examples` by
+the application that ships them (twinfleet's command line and testing API name the
+robots' `launch` package; the runtime itself knows no example), so the files'
+relative paths work in a checkout and in an installed wheel alike.
 `runtime.scenario.spec.resolve_scenario` turns a name into one of these files;
-`copy_example` copies one (and its map) into a directory to edit.
+`copy_example` copies one (and the files its nodes' path parameters name) into a
+directory to edit.
 """
 
 from __future__ import annotations
@@ -13,11 +15,9 @@ import re
 import shutil
 from importlib import resources
 from pathlib import Path
-from typing import Final
 
 import yaml
 
-PACKAGE: Final = "twinfleet.launch"
 _KEY_LINE = r"^(?P<head>{key}:[ \t]*)(?P<q>['\"]?)(?P<value>[^'\"#\n]*?)(?P=q)[ \t]*$"
 
 
@@ -25,10 +25,24 @@ class ExampleError(ValueError):
     """An example cannot be found or copied; the message says why."""
 
 
+_PACKAGES: list[str] = []  # where examples are found, in the order they were added
+
+
+def add_examples(package: str) -> None:
+    """Let the scenario files of `package` (an importable package of ``*.yaml`` files) be
+    loaded by name; adding one twice changes nothing."""
+    if package not in _PACKAGES:
+        _PACKAGES.append(package)
+
+
 def shipped_scenarios() -> dict[str, Path]:
-    """Every shipped scenario by name (file stem), sorted."""
-    root = Path(str(resources.files(PACKAGE)))
-    return {p.stem: p for p in sorted(root.glob("*.yaml"))}
+    """Every example scenario by name (file stem), sorted; a name in two packages is the
+    first package's."""
+    found: dict[str, Path] = {}
+    for package in _PACKAGES:
+        for path in Path(str(resources.files(package))).glob("*.yaml"):
+            found.setdefault(path.stem, path)
+    return dict(sorted(found.items()))
 
 
 def describe(path: Path) -> str:

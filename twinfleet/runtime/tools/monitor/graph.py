@@ -252,3 +252,14 @@ def topic_types(session: zenoh.Session, fleet: str, topics: Iterable[tuple[str, 
     rest = [t for t in wanted if t not in found]
     found.update(sample_types(session, fleet, rest, timeout_s, latched_topics(infos)))
     return found
+
+def fleet_schemas(session: Any, fleet: str, timeout_s: float = 1.0) -> dict[str, dict[str, Any]]:
+    """Message data schemas served by the running node processes of `fleet` ('*': all)."""
+    found: dict[str, dict[str, Any]] = {}
+    if session is None:
+        return found
+    for reply in session.get(kind_expr(fleet, KeyKind.TYPES), timeout=timeout_s):
+        if reply.ok is not None:
+            with contextlib.suppress(ValueError, TypeError):  # a node of another version
+                found.update(json.loads(reply.ok.payload.to_bytes()))
+    return found

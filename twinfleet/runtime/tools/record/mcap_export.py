@@ -10,7 +10,7 @@ base64 strings, and every schema says so with ``contentEncoding: base64``
 metadata; messages keep their log and publish times and sequence numbers.
 
 Beside those JSON copies the export writes Foxglove's well-known messages
-(`runtime.tools.view.foxglove_scene`, protobuf-encoded, schema names ``foxglove.Grid``,
+(`runtime.tools.forms.foxglove_scene`, protobuf-encoded, schema names ``foxglove.Grid``,
 ``foxglove.SceneUpdate``, ``foxglove.PointCloud``) on ``/foxglove/...``
 channels, logged at the time of the sample they come from: the same channels
 the live bridge (`twinfleet foxglove`) serves, so Foxglove's 3D panel draws a
@@ -34,7 +34,7 @@ from mcap.reader import make_reader
 from mcap.writer import Writer
 
 from twinfleet.runtime.scenario.scenes import SceneError, load_scene
-from twinfleet.runtime.tools.view.viewstate import jsonable
+from twinfleet.runtime.tools.forms.json_form import json_schema, message_json
 
 FOXGLOVE_CHANNELS_KEY = "foxglove"  # metadata of a derived channel: what it was made from
 
@@ -48,28 +48,8 @@ class Exported:
     scene: str | None
 
 
-def json_schema(schema: Any) -> Any:
-    """A recorded JSON Schema rewritten for JSON messages: msgpack bins become base64 strings."""
-    if isinstance(schema, list):
-        return [json_schema(s) for s in schema]
-    if not isinstance(schema, dict):
-        return schema
-    out = {k: json_schema(v) for k, v in schema.items()}
-    if out.get("contentMediaType") == "application/octet-stream":
-        out["contentEncoding"] = "base64"
-        out["description"] = "bytes, base64-encoded"
-    if isinstance(out.get("description"), str) and "msgpack-encoded" in out["description"]:
-        out["description"] = out["description"].replace("msgpack-encoded", "exported as JSON")
-    return out
 
 
-def message_json(payload: bytes) -> bytes:
-    """One recorded payload as JSON bytes; an undecodable one as ``{"undecodable": base64}``."""
-    try:
-        value = msgpack.unpackb(payload, raw=False, strict_map_key=False)
-    except Exception:  # msgpack raises several unrelated types
-        value = {"undecodable": payload}
-    return json.dumps(jsonable(value), separators=(",", ":"), allow_nan=True).encode()
 
 
 def export_json(source: str | Path, target: str | Path, *, foxglove: bool = True) -> Exported:
@@ -155,7 +135,7 @@ class _FoxgloveChannels:
     """The ``/foxglove/...`` channels of an export, written with the recording's writer."""
 
     def __init__(self, writer: Writer, scene: Any) -> None:
-        from twinfleet.runtime.tools.view.foxglove_scene import FoxgloveScene
+        from twinfleet.runtime.tools.forms.foxglove_scene import FoxgloveScene
 
         self.writer, self.scene = writer, FoxgloveScene(scene)
         self.schemas: dict[str, int] = {}

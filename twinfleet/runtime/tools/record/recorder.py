@@ -63,14 +63,13 @@ from twinfleet.runtime.host.keys import (
     ANY,
     KeyKind,
     fleet_key,
-    kind_expr,
     node_key,
     topic_expr,
     topic_in_fleet,
 )
 from twinfleet.runtime.host.schemas import message_schema
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
-from twinfleet.runtime.tools.monitor.graph import fleet_infos
+from twinfleet.runtime.tools.monitor.graph import fleet_infos, fleet_schemas
 from twinfleet.runtime.tools.monitor.tap import FleetTap, follow_relaunches, tap_config
 
 DRAIN_S = 0.3
@@ -296,16 +295,6 @@ def _one_description(infos: Mapping[str, Any]) -> dict[str, Any]:
     return {"scene": scenes.pop() if len(scenes) == 1 else None, "latched": tuple(latched)}
 
 
-def fleet_schemas(session: Any, fleet: str, timeout_s: float = 1.0) -> dict[str, dict[str, Any]]:
-    """Message data schemas served by the running node processes of `fleet` ('*': all)."""
-    found: dict[str, dict[str, Any]] = {}
-    if session is None:
-        return found
-    for reply in session.get(kind_expr(fleet, KeyKind.TYPES), timeout=timeout_s):
-        if reply.ok is not None:
-            with contextlib.suppress(ValueError, TypeError):  # a node of another version
-                found.update(json.loads(reply.ok.payload.to_bytes()))
-    return found
 
 
 def _describe_fleets(session: Any, reader: Any, summary: Any, fleet: str | None) -> list[Any]:

@@ -3,7 +3,6 @@
 
 __all__ = [
     "foxglove_bridge",
-    "foxglove_scene",
     "scene_finder",
     "viewer",
     "viewstate",

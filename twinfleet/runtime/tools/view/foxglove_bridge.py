@@ -8,9 +8,9 @@ name foxglove-sdk 0.30 accepts: a client offering only the older
 ``foxglove.websocket.v1`` is refused at the handshake) twice:
 
 * as itself, on a channel of the same topic name, JSON-encoded with the JSON
-  Schema of its type (bytes as base64: `runtime.tools.record.mcap_export.message_json`),
+  Schema of its type (bytes as base64: `runtime.tools.forms.json_form.message_json`),
   so the Raw Messages and Plot panels work for any node's topics;
-* as Foxglove's well-known messages (`runtime.tools.view.foxglove_scene`) of what
+* as Foxglove's well-known messages (`runtime.tools.forms.foxglove_scene`) of what
   the fleet's scene draws: the map as a ``foxglove.Grid``, the bodies as
   ``foxglove.SceneUpdate`` entities, scans as ``foxglove.PointCloud``,
   collisions as red markers, protobuf-encoded, all in frame ``map``, so the 3D
@@ -44,9 +44,9 @@ import msgpack
 from twinfleet.runtime.contract.scene import Scene
 from twinfleet.runtime.host.keys import topic_in_fleet
 from twinfleet.runtime.host.schemas import message_schema
-from twinfleet.runtime.tools.record.mcap_export import json_schema, message_json
+from twinfleet.runtime.tools.forms.foxglove_scene import MAP_TOPIC, ROBOTS_TOPIC, FoxgloveScene
+from twinfleet.runtime.tools.forms.json_form import json_schema, message_json
 from twinfleet.runtime.tools.view.foxglove_gate import FoxgloveGate, inner_certificate
-from twinfleet.runtime.tools.view.foxglove_scene import MAP_TOPIC, ROBOTS_TOPIC, FoxgloveScene
 from twinfleet.runtime.tools.view.web_guard import WebAccess
 
 RESEND_DELAY_S = 0.05  # let the server finish a subscription before re-sending to it
@@ -183,8 +183,8 @@ async def serve_foxglove(endpoint: str, fleet: str, *, port: int | None = None,
     (None: 8765, or a free port if that one is taken; 0: a free port; `ready` gets the port).
     `auth`: the fleet's credentials (default: this machine's registry); `web`: who may
     connect (default: a fresh token, the local host names)."""
+    from twinfleet.runtime.tools.monitor.graph import fleet_schemas
     from twinfleet.runtime.tools.monitor.tap import FleetTap, tap_config
-    from twinfleet.runtime.tools.record.recorder import fleet_schemas
     from twinfleet.runtime.tools.view.scene_finder import SceneFinder
 
     context = foxglove.Context()

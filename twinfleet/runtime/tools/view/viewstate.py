@@ -42,6 +42,7 @@ import msgpack
 from twinfleet.runtime.contract import scene as draw
 from twinfleet.runtime.contract.tracefile import load_trace
 from twinfleet.runtime.host.keys import topic_in_fleet
+from twinfleet.runtime.tools.forms.json_form import jsonable
 
 MAX_TRAIL = 20_000
 MAX_LOG = 500
@@ -52,15 +53,6 @@ FIELDS: dict[type, str] = {draw.Body: "body", draw.Row: "row", draw.Scan: "scan"
                            draw.Plan: "path", draw.Start: "start", draw.Goal: "goal"}
 
 
-def jsonable(value: Any) -> Any:
-    """Msgpack-decoded data → JSON values: bytes become base64 text, tuples lists."""
-    if isinstance(value, bytes | bytearray):
-        return base64.b64encode(value).decode("ascii")
-    if isinstance(value, dict):
-        return {str(k): jsonable(v) for k, v in value.items()}
-    if isinstance(value, list | tuple):
-        return [jsonable(v) for v in value]
-    return value
 
 
 def decode_envelope(payload: bytes) -> dict[str, Any] | None:
