@@ -27,7 +27,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from twinfleet.agreement.discretization import (  # noqa: E402
+from twinfleet.robots.discretization import (  # noqa: E402
     cell_rules,
     check_setting,
     scale_map,
@@ -116,7 +116,7 @@ def main() -> int:
 def _shape(scenario) -> tuple[int, int]:  # noqa: ANN001
     from twinfleet.nodes.mapfile import load_map
 
-    return load_map(scenario.map_path).shape
+    return load_map(scenario.node("map_server").params.map).shape
 
 
 if __name__ == "__main__":

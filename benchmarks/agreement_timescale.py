@@ -3,7 +3,7 @@
 For one scenario (default C1a, fixed profile), run the fleet live at several
 time scales and compare each robot's live arrival time, counted from its own
 start (its first `planning` status), with the logical arrival time of the
-same robot on a path of the checker (`agreement.timing.predicted_arrivals`).
+same robot on a path of the checker (`robots.timing.predicted_arrivals`).
 Prints one line per scale:
 
     scale  runs  mean |Δ| ms  max |Δ| ms  mean Δ ms  Δ spread ms  start spread ms  collisions ...
@@ -32,8 +32,8 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from twinfleet.agreement.live import live_run, private_copy  # noqa: E402
-from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, summarise  # noqa: E402
+from twinfleet.robots.live import live_run, private_copy  # noqa: E402
+from twinfleet.robots.timing import arrival_errors, predicted_arrivals, summarise  # noqa: E402
 from twinfleet.runtime.scenario.spec import load_scenario  # noqa: E402
 
 

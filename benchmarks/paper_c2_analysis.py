@@ -48,7 +48,7 @@ def load_case(case: str) -> dict[str, Any]:
     """The scenario document of `launch/<case>_rebeca.yaml` with an absolute map path."""
     path = ROOT / "twinfleet" / "launch" / f"{case}_rebeca.yaml"
     doc = yaml.safe_load(path.read_text())
-    doc["map"] = str((path.parent / doc["map"]).resolve())
+    doc["params"]["map"] = str((path.parent / doc["params"]["map"]).resolve())
     return doc
 
 

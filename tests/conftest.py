@@ -17,6 +17,7 @@ if os.environ.get("PYTEST_XDIST_WORKER"):
     tempfile.tempdir = None
 
 from tests.support import RUNTIME_DIR, pick_free_port  # noqa: E402
+from twinfleet.robots import EXAMPLES  # noqa: E402
 from twinfleet.runtime.scenario.examples import add_examples  # noqa: E402
 
 # A test ends only the processes it started (tests/integration/itest_support.py `spawned_by`).
@@ -33,7 +34,7 @@ os.environ["XDG_RUNTIME_DIR"] = RUNTIME_DIR
 os.environ.pop("TWINFLEET_RUNTIME_DIR", None)
 
 # Tests load the shipped examples by name, as the command line does (which adds them).
-add_examples("twinfleet.launch")
+add_examples(EXAMPLES)
 
 
 @pytest.fixture

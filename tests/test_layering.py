@@ -5,7 +5,8 @@ Every source file belongs to one layer, read from its folder under `twinfleet/`:
 - `runtime/<wing>/` for each wing of the runtime (`contract`, `scenario`, `core`, `host`,
   `access`, `fleet`, `tools`);
 - `checker/`, `sweep/` (many checks over a grid of parameters, on the checker's engines),
-  `agreement/`, `nodes/`, `ros2/` (the ROS 2 bridge, beside the runtime: it
+  `agreement/`, `nodes/` (the robots and the demo: node code only), `robots/` (the robot
+  case study's experiment, on everything below the command line), `ros2/` (the ROS 2 bridge, beside the runtime: it
   speaks rmw_zenoh's protocol through the runtime's tools, and only it imports the ROS
   field's libraries, `ROS_LIBRARIES`, so the default install needs none of them);
 - `interfaces/` (ROS 2 message and service types from their definitions, above the
@@ -55,14 +56,17 @@ RULES: dict[str, set[str]] = {
     "checker": {"api", "contract", "scenario"},
     "sweep": {"api", "contract", "scenario", "checker"},
     "nodes": {"api", "contract"},
-    "agreement": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "nodes"},
+    "agreement": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker"},
+    # the robot case study's experiment: an application of everything below the command line
+    "robots": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes",
+               "launch"},  # ... and its own example scenarios
     "interfaces": {"contract"},
     "rclpy": {"contract", "interfaces"},
     "ros2": {"api", "access", "fleet", "tools", *_BELOW_HOST, "interfaces"},
     "runtime": set(),  # runtime/__init__.py: names its wings, imports none
     "maps": set(), "launch": set(),  # package data: shipped maps and scenarios
     "top": {"api", "access", "fleet", "tools", *_BELOW_HOST, "checker", "agreement", "nodes", "ros2",
-            "sweep", "interfaces", "rclpy", "top", "launch"},  # the top names the shipped examples
+            "sweep", "interfaces", "rclpy", "robots", "top"},
 }
 #: `tools/` groups four wings of its own (tests/test_sizes.py measures each alone): the
 #: monitors and the forms (JSON and Foxglove forms of the fleet's data) lie below the

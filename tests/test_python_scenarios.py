@@ -97,8 +97,7 @@ def test_check_settings_of_a_python_scenario_are_the_typed_config() -> None:
     ({"check": {"queue_bound": {"nobody": 2}}}, r"check\.queue_bound\.nobody: 'nobody' is not a "
                                                  r"node"),
     ({"live": LiveConfig(timeout_s=3)}, None),
-    ({"profile": "fast"}, r"<scenario pingpong>: profile: expected one of fixed, rebeca"),
-    ({"map_path": "nowhere.yaml"}, r"map: file .*nowhere\.yaml does not exist"),
+    ({"semantics": "fast"}, r"<scenario pingpong>: semantics: expected one of ros, rebeca"),
 ])
 def test_python_scenarios_fail_as_files_do(kwargs: dict[str, Any], expected: str | None) -> None:
     if expected is None:

@@ -43,7 +43,7 @@ def test_c2c_collides_in_the_paper_profile_and_the_trace_replays(tmp_path):
     # RMC: 1,634 / 3,621 (paper 1,740 / 3,727); a violating run's counts depend on the
     # search order (docs/results.md)
     assert (result.statistics.states, result.rmc_transitions) == (1_636, 3_645)
-    scenario = load(result.trace["scenario"], profile=result.trace["profile"])
+    scenario = load(result.trace["scenario"], params=result.trace["params"])
     system = System(scenario, semantics=result.trace["semantics"],
                     properties=PropertySet.from_scenario(scenario))
     assert replay(system, result.trace).confirmed

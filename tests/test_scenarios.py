@@ -25,7 +25,7 @@ ROOT = Path(__file__).resolve().parents[1]
 SHIPPED = sorted((ROOT / "twinfleet" / "launch").glob("*.yaml"))
 GOOD = {
     "name": "t",
-    "map": str(ROOT / "twinfleet" / "maps" / "corridor12.yaml"),
+    "params": {"map": str(ROOT / "twinfleet" / "maps" / "corridor12.yaml")},
     "nodes": [
         {"name": "map_server", "class": "twinfleet.nodes.map_server:MapServer", "params": {"robots": ["r1"]}},
         {"name": "r1", "class": "twinfleet.nodes.robot:Robot", "namespace": "/r1",
@@ -56,7 +56,7 @@ def test_a_scene_is_kept_when_a_scenario_is_written_for_node_processes(tmp_path)
     from twinfleet.runtime.scenario.scenario_file import write_scenario
     from twinfleet.runtime.scenario.spec import Scenario
 
-    built = Scenario.build("t", GOOD["nodes"], map_path=GOOD["map"],
+    built = Scenario.build("t", GOOD["nodes"], params=GOOD["params"],
                            scene="twinfleet.nodes.scene:RobotScene")
     assert write_scenario(built, tmp_path / "t.yaml").scene == built.scene
 
@@ -65,7 +65,7 @@ def test_good_scenario_builds_typed_parameters(tmp_path):
     scenario = load_scenario(write(tmp_path, GOOD))
     r1 = scenario.node("r1")
     assert r1.params.start == (5, 1)
-    assert r1.params.map == GOOD["map"]
+    assert r1.params.map == GOOD["params"]["map"]
     assert r1.namespace == "/r1"
 
 
@@ -97,9 +97,12 @@ def mutate(path: str, value):
         ("nodes.1.params.speed", 3.0, r"Eq\. 1"),
         ("nodes.1.name", "map_server", r"node name 'map_server' is used twice"),
         ("nodes.1.name", "1robot", r"invalid node name"),
-        ("profile", "fast", r"profile: expected one of fixed, rebeca"),
+        ("params.profile", "fast", r"nodes\[0\] \(map_server\): .*fast"),
+        ("profile", "rebeca", r"^\S+: profile: unknown key; expected one of .* \(a parameter of "
+                              r"the nodes goes under params:, as params: \{profile: \.\.\.\}\)$"),
         ("semantics", "dds", r"semantics: expected one of ros, rebeca"),
-        ("map", "nowhere.yaml", r"map: file .* does not exist"),
+        ("params.map", "nowhere.yaml", r"nodes\[0\]\.params\.map: file .*nowhere\.yaml does not exist"),
+        ("map", "../maps/map50.yaml", r"map: unknown key; .*params: \{map: \.\.\.\}"),
         ("nodez", [], r"nodez: unknown key"),
         ("nodes", [], r"nodes: expected a non-empty list"),
         ("properties", [{"kind": "always"}], r"properties\[0\]\.kind: expected one of"),
@@ -218,7 +221,7 @@ def test_shipped_scenarios_resolve_by_name_from_any_directory(tmp_path, monkeypa
     assert resolve_scenario("c1a.yaml") == ROOT / "twinfleet" / "launch" / "c1a.yaml"
     scenario = load_scenario("c1a_rebeca")
     assert scenario.path == ROOT / "twinfleet" / "launch" / "c1a_rebeca.yaml"
-    assert scenario.map_path == ROOT / "twinfleet" / "maps" / "map50.yaml"
+    assert scenario.node("r1").params.map == str(ROOT / "twinfleet" / "maps" / "map50.yaml")
     assert scenario.live.report == "twinfleet.nodes.report:report_for"
     # A file of that name in the working directory wins: a path still works as it did.
     (tmp_path / "c1a").write_text(yaml.safe_dump({**GOOD, "name": "mine"}))
@@ -248,10 +251,9 @@ def test_examples_copy_writes_an_editable_scenario_and_its_map(tmp_path, capsys)
     assert sorted(p.name for p in copied.parent.iterdir()) == \
         ["corridor12.pgm", "corridor12.yaml", "headon.yaml"]
     original = (ROOT / "twinfleet" / "launch" / "headon.yaml").read_text()
-    assert copied.read_text() == original.replace("map: ../maps/corridor12.yaml",
-                                                  "map: corridor12.yaml")
+    assert copied.read_text() == original.replace("  map: ../maps/corridor12.yaml",
+                                                  "  map: corridor12.yaml")
     scenario = load_scenario(copied)
-    assert scenario.map_path == copied.parent / "corridor12.yaml"
     assert scenario.node("map_server").params.map == str(copied.parent / "corridor12.yaml")
     assert cli(["examples", "--copy", "headon", str(copied.parent)]) == 2
     assert "headon.yaml exists; not overwritten" in capsys.readouterr().err
@@ -267,7 +269,7 @@ def test_examples_sharing_a_map_keep_the_first_copy(tmp_path, capsys, monkeypatc
     out = capsys.readouterr().out
     assert "kept existing map50.yaml" in out and "wrote c1a_rebeca.yaml" in out
     assert (tmp_path / "map50.yaml").read_text().endswith("# edited\n")
-    assert load_scenario("c1a_rebeca.yaml").map_path == tmp_path / "map50.yaml"
+    assert load_scenario("c1a_rebeca.yaml").node("r1").params.map == str(tmp_path / "map50.yaml")
 
 
 def test_a_mistyped_class_name_gets_a_did_you_mean(tmp_path):

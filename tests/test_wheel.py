@@ -289,6 +289,7 @@ PROBE = """
 import importlib, importlib.resources, json, sys
 import twinfleet
 from twinfleet.runtime.tools.view.viewer import STATIC_DIR
+import twinfleet.cli  # adds the shipped examples, as the command does
 from twinfleet.runtime.scenario.examples import shipped_scenarios
 data = {p: sorted(f.name for f in importlib.resources.files(p).iterdir() if f.is_file()
                   and not f.name.endswith(".py"))

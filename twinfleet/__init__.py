@@ -26,6 +26,7 @@ from twinfleet.runtime.contract.node import (
     service,
     subscribe,
 )
+from twinfleet.runtime.contract.params import file_param
 
 __all__ = [
     "QOS_DEFAULT",
@@ -43,6 +44,7 @@ __all__ = [
     "Reliability",
     "String",
     "every",
+    "file_param",
     "handler",
     "message",
     "on_start",

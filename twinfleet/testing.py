@@ -6,8 +6,8 @@ and run it live over Zenoh, from a test::
     from twinfleet import testing
 
     def test_no_two_robots_in_the_cell():
-        system = testing.system({"keeper": Keeper, "r1": (Robot, {"cell": 1}),
-                                 "r2": (Robot, {"cell": 1})},
+        system = testing.system({"keeper": Keeper, "r1": (Walker, {"cell": 1}),
+                                 "r2": (Walker, {"cell": 1})},
                                 [testing.invariant("one_inside", "keeper.inside <= 1")])
         result = testing.check(system)
         assert result.holds, result.explain()
@@ -40,6 +40,7 @@ from typing import Any, TextIO, final
 from twinfleet.checker.diagnosis import ContractBreachError
 from twinfleet.checker.driver import CheckOptions, CheckResult
 from twinfleet.checker.driver import check as _check
+from twinfleet.robots import EXAMPLES
 from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.contract.messages import DecodeError, decode, encode
 from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
@@ -56,8 +57,7 @@ __all__ = ["CheckReport", "LiveFleet", "check", "eventually", "invariant", "live
 # ------------------------------------------------------------------ building
 
 
-#: the robots' example scenarios, loadable by name here as on the command line
-add_examples("twinfleet.launch")
+add_examples(EXAMPLES)  # the robots' scenarios, by name here as on the command line
 
 
 def invariant(name: str, expr: str) -> PropertyConfig:

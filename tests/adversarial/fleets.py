@@ -39,8 +39,9 @@ def robot_scenario(tmp_path: Path, robots: dict[str, dict]) -> Path:
     props = [{"name": "no_collision", "kind": "invariant", "expr": "map_server.collisions == 0"},
              {"name": "no_handler_failure", "kind": "no_failure"},
              {"name": "all_arrive", "kind": "eventually", "expr": done}]
-    return write_scenario(tmp_path, "robots", nodes, props, map=str(ROOT / "twinfleet" / "maps" / "map50.yaml"),
-                          params={"scan_rate_ms": 100},
+    return write_scenario(tmp_path, "robots", nodes, props,
+                          params={"map": str(ROOT / "twinfleet" / "maps" / "map50.yaml"),
+                                  "scan_rate_ms": 100},
                           live={"report": "twinfleet.nodes.report:report_for"})
 
 

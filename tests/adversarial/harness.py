@@ -32,10 +32,8 @@ from twinfleet.runtime.host.zenoh_transport import zenoh_config
 
 SCENARIO = """\
 name: {name}
-map: {root}/twinfleet/maps/map50.yaml
-profile: fixed
 seed: 1
-params: {{scan_rate_ms: 100}}
+params: {{map: {root}/twinfleet/maps/map50.yaml, profile: fixed, scan_rate_ms: 100}}
 nodes:
 - {{name: map_server, class: "twinfleet.nodes.map_server:MapServer", priority: 1,
     params: {{robots: [r1, r2]}}}}

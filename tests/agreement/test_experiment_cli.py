@@ -1,4 +1,4 @@
-"""`python -m twinfleet.agreement experiment` end to end on the tiny head-on scenario (real processes)."""
+"""`python -m twinfleet.robots experiment` end to end on the tiny head-on scenario (real processes)."""
 
 from __future__ import annotations
 
@@ -11,13 +11,13 @@ from pathlib import Path
 
 import pytest
 
-from twinfleet.agreement.table import columns, markdown_header
+from twinfleet.robots.table import columns, markdown_header
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
 def _run(*args: str, timeout: float = 60) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "twinfleet.agreement", *args], cwd=ROOT, text=True,
+    return subprocess.run([sys.executable, "-m", "twinfleet.robots", *args], cwd=ROOT, text=True,
                           capture_output=True, timeout=timeout,
                           env={"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"})
 
@@ -100,7 +100,7 @@ def test_checker_only_with_runs_0(tmp_path):
 
 def test_register_adds_experiment_without_loading_the_live_runtime():
     code = ("import argparse, sys\n"
-            "from twinfleet.agreement.commands import register\n"
+            "from twinfleet.robots.commands import register\n"
             "p = argparse.ArgumentParser(prog='twinfleet')\n"
             "register(p.add_subparsers(dest='command'))\n"
             "a = p.parse_args(['experiment', 'twinfleet/launch/c1a.yaml', '--runs', '3'])\n"
@@ -116,7 +116,7 @@ def test_register_adds_experiment_without_loading_the_live_runtime():
 def test_ctrl_c_stops_and_still_writes_what_was_done(tmp_path):
     import signal
 
-    proc = subprocess.Popen([sys.executable, "-m", "twinfleet.agreement", "headon", "--runs",
+    proc = subprocess.Popen([sys.executable, "-m", "twinfleet.robots", "headon", "--runs",
                              "5", "--time-scale", "1", "--semantics", "ros", "--out",
                              str(tmp_path)], cwd=ROOT, text=True, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE,

@@ -9,14 +9,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from twinfleet.agreement.discretization import (
+from twinfleet.nodes.mapfile import load_map
+from twinfleet.nodes.profile import FIXED
+from twinfleet.robots.discretization import (
     cell_rules,
     hidden_overlap_m,
     scale_map,
     scale_scenario,
 )
-from twinfleet.nodes.mapfile import load_map
-from twinfleet.nodes.profile import FIXED
 from twinfleet.runtime.scenario.spec import load_scenario
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -45,7 +45,7 @@ def test_scaled_scenario_loads_with_scaled_cells_and_rules(tmp_path):
     out = scale_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml", Fraction(2), fine_map,
                          tmp_path / "c1a_fine.yaml", name="c1a_fine")
     sc = load_scenario(out)
-    assert sc.name == "c1a_fine" and sc.map_path == fine_map.resolve()
+    assert sc.name == "c1a_fine" and sc.node("r1").params.map == str(fine_map.resolve())
     r1 = sc.node("r1").params
     assert (r1.start, r1.goal) == ((10, 10), (90, 90))
     rules = cell_rules(out)

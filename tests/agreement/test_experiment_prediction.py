@@ -12,10 +12,15 @@ import pytest
 
 from tests.checker.smc_systems import Coin4
 from twinfleet import testing
-from twinfleet.agreement.live import LiveRunResult
-from twinfleet.agreement.paper import paper_row
-from twinfleet.agreement.resume import FinishedCase, fingerprint, load_case, save_case
-from twinfleet.agreement.table import (
+from twinfleet.checker.estimate import agreement_p_value, binomial_test, clopper_pearson
+from twinfleet.checker.properties import PropertySet
+from twinfleet.checker.simulate import Simulator
+from twinfleet.checker.system import System
+from twinfleet.checker.timing import Histogram, TimingModel
+from twinfleet.robots.live import LiveRunResult
+from twinfleet.robots.paper import paper_row
+from twinfleet.robots.resume import FinishedCase, fingerprint, load_case, save_case
+from twinfleet.robots.table import (
     CheckCell,
     LiveSummary,
     Prediction,
@@ -25,11 +30,6 @@ from twinfleet.agreement.table import (
     to_csv,
     to_markdown,
 )
-from twinfleet.checker.estimate import agreement_p_value, binomial_test, clopper_pearson
-from twinfleet.checker.properties import PropertySet
-from twinfleet.checker.simulate import Simulator
-from twinfleet.checker.system import System
-from twinfleet.checker.timing import Histogram, TimingModel
 
 
 def _pmf(j: int, n: int, p: float) -> float:

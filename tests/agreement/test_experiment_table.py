@@ -8,9 +8,9 @@ from pathlib import Path
 
 import pytest
 
-from twinfleet.agreement.experiment import scenario_row
-from twinfleet.agreement.paper import PAPER, paper_row
-from twinfleet.agreement.table import (
+from twinfleet.robots.experiment import scenario_row
+from twinfleet.robots.paper import PAPER, paper_row
+from twinfleet.robots.table import (
     CheckCell,
     LiveSummary,
     Row,

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from twinfleet.agreement.live import LiveRunResult, TimedReport
-from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, summarise
 from twinfleet.nodes.msgs import Collision, RobotStatus
+from twinfleet.robots.live import LiveRunResult, TimedReport
+from twinfleet.robots.timing import arrival_errors, predicted_arrivals, summarise
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -69,12 +69,11 @@ def test_timed_report_stops_at_a_collision_only_when_asked():
 
 
 def test_private_copy_runs_the_same_scenario_from_elsewhere(tmp_path):
-    from twinfleet.agreement.live import private_copy
+    from twinfleet.robots.live import private_copy
     from twinfleet.runtime.scenario.spec import load_scenario
 
     original = load_scenario(ROOT / "twinfleet" / "launch" / "c1a.yaml")
     copy = private_copy(original, tmp_path)
     assert copy.path == tmp_path / "c1a.yaml" and copy.path != original.path
-    assert (copy.name, copy.fleet, copy.map_path) == (original.name, original.fleet,
-                                                      original.map_path)
+    assert (copy.name, copy.fleet) == (original.name, original.fleet)
     assert [n.params for n in copy.nodes] == [n.params for n in original.nodes]

@@ -36,7 +36,8 @@ def test_check_c1a_with_an_override_counts_as_the_file_with_that_speed(tmp_path,
     r1 = next(n for n in doc["nodes"] if n["name"] == "r1")
     assert r1["params"]["speed"] == 0.5  # the override changes something
     r1["params"]["speed"] = 0.4
-    doc["map"] = str((shipped_scenarios()["c1a"].parent / doc["map"]).resolve())
+    common = doc["params"]
+    common["map"] = str((shipped_scenarios()["c1a"].parent / common["map"]).resolve())
     edited = tmp_path / "c1a_slow.yaml"
     edited.write_text(yaml.safe_dump(doc, sort_keys=False))
     assert commands.main([str(edited), "--json"]) == 0

@@ -24,7 +24,7 @@ from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
 ROOT = Path(__file__).resolve().parents[2]
 FUZZ = settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
 GOOD_SCENARIO = yaml.safe_load((ROOT / "twinfleet" / "launch" / "headon.yaml").read_text())
-GOOD_SCENARIO["map"] = str(ROOT / "twinfleet" / "maps" / "corridor12.yaml")
+GOOD_SCENARIO["params"]["map"] = str(ROOT / "twinfleet" / "maps" / "corridor12.yaml")
 
 
 def pgm_header(magic: bytes, w: int, h: int, maxval: int) -> bytes:
@@ -79,7 +79,7 @@ def _set(doc: dict, path: list, value) -> dict:
     return doc
 
 
-PATHS = [["name"], ["profile"], ["semantics"], ["seed"], ["params"], ["nodes"], ["properties"],
+PATHS = [["name"], ["params", "profile"], ["params", "map"], ["semantics"], ["seed"], ["params"], ["nodes"], ["properties"],
          ["check"], ["live"], ["nodes", 0, "class"], ["nodes", 1, "params"],
          ["nodes", 1, "params", "start"], ["nodes", 1, "params", "speed"], ["nodes", 2, "name"],
          ["nodes", 0, "params", "robots"], ["properties", 0], ["properties", 0, "expr"]]
@@ -115,7 +115,7 @@ def headon_trace(tmp_path_factory):
     return out.read_text()  # text: hypothesis prints the arguments of a failing example
 
 
-TRACE_PATHS = [["format"], ["scenario"], ["semantics"], ["profile"], ["steps"], ["initial"],
+TRACE_PATHS = [["format"], ["scenario"], ["semantics"], ["params"], ["steps"], ["initial"],
                ["initial", "choices"], ["initial", "digest"], ["steps", 0], ["steps", 3, "event"],
                ["steps", 3, "choices"], ["steps", 5, "digest"], ["property"], ["latency"]]
 

@@ -30,7 +30,7 @@ def variant(tmp_path: Path, base: str, scan: int, robots=None) -> Path:
     """`launch/<base>_rebeca.yaml` with another scan period and (speed, wait, priority)s."""
     path = ROOT / "twinfleet" / "launch" / f"{base}_rebeca.yaml"
     doc = yaml.safe_load(path.read_text())
-    doc["map"] = str((path.parent / doc["map"]).resolve())
+    doc["params"]["map"] = str((path.parent / doc["params"]["map"]).resolve())
     doc["params"]["scan_rate_ms"] = scan
     nodes = [n for n in doc["nodes"] if n["class"].endswith(":Robot")]
     for node, (speed, wait, prio) in zip(nodes, robots or (), strict=False):

@@ -33,7 +33,7 @@ from twinfleet.runtime.access.registry import find_fleet
 from twinfleet.runtime.contract.messages import decode
 from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
-from twinfleet.runtime.scenario.examples import copy_example
+from twinfleet.runtime.scenario.files import copy_example
 from twinfleet.runtime.tools.monitor.tap import tap_config
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(90)]

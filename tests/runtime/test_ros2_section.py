@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from twinfleet.runtime.scenario.config import DEFAULT_ROS2_ROUTER, Ros2Config
-from twinfleet.runtime.scenario.examples import copy_example
+from twinfleet.runtime.scenario.files import copy_example
 from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
 
 

@@ -38,7 +38,7 @@ def test_a_range_is_inclusive_and_printable():
     ("r1.speed:=0.4", Target.NODE, "r1", "speed"),
     ("scan_rate_ms=100", Target.COMMON, None, "scan_rate_ms"),
     ("*.speed=0.4", Target.EVERY_NODE, None, "speed"),
-    ("profile=fixed", Target.PROFILE, None, "profile"),
+    ("profile=fixed", Target.COMMON, None, "profile"),  # a parameter of the robots, no option
     ("semantics=ros,rebeca", Target.SEMANTICS, None, "semantics"),
     ("check.max_states=100", Target.CHECK, None, "max_states"),
 ])
@@ -67,7 +67,7 @@ def test_points_are_every_combination_the_last_axis_fastest():
     (["r1.speed=0.9:0.3:0.2"], "a range start:stop:step needs start <= stop and step > 0"),
     (["r1.speed=0.3:0.9:0"], "a range start:stop:step needs start <= stop and step > 0"),
     (["r1.speed=[1, 2"], "is not YAML"),
-    (["profile=fast"], "profile is one of fixed, rebeca"),
+    (["semantics=dds"], "semantics is one of ros, rebeca"),
     (["r1.speed=0.4", "r1.speed=0.6"], "--param r1.speed given twice"),
     ([], "give at least one --param NAME=VALUES"),
     (["a=0:20000:1"], f"20,001 values (at most {MAX_POINTS:,})"),

@@ -8,7 +8,7 @@ node, then one line per event in dispatch-time order::
 
     {"node": "r1", "i": 7, "t": 897, "kind": "delivery", "handler": "on_scan",
      "sender": "map_server", "topic": "/r1/scan", "seq": 3, "stamp": 893, "due": null,
-     "args": "1fbe1fd230dddbf1", "summary": "ObstacleScan(robot='r1', ...)",
+     "args": "1fbe1fd230dddbf1", "summary": "Scan(robot='r1', ...)",
      "choices": [], "options": [], "digest": "98e2f8602e3277dcf81e4b54"}
 
 ``t`` is the fleet ms at dispatch, ``stamp`` the sender's fleet ms at send,

@@ -115,7 +115,6 @@ class Plan:
     steps: list[Grant]
     final_digests: dict[str, str]
     collisions: list[tuple[str, str, str]]  # (step, "ra,rb", cells text) from the trace's logs
-    file_profile: str = ""  # the profile the scenario file itself names
     cycles: int = 0  # extra rounds of a lasso's cycle appended to the trace's steps
     #: each node's state digest before any grant: a node the trace never runs keeps it
     initial_digests: dict[str, str] = field(default_factory=dict)
@@ -228,8 +227,8 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
     collisions = [(str(rec["index"]), str(log.get("robots")), str(log.get("cells")))
                   for rec in trace["steps"] for log in rec.get("logs", ())
                   if log.get("event") == "collision"]
-    return Plan(str(trace_path), trace, scenario, starts, steps, final, collisions,
-                load(trace["scenario"]).profile, cycles, initial)
+    return Plan(str(trace_path), trace, scenario, starts, steps, final, collisions, cycles,
+                initial)
 
 
 def _step_grants(system: System, world: World, records: Sequence[Mapping[str, Any]],
@@ -441,11 +440,9 @@ async def replay_live(trace_path: str | Path, *, out: TextIO = sys.stdout,
                               cycle_start=p.trace.get("cycle_start"))
     coordinator = Coordinator(p, result, step_timeout_s=step_timeout_s)
     events = events_out or str(Path(trace_path).with_suffix(".live-events.jsonl"))
-    # the node processes read the scenario file: give them the trace's profile if it differs
-    profile = ("--profile", p.scenario.profile) if p.scenario.profile != p.file_profile else ()
     fleet = await run_fleet(p.scenario, timeout_s=timeout_s, out=out,
                             handle_signals=handle_signals, record_events=events,
-                            node_args=("--gate", *profile), driver=coordinator,
+                            node_args=("--gate",), driver=coordinator,
                             params=p.trace.get("params") or ())  # the overrides checked
     result.fleet_reason = fleet.reason
     for line in format_result(fleet):
@@ -484,8 +481,7 @@ def live_replay_command(args: Any) -> int:
     try:
         trace = load_trace(args.trace)
         if trace.get("scenario") is not None:  # else `plan` says it has no scenario file
-            scenario = load(trace["scenario"], profile=trace.get("profile"),
-                            params=trace.get("params") or ())
+            scenario = load(trace["scenario"], params=trace.get("params") or ())
             for line in code_changes(trace, {cfg.name: cfg.cls for cfg in scenario.nodes}):
                 print(f"twinfleet replay --live: warning: {line}", file=sys.stderr)
         result = asyncio.run(replay_live(args.trace, out=io.StringIO() if args.quiet

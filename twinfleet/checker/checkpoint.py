@@ -2,7 +2,7 @@
 
 A checkpoint is two pickles in one file: a header (``"format":
 "twinfleet-checkpoint/3"`` and `meta`: what the search was run on: the scenario
-file, its SHA-256, semantics, profile, search order, state mode...), then the
+file, its SHA-256, semantics, parameters, search order, state mode...), then the
 visited-state store, the frontier (worlds waiting to be expanded, with their ids
 and depths) and the counters. The header comes first because the rest holds node
 states of the user's own classes: `load` puts the scenario's folder on the import

@@ -67,8 +67,6 @@ def register(subparsers: Any) -> None:
     p.add_argument("--semantics", type=choice_of(Semantics), choices=tuple(Semantics),
                    default=None,
                    help="message rules: ros (per-sender FIFO) or rebeca (RMC); default: scenario")
-    p.add_argument("--profile", choices=("fixed", "rebeca"), default=None,
-                   help="robot behaviour profile passed to the nodes; default: scenario")
     p.add_argument("--trace-out", default=None,
                    help="where to write a counterexample trace (default: out/<name>.trace.json)")
     p.add_argument("--json", action="store_true", help="print the result as JSON on stdout")
@@ -202,7 +200,7 @@ def check_command(args: argparse.Namespace) -> int:
     stem = Path(args.scenario or args.resume).stem
     trace_out = args.trace_out or str(Path("out") / f"{stem}.trace.json")
     options = CheckOptions(**SearchChoices.of(args).fields(), walks=args.walks, seed=args.seed,
-                           semantics=args.semantics, profile=args.profile, trace_out=trace_out,
+                           semantics=args.semantics, trace_out=trace_out,
                            debug_state=args.debug_state, exact_states=args.exact_states,
                            check_determinism=args.check_determinism,
                            transition_cache=not args.no_transition_cache,
@@ -235,8 +233,8 @@ def _lint_fails(args: argparse.Namespace, params: tuple[str, ...]) -> bool:
     from twinfleet.runtime.scenario.lint import lint_scenario
 
     try:
-        warnings = lint_scenario(load(args.scenario, profile=args.profile,
-                                      semantics=args.semantics, params=params))
+        warnings = lint_scenario(load(args.scenario, semantics=args.semantics,
+                                      params=params))
     except bad_input_errors():
         return False  # the check itself reports a scenario it cannot load
     for warning in warnings:

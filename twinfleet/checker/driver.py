@@ -67,7 +67,6 @@ class CheckOptions:
     max_time_s: float | None = None
     max_depth: int | None = None
     semantics: Semantics | None = None
-    profile: str | None = None
     trace_out: str | None = None
     debug_state: bool = False
     exact_states: bool = False
@@ -234,13 +233,13 @@ _DEEP = 1_000  # a search stopped by a limit this deep gets the hint of `growth_
 
 
 def system_for_trace(trace: Mapping[str, Any]) -> tuple[System, PropertySet]:
-    """The system a trace was found on (its scenario, profile, semantics, latency and flags),
+    """The system a trace was found on (its scenario, parameters, semantics, latency and flags),
     with the scenario's properties watching it, as `twinfleet replay` re-executes it."""
     if trace.get("scenario") is None:
         raise ScenarioError("the trace names no scenario file (its scenario was built in "
                             "Python): replay it with checker.replay(System(scenario), trace)")
-    scenario = load(trace["scenario"], profile=trace.get("profile"),
-                    semantics=trace.get("semantics"), params=trace.get("params") or ())
+    scenario = load(trace["scenario"], semantics=trace.get("semantics"),
+                    params=trace.get("params") or ())
     props = PropertySet.from_scenario(scenario)
     latency = trace.get("latency")
     per_name = tuple((name, (span[0], span[1])) for name, span in trace.get("topic_latency") or ())
@@ -284,7 +283,7 @@ def check(scenario: str | Path | Scenario | None,
                                          meta.get("reduction") or options.reduction)
     meta = {"scenario": None if path is None else str(path.resolve()),
             "sha256": None if path is None else ckpt.file_sha256(path),
-            "semantics": system.semantics.value, "profile": scenario.profile,
+            "semantics": system.semantics.value,
             "strategy": strategy, "reduction": reduction_name.split()[0],
             "params": list(meta.get("params", options.params)), **flags}
     search = Search(system, props, limits_for(options, scenario.check), progress=options.progress,
@@ -406,7 +405,7 @@ def _distributed(system: System, props: PropertySet, strategy: str, reduction: R
                               "continue it without --workers/--cluster")
     saving = options.checkpoint or options.resume
     timing = _timing_ranges(scenario, options)
-    spec = SystemSpec(str(path.resolve()), scenario.profile, system.semantics.value,
+    spec = SystemSpec(str(path.resolve()), system.semantics.value,
                       tuple(options.params), tuple(sorted(flags.items())), options.timing,
                       timing.get("latency"), timing.get("topic_latency"),
                       None if reduction is None else meta["reduction"])
@@ -497,21 +496,17 @@ def _scenario_file(scenario: str | Path | Scenario | None) -> Path | None:
 
 def _scenario(scenario: Path | Scenario | None, options: CheckOptions,
               meta: Mapping[str, Any]) -> Scenario:
-    """The scenario to check, with the profile and semantics of the options or checkpoint."""
-    profile = meta.get("profile", options.profile)
+    """The scenario to check, with the semantics and parameters of the options or checkpoint."""
     semantics = meta.get("semantics", options.semantics)
     params = meta.get("params", options.params)
     if not isinstance(scenario, Scenario):
         assert scenario is not None  # check() refuses a missing scenario file first
-        return _with_fairness(load(scenario, profile=profile, semantics=semantics,
-                                   params=params), options.fairness)
+        return _with_fairness(load(scenario, semantics=semantics, params=params),
+                              options.fairness)
     scenario = _with_fairness(scenario, options.fairness)
     if params:
         raise ScenarioError(f"{scenario.source}: the parameters of a scenario built in Python "
                             "are given when it is built (Scenario.build(..., params=...))")
-    if profile is not None and profile != scenario.profile:
-        raise ScenarioError(f"{scenario.source}: the profile of a scenario built in Python is "
-                            "chosen when it is built (Scenario.build(..., profile=...))")
     return scenario if semantics is None else dataclasses.replace(scenario, semantics=semantics)
 
 
@@ -537,8 +532,7 @@ def _resume_path(path: Path | None, options: CheckOptions,
     if options.params and list(options.params) != meta.get("params", []):
         raise CheckpointError(f"{where}: written with parameters {meta.get('params', [])}, "
                               f"cannot resume with {list(options.params)}")
-    for key, value in (("semantics", options.semantics), ("profile", options.profile),
-                       ("strategy", options.search)):
+    for key, value in (("semantics", options.semantics), ("strategy", options.search)):
         if value is not None and value != meta[key]:
             raise CheckpointError(f"{where}: written with {key} {meta[key]}, cannot resume "
                                   f"with {value}")

@@ -22,8 +22,8 @@ from twinfleet.runtime.scenario.config import Fairness
 class Semantics(StrEnum):
     """The checker's message semantics, named in a scenario's `semantics:` key.
 
-    Not to be confused with a robot *profile* (`profile: fixed|rebeca`, the nodes'
-    behaviour): `Semantics.REBECA` is RMC's message rules, whatever the nodes do.
+    It says how messages are delivered, never what the nodes do: `Semantics.REBECA` is
+    RMC's message rules, whatever behaviour the nodes' own parameters choose.
     """
 
     ROS = "ros"  # per-sender FIFO, as Zenoh delivers

@@ -66,7 +66,6 @@ class StatisticalOptions:
     max_traces: int = 3
     max_time_s: float | None = None
     verify: bool = True
-    profile: str | None = None
     semantics: str | None = None
     params: tuple[str, ...] = ()  # parameter overrides, as `check` and `launch` take them
     until_decided: bool = False
@@ -79,7 +78,6 @@ class SimulationJob:
     """What a worker needs to run simulations: picklable, builds its `Simulator` once."""
 
     scenario: str
-    profile: str | None
     semantics: str | None
     model: TimingModel
     seed: int
@@ -99,8 +97,7 @@ _SIMULATORS: dict[SimulationJob, Simulator] = {}  # one per job in each worker p
 def _simulator(job: SimulationJob) -> Simulator:
     sim = _SIMULATORS.get(job)
     if sim is None:
-        scenario = load(job.scenario, profile=job.profile, semantics=job.semantics,
-                        params=job.params)
+        scenario = load(job.scenario, semantics=job.semantics, params=job.params)
         system, props = timed_system(scenario, job.model, verify=job.verify)
         sim = _SIMULATORS[job] = Simulator(system, props, job.model, seed=job.seed,
                                            horizon_ms=job.horizon_ms, max_steps=job.max_steps,
@@ -232,12 +229,11 @@ class StatisticalResult:
 def check_statistical(scenario: str | Path, options: StatisticalOptions) -> StatisticalResult:
     """Estimate (or test) the probability of a violation of `scenario` (module docstring)."""
     path = resolve_scenario(scenario)
-    spec = load(path, profile=options.profile, semantics=options.semantics,
-                params=options.params)
+    spec = load(path, semantics=options.semantics, params=options.params)
     model, source, replaced = statistical_timing(spec, options.timing)
     horizon = options.horizon_ms or int(1000 * (spec.live.horizon_s or 60))
     seed = options.seed if options.seed is not None else spec.seed
-    job = SimulationJob(str(path.resolve()), options.profile, options.semantics, model, seed,
+    job = SimulationJob(str(path.resolve()), options.semantics, model, seed,
                         horizon, options.max_steps, options.verify, options.until_decided,
                         options.params)
     sim = _simulator(job)  # here too: it writes the traces, and a bad scenario fails early

@@ -46,7 +46,7 @@ def statistical_command(args: argparse.Namespace, bad_input: tuple[type[Exceptio
         assert_below=args.assert_below, indifference=args.indifference, alpha=args.alpha,
         beta=args.beta, workers=args.workers, cluster=args.cluster, timing=args.timing, traces_out=args.traces_out,
         max_traces=args.max_traces, max_time_s=args.max_time, verify=args.verify,
-        profile=args.profile, params=params,
+        params=params,
         semantics=args.semantics, progress=None if quiet else _progress)
     try:
         result = check_statistical(args.scenario, options)

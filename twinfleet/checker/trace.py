@@ -102,7 +102,6 @@ def build_trace(system: System, violation: PropertyViolation, path: Counterexamp
         "scenario_sha256": scenario_sha256,
         "params": list(params),
         "semantics": system.semantics.value,
-        "profile": system.scenario.profile,
         "latency": list(system.rules.latency) if system.rules.latency else None,
         "topic_latency": [[name, list(span)] for name, span in system.topic_latency] or None,
         "global_priority": system.rules.global_priority,

@@ -5,7 +5,8 @@
     twinfleet view|foxglove                                   (twinfleet.cli.viewer_commands)
     twinfleet render                                          (twinfleet.cli.render)
     twinfleet check                                           (twinfleet.checker.commands)
-    twinfleet replay|validate|experiment|calibrate            (twinfleet.agreement.commands)
+    twinfleet experiment                                      (twinfleet.robots.commands)
+    twinfleet replay|validate|calibrate                       (twinfleet.agreement.commands)
     twinfleet ros2 bridge                                     (twinfleet.ros2.commands)
     twinfleet sweep                                           (twinfleet.sweep.commands)
 

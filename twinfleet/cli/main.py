@@ -27,6 +27,8 @@ from twinfleet.cli import render as render_command
 from twinfleet.cli import runtime_commands
 from twinfleet.cli.interrupts import Interrupts
 from twinfleet.interfaces.guard import install as refuse_borrowed_ros_names
+from twinfleet.robots import EXAMPLES
+from twinfleet.robots import commands as robot_commands
 from twinfleet.ros2 import commands as ros2_commands
 from twinfleet.runtime.access.connection import (
     EXIT_BAD_INPUT,
@@ -37,9 +39,7 @@ from twinfleet.runtime.access.connection import (
 from twinfleet.runtime.scenario.examples import add_examples
 from twinfleet.sweep import commands as sweep_commands
 
-#: the robots' example scenarios (package data), loadable by name: ``twinfleet check c1a``
-EXAMPLES = "twinfleet.launch"
-add_examples(EXAMPLES)
+add_examples(EXAMPLES)  # the robots' scenarios, by name: ``twinfleet check c1a``
 
 DESCRIPTION = """\
 twinfleet runs a fleet of robot nodes (or any nodes you write in Python) as separate
@@ -81,6 +81,7 @@ def build_parser() -> argparse.ArgumentParser:
     render_command.register(sub)
     checker_commands.register(sub)
     sweep_commands.register(sub)
+    robot_commands.register(sub)
     agreement_commands.register(sub)
     ros2_commands.register(sub)
     return parser

@@ -45,6 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def cmd_render(args: argparse.Namespace) -> int:
     """`twinfleet render`: a scenario's start or a trace, on its map or as a chart."""
+    from twinfleet.runtime.scenario.overrides import load_with_params
     from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
 
     source = args.source
@@ -56,7 +57,7 @@ def cmd_render(args: argparse.Namespace) -> int:
                 trace = load_trace(source)
             except TraceError as exc:
                 raise ValueError(str(exc)) from None
-            scenario = load_scenario(trace["scenario"], {"profile": trace.get("profile") or "fixed"})
+            scenario = load_with_params(trace["scenario"], trace.get("params") or ())
             no_map = _no_map(scenario)
             if args.chart or args.steps or no_map or args.output.endswith(".svg"):
                 if no_map and not args.chart:

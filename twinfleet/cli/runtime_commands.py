@@ -143,12 +143,8 @@ def _worse(a: int, b: int) -> int:
 
 def cmd_examples(args: argparse.Namespace) -> int:
     """`twinfleet examples`: list the shipped scenarios, or copy one (and its map) to edit."""
-    from twinfleet.runtime.scenario.examples import (
-        ExampleError,
-        copy_example,
-        describe,
-        shipped_scenarios,
-    )
+    from twinfleet.runtime.scenario.examples import ExampleError, describe, shipped_scenarios
+    from twinfleet.runtime.scenario.files import copy_example
 
     if args.copy is None:
         if args.dir is not None:

@@ -12,7 +12,18 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from twinfleet import QOS_LATCHED, Context, Node, QoS, String, handler, on_start, service, subscribe
+from twinfleet import (
+    QOS_LATCHED,
+    Context,
+    Node,
+    QoS,
+    String,
+    file_param,
+    handler,
+    on_start,
+    service,
+    subscribe,
+)
 from twinfleet.nodes.geometry import shadows_intersect
 from twinfleet.nodes.grid import Cell, Dims
 from twinfleet.nodes.mapfile import static_grids
@@ -40,7 +51,7 @@ SHUTDOWN_TOPIC = "/twinfleet/shutdown"
 class MapServerParams:
     """Parameters of the map server (defaults: docs/robots.md §8)."""
 
-    map: str
+    map: str = file_param()  # the map YAML, relative to the scenario file
     robots: tuple[str, ...]
     profile: str = "fixed"
     scan_rate_ms: int = 100

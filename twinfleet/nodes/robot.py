@@ -14,7 +14,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 
-from twinfleet import CallError, Context, Node, handler, on_start, subscribe
+from twinfleet import CallError, Context, Node, file_param, handler, on_start, subscribe
 from twinfleet.nodes.congestion import (
     backoff_candidates,
     backoff_options,
@@ -43,7 +43,7 @@ MAX_FAILURES = 2  # a third failed plan leaves the robot stuck (the model's live
 class RobotParams:
     """Parameters of one robot (defaults: docs/robots.md §8)."""
 
-    map: str
+    map: str = file_param()  # the map YAML, relative to the scenario file
     start: tuple[int, int]
     goal: tuple[int, int]
     speed: float = 0.5  # m/s

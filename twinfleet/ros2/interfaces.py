@@ -1,8 +1,8 @@
 """twinfleet message types as ROS 2 interfaces, by their fields: ``.msg`` text, CDR, a package.
 
 A message class that no mapping turns into a standard type is carried by its
-fields under a ROS-style name (``twinfleet_msgs/RobotStatus`` →
-``twinfleet_msgs/msg/RobotStatus``); a standard ROS 2 type (``geometry_msgs/Twist``
+fields under a ROS-style name (``twinfleet_msgs/Status`` →
+``twinfleet_msgs/msg/Status``); a standard ROS 2 type (``geometry_msgs/Twist``
 of `twinfleet.interfaces`) under its own name and hash. Each field's annotation gives its ROS type:
 
     int → int64    float → float64    str → string    bool → bool    bytes → uint8[]

@@ -19,7 +19,7 @@ ValueError with the reason it is dropped for): `InboundMapping`.
 It is named by import name (``module:Name``, a class made with no arguments),
 resolved as node classes are (the scenario's folder and the working directory are
 searched too: `load_mapping`); the default is the one the fleet's scene names in
-its ``ros2`` attribute (``RobotScene.ros2``), so the shipped robot scenarios need no
+its ``ros2`` attribute (``Scene.ros2``), so a scenario whose scene names one needs no
 option. A fleet with neither needs none: `NoMapping` maps no type, and the bridge and
 the bag export carry each standard type under its own name and every other type by
 its fields (`interfaces`).

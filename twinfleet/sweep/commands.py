@@ -34,7 +34,7 @@ and, with --heatmap X,Y, OUT/heatmap.png; prints the Markdown table on stdout an
 progress line per point on stderr.
 
 NAME is NODE.PARAM (one node's parameter, r1.speed), PARAM (the scenario's common params,
-scan_rate_ms), *.PARAM (that parameter of every node that has it), profile, semantics, or
+scan_rate_ms), *.PARAM (that parameter of every node that has it), semantics, or
 check.KEY (a key of the scenario's check: block). VALUES is a list a,b,c (YAML values) or
 an inclusive range start:stop:step.
 

@@ -7,7 +7,7 @@ Pure logic, no I/O. A NAME says what a value sets:
   parameters have that field, unless the node sets it itself);
 - ``*.speed``: parameter `speed` of every node whose parameters have that field, over
   what each node sets (expanded into one per-node override per node when the sweep runs);
-- ``profile``, ``semantics``: the check's robot profile and message rules;
+- ``semantics``: the check's message rules;
 - ``check.latency`` (any ``check.KEY``): one key of the scenario's ``check:`` block.
 
 VALUES is a list ``a,b,c`` (each YAML; brackets keep their commas: ``[5, 5],[6, 6]``) or
@@ -34,13 +34,12 @@ class Target(Enum):
     NODE = "node"  # r1.speed: one node's parameter
     COMMON = "common"  # scan_rate_ms: the scenario's common params
     EVERY_NODE = "every node"  # *.speed: every node that has the parameter
-    PROFILE = "profile"
     SEMANTICS = "semantics"
     CHECK = "check"  # check.latency: a key of the scenario's check: block
 
 
-_OPTIONS = {"profile": Target.PROFILE, "semantics": Target.SEMANTICS}
-_CHOICES = {Target.PROFILE: ("fixed", "rebeca"), Target.SEMANTICS: ("ros", "rebeca")}
+_OPTIONS = {"semantics": Target.SEMANTICS}
+_CHOICES = {Target.SEMANTICS: ("ros", "rebeca")}
 _NAME = re.compile(r"^(\*\.|check\.|[A-Za-z_][\w/-]*\.)?[A-Za-z_]\w*$")
 _NUMBER = r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?"
 _RANGE = re.compile(rf"^({_NUMBER}):({_NUMBER}):({_NUMBER})$")

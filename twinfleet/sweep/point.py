@@ -90,21 +90,19 @@ def _checked(settings: SweepSettings, point: Point, name: str) -> PointResult:
 
     values = dict(settings.fixed + point)
     targets = dict(settings.targets)
-    chosen = {t: next((values[n] for n, tt in targets.items() if tt is t), None)
-              for t in (Target.PROFILE, Target.SEMANTICS)}
+    semantics = next((values[n] for n, t in targets.items() if t is Target.SEMANTICS), None)
     params = node_overrides(settings.scenario, settings.fixed + point, targets)
     trace_out = None
     if settings.trace_dir and name:
         trace_out = str(Path(settings.trace_dir) / f"{name}.trace.json")
-    options = CheckOptions(**settings.check.fields(), profile=chosen[Target.PROFILE], semantics=chosen[Target.SEMANTICS],
+    options = CheckOptions(**settings.check.fields(), semantics=semantics,
                            params=tuple(params), trace_out=trace_out)
     check_block = {n.removeprefix("check."): v for n, v in settings.fixed + point
                    if targets[n] is Target.CHECK}
     scenario: Any = settings.scenario
     if check_block:  # a changed check: block makes a scenario built here, not a file's
         scenario = with_check(settings.scenario, params, check_block, options)
-        options = dataclasses.replace(options, params=(), trace_out=None, profile=None,
-                                      semantics=None)
+        options = dataclasses.replace(options, params=(), trace_out=None, semantics=None)
     result = check(scenario, options)
     stats = result.statistics
     steps = (result.trace or {}).get("steps")
@@ -125,9 +123,8 @@ def with_check(path: str, params: Sequence[str], block: Mapping[str, Any],
 
     doc = parse_yaml(Path(path).read_text())
     overrides: dict[str, Any] = {"check": {**(doc.get("check") or {}), **block}}
-    for key in ("profile", "semantics"):
-        if getattr(options, key) is not None:
-            overrides[key] = getattr(options, key)
+    if options.semantics is not None:
+        overrides["semantics"] = options.semantics
     return load_with_params(path, params, overrides)
 
 

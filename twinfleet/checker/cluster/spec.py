@@ -32,7 +32,6 @@ class SystemSpec:
     """How to build the system of a check on another machine (picklable)."""
 
     scenario: str  # an absolute path to the scenario file
-    profile: str | None
     semantics: str | None
     params: tuple[str, ...]
     flags: tuple[tuple[str, Any], ...]  # System's search flags (debug_state, verify...)
@@ -47,8 +46,7 @@ class SystemSpec:
         from twinfleet.checker.reduction import plan
         from twinfleet.runtime.scenario.overrides import load
 
-        scenario = load(self.scenario, profile=self.profile, semantics=self.semantics,
-                        params=self.params)
+        scenario = load(self.scenario, semantics=self.semantics, params=self.params)
         props = PropertySet.from_scenario(scenario)
         extra = {} if self.latency is None else {"latency": self.latency,
                                                  "topic_latency": self.topic_latency}

@@ -10,6 +10,7 @@ __all__ = [
     "messages",
     "names",
     "node",
+    "params",
     "scene",
     "snapshot",
     "tracefile",

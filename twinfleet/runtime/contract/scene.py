@@ -3,7 +3,7 @@
 The framework's viewers (`twinfleet view`, `twinfleet foxglove`, `twinfleet
 export`) know no message type of any fleet. They list every topic whatever
 it carries; to draw a picture they ask the fleet's scene, an object the
-scenario names by import name (``scene: twinfleet.nodes.scene:RobotScene``)
+scenario names by import name (``scene: mypkg.drawing:MyScene``)
 that turns what the fleet publishes, and in a checker trace the node states,
 into the small frozen values below. A fleet without a scene is shown as its
 topics only.

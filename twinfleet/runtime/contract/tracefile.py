@@ -117,7 +117,6 @@ _TOP: dict[str, Any] = {
     "scenario": lambda v: v is None or isinstance(v, str),
     "params": lambda v: v is None or (isinstance(v, list) and all(isinstance(p, str) for p in v)),
     "semantics": lambda v: v in ("ros", "rebeca"),
-    "profile": lambda v: v is None or isinstance(v, str),
     "latency": lambda v: v is None or (_ints(v) and len(v) == 2),
     "topic_latency": lambda v: v is None or (isinstance(v, list) and all(
         isinstance(e, list) and len(e) == 2 and isinstance(e[0], str) and _ints(e[1])

@@ -30,7 +30,6 @@ from pathlib import Path
 from typing import Any, TextIO, final
 
 import msgpack
-import yaml
 
 from twinfleet.runtime.access import fleetauth
 from twinfleet.runtime.contract.messages import DecodeError, decode
@@ -53,6 +52,7 @@ from twinfleet.runtime.host.keys import (
     topic_key,
 )
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
+from twinfleet.runtime.scenario.files import largest_file_bytes
 from twinfleet.runtime.scenario.scenario_file import write_scenario
 from twinfleet.runtime.scenario.spec import NodeConfig, Scenario
 
@@ -393,15 +393,12 @@ def local_endpoint(listen: str) -> str:
 
 def scenario_payload_limit(scenario: Scenario) -> int:
     """The per-topic payload limit of a fleet: `live.max_payload_bytes`, else sized to the
-    scenario's map (the occupancy grid is the largest message: `guard.payload_limit`)."""
+    largest file its nodes read (a grid read from one is the largest message a node sends
+    whole: `guard.payload_limit`, one byte per cell)."""
     configured = scenario.live.max_payload_bytes
-    if configured is not None or scenario.map_path is None:
+    cells = largest_file_bytes(scenario)
+    if configured is not None or not cells:
         return payload_limit(0, 0, configured)
-    cells = 0
-    with contextlib.suppress(OSError, ValueError, TypeError, AttributeError):
-        doc = yaml.safe_load(scenario.map_path.read_text())
-        image = scenario.map_path.parent / str(doc["image"])
-        cells = image.stat().st_size  # a binary PGM: one byte per cell, plus its header
     return payload_limit(cells, 1)
 
 

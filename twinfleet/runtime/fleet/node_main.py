@@ -123,8 +123,6 @@ def parse_args(argv: Sequence[str] | None) -> argparse.Namespace:
                    help="seconds allowed for closing Zenoh before the process is forced out")
     p.add_argument("--record-events", default=None, metavar="FILE",
                    help="append every dispatched event to FILE as JSON lines, flushed per line")
-    p.add_argument("--profile", default=None,
-                   help="override the scenario's behaviour profile, as `check --profile` does")
     p.add_argument(PARAM_FLAG, action="append", default=[], metavar="[NODE.]NAME=VALUE",
                    help="parameter override, as `twinfleet launch --param` (repeatable)")
     p.add_argument("--report", choices=("states", "failures"), default=None,
@@ -262,8 +260,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     die_with_parent()
     args = parse_args(argv)
     try:
-        scenario = load_with_params(args.scenario, args.param,
-                                    {"profile": args.profile} if args.profile else None)
+        scenario = load_with_params(args.scenario, args.param)
         scenario.node(args.node)
     except ScenarioError as exc:
         print(f"error: {exc}", file=sys.stderr)

@@ -6,6 +6,7 @@ Imports only the contract.
 __all__ = [
     "config",
     "examples",
+    "files",
     "lint",
     "overrides",
     "params",

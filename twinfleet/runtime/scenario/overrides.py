@@ -148,13 +148,11 @@ def _check_node_overrides(scenario: Scenario, params: Sequence[str]) -> None:
                 f"(it has: {', '.join(known) or 'none'}){did_you_mean(name, known)}")
 
 
-def load(path: str | Path, *, profile: str | None = None, semantics: str | None = None,
+def load(path: str | Path, *, semantics: str | None = None,
          params: Sequence[str] = ()) -> Scenario:
-    """Load a scenario as `check` does: optional profile/semantics overrides and parameter
+    """Load a scenario as `check` does: an optional semantics override and parameter
     overrides (``r1.speed:=0.4``, validated as `launch` validates them)."""
     overrides: dict[str, Any] = {}
-    if profile is not None:
-        overrides["profile"] = profile
     if semantics is not None:
         overrides["semantics"] = semantics
     return load_with_params(path, params, overrides)

@@ -1,10 +1,11 @@
 """Node parameters from scenario values: a frozen `Params` dataclass, checked by its hints.
 
 A scenario gives a node's parameters as YAML values (or Python values of the
-same shapes); `build_params` merges them with the scenario's common `params:`
-and context (map, profile), checks every value against the field's type hint
-(lists become tuples for tuple fields, ints become floats for float fields)
-and builds the dataclass. Errors are `ConfigError`s naming the key.
+same shapes); `build_params` merges them with the scenario's common `params:`,
+checks every value against the field's type hint (lists become tuples for tuple
+fields, ints become floats for float fields), reads a file parameter
+(`runtime.contract.params.file_param`) relative to the scenario's folder and
+builds the dataclass. Errors are `ConfigError`s naming the key.
 """
 
 from __future__ import annotations
@@ -13,8 +14,10 @@ import dataclasses
 import types
 import typing
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any, NoReturn
 
+from twinfleet.runtime.contract.params import file_fields
 from twinfleet.runtime.scenario.config import ConfigError
 from twinfleet.runtime.scenario.suggest import did_you_mean
 
@@ -24,14 +27,14 @@ def _fail(key: str, what: str) -> NoReturn:
 
 
 def build_params(params_cls: type, given: Mapping[str, Any], common: Mapping[str, Any],
-                 context: Mapping[str, Any], where: str) -> Any:
+                 base: Path, where: str) -> Any:
     """Build a frozen Params dataclass from scenario values, checking names and types.
 
     Args:
         params_cls: the node class's `Params` dataclass.
         given: the node's own values (unknown names are errors).
         common: the scenario's `params:`, used for the fields the class has.
-        context: values the scenario provides (map, profile), used likewise.
+        base: the folder relative file parameters are read from (the scenario file's).
         where: the key errors name, e.g. ``nodes[1].params``.
 
     Raises:
@@ -43,11 +46,13 @@ def build_params(params_cls: type, given: Mapping[str, Any], common: Mapping[str
             expected = ", ".join(fields) or "no parameters"
             _fail(f"{where}.{key}", f"unknown parameter of {params_cls.__name__}; expected "
                   f"{expected}{did_you_mean(key, fields)}")
-    values = {k: v for k, v in context.items() if k in fields and v is not None}
-    values.update({k: v for k, v in common.items() if k in fields})
+    values = {k: v for k, v in common.items() if k in fields}
     values.update(given)
     hints = typing.get_type_hints(params_cls)
     converted = {k: _convert(v, hints.get(k, Any), f"{where}.{k}") for k, v in values.items()}
+    for name in file_fields(params_cls):
+        if isinstance(converted.get(name), str):
+            converted[name] = _file(base, converted[name], f"{where}.{name}")
     missing = [f.name for f in fields.values() if f.name not in converted
                and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING]
     if missing:
@@ -56,6 +61,15 @@ def build_params(params_cls: type, given: Mapping[str, Any], common: Mapping[str
         return params_cls(**converted)
     except (TypeError, ValueError) as exc:
         _fail(where, str(exc))
+
+
+def _file(base: Path, value: str, key: str) -> str:
+    """A file parameter's path, absolute: node processes and the checker read the same file
+    wherever they run."""
+    path = (base / value).resolve()
+    if not path.is_file():
+        _fail(key, f"file {path} does not exist")
+    return str(path)
 
 
 def _convert(value: Any, hint: Any, key: str) -> Any:

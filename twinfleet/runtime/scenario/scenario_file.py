@@ -47,10 +47,8 @@ def importable_class_path(cls: type, where: str) -> str:
 def to_document(scenario: Scenario) -> dict[str, Any]:
     """The scenario as a YAML mapping that loads back to an equal scenario."""
     doc: dict[str, Any] = {"name": scenario.name, "fleet": scenario.fleet,
-                           "description": scenario.description, "profile": scenario.profile,
+                           "description": scenario.description,
                            "semantics": scenario.semantics, "seed": scenario.seed}
-    if scenario.map_path is not None:
-        doc["map"] = str(scenario.map_path)
     if scenario.scene is not None:
         doc["scene"] = scenario.scene
     doc["nodes"] = [_node(i, cfg, scenario.source) for i, cfg in enumerate(scenario.nodes)]

@@ -4,21 +4,21 @@ YAML layout (every key but `nodes` optional)::
 
     name: c1a                      # also the Zenoh fleet name unless `fleet:` is given
     description: free text
-    map: ../maps/map50.yaml        # relative to this file; given to nodes whose Params has `map`
-    profile: fixed                 # robot behaviour: fixed | rebeca
     semantics: ros                 # checker message rules: ros | rebeca
     seed: 1                        # live randomness (ctx.choose)
-    scene: twinfleet.nodes.scene:RobotScene   # how viewers draw the fleet (runtime.contract.scene)
-    params: {scan_rate_ms: 100}    # merged into every node whose Params has the field
+    scene: mypkg.drawing:MyScene   # how viewers draw the fleet (runtime.contract.scene)
+    params:                        # merged into every node whose Params has the field
+      period_ms: 100
+      layout: ../data/layout.yaml  # a file parameter (file_param): relative to this file
     nodes:
-      - name: r1
-        class: twinfleet.nodes.robot:Robot   # module:Class, a subclass of twinfleet.Node
-        namespace: /r1             # default: root
+      - name: w1
+        class: mypkg.worker:Worker # module:Class, a subclass of twinfleet.Node
+        namespace: /w1             # default: root
         priority: 3                # node-instance priority (checker, rebeca semantics)
         respawn: false             # live: restart the process if it dies
         params: {start: [5, 5], goal: [45, 45]}
     properties:                    # see twinfleet/checker/properties.py for the kinds
-      - {name: no_collision, kind: invariant, expr: "map_server.collisions == 0"}
+      - {name: bounded, kind: invariant, expr: "w1.done <= 3"}
     check:                         # checker settings, all optional (twinfleet/checker/faults.py has details)
       max_states: 100000           # also max_depth, max_time_s, search: bfs|dfs|random
       latency: [0, 0]              # delivery delay branches, or {default: [a, b], /topic: [a, b]}
@@ -90,12 +90,11 @@ from twinfleet.runtime.scenario.property_eval import ExpressionError, parse_expr
 from twinfleet.runtime.scenario.scenes import SceneError, load_scene
 from twinfleet.runtime.scenario.suggest import did_you_mean
 
-PROFILES = ("fixed", "rebeca")
 SEMANTICS = ("ros", "rebeca")
 PROPERTY_KINDS = ("invariant", "no_failure", "deadlock", "quiescence", "eventually", "within")
 MAX_NODES = 100  # default of live.max_nodes: each node is one OS process live
-_TOP_KEYS = {"name", "fleet", "description", "map", "profile", "semantics", "seed", "params",
-             "nodes", "properties", "check", "live", "scene", "ros2"}
+_TOP_KEYS = {"name", "fleet", "description", "semantics", "seed", "params", "nodes",
+             "properties", "check", "live", "scene", "ros2"}
 _NODE_KEYS = {"name", "class", "namespace", "priority", "respawn", "params"}
 _PROPERTY_KEYS = {"name", "kind", "expr", "within_ms"}
 
@@ -173,8 +172,6 @@ class Scenario:
     name: str
     fleet: str
     description: str
-    map_path: Path | None
-    profile: str
     semantics: str
     seed: int
     nodes: tuple[NodeConfig, ...]
@@ -201,18 +198,15 @@ class Scenario:
               properties: Sequence[PropertyConfig | Mapping[str, Any]] = (),
               check: CheckConfig | Mapping[str, Any] | None = None,
               live: LiveConfig | Mapping[str, Any] | None = None,
-              map_path: str | Path | None = None, profile: str = PROFILES[0],
               semantics: str = SEMANTICS[0], seed: int = 0,
               params: Mapping[str, Any] | None = None, fleet: str | None = None,
               description: str = "", scene: str | None = None) -> Scenario:
-        """A scenario from Python values, checked as a file is (`map_path` relative to the
-        working directory); the keywords are the YAML keys."""
+        """A scenario from Python values, checked as a file is (file parameters relative to
+        the working directory); the keywords are the YAML keys."""
         doc: dict[str, Any] = {"name": name, "nodes": list(nodes), "properties": list(properties),
-                               "profile": profile, "semantics": semantics, "seed": seed,
+                               "semantics": semantics, "seed": seed,
                                "description": description, "check": check, "live": live,
                                "params": dict(params or {})}
-        if map_path is not None:
-            doc["map"] = str(map_path)
         if fleet is not None:
             doc["fleet"] = fleet
         if scene is not None:
@@ -242,7 +236,7 @@ def resolve_scenario(spec: str | Path) -> Path:
 
 def load_scenario(path: str | Path, overrides: Mapping[str, Any] | None = None) -> Scenario:
     """Read and validate a scenario file (or shipped example, `resolve_scenario`);
-    `overrides` replace top-level keys (e.g. profile)."""
+    `overrides` replace top-level keys (e.g. semantics)."""
     path = resolve_scenario(path)
     try:
         doc = parse_yaml(path.read_text())
@@ -311,6 +305,11 @@ def user_import_path(scenario_dir: Path) -> None:
 def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
     """Validate a scenario mapping read from `path` (None: built in Python, `Scenario.build`)."""
     err = _Errors(str(path) if path is not None else python_source(doc.get("name", "?")))
+    for key in doc:  # a word close to a key is a typo; another, a node parameter put at the
+        # top (as old files did)
+        if key not in _TOP_KEYS and not did_you_mean(str(key), _TOP_KEYS):
+            err.fail(key, f"unknown key; expected one of {', '.join(sorted(_TOP_KEYS))} (a "
+                          f"parameter of the nodes goes under params:, as params: {{{key}: ...}})")
     err.unknown_keys(doc, _TOP_KEYS, "")
     name = _get(doc, "name", str, err, default=path.stem if path is not None else ...)
     fleet = _get(doc, "fleet", str, err, default=name.replace("-", "_"))
@@ -318,21 +317,14 @@ def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
         validate_token(fleet, "fleet")
     except InvalidName as exc:
         err.fail("fleet" if "fleet" in doc else "name", str(exc))
-    profile = _choice(doc, "profile", PROFILES, err)
     semantics = _choice(doc, "semantics", SEMANTICS, err)
-    map_path = None
-    if "map" in doc:
-        base = path.parent if path is not None else Path()
-        map_path = (base / _get(doc, "map", str, err)).resolve()
-        if not map_path.is_file():
-            err.fail("map", f"file {map_path} does not exist")
     common = _get(doc, "params", dict, err, default={})
     raw_nodes = doc.get("nodes")
     if not isinstance(raw_nodes, list) or not raw_nodes:
         err.fail("nodes", "expected a non-empty list of nodes")
     _check_node_count(len(raw_nodes), doc.get("live"), err)
-    context = {"map": str(map_path) if map_path else None, "profile": profile}
-    nodes = tuple(_node(i, n, common, context, err) for i, n in enumerate(raw_nodes))
+    base = path.parent if path is not None else Path()
+    nodes = tuple(_node(i, n, common, base, err) for i, n in enumerate(raw_nodes))
     _check_common_params(common, nodes, err)
     names = [n.name for n in nodes]
     for dup in sorted({n for n in names if names.count(n) > 1}):
@@ -355,7 +347,7 @@ def parse_scenario(doc: Mapping[str, Any], path: Path | None) -> Scenario:
                                     "scenario)")
     return Scenario(path=path, name=name, fleet=fleet,
                     description=_get(doc, "description", str, err, default=""),
-                    map_path=map_path, profile=profile, semantics=semantics,
+                    semantics=semantics,
                     seed=_get(doc, "seed", int, err, default=0), nodes=nodes,
                     properties=props, check=check, live=live, scene=_scene(doc, err),
                     ros2=_checked(ros2_config, err, doc["ros2"]) if "ros2" in doc else None)
@@ -437,8 +429,7 @@ def _choice(doc: Mapping[str, Any], key: str, options: tuple[str, ...], err: _Er
     return value
 
 
-def _node(i: int, raw: Any, common: Mapping[str, Any], context: Mapping[str, Any],
-          err: _Errors) -> NodeConfig:
+def _node(i: int, raw: Any, common: Mapping[str, Any], base: Path, err: _Errors) -> NodeConfig:
     where = f"nodes[{i}]."
     if isinstance(raw, NodeEntry):
         raw = raw.as_mapping()
@@ -460,7 +451,7 @@ def _node(i: int, raw: Any, common: Mapping[str, Any], context: Mapping[str, Any
                                      for f in dataclasses.fields(given)}
     else:
         raw_params = _get(raw, "params", dict, err, default={}, where=where)
-        params = _checked(build_params, err, cls.Params, raw_params, common, context,
+        params = _checked(build_params, err, cls.Params, raw_params, common, base,
                           where + "params")
     return NodeConfig(name=name, cls=cls, class_path=class_path, namespace=namespace,
                       priority=_get(raw, "priority", int, err, default=0, where=where),

@@ -345,11 +345,11 @@ def _natural(name: str) -> tuple[Any, ...]:
 def trace_document(path: str | Path) -> dict[str, Any]:
     """The page's view of a checker trace: the map, the node states and each step's changes,
     and what the scenario's scene draws at each step (`frames`)."""
+    from twinfleet.runtime.scenario.overrides import load_with_params
     from twinfleet.runtime.scenario.scenes import load_scene
-    from twinfleet.runtime.scenario.spec import load_scenario
 
     trace = load_trace(path)
-    scenario = load_scenario(trace["scenario"], {"profile": trace.get("profile", "fixed")})
+    scenario = load_with_params(trace["scenario"], trace.get("params") or ())
     scene = load_scene(scenario.scene) if scenario.scene else None
     initial: Mapping[str, Any] = trace["initial"]["states"]
     keep = ("index", "time", "node", "handler", "kind", "args", "changed", "logs", "failure",

@@ -38,10 +38,11 @@ from twinfleet.runtime.contract.messages import encode
 from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, free_port, run_fleet
 from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
+from twinfleet.runtime.scenario.files import with_absolute_files
 from twinfleet.runtime.scenario.overrides import load_with_params, overrides_doc
 from twinfleet.runtime.scenario.spec import Scenario, load_scenario
 
-REPORT_FACTORY = "twinfleet.agreement.live:timed_report_for"
+REPORT_FACTORY = "twinfleet.robots.live:timed_report_for"
 _HOOK: ContextVar[Callable[[TimedReport], None] | None] = ContextVar("agreement_report_hook",
                                                                     default=None)
 
@@ -180,8 +181,8 @@ class LiveRunResult:
 
 def private_copy(scenario: Scenario, directory: str | Path,
                  params: Sequence[str] = ()) -> Scenario:
-    """The scenario loaded from a copy in `directory`, its map path made absolute (and the
-    parameter overrides `params` written into it, `runtime.scenario.overrides`).
+    """The scenario loaded from a copy in `directory`, its file parameters made absolute
+    (and the parameter overrides `params` written into it, `runtime.scenario.overrides`).
 
     Node processes are started with the scenario's path on their command line,
     and test suites find (and kill) a fleet's processes by that path; a copy
@@ -190,13 +191,12 @@ def private_copy(scenario: Scenario, directory: str | Path,
     """
     doc = yaml.safe_load(Path(scenario.path).read_text())
     if params:  # validated as every command validates them, then written in
-        load_with_params(scenario.path, params)
+        scenario = load_with_params(scenario.path, params)
         doc.update(overrides_doc(Path(scenario.path), params))
-    if scenario.map_path is not None:
-        doc["map"] = str(scenario.map_path)
+    doc = with_absolute_files(doc, scenario)
     out = Path(directory) / Path(scenario.path).name
     out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(f"# Copy of {scenario.path} for live runs (map path made absolute).\n"
+    out.write_text(f"# Copy of {scenario.path} for live runs (file parameters made absolute).\n"
                    + yaml.safe_dump(doc, sort_keys=False))
     return load_scenario(out)
 

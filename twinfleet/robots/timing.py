@@ -11,7 +11,7 @@ so a live run is compared per robot from its own start (`LiveRunResult.durations
 from __future__ import annotations
 
 import random
-from collections.abc import Iterable, Mapping
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, final
@@ -19,15 +19,27 @@ from typing import Any, final
 from twinfleet.checker.choices import RandomChooser
 from twinfleet.checker.driver import load
 from twinfleet.checker.system import System
+from twinfleet.nodes.map_server import MapServerParams
+from twinfleet.nodes.robot import RobotParams
 from twinfleet.runtime.scenario.spec import Scenario
 
 
 def robot_names(scenario: Scenario) -> tuple[str, ...]:
     """The robots the map server tracks (its `robots` parameter), else ()."""
-    for cfg in scenario.nodes:
-        if hasattr(cfg.params, "robots") and hasattr(cfg.params, "map"):
-            return tuple(cfg.params.robots)
-    return ()
+    server = map_server(scenario)
+    return () if server is None else tuple(server.robots)
+
+
+def map_server(scenario: Scenario) -> MapServerParams | None:
+    """The parameters of the scenario's map server, if it has one."""
+    return next((cfg.params for cfg in scenario.nodes
+                 if isinstance(cfg.params, MapServerParams)), None)
+
+
+def robot_profile(scenario: Scenario) -> str:
+    """The behaviour profile of the scenario's robots (the first robot's; "" without one)."""
+    return next((cfg.params.profile for cfg in scenario.nodes
+                 if isinstance(cfg.params, RobotParams)), "")
 
 
 @final
@@ -41,19 +53,20 @@ class Prediction:
 
 
 def predicted_arrivals(path: str | Path, *, seed: int = 0, semantics: str | None = None,
-                       profile: str | None = None, max_steps: int = 200_000,
+                       params: Sequence[str] = (), max_steps: int = 200_000,
                        horizon_ms: int = 180_000) -> Prediction:
     """Arrival times on one seeded random path of the checker's transition relation.
 
     Args:
         path: scenario file.
         seed: seed of the walk's choices.
-        semantics, profile: overrides of the scenario's settings.
+        semantics: an override of the scenario's; params: parameter overrides
+            (``profile=rebeca``).
         max_steps: give up after this many transitions,
         horizon_ms: or once logical time passes this (robots that never arrive keep the
             scan loop going for ever).
     """
-    scenario = load(path, profile=profile, semantics=semantics)
+    scenario = load(path, semantics=semantics, params=params)
     system = System(scenario)
     robots = {system.index[name]: name for name in robot_names(scenario)}
     rng = random.Random(seed)

@@ -2,18 +2,18 @@
 
 For each scenario `run_experiment` runs the checker once per semantics
 (counterexample traces under `OUT/traces/`), predicts P(a live run passes)
-from simulations under a timing model (`agreement.prediction`), then N live runs one after
+from simulations under a timing model (`robots.prediction`), then N live runs one after
 another in this process (seeds S, S+1, …; the nodes' output goes to
 `OUT/logs/<case>.live.log`; the fleets run a copy of the scenario file in
-`OUT/scenarios/`, see `agreement.live.private_copy`), and fills one
-`agreement.table.Row`. The table
+`OUT/scenarios/`, see `robots.live.private_copy`), and fills one
+`robots.table.Row`. The table
 is written as `experiment.md`, `experiment.csv` and `experiment.json` (every
 run's arrival times and collisions too) after every scenario and once more at
 the end, also when Ctrl-C stopped the experiment: what was done is kept, a
 half-done scenario shows "stopped after k of N". A finished scenario is
-kept in `OUT/cases/` (`agreement.resume`): the same command run again skips it.
+kept in `OUT/cases/` (`robots.resume`): the same command run again skips it.
 
-Live runs end as soon as their outcome is known (`agreement.live`), or after
+Live runs end as soon as their outcome is known (`robots.live`), or after
 `startup_s + horizon_s / time_scale` wall seconds: `horizon_s` fleet seconds
 is far beyond any arrival of the paper's cases (the slowest robot of C1a
 arrives after about 50 s).
@@ -31,15 +31,21 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO, final
 
-from twinfleet.agreement import DEFAULT_TIME_SCALE
-from twinfleet.agreement.live import LiveRunResult, live_run, private_copy
-from twinfleet.agreement.paper import paper_row
-from twinfleet.agreement.resume import FinishedCase, fingerprint, load_case, save_case
-from twinfleet.agreement.table import CheckCell, LiveSummary, Row, csv_record, to_csv, to_markdown
-from twinfleet.agreement.timing import arrival_errors, predicted_arrivals, robot_names, summarise
 from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.checker.options import Semantics
 from twinfleet.checker.outcome import INTERRUPTED_REASON, SearchStatistics
+from twinfleet.robots import DEFAULT_TIME_SCALE
+from twinfleet.robots.live import LiveRunResult, live_run, private_copy
+from twinfleet.robots.paper import paper_row
+from twinfleet.robots.resume import FinishedCase, fingerprint, load_case, save_case
+from twinfleet.robots.table import CheckCell, LiveSummary, Row, csv_record, to_csv, to_markdown
+from twinfleet.robots.timing import (
+    arrival_errors,
+    predicted_arrivals,
+    robot_names,
+    robot_profile,
+    summarise,
+)
 from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.scenario.overrides import load_with_params
 from twinfleet.runtime.scenario.spec import Scenario, ScenarioError
@@ -162,7 +168,7 @@ def scenario_row(path: str | Path, scenario: Scenario) -> Row:
             scan = getattr(cfg.params, "scan_rate_ms", None)
         elif cfg.name in robots:
             params.append((cfg.name, float(cfg.params.speed), int(cfg.params.max_wait_ms)))
-    return Row(case=scenario.name, scenario=str(path), profile=scenario.profile, scan_ms=scan,
+    return Row(case=scenario.name, scenario=str(path), profile=robot_profile(scenario), scan_ms=scan,
                robots=tuple(params), paper=paper_row(scenario.name))
 
 
@@ -239,7 +245,7 @@ def _take_kept(exp: Experiment, kept: FinishedCase) -> None:
 
 def _predict(exp: Experiment, row: Row, path: str | Path,
              progress: Callable[[str], None]) -> None:
-    from twinfleet.agreement.prediction import predict
+    from twinfleet.robots.prediction import predict
 
     opts = exp.options
     if opts.predict <= 0:

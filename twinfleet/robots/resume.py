@@ -20,9 +20,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, final
 
-from twinfleet.agreement.live import LiveRunResult
-from twinfleet.agreement.paper import paper_row
-from twinfleet.agreement.table import CheckCell, LiveSummary, Prediction, Row
+from twinfleet.robots.live import LiveRunResult
+from twinfleet.robots.paper import paper_row
+from twinfleet.robots.table import CheckCell, LiveSummary, Prediction, Row
 
 CASE_FORMAT = "twinfleet-experiment-case/1"
 

@@ -10,7 +10,7 @@ collision, every robot arrived within the horizon, no handler failure (and
 any other property of the scenario — a robot past its failure limit gives up
 and does not arrive, which a live run counts as a failure too).
 
-`Prediction.agreement_p` (in `agreement.table`) holds the live k/N against
+`Prediction.agreement_p` (in `robots.table`) holds the live k/N against
 the predicted interval (`checker.estimate.agreement_p_value`): 1 when k/N
 lies inside it, small when the counts and the prediction disagree.
 """
@@ -20,10 +20,10 @@ from __future__ import annotations
 import time
 from pathlib import Path
 
-from twinfleet.agreement.table import Prediction
 from twinfleet.checker.options import Semantics
 from twinfleet.checker.statistical import StatisticalOptions, check_statistical
 from twinfleet.checker.timing import load_timing, save_timing
+from twinfleet.robots.table import Prediction
 
 
 def predict(scenario: str | Path, *, timing: str | None, time_scale: float, simulations: int,

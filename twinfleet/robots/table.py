@@ -17,7 +17,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import final
 
-from twinfleet.agreement.paper import PaperRow
+from twinfleet.robots.paper import PaperRow
 from twinfleet.runtime.contract.kinds import Status
 
 

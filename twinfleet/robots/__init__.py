@@ -1,0 +1,26 @@
+"""The robot case study on twinfleet's public API: the paper's experiment.
+
+The robots themselves are node code (`twinfleet.nodes`: the robot and map server nodes,
+their messages, maps and scene; the scenarios under `twinfleet/launch`). What lies here
+measures them, on the checker, the agreement layer and the live fleet, as any
+application could: `run_experiment` (the paper's Table 4/5 for any scenarios: checker
+verdicts and counts per semantics plus N live runs), `live_run` (one live fleet with
+arrival times and early stop), `predicted_arrivals` (the checker's logical arrival
+times on one path), the discretization study, and `robots.commands.register` for the
+`twinfleet experiment` command. Nothing below the command line imports this package.
+"""
+
+from twinfleet.robots.paper import PAPER, PaperRow, paper_row
+from twinfleet.robots.table import CheckCell, LiveSummary, Row
+
+#: The live time scale the experiment uses unless told otherwise: the fastest scale at
+#: which every measured live run stayed on the checker's path
+#: (`benchmarks/agreement_timescale.py`, docs/experiment.md).
+DEFAULT_TIME_SCALE = 2.0
+
+#: the package of the robots' example scenarios (package data, beside their maps), which the
+#: command line and the testing API add to the names scenarios resolve (`add_examples`)
+EXAMPLES = "twinfleet.launch"
+
+__all__ = ["DEFAULT_TIME_SCALE", "EXAMPLES", "PAPER", "CheckCell", "LiveSummary", "PaperRow", "Row",
+           "paper_row"]
