@@ -6,7 +6,9 @@ Checked on the source, grep-style (docs/design.md §1, docs/robots.md §9):
   are the robot nodes' own parameters;
 - no robot type (node, parameter, message, scene or report class of the robots) is named
   outside the robots' packages, `twinfleet/nodes/` (their node code) and
-  `twinfleet/robots/` (their experiment).
+  `twinfleet/robots/` (their experiment);
+- no code reads a reason as English (`reason.startswith(`): what ended a run is an
+  `EndReason`, why a call failed a `CallFailure`.
 """
 
 from __future__ import annotations
@@ -71,3 +73,10 @@ def test_the_scenario_checks_see_a_key_line(tmp_path):
     assert [line for line in old.splitlines() if re.search(r"\b(map|profile)\s*:", line)] == [
         "map: ../maps/map50.yaml", "profile: fixed"]
 
+
+
+def test_no_reason_is_parsed_as_english():
+    found = [f"{path.relative_to(ROOT)}:{n}" for path in _sources(PACKAGE)
+             for n, line in enumerate(path.read_text().splitlines(), 1)
+             if "reason.startswith(" in line]
+    assert found == []

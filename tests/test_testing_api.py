@@ -12,6 +12,7 @@ from tests.checker.models import Ping, Pong
 from tests.support import child_env
 from twinfleet import testing
 from twinfleet.cli import main
+from twinfleet.runtime.fleet.fleet_result import EndReason
 
 pytestmark = pytest.mark.timeout(60)
 
@@ -122,3 +123,4 @@ def test_run_live_publishes_into_the_fleet_and_times_out_clearly(monkeypatch):
 
     result = testing.run_live("demo", talk, time_scale=5, timeout_s=30)
     assert result.ok and result.reason == "the test finished"
+    assert result.end is EndReason.DRIVER

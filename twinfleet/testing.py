@@ -275,14 +275,14 @@ class LiveFleet:
             return found.result()
         found.cancel()
         if ended in done:
-            raise RuntimeError(f"fleet {self.name} ended ({ended.result()}) before a message "
+            raise RuntimeError(f"fleet {self.name} ended ({ended.result().detail}) before a message "
                                f"on {topic} came")
         raise TimeoutError(f"no matching message on {topic} within {timeout_s:g} s "
                            f"({len(self._heard[topic])} others arrived)")
 
     async def ended(self) -> str:
-        """Wait until the run ends by itself; why it ended."""
-        return await asyncio.shield(self._fleet.ended)
+        """Wait until the run ends by itself; why it ended, in words."""
+        return (await asyncio.shield(self._fleet.ended)).detail
 
     def publish(self, topic: str, msg: Any) -> None:
         """Publish `msg` on `topic` (absolute name) into the fleet, as node "test"."""

@@ -90,13 +90,13 @@ def test_statistical_prints_the_estimate_so_far_and_writes_its_traces(tmp_path, 
     assert sorted(p.name for p in out_dir.iterdir())  # the violating traces are written
 
 
-@pytest.mark.parametrize(("reason", "code"), [("SIGINT received", 130),
-                                              ("SIGTERM received", 143),
-                                              ("timeout after 5 s", 0)])
-def test_launch_reports_sigterm_as_143(reason, code):
-    from twinfleet.runtime.fleet.fleet_result import FleetResult
+@pytest.mark.parametrize(("end", "reason", "code"), [
+    ("interrupted", "SIGINT received", 130), ("terminated", "SIGTERM received", 143),
+    ("timeout", "timeout after 5 s", 0)])
+def test_launch_reports_sigterm_as_143(end, reason, code):
+    from twinfleet.runtime.fleet.fleet_result import EndReason, FleetResult
 
-    assert FleetResult("f", "tcp/127.0.0.1:7447", reason, {}, ()).exit_code == code
+    assert FleetResult("f", "tcp/127.0.0.1:7447", reason, EndReason(end), {}, ()).exit_code == code
 
 
 @SLOW

@@ -282,6 +282,7 @@ def test_run_fleet_as_a_library_with_respawn_and_summary(tmp_path: Path) -> None
     import io
 
     from twinfleet.runtime.contract.messages import String
+    from twinfleet.runtime.fleet.fleet_result import EndReason
     from twinfleet.runtime.fleet.launcher import run_fleet
     from twinfleet.runtime.scenario.spec import load_scenario
 
@@ -296,6 +297,7 @@ def test_run_fleet_as_a_library_with_respawn_and_summary(tmp_path: Path) -> None
         40))
     text = out.getvalue()
     assert result.reason == "timeout after 6 s", text
+    assert result.end is EndReason.TIMEOUT and not result.interrupted
     assert result.restarts["crasher"] >= 1, text
     assert "[launcher] respawning crasher (restart 1)" in text
     assert result.exit_codes["talker"] == 0 and "talker" not in result.failed

@@ -67,7 +67,7 @@ from twinfleet.runtime.contract.messages import DecodeError, decode
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.contract.tracefile import TraceError, code_changes, load_trace
 from twinfleet.runtime.core.eventlog import payload_digest, state_digest, summarise
-from twinfleet.runtime.fleet.fleet_result import signal_exit_code
+from twinfleet.runtime.fleet.fleet_result import EndReason, signal_exit_code
 from twinfleet.runtime.fleet.launcher import Fleet, format_result, run_fleet
 from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key, parse_node_key, topic_key
 from twinfleet.runtime.host.transport import Transport
@@ -144,6 +144,7 @@ class LiveReplayResult:
     replay_s: float = 0.0
     wall_s: float = 0.0
     fleet_reason: str = ""
+    fleet_end: EndReason | None = None  # what ended the replay's fleet
 
     @property
     def collisions_match(self) -> bool:
@@ -444,7 +445,7 @@ async def replay_live(trace_path: str | Path, *, out: TextIO = sys.stdout,
                             handle_signals=handle_signals, record_events=events,
                             node_args=("--gate",), driver=coordinator,
                             params=p.trace.get("params") or ())  # the overrides checked
-    result.fleet_reason = fleet.reason
+    result.fleet_reason, result.fleet_end = fleet.reason, fleet.end
     for line in format_result(fleet):
         print(f"[launcher] {line}", file=out, flush=True)
     result.node_logs_match, result.node_logs = compare_node_logs(p, events)
@@ -491,4 +492,4 @@ def live_replay_command(args: Any) -> int:
         print(f"twinfleet replay --live: {exc}", file=sys.stderr)
         return 2
     print(result.summary() if not args.quiet else result.summary().splitlines()[-1])
-    return signal_exit_code(result.fleet_reason) or (1 if result.confirmed else 2)
+    return signal_exit_code(result.fleet_end) or (1 if result.confirmed else 2)

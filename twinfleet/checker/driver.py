@@ -126,6 +126,11 @@ class CheckResult:
     timing: AssumedTiming | None = None  # the latency and timer lateness the verdict assumed
 
     @property
+    def interrupted(self) -> bool:
+        """The search was stopped by Ctrl-C (no verdict; the caller stops too)."""
+        return self.status is Status.UNKNOWN and self.reason == INTERRUPTED_REASON
+
+    @property
     def rmc_transitions(self) -> int:
         """Transitions as RMC counts them: executed steps plus one per initial state (R10)."""
         return self.statistics.transitions + self.statistics.initial_states

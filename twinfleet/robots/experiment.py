@@ -33,7 +33,7 @@ from typing import Any, TextIO, final
 
 from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.checker.options import Semantics
-from twinfleet.checker.outcome import INTERRUPTED_REASON, SearchStatistics
+from twinfleet.checker.outcome import SearchStatistics
 from twinfleet.robots import DEFAULT_TIME_SCALE
 from twinfleet.robots.live import LiveRunResult, live_run, private_copy
 from twinfleet.robots.paper import paper_row
@@ -46,7 +46,7 @@ from twinfleet.robots.timing import (
     robot_profile,
     summarise,
 )
-from twinfleet.runtime.contract.kinds import Status
+from twinfleet.runtime.fleet.fleet_result import EndReason
 from twinfleet.runtime.scenario.overrides import load_with_params
 from twinfleet.runtime.scenario.spec import Scenario, ScenarioError
 
@@ -130,7 +130,7 @@ class Experiment:
     predictions: dict[str, dict[str, int | None]] = field(default_factory=dict)
     retried: list[tuple[str, int, str]] = field(default_factory=list)
     interrupted: bool = False
-    stopped_by: str = ""  # the end reason of the live run a signal stopped ("SIGTERM ...")
+    stopped_by: EndReason | None = None  # the signal that stopped it (a live run's, or Ctrl-C)
     started: float = field(default_factory=time.time)
 
     @property
@@ -140,7 +140,9 @@ class Experiment:
 
 
 class _Interrupted(Exception):
-    pass
+    def __init__(self, end: EndReason) -> None:
+        super().__init__(end.value)
+        self.end = end
 
 
 def stderr_progress(text: str) -> None:
@@ -210,7 +212,7 @@ def run_experiment(paths: Sequence[str | Path], options: ExperimentOptions, *,
             _keep(exp, row, key, predicted)
     except (KeyboardInterrupt, _Interrupted) as exc:
         exp.interrupted = True
-        exp.stopped_by = str(exc)
+        exp.stopped_by = exc.end if isinstance(exc, _Interrupted) else EndReason.INTERRUPTED
         progress("interrupted: writing what was done")
     write_outputs(exp)
     return exp
@@ -284,8 +286,8 @@ def _checks(exp: Experiment, row: Row, path: str | Path, progress: Callable[[str
         progress(f"{row.case} {sem}: {cell.result}, {s.states:,} states, {s.transitions:,} "
                  f"transitions (RMC-style {result.rmc_transitions:,}) in {s.elapsed_s:.1f} s"
                  + (f"; trace {result.trace_path}" if result.trace_path else ""))
-        if result.status is Status.UNKNOWN and result.reason.startswith(INTERRUPTED_REASON):
-            raise _Interrupted
+        if result.interrupted:
+            raise _Interrupted(EndReason.INTERRUPTED)  # the checker stops on Ctrl-C
 
 
 def _live(exp: Experiment, row: Row, path: str | Path, scenario: Scenario,
@@ -311,7 +313,8 @@ def _live(exp: Experiment, row: Row, path: str | Path, scenario: Scenario,
                                               timeout_s=opts.run_timeout_s, out=log,
                                               stop_on_collision=opts.stop_on_collision))
                 if record.interrupted:
-                    raise _Interrupted(record.reason)
+                    raise _Interrupted(EndReason.TERMINATED if record.terminated
+                                       else EndReason.INTERRUPTED)
                 if not record.killed_from_outside or attempt == _RETRIES:
                     break
                 exp.retried.append((row.case, seed, record.reason))

@@ -35,6 +35,7 @@ from twinfleet.nodes.msgs import Collision, RobotStatus
 from twinfleet.nodes.report import FleetReport
 from twinfleet.runtime.access.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.contract.messages import encode
+from twinfleet.runtime.fleet.fleet_result import EndReason
 from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, free_port, run_fleet
 from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
@@ -127,12 +128,10 @@ class LiveRunResult:
     stuck: tuple[str, ...] = ()
     interrupted: bool = False
     exit_codes: dict[str, int | None] = field(default_factory=dict)
-
-    @property
-    def killed_from_outside(self) -> bool:
-        """A node died of a signal the launcher did not send (the run says nothing about
-        the fleet: another program or the OOM killer ended it)."""
-        return self.reason.startswith("node ") and "exit code -" in self.reason
+    #: a node died of a signal the launcher did not send (`EndReason.NODE_KILLED`): the run
+    #: says nothing about the fleet, another program or the OOM killer ended it
+    killed_from_outside: bool = False
+    terminated: bool = False  # a SIGTERM, not a Ctrl-C, interrupted it (exit 143, not 130)
 
     @property
     def all_arrived(self) -> bool:
@@ -251,8 +250,9 @@ async def live_run(scenario: Scenario, *, time_scale: float, seed: int, timeout_
     report = reports[0] if reports else result.report
     record = LiveRunResult(seed=seed, time_scale=time_scale, reason=result.reason,
                        wall_s=time.monotonic() - started, failed_nodes=tuple(result.failed),
-                       interrupted=result.reason.startswith(("SIGINT", "SIGTERM")),
-                       exit_codes=dict(result.exit_codes))
+                       interrupted=result.interrupted, exit_codes=dict(result.exit_codes),
+                       killed_from_outside=result.end is EndReason.NODE_KILLED,
+                       terminated=result.end is EndReason.TERMINATED)
     if isinstance(report, TimedReport):
         record.collisions = [(c.robot_a, c.robot_b, c.time_ms) for c in report.collisions]
         record.arrived = {n: r.arrived for n, r in report.records.items()}

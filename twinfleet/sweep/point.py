@@ -71,7 +71,6 @@ def run_point(settings: SweepSettings, point: Point, name: str = "") -> PointRes
     """
     from twinfleet.checker.commands import bad_input_errors
     from twinfleet.checker.diagnosis import ContractBreachError
-    from twinfleet.checker.outcome import INTERRUPTED_REASON
 
     started = time.perf_counter()
     try:
@@ -80,8 +79,6 @@ def run_point(settings: SweepSettings, point: Point, name: str = "") -> PointRes
     except (*bad_input_errors(), ContractBreachError, ValueError) as exc:  # type: ignore[misc]
         return PointResult(point, "error", None, 0, 0, round(time.perf_counter() - started, 3),
                            None, reason=" ".join(str(exc).split()))
-    if result.reason == INTERRUPTED_REASON:
-        raise KeyboardInterrupt
     return result
 
 
@@ -104,6 +101,8 @@ def _checked(settings: SweepSettings, point: Point, name: str) -> PointResult:
         scenario = with_check(settings.scenario, params, check_block, options)
         options = dataclasses.replace(options, params=(), trace_out=None, semantics=None)
     result = check(scenario, options)
+    if result.interrupted:
+        raise KeyboardInterrupt
     stats = result.statistics
     steps = (result.trace or {}).get("steps")
     return PointResult(point, str(result.status.value),

@@ -1,16 +1,49 @@
-"""How a run of the fleet ended: `FleetResult`, its summary lines and its run-record summary."""
+"""How a run of the fleet ended: `EndReason`, `FleetResult`, its summary lines and its
+run-record summary."""
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any
+from enum import Enum, unique
+from typing import Any, final
 
 from twinfleet.runtime.access.connection import EXIT_FAILED, EXIT_INTERRUPTED, EXIT_OK
 from twinfleet.runtime.contract.kinds import EXIT_INCONCLUSIVE, EXIT_TERMINATED, Status
 from twinfleet.runtime.core.statistics import NodeStatistics
 from twinfleet.runtime.fleet.live_verdict import RESULT_WORDS, Verdict
 from twinfleet.runtime.fleet.run_record import RunRecord
+
+
+@unique
+class EndReason(Enum):
+    """What ended a run; `RunEnding.detail` says it in words for people."""
+
+    NOT_UP = "not up"  # some node was not alive within the start-up limit
+    TIMEOUT = "timeout"  # `live.timeout_s` passed
+    INTERRUPTED = "interrupted"  # SIGINT reached the launcher (Ctrl-C)
+    TERMINATED = "terminated"  # SIGTERM reached the launcher (a stop request)
+    SHUTDOWN = "shutdown"  # a message on the fleet's shutdown topic asked for it
+    NODE_FAILED = "node failed"  # a node process exited with an error code
+    NODE_KILLED = "node killed"  # a node process died of a signal the launcher did not send
+    ALL_EXITED = "all exited"  # every node process ended by itself
+    SETTLED = "settled"  # every `eventually` property held (``until_settled``)
+    DRIVER = "driver"  # the launch driver (a test, the live replay, ...) returned or failed
+
+
+@final
+@dataclass(frozen=True, slots=True)
+class RunEnding:
+    """Why a run ended: what ended it, and the detail in words ("timeout after 5 s")."""
+
+    kind: EndReason
+    detail: str
+
+    @classmethod
+    def node_exit(cls, node: str, code: int) -> RunEnding:
+        """A node process that ended with `code` (negative: killed by that signal)."""
+        kind = EndReason.NODE_KILLED if code < 0 else EndReason.NODE_FAILED
+        return cls(kind, f"node {node} failed (exit code {code})")
 
 
 @dataclass(frozen=True)
@@ -20,7 +53,8 @@ class FleetResult:
     Attributes:
         fleet: the fleet name (Zenoh key prefix `twinfleet/<fleet>`).
         endpoint: the router endpoint the nodes connected to.
-        reason: why the run ended ("timeout after 5 s", "shutdown requested by ...", ...).
+        reason: why the run ended, in words ("timeout after 5 s", "shutdown requested by ...").
+        end: what ended it (`EndReason`): what code reads, never `reason`.
         exit_codes: last exit code of every node (negative: killed by that signal).
         failed: nodes that failed (non-zero exit, or had to be killed).
         restarts: respawn count per node.
@@ -35,6 +69,7 @@ class FleetResult:
     fleet: str
     endpoint: str
     reason: str
+    end: EndReason
     exit_codes: Mapping[str, int | None]
     failed: tuple[str, ...]
     restarts: Mapping[str, int] = field(default_factory=dict)
@@ -62,7 +97,7 @@ class FleetResult:
     @property
     def interrupted(self) -> bool:
         """True when the run ended on SIGINT or SIGTERM (Ctrl-C, a stop request)."""
-        return ended_by_signal(self.reason)
+        return self.end in _SIGNAL_EXITS
 
     @property
     def exit_code(self) -> int:
@@ -71,7 +106,7 @@ class FleetResult:
         code = self.verdict.exit_code if self.verdict is not None else (
             EXIT_INTERRUPTED if self.interrupted else EXIT_OK if self.passed else EXIT_FAILED)
         if code == EXIT_INTERRUPTED:
-            return signal_exit_code(self.reason) or code  # SIGTERM: 143, as everywhere
+            return signal_exit_code(self.end) or code  # SIGTERM: 143, as everywhere
         return code
 
 
@@ -88,18 +123,13 @@ def runs_summary(name: str, codes: list[int], runs: int) -> str:
     return f"{name}: {', '.join(words)}"
 
 
-def signal_exit_code(reason: str) -> int | None:
+_SIGNAL_EXITS = {EndReason.INTERRUPTED: EXIT_INTERRUPTED, EndReason.TERMINATED: EXIT_TERMINATED}
+
+
+def signal_exit_code(end: EndReason | None) -> int | None:
     """130 for a run ended by SIGINT (Ctrl-C), 143 (128 + 15) by SIGTERM, as every command
     exits on them; None for a run that ended otherwise."""
-    if not ended_by_signal(reason):
-        return None
-    return EXIT_TERMINATED if reason.startswith("SIGTERM") else EXIT_INTERRUPTED
-
-
-def ended_by_signal(reason: str) -> bool:
-    """Whether a run's end `reason` is a signal the launcher turned into an end
-    (`launcher.run_fleet`, ``handle_signals``)."""
-    return reason.startswith(("SIGINT", "SIGTERM"))
+    return _SIGNAL_EXITS.get(end) if end is not None else None
 
 
 def format_result(result: FleetResult) -> list[str]:
@@ -137,7 +167,7 @@ def record_summary(record: RunRecord, result: FleetResult) -> None:
         verdict = {"status": v.status, "summary": v.summary, "details": list(v.details),
                    "property": v.property_name, "exit_code": v.exit_code}
     record.write("summary", ok=result.ok, passed=result.passed, verdict=verdict,
-                 reason=result.reason,
+                 reason=result.reason, end=result.end.value,
                  exit_codes=result.exit_codes, failed=result.failed, restarts=result.restarts,
                  duration_s=round(result.duration_s, 3), last_messages=result.last_messages,
                  report=report)

@@ -33,10 +33,12 @@ from typing import TextIO, final
 from twinfleet.runtime.access import fleetauth, registry
 from twinfleet.runtime.fleet.event_merge import fresh_parts_dir, merge_logged
 from twinfleet.runtime.fleet.fleet_result import (
+    EndReason,
     FleetResult,
-    ended_by_signal,
+    RunEnding,
     format_result,
     record_summary,
+    signal_exit_code,
 )
 from twinfleet.runtime.fleet.live_fleet import SHUTDOWN_TOPIC, Fleet, endpoint_host, free_port
 from twinfleet.runtime.fleet.live_verdict import RunEnd, Verdict
@@ -121,8 +123,8 @@ async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
     async with _Launch(fleet, record_events, handle_signals) as launch:
         limit = wall_limit(live.wall_timeout_s, live.horizon_s, time_scale) \
             if timeout_s is None else wall_limit(timeout_s, None, time_scale)
-        reason, running = await launch.until_end((startup_s, *limit), params, driver)
-    result = _result(fleet, reason, running, time.monotonic() - started)
+        ending, running = await launch.until_end((startup_s, *limit), params, driver)
+    result = _result(fleet, ending, running, time.monotonic() - started)
     if record is not None:
         record_summary(record, result)
         record.close()
@@ -168,7 +170,8 @@ class _Launch:
         return self
 
     async def until_end(self, limits: tuple[float, float | None, str], params: Sequence[str],
-                        driver: Callable[[Fleet], Awaitable[str]] | None) -> tuple[str, list[str]]:
+                        driver: Callable[[Fleet], Awaitable[str]] | None
+                        ) -> tuple[RunEnding, list[str]]:
         """Open the fleet, register it, start its nodes (and the driver) and wait for the
         end (`limits`: start-up and timeout seconds, the reason of the timeout); return why the run ended and which
         nodes were still running then."""
@@ -186,11 +189,12 @@ class _Launch:
         self.tasks = await fleet.start_nodes()
         if driver is not None:
             self.driving = asyncio.create_task(driver(fleet))
-            self.driving.add_done_callback(lambda task: fleet.end(_driver_reason(task)))
-        reason = await _until_end(fleet, *limits)
+            self.driving.add_done_callback(lambda task: fleet.end(EndReason.DRIVER,
+                                                                  _driver_reason(task)))
+        ending = await _until_end(fleet, *limits)
         running = [name for name, p in fleet.processes.items() if p.running()]
-        await _final_statistics(fleet, fleet.record, reason)
-        return reason, running
+        await _final_statistics(fleet, fleet.record, ending)
+        return ending, running
 
     async def __aexit__(self, _kind: type[BaseException] | None, error: BaseException | None,
                         _tb: TracebackType | None) -> None:
@@ -257,29 +261,29 @@ def _record_start(record: RunRecord, fleet: Fleet, *, timeout_s: float | None) -
 
 
 async def _until_end(fleet: Fleet, startup_s: float, timeout_s: float | None,
-                     timed_out: str) -> str:
+                     timed_out: str) -> RunEnding:
     """Why the run ended: what `fleet.end` was told, the start-up limit (some node not alive
     after `startup_s`), or the timeout, which counts from the epoch (every node alive): a
     loaded machine's slow imports are not the run's time."""
     assert fleet.ended is not None
     up: asyncio.Future[object] = asyncio.ensure_future(fleet.all_alive.wait())
-    ended: asyncio.Future[object] = fleet.ended
+    ended: asyncio.Future[RunEnding] = fleet.ended
     try:
         await asyncio.wait([ended, up], timeout=startup_s,
                            return_when=asyncio.FIRST_COMPLETED)
     finally:
         up.cancel()
     if not fleet.all_alive.is_set():
-        fleet.end(f"the fleet was not up after {startup_s:g} s")
+        fleet.end(EndReason.NOT_UP, f"the fleet was not up after {startup_s:g} s")
     try:
-        reason = await asyncio.wait_for(asyncio.shield(fleet.ended), timeout_s)
+        ending = await asyncio.wait_for(asyncio.shield(fleet.ended), timeout_s)
     except TimeoutError:
-        reason = timed_out
-    fleet.log(f"run ended: {reason}")
-    return reason
+        ending = RunEnding(EndReason.TIMEOUT, timed_out)
+    fleet.log(f"run ended: {ending.detail}")
+    return ending
 
 
-async def _final_statistics(fleet: Fleet, record: RunRecord | None, reason: str) -> None:
+async def _final_statistics(fleet: Fleet, record: RunRecord | None, ending: RunEnding) -> None:
     """Ask the nodes for their counters (the verdict and the run record read them) and say
     what the launcher's own subscriptions refused."""
     if record is not None or fleet.judge is not None:
@@ -292,31 +296,33 @@ async def _final_statistics(fleet: Fleet, record: RunRecord | None, reason: str)
         fleet.log("refused samples on the report and shutdown topics: "
                   + ", ".join(f"{k} {v}" for k, v in refused.items()))
     if record is not None:
-        record.write("end", reason=reason)
+        record.write("end", reason=ending.detail, end=ending.kind.value)
         record.write("node_stats", stats={n: s.to_dict() for n, s in fleet.statistics.items()})
 
 
-def _result(fleet: Fleet, reason: str, running: Sequence[str], duration_s: float) -> FleetResult:
+def _result(fleet: Fleet, ending: RunEnding, running: Sequence[str],
+            duration_s: float) -> FleetResult:
     """How the run ended, from the fleet after its shutdown."""
     codes = {name: p.exit_code for name, p in fleet.processes.items()}
     judge = fleet.judge
-    return FleetResult(fleet=fleet.scenario.fleet, endpoint=fleet.endpoint, reason=reason,
-                       exit_codes=codes, failed=tuple(fleet.failed),
+    return FleetResult(fleet=fleet.scenario.fleet, endpoint=fleet.endpoint,
+                       reason=ending.detail, end=ending.kind, exit_codes=codes,
+                       failed=tuple(fleet.failed),
                        restarts={n: p.restarts for n, p in fleet.processes.items()},
                        last_messages=dict(fleet.last_messages), duration_s=duration_s,
-                       report=fleet.report, verdict=_verdict(fleet, reason, running, codes),
+                       report=fleet.report, verdict=_verdict(fleet, ending, running, codes),
                        handler_failures=dict(judge.failures) if judge else {},
                        state_reports=judge.reports if judge else 0,
                        statistics=dict(fleet.statistics))
 
 
-def _verdict(fleet: Fleet, reason: str, running: Sequence[str],
+def _verdict(fleet: Fleet, ending: RunEnding, running: Sequence[str],
              codes: Mapping[str, int | None]) -> Verdict | None:
     """The live verdict of the run (None when the run is not judged)."""
     if fleet.judge is None:
         return None
     dropped = fleet.transport.statistics().overflow if fleet.transport is not None else 0
-    end = RunEnd(reason, interrupted=ended_by_signal(reason),
+    end = RunEnd(ending.detail, interrupted=signal_exit_code(ending.kind) is not None,
                  failed={n: codes.get(n) for n in fleet.failed}, statistics=fleet.statistics,
                  running=tuple(running), dropped_reports=dropped,
                  not_up=() if fleet.all_alive.is_set() else tuple(sorted(fleet.unseen)),
@@ -370,5 +376,6 @@ def _install_signals(loop: asyncio.AbstractEventLoop, fleet: Fleet) -> list[int]
         return []
     sigs: list[int] = [signal.SIGINT, signal.SIGTERM]
     for sig in sigs:
-        loop.add_signal_handler(sig, fleet.end, f"{signal.Signals(sig).name} received")
+        kind = EndReason.INTERRUPTED if sig == signal.SIGINT else EndReason.TERMINATED
+        loop.add_signal_handler(sig, fleet.end, kind, f"{signal.Signals(sig).name} received")
     return sigs

@@ -37,6 +37,7 @@ from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.core.guard import Rejected, check_message, payload_limit
 from twinfleet.runtime.core.state_report import decode_report
 from twinfleet.runtime.core.statistics import NodeStatistics, Rejection, StatisticsError
+from twinfleet.runtime.fleet.fleet_result import EndReason, RunEnding
 from twinfleet.runtime.fleet.live_verdict import LiveJudge
 from twinfleet.runtime.fleet.node_main import LIMIT_ENV, read_statistics
 from twinfleet.runtime.fleet.node_process import NODE_PROCESS_FLAGS, NodeProcess, emit, stop_all
@@ -122,7 +123,7 @@ class Fleet:
         self.all_alive = asyncio.Event()
         self.processes: dict[str, NodeProcess] = {}
         self.last_messages: dict[str, Any] = {}
-        self.ended: asyncio.Future[str] | None = None
+        self.ended: asyncio.Future[RunEnding] | None = None
         self.shutting_down = False
         self.failed: list[str] = []
         self.report = load_report(scenario)
@@ -138,10 +139,14 @@ class Fleet:
         """A launcher line on the output."""
         emit(self.out, f"[launcher] {text}")
 
-    def end(self, reason: str) -> None:
-        """End the run (first reason wins)."""
+    def end(self, kind: EndReason, detail: str) -> None:
+        """End the run (the first ending wins)."""
+        self.end_as(RunEnding(kind, detail))
+
+    def end_as(self, ending: RunEnding) -> None:
+        """End the run as `ending` (the first ending wins)."""
         if self.ended is not None and not self.ended.done():
-            self.ended.set_result(reason)
+            self.ended.set_result(ending)
 
     async def open(self) -> None:
         """Open the router (or client) session and the launcher's subscriptions."""
@@ -191,7 +196,7 @@ class Fleet:
             self.end(f"stopped at the first violation ({self.judge.violations[0][0]}, at "
                      f"t={self.judge.now} ms)")
         if self.until_settled and self.judge.settled():
-            self.end(f"settled: every eventually property held (the last at t="
+            self.end(EndReason.SETTLED, f"settled: every eventually property held (the last at t="
                      f"{max(self.judge.held_at.values())} ms)")
 
     def refusals(self) -> dict[Rejection, int]:
@@ -218,9 +223,9 @@ class Fleet:
         try:
             env = decode(payload)
             text = getattr(env.msg, "data", str(env.msg))
-            self.end(f"shutdown requested by {env.sender or '?'}: {text}")
+            self.end(EndReason.SHUTDOWN, f"shutdown requested by {env.sender or '?'}: {text}")
         except DecodeError:
-            self.end("shutdown requested (undecodable reason)")
+            self.end(EndReason.SHUTDOWN, "shutdown requested (undecodable reason)")
 
     def _summary(self, topic: str) -> Any:
         def deliver(_key: str, payload: bytes) -> None:
@@ -317,9 +322,9 @@ class Fleet:
                 continue
             if code != 0:
                 self.failed.append(proc.cfg.name)
-                self.end(f"node {proc.cfg.name} failed (exit code {code})")
+                self.end_as(RunEnding.node_exit(proc.cfg.name, code))
             elif not any(p.running() for p in self.processes.values()):
-                self.end("all nodes exited")
+                self.end(EndReason.ALL_EXITED, "all nodes exited")
             return
 
     async def node_statistics(self, timeout_s: float = 0.5

@@ -1,0 +1,32 @@
+"""`FleetResult`: what ended a run is an `EndReason`, read by code; `reason` is for people."""
+
+from __future__ import annotations
+
+import pytest
+
+from twinfleet.runtime.access.connection import EXIT_INTERRUPTED, EXIT_OK
+from twinfleet.runtime.contract.kinds import EXIT_TERMINATED
+from twinfleet.runtime.fleet.fleet_result import EndReason, FleetResult, RunEnding
+
+pytestmark = pytest.mark.timeout(30)
+
+
+def result(end: EndReason, reason: str) -> FleetResult:
+    return FleetResult(fleet="f", endpoint="tcp/127.0.0.1:1", reason=reason, end=end,
+                       exit_codes={"a": 0}, failed=())
+
+
+def test_the_end_reason_not_its_words_says_whether_a_run_was_interrupted():
+    assert result(EndReason.INTERRUPTED, "SIGINT received").interrupted
+    assert result(EndReason.INTERRUPTED, "SIGINT received").exit_code == EXIT_INTERRUPTED
+    assert result(EndReason.TERMINATED, "SIGTERM received").exit_code == EXIT_TERMINATED
+    # a shutdown request whose text happens to begin like a signal is no signal
+    said = result(EndReason.SHUTDOWN, "SIGINT from the operator's script")
+    assert not said.interrupted and said.exit_code == EXIT_OK
+
+
+@pytest.mark.parametrize(("code", "kind"), [(-9, EndReason.NODE_KILLED),
+                                            (1, EndReason.NODE_FAILED)])
+def test_a_node_exit_is_killed_or_failed_by_its_code(code, kind):
+    ending = RunEnding.node_exit("r1", code)
+    assert ending == RunEnding(kind, f"node r1 failed (exit code {code})")
