@@ -93,3 +93,20 @@ def test_flat_dataclasses_take_the_fast_path_with_the_general_paths_bytes():
                   (One(), 1, "a", None, 2.5, True, b"x"), (), (One(), (1, 2)), (1, [2])):
         assert snapshot(value) == _pack(_canonical(value))
         assert restore(snapshot(value)) == value
+
+
+def test_a_call_error_in_a_state_keeps_its_failure_enum():
+    from twinfleet import CallError, CallFailure
+
+    error = CallError("/plan", CallFailure.TIMEOUT, "timeout")
+    back = restore(snapshot({"last": error}))["last"]
+    assert back == error and back.failure is CallFailure.TIMEOUT
+    assert snapshot(error) != snapshot(CallError("/plan", CallFailure.NO_SERVER, "timeout"))
+
+
+def test_a_call_error_decoded_from_the_wire_carries_the_enum():
+    from twinfleet import CallError, CallFailure
+    from twinfleet.runtime.contract.messages import decode, encode
+
+    error = decode(encode(CallError("/plan", CallFailure.SERVER_ERROR, "server error: x"))).msg
+    assert error.failure is CallFailure.SERVER_ERROR and error.reason == "server error: x"

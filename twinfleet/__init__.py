@@ -9,7 +9,7 @@ robot case study) and ``twinfleet.cli`` on top.
 """
 
 from twinfleet.runtime.contract.context import Context, ContractError
-from twinfleet.runtime.contract.messages import CallError, Empty, String, message
+from twinfleet.runtime.contract.messages import CallError, CallFailure, Empty, String, message
 from twinfleet.runtime.contract.node import (
     QOS_DEFAULT,
     QOS_LATCHED,
@@ -33,6 +33,7 @@ __all__ = [
     "QOS_LATCHED",
     "QOS_SENSOR_DATA",
     "CallError",
+    "CallFailure",
     "Context",
     "ContractError",
     "Durability",

@@ -11,7 +11,7 @@ from twinfleet.nodes.msgs import Collision, ObstacleScan, Path, PathRequest, Rob
 from twinfleet.nodes.robot import Robot, RobotParams
 from twinfleet.runtime.contract.context import After, Call, Context, Publish
 from twinfleet.runtime.contract.dispatch import run_handler
-from twinfleet.runtime.contract.messages import CallError
+from twinfleet.runtime.contract.messages import CallError, CallFailure
 
 MAP50 = str(FsPath(__file__).resolve().parents[2] / "twinfleet" / "maps" / "map50.yaml")
 ROBOTS = ("r1", "r2", "r3", "r4", "r5")
@@ -128,7 +128,7 @@ def test_failed_plans_leave_the_robot_stuck_after_the_third():
     run(r, "start")
     chooser = CountingChooser()
     for _ in range(3):
-        run(r, "on_path", CallError("/generate_path", "timeout"), chooser=chooser)
+        run(r, "on_path", CallError("/generate_path", CallFailure.TIMEOUT, "timeout"), chooser=chooser)
     assert r.state.failures == 3 and r.state.stuck
 
 

@@ -11,6 +11,7 @@ import pytest
 from tests.runtime.hosts import Doubler, Log, Num, Recorder, Shallow
 from twinfleet import (
     CallError,
+    CallFailure,
     Context,
     Node,
     handler,
@@ -256,7 +257,7 @@ def test_a_reply_runs_the_reply_handler_and_voids_the_timeout():
     core = started(node, now=10)
     query = _call(core)
     assert core.next_due() == 210
-    assert core.receive_reply(query.call, encode(Num(42), stamp_ms=12, sender="d"), "", 15)
+    assert core.receive_reply(query.call, encode(Num(42), stamp_ms=12, sender="d"), None, "", 15)
     drain(core, 15)
     assert node.state.seen == [(15, Num(42))]
     assert core.next_due() is None and core.release_due(10_000) == 0
@@ -269,8 +270,8 @@ def test_no_answer_in_time_runs_the_reply_handler_with_a_timeout_at_its_due_time
     assert core.release_due(209) == 0
     assert core.release_due(210) == 1
     drain(core, 213)
-    assert node.state.seen == [(210, CallError("/double", "timeout"))]
-    assert not core.receive_reply(query.call, encode(Num(42)), "", 300)  # too late: ignored
+    assert node.state.seen == [(210, CallError("/double", CallFailure.TIMEOUT, "timeout"))]
+    assert not core.receive_reply(query.call, encode(Num(42)), None, "", 300)  # too late: ignored
 
 
 def test_a_call_error_from_the_transport_is_a_timeout_event():
@@ -279,9 +280,9 @@ def test_a_call_error_from_the_transport_is_a_timeout_event():
     core.observe(recorder)
     core.start(10)
     query = _call(core)
-    assert core.receive_reply(query.call, None, "no server", 11)
+    assert core.receive_reply(query.call, None, CallFailure.NO_SERVER, "no server", 11)
     drain(core, 11)
-    assert node.state.seen == [(11, CallError("/double", "no server"))]
+    assert node.state.seen == [(11, CallError("/double", CallFailure.NO_SERVER, "no server"))]
     entry = recorder.records[-1].entry
     assert (entry.kind, entry.sender, entry.topic) == (EventKind.TIMEOUT, "c", "/double")
 

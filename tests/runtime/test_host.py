@@ -21,6 +21,7 @@ from tests.runtime.hosts import (
 )
 from twinfleet import (
     CallError,
+    CallFailure,
     Context,
     Node,
     String,
@@ -130,7 +131,7 @@ def test_call_without_server_gets_no_server_error() -> None:
         await h.stop()
         return asker.state.seen
 
-    assert run(body()) == [CallError("/missing", "no server")]
+    assert run(body()) == [CallError("/missing", CallFailure.NO_SERVER, "no server")]
 
 
 def test_call_timeout_is_a_clock_timer() -> None:
@@ -149,7 +150,7 @@ def test_call_timeout_is_a_clock_timer() -> None:
 
     before, after = run(body())
     assert before == []
-    assert after == [CallError("/double", "timeout")]
+    assert after == [CallError("/double", CallFailure.TIMEOUT, "timeout")]
 
 
 def test_server_exception_becomes_call_error_and_server_keeps_serving() -> None:
@@ -164,7 +165,7 @@ def test_server_exception_becomes_call_error_and_server_keeps_serving() -> None:
         return bad.state.seen, good.state.seen, server.statistics().handler_errors
 
     bad, good, errors = run(body())
-    assert bad == [CallError("/double", "server error: ValueError: negative")]
+    assert bad == [CallError("/double", CallFailure.SERVER_ERROR, "server error: ValueError: negative")]
     assert good == [Num(10)]
     assert errors == 1
 
@@ -483,7 +484,8 @@ def test_unencodable_effects_and_replies_are_handler_errors_not_crashes() -> Non
         return asker.state.seen, host.statistics(), violations, out_seqs
 
     seen, stats, violations, out_seqs = run(body())
-    assert len(seen) == 1 and seen[0].reason.startswith("server error: unencodable reply")
+    assert len(seen) == 1 and seen[0].failure is CallFailure.SERVER_ERROR
+    assert seen[0].reason.startswith("server error: unencodable reply")
     assert stats.handler_errors == 2 and stats.handled == 3
     assert [v.handler for v in violations] == ["on_num", "double"]
     assert out_seqs == [1]  # the failed publish used no sequence number: receivers see no gap

@@ -21,7 +21,7 @@ from tests.runtime.hosts import (
     run,
     settle,
 )
-from twinfleet import CallError, Context, Node, every, handler, on_start, subscribe
+from twinfleet import CallError, CallFailure, Context, Node, every, handler, on_start, subscribe
 from twinfleet.runtime.contract.messages import encode
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.core.eventlog import EVENTS_FORMAT, EventLog, payload_digest
@@ -92,13 +92,13 @@ def test_the_event_log_names_each_kind_of_event(tmp_path: Path) -> None:
         "reply", "doubler", payload_digest((Num(42),)))
     timeout = _events(tmp_path / "lonely.jsonl")[1][1]
     assert (timeout["kind"], timeout["sender"], timeout["topic"], timeout["args"]) == (
-        "timeout", "lonely", "/missing", payload_digest((CallError("/missing", "no server"),)))
+        "timeout", "lonely", "/missing", payload_digest((CallError("/missing", CallFailure.NO_SERVER, "no server"),)))
 
 
 async def _grant(transport: LoopbackTransport, node: str, **grant: Any) -> dict[str, Any]:
     done: asyncio.Future[tuple[bytes | None, str]] = asyncio.get_running_loop().create_future()
     transport.query(node_key(FLEET, KeyKind.REPLAY, node), msgpack.packb(grant), 5_000.0,
-                    lambda reply, reason: done.done() or done.set_result((reply, reason)))
+                    lambda reply, _failure, reason: done.done() or done.set_result((reply, reason)))
     reply, reason = await done
     assert reply is not None, reason
     return msgpack.unpackb(reply, raw=False)

@@ -10,6 +10,7 @@ from typing import Any
 
 import pytest
 
+from twinfleet.runtime.contract.messages import CallFailure
 from twinfleet.runtime.contract.node import QOS_DEFAULT, QOS_LATCHED
 from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key
 from twinfleet.runtime.host.transport import (
@@ -126,18 +127,23 @@ def test_query_reply_no_server_timeout_and_error(make: Factory) -> None:
             server.serve("twinfleet/conf/mute", lambda p, respond: slow.append(respond))
             server.serve("twinfleet/conf/err", lambda p, respond: respond(None, "server error: x"))
             await ready(client, server, "srv")
-            results: dict[str, tuple[bytes | None, str]] = {}
+            results: dict[str, tuple[bytes | None, CallFailure | None, str]] = {}
 
-            def done(name: str) -> Callable[[bytes | None, str], None]:
-                return lambda reply, reason: results.setdefault(name, (reply, reason))
+            def done(name: str) -> Callable[[bytes | None, CallFailure | None, str], None]:
+                return lambda reply, failure, reason: results.setdefault(name, (reply, failure,
+                                                                                 reason))
 
             client.query("twinfleet/conf/echo", b"hi", 2000, done("echo"))
             client.query("twinfleet/conf/none", b"hi", 2000, done("none"))
             client.query("twinfleet/conf/mute", b"hi", 300, done("mute"))
             client.query("twinfleet/conf/err", b"hi", 2000, done("err"))
             await eventually(lambda: len(results) == 4)
-            assert results == {"echo": (b"hi!", ""), "none": (None, "no server"),
-                               "mute": (None, "timeout"), "err": (None, "server error: x")}
+            # what happened, as each transport saw it: Zenoh's own Timeout error reply, a
+            # query finalised with no reply, the server's error reply
+            assert results == {"echo": (b"hi!", None, ""),
+                               "none": (None, CallFailure.NO_SERVER, "no server"),
+                               "mute": (None, CallFailure.TIMEOUT, "timeout"),
+                               "err": (None, CallFailure.SERVER_ERROR, "server error: x")}
             for respond in slow:
                 respond(b"late", "")  # ignored by the caller; finalises the query
 

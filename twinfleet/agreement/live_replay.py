@@ -63,7 +63,7 @@ from twinfleet.checker.system import System
 from twinfleet.checker.trace import NondeterminismError, recorded_step, replay_step
 from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import EventKind
-from twinfleet.runtime.contract.messages import DecodeError, decode
+from twinfleet.runtime.contract.messages import CallFailure, DecodeError, decode
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.contract.tracefile import TraceError, code_changes, load_trace
 from twinfleet.runtime.core.eventlog import payload_digest, state_digest, summarise
@@ -385,10 +385,10 @@ class Coordinator:
         transport, payload = self.transport, grant.payload()
         key = node_key(self.plan.scenario.fleet, KeyKind.REPLAY, grant.node)
         for _ in range(100):  # the queryable may not be routed yet just after the token
-            reply, reason = await _query(transport, key, payload, self.step_timeout_s)
+            reply, failure, reason = await _query(transport, key, payload, self.step_timeout_s)
             if reply is not None:
                 return msgpack.unpackb(reply, raw=False)
-            if reason != "no server":
+            if failure is not CallFailure.NO_SERVER:
                 break
             await asyncio.sleep(0.05)
         status = await _query(transport, key, msgpack.packb({"op": "status"}), 2.0)
@@ -405,13 +405,14 @@ class Coordinator:
 
 
 async def _query(transport: Transport | None, key: str, payload: bytes,
-                 timeout_s: float) -> tuple[bytes | None, str]:
+                 timeout_s: float) -> tuple[bytes | None, CallFailure | None, str]:
     assert transport is not None
-    done: asyncio.Future[tuple[bytes | None, str]] = asyncio.get_running_loop().create_future()
+    done: asyncio.Future[tuple[bytes | None, CallFailure | None, str]] = \
+        asyncio.get_running_loop().create_future()
 
-    def on_done(reply: bytes | None, reason: str) -> None:
+    def on_done(reply: bytes | None, failure: CallFailure | None, reason: str) -> None:
         if not done.done():
-            done.set_result((reply, reason))
+            done.set_result((reply, failure, reason))
 
     transport.query(key, payload, timeout_s * 1000.0, on_done)
     return await done

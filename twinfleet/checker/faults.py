@@ -50,7 +50,7 @@ crash itself is `checker.system`'s `Crash` action):
 - `faults.drop`: for a topic, each delivery to each subscriber is two
   branches, delivered or lost. For a service, each request is delivered or
   lost; a lost request makes the caller's reply handler get
-  ``CallError(service, "timeout")`` after the call's timeout (an event of kind
+  ``CallError(service, CallFailure.TIMEOUT)`` after the call's timeout (an event of kind
   TIMEOUT), as live mode does. Replies are never lost.
 - `faults.duplicate` (topics only): each delivery is delivered once or twice
   (the copy is a separate message with its own latency branch). A topic in

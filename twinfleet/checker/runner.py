@@ -61,7 +61,7 @@ from twinfleet.checker.world import ENVIRONMENT, Event, event_key
 from twinfleet.runtime.contract.context import After, Call, Context, Fail, Log, Publish
 from twinfleet.runtime.contract.dispatch import HandlerOutcome, run_handler
 from twinfleet.runtime.contract.kinds import EventKind, FailureKind
-from twinfleet.runtime.contract.messages import CallError
+from twinfleet.runtime.contract.messages import CallError, CallFailure
 from twinfleet.runtime.contract.node import Node
 from twinfleet.runtime.contract.snapshot import SnapshotError, restore, snapshot
 
@@ -342,8 +342,8 @@ class Runner:
                         lost_keys.append(event_key(EventKind.REQUEST, server[0], server[1], i,
                                                    reply_to, (req,)))
                     if server is None or lost:
-                        err = CallError(service, "timeout" if lost else
-                                        self.rules.no_server(chooser))
+                        why = CallFailure.TIMEOUT if lost else self.rules.no_server(chooser)
+                        err = CallError(service, why, why.value)
                         out.append(Event(now + timeout, EventKind.TIMEOUT, i, reply_to, i,
                                          (err,), topology.priority(i, reply_to)))
                     else:

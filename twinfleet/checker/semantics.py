@@ -58,8 +58,8 @@ Rule 5 (latency and faults, all off by default; see `checker.faults` for the
     message due after its deadline (`Rules.delivery` sets it) is a deadline
     miss when it is taken; because of Rule 1 it is taken exactly at its due
     time, so only latency or FIFO clamping can make it late. A call to a
-    service nobody serves fails at its timeout with `CallError` reason "no
-    server" or "timeout", each a branch (`Rules.no_server`): live, which one
+    service nobody serves fails at its timeout with `CallError` failure
+    `NO_SERVER` or `TIMEOUT`, each a branch (`Rules.no_server`): live, which one
     depends on how soon Zenoh gives up on the query.
 
 Rule 6 (QoS). A subscription declared `qos=QoS(depth=d)` (KEEP_LAST, default
@@ -118,6 +118,7 @@ from twinfleet.checker.faults import DROP, DUPLICATE, CheckSettings
 from twinfleet.checker.options import Semantics
 from twinfleet.checker.world import Event
 from twinfleet.runtime.contract.kinds import EventKind
+from twinfleet.runtime.contract.messages import CallFailure
 from twinfleet.runtime.contract.rules import keep_last_excess, next_ticks
 
 if TYPE_CHECKING:
@@ -283,10 +284,11 @@ class Rules:
             return 2, "duplicated"
         return 1, ""
 
-    def no_server(self, chooser: ExploringChooser) -> str:
-        """Rule 5: the reason a call to a service nobody serves fails with, a branch of
-        `chooser`: live, Zenoh finalises such a query early ("no server") or only at its
-        timeout ("timeout"), depending on timing; either way at the call's timeout here."""
+    def no_server(self, chooser: ExploringChooser) -> CallFailure:
+        """Rule 5: the failure a call to a service nobody serves ends with, a branch of
+        `chooser`: live, Zenoh finalises such a query with no reply (`NO_SERVER`), or a
+        server that took it and went away leaves it to its timeout (`TIMEOUT`); either
+        way at the call's timeout here."""
         return _NO_SERVER[chooser.branch(len(_NO_SERVER))]
 
     def droppable(self, events: Sequence[Event], tolerance_ms: int | None = 0) -> list[int]:
@@ -361,7 +363,7 @@ class Rules:
         return min((e for e in events if stream(e) == key), key=lambda e: (e.due, e.rank))
 
 
-_NO_SERVER = ("no server", "timeout")
+_NO_SERVER = (CallFailure.NO_SERVER, CallFailure.TIMEOUT)
 
 
 def stream(ev: Event) -> tuple[int, int, str, str] | None:

@@ -89,6 +89,8 @@ class Interfaces:
         """(.msg type, plain → ROS value, helper types) of one annotation."""
         if hint in _SCALARS:
             return _SCALARS[hint], _same, {}
+        if isinstance(hint, type) and issubclass(hint, str):  # a StrEnum travels as its text
+            return "string", str, {}
         if hint is bytes:
             return "uint8[]", bytes, {}
         message = getattr(hint, "__message_type__", None)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from enum import StrEnum, unique
 from typing import Any, TypeVar, dataclass_transform
 
 import msgpack
@@ -224,12 +225,29 @@ def decode(payload: bytes) -> Envelope:
     return Envelope(*decode_fields(payload))
 
 
+@unique
+class CallFailure(StrEnum):
+    """Why a service call got no reply, as the caller's transport saw it happen."""
+
+    TIMEOUT = "timeout"  # a server took the request and did not answer within the timeout
+    NO_SERVER = "no server"  # no server took the request (none serves it, or it went away)
+    SERVER_ERROR = "server error"  # the server answered with an error (its handler failed,
+    # or it refused or could not read the request)
+    BAD_REPLY = "bad reply"  # the server's answer could not be decoded here
+
+
 @message("twinfleet/CallError")
 class CallError:
-    """Delivered to a caller's reply handler when a service call fails."""
+    """Delivered to a caller's reply handler when a service call fails: `failure` says
+    what happened (branch on it), `reason` in words (the server's error text, say)."""
 
     service: str
-    reason: str  # "timeout", "no server", "server error: ..."
+    failure: CallFailure
+    reason: str = ""
+
+    def __post_init__(self) -> None:
+        # decoded from the wire the failure is its text: hand nodes the enum either way
+        object.__setattr__(self, "failure", CallFailure(self.failure))
 
 
 @message("std_msgs/Empty")

@@ -4,7 +4,7 @@ The checker stores every node's state as bytes, hashes them and restores them
 before each handler; the same bytes must come out for equal states, and the
 restored value must have the same Python types (tuple stays tuple, a dataclass
 comes back as itself). msgpack arrays are lists; tuples, dicts, sets, numpy
-arrays and dataclasses travel as msgpack extension types. A dataclass whose
+arrays, dataclasses and enum members travel as msgpack extension types. A dataclass whose
 fields are all *declared* as plain values and tuples takes a fast path: its
 arrays travel natively and come back as tuples (a value that breaks its own
 declaration, a list in a tuple field, comes back as a tuple). A dataclass that sets
@@ -16,6 +16,7 @@ vary) and reads every array back as a tuple (the rclpy wing's node state does).
 from __future__ import annotations
 
 import dataclasses
+import enum
 import importlib
 import types
 import typing
@@ -27,7 +28,7 @@ from typing import Any
 import msgpack
 import numpy as np
 
-_TUPLE, _DICT, _SET, _ARRAY, _DATACLASS, _FLAT_DATACLASS = 1, 2, 3, 4, 5, 6
+_TUPLE, _DICT, _SET, _ARRAY, _DATACLASS, _FLAT_DATACLASS, _ENUM = 1, 2, 3, 4, 5, 6, 7
 _PLAIN = (int, float, bool, str, bytes, type(None))
 
 
@@ -55,6 +56,8 @@ def _default(obj: Any) -> msgpack.ExtType:
             # can travel natively and come back as tuples (no extension per tuple).
             return msgpack.ExtType(_FLAT_DATACLASS, _pack_loose([_class_path(cls), values]))
         return msgpack.ExtType(_DATACLASS, _pack([_class_path(cls), [_canonical(v) for v in values]]))
+    if isinstance(obj, enum.Enum):  # a member, by its class and value (a StrEnum too)
+        return msgpack.ExtType(_ENUM, _pack([_class_path(type(obj)), obj.value]))
     if isinstance(obj, np.generic):
         return obj.item()
     raise SnapshotError(f"cannot snapshot a value of type {type(obj).__name__}: {obj!r:.80}")
@@ -168,6 +171,9 @@ def _ext_hook(code: int, data: bytes) -> Any:
         for name, v in zip(_field_names(cls), values, strict=True):
             object.__setattr__(obj, name, v)
         return obj
+    if code == _ENUM:
+        path, member = value
+        return _class_named(path)(member)
     raise SnapshotError(f"unknown snapshot extension code {code}")
 
 

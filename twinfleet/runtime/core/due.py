@@ -22,7 +22,7 @@ from typing import final
 
 from twinfleet.runtime.contract.context import Call
 from twinfleet.runtime.contract.kinds import EventKind
-from twinfleet.runtime.contract.messages import CallError
+from twinfleet.runtime.contract.messages import CallError, CallFailure
 from twinfleet.runtime.contract.node import HandlerSpec, Node
 from twinfleet.runtime.contract.rules import first_tick, next_tick
 from twinfleet.runtime.core.events import Event
@@ -67,7 +67,7 @@ class DueEntries:
         """Register a call made at `now_ms` and arm its TIMEOUT; return the call's id."""
         cid = next(self.counter)
         self._calls[cid] = call
-        self.arm(Event(EventKind.TIMEOUT, call.reply_to, (CallError(call.service, "timeout"),),
+        self.arm(Event(EventKind.TIMEOUT, call.reply_to, (CallError(call.service, CallFailure.TIMEOUT, "timeout"),),
                        self.name, call.service, due=now_ms + call.timeout_ms, call=cid))
         return cid
 

@@ -82,6 +82,7 @@ from twinfleet.runtime.contract.dispatch import HandlerError, declared_message_t
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import (
     CallError,
+    CallFailure,
     DecodeError,
     NodeAlive,
     decode_fields,
@@ -350,9 +351,10 @@ class NodeCore:
                          stamp, responder=responder))
         return _NOTHING
 
-    def receive_reply(self, call: int, payload: bytes | None, reason: str,
-                      arrival_ms: int) -> bool:
-        """The answer to `CallOutput` `call`: a reply payload, or None and why there is none.
+    def receive_reply(self, call: int, payload: bytes | None, failure: CallFailure | None,
+                      reason: str, arrival_ms: int) -> bool:
+        """The answer to `CallOutput` `call`: a reply payload, or None, the transport's
+        `CallFailure` and its words.
 
         A CallError (no answer, or an undecodable one) runs the reply handler as a
         TIMEOUT event. Returns False when the call is already over (it timed out).
@@ -361,12 +363,12 @@ class NodeCore:
         if opened is None:
             return False
         service, reply_to = opened.service, opened.reply_to
-        error = CallError(service, reason or "no reply")
+        error = CallError(service, failure or CallFailure.NO_SERVER, reason or "no reply")
         if payload is not None:
             try:
                 msg, stamp, seq, sender = decode_fields(payload)
             except DecodeError as exc:
-                error = CallError(service, f"server error: undecodable reply ({exc})")
+                error = CallError(service, CallFailure.BAD_REPLY, f"undecodable reply ({exc})")
             else:
                 self._push(arrival_ms, self.due.priority(reply_to),
                            Event(EventKind.REPLY, reply_to, (msg,), sender, service, seq, stamp))

@@ -28,6 +28,7 @@ class EndReason(Enum):
     NODE_KILLED = "node killed"  # a node process died of a signal the launcher did not send
     ALL_EXITED = "all exited"  # every node process ended by itself
     SETTLED = "settled"  # every `eventually` property held (``until_settled``)
+    VIOLATION = "violation"  # a property was violated (``until_violation``)
     DRIVER = "driver"  # the launch driver (a test, the live replay, ...) returned or failed
 
 

@@ -193,11 +193,11 @@ class Fleet:
             return
         self.judge.on_report(report)
         if self.until_violation and self.judge.violations:
-            self.end(f"stopped at the first violation ({self.judge.violations[0][0]}, at "
-                     f"t={self.judge.now} ms)")
+            self.end(EndReason.VIOLATION, f"stopped at the first violation "
+                     f"({self.judge.violations[0][0]}, at t={self.judge.now} ms)")
         if self.until_settled and self.judge.settled():
-            self.end(EndReason.SETTLED, f"settled: every eventually property held (the last at t="
-                     f"{max(self.judge.held_at.values())} ms)")
+            self.end(EndReason.SETTLED, "settled: every eventually property held (the last "
+                     f"at t={max(self.judge.held_at.values())} ms)")
 
     def refusals(self) -> dict[Rejection, int]:
         """What the launcher's own subscriptions (report, shutdown) refused, by reason."""

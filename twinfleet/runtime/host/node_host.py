@@ -43,7 +43,7 @@ import sys
 from collections.abc import Callable, Sequence
 from typing import TextIO, final
 
-from twinfleet.runtime.contract.messages import DecodeError
+from twinfleet.runtime.contract.messages import CallFailure, DecodeError
 from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.core.guard import Rejected
@@ -231,8 +231,9 @@ class NodeHost:
 
         return on_request
 
-    def _on_reply(self, call: int, reply: bytes | None, reason: str) -> None:
-        if self.core.receive_reply(call, reply, reason, self.clock.now_ms()):
+    def _on_reply(self, call: int, reply: bytes | None, failure: CallFailure | None,
+                  reason: str) -> None:
+        if self.core.receive_reply(call, reply, failure, reason, self.clock.now_ms()):
             self._wake_soon()
 
     def _on_liveliness(self, key: str, alive: bool) -> None:

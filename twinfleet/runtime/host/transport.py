@@ -23,13 +23,15 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from typing import Protocol, final
 
+from twinfleet.runtime.contract.messages import CallFailure
 from twinfleet.runtime.contract.node import Durability, QoS
 from twinfleet.runtime.core.statistics import Rejection
 
 Deliver = Callable[[str, bytes], None]
 Respond = Callable[[bytes | None, str], None]  # (reply payload, "") or (None, error reason)
 OnRequest = Callable[[bytes, Respond], None]
-OnDone = Callable[[bytes | None, str], None]  # reply payload, or None and a reason
+#: a query's end: the reply payload, or None with what failed and why in words
+OnDone = Callable[[bytes | None, CallFailure | None, str], None]
 OnChange = Callable[[str, bool], None]  # token key, alive
 
 @final
@@ -82,7 +84,8 @@ class Transport(Protocol):
         ...
 
     def query(self, key: str, payload: bytes, timeout_ms: float, on_done: OnDone) -> None:
-        """Ask the server of `key`; `on_done` runs once: reply, or None and a reason."""
+        """Ask the server of `key`; `on_done` runs once: the reply, or None, the
+        `CallFailure` and its words."""
         ...
 
     def announce(self, token_key: str) -> None:
@@ -186,19 +189,20 @@ class LoopbackTransport:
         servers = [s for s in self.bus.servers if key_matches(s[1], key)]
         done = False
 
-        def finish(reply: bytes | None, reason: str) -> None:
+        def finish(reply: bytes | None, failure: CallFailure | None, reason: str) -> None:
             nonlocal done
             if not done:
                 done = True
-                on_done(reply, reason)
+                on_done(reply, failure, reason)
 
         if not servers:
-            self.loop.call_soon(finish, None, "no server")
+            self.loop.call_soon(finish, None, CallFailure.NO_SERVER, "no server")
             return
-        self.loop.call_later(timeout_ms / 1000.0, finish, None, "timeout")
+        self.loop.call_later(timeout_ms / 1000.0, finish, None, CallFailure.TIMEOUT, "timeout")
 
         def respond(reply: bytes | None, reason: str) -> None:
-            self.loop.call_soon(finish, reply, reason)
+            failure = None if reply is not None else CallFailure.SERVER_ERROR
+            self.loop.call_soon(finish, reply, failure, reason)
 
         self.loop.call_soon(servers[0][2], payload, respond)
 

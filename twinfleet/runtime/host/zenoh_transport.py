@@ -44,8 +44,12 @@ so a late joiner receives the last samples.
 
 Services. A queryable hands the `Query` to the loop; the host replies on the
 queryable's key (or with `reply_err` "server error: ...") and the query is
-finalised with ``with query:``. A caller gets the first reply, or, when the
-query is finalised with no reply, "no server" (finalised early) or "timeout".
+finalised with ``with query:``. A caller gets the first reply, or a `CallFailure`
+from what Zenoh reports: an error reply from the server (`SERVER_ERROR`); the
+error reply ``Timeout`` Zenoh itself gives when a server took the query and the
+timeout passed (`TIMEOUT`); the query finalised with no reply at all, which is
+what Zenoh does when no queryable took it or the one that did went away
+(`NO_SERVER`).
 """
 
 from __future__ import annotations
@@ -53,7 +57,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
-import time
 import traceback
 from collections import deque
 from collections.abc import Callable, Mapping, Sequence
@@ -63,6 +66,7 @@ import zenoh
 from zenoh import ext
 
 from twinfleet.runtime.contract.environment import EnvVar, env_value
+from twinfleet.runtime.contract.messages import CallFailure
 from twinfleet.runtime.contract.node import Durability, QoS, Reliability
 from twinfleet.runtime.core.guard import ReplayWindow, Role, opened, signer
 from twinfleet.runtime.core.statistics import Rejection
@@ -397,27 +401,29 @@ class ZenohTransport:
         return self._s.declare_publisher(key, congestion_control=cc)
 
     def query(self, key: str, payload: bytes, timeout_ms: float, on_done: OnDone) -> None:
-        """Query `key`; `on_done` gets the first reply, or None and a reason."""
+        """Query `key`; `on_done` gets the first reply, or None, the `CallFailure` Zenoh's
+        answers tell (module docstring) and its words."""
         push = self._h.push
         state = {"done": False}
-        started = time.monotonic()
         timeout_s = timeout_ms / 1000.0
 
-        def finish(reply: bytes | None, reason: str) -> None:
+        def finish(reply: bytes | None, failure: CallFailure | None, reason: str) -> None:
             if not state["done"]:
                 state["done"] = True
-                on_done(reply, reason)
+                on_done(reply, failure, reason)
 
         def on_reply(reply: zenoh.Reply) -> None:
             if reply.ok is not None:
-                push(finish, reply.ok.payload.to_bytes(), "")
+                push(finish, reply.ok.payload.to_bytes(), None, "")
             elif reply.err is not None:
                 text = reply.err.payload.to_string()
-                push(finish, None, "timeout" if text == "Timeout" else _server_error(text))
+                if text == ZENOH_TIMEOUT:
+                    push(finish, None, CallFailure.TIMEOUT, "timeout")
+                else:
+                    push(finish, None, CallFailure.SERVER_ERROR, _server_error(text))
 
-        def on_final() -> None:
-            elapsed = time.monotonic() - started
-            push(finish, None, "timeout" if elapsed >= 0.9 * timeout_s else "no server")
+        def on_final() -> None:  # after a reply or a timeout `finish` has run: no server
+            push(finish, None, CallFailure.NO_SERVER, "no server")
 
         tag = self._query_signers.get(key)
         if tag is None:
@@ -469,6 +475,11 @@ class ZenohTransport:
         self._entities.clear()
         if self.session is not None and not self.session.is_closed():
             self.session.close()
+
+
+#: the error reply Zenoh gives a query whose timeout passed after a queryable took it (our
+#: servers' error replies all begin "server error", so it is never theirs)
+ZENOH_TIMEOUT = "Timeout"
 
 
 def _server_error(text: str) -> str:
