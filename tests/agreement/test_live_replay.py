@@ -90,18 +90,18 @@ def test_gated_hosts_follow_the_trace_and_show_its_collision(headon_plan, tmp_pa
     assert int(step) == len(headon_plan.steps)  # the trace ends at the collision
     assert [(f"{a},{b}", f"{ca},{cb}") for a, b, ca, cb, _ in result.live_collisions] == [
         (robots, cells)]
-    assert result.live_collisions[0][4] == headon_plan.steps[-1].t  # logical time, as the trace
+    assert result.live_collisions[0][4] == headon_plan.steps[-1].grant.t  # logical time, as the trace
     assert result.collisions_match and result.confirmed
 
 
 def test_a_state_the_live_node_does_not_reach_stops_the_replay(headon_plan, tmp_path):
-    k = next(k for k, g in enumerate(headon_plan.steps) if g.node == "r1" and g.kind == "reply")
+    k = next(k for k, g in enumerate(headon_plan.steps) if g.node == "r1" and g.grant.kind == "reply")
     steps = list(headon_plan.steps)
     steps[k] = replace(steps[k], digest="0" * 24)
     result = asyncio.run(asyncio.wait_for(
         replay_in_process(replace(headon_plan, steps=steps), tmp_path / "ev"), 60))
     assert result.divergence is not None
-    assert result.divergence.startswith(f"step {steps[k].step}: r1.on_path (reply) at t=")
+    assert result.divergence.startswith(f"step {steps[k].grant.step}: r1.on_path (reply) at t=")
     assert "live state digest" in result.divergence and "0" * 24 in result.divergence
     assert result.granted == len(headon_plan.starts) + k
     assert not result.confirmed
@@ -109,8 +109,9 @@ def test_a_state_the_live_node_does_not_reach_stops_the_replay(headon_plan, tmp_
 
 def test_an_event_that_never_comes_is_reported_with_what_the_node_holds(headon_plan, tmp_path):
     steps = list(headon_plan.steps)
-    k = next(k for k, g in enumerate(steps) if g.node == "map_server" and g.kind == "delivery")
-    steps[k] = replace(steps[k], args="feedfacefeedface")  # a pose nobody sent
+    k = next(k for k, g in enumerate(steps) if g.node == "map_server" and g.grant.kind == "delivery")
+    steps[k] = replace(steps[k], grant=replace(steps[k].grant, args="feedfacefeedface"))  # a
+    # pose nobody sent
     result = asyncio.run(asyncio.wait_for(replay_in_process(
         replace(headon_plan, steps=steps), tmp_path / "ev", step_timeout_s=0.5), 60))
     assert result.divergence is not None and "did not run on_pose" in result.divergence
@@ -175,7 +176,7 @@ def test_c2a_counterexample_replayed_live_collides_the_same_way(tmp_path, reap_n
     (_, robots, cells), = p.collisions
     assert [(f"{a},{b}", f"{ca},{cb}") for a, b, ca, cb, _ in result.live_collisions] == [
         (robots, cells)]
-    assert f"[map_server] t={p.steps[-1].t} collision cells='{cells}' robots='{robots}'" in text
+    assert f"[map_server] t={p.steps[-1].grant.t} collision cells='{cells}' robots='{robots}'" in text
     assert result.node_logs_match, result.node_logs
     assert result.confirmed
     # the nodes' own event logs of the replay are a path of the checker, even strictly timed
@@ -215,8 +216,8 @@ def test_a_lasso_goes_round_its_cycle_again_on_gated_hosts(tmp_path):
     once, thrice = plan(trace, cycles=0), plan(trace, cycles=3)
     # 4 recorded steps, the cycle from world 1 is the last 3 of them
     assert len(once.steps) == 4 and len(thrice.steps) == 4 + 3 * 3
-    assert [g.handler for g in thrice.steps[1:4]] == [g.handler for g in thrice.steps[-3:]]
-    assert [g.t for g in thrice.steps[-3:]] == [g.t + 30 for g in thrice.steps[1:4]]
+    assert [g.grant.handler for g in thrice.steps[1:4]] == [g.grant.handler for g in thrice.steps[-3:]]
+    assert [g.grant.t for g in thrice.steps[-3:]] == [g.grant.t + 30 for g in thrice.steps[1:4]]
     assert thrice.final_digests == once.final_digests  # same states, 30 ms later
     result = asyncio.run(asyncio.wait_for(replay_in_process(thrice, tmp_path / "ev"), 60))
     assert result.divergence is None and result.final_states_match
@@ -276,14 +277,14 @@ def test_latency_and_drop_branches_are_granted_not_chosen(tmp_path):
     # time, and the nodes are not asked for the latency branches as ctx.choose answers.
     trace = fault_trace(tmp_path, "late", LATE, latency={"/pong": [0, 3]})
     late = plan(trace)
-    assert [(g.handler, g.t) for g in late.steps] == [("on_ping", 0), ("on_pong", 2), ("on_ping", 2)]
+    assert [(g.grant.handler, g.grant.t) for g in late.steps] == [("on_ping", 0), ("on_pong", 2), ("on_ping", 2)]
     assert [rec["choices"] for rec in json.loads(trace.read_text())["steps"]] == [[2], [], [3]]
-    assert all(g.choices == () for g in late.steps)
+    assert all(g.grant.choices == () for g in late.steps)
     result = asyncio.run(asyncio.wait_for(replay_in_process(late, tmp_path / "ev1"), 60))
     assert result.divergence is None and result.final_states_match
     # A dropped /pong: never granted; ping ends waiting, as in the trace.
     lost = plan(fault_trace(tmp_path, "lost", FINISHES, faults={"drop": ["/pong"]}))
-    assert [g.handler for g in lost.steps] == ["on_ping"]
+    assert [g.grant.handler for g in lost.steps] == ["on_ping"]
     result = asyncio.run(asyncio.wait_for(replay_in_process(lost, tmp_path / "ev2"), 60))
     assert result.divergence is None and result.final_states_match
 
@@ -299,8 +300,8 @@ def test_duplicates_are_refused_and_start_message_branches_are_granted(tmp_path)
                          timer_lateness=[0, 45]))
     # Ping's @on_start publishes the first /ping: its delay is the grant's to take too
     early = plan(fault_trace(tmp_path, "early", LATE, latency={"/ping": [0, 3]}))
-    assert all(g.choices == () for g in [*early.starts, *early.steps])
-    assert early.steps[0].handler == "on_ping" and early.steps[0].t > 0
+    assert all(g.grant.choices == () for g in [*early.starts, *early.steps])
+    assert early.steps[0].grant.handler == "on_ping" and early.steps[0].grant.t > 0
     result = asyncio.run(asyncio.wait_for(replay_in_process(early, tmp_path / "ev"), 60))
     assert result.divergence is None and result.final_states_match
 

@@ -22,6 +22,7 @@ from tests.runtime.hosts import (
     settle,
 )
 from twinfleet import CallError, CallFailure, Context, Node, every, handler, on_start, subscribe
+from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import encode
 from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.core.eventlog import EVENTS_FORMAT, EventLog, payload_digest
@@ -29,6 +30,7 @@ from twinfleet.runtime.host.clock import ManualClock
 from twinfleet.runtime.host.keys import KeyKind, node_key, topic_key
 from twinfleet.runtime.host.node_host import NodeHost
 from twinfleet.runtime.host.replay_gate import LogicalClock
+from twinfleet.runtime.host.replay_wire import STATUS, GateStatus, Grant, GrantAnswer, Held
 from twinfleet.runtime.host.transport import LoopbackBus, LoopbackTransport
 
 
@@ -95,17 +97,21 @@ def test_the_event_log_names_each_kind_of_event(tmp_path: Path) -> None:
         "timeout", "lonely", "/missing", payload_digest((CallError("/missing", CallFailure.NO_SERVER, "no server"),)))
 
 
-async def _grant(transport: LoopbackTransport, node: str, **grant: Any) -> dict[str, Any]:
+async def _ask(transport: LoopbackTransport, node: str, payload: bytes) -> bytes:
     done: asyncio.Future[tuple[bytes | None, str]] = asyncio.get_running_loop().create_future()
-    transport.query(node_key(FLEET, KeyKind.REPLAY, node), msgpack.packb(grant), 5_000.0,
+    transport.query(node_key(FLEET, KeyKind.REPLAY, node), payload, 5_000.0,
                     lambda reply, _failure, reason: done.done() or done.set_result((reply, reason)))
     reply, reason = await done
     assert reply is not None, reason
-    return msgpack.unpackb(reply, raw=False)
+    return reply
+
+
+async def _grant(transport: LoopbackTransport, node: str, grant: Grant) -> GrantAnswer:
+    return GrantAnswer.decode(await _ask(transport, node, grant.encode()))
 
 
 def test_a_gated_host_runs_only_what_is_granted_and_waits_for_what_is_in_flight() -> None:
-    async def body() -> tuple[list[Any], list[dict[str, Any]], dict[str, Any]]:
+    async def body() -> tuple[list[Any], list[GrantAnswer], GateStatus]:
         bus = LoopbackBus()
         transport, coordinator = LoopbackTransport(bus), LoopbackTransport(bus)
         await transport.open()
@@ -116,28 +122,61 @@ def test_a_gated_host_runs_only_what_is_granted_and_waits_for_what_is_in_flight(
         task = asyncio.create_task(host.run())
         for _ in range(50):
             await asyncio.sleep(0)
-        status = await _grant(coordinator, "ticker", op="status")
-        answers = [await _grant(coordinator, "ticker", kind="start", handler="start",
-                                sender="ticker", args=payload_digest(()), t=0)]
+        status = GateStatus.decode(await _ask(coordinator, "ticker", STATUS))
+        answers = [await _grant(coordinator, "ticker", Grant(EventKind.START, "start", "ticker",
+                                                             payload_digest(()), 0))]
         # a grant for a message still in flight waits for it
-        waiting = asyncio.create_task(_grant(coordinator, "ticker", kind="delivery",
-                                             handler="on_num", sender="x",
-                                             args=payload_digest((Num(5),)), t=7))
+        waiting = asyncio.create_task(_grant(coordinator, "ticker", Grant(
+            EventKind.DELIVERY, "on_num", "x", payload_digest((Num(5),)), 7)))
         for _ in range(50):
             await asyncio.sleep(0)
         assert not waiting.done() and node.state.seen == []
         coordinator.put(topic_key(FLEET, "/nums"), encode(Num(5), seq=1, sender="x"), QOS_DEFAULT)
         answers.append(await waiting)
-        answers.append(await _grant(coordinator, "ticker", kind="periodic", handler="tick",
-                                    sender="ticker", args=payload_digest(()), t=100))
+        answers.append(await _grant(coordinator, "ticker", Grant(
+            EventKind.PERIODIC, "tick", "ticker", payload_digest(()), 100)))
         host.stop()
         await task
         return node.state.seen, answers, status
 
     seen, answers, status = run(body())
     assert seen == [5, 100]  # the after timer was never granted, so it never ran
-    assert [a["error"] for a in answers] == [None, None, None]
-    assert [r["kind"] for r in status["ready"]] == ["start", "periodic"]
+    assert [a.error for a in answers] == [None, None, None]
+    assert [h.kind for h in status.ready] == ["start", "periodic"] and status.waiting is None
+
+
+def test_a_malformed_grant_is_a_one_line_server_error() -> None:
+    async def body() -> tuple[bytes | None, CallFailure | None, str]:
+        bus = LoopbackBus()
+        transport, coordinator = LoopbackTransport(bus), LoopbackTransport(bus)
+        await transport.open()
+        await coordinator.open()
+        host = NodeHost(Ticker("ticker"), transport, LogicalClock(), seed=1, fleet=FLEET,
+                        gated=True, out=io.StringIO())
+        task = asyncio.create_task(host.run())
+        for _ in range(50):
+            await asyncio.sleep(0)
+        done: asyncio.Future[tuple[bytes | None, CallFailure | None, str]] = \
+            asyncio.get_running_loop().create_future()
+        coordinator.query(node_key(FLEET, KeyKind.REPLAY, "ticker"),
+                          msgpack.packb({"kind": "start", "handler": "start"}), 5_000.0,
+                          lambda *answer: done.done() or done.set_result(answer))
+        answer = await done
+        host.stop()
+        await task
+        return answer
+
+    assert run(body()) == (None, CallFailure.SERVER_ERROR,
+                           "server error: bad grant (grant: missing sender, args, t)")
+
+
+def test_the_wire_values_round_trip() -> None:
+    grant = Grant(EventKind.TIMER, "later", "ticker", payload_digest((3,)), 30, (1, 0), 4)
+    answer = GrantAnswer("ab" * 12, (1,), (2,), (("/nums", "test/Num"),), None)
+    status = GateStatus((Held("timer", "later", "ticker", grant.args, "(3,)"),), 2, grant)
+    assert Grant.decode(grant.encode()) == grant
+    assert GrantAnswer.decode(answer.encode()) == answer
+    assert GateStatus.decode(status.encode()) == status
 
 
 def test_a_gated_host_needs_a_logical_clock() -> None:

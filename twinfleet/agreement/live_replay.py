@@ -50,8 +50,6 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, TextIO, final
 
-import msgpack
-
 from twinfleet.agreement.events import (
     live_signature,
     load_events,
@@ -70,6 +68,7 @@ from twinfleet.runtime.core.eventlog import payload_digest, state_digest, summar
 from twinfleet.runtime.fleet.fleet_result import EndReason, signal_exit_code
 from twinfleet.runtime.fleet.launcher import Fleet, format_result, run_fleet
 from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key, parse_node_key, topic_key
+from twinfleet.runtime.host.replay_wire import STATUS, GateStatus, Grant, GrantAnswer, WireError
 from twinfleet.runtime.host.transport import Transport
 from twinfleet.runtime.scenario.spec import Scenario
 
@@ -82,25 +81,15 @@ class ReplayDivergence(RuntimeError):
 
 @final
 @dataclass(frozen=True, slots=True)
-class Grant:
-    """One event the coordinator grants, and what the node must report after it."""
+class Planned:
+    """One grant of the plan (`grant.step` 0: a start handler), and what the node must
+    report after it."""
 
-    step: int  # trace step (0: a start handler)
     node: str
-    handler: str
-    kind: EventKind
-    sender: str
-    args: str
-    summary: str
-    t: int
-    choices: tuple[int, ...]
+    grant: Grant
+    summary: str  # the event's arguments, shortened for messages
     options: tuple[int, ...] | None  # None: not checked (a node's earlier start handlers)
     digest: str | None
-
-    def payload(self) -> bytes:
-        return msgpack.packb({"step": self.step, "kind": self.kind.value, "handler": self.handler,
-                              "sender": self.sender, "args": self.args, "t": self.t,
-                              "choices": list(self.choices)})
 
 
 @final
@@ -111,8 +100,8 @@ class Plan:
     trace_path: str
     trace: Mapping[str, Any]
     scenario: Scenario
-    starts: list[Grant]
-    steps: list[Grant]
+    starts: list[Planned]
+    steps: list[Planned]
     final_digests: dict[str, str]
     collisions: list[tuple[str, str, str]]  # (step, "ra,rb", cells text) from the trace's logs
     cycles: int = 0  # extra rounds of a lasso's cycle appended to the trace's steps
@@ -233,7 +222,7 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
 
 
 def _step_grants(system: System, world: World, records: Sequence[Mapping[str, Any]],
-                 where: str) -> tuple[list[Grant], World]:
+                 where: str) -> tuple[list[Planned], World]:
     """The grants of a trace's step records, taken from `world`, and the world at the end."""
     steps = []
     for n, rec in enumerate(records, start=1):
@@ -254,11 +243,11 @@ def _step_grants(system: System, world: World, records: Sequence[Mapping[str, An
         ev = t.event
         sender = system.names[ev.sender] if ev.sender >= 0 else ""
         # the node answers its own ctx.choose; latency and drop branches are the grants' timing
-        steps.append(Grant(n, system.names[ev.target], ev.method, ev.kind,
-                           sender, payload_digest(ev.args), summarise(ev.args), ev.due,
-                           _handler_part(t.step.choices, t.branches),
-                           _handler_part(t.step.options, t.branches),
-                           state_digest(t.world.states[ev.target])))
+        grant = Grant(ev.kind, ev.method, sender, payload_digest(ev.args), ev.due,
+                      _handler_part(t.step.choices, t.branches), n)
+        steps.append(Planned(system.names[ev.target], grant, summarise(ev.args),
+                             _handler_part(t.step.options, t.branches),
+                             state_digest(t.world.states[ev.target])))
         world = t.world
     return steps, world
 
@@ -270,16 +259,16 @@ def _handler_part(values: Sequence[int], branches: Sequence[int]) -> tuple[int, 
 
 
 def _start_grants(system: System, states: Sequence[bytes],
-                  choices: Mapping[tuple[str, str], tuple[int, ...]]) -> list[Grant]:
+                  choices: Mapping[tuple[str, str], tuple[int, ...]]) -> list[Planned]:
     grants = []
     for i, node in enumerate(system.nodes):
         specs = node.spec().of_kind("start")
         for n, spec in enumerate(specs):
             last = n == len(specs) - 1
-            grants.append(Grant(0, node.name, spec.method, EventKind.START, node.name,
-                                payload_digest(()),
-                                "", 0, choices.get((node.name, spec.method), ()), None,
-                                state_digest(states[i]) if last else None))
+            grant = Grant(EventKind.START, spec.method, node.name, payload_digest(()), 0,
+                          choices.get((node.name, spec.method), ()))
+            grants.append(Planned(node.name, grant, "", None,
+                                  state_digest(states[i]) if last else None))
     return grants
 
 
@@ -312,8 +301,8 @@ class Coordinator:
             await self._wait_alive()
             begin = time.monotonic()
             self.result.startup_s = begin - started
-            for grant in [*self.plan.starts, *self.plan.steps]:
-                await self._grant(grant)
+            for planned in [*self.plan.starts, *self.plan.steps]:
+                await self._grant(planned)
                 self.result.granted += 1
         except ReplayDivergence as exc:
             self.result.divergence = str(exc)
@@ -366,42 +355,52 @@ class Coordinator:
             except TimeoutError:
                 return
 
-    async def _grant(self, grant: Grant) -> None:
-        answer = await self._ask(grant)
-        where = f"step {grant.step}: {grant.node}.{grant.handler} ({grant.kind}) at t={grant.t}"
-        if answer.get("error"):
-            raise ReplayDivergence(f"{where}: the live handler failed: {answer['error']}")
-        made = (tuple(answer["choices"]), tuple(answer["options"]))
-        if made[0] != grant.choices or (grant.options is not None and made[1] != grant.options):
-            raise ReplayDivergence(f"{where}: ctx.choose answered {list(made[0])} of options "
-                                   f"{list(made[1])}, the trace has {list(grant.choices)} of "
-                                   f"{list(grant.options or ())}")
-        if grant.digest is not None and answer["digest"] != grant.digest:
-            raise ReplayDivergence(f"{where}: live state digest {answer['digest']}, the checker's "
-                                   f"is {grant.digest} (the node's state differs)")
-        self.digests[grant.node] = answer["digest"]
+    async def _grant(self, planned: Planned) -> None:
+        answer, grant = await self._ask(planned), planned.grant
+        where = f"step {grant.step}: {planned.node}.{grant.handler} ({grant.kind}) at t={grant.t}"
+        if answer.error:
+            raise ReplayDivergence(f"{where}: the live handler failed: {answer.error}")
+        if answer.choices != grant.choices or (planned.options is not None
+                                               and answer.options != planned.options):
+            raise ReplayDivergence(f"{where}: ctx.choose answered {list(answer.choices)} of "
+                                   f"options {list(answer.options)}, the trace has "
+                                   f"{list(grant.choices)} of {list(planned.options or ())}")
+        if planned.digest is not None and answer.digest != planned.digest:
+            raise ReplayDivergence(f"{where}: live state digest {answer.digest}, the checker's "
+                                   f"is {planned.digest} (the node's state differs)")
+        self.digests[planned.node] = answer.digest
 
-    async def _ask(self, grant: Grant) -> dict[str, Any]:
-        transport, payload = self.transport, grant.payload()
-        key = node_key(self.plan.scenario.fleet, KeyKind.REPLAY, grant.node)
+    async def _ask(self, planned: Planned) -> GrantAnswer:
+        transport, grant = self.transport, planned.grant
+        key = node_key(self.plan.scenario.fleet, KeyKind.REPLAY, planned.node)
         for _ in range(100):  # the queryable may not be routed yet just after the token
-            reply, failure, reason = await _query(transport, key, payload, self.step_timeout_s)
+            reply, failure, reason = await _query(transport, key, grant.encode(),
+                                                  self.step_timeout_s)
             if reply is not None:
-                return msgpack.unpackb(reply, raw=False)
+                try:
+                    return GrantAnswer.decode(reply)
+                except WireError as exc:
+                    raise ReplayDivergence(f"step {grant.step}: {planned.node}: {exc}") from None
             if failure is not CallFailure.NO_SERVER:
                 break
             await asyncio.sleep(0.05)
-        status = await _query(transport, key, msgpack.packb({"op": "status"}), 2.0)
-        ready = ""
-        if status[0] is not None:
-            items = msgpack.unpackb(status[0], raw=False)["ready"]
-            ready = "; node holds: " + (", ".join(
-                f"{r['handler']}({r['summary'][:40]}) ({r['kind']} from {r['sender']})"
-                for r in items[:8]) or "nothing")
-        raise ReplayDivergence(f"step {grant.step}: {grant.node} did not run "
-                               f"{grant.handler}({grant.summary[:60]}) ({grant.kind} from "
+        raise ReplayDivergence(f"step {grant.step}: {planned.node} did not run "
+                               f"{grant.handler}({planned.summary[:60]}) ({grant.kind} from "
                                f"{grant.sender}) within {self.step_timeout_s:g} s "
-                               f"({reason}){ready}")
+                               f"({reason}){await self._holds(key)}")
+
+    async def _holds(self, key: str) -> str:
+        """What a node that did not run its grant holds, for the message."""
+        reply, _, _ = await _query(self.transport, key, STATUS, 2.0)
+        try:
+            status = GateStatus.decode(reply) if reply is not None else None
+        except WireError:
+            status = None
+        if status is None:
+            return ""
+        return "; node holds: " + (", ".join(
+            f"{h.handler}({h.summary[:40]}) ({h.kind} from {h.sender})"
+            for h in status.ready[:8]) or "nothing")
 
 
 async def _query(transport: Transport | None, key: str, payload: bytes,
@@ -463,8 +462,9 @@ def compare_node_logs(p: Plan, events_path: str) -> tuple[bool | None, str]:
         return None, f"unreadable ({exc})"
     by_node = log.by_node()
     expected: dict[str, list[tuple[str, str, str, str]]] = {}
-    for g in [*p.starts, *p.steps]:
-        expected.setdefault(g.node, []).append((g.handler, g.kind, g.sender, g.args))
+    for planned in [*p.starts, *p.steps]:
+        g = planned.grant
+        expected.setdefault(planned.node, []).append((g.handler, g.kind, g.sender, g.args))
     for node, want in expected.items():
         got = [live_signature(e)[1:] for e in by_node.get(node, [])]
         if got != want:

@@ -12,6 +12,7 @@ __all__ = [
     "node_host",
     "readiness",
     "replay_gate",
+    "replay_wire",
     "schemas",
     "transport",
     "zenoh_transport",

@@ -11,13 +11,8 @@ in flight — sets the logical time, runs it with `NodeCore.run` and the grant's
 new state digest and what the handler published. The gate drives the core through its
 public methods and observes it (`handled`) to learn what the handler did.
 
-Wire protocol. A grant is a msgpack map naming the event (``kind``, ``handler``,
-``sender``, ``args``: its `payload_digest`) with the logical time ``t`` and the
-``choices`` that answer `ctx.choose`. The answer, sent once the handler ran and
-its outputs were performed, is a msgpack map: ``digest`` (`state_digest` of the
-new state), ``choices``, ``options``, ``error`` (or None) and ``published``
-([topic, type] pairs). ``{"op": "status"}`` answers at once with the pending
-events and the waiting grant.
+Wire protocol: `runtime.host.replay_wire` (`Grant` in, `GrantAnswer` out, `STATUS`
+answered with a `GateStatus`), the same values the coordinator imports.
 """
 
 from __future__ import annotations
@@ -25,20 +20,24 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any, final
 
-import msgpack
-
 from twinfleet.runtime.contract.context import Publish
 from twinfleet.runtime.contract.messages import type_name_of
 from twinfleet.runtime.core.choosers import RecordingChooser
-from twinfleet.runtime.core.eventlog import node_state_digest, payload_digest, summarise
-from twinfleet.runtime.core.events import Event
+from twinfleet.runtime.core.eventlog import node_state_digest
 from twinfleet.runtime.core.node_core import Handled, NodeCore
 from twinfleet.runtime.core.outbox import Output
 from twinfleet.runtime.host.clock import TimerHandle
+from twinfleet.runtime.host.replay_wire import (
+    GateStatus,
+    Grant,
+    GrantAnswer,
+    Held,
+    WireError,
+    is_status,
+)
 from twinfleet.runtime.host.transport import Respond
 
 GATED_CALL_WALL_S = 600.0  # a gated call waits for its grant, not for a timeout
-_GRANT_KEYS = ("kind", "handler", "sender", "args", "t")
 
 
 @final
@@ -68,18 +67,6 @@ class LogicalClock:
         return GATED_CALL_WALL_S
 
 
-def describe(entry: Event) -> dict[str, Any]:
-    """A pending entry as the coordinator's status request shows it."""
-    return {"kind": str(entry.kind), "handler": entry.handler, "sender": entry.sender,
-            "args": payload_digest(entry.args), "summary": summarise(entry.args)}
-
-
-def matches(entry: Event, grant: dict[str, Any]) -> bool:
-    """Whether `entry` is the event `grant` names (the argument digest is computed last)."""
-    return (entry.handler == grant["handler"] and entry.kind == grant["kind"]
-            and entry.sender == grant["sender"] and payload_digest(entry.args) == grant["args"])
-
-
 @final
 class ReplayGate:
     """Runs a gated node's pending events one grant at a time (module docstring).
@@ -94,7 +81,7 @@ class ReplayGate:
                  perform: Callable[[Sequence[Output]], None]) -> None:
         self.core, self.clock, self.perform = core, clock, perform
         self.granted = 0
-        self._grant: tuple[dict[str, Any], Respond] | None = None
+        self._grant: tuple[Grant, Respond] | None = None
         self._last: Handled | None = None
         core.observe(self)
 
@@ -109,18 +96,16 @@ class ReplayGate:
 
     def on_request(self, payload: bytes, respond: Respond) -> None:
         """A grant or a status request from the coordinator."""
+        if is_status(payload):
+            waiting = self._grant[0] if self._grant is not None else None
+            status = GateStatus(tuple(Held.of(e) for e in self.core.pending()), self.granted,
+                                waiting)
+            respond(status.encode(), "")
+            return
         try:
-            grant = msgpack.unpackb(payload, raw=False)
-            if grant.get("op") == "status":
-                waiting = self._grant[0] if self._grant is not None else None
-                respond(msgpack.packb({"ready": [describe(e) for e in self.core.pending()],
-                                       "granted": self.granted, "waiting": waiting}), "")
-                return
-            missing = [k for k in _GRANT_KEYS if k not in grant]
-            if missing:
-                raise KeyError(", ".join(missing))
-        except Exception as exc:  # a malformed grant is the coordinator's bug: say so
-            respond(None, f"server error: bad grant ({exc!r})")
+            grant = Grant.decode(payload)
+        except WireError as exc:  # a malformed grant is the coordinator's bug: say so
+            respond(None, f"server error: bad grant ({exc})")
             return
         if self._grant is not None:
             respond(None, "server error: another grant is still waiting")
@@ -131,20 +116,19 @@ class ReplayGate:
     def _run(self) -> None:
         assert self._grant is not None
         grant, respond = self._grant
-        entry = next((e for e in self.core.pending() if matches(e, grant)), None)
+        entry = next((e for e in self.core.pending() if grant.names(e)), None)
         if entry is None:
             return  # still in flight: `poll` tries again when something arrives
         self._grant = None
-        self.clock.now = int(grant["t"])
-        chooser = RecordingChooser(None, grant.get("choices") or ())
+        self.clock.now = grant.t
+        chooser = RecordingChooser(None, grant.choices)
         self.perform(self.core.run(entry, self.clock.now, chooser))
         self.granted += 1
         record = self._last
         assert record is not None and record.entry is entry
-        published = ([[e.topic, type_name_of(e.msg)] for e in record.effects if type(e) is Publish]
-                     if record.error is None else [])
-        respond(msgpack.packb({"digest": node_state_digest(self.core.node.state),
-                               "choices": chooser.indices, "options": chooser.options,
-                               "published": published,
-                               "error": None if record.error is None else record.error.message}),
-                "")
+        published = (tuple((e.topic, type_name_of(e.msg)) for e in record.effects
+                           if type(e) is Publish) if record.error is None else ())
+        answer = GrantAnswer(node_state_digest(self.core.node.state), tuple(chooser.indices),
+                             tuple(chooser.options), published,
+                             None if record.error is None else record.error.message)
+        respond(answer.encode(), "")
