@@ -32,7 +32,7 @@ from typing import Any
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from twinfleet.runtime.fleet.launcher import run_fleet  # noqa: E402
+from twinfleet.runtime.fleet.launcher import LaunchOptions, run_fleet  # noqa: E402
 from twinfleet.runtime.scenario.spec import load_scenario  # noqa: E402
 
 
@@ -46,8 +46,9 @@ def one_run(scenario_path: str, time_scale: float, monitor: bool) -> dict[str, A
     scenario = load_scenario(scenario_path)
     children, own, wall = (_cpu(resource.RUSAGE_CHILDREN), _cpu(resource.RUSAGE_SELF),
                            time.monotonic())
-    result = asyncio.run(run_fleet(scenario, time_scale=time_scale, timeout_s=120,
-                                   out=io.StringIO(), handle_signals=False, judge=monitor))
+    options = LaunchOptions(time_scale=time_scale, timeout_s=120, handle_signals=False,
+                            judge=monitor)
+    result = asyncio.run(run_fleet(scenario, options, out=io.StringIO()))
     report = result.report
     r5 = report.records["r5"].arrival_ms if report is not None else None
     return {"nodes_cpu_s": _cpu(resource.RUSAGE_CHILDREN) - children,

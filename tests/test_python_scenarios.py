@@ -193,7 +193,8 @@ def pong_report(scenario: Scenario) -> PongReport:
 @pytest.mark.parametrize("record", [False, True], ids=["private-file", "beside-the-event-log"])
 def test_a_python_scenario_runs_live(tmp_path: Path, record: bool) -> None:
     from tests.integration.itest_support import fleet_nodes, poll
-    from twinfleet.runtime.fleet.launcher import format_result, run_fleet
+    from twinfleet.runtime.fleet.fleet_result import EndReason
+    from twinfleet.runtime.fleet.launcher import LaunchOptions, format_result, run_fleet
 
     scenario = Scenario.build("pypong", [NodeEntry("ping", Ping, {"rounds": 3}),
                                          NodeEntry("pong", Pong)],
@@ -202,10 +203,12 @@ def test_a_python_scenario_runs_live(tmp_path: Path, record: bool) -> None:
     events = str(tmp_path / "events.jsonl") if record else None
     out = io.StringIO()
     result = asyncio.run(asyncio.wait_for(
-        run_fleet(scenario, timeout_s=60, out=out, handle_signals=False, record_events=events),
+        run_fleet(scenario, LaunchOptions(timeout_s=60, handle_signals=False,
+                                          record_events=events), out=out),
         80))
     text = out.getvalue() + "\n".join(format_result(result))
-    assert result.reason == "the run report says every robot is done", text
+    assert result.reason == "the run report says the run is finished", text
+    assert result.end is EndReason.REPORT_FINISHED
     assert result.passed and result.report.seen == [1, 2, 3], text
     assert not result.failed, text
     # The node processes loaded a file written for them: a private one is gone afterwards;

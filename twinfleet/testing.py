@@ -45,7 +45,7 @@ from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.contract.messages import DecodeError, decode, encode
 from twinfleet.runtime.contract.node import QOS_DEFAULT, Node
 from twinfleet.runtime.contract.tracefile import write_trace
-from twinfleet.runtime.fleet.launcher import FleetResult, run_fleet
+from twinfleet.runtime.fleet.launcher import FleetResult, LaunchOptions, run_fleet
 from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.scenario.examples import add_examples
 from twinfleet.runtime.scenario.scenario_file import write_scenario
@@ -321,10 +321,10 @@ async def live_fleet(scenario: Scenario | str | Path, *, time_scale: float = 1.0
         await finished.wait()
         return "the test finished"
 
-    kwargs = {} if out is None else {"out": out}
-    runner = asyncio.create_task(run_fleet(scenario, time_scale=time_scale, timeout_s=timeout_s,
-                                           seed=seed, handle_signals=False, driver=driver,
-                                           params=list(params), **kwargs))
+    options = LaunchOptions(time_scale=time_scale, timeout_s=timeout_s, seed=seed,
+                            handle_signals=False, params=tuple(params))
+    output = {} if out is None else {"out": out}  # else run_fleet's own default
+    runner = asyncio.create_task(run_fleet(scenario, options, driver=driver, **output))
     await asyncio.wait({ready, runner}, return_when=asyncio.FIRST_COMPLETED)
     if not ready.done():
         result = await runner  # re-raises a launcher error

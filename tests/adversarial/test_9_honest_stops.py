@@ -10,7 +10,7 @@ import io
 import pytest
 
 from tests.adversarial.fleets import run_launch, write_scenario
-from twinfleet.runtime.fleet.launcher import run_fleet
+from twinfleet.runtime.fleet.launcher import LaunchOptions, run_fleet
 from twinfleet.runtime.fleet.live_verdict import Status
 from twinfleet.runtime.scenario.spec import load_scenario
 
@@ -51,8 +51,8 @@ def test_a_timeout_shorter_than_the_start_up_counts_from_the_epoch(tmp_path):
 def test_a_fleet_not_up_in_time_is_inconclusive_and_blames_no_node(tmp_path):
     scenario = load_scenario(_scenario(tmp_path, 60.0))
     out = io.StringIO()
-    result = asyncio.run(run_fleet(scenario, timeout_s=0.5, out=out, handle_signals=False,
-                                   startup_s=8.0))
+    options = LaunchOptions(timeout_s=0.5, handle_signals=False, startup_s=8.0)
+    result = asyncio.run(run_fleet(scenario, options, out=out))
     text = out.getvalue()
     assert result.failed == (), text
     assert result.verdict is not None and result.verdict.status == Status.INCONCLUSIVE, text

@@ -283,7 +283,7 @@ def test_run_fleet_as_a_library_with_respawn_and_summary(tmp_path: Path) -> None
 
     from twinfleet.runtime.contract.messages import String
     from twinfleet.runtime.fleet.fleet_result import EndReason
-    from twinfleet.runtime.fleet.launcher import run_fleet
+    from twinfleet.runtime.fleet.launcher import LaunchOptions, run_fleet
     from twinfleet.runtime.scenario.spec import load_scenario
 
     path = tmp_path / "respawn.yaml"
@@ -293,7 +293,8 @@ def test_run_fleet_as_a_library_with_respawn_and_summary(tmp_path: Path) -> None
         scenario, live=dataclasses.replace(scenario.live, summary_topics=("/chatter",)))
     out = io.StringIO()
     result = asyncio.run(asyncio.wait_for(
-        run_fleet(scenario, time_scale=2.0, timeout_s=6.0, seed=5, out=out, handle_signals=False),
+        run_fleet(scenario, LaunchOptions(time_scale=2.0, timeout_s=6.0, seed=5,
+                                          handle_signals=False), out=out),
         40))
     text = out.getvalue()
     assert result.reason == "timeout after 6 s", text

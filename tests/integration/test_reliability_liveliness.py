@@ -36,7 +36,7 @@ from itest_support import (
 from twinfleet.runtime.access.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.contract.messages import String, encode
 from twinfleet.runtime.core.guard import sign
-from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, format_result, run_fleet
+from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, LaunchOptions, format_result, run_fleet
 from twinfleet.runtime.fleet.run_record import read_run_record
 from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.zenoh_transport import zenoh_config
@@ -112,9 +112,9 @@ def test_killed_node_is_detected_within_a_second_respawned_and_reported(tmp_path
     figures: dict[str, float] = {}
 
     async def body() -> object:
-        run = asyncio.create_task(run_fleet(scenario, time_scale=1.0, timeout_s=60, seed=4,
-                                            listen=endpoint, out=out, handle_signals=False,
-                                            run_record=str(record)))
+        options = LaunchOptions(time_scale=1.0, timeout_s=60, seed=4, listen=endpoint,
+                                handle_signals=False, run_record=str(record))
+        run = asyncio.create_task(run_fleet(scenario, options, out=out))
         try:
             await out.wait_for(r"\[watcher\] t=\d+ alive node='r1'", timeout=30)
             await out.wait_for(r"\[watcher\] t=\d+ alive node='r2'", timeout=30)
@@ -176,9 +176,10 @@ def test_killed_node_is_detected_within_a_second_respawned_and_reported(tmp_path
 
 LAUNCH_SCRIPT = """
 import asyncio, sys
-from twinfleet.runtime.fleet.launcher import run_fleet
+from twinfleet.runtime.fleet.launcher import LaunchOptions, run_fleet
 from twinfleet.runtime.scenario.spec import load_scenario
-asyncio.run(run_fleet(load_scenario(sys.argv[1]), run_record=sys.argv[2], listen=sys.argv[3]))
+asyncio.run(run_fleet(load_scenario(sys.argv[1]),
+                      LaunchOptions(run_record=sys.argv[2], listen=sys.argv[3])))
 """
 
 

@@ -26,7 +26,7 @@ from pathlib import Path
 import pytest
 from itest_support import fleet_nodes, kill_all, pick_free_port
 
-from twinfleet.runtime.fleet.launcher import run_fleet
+from twinfleet.runtime.fleet.launcher import LaunchOptions, run_fleet
 from twinfleet.runtime.fleet.run_record import read_run_record
 from twinfleet.runtime.scenario.spec import load_scenario
 
@@ -65,9 +65,10 @@ def test_soak_reliable_topics_lose_nothing_and_memory_stays_bounded(tmp_path: Pa
     out = io.StringIO()
 
     async def body() -> object:
-        return await run_fleet(scenario, time_scale=1.0, seed=1, out=out,
-                               listen=f"tcp/127.0.0.1:{pick_free_port()}",
-                               handle_signals=False, run_record=str(record))
+        options = LaunchOptions(time_scale=1.0, seed=1,
+                                listen=f"tcp/127.0.0.1:{pick_free_port()}",
+                                handle_signals=False, run_record=str(record))
+        return await run_fleet(scenario, options, out=out)
 
     try:
         result = asyncio.run(body())

@@ -30,3 +30,20 @@ def test_the_end_reason_not_its_words_says_whether_a_run_was_interrupted():
 def test_a_node_exit_is_killed_or_failed_by_its_code(code, kind):
     ending = RunEnding.node_exit("r1", code)
     assert ending == RunEnding(kind, f"node r1 failed (exit code {code})")
+
+
+def test_launch_options_are_one_frozen_value_with_the_scenarios_defaults():
+    import dataclasses
+    import inspect
+
+    from twinfleet.runtime.fleet.launcher import STARTUP_S, LaunchOptions, run_fleet
+
+    options = LaunchOptions()
+    assert (options.time_scale, options.timeout_s, options.seed, options.until_settled) == (
+        None, None, None, None)  # the scenario's
+    assert options.startup_s == STARTUP_S and options.handle_signals and options.judge
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        options.seed = 3  # type: ignore[misc]
+    # run_fleet takes the scenario, the options, where output goes and the driver: no more
+    assert list(inspect.signature(run_fleet).parameters) == ["scenario", "options", "out",
+                                                            "driver"]

@@ -66,7 +66,7 @@ from twinfleet.runtime.contract.node import QOS_DEFAULT
 from twinfleet.runtime.contract.tracefile import TraceError, code_changes, load_trace
 from twinfleet.runtime.core.eventlog import payload_digest, state_digest, summarise
 from twinfleet.runtime.fleet.fleet_result import EndReason, signal_exit_code
-from twinfleet.runtime.fleet.launcher import Fleet, format_result, run_fleet
+from twinfleet.runtime.fleet.launcher import Fleet, LaunchOptions, format_result, run_fleet
 from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key, parse_node_key, topic_key
 from twinfleet.runtime.host.replay_wire import STATUS, GateStatus, Grant, GrantAnswer, WireError
 from twinfleet.runtime.host.transport import Transport
@@ -441,10 +441,10 @@ async def replay_live(trace_path: str | Path, *, out: TextIO = sys.stdout,
                               cycle_start=p.trace.get("cycle_start"))
     coordinator = Coordinator(p, result, step_timeout_s=step_timeout_s)
     events = events_out or str(Path(trace_path).with_suffix(".live-events.jsonl"))
-    fleet = await run_fleet(p.scenario, timeout_s=timeout_s, out=out,
-                            handle_signals=handle_signals, record_events=events,
-                            node_args=("--gate",), driver=coordinator,
-                            params=p.trace.get("params") or ())  # the overrides checked
+    options = LaunchOptions(timeout_s=timeout_s, handle_signals=handle_signals,
+                            record_events=events, node_args=("--gate",),
+                            params=tuple(p.trace.get("params") or ()))  # the overrides checked
+    fleet = await run_fleet(p.scenario, options, out=out, driver=coordinator)
     result.fleet_reason, result.fleet_end = fleet.reason, fleet.end
     for line in format_result(fleet):
         print(f"[launcher] {line}", file=out, flush=True)

@@ -52,7 +52,12 @@ def cmd_launch(args: argparse.Namespace) -> int:
     import zenoh
 
     from twinfleet.runtime.fleet.fleet_result import runs_summary
-    from twinfleet.runtime.fleet.launcher import FleetConflict, format_result, run_fleet
+    from twinfleet.runtime.fleet.launcher import (
+        FleetConflict,
+        LaunchOptions,
+        format_result,
+        run_fleet,
+    )
     bridge = launch_bridge(args, scenario)
 
     worst, codes = 0, []
@@ -61,17 +66,15 @@ def cmd_launch(args: argparse.Namespace) -> int:
         if args.runs > 1:
             print(f"[launcher] run {run + 1}/{args.runs} (seed {seed})", flush=True)
         try:
-            result = asyncio.run(run_fleet(scenario, time_scale=args.time_scale,
-                                           timeout_s=args.timeout, seed=seed,
-                                           connect=args.connect, listen=args.listen,
-                                           run_record=args.record_run,
-                                           record_events=_events_path(args, run),
-                                           params=params, auth=auth,
-                                           bridge=bridge is not None, driver=bridge,
-                                           accept_recorded=args.accept_recorded,
-                                           node_args=["--verbose"] if args.verbose else [],
-                                           until_settled=args.until_settled or None,
-                                           until_violation=args.stop_on_violation or None))
+            options = LaunchOptions(
+                time_scale=args.time_scale, timeout_s=args.timeout, seed=seed,
+                connect=args.connect, listen=args.listen, run_record=args.record_run,
+                record_events=_events_path(args, run), params=params, auth=auth,
+                bridge=bridge is not None, accept_recorded=args.accept_recorded,
+                node_args=["--verbose"] if args.verbose else [],
+                until_settled=args.until_settled or None,
+                until_violation=args.stop_on_violation or None)
+            result = asyncio.run(run_fleet(scenario, options, driver=bridge))
         except FleetConflict as exc:
             raise CommandError(str(exc)) from None
         except ValueError as exc:  # e.g. a bad TWINFLEET_ZENOH_CONFIG_OVERRIDE

@@ -36,7 +36,7 @@ from twinfleet.nodes.report import FleetReport
 from twinfleet.runtime.access.fleetauth import login_settings, registry_auth
 from twinfleet.runtime.contract.messages import encode
 from twinfleet.runtime.fleet.fleet_result import EndReason
-from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, free_port, run_fleet
+from twinfleet.runtime.fleet.launcher import SHUTDOWN_TOPIC, LaunchOptions, free_port, run_fleet
 from twinfleet.runtime.host.keys import topic_key
 from twinfleet.runtime.host.zenoh_transport import ZenohTransport, zenoh_config
 from twinfleet.runtime.scenario.files import with_absolute_files
@@ -234,9 +234,9 @@ async def live_run(scenario: Scenario, *, time_scale: float, seed: int, timeout_
     token = _HOOK.set(hook)
     started = time.monotonic()
     try:
-        fleet = asyncio.create_task(run_fleet(
-            with_timed_report(scenario), time_scale=time_scale, timeout_s=timeout_s, seed=seed,
-            listen=endpoint, out=out, handle_signals=handle_signals))
+        options = LaunchOptions(time_scale=time_scale, timeout_s=timeout_s, seed=seed,
+                                listen=endpoint, handle_signals=handle_signals)
+        fleet = asyncio.create_task(run_fleet(with_timed_report(scenario), options, out=out))
         stopper = asyncio.create_task(_stop_when_decided(decided, fleet, endpoint,
                                                          scenario.fleet, why))
         try:

@@ -8,6 +8,7 @@ Imports the access wing, the host and what lies below them.
 __all__ = [
     "event_merge",
     "fleet_result",
+    "launch_options",
     "launcher",
     "live_fleet",
     "live_verdict",

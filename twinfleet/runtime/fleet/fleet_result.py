@@ -29,6 +29,7 @@ class EndReason(Enum):
     ALL_EXITED = "all exited"  # every node process ended by itself
     SETTLED = "settled"  # every `eventually` property held (``until_settled``)
     VIOLATION = "violation"  # a property was violated (``until_violation``)
+    REPORT_FINISHED = "report finished"  # the scenario's run report says it is over
     DRIVER = "driver"  # the launch driver (a test, the live replay, ...) returned or failed
 
 

@@ -30,7 +30,7 @@ from pathlib import Path
 from types import TracebackType
 from typing import TextIO, final
 
-from twinfleet.runtime.access import fleetauth, registry
+from twinfleet.runtime.access import registry
 from twinfleet.runtime.fleet.event_merge import fresh_parts_dir, merge_logged
 from twinfleet.runtime.fleet.fleet_result import (
     EndReason,
@@ -40,6 +40,7 @@ from twinfleet.runtime.fleet.fleet_result import (
     record_summary,
     signal_exit_code,
 )
+from twinfleet.runtime.fleet.launch_options import STARTUP_S, LaunchOptions
 from twinfleet.runtime.fleet.live_fleet import SHUTDOWN_TOPIC, Fleet, endpoint_host, free_port
 from twinfleet.runtime.fleet.live_verdict import RunEnd, Verdict
 from twinfleet.runtime.fleet.run_record import RunRecord, versions
@@ -52,6 +53,8 @@ __all__ = [
     "Fleet",
     "FleetConflict",
     "FleetResult",
+    "LaunchOptions",
+    "STARTUP_S",
     "alive_names",
     "format_result",
     "free_port",
@@ -61,69 +64,41 @@ __all__ = [
 
 _STATS_TIMEOUT_S = 2.0  # for the nodes' final statistics (the live verdict reads them)
 _DRIVER_STOP_S = 5.0  # for a driver still running at the end to finish its cancellation
-#: wall seconds every node has to become alive (imports, session, liveliness) before a run
-#: ends as not started; the timeout counts from the epoch, after that
-STARTUP_S = 60.0
 
 
 class FleetConflict(ValueError):
     """Nodes of the fleet are already alive on the router; the text names them."""
 
 
-async def run_fleet(scenario: Scenario, *, time_scale: float | None = None,
-                    timeout_s: float | None = None, seed: int | None = None,
-                    connect: str | None = None, listen: str | None = None,
-                    out: TextIO = sys.stdout, handle_signals: bool = True,
-                    run_record: str | None = None, record_events: str | None = None,
-                    node_args: Sequence[str] = (), params: Sequence[str] = (),
-                    driver: Callable[[Fleet], Awaitable[str]] | None = None,
-                    judge: bool = True, auth: fleetauth.MonitorAuth | None = None,
-                    bridge: bool = False, startup_s: float = STARTUP_S,
-                    accept_recorded: bool = False,
-                    until_settled: bool | None = None,
-                    until_violation: bool | None = None) -> FleetResult:
+async def run_fleet(scenario: Scenario, options: LaunchOptions | None = None, *,
+                    out: TextIO = sys.stdout,
+                    driver: Callable[[Fleet], Awaitable[str]] | None = None) -> FleetResult:
     """Run a fleet until timeout, shutdown request, failure or signal; return how it ended.
 
     Args:
         scenario: a validated scenario (`load_scenario`, or `Scenario.build`: then written
             to a file for the node processes, `live_fleet.launchable`).
-        time_scale, seed: fleet speed-up and seed (default: the scenario's).
-        timeout_s: wall seconds the run lasts from the fleet's epoch, instead of the
-            scenario's `live.wall_timeout_s` and ``live.horizon_s`` (`wall_limit`).
-        connect, listen: join this router; else the embedded one's endpoint.
-        out, handle_signals: where output goes; end on SIGINT/SIGTERM (main thread only).
-        run_record: write the run as JSON lines to this file (`runtime.fleet.run_record`).
-        record_events: write every dispatched event to this file (module docstring).
-        node_args: extra arguments for every node process (`runtime.fleet.node_main`).
-        params: parameter overrides ``[NODE.]NAME=VALUE`` (`runtime.host.introspect`); the
-            scenario must already be loaded with them (`introspect.load_with_params`).
+        options: how to launch it (`LaunchOptions`; None, and None fields: the scenario's).
+        out: where the launcher's and the nodes' output goes.
         driver: a coroutine function run with the fleet once its nodes started; the run
             ends with the reason it returns (an exception it raises is re-raised).
-        judge: judge the properties live (`runtime.fleet.live_verdict`: the result's
-            `verdict`); False: no state reports (exits and the report decide).
-        auth: with `connect`, the joined fleet's key and logins (default: the registry's).
-        bridge: take external input under a bridge key (`core.guard`); `driver` runs it.
-        startup_s: wall seconds for every node to become alive; a run not up by then is
-            INCONCLUSIVE, never a node's failure.
-        accept_recorded: the nodes take recorded input ``twinfleet play --into-fleet``
-            signs (the verdict says so); otherwise they drop it.
-        until_settled, until_violation: end when every eventually held, at a violation.
     """
-    live = scenario.live
-    time_scale = float(time_scale if time_scale is not None else live.time_scale)
-    seed = scenario.seed if seed is None else seed
-    record = RunRecord(run_record) if run_record else None
-    fleet = Fleet(scenario, time_scale=time_scale, seed=seed, connect=connect, listen=listen,
-                  out=out, record=record, node_args=[*node_args, *param_arguments(params)],
-                  events_dir=fresh_parts_dir(record_events) if record_events else None,
-                  keep_scenario_beside=record_events or run_record, judge=judge, auth=auth,
-                  bridge=bridge, accept_recorded=accept_recorded,
-                  **_stops(live.stop, until_settled, until_violation))
+    o, live = options or LaunchOptions(), scenario.live
+    time_scale = float(o.time_scale if o.time_scale is not None else live.time_scale)
+    record = RunRecord(o.run_record) if o.run_record else None
+    fleet = Fleet(scenario, time_scale=time_scale,
+                  seed=scenario.seed if o.seed is None else o.seed, connect=o.connect,
+                  listen=o.listen, out=out, record=record,
+                  node_args=[*o.node_args, *param_arguments(o.params)],
+                  events_dir=fresh_parts_dir(o.record_events) if o.record_events else None,
+                  keep_scenario_beside=o.record_events or o.run_record, judge=o.judge,
+                  auth=o.auth, bridge=o.bridge, accept_recorded=o.accept_recorded,
+                  **_stops(live.stop, o.until_settled, o.until_violation))
     started = time.monotonic()
-    async with _Launch(fleet, record_events, handle_signals) as launch:
+    async with _Launch(fleet, o.record_events, o.handle_signals) as launch:
         limit = wall_limit(live.wall_timeout_s, live.horizon_s, time_scale) \
-            if timeout_s is None else wall_limit(timeout_s, None, time_scale)
-        ending, running = await launch.until_end((startup_s, *limit), params, driver)
+            if o.timeout_s is None else wall_limit(o.timeout_s, None, time_scale)
+        ending, running = await launch.until_end((o.startup_s, *limit), o.params, driver)
     result = _result(fleet, ending, running, time.monotonic() - started)
     if record is not None:
         record_summary(record, result)

@@ -253,7 +253,8 @@ class Fleet:
                 # found on the last pose) still reach the report.
                 self._finishing = True
                 asyncio.get_running_loop().call_later(
-                    _REPORT_GRACE_S, self.end, "the run report says every robot is done")
+                    _REPORT_GRACE_S, self.end, EndReason.REPORT_FINISHED,
+                    "the run report says the run is finished")
         return deliver
 
     def _argv(self, cfg: NodeConfig) -> list[str]:

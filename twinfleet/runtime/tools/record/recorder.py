@@ -29,7 +29,7 @@ is cut back to its last complete chunk (readable after `bag repair`), and
 `failed` holds the one line that says so.
 
 `record_scenario` makes the recorder's session the fleet's router and then
-launches the fleet with `run_fleet(connect=...)`, so the recorder is subscribed
+launches the fleet with `run_fleet` (`LaunchOptions.connect`), so the recorder is subscribed
 before the first node starts. `record_live` joins a running fleet and asks its
 nodes for their message schemas (`fleet_schemas`) and the fleet for its
 description (scene, latched topics: `runtime.host.keys.fleet_key`).
@@ -201,7 +201,7 @@ async def record_scenario(scenario: Any, path: str | Path, *, time_scale: float 
 
     Returns the launcher's `FleetResult` and the (closed) recorder with its counts.
     """
-    from twinfleet.runtime.fleet.launcher import free_port, run_fleet
+    from twinfleet.runtime.fleet.launcher import LaunchOptions, free_port, run_fleet
     from twinfleet.runtime.fleet.live_fleet import with_free_port
 
     endpoint = with_free_port(listen) if listen else f"tcp/127.0.0.1:{free_port()}"
@@ -224,8 +224,9 @@ async def record_scenario(scenario: Any, path: str | Path, *, time_scale: float 
             await failed.wait()
             return str(recorder.failed)
 
-        result = await run_fleet(scenario, time_scale=time_scale, timeout_s=duration_s, seed=seed,
-                                 connect=endpoint, out=out, driver=until_failed)
+        options = LaunchOptions(time_scale=time_scale, timeout_s=duration_s, seed=seed,
+                                connect=endpoint)
+        result = await run_fleet(scenario, options, out=out, driver=until_failed)
         await asyncio.sleep(DRAIN_S)  # the last samples may still be on their way
     finally:
         if flusher is not None:
