@@ -57,13 +57,14 @@ def trace_records(trace_path: Path) -> tuple[list[dict[str, Any]], list[str]]:
     p = plan(trace_path)
     counters: dict[str, int] = {}
     records = []
-    for g in [*p.starts, *p.steps]:
-        i = counters.get(g.node, 0)
-        counters[g.node] = i + 1
-        records.append({"node": g.node, "i": i, "t": g.t, "kind": g.kind, "handler": g.handler,
-                        "sender": g.sender, "args": g.args, "summary": g.summary,
-                        "choices": list(g.choices), "options": list(g.options or ()),
-                        "digest": g.digest})
+    for planned in [*p.starts, *p.steps]:
+        g = planned.grant
+        i = counters.get(planned.node, 0)
+        counters[planned.node] = i + 1
+        records.append({"node": planned.node, "i": i, "t": g.t, "kind": g.kind,
+                        "handler": g.handler, "sender": g.sender, "args": g.args,
+                        "summary": planned.summary, "choices": list(g.choices),
+                        "options": list(planned.options or ()), "digest": planned.digest})
     return records, [cfg.name for cfg in p.scenario.nodes]
 
 
