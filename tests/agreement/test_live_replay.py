@@ -31,6 +31,7 @@ from twinfleet.checker.driver import CheckOptions, check
 from twinfleet.runtime.core.eventlog import EventLog
 from twinfleet.runtime.host.node_host import NodeHost
 from twinfleet.runtime.host.replay_gate import LogicalClock
+from twinfleet.runtime.host.replay_wire import logs_digest
 from twinfleet.runtime.host.transport import LoopbackBus, LoopbackTransport
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -65,8 +66,7 @@ async def replay_in_process(p: Plan, events: Path, *,
                               fleet=p.scenario.fleet, wait_for=names, gated=True, events=log,
                               out=io.StringIO()))
     tasks = [asyncio.create_task(h.run()) for h in hosts]
-    result = LiveReplayResult(p.trace_path, "no_collision", "", len(p.steps),
-                              expected_collisions=p.collisions)
+    result = LiveReplayResult(p.trace_path, "no_collision", "", len(p.steps))
     coordinator = Coordinator(p, result, step_timeout_s=step_timeout_s)
     transport = LoopbackTransport(bus)
     await transport.open()
@@ -85,13 +85,23 @@ def test_gated_hosts_follow_the_trace_and_show_its_collision(headon_plan, tmp_pa
     result = asyncio.run(asyncio.wait_for(replay_in_process(headon_plan, tmp_path / "ev"), 60))
     assert result.divergence is None, result.divergence
     assert result.granted == len(headon_plan.starts) + len(headon_plan.steps)
-    assert result.final_states_match
-    (step, robots, cells), = headon_plan.collisions
-    assert int(step) == len(headon_plan.steps)  # the trace ends at the collision
-    assert [(f"{a},{b}", f"{ca},{cb}") for a, b, ca, cb, _ in result.live_collisions] == [
-        (robots, cells)]
-    assert result.live_collisions[0][4] == headon_plan.steps[-1].grant.t  # logical time, as the trace
-    assert result.collisions_match and result.confirmed
+    assert result.final_states_match and result.confirmed
+    # the trace ends at the collision, which the map server's last handler logs: live too,
+    # since every granted handler logged what the checker's run of its step logged
+    trace = json.loads(Path(headon_plan.trace_path).read_text())
+    assert [log["event"] for log in trace["steps"][-1]["logs"]] == ["collision"]
+    assert all(g.logs is not None for g in headon_plan.steps)
+    assert "every granted handler logged what its trace step logged" in result.summary()
+
+
+def test_a_handler_that_logs_otherwise_than_the_trace_stops_the_replay(headon_plan, tmp_path):
+    steps = list(headon_plan.steps)
+    steps[-1] = replace(steps[-1], logs=logs_digest(()))  # as if the collision were not logged
+    result = asyncio.run(asyncio.wait_for(
+        replay_in_process(replace(headon_plan, steps=steps), tmp_path / "ev"), 60))
+    assert result.divergence is not None and not result.confirmed
+    assert result.divergence.startswith(f"step {steps[-1].grant.step}: map_server.")
+    assert "ctx.log records differ from the checker's run of the step" in result.divergence
 
 
 def test_a_state_the_live_node_does_not_reach_stops_the_replay(headon_plan, tmp_path):
@@ -172,11 +182,10 @@ def test_c2a_counterexample_replayed_live_collides_the_same_way(tmp_path, reap_n
     assert result.divergence is None, result.divergence + text[-3000:]
     assert result.granted == len(p.starts) + len(p.steps) > 1000
     assert result.final_states_match
-    # the live map server reported exactly the checker's collision: same robots, same cells
-    (_, robots, cells), = p.collisions
-    assert [(f"{a},{b}", f"{ca},{cb}") for a, b, ca, cb, _ in result.live_collisions] == [
-        (robots, cells)]
-    assert f"[map_server] t={p.steps[-1].grant.t} collision cells='{cells}' robots='{robots}'" in text
+    # the live map server logged exactly the checker's collision: same robots, same cells
+    (log,) = json.loads(trace.read_text())["steps"][-1]["logs"]
+    assert f"[map_server] t={p.steps[-1].grant.t} collision cells='{log['cells']}' " \
+           f"robots='{log['robots']}'" in text
     assert result.node_logs_match, result.node_logs
     assert result.confirmed
     # the nodes' own event logs of the replay are a path of the checker, even strictly timed

@@ -18,12 +18,12 @@ the launcher process, on its router session, as the fleet's driver
    recorded choices, performs its effects on Zenoh and answers with its state
    digest, the choices it made and what it published. Any difference stops
    the replay with the step, what was expected and what the node did.
+   Each granted handler must also log (``ctx.log``) what the checker's run of
+   its step logged: the answer's `logs_digest` equals the one computed here.
 3. At the end it checks that the live fleet shows the trace's violation: each
    node's state digest equals the checker's final world (so the violated
-   invariant holds of the real processes' states), the map server's
-   `Collision` messages on ``/collisions`` name the same robots and cells as
-   the trace's collision logs, and the nodes' own event logs
-   (``--record-events``) list the same events in the same order per node.
+   invariant holds of the real processes' states), and the nodes' own event
+   logs (``--record-events``) list the same events in the same order per node.
 
 Timers fire when granted, not by wall clock, so the replay runs as fast as
 the processes go, whatever the trace's logical duration. A lasso trace (a
@@ -61,18 +61,22 @@ from twinfleet.checker.system import System
 from twinfleet.checker.trace import NondeterminismError, recorded_step, replay_step
 from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import EventKind
-from twinfleet.runtime.contract.messages import CallFailure, DecodeError, decode
-from twinfleet.runtime.contract.node import QOS_DEFAULT
+from twinfleet.runtime.contract.messages import CallFailure
 from twinfleet.runtime.contract.tracefile import TraceError, code_changes, load_trace
 from twinfleet.runtime.core.eventlog import payload_digest, state_digest, summarise
 from twinfleet.runtime.fleet.fleet_result import EndReason, signal_exit_code
 from twinfleet.runtime.fleet.launcher import Fleet, LaunchOptions, format_result, run_fleet
-from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key, parse_node_key, topic_key
-from twinfleet.runtime.host.replay_wire import STATUS, GateStatus, Grant, GrantAnswer, WireError
+from twinfleet.runtime.host.keys import KeyKind, kind_expr, node_key, parse_node_key
+from twinfleet.runtime.host.replay_wire import (
+    STATUS,
+    GateStatus,
+    Grant,
+    GrantAnswer,
+    WireError,
+    logs_digest,
+)
 from twinfleet.runtime.host.transport import Transport
 from twinfleet.runtime.scenario.spec import Scenario
-
-COLLISIONS_TOPIC = "/collisions"
 
 
 class ReplayDivergence(RuntimeError):
@@ -90,6 +94,7 @@ class Planned:
     summary: str  # the event's arguments, shortened for messages
     options: tuple[int, ...] | None  # None: not checked (a node's earlier start handlers)
     digest: str | None
+    logs: str | None = None  # `logs_digest` of the step's ctx.log records; None: not checked
 
 
 @final
@@ -103,7 +108,6 @@ class Plan:
     starts: list[Planned]
     steps: list[Planned]
     final_digests: dict[str, str]
-    collisions: list[tuple[str, str, str]]  # (step, "ra,rb", cells text) from the trace's logs
     cycles: int = 0  # extra rounds of a lasso's cycle appended to the trace's steps
     #: each node's state digest before any grant: a node the trace never runs keeps it
     initial_digests: dict[str, str] = field(default_factory=dict)
@@ -120,9 +124,6 @@ class LiveReplayResult:
     steps: int
     granted: int = 0
     divergence: str | None = None
-    live_collisions: list[tuple[str, str, tuple[int, ...], tuple[int, ...], int]] = field(
-        default_factory=list)
-    expected_collisions: list[tuple[str, str, str]] = field(default_factory=list)
     final_states_match: bool = False
     node_logs: str = ""
     node_logs_match: bool | None = None
@@ -136,19 +137,10 @@ class LiveReplayResult:
     fleet_end: EndReason | None = None  # what ended the replay's fleet
 
     @property
-    def collisions_match(self) -> bool:
-        """The live map server reported exactly the trace's collisions (as robot pairs and
-        cells), or the trace has none."""
-        want = sorted((r, c) for _, r, c in self.expected_collisions)
-        seen = sorted((f"{a},{b}", f"{tuple(ca)},{tuple(cb)}")
-                      for a, b, ca, cb, _ in self.live_collisions)
-        return want == seen
-
-    @property
     def confirmed(self) -> bool:
-        """Every step ran as recorded, the final states and the collisions agree."""
+        """Every step ran (and logged) as recorded, and the final states agree."""
         return (self.divergence is None and self.granted > 0 and self.final_states_match
-                and self.collisions_match and self.node_logs_match is not False)
+                and self.node_logs_match is not False)
 
     def summary(self) -> str:
         """A human-readable report."""
@@ -159,11 +151,8 @@ class LiveReplayResult:
             lines.append(f"DIVERGED: {self.divergence}")
         lines.append("final node states: " + ("equal to the checker's final world"
                                               if self.final_states_match else "NOT reached"))
-        for _, robots, cells in self.expected_collisions:
-            lines.append(f"trace collision: robots {robots}, cells {cells}")
-        for a, b, ca, cb, t in self.live_collisions:
-            lines.append(f"live /collisions: robots {a},{b}, cells {tuple(ca)},{tuple(cb)} "
-                         f"at t={t} ms")
+        if self.divergence is None and self.granted:
+            lines.append("handler logs: every granted handler logged what its trace step logged")
         if self.node_logs:
             lines.append(f"node event logs: {self.node_logs} ({self.events_path})")
         if self.cycles:
@@ -214,11 +203,7 @@ def plan(trace_path: str | Path, *, cycles: int = 0) -> Plan:
     steps, world = _step_grants(system, init.world, records, str(trace_path))
     final = {name: state_digest(world.states[i]) for i, name in enumerate(system.names)}
     initial = {name: state_digest(init.world.states[i]) for i, name in enumerate(system.names)}
-    collisions = [(str(rec["index"]), str(log.get("robots")), str(log.get("cells")))
-                  for rec in trace["steps"] for log in rec.get("logs", ())
-                  if log.get("event") == "collision"]
-    return Plan(str(trace_path), trace, scenario, starts, steps, final, collisions, cycles,
-                initial)
+    return Plan(str(trace_path), trace, scenario, starts, steps, final, cycles, initial)
 
 
 def _step_grants(system: System, world: World, records: Sequence[Mapping[str, Any]],
@@ -247,7 +232,7 @@ def _step_grants(system: System, world: World, records: Sequence[Mapping[str, An
                       _handler_part(t.step.choices, t.branches), n)
         steps.append(Planned(system.names[ev.target], grant, summarise(ev.args),
                              _handler_part(t.step.options, t.branches),
-                             state_digest(t.world.states[ev.target])))
+                             state_digest(t.world.states[ev.target]), logs_digest(t.logs)))
         world = t.world
     return steps, world
 
@@ -294,7 +279,6 @@ class Coordinator:
         """Wait for the nodes, grant every event, check the end; return the end reason."""
         self.transport = transport
         name = self.plan.scenario.fleet
-        transport.subscribe(topic_key(name, COLLISIONS_TOPIC), self._on_collision, QOS_DEFAULT)
         transport.watch(kind_expr(name, KeyKind.NODE), self._on_alive)
         started = begin = time.monotonic()
         try:
@@ -309,7 +293,6 @@ class Coordinator:
             return f"live replay diverged: {exc}"
         finally:
             self.result.replay_s = time.monotonic() - begin
-        await self._wait_collisions()
         self.result.final_states_match = all(self.digests.get(n) == d
                                              for n, d in self.plan.final_digests.items())
         return f"live replay done: {self.result.granted} events granted"
@@ -317,15 +300,6 @@ class Coordinator:
     def _on_alive(self, key: str, alive: bool) -> None:
         node = parse_node_key(key, KeyKind.NODE).node
         (self.alive.add if alive else self.alive.discard)(node)
-        self._changed.set()
-
-    def _on_collision(self, _key: str, payload: bytes) -> None:
-        try:
-            msg = decode(payload).msg
-            seen = (msg.robot_a, msg.robot_b, tuple(msg.cell_a), tuple(msg.cell_b), msg.time_ms)
-        except (DecodeError, AttributeError, TypeError):  # not a collision message
-            return
-        self.result.live_collisions.append(seen)
         self._changed.set()
 
     async def _wait_alive(self) -> None:
@@ -343,18 +317,6 @@ class Coordinator:
             except TimeoutError:
                 continue
 
-    async def _wait_collisions(self, timeout_s: float = 5.0) -> None:
-        deadline = time.monotonic() + timeout_s
-        while len(self.result.live_collisions) < len(self.plan.collisions):
-            remaining = deadline - time.monotonic()
-            if remaining <= 0:
-                return
-            self._changed.clear()
-            try:
-                await asyncio.wait_for(self._changed.wait(), remaining)
-            except TimeoutError:
-                return
-
     async def _grant(self, planned: Planned) -> None:
         answer, grant = await self._ask(planned), planned.grant
         where = f"step {grant.step}: {planned.node}.{grant.handler} ({grant.kind}) at t={grant.t}"
@@ -365,6 +327,9 @@ class Coordinator:
             raise ReplayDivergence(f"{where}: ctx.choose answered {list(answer.choices)} of "
                                    f"options {list(answer.options)}, the trace has "
                                    f"{list(grant.choices)} of {list(planned.options or ())}")
+        if planned.logs is not None and answer.logs != planned.logs:
+            raise ReplayDivergence(f"{where}: the live handler's ctx.log records differ from "
+                                   "the checker's run of the step (see the node's output)")
         if planned.digest is not None and answer.digest != planned.digest:
             raise ReplayDivergence(f"{where}: live state digest {answer.digest}, the checker's "
                                    f"is {planned.digest} (the node's state differs)")
@@ -437,7 +402,7 @@ async def replay_live(trace_path: str | Path, *, out: TextIO = sys.stdout,
     p = plan(trace_path, cycles=cycles)
     prop = p.trace["property"]["name"]
     result = LiveReplayResult(str(trace_path), prop, p.trace.get("message", ""), len(p.steps),
-                              expected_collisions=p.collisions, cycles=p.cycles,
+                              cycles=p.cycles,
                               cycle_start=p.trace.get("cycle_start"))
     coordinator = Coordinator(p, result, step_timeout_s=step_timeout_s)
     events = events_out or str(Path(trace_path).with_suffix(".live-events.jsonl"))

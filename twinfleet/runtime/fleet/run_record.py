@@ -1,6 +1,6 @@
 """The run record of a live run: JSON lines, flushed one by one, so a crash keeps what was written.
 
-`run_fleet(..., run_record=PATH)` writes one JSON object per line::
+`run_fleet(..., LaunchOptions(run_record=PATH))` writes one JSON object per line::
 
     {"event": "start", "t": 0.0, "wall": 1718000000.1, "scenario": "launch/demo.yaml",
      "name": "demo", "fleet": "demo", "seed": 1, "time_scale": 1.0, "timeout_s": 30,

@@ -8,8 +8,9 @@ node's ``@replay`` queryable (`runtime.host.keys.KeyKind.REPLAY`): the gate
 finds it among the core's `pending()` entries — waiting for it if it is still
 in flight — sets the logical time, runs it with `NodeCore.run` and the grant's
 `ctx.choose` answers, has the host perform the outputs, and answers with the
-new state digest and what the handler published. The gate drives the core through its
-public methods and observes it (`handled`) to learn what the handler did.
+new state digest, what the handler published and the digest of what it logged.
+The gate drives the core through its public methods and observes it (`handled`)
+to learn what the handler did.
 
 Wire protocol: `runtime.host.replay_wire` (`Grant` in, `GrantAnswer` out, `STATUS`
 answered with a `GateStatus`), the same values the coordinator imports.
@@ -20,7 +21,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from typing import Any, final
 
-from twinfleet.runtime.contract.context import Publish
+from twinfleet.runtime.contract.context import Log, Publish
 from twinfleet.runtime.contract.messages import type_name_of
 from twinfleet.runtime.core.choosers import RecordingChooser
 from twinfleet.runtime.core.eventlog import node_state_digest
@@ -34,6 +35,7 @@ from twinfleet.runtime.host.replay_wire import (
     Held,
     WireError,
     is_status,
+    logs_digest,
 )
 from twinfleet.runtime.host.transport import Respond
 
@@ -128,7 +130,9 @@ class ReplayGate:
         assert record is not None and record.entry is entry
         published = (tuple((e.topic, type_name_of(e.msg)) for e in record.effects
                            if type(e) is Publish) if record.error is None else ())
+        logs = [e for e in record.effects if type(e) is Log] if record.error is None else []
         answer = GrantAnswer(node_state_digest(self.core.node.state), tuple(chooser.indices),
                              tuple(chooser.options), published,
-                             None if record.error is None else record.error.message)
+                             None if record.error is None else record.error.message,
+                             logs_digest(logs))
         respond(answer.encode(), "")

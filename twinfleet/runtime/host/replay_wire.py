@@ -5,7 +5,9 @@
 A `Grant` names one event a gated node holds (its kind, handler, sender and the
 `payload_digest` of its arguments) with the logical time to run it at and the answers to
 its `ctx.choose` calls; the node runs it and answers with a `GrantAnswer`: the new state
-digest, the choices it made among which options, what it published and its error. A
+digest, the choices it made among which options, what it published, the digest of what it
+logged (`logs_digest`, which the coordinator computes from the checker's run of the same
+step) and its error. A
 `STATUS` request is answered at once with a `GateStatus`: what the node holds and the
 grant still waiting for its event. Each travels as one msgpack map; `decode` refuses a
 map that lacks a field with `WireError`, naming it.
@@ -13,12 +15,13 @@ map that lacks a field with `WireError`, naming it.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final, final
 
 import msgpack
 
+from twinfleet.runtime.contract.context import Log
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.core.eventlog import payload_digest, summarise
 from twinfleet.runtime.core.events import Event
@@ -42,6 +45,12 @@ def _map(payload: bytes, what: str, keys: tuple[str, ...]) -> Mapping[str, Any]:
     if missing:
         raise WireError(f"{what}: missing {', '.join(missing)}")
     return doc
+
+
+def logs_digest(logs: Sequence[Log]) -> str:
+    """The digest of a handler's `ctx.log` records, the same for the live node and the
+    checker's run of the same step (`payload_digest` over (event, fields) pairs)."""
+    return payload_digest(tuple((log.event, log.fields) for log in logs))
 
 
 def is_status(payload: bytes) -> bool:
@@ -95,13 +104,14 @@ class GrantAnswer:
     options: tuple[int, ...]  # how many options each `ctx.choose` had
     published: tuple[tuple[str, str], ...] = ()  # (topic, message type) per publication
     error: str | None = None  # the handler's failure, if it failed
+    logs: str = ""  # `logs_digest` of what the handler logged
 
     def encode(self) -> bytes:
         """The answer as it travels."""
         return msgpack.packb({"digest": self.digest, "choices": list(self.choices),
                               "options": list(self.options),
                               "published": [list(p) for p in self.published],
-                              "error": self.error})
+                              "error": self.error, "logs": self.logs})
 
     @classmethod
     def decode(cls, payload: bytes) -> GrantAnswer:
@@ -111,7 +121,8 @@ class GrantAnswer:
             return cls(str(doc["digest"]), tuple(map(int, doc["choices"])),
                        tuple(map(int, doc["options"])),
                        tuple((str(t), str(m)) for t, m in doc.get("published") or ()),
-                       None if doc.get("error") is None else str(doc["error"]))
+                       None if doc.get("error") is None else str(doc["error"]),
+                       str(doc.get("logs", "")))
         except (TypeError, ValueError) as exc:
             raise WireError(f"grant answer: {exc}") from None
 
