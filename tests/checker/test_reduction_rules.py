@@ -33,15 +33,15 @@ RULE_FUNCTIONS: tuple[Callable[..., Any], ...] = (
 )
 
 #: The fingerprint of `RULE_FUNCTIONS` as the closure was last reviewed for them: Rule 6
-#: (KEEP_LAST drops, BEST_EFFORT losses), calls with no server, a latency branch that
-#: tells a sampler the send time (its branches and due times unchanged), the keys of
-#: the messages a drop branch lost, recorded for weak fairness (no event changed), a
-#: latency site that also names the publish a delivery copies plus event keys computed as
-#: the event is made (for simulations: the same branches, due times and keys as before),
-#: and Rule 7, a late `@every` tick's next due time as a branch of the tick's own run (a
-#: variant of it, creating only the node's own timer, always after the instant:
-#: docs/reduction.md §6).
-PINNED = "ae47c9c3775d99a0"
+#: (KEEP_LAST drops, BEST_EFFORT losses), calls with no server (their CallError typed with a
+#: CallFailure: the same two branches), a latency branch that tells a sampler the send time
+#: (its branches and due times unchanged), the keys of the messages a drop branch lost,
+#: recorded for weak fairness (no event changed), a latency site that also names the
+#: publish a delivery copies plus event keys computed as the event is made (for
+#: simulations: the same branches, due times and keys as before), and Rule 7, a late
+#: `@every` tick's next due time as a branch of the tick's own run (a variant of it,
+#: creating only the node's own timer, always after the instant: docs/reduction.md §6).
+PINNED = "c0056dec1bb57f7e"
 
 _SKIPPED = (tokenize.NL, tokenize.COMMENT)
 _STATEMENT_START = (tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT)
