@@ -30,6 +30,7 @@ This module sits on top of every layer, beside the command line.
 from __future__ import annotations
 
 import asyncio
+import builtins
 import json
 from collections.abc import AsyncIterator, Awaitable, Callable, Mapping, Sequence
 from contextlib import asynccontextmanager
@@ -136,17 +137,17 @@ class CheckReport:
     result: CheckResult | None = None
     scenario: Scenario | None = None
 
-    @property
+    @builtins.property  # the class has a field named `property`
     def holds(self) -> bool:
         """True when every property holds (exhaustively)."""
         return self.verdict is Status.HOLDS
 
-    @property
+    @builtins.property
     def violated(self) -> bool:
         """True when a property is violated (then `trace` shows how)."""
         return self.verdict is Status.VIOLATED
 
-    @property
+    @builtins.property
     def breach(self) -> bool:
         """True when a node breaks the node contract (`message` says where and how)."""
         return self.verdict is Status.BREACH
@@ -325,7 +326,8 @@ async def live_fleet(scenario: Scenario | str | Path, *, time_scale: float = 1.0
                             handle_signals=False, params=tuple(params))
     output = {} if out is None else {"out": out}  # else run_fleet's own default
     runner = asyncio.create_task(run_fleet(scenario, options, driver=driver, **output))
-    await asyncio.wait({ready, runner}, return_when=asyncio.FIRST_COMPLETED)
+    waited: set[asyncio.Future[Any]] = {ready, runner}
+    await asyncio.wait(waited, return_when=asyncio.FIRST_COMPLETED)
     if not ready.done():
         result = await runner  # re-raises a launcher error
         raise RuntimeError(f"fleet {scenario.fleet} ended before the test began: {result.reason}")

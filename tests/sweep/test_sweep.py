@@ -146,7 +146,7 @@ def test_a_value_a_node_refuses_is_an_error_row_not_the_end(tmp_path, capsys):
 @pytest.mark.parametrize(("extra", "message"), [
     (["--param", "r1.speed"], "twinfleet sweep: --param 'r1.speed': expected"),
     (["--param", "r9.speed=0.3"], "--param r9.speed: the scenario has no node 'r9' (nodes: "),
-    (["--param", "r1.sped=0.3"], "r1.sped: node r1 has no parameter 'sped' (it has: map, "),
+    (["--param", "r1.sped=0.3"], "r1.sped: node r1 has no parameter 'sped' (it has: start, goal, map, "),
     (["--param", "sped=0.3"], "--param sped: no node of the scenario has parameter 'sped'"),
     (["--param", "*.colour=1,2"], "no node of the scenario has parameter 'colour'"),
     (["--param", "r1.speed=0.3", "--heatmap", "r1.speed,r2.speed"],

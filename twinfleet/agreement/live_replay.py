@@ -42,6 +42,7 @@ is refused.
 from __future__ import annotations
 
 import asyncio
+import builtins
 import io
 import sys
 import time
@@ -136,7 +137,7 @@ class LiveReplayResult:
     fleet_reason: str = ""
     fleet_end: EndReason | None = None  # what ended the replay's fleet
 
-    @property
+    @builtins.property  # the class has a field named `property`
     def confirmed(self) -> bool:
         """Every step ran (and logged) as recorded, and the final states agree."""
         return (self.divergence is None and self.granted > 0 and self.final_states_match
@@ -338,6 +339,7 @@ class Coordinator:
     async def _ask(self, planned: Planned) -> GrantAnswer:
         transport, grant = self.transport, planned.grant
         key = node_key(self.plan.scenario.fleet, KeyKind.REPLAY, planned.node)
+        reason = ""
         for _ in range(100):  # the queryable may not be routed yet just after the token
             reply, failure, reason = await _query(transport, key, grant.encode(),
                                                   self.step_timeout_s)

@@ -203,7 +203,7 @@ DROPPED = -1  # the `node` of an option that drops the pending event (KEEP_LAST)
 RESTART = -1  # the `pending event` of an option that crashes and restarts the node
 LEFT = -2  # the `pending event` of an option that takes a peer leaving at shutdown
 CUT = -3  # the `pending event` of an option that takes a run as cut off by the crash after it
-_Seen = tuple[bytes, tuple[int, ...], int | None]  # `_Frame.seen`
+_Seen = tuple[int | bytes, tuple[int, ...], int | None]  # `_Frame.seen`
 
 
 @final
@@ -526,6 +526,8 @@ def validate_command(args: Any) -> int:
     Unless ``--tolerance-ms 0`` judged the run by the exact rules already, the run is
     judged by them too, and the verdict (first line, and exit code) says which held.
     """
+    bad_input: tuple[type[Exception], ...] = (*bad_input_errors(), EventLogError, ValueError,
+                                              OSError)
     try:
         params = override_words("validate", args.overrides, args.param)
         log = load_events(args.events)
@@ -536,7 +538,7 @@ def validate_command(args: Any) -> int:
         if args.tolerance_ms != 0:
             strict = validate(log, args.scenario, semantics=args.semantics, tolerance_ms=0,
                               window_ms=args.window_ms, max_backtracks=2_000, params=params)
-    except (*bad_input_errors(), EventLogError, ValueError, OSError) as exc:
+    except bad_input as exc:
         print(f"twinfleet validate: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     if args.json:

@@ -229,7 +229,7 @@ def earliest(why: Sequence[Unexplained]) -> Unexplained | None:
     ordered = sorted(why, key=lambda u: u.event.line if u.event is not None else 0)
     if not ordered:
         return None
-    first, others = ordered[0], []
+    first, others = ordered[0], list[str]()
     for u in ordered[1:]:
         if u.event is not None and u.event != first.event and len(others) < 3:
             others.append(f"{u.event.label()} [{u.event.where()}]: {u.reason}")

@@ -104,7 +104,10 @@ class SearchState:
             self._elapsed_before + time.monotonic() - self.guard.started, peak_rss_mb(),
             store.nbytes(), store.digest_bits, store.collision_probability(hashed),
             c.peak_frontier,
-            None if self._attempt is None else time.monotonic() - self._attempt,
+            # an attempt begun before the search's clock started (a restart while the search
+            # was set up) counts from the clock's start, as the elapsed time does
+            None if self._attempt is None else
+            time.monotonic() - max(self._attempt, self.guard.started),
             0 if self.reduction is None else self.reduction.stats.restarts,
             growth=self.growth.notes())
 

@@ -51,8 +51,9 @@ SHUTDOWN_TOPIC = "/twinfleet/shutdown"
 class MapServerParams:
     """Parameters of the map server (defaults: docs/robots.md §8)."""
 
-    map: str = file_param()  # the map YAML, relative to the scenario file
     robots: tuple[str, ...]
+    # After the fields without a default: a type checker reads file_param() as one.
+    map: str = file_param()  # the map YAML, relative to the scenario file
     profile: str = "fixed"
     scan_rate_ms: int = 100
     fov_deg: float = 180.0

@@ -43,9 +43,10 @@ MAX_FAILURES = 2  # a third failed plan leaves the robot stuck (the model's live
 class RobotParams:
     """Parameters of one robot (defaults: docs/robots.md §8)."""
 
-    map: str = file_param()  # the map YAML, relative to the scenario file
     start: tuple[int, int]
     goal: tuple[int, int]
+    # After the fields without a default: a type checker reads file_param() as one.
+    map: str = file_param()  # the map YAML, relative to the scenario file
     speed: float = 0.5  # m/s
     max_wait_ms: int = 1500
     profile: str = "fixed"

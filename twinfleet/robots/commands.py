@@ -130,9 +130,10 @@ def experiment_command(args: argparse.Namespace) -> int:
                                 timing=args.timing, confidence=args.confidence,
                                 workers=args.workers, params=params)
     command = command_line(args)
+    bad_input: tuple[type[Exception], ...] = (*bad_input_errors(), ValueError)
     try:
         exp = run_experiment(scenarios, options, command=command)
-    except (*bad_input_errors(), ValueError) as exc:
+    except bad_input as exc:
         print(f"twinfleet experiment: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
     print(to_markdown(exp.rows, options.semantics), end="")

@@ -190,6 +190,7 @@ def run_experiment(paths: Sequence[str | Path], options: ExperimentOptions, *,
     try:
         decisive, predictive = options.decisive(), options.predictive()
         for path, scenario in scenarios:
+            assert scenario.path is not None  # loaded from a file
             key = fingerprint(scenario.path, decisive)
             predicted = fingerprint(scenario.path, predictive)
             kept = load_case(out, scenario.name, key)
@@ -275,7 +276,7 @@ def _checks(exp: Experiment, row: Row, path: str | Path, progress: Callable[[str
                 progress(f"{row.case} {sem}: {stats.states:,} states, {stats.transitions:,} "
                          f"transitions, {stats.states_per_s:,.0f} states/s, depth {stats.depth}")
 
-        result = check(path, CheckOptions(semantics=sem, max_states=opts.max_states,
+        result = check(path, CheckOptions(semantics=Semantics(sem), max_states=opts.max_states,
                                           max_time_s=opts.max_time_s, trace_out=str(trace),
                                           progress=report))
         s = result.statistics
@@ -308,7 +309,8 @@ def _live(exp: Experiment, row: Row, path: str | Path, scenario: Scenario,
             seed = base + k
             _header(log, f"run {k + 1}/{opts.runs} of {row.case} (seed {seed}, "
                          f"time scale {opts.time_scale:g})")
-            for attempt in range(1 + _RETRIES):
+            attempt = 0
+            while True:  # a run killed from outside the fleet, up to _RETRIES times again
                 record = asyncio.run(live_run(scenario, time_scale=opts.time_scale, seed=seed,
                                               timeout_s=opts.run_timeout_s, out=log,
                                               stop_on_collision=opts.stop_on_collision))
@@ -317,6 +319,7 @@ def _live(exp: Experiment, row: Row, path: str | Path, scenario: Scenario,
                                        else EndReason.INTERRUPTED)
                 if not record.killed_from_outside or attempt == _RETRIES:
                     break
+                attempt += 1
                 exp.retried.append((row.case, seed, record.reason))
                 progress(f"{row.case} live {k + 1}/{opts.runs} (seed {seed}): {record.reason}; "
                          "killed from outside the fleet, running it again")

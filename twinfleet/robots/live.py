@@ -188,12 +188,15 @@ def private_copy(scenario: Scenario, directory: str | Path,
     keeps the experiment's fleets apart from anyone else's run of the same file,
     and freezes the file for the whole experiment.
     """
-    doc = yaml.safe_load(Path(scenario.path).read_text())
+    source = scenario.path
+    if source is None:
+        raise ValueError(f"scenario {scenario.name!r} has no file to copy (built in Python)")
+    doc = yaml.safe_load(Path(source).read_text())
     if params:  # validated as every command validates them, then written in
-        scenario = load_with_params(scenario.path, params)
-        doc.update(overrides_doc(Path(scenario.path), params))
+        scenario = load_with_params(source, params)
+        doc.update(overrides_doc(Path(source), params))
     doc = with_absolute_files(doc, scenario)
-    out = Path(directory) / Path(scenario.path).name
+    out = Path(directory) / Path(source).name
     out.parent.mkdir(parents=True, exist_ok=True)
     out.write_text(f"# Copy of {scenario.path} for live runs (file parameters made absolute).\n"
                    + yaml.safe_dump(doc, sort_keys=False))
@@ -228,7 +231,10 @@ async def live_run(scenario: Scenario, *, time_scale: float, seed: int, timeout_
 
     def hook(report: TimedReport) -> None:
         report.stop_on_collision = stop_on_collision
-        report.on_decided = lambda reason: (why.append(reason), decided.set())
+        def on_decided(reason: str) -> None:
+            why.append(reason)
+            decided.set()
+        report.on_decided = on_decided
         reports.append(report)
 
     token = _HOOK.set(hook)

@@ -88,8 +88,8 @@ def predicted_arrivals(path: str | Path, *, seed: int = 0, semantics: str | None
 def arrival_errors(durations_ms: Mapping[str, int | None],
                    predicted: Mapping[str, int | None]) -> dict[str, int]:
     """Per robot live duration minus predicted arrival, for robots known in both."""
-    return {name: d - predicted[name] for name, d in durations_ms.items()
-            if d is not None and predicted.get(name) is not None}
+    return {name: d - p for name, d in durations_ms.items()
+            if d is not None and (p := predicted.get(name)) is not None}
 
 
 @final

@@ -28,7 +28,7 @@ import time
 from collections.abc import Awaitable, Callable, Mapping, Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import TextIO, final
+from typing import Any, TextIO, final
 
 from twinfleet.runtime.access import registry
 from twinfleet.runtime.fleet.event_merge import fresh_parts_dir, merge_logged
@@ -138,7 +138,7 @@ class _Launch:
         self.loop = asyncio.get_running_loop()
         self.signals = _install_signals(self.loop, fleet) if handle_signals else []
         self.entry: Path | None = None  # the fleet registry's entry
-        self.driving: asyncio.Task[str] | None = None
+        self.driving: asyncio.Future[str] | None = None
         self.tasks: list[asyncio.Task[None]] = []  # one supervisor per node
 
     async def __aenter__(self) -> _Launch:
@@ -163,7 +163,7 @@ class _Launch:
                   + ("" if self.entry else f" --connect {fleet.endpoint}"))
         self.tasks = await fleet.start_nodes()
         if driver is not None:
-            self.driving = asyncio.create_task(driver(fleet))
+            self.driving = asyncio.ensure_future(driver(fleet))
             self.driving.add_done_callback(lambda task: fleet.end(EndReason.DRIVER,
                                                                   _driver_reason(task)))
         ending = await _until_end(fleet, *limits)
@@ -244,7 +244,8 @@ async def _until_end(fleet: Fleet, startup_s: float, timeout_s: float | None,
     up: asyncio.Future[object] = asyncio.ensure_future(fleet.all_alive.wait())
     ended: asyncio.Future[RunEnding] = fleet.ended
     try:
-        await asyncio.wait([ended, up], timeout=startup_s,
+        waited: list[asyncio.Future[Any]] = [ended, up]
+        await asyncio.wait(waited, timeout=startup_s,
                            return_when=asyncio.FIRST_COMPLETED)
     finally:
         up.cancel()

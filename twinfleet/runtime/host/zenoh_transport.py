@@ -299,7 +299,7 @@ class ZenohTransport:
                 return
             payload, where = sample.payload.to_bytes(), str(sample.key_expr)
             if fleet_key is not None:
-                raw = sample.attachment and sample.attachment.to_bytes()
+                raw = sample.attachment.to_bytes() if sample.attachment else None
                 stamp = opened(fleet_key, where, payload, raw)
                 from_bridge = False
                 if stamp is None and bridge_key is not None:
@@ -336,7 +336,7 @@ class ZenohTransport:
             payload = query.payload.to_bytes() if query.payload is not None else b""
             if fleet_key is not None:
                 tag = query.attachment
-                stamp = opened(fleet_key, key, payload, tag and tag.to_bytes())
+                stamp = opened(fleet_key, key, payload, tag.to_bytes() if tag else None)
                 why = (Rejection.FORGED if stamp is None or stamp.role is not Role.MEMBER
                        else None if window.fresh(key, stamp) else Rejection.REPLAYED)
                 if why is not None:
