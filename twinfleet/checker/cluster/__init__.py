@@ -15,17 +15,16 @@ enough to need it.
 
 from __future__ import annotations
 
-import os
-import sys
 from collections.abc import Callable, Mapping
 from contextlib import ExitStack
 from dataclasses import dataclass
 from typing import Any, cast, final
 
 from twinfleet.checker.cluster.backend import Backend, Checkpointing, Traffic
-from twinfleet.checker.cluster.coordinator import ENGINE, Coordinator
+from twinfleet.checker.cluster.coordinator import ENGINE, START_STATES, Coordinator
 from twinfleet.checker.cluster.flow import FlowBackend
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint
+from twinfleet.checker.cluster.starting import engine_module, start
 from twinfleet.checker.outcome import Limits, Outcome
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.reduction import Reduction
@@ -33,7 +32,7 @@ from twinfleet.checker.system import System
 from twinfleet.runtime.contract.kinds import Status
 
 __all__ = ["Checkpointing", "ClusterError", "Distributed", "SystemSpec", "distributed",
-           "is_distributed_checkpoint", "why_local"]
+           "engine_module", "is_distributed_checkpoint", "why_local"]
 
 
 @final
@@ -58,26 +57,6 @@ def is_distributed_checkpoint(meta: Mapping[str, Any]) -> bool:
     return meta.get("engine") == ENGINE
 
 
-def engine_module(local: bool = True) -> Any:
-    """`checker.cluster.engine` (imports Ray); ClusterError when Ray is not installed.
-
-    `local`: the command starts its own cluster. Ray reads its cluster switch once, when
-    first imported: set off, a local cluster advertises and binds 127.0.0.1 only, where
-    it would otherwise listen on every interface under the host's address (measured with
-    Ray 2.60; `_node_ip_address="127.0.0.1"` alone does not do it). Joining a cluster of
-    several machines needs the switch on, so only a local cluster sets it.
-    """
-    if local and "ray" not in sys.modules:
-        os.environ.setdefault("RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER", "0")
-    os.environ.setdefault("RAY_USAGE_STATS_ENABLED", "0")  # offline: no usage report
-    try:
-        from twinfleet.checker.cluster import engine
-    except ImportError as exc:
-        raise ClusterError("the distributed search needs Ray: pip install "
-                           f"twinfleet[cluster] ({exc})") from None
-    return engine
-
-
 def distributed(system: System, properties: PropertySet, limits: Limits, spec: SystemSpec, *,
                 workers: int, address: str | None, min_width: int,
                 report: Callable[[str], None] | None = None,
@@ -91,34 +70,33 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
     checkpoints). ClusterError when the cluster cannot start or loses a worker."""
     expected = fingerprint(system)
     with ExitStack() as stack:
-        def engine(width: int) -> Any:
-            found = engine_module(local=address is None)
+        def starting(width: int, make: Callable[[Any], Any]) -> Any:
             if report is not None:
                 report(f"[check] frontier {width:,} wide: starting {workers} Ray worker(s)"
                        + (" (relaxed order)" if relaxed else "")
                        + ("" if min_width <= 1 else "; the search goes on here until they "
                           "are up"))
-            stack.enter_context(found.session(workers, address))
-            return found
+            return start(workers, make, address, stack.callback)
 
-        def factory(width: int) -> Backend:
-            ray_backend = engine(width).RayBackend(spec, expected, workers)
-            stack.callback(ray_backend.close)
-            backend: Backend = ray_backend
+        def made(engine: Any) -> Backend:
+            backend: Backend = engine.RayBackend(spec, expected, workers)
             if on_backend is not None:
                 on_backend(backend)
             return backend
 
+        def factory(width: int) -> Backend:
+            return cast(Backend, starting(width, made))
+
         def flow(width: int) -> FlowBackend:
-            ray_flow = engine(width).RayFlow(spec, expected, workers)
-            stack.callback(ray_flow.close)
-            return cast(FlowBackend, ray_flow)
+            return cast(FlowBackend, starting(
+                width, lambda engine: engine.RayFlow(spec, expected, workers)))
 
         here = workers == 1 and address is None
         coordinator = Coordinator(system, properties, limits, None if here else factory,
                                   min_width, report, checkpointing=checkpointing,
                                   reduction=reduction,
-                                  flow=flow if relaxed and not here else None)
+                                  flow=flow if relaxed and not here else None,
+                                  start_states=START_STATES if min_width > 1 else 0)
         if resume is not None:
             coordinator.restore(resume)
         outcome = coordinator.run()
@@ -132,9 +110,13 @@ def _note(coordinator: Coordinator, outcome: Outcome, workers: int, min_width: i
     t = coordinator.traffic
     if here:
         note = "strict BFS in one process (the distributed search's order and checkpoints)"
+    elif coordinator.started_at is not None and coordinator.distributed_at is None:
+        note = (f"ran in one process: the Ray workers started at depth "
+                f"{coordinator.started_at} were not up before the search ended or narrowed")
     elif coordinator.distributed_at is None:
-        note = (f"ran in one process: the search ended before a level held {min_width} "
-                "worlds (--min-width)")
+        note = (f"ran in one process: no level held {min_width} worlds (--min-width) after "
+                f"the first {START_STATES:,} states (a smaller search is over before Ray "
+                "would be up)")
     else:
         per = t.claims / max(1, outcome.statistics.states)
         runs = coordinator.system.runner.handler_runs + sum(t.handler_runs)

@@ -207,7 +207,7 @@ class Placement:
         system, properties, reduction: what a new local backend searches.
         factory: starts the cluster's backend; None: everything in this process.
         flow_factory: starts the workers of a relaxed order instead, or None.
-        min_width, back_width, patience: as `Coordinator` takes them.
+        min_width, back_width, patience, start_states: as `Coordinator` takes them.
         tick: called while waiting for the workers (Ctrl-C, max-time).
         report: called with a line when the workers are up, or None.
     """
@@ -215,13 +215,15 @@ class Placement:
     def __init__(self, system: System, properties: PropertySet, reduction: Reduction | None,
                  factory: Factory | None, flow_factory: FlowFactory | None, *,
                  min_width: int, back_width: int, patience: int, tick: Callable[[], None],
+                 start_states: int = 0,
                  report: Callable[[str], None] | None) -> None:
         self.system, self.properties, self.reduction = system, properties, reduction
         self.factory, self.flow_factory = factory, flow_factory
         self.min_width, self.back_width = min_width, back_width
         self.patience, self._narrow = patience, 0
         self.tick, self.report = tick, report
-        self.local = LocalBackend(system, properties, reduction)
+        self.start_states = start_states
+        self.started_at: int | None = None  # the level where the cluster started        self.local = LocalBackend(system, properties, reduction)
         self.backend: Backend = self.local
         self.cluster: Backend | None = None
         self.flow: FlowBackend | None = None  # the relaxed order's workers, once searching
@@ -234,11 +236,12 @@ class Placement:
         return self.flow or self.backend
 
     def before_level(self, width: int, level: int, roots: dict[int, tuple[int, ...]],
-                     traffic: Traffic) -> bool:
-        """Move the search to where a level `width` wide at depth `level` runs; True if
-        the relaxed order's workers are up to take the rest of it (`to_flow`)."""
+                     traffic: Traffic, states: int = 0) -> bool:
+        """Move the search to where a level `width` wide at depth `level` runs, `states`
+        found so far; True if the relaxed order's workers are up to take the rest of it
+        (`to_flow`)."""
         if self.backend is self.local and self.factory is not None and \
-                width >= self.min_width and self._started(width, level):
+                width >= self.min_width and self._started(width, level, states):
             if self.flow_factory is not None:
                 return True
             self._to_cluster(level)
@@ -248,18 +251,21 @@ class Placement:
                 self._to_local(roots, traffic)
         return False
 
-    def _started(self, width: int, level: int) -> bool:
+    def _started(self, width: int, level: int, states: int) -> bool:
         """Start the cluster's backend, once, and say whether its workers are up. They
         start while the search goes on here (a worker process takes a second or two to
         import the node code and build its system: time this process spends searching),
         except with `min_width` 1, which asks for the whole search on the workers: then
-        this waits for them."""
+        this waits for them. A search of fewer than `start_states` states starts nothing."""
         if self._starting is None:
+            if states < self.start_states:
+                return False
             if self.flow_factory is not None:
                 self._starting = self.flow_factory(width)
             else:
                 assert self.factory is not None
                 self._starting = self.factory(width)
+            self.started_at = level
         while not self._starting.ready():
             if self.min_width > 1:
                 return False

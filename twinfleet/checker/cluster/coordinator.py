@@ -81,6 +81,9 @@ from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.system import System
 from twinfleet.runtime.contract.kinds import Status
 
+# A search smaller than this is over in a few seconds in one process: less than a local
+# cluster takes to start (3-15 s here), and the cluster's processes hold about a gigabyte.
+START_STATES = 50_000
 PATIENCE = 16  # narrow levels in a row before the first return (doubled after each)
 ENGINE = "cluster"  # a checkpoint's meta["engine"]: written by this coordinator
 
@@ -102,6 +105,8 @@ class Coordinator:
         reduction: the partial-order reduction of the coordinator's system, or None.
         back_width: a frontier narrower than this comes back (default min_width).
         patience: narrow levels in a row before the first return.
+        start_states: the cluster starts only once the search found this many states
+            (and a level is `min_width` wide).
         flow: starts the workers of a relaxed order (`checker.cluster.flow`), as
             `factory` does, which then replace `factory`'s levels; None: a strict BFS.
             Only for a search without reduction, depth bound or checkpoints.
@@ -112,7 +117,8 @@ class Coordinator:
                  report: Callable[[str], None] | None = None, interval: float = 1.0,
                  checkpointing: Checkpointing | None = None,
                  reduction: Reduction | None = None, back_width: int | None = None,
-                 patience: int = PATIENCE, flow: FlowFactory | None = None) -> None:
+                 patience: int = PATIENCE, flow: FlowFactory | None = None,
+                 start_states: int = 0) -> None:
         if flow is not None and (reduction is not None or limits.max_depth is not None
                                  or checkpointing is not None):
             raise ValueError("a relaxed order needs a search without reduction, depth bound "
@@ -129,7 +135,7 @@ class Coordinator:
                                min_width=min_width,
                                back_width=min_width if back_width is None else back_width,
                                patience=patience, tick=partial(self.guard.tick, self.statistics),
-                               report=report)
+                               report=report, start_states=start_states)
         self.roots: dict[int, tuple[int, ...]] = {}
         self.traffic = Traffic()
         self.tally = Tally()
@@ -143,6 +149,11 @@ class Coordinator:
     def distributed_at(self) -> int | None:
         """The level where the cluster took over, if it did."""
         return self.place.distributed_at
+
+    @property
+    def started_at(self) -> int | None:
+        """The level where the cluster was started, if it was."""
+        return self.place.started_at
 
     @property
     def flow(self) -> FlowBackend | None:
@@ -183,7 +194,7 @@ class Coordinator:
                     return found
                 continue
             if self.place.before_level(self.tally.frontier, self.tally.level, self.roots,
-                                       self.traffic):
+                                       self.traffic, self.tally.states):
                 return self._flow()
             outcome = self._level()
             if outcome is not None:

@@ -1,10 +1,12 @@
 """The one module of the checker that imports Ray: actors, the cluster backend, the engine.
 
-`session(workers, address)` starts a local cluster (loopback, no dashboard,
-no usage statistics, a fresh cluster even when a stale
-/tmp/ray/ray_current_cluster names a dead one) or joins `address`, and stops
-what it started. A Ray already initialised by the caller (a test's shared
-cluster) is used as it is and left running. `RayBackend` runs the levels of
+`connect` joins a cluster as this process's driver: a local one that
+`checker.cluster.head.LocalHead` started in processes of its own (loopback, no
+dashboard, no usage statistics, its own temporary directory, so a stale
+/tmp/ray/ray_current_cluster never matters), or one of other machines.
+`session(workers, address)` does it all for a caller that waits (the
+statistical engine), and stops what it started. A Ray already initialised by
+the caller (a test's shared cluster) is used as it is and left running. `RayBackend` runs the levels of
 `checker.cluster.coordinator` on `Worker` actors (an `Expander` each) and
 `Shard` actors (a `ShardCore` each): claims go from workers to shards and
 masks back as object references, so the coordinator moves no claim itself.
@@ -16,6 +18,7 @@ actors that send each other claims and answers directly.
 from __future__ import annotations
 
 import gc
+import logging
 import os
 import pickle
 import re
@@ -29,6 +32,7 @@ from typing import Any, final
 import numpy as np
 
 from twinfleet.checker.cluster.flow import ASK, FlowCore, FlowStatus
+from twinfleet.checker.cluster.head import local_head
 from twinfleet.checker.cluster.level import (
     Acceptance,
     Expander,
@@ -40,14 +44,13 @@ from twinfleet.checker.cluster.level import (
     split,
 )
 from twinfleet.checker.cluster.links import TOKEN_BYTES, Links
-from twinfleet.checker.cluster.ray_host import answers, environment, ray_notices, worker_env
+from twinfleet.checker.cluster.ray_host import answers, ray_notices, worker_env
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint, mismatch
 from twinfleet.checker.cluster.visited import VisitedTable
 from twinfleet.checker.collector import SEARCH_THRESHOLDS
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.system import System
-from twinfleet.runtime.contract.environment import EnvVar, env_value
 
 try:
     import ray
@@ -58,47 +61,67 @@ except ImportError:  # pragma: no cover - exercised in a subprocess without Ray
 
 
 
-@contextmanager
-def session(workers: int, address: str | None) -> Iterator[None]:
-    """A Ray connection for the command (module docstring); ClusterError if none."""
-    if ray.is_initialized():
-        yield
-        return
-    if address is not None:
-        answers(address)
-    with ray_notices():
-        _init(workers, address)
+def connect(address: str, log: str, *, local: bool) -> None:
+    """Join the cluster at `address` as this process's driver, Ray's own log lines (its
+    notices, its warning that a driver on a thread sets no SIGTERM handler) going to the
+    file `log` rather than to the terminal. `local`: a `head.LocalHead` of this process,
+    whose workers inherit the node code's path from the cluster's processes (with a
+    job's runtime_env instead, Ray starts a new process for every actor rather than
+    using the ones it keeps ready: two actors up in 1.0-1.2 s against 0.2-0.5 s); a
+    cluster of other machines gets the path as the job's environment."""
+    handler = logging.FileHandler(log)
+    _log_to(handler, "ray._private")  # where ray.init's own messages come from
     try:
-        yield
-    finally:
-        with ray_notices():
-            ray.shutdown()
-
-
-def _init(workers: int, address: str | None) -> None:
-    """`ray.init` for `session`; ClusterError if it fails."""
-    try:
-        if address is None:
-            # A local cluster's processes inherit the path from this one: with a job's
-            # runtime_env instead, Ray starts a new process for every actor rather than
-            # using the ones it keeps ready (measured: two actors up in 1.0-1.2 s against
-            # 0.2-0.5 s). And its workers run at this process's priority, unless the
-            # user set one: Ray lowers them by 15, and on a busy machine a search's
-            # workers then lose the cores to everything else, where the same search in
-            # one process would not.
-            niceness = env_value(EnvVar.RAY_WORKER_NICENESS) or "0"
-            with environment({**worker_env(), "RAY_worker_niceness": niceness}):
-                ray.init(address="local", num_cpus=max(2, workers), include_dashboard=False,
-                         _node_ip_address="127.0.0.1", log_to_driver=False,
-                         configure_logging=False)
+        if local:
+            ray.init(address=address, log_to_driver=False, configure_logging=False)
         else:
             ray.init(address=address, log_to_driver=False, configure_logging=False,
                      runtime_env={"env_vars": worker_env()})
+        _log_to(handler, "ray")  # ray.init without configure_logging empties its handlers
     except Exception as exc:  # noqa: BLE001 - Ray raises many types for one bad address
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        where = "a local cluster" if address is None else f"cluster {address}"
+        where = "the local cluster" if local else f"cluster {address}"
         raise ClusterError(f"cannot connect to {where}: {first} (a cluster started with "
-                           "`ray start --head` needs the same RAY_AUTH_TOKEN here)") from None
+                           "`ray start --head` needs the same RAY_AUTH_TOKEN here; Ray's "
+                           f"log: {log})") from None
+
+
+def _log_to(handler: logging.Handler, name: str) -> None:
+    logger = logging.getLogger(name)
+    logger.handlers = [handler]
+    logger.propagate = False
+
+
+def disconnect() -> None:
+    """Leave the cluster `connect` joined."""
+    ray.shutdown()
+
+
+@contextmanager
+def session(workers: int, address: str | None) -> Iterator[None]:
+    """A Ray connection for the command (module docstring), waiting for a local cluster
+    to start; ClusterError if none."""
+    if ray.is_initialized():
+        yield
+        return
+    head = local_head(workers) if address is None else None
+    try:
+        with ray_notices():  # what Ray's C++ core writes to file descriptor 2 as well
+            if head is None:
+                assert address is not None
+                answers(address)
+                connect(address, os.devnull, local=False)
+            else:
+                head.wait_up()
+                connect(head.address, head.driver_log, local=True)
+        try:
+            yield
+        finally:
+            with ray_notices():
+                disconnect()
+    finally:
+        if head is not None:
+            head.stop()
 
 
 def _built(spec: SystemSpec, expected: dict[str, str]

@@ -1,0 +1,155 @@
+"""A local Ray cluster in processes of its own, started without importing Ray here.
+
+`LocalHead` runs Ray's own `ray start --head --block` as a child process, in a
+session of its own (a Ctrl-C at the terminal reaches the search, which stops
+between two levels, not the cluster under it) and bound to this process's
+life: it receives SIGTERM when this process ends, however it ends, and then
+stops every process of the cluster. Starting takes seconds of Ray's time (and
+of this machine's cores), none of them on the search's thread: the caller
+connects once `up` says the cluster answers (`checker.cluster.engine.connect`).
+
+The cluster listens on 127.0.0.1 only, with ports picked free here, no
+dashboard and no usage report. Its authentication token is made here, one per
+process (Ray caches the token a process first read), and given to the
+cluster and to this process's connection through the environment: nothing is
+written to ~/.ray and Ray prints no notice about it. Everything Ray says goes
+to a log file in the cluster's temporary directory, which is removed after a
+clean stop and kept, and named in the error, when the cluster failed.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import ctypes
+import os
+import secrets
+import shutil
+import signal
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from typing import final
+
+from twinfleet.checker.cluster.ray_host import worker_env
+from twinfleet.checker.cluster.spec import ClusterError
+from twinfleet.runtime.contract.environment import EnvVar, env_value
+
+TOKEN = secrets.token_hex(32)
+STOP_TIMEOUT_S = 15.0
+# On SIGTERM `ray start` first drains its node (for Ray Serve), up to 30 s: 0.5-3.4 s
+# measured here with nothing to drain; a search's workers have nothing worth waiting for.
+QUICK_STOP = {"RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S": "0"}
+PR_SET_PDEATHSIG = 1  # prctl(2): a signal for the child when its parent thread ends
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 now."""
+    with socket.socket() as probe:
+        probe.bind(("127.0.0.1", 0))
+        return int(probe.getsockname()[1])
+
+
+def _die_with_parent() -> None:  # pragma: no cover - runs in the child, between fork and exec
+    """SIGTERM to the child when the thread that started it ends (Linux; elsewhere a
+    killed command leaves its cluster to Ray's own reaper)."""
+    if sys.platform.startswith("linux"):
+        ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def driver_env() -> dict[str, str]:
+    """What a process connecting to a `LocalHead` needs in its environment before it
+    imports Ray: the cluster switch off (Ray reads it once, at import: on, a local
+    cluster listens on every interface), no usage report, the token."""
+    return {"RAY_ENABLE_WINDOWS_OR_OSX_CLUSTER": "0", "RAY_USAGE_STATS_ENABLED": "0",
+            "RAY_AUTH_MODE": "token", "RAY_AUTH_TOKEN": TOKEN}
+
+
+@final
+class LocalHead:
+    """A local Ray cluster of `cpus` CPUs, started at construction (module docstring).
+
+    Must be constructed on the thread that lives as long as the cluster should (the
+    main thread): the cluster stops when that thread ends.
+
+    Args:
+        cpus: the cluster's CPUs (one per worker actor).
+        env: the environment of the cluster's processes, which Ray's workers inherit
+            (the node code's import path, their niceness), over this process's.
+    """
+
+    def __init__(self, cpus: int, env: dict[str, str]) -> None:
+        self.directory = tempfile.mkdtemp(prefix="twinfleet-ray-")
+        self.log = os.path.join(self.directory, "ray.log")
+        self.driver_log = os.path.join(self.directory, "driver.log")  # this process's Ray
+        self.address = f"127.0.0.1:{free_port()}"
+        self._failed = False
+        command = [sys.executable, "-m", "ray.scripts.scripts", "start", "--head", "--block",
+                   "--port", self.address.rsplit(":", 1)[1], "--node-ip-address", "127.0.0.1",
+                   "--num-cpus", str(cpus), "--include-dashboard", "false",
+                   "--disable-usage-stats", "--temp-dir", self.directory,
+                   # Ray's defaults are fixed ports (10001, 52365): two clusters on one
+                   # machine would collide on them.
+                   "--ray-client-server-port", str(free_port()),
+                   "--dashboard-agent-listen-port", str(free_port())]
+        with open(self.log, "wb") as out:
+            self.process = subprocess.Popen(  # noqa: S603 - our own interpreter, fixed arguments
+                command, env={**os.environ, **env, **driver_env(), **QUICK_STOP}, stdin=subprocess.DEVNULL,
+                stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
+                preexec_fn=_die_with_parent)  # noqa: PLW1509 - started from the main thread
+
+    def up(self) -> bool:
+        """Whether the cluster answers at `address`; ClusterError when it stopped."""
+        if self.process.poll() is not None:
+            raise ClusterError(self.failure())
+        try:
+            socket.create_connection(self._host_port(), timeout=0.5).close()
+        except OSError:
+            return False
+        return True
+
+    def wait_up(self, poll_s: float = 0.05) -> None:
+        """Return once the cluster answers; ClusterError when it stopped first."""
+        while not self.up():
+            time.sleep(poll_s)
+
+    def failure(self) -> str:
+        """The one-line error of a cluster that failed, naming the log (which is kept)."""
+        self._failed = True
+        last = ""
+        with contextlib.suppress(OSError), open(self.log, errors="replace") as lines:
+            last = next((line.strip() for line in reversed(lines.readlines()) if line.strip()),
+                        "")
+        code = self.process.poll()
+        how = "failed" if code is None else f"stopped (exit {code})"
+        return (f"the local Ray cluster {how}" + (f": {last[:200]}" if last else "")
+                + f" (Ray's log: {self.log})")
+
+    def stop(self) -> None:
+        """Stop every process of the cluster and wait for them (SIGTERM to `ray start`,
+        which stops the rest; SIGKILL to its process group after STOP_TIMEOUT_S)."""
+        if self.process.poll() is None:
+            self.process.terminate()
+            try:
+                self.process.wait(STOP_TIMEOUT_S)
+            except subprocess.TimeoutExpired:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(self.process.pid, signal.SIGKILL)
+                self.process.wait()
+        if not self._failed:
+            shutil.rmtree(self.directory, ignore_errors=True)
+
+    def _host_port(self) -> tuple[str, int]:
+        host, _, port = self.address.rpartition(":")
+        return host, int(port)
+
+
+def local_head(workers: int) -> LocalHead:
+    """A `LocalHead` for `workers` worker actors (at least two CPUs: the statistical
+    engine's tasks and the shards need one beside a worker). Its workers run at this
+    process's priority unless the user set one: Ray lowers them by 15, and on a busy
+    machine a search's workers then lose the cores to everything else, where the same
+    search in one process would not."""
+    niceness = env_value(EnvVar.RAY_WORKER_NICENESS) or "0"
+    return LocalHead(max(2, workers), {**worker_env(), "RAY_worker_niceness": niceness})
