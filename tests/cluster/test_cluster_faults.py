@@ -19,6 +19,7 @@ from pathlib import Path
 import pytest
 
 from tests.cluster.test_distributed import assert_same_answer, safety_copy
+from tests.integration.itest_support import spawned_by
 from tests.support import child_env
 from twinfleet.checker import CheckOptions, check
 from twinfleet.checker.cluster import engine_module
@@ -50,19 +51,10 @@ def test_two_nodes_give_the_single_process_answer(tmp_path: Path) -> None:
         cluster.shutdown()
 
 
-def _ray_processes_of(session: int) -> list[int]:
-    pids = []
-    for entry in Path("/proc").glob("[0-9]*"):
-        try:
-            if os.getsid(int(entry.name)) == session:
-                pids.append(int(entry.name))
-        except (OSError, ValueError):
-            continue
-    return pids
-
-
-def _pid_named(prefix: bytes, session: int) -> int | None:
-    for pid in _ray_processes_of(session):
+def _pid_named(prefix: bytes, root: int) -> int | None:
+    """A process `root` started (its local cluster's, in a session of its own) whose
+    command line starts with `prefix`."""
+    for pid in spawned_by(root):
         with contextlib.suppress(OSError):
             if Path(f"/proc/{pid}/cmdline").read_bytes().startswith(prefix):
                 return pid
