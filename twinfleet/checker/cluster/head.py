@@ -89,6 +89,8 @@ class LocalHead:
                    "--port", self.address.rsplit(":", 1)[1], "--node-ip-address", "127.0.0.1",
                    "--num-cpus", str(cpus), "--include-dashboard", "false",
                    "--disable-usage-stats", "--temp-dir", self.directory,
+                   # The autoscaler's monitor serves no fixed local cluster: 80 MB.
+                   "--no-monitor",
                    # Ray's defaults are fixed ports (10001, 52365): two clusters on one
                    # machine would collide on them.
                    "--ray-client-server-port", str(free_port()),
