@@ -79,6 +79,8 @@ class Starting:
         self._built: Any = None
         self._engine: Any = None  # the engine module, once this process joined a cluster
         self._error: BaseException | None = None
+        self._joining = False  # joining the cluster (`close` then waits for it)
+        self._done = threading.Event()  # the thread ended
         prepare_environment(local=head is not None)
         self._thread = threading.Thread(target=self._run, name="cluster-start", daemon=True)
         self._thread.start()
@@ -100,26 +102,43 @@ class Starting:
         return getattr(self._built, name)
 
     def close(self) -> None:
-        """Stop the backend's workers and leave the cluster; a start still under way is
-        not waited for (its thread does both once it ends)."""
+        """Stop the backend's workers and leave the cluster. A start still waiting for the
+        cluster is not waited for (it joins nothing once closed); one joining it is, for
+        the few seconds joining takes once the cluster is up, since Ray ends a process
+        whose cluster stops while it joins."""
         with self._lock:
             self._closed = True
+            joining = self._joining
+        if joining:
+            self._done.wait()
+        with self._lock:
             built, engine = self._built, self._engine
         _shut(built, engine)
 
     def _run(self) -> None:
         engine = built = None
         try:
-            if self._head is not None:
-                self._head.wait_up()
+            if self._head is not None or self._address is not None:
+                if self._head is not None:
+                    self._head.wait_up()
                 engine = _imported()
-                engine.connect(self._head.address, self._head.driver_log, local=True)
-            elif self._address is not None:
-                engine = _imported()
-                engine.connect(self._address, os.devnull, local=False)
+                with self._lock:
+                    if self._closed:
+                        engine = None  # joined nothing: nothing to leave
+                        return
+                    self._joining = True
+                if self._head is not None:
+                    engine.connect(self._head.address, self._head.driver_log, local=True)
+                else:
+                    engine.connect(self._address, os.devnull, local=False)
             built = self._make(engine or _imported())
         except BaseException as exc:  # noqa: BLE001 - handed to the search's thread
             self._error = exc
+        finally:
+            self._keep(built, engine)
+            self._done.set()
+
+    def _keep(self, built: Any, engine: Any) -> None:
         with self._lock:
             if not self._closed:
                 self._built, self._engine = built, engine
