@@ -223,7 +223,8 @@ class Placement:
         self.patience, self._narrow = patience, 0
         self.tick, self.report = tick, report
         self.start_states = start_states
-        self.started_at: int | None = None  # the level where the cluster started        self.local = LocalBackend(system, properties, reduction)
+        self.started_at: int | None = None  # the level where the cluster started
+        self.local = LocalBackend(system, properties, reduction)
         self.backend: Backend = self.local
         self.cluster: Backend | None = None
         self.flow: FlowBackend | None = None  # the relaxed order's workers, once searching

@@ -60,7 +60,6 @@ except ImportError:  # pragma: no cover - exercised in a subprocess without Ray
         from None
 
 
-
 def connect(address: str, log: str, *, local: bool) -> None:
     """Join the cluster at `address` as this process's driver, Ray's own log lines (its
     notices, its warning that a driver on a thread sets no SIGTERM handler) going to the
