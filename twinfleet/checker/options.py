@@ -227,5 +227,6 @@ def add_engine_arguments(p: argparse.ArgumentParser) -> None:
                    help="exhaustive search with --workers/--cluster: stay in this process "
                    "until a BFS level holds W worlds, and come back when levels stay "
                    f"narrower (narrow searches never leave it; default {MIN_WIDTH}). The "
-                   "workers start while the search goes on here and take it over once "
-                   "up; 1: the whole search on the workers, waiting for them to start")
+                   "workers start, once the search also found 50,000 states (a smaller "
+                   "one ends before they are up), while it goes on here, and take it over "
+                   "once up; 1: the whole search on the workers, waiting for them to start")

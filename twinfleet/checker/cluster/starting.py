@@ -3,8 +3,9 @@
 Importing Ray (about a second of Python on this process's interpreter) and
 joining a cluster (seconds while a local one starts) happen on that thread;
 the search's thread only asks `Starting.ready` between two levels. A search
-that ends first never waits for it: `close` leaves the thread to clean up
-after itself, and the caller stops the local cluster under it.
+that ends while the cluster starts does not wait for it: the thread joins
+nothing once closed, and the caller stops the local cluster under it (only a
+join already under way, a few seconds once the cluster is up, is waited for).
 """
 
 from __future__ import annotations
