@@ -1,12 +1,10 @@
 """The one module of the checker that imports Ray: actors, the cluster backend, the engine.
 
-`connect` joins a cluster as this process's driver: a local one that
-`checker.cluster.head.LocalHead` started in processes of its own (loopback, no
-dashboard, no usage statistics, its own temporary directory, so a stale
-/tmp/ray/ray_current_cluster never matters), or one of other machines.
-`session(workers, address)` does it all for a caller that waits (the
-statistical engine), and stops what it started. A Ray already initialised by
-the caller (a test's shared cluster) is used as it is and left running. `RayBackend` runs the levels of
+`connect` joins a cluster as this process's driver: a local one of
+`checker.cluster.head.LocalHead` (loopback, no dashboard nor usage statistics) or
+one of other machines. `session(workers, address)` does it all for a caller that
+waits (the statistical engine), and stops what it started; a Ray already initialised
+by the caller (a test's shared cluster) is used as it is. `RayBackend` runs the levels of
 `checker.cluster.coordinator` on `Worker` actors (an `Expander` each) and
 `Shard` actors (a `ShardCore` each): claims go from workers to shards and
 masks back as object references, so the coordinator moves no claim itself.
