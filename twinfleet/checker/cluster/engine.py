@@ -8,9 +8,8 @@ by the caller (a test's shared cluster) is used as it is. `RayBackend` runs the 
 `checker.cluster.coordinator` on `Worker` actors (an `Expander` each) and
 `Shard` actors (a `ShardCore` each): claims go from workers to shards and
 masks back as object references, so the coordinator moves no claim itself.
-`RayFlow` runs a relaxed-order search (`checker.cluster.flow`) on `FlowWorker`
-actors that send each other claims and answers directly.
-`RayEngine` is `checker.parallel.Engine` on Ray tasks.
+`RayFlow` runs a relaxed-order search (`checker.cluster.flow`) on `FlowWorker` actors
+that send each other claims and answers directly. `RayEngine`: `checker.parallel.Engine`.
 """
 
 from __future__ import annotations
