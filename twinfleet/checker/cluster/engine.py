@@ -59,8 +59,7 @@ except ImportError:  # pragma: no cover - exercised in a subprocess without Ray
 
 def connect(address: str, log: str, *, local: bool) -> None:
     """Join the cluster at `address` as this process's driver, Ray's own log lines (its
-    notices, its warning that a driver on a thread sets no SIGTERM handler) going to the
-    file `log` rather than to the terminal. `local`: a `head.LocalHead` of this process,
+    notices) going to the file `log` rather than to the terminal. `local`: a `head.LocalHead` of this process,
     whose workers inherit the node code's path from the cluster's processes (with a
     job's runtime_env instead, Ray starts a new process for every actor rather than
     using the ones it keeps ready: two actors up in 1.0-1.2 s against 0.2-0.5 s); a
@@ -77,15 +76,16 @@ def connect(address: str, log: str, *, local: bool) -> None:
     except Exception as exc:  # noqa: BLE001 - Ray raises many types for one bad address
         first = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
         where = "the local cluster" if local else f"cluster {address}"
-        raise ClusterError(f"cannot connect to {where}: {first} (a cluster started with "
-                           "`ray start --head` needs the same RAY_AUTH_TOKEN here; Ray's "
-                           f"log: {log})") from None
+        raise ClusterError(f"cannot connect to {where}: {first} (a cluster started with `ray "
+                           f"start --head` needs the same RAY_AUTH_TOKEN here; Ray's log: {log})"
+                           ) from None
+    finally:  # ray._private propagates to the ray logger again: one place to redirect
+        _log_to(None, "ray._private")
 
 
-def _log_to(handler: logging.Handler, name: str) -> None:
-    logger = logging.getLogger(name)
-    logger.handlers = [handler]
-    logger.propagate = False
+def _log_to(handler: logging.Handler | None, name: str) -> None:
+    logger = logging.getLogger(name)  # None: Ray's setting back (no handler, propagating)
+    logger.handlers, logger.propagate = ([], True) if handler is None else ([handler], False)
 
 
 def disconnect() -> None:
