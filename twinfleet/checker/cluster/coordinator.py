@@ -65,7 +65,7 @@ from twinfleet.checker.cluster.saving import (
 )
 from twinfleet.checker.cluster.spec import ClusterError
 from twinfleet.checker.cluster.tally import Tally
-from twinfleet.checker.cluster.walk import failing_step, gathered, walk
+from twinfleet.checker.cluster.walk import failing_step, first_lasso, gathered, walk
 from twinfleet.checker.outcome import (
     INTERRUPTED_REASON,
     Counterexample,
@@ -75,7 +75,6 @@ from twinfleet.checker.outcome import (
     SearchStatistics,
     Stop,
 )
-from twinfleet.checker.paths import lasso_counterexample
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.system import System
@@ -297,11 +296,10 @@ class Coordinator:
     def _liveness(self) -> Outcome:
         """Every `eventually` property, by the lasso search of one process, on the graph
         the workers saw, gathered here (`checker.paths`)."""
-        store = gathered(*self.place.graph(), self.roots, self.properties)
-        for prop in self.properties.eventually:
-            found = lasso_counterexample(self.system, store, prop)
-            if found is not None:
-                return self._violated(*found)
+        found = first_lasso(self.system, gathered(*self.place.graph(), self.roots,
+                                                  self.properties), self.properties)
+        if found is not None:
+            return self._violated(*found)
         return self._outcome(Status.HOLDS, "every property holds")
 
     # ------------------------------------------------------------- answers
@@ -309,10 +307,7 @@ class Coordinator:
     def statistics(self) -> SearchStatistics:
         """The counters so far."""
         attempt = None if self._attempt is None else time.monotonic() - self._attempt
-        return self.tally.statistics(self._elapsed(), self._shard_bytes(), attempt)
-
-    def _shard_bytes(self) -> list[int]:
-        return self.place.current.shard_bytes()
+        return self.tally.statistics(self._elapsed(), self.place.current.shard_bytes(), attempt)
 
     def _elapsed(self) -> float:
         return self._elapsed_before + time.monotonic() - self.guard.started
@@ -361,8 +356,9 @@ class Coordinator:
         """The outcome of the first handler failure, else the first violation, the workers
         met (a failure's parent, a violating world's key), or None."""
         failure = next((f for f in failures if f is not None), None)
-        if failure is not None:
-            return self._failed(failure.parent)
+        if failure is not None:  # the first failing step from the failure's parent
+            path, world = walk(self.system, self.roots, self._ancestry(), failure.parent)
+            return self._violated(*failing_step(self.system, self.properties, path, world))
         violation = next((v for v in violations if v is not None), None)
         if violation is not None:
             return self._violated(violation[0],
@@ -371,11 +367,6 @@ class Coordinator:
 
     def _violated(self, violation: PropertyViolation, path: Counterexample) -> Outcome:
         return Outcome(Status.VIOLATED, violation.property, self.statistics(), violation, path)
-
-    def _failed(self, parent: int) -> Outcome:
-        """A handler failed on a step from `parent`: the first failing step from there."""
-        path, world = walk(self.system, self.roots, self._ancestry(), parent)
-        return self._violated(*failing_step(self.system, self.properties, path, world))
 
     def _ancestry(self) -> Callable[[int], list[int]]:
         """How `walk` finds a key's ancestors: after a relaxed order, on the whole visited set
@@ -393,5 +384,5 @@ class Coordinator:
         place = self.place
         where = "in this process" if place.current is place.local else \
             f"{place.current.workers} worker(s)"
-        self.report(self.tally.progress_line(where, self.traffic, self._shard_bytes(),
-                                             self._elapsed()))
+        shards = self.place.current.shard_bytes()
+        self.report(self.tally.progress_line(where, self.traffic, shards, self._elapsed()))

@@ -14,6 +14,7 @@ from collections.abc import Callable, Mapping
 from twinfleet.checker.cluster.level import ROOT, Graph
 from twinfleet.checker.diagnosis import FIX_HIDDEN, ContractBreachError, breach_line
 from twinfleet.checker.outcome import Counterexample
+from twinfleet.checker.paths import lasso_counterexample
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.store import StateStore
 from twinfleet.checker.system import System
@@ -72,3 +73,14 @@ def gathered(parts: list[Graph], visited: list[bytes], roots: Mapping[int, tuple
     for key, choices in roots.items():
         store.roots[store.find(key)] = choices
     return store
+
+
+def first_lasso(system: System, store: StateStore, properties: PropertySet
+                ) -> tuple[PropertyViolation, Counterexample] | None:
+    """The first `eventually` property a lasso of the gathered graph violates, with its
+    counterexample (`checker.paths`), or None: every one holds."""
+    for prop in properties.eventually:
+        found = lasso_counterexample(system, store, prop)
+        if found is not None:
+            return found
+    return None
