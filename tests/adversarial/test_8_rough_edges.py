@@ -27,7 +27,7 @@ ROBOT = ('{{name: r{i}, class: "twinfleet.nodes.robot:Robot", namespace: /r{i}, 
 def scenario(tmp_path, name: str, *, robots: int = 1, speed: str = "0.5", server: str =
              "twinfleet.nodes.map_server:MapServer", live: str = "{wall_timeout_s: 5}") -> str:
     nodes = "\n".join(f"- {ROBOT.format(i=i, speed=speed)}" for i in range(1, robots + 1))
-    text = (f"name: {name}\nmap: {ROOT}/twinfleet/maps/map50.yaml\nnodes:\n"
+    text = (f"name: {name}\nparams: {{map: {ROOT}/twinfleet/maps/map50.yaml}}\nnodes:\n"
             f"- {{name: map_server, class: \"{server}\", params: {{robots: "
             f"[{', '.join(f'r{i}' for i in range(1, robots + 1))}]}}}}\n{nodes}\nlive: {live}\n")
     path = tmp_path / f"{name}.yaml"

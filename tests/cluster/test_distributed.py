@@ -14,6 +14,7 @@ so the distributed path is what is compared; each result says so.
 from __future__ import annotations
 
 import os
+import re
 import time
 from pathlib import Path
 from typing import Any
@@ -93,6 +94,21 @@ def assert_same_answer(one: CheckResult, many: CheckResult, *, relaxed: bool = F
             assert replay_confirms(many)
 
 
+_RESTARTS = re.compile(r"(\d+) restarts?; (learned ahead by [^;]*; )?")
+
+
+def assert_same_reduction(one: CheckResult, many: CheckResult) -> None:
+    """The same reduction summary: worlds reduced, worlds expanded fully, what was learned.
+    A search in one process walks its reduced graph on before it restarts, to learn deeper
+    sends at once (`Reduction.walk_on`); the distributed search does not, so it may restart
+    more often: its restarts are at least as many, the rest of the summary the same."""
+    assert one.reduction is not None and many.reduction is not None
+    counted = [int(m.group(1)) if (m := _RESTARTS.search(r)) else 0
+               for r in (one.reduction, many.reduction)]
+    assert counted[1] >= counted[0], (one.reduction, many.reduction)
+    assert _RESTARTS.sub("", many.reduction) == _RESTARTS.sub("", one.reduction)
+
+
 @pytest.mark.parametrize("reduction", ["none", "por"])
 @pytest.mark.parametrize("workers", [1, 2, 3])
 def test_a_violated_shipped_case_has_a_trace_as_short(tmp_path: Path, workers: int,
@@ -125,7 +141,7 @@ def test_a_wide_reduced_search_has_the_same_counts_and_restarts(tmp_path: Path) 
     for workers in (2, 3):
         many = distributed(path, workers, max_depth=80, reduction="por")
         assert_same_answer(one, many)
-        assert many.reduction == one.reduction  # worlds reduced, expanded fully, restarts
+        assert_same_reduction(one, many)
 
 
 def test_a_violated_paper_case_with_two_workers(tmp_path: Path) -> None:
@@ -179,7 +195,7 @@ def test_generated_systems(tmp_path: Path, doc: dict[str, Any], workers: int,
                        beyond_start=one.statistics.depth > 0)
     assert_same_answer(one, many)
     if one.violation is None:
-        assert many.reduction == one.reduction
+        assert_same_reduction(one, many)
 
 
 @pytest.mark.parametrize("backend", ["RayBackend", "RayFlow"])

@@ -22,7 +22,7 @@ from typing import Any
 
 import pytest
 
-from tests.cluster.test_distributed import assert_same_answer, safety_copy
+from tests.cluster.test_distributed import assert_same_answer, assert_same_reduction, safety_copy
 from tests.support import child_env
 from tests.support import wait_for_line as _wait_for
 from twinfleet.checker import CheckOptions, check
@@ -72,7 +72,7 @@ def test_a_holding_search_resumes_on_three_workers_and_in_one_process(tmp_path: 
         assert (resumed.statistics.states, resumed.statistics.transitions,
                 resumed.statistics.depth) == (one.statistics.states, one.statistics.transitions,
                                               one.statistics.depth)
-        assert resumed.reduction == one.reduction
+        assert_same_reduction(one, resumed)
 
 
 @pytest.mark.usefixtures("engine")

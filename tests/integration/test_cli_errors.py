@@ -89,8 +89,8 @@ def test_bad_files(runtime_dir, tmp_path):
                    "none.json")
     one_line_error(tf(runtime_dir, "bag", "info", str(tmp_path / "none.mcap")), "none.mcap",
                    "No such file")
-    one_line_error(tf(runtime_dir, "launch", DEMO, "talker.periodms:=5"), "TalkerParams",
-                   "periodms")
+    one_line_error(tf(runtime_dir, "launch", DEMO, "talker.periodms:=5"),
+                   "'talker.periodms:=5'", "did you mean 'period_ms'")
 
 
 def test_corrupt_and_truncated_recordings(runtime_dir, recordings):
