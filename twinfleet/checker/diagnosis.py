@@ -99,10 +99,15 @@ class EnvironmentProbe:
     def __init__(self) -> None:
         self.calls: list[str] = []
         self._owner: int | None = None
-        self._patches = [(module, name, original, self._wrap(f"{label}.{name}", original))
-                         for module, label, names in _sources()
-                         for name in names
-                         if callable(original := getattr(module, name, None))]
+        # Per module namespace: the wrapped functions and the originals, swapped in and out
+        # with one `dict.update` each (a handler run installs and removes ~60 of them).
+        self._patches: list[tuple[dict[str, Any], dict[str, Any], dict[str, Any]]] = []
+        for module, label, names in _sources():
+            originals = {name: original for name in names
+                         if callable(original := getattr(module, name, None))}
+            probed = {name: self._wrap(f"{label}.{name}", original)
+                      for name, original in originals.items()}
+            self._patches.append((vars(module), probed, originals))
 
     def _wrap(self, label: str, original: Callable[..., Any]) -> Callable[..., Any]:
         def probed(*args: Any, **kwargs: Any) -> Any:
@@ -114,13 +119,13 @@ class EnvironmentProbe:
     def __enter__(self) -> EnvironmentProbe:
         self.calls = []
         self._owner = threading.get_ident()
-        for module, name, _, probed in self._patches:
-            setattr(module, name, probed)
+        for namespace, probed, _ in self._patches:
+            namespace.update(probed)
         return self
 
     def __exit__(self, *exc: object) -> None:
-        for module, name, original, _ in self._patches:
-            setattr(module, name, original)
+        for namespace, _, originals in self._patches:
+            namespace.update(originals)
         self._owner = None
 
 
