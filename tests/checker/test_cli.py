@@ -146,3 +146,19 @@ def test_a_user_package_beside_the_scenario_is_found_from_any_directory(tmp_path
     assert proc.returncode == 0, proc.stderr
     result = json.loads(proc.stdout)
     assert (result["verdict"], result["states"]) == ("holds", 2)
+
+
+def test_the_parser_starts_no_loop_and_reads_no_package_metadata():
+    # `twinfleet check` waits for every module the parser's commands import: asyncio and
+    # importlib.metadata (the version) are only imported by the commands that use them.
+    code = ("import sys; from twinfleet.cli.main import build_parser; build_parser(); "
+            "print(sorted({'asyncio', 'importlib.metadata', 'twinfleet.runtime.fleet.fleet_result'}"
+            " & set(sys.modules)))")
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          cwd=ROOT, timeout=60, env=env)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"
+    version = subprocess.run([sys.executable, "-m", "twinfleet", "--version"],
+                             capture_output=True, text=True, cwd=ROOT, timeout=60, env=env)
+    assert version.returncode == 0 and version.stdout.startswith("twinfleet "), version.stderr

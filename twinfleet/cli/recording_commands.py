@@ -10,7 +10,6 @@ recorded fleet there, so `twinfleet topic echo` finds it without options.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import sys
 from pathlib import Path
 from typing import Any
@@ -28,6 +27,8 @@ from twinfleet.runtime.contract.environment import EnvVar, env_value
 
 def cmd_record(args: argparse.Namespace) -> int:
     """`twinfleet record`: launch a scenario (or join a fleet) and write its topics to MCAP."""
+    import asyncio  # here: the other commands (check) never start a loop
+
     import zenoh
 
     from twinfleet.runtime.fleet.launcher import format_result

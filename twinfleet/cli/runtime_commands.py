@@ -20,7 +20,6 @@ when it runs.
 from __future__ import annotations
 
 import argparse
-import asyncio
 import sys
 from typing import Any
 
@@ -74,6 +73,8 @@ def cmd_launch(args: argparse.Namespace) -> int:
                 node_args=["--verbose"] if args.verbose else [],
                 until_settled=args.until_settled or None,
                 until_violation=args.stop_on_violation or None)
+            import asyncio  # here: the other commands (check) never start a loop
+
             result = asyncio.run(run_fleet(scenario, options, driver=bridge))
         except FleetConflict as exc:
             raise CommandError(str(exc)) from None

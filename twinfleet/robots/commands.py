@@ -31,7 +31,6 @@ from twinfleet.runtime.contract.kinds import (
     EXIT_INTERRUPTED,
     EXIT_OK,
 )
-from twinfleet.runtime.fleet.fleet_result import signal_exit_code
 from twinfleet.runtime.scenario.examples import add_examples
 from twinfleet.runtime.scenario.overrides import (
     add_override_arguments,
@@ -140,6 +139,8 @@ def experiment_command(args: argparse.Namespace) -> int:
     print(f"wrote {options.out / 'experiment.md'}, {options.out / 'experiment.csv'}, "
           f"{options.out / 'experiment.json'}; node output in {options.out / 'logs'}")
     if exp.interrupted:  # a live fleet takes the signal itself: SIGTERM is 143 there too
+        from twinfleet.runtime.fleet.fleet_result import signal_exit_code
+
         return signal_exit_code(exp.stopped_by) or EXIT_INTERRUPTED
     return EXIT_FAILED if exp.contradictions else EXIT_OK
 

@@ -8,7 +8,6 @@ says how to install them (exit 2).
 from __future__ import annotations
 
 import argparse
-import asyncio
 import dataclasses
 import signal
 import sys
@@ -127,6 +126,8 @@ def bridge_command(args: argparse.Namespace) -> int:
         raise CommandError(str(exc)) from None
     bridge = FleetBridge(BridgeSettings(conn.fleet, conn.endpoint, conn.auth, args.domain,
                                         args.router, routes, args.mapping, (Path.cwd(),)))
+
+    import asyncio  # here: the other commands (check) never start a loop
 
     async def run() -> None:
         loop = asyncio.get_running_loop()
