@@ -148,17 +148,20 @@ def test_a_user_package_beside_the_scenario_is_found_from_any_directory(tmp_path
     assert (result["verdict"], result["states"]) == ("holds", 2)
 
 
-def test_the_parser_starts_no_loop_and_reads_no_package_metadata():
-    # `twinfleet check` waits for every module the parser's commands import: asyncio and
-    # importlib.metadata (the version) are only imported by the commands that use them.
-    code = ("import sys; from twinfleet.cli.main import build_parser; build_parser(); "
-            "print(sorted({'asyncio', 'importlib.metadata', 'twinfleet.runtime.fleet.fleet_result'}"
-            " & set(sys.modules)))")
+def test_check_imports_no_loop_package_metadata_or_rclpy_layer(tmp_path):
+    # `twinfleet check` waits for every module it imports: asyncio (the live commands),
+    # importlib.metadata (--version) and the rclpy layer (rclpy nodes) are imported only
+    # by what uses them.
+    path = scenario(tmp_path, [node("ping", "Ping"), node("pong", "Pong")], name="pp")
+    unwanted = ["asyncio", "importlib.metadata", "twinfleet.runtime.fleet.fleet_result",
+                "twinfleet.rclpy.api"]
+    code = (f"import sys; from twinfleet.cli.main import main; code = main(['check', "
+            f"{str(path)!r}, '--quiet']); print(code, sorted(set({unwanted!r}) & set(sys.modules)))")
     env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                          cwd=ROOT, timeout=60, env=env)
+                          cwd=tmp_path, timeout=60, env=env)
     assert proc.returncode == 0, proc.stderr
-    assert proc.stdout.strip() == "[]"
+    assert proc.stdout.splitlines()[-1] == "0 []"
     version = subprocess.run([sys.executable, "-m", "twinfleet", "--version"],
                              capture_output=True, text=True, cwd=ROOT, timeout=60, env=env)
     assert version.returncode == 0 and version.stdout.startswith("twinfleet "), version.stderr

@@ -133,8 +133,11 @@ def _ros_name(name: str) -> bool:
 
 def is_rclpy_node_class(obj: Any) -> bool:
     """True for a subclass of twinfleet's `rclpy.node.Node`."""
-    from twinfleet.rclpy.api.node import Node
-    return isinstance(obj, type) and issubclass(obj, Node)
+    # Such a class imported the module that defines Node (`rclpy` is an alias of it): if
+    # nothing did, no class is one, and a scenario of contract nodes (`check`) need not
+    # import the whole rclpy layer to learn that.
+    module = sys.modules.get(f"{_API}.node")
+    return module is not None and isinstance(obj, type) and issubclass(obj, module.Node)
 
 
 def contract_class(obj: Any) -> Any:
