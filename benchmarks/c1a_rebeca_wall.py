@@ -12,7 +12,9 @@ baseline runs in the same session, alternating with this checkout, and the
 ratios baseline / this checkout come last. Every run's counts must be RMC's
 (c1a_rebeca: 18,527 states / 43,076 transitions) on both sides, or it stops.
 The load averages before and after are printed: wall times mean little above
-a load of 1 on this 2-core machine.
+a load of 1 on this 2-core machine. Compare sides that both have their bytecode
+cached (or neither): with PYTHONDONTWRITEBYTECODE set and no __pycache__, every
+run compiles the modules it imports again (the script says which side has it).
 """
 
 from __future__ import annotations
@@ -82,7 +84,8 @@ def main() -> int:
     for label, path in sides.items():
         if not (path / "twinfleet" / "__init__.py").is_file():
             sys.exit(f"c1a_rebeca_wall: --baseline {path}: no twinfleet/__init__.py there")
-        print(f"{label}: {path}")
+        cached = (path / "twinfleet" / "__pycache__").is_dir()
+        print(f"{label}: {path} (bytecode {'cached' if cached else 'not cached: compiled every run'})")
     print(f"load before: {os.getloadavg()[0]:.2f} {os.getloadavg()[1]:.2f}; "
           f"PYTHONDONTWRITEBYTECODE={os.environ.get('PYTHONDONTWRITEBYTECODE', '')!r}")
     results: dict[str, list[Run]] = {label: [] for label in sides}
