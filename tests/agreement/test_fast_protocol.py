@@ -132,6 +132,46 @@ def test_messages_first_at_one_ms_makes_the_commit_less_likely_to_break() -> Non
     assert first < uniform - 40
 
 
+def _run_log(path: Path, delay: int) -> Path:
+    """One run's log: 20 publishes on /x to two receivers, every latency `delay` ms."""
+    lines: list[dict[str, object]] = [{"format": EVENTS_FORMAT, "kind": "header", "node": "s",
+                                       "time_scale": 1.0}]
+    for seq in range(20):
+        for k, node in enumerate(("a", "b")):
+            lines.append(_delivery(node, "/x", seq, 10 * seq, 10 * seq + delay, 2 * seq + k))
+    path.write_text("\n".join(json.dumps(x) for x in lines) + "\n")
+    return path
+
+
+def test_calibrate_fits_one_level_per_group_of_runs_alike_in_latency(tmp_path: Path) -> None:
+    logs = [_run_log(tmp_path / f"r{k}.jsonl", (1, 9, 2, 8)[k]) for k in range(4)]
+    model = calibrate(logs, startup_ms=0, levels=2)
+    assert [lv.default.values for lv in model.levels] == [(1, 2), (8, 9)]
+    assert [lv.weight for lv in model.levels] == [0.5, 0.5]
+    assert model.at_level(1).latency_of("/x").values == (8, 9)
+    assert model.default.values == (1, 2, 8, 9) and calibrate(logs, startup_ms=0).levels == ()
+
+
+def test_load_levels_change_the_violation_probability(tmp_path: Path) -> None:
+    # Half the runs quick (1 ms), half slow (9 ms). Drawn from one level per simulation,
+    # all of a commit's deliveries are quick or all slow, and both end consistently;
+    # drawn independently from the pooled histogram, a quick and a slow decision often
+    # reach two participants on either side of their 4-ms timeout.
+    logs = [_run_log(tmp_path / f"r{k}.jsonl", 1 if k % 2 else 9) for k in range(6)]
+    pooled = _violating(calibrate(logs, startup_ms=0), 300)
+    levels = _violating(calibrate(logs, startup_ms=0, levels=2), 300)
+    assert levels < pooled - 60, (levels, pooled)
+
+
+def test_the_file_keeps_the_load_levels(tmp_path: Path) -> None:
+    logs = [_run_log(tmp_path / f"r{k}.jsonl", 1 + 3 * k) for k in range(3)]
+    model = calibrate(logs, startup_ms=0, levels=3)
+    save_timing(model, tmp_path / "t.yaml")
+    back = load_timing(tmp_path / "t.yaml")
+    assert back.levels == model.levels and "3 load levels" in back.describe()
+    assert [lv.default.values for lv in back.at_time_scale(2.0).levels] == [(2,), (8,), (14,)]
+
+
 def _batch(folder: Path) -> tuple[float, str]:
     """Run the fleet RUNS times, calibrate from those runs, predict: (agreement p, what)."""
     folder.mkdir()

@@ -19,6 +19,14 @@ intraclass correlation of their latencies' normal scores (each latency mapped
 through its channel's mid-rank empirical CDF and the inverse normal CDF), the
 parameter of the Gaussian copula `checker.sampling` draws them through.
 
+With `levels` K > 1, each event log counts as one run (`launch --runs N
+--record-events` writes one per run): the runs, sorted by the mean of their
+latencies (start-up ones apart), are cut into K groups of as nearly equal size
+as can be, each a `Level` weighted by its share of the runs, with its own default
+histogram and one of each channel the model gives a histogram of its own (the
+group's latencies on that channel; where the group has none, the pooled one is
+kept). K at least the number of runs makes each run a level of its own.
+
 Ties give `messages_first`: of every pair of a timer (or tick) and a message
 handled by one node at the timer's due ms, the fraction in which the message ran
 first (the node's own event order, ``i``); `checker.simulate` breaks such ties
@@ -32,13 +40,13 @@ import json
 import platform
 from bisect import bisect_left, bisect_right
 from collections import defaultdict
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from statistics import NormalDist
 from typing import Any
 
-from twinfleet.checker.timing import Histogram, TimingError, TimingModel
+from twinfleet.checker.timing import Histogram, Level, TimingError, TimingModel
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.core.eventlog import EVENTS_FORMAT
 
@@ -86,6 +94,9 @@ class _Samples:
     at_ms: defaultdict[tuple[str, int], list[tuple[int, bool]]] = field(
         default_factory=lambda: defaultdict(list))
     scales: set[float] = field(default_factory=set)
+    #: per log: per channel the latencies of messages sent after start-up
+    runs: defaultdict[str, defaultdict[str, list[int]]] = field(
+        default_factory=lambda: defaultdict(lambda: defaultdict(list)))
 
     def read(self, path: Path) -> None:
         """Add one event log's records."""
@@ -105,6 +116,8 @@ class _Samples:
         if kind in _MESSAGES and isinstance(stamp, int) and r.get("topic"):
             topic = str(r["topic"])
             (self.startup if stamp < self.startup_ms else self.latency[topic]).append(t - stamp)
+            if stamp >= self.startup_ms:
+                self.runs[log][topic].append(t - stamp)
             if kind == str(EventKind.DELIVERY) and stamp >= self.startup_ms:
                 self.copies[(log, r.get("sender"), topic, r.get("seq"))].append(t - stamp)
         elif kind in _TIMED and isinstance(r.get("due"), int):
@@ -116,10 +129,13 @@ class _Samples:
 
 
 def calibrate(paths: Sequence[str | Path], *, min_samples: int = 30,
-              startup_ms: int = STARTUP_MS) -> TimingModel:
-    """Fit a `TimingModel` from event logs (module docstring)."""
+              startup_ms: int = STARTUP_MS, levels: int = 1) -> TimingModel:
+    """Fit a `TimingModel` from event logs (module docstring); `levels` > 1: that many
+    load levels, each log one run."""
     if not paths:
         raise TimingError("calibrate: give at least one event log")
+    if levels < 1:
+        raise TimingError(f"calibrate: levels: expected a whole number >= 1, got {levels}")
     got = _Samples(startup_ms)
     for name in paths:
         got.read(Path(name))
@@ -141,7 +157,32 @@ def calibrate(paths: Sequence[str | Path], *, min_samples: int = 30,
                        machine(), got.scales.pop() if got.scales else None,
                        tuple(str(p) for p in paths), start, startup_ms if start else 0,
                        together=_together(got.latency, got.copies),
+                       levels=_levels(got.runs, levels, [name for name, _ in own]),
                        **_ties(got.at_ms.values()))
+
+
+def _levels(runs: Mapping[str, Mapping[str, list[int]]], k: int, channels: list[str]
+            ) -> tuple[Level, ...]:
+    """`k` load levels of the `runs` (module docstring; k <= 1: none)."""
+    measured = [lats for lats in runs.values() if any(lats.values())]
+    if k <= 1 or len(measured) < 2:
+        return ()
+    k = min(k, len(measured))
+
+    def mean(lats: Mapping[str, list[int]]) -> float:
+        every = [x for xs in lats.values() for x in xs]
+        return sum(every) / len(every)
+
+    ordered = sorted(measured, key=mean)
+    out = []
+    for g in range(k):
+        group = ordered[g * len(ordered) // k:(g + 1) * len(ordered) // k]
+        every = [x for lats in group for xs in lats.values() for x in xs]
+        own = tuple((name, Histogram.fit(found)) for name in channels
+                    if (found := [x for lats in group for x in lats.get(name, ())]))
+        out.append(Level(len(group) / len(ordered), Histogram.fit(every), own, len(group),
+                         round(sum(every) / len(every), 3)))
+    return tuple(out)
 
 
 def _ties(moments: Iterable[list[tuple[int, bool]]]) -> dict[str, Any]:

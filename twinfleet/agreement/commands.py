@@ -43,6 +43,12 @@ def _calibrate_parser(subparsers: Any) -> None:
                    help="messages sent in the fleet's first MS fleet ms get a latency "
                    "histogram of their own, used for the first MS ms of every simulation: "
                    "a fleet's first messages take several times longer (0: none; default 20)")
+    p.add_argument("--levels", type=int, default=1, metavar="K",
+                   help="load levels: each event log is one run; the runs, sorted by their "
+                   "mean latency, are cut into K groups, and a simulation draws its group "
+                   "(by its share of the runs) before drawing any latency from it, as a "
+                   "live run's latencies share its machine's load (1: none, the pooled "
+                   "histograms; default 1)")
     p.set_defaults(func=calibrate_command)
 
 
@@ -53,7 +59,7 @@ def calibrate_command(args: argparse.Namespace) -> int:
 
     try:
         model = calibrate(args.events, min_samples=args.min_samples,
-                          startup_ms=args.startup_ms)
+                          startup_ms=args.startup_ms, levels=args.levels)
     except TimingError as exc:
         print(f"twinfleet calibrate: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT

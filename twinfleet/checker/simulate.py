@@ -27,7 +27,9 @@ from __future__ import annotations
 
 import hashlib
 import random
+from bisect import bisect_right
 from dataclasses import dataclass
+from itertools import accumulate
 from typing import final
 
 from twinfleet.checker.diagnosis import CONTRACT_KINDS, breach_line
@@ -41,6 +43,11 @@ from twinfleet.checker.transition import RunEvent, Step, Transition
 from twinfleet.checker.world import Event
 
 SETTLE_AFTER = 64  # steps that changed no node state before asking whether none can
+
+
+#: (cumulative weights, copula correlation) per (channel, low, n, start-up), as
+#: `SamplingChooser` caches them
+_Cumulative = dict[tuple[str, int, int, bool], tuple[list[float], float]]
 
 
 class ContractBreach(RuntimeError):
@@ -94,7 +101,11 @@ class Simulator:
                                  queue_bounds=properties.queue_bounds,
                                  node_names=properties.node_names,
                                  deadlines=properties.deadlines)
-        self._cumulative: dict[tuple[str, int, int, bool], tuple[list[float], float]] = {}
+        # Per load level (one for a model without levels): the level's model and the
+        # cumulative weights its choosers share.
+        self._levels = [(m, _Cumulative()) for m in (
+            [model.at_level(k) for k in range(len(model.levels))] or [model])]
+        self._level_cum = list(accumulate(lv.weight for lv in model.levels))
         self._first = model.messages_first
         # An expression without `now` is a function of node states alone: a step that
         # changed no state cannot change its value (most steps of a fleet change none).
@@ -115,7 +126,8 @@ class Simulator:
         """Simulation `index`."""
         rng = random.Random(simulation_seed(self.seed, index))
         system = self.system
-        init = system.initial_world(chooser=self._chooser(rng))
+        level = self._draw_level(rng)
+        init = system.initial_world(chooser=self._chooser(rng, level))
         seen: dict[str, tuple[PropertyViolation, int]] = {}
         self._note(init, 0, seen)
         world, steps = init.world, list[Step]()
@@ -142,7 +154,7 @@ class Simulator:
             pick = rng.choice(picks)
             if self._first is not None:
                 pick = self._tie(rng, world.events, picks, pick)
-            t = self._take(world, RunEvent(pick), self._chooser(rng))
+            t = self._take(world, RunEvent(pick), self._chooser(rng, level))
             steps.append(t.step)
             world = t.world
             moved = bool(t.changed) or not self._timeless
@@ -182,8 +194,17 @@ class Simulator:
             i for i in mine if not events[i].message]
         return index if index in pool else rng.choice(pool)
 
-    def _chooser(self, rng: random.Random) -> SamplingChooser:
-        return SamplingChooser(rng, self.model, self._cumulative)
+    def _draw_level(self, rng: random.Random) -> int:
+        """The load level of one simulation, drawn by the levels' weights (no draw, and so
+        the same simulations as before levels existed, for a model without levels)."""
+        if not self._level_cum:
+            return 0
+        u = rng.random() * self._level_cum[-1]
+        return min(bisect_right(self._level_cum, u), len(self._levels) - 1)
+
+    def _chooser(self, rng: random.Random, level: int) -> SamplingChooser:
+        model, cumulative = self._levels[level]
+        return SamplingChooser(rng, model, cumulative)
 
     def _holds(self, name: str, world: object) -> bool:
         prop = self.properties.eventually_named(name)

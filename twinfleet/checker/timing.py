@@ -36,6 +36,17 @@ enabled at one ms (`checker.simulate`); with None the choice is uniform.
 (`twinfleet.agreement.calibrate`); a model for loopback ships with the package
 (`default_timing`).
 
+Load levels: a machine's load changes between runs more than within one, so the
+latencies of one live run are alike (all slow, or all quick), and a mixture of
+per-run distributions is not the pooled histogram drawn independently: a
+protocol whose outcome turns on a few deliveries being late together breaks in
+slow runs far more often than the pooled draws say. `levels` (fitted by
+`calibrate --levels K`: the runs sorted by their mean latency and cut into K
+groups) holds, per group, its share of the runs and its own latency
+histograms; a simulation first draws its level by those shares, then draws
+every latency from that level (`at_level`). A model without levels draws from
+the pooled histograms, as before.
+
 Two uses. `twinfleet check --timing FILE` takes the model's *bounds* as the
 exhaustive search's latency ranges (every value a branch, as `check.latency`
 is); `twinfleet check --statistical` draws each latency from the model's
@@ -55,6 +66,9 @@ File format (YAML, ``format: twinfleet-timing/1``)::
     startup: {window_ms: 20, values: [20, 48], weights: [0.5, 0.5], samples: 24}  # optional
     together: {default: 0.6, /decision: 0.87}  # optional: one publish's copies, correlation
     ties: {messages_first: 0.93, samples: 43}  # optional: a message and a timer at one ms
+    levels:                              # optional: load levels, each its share of the runs
+      - {weight: 0.5, runs: 20, mean_ms: 2.1, latency: {default: {values: [1, 2], ...}}}
+      - {weight: 0.5, runs: 20, mean_ms: 3.4, latency: {default: {values: [2, 5], ...}}}
     loss: {/poses: 0.0}                  # optional
 
 `values` are distinct whole ms in increasing order, `weights` their
@@ -66,7 +80,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Final, final
 
@@ -159,6 +173,39 @@ class Histogram:
 
 @final
 @dataclass(frozen=True, slots=True)
+class Level:
+    """One load level of a model: a group of runs alike in latency (module docstring).
+
+    Attributes:
+        weight: the share of the runs in this level (the probability a simulation draws it).
+        default: latency of a channel with no histogram of its own, in these runs.
+        latency: (topic or service, histogram) pairs, sorted by name; a channel of the
+            model missing here is drawn from the model's own histogram of it.
+        runs: how many runs it was fitted from; mean_ms: their mean latency.
+    """
+
+    weight: float
+    default: Histogram
+    latency: tuple[tuple[str, Histogram], ...] = ()
+    runs: int = 0
+    mean_ms: float = 0.0
+
+    def scaled(self, factor: float) -> Level:
+        """The level with every histogram stretched by `factor` (`Histogram.scaled`)."""
+        return Level(self.weight, self.default.scaled(factor),
+                     tuple((n, h.scaled(factor)) for n, h in self.latency), self.runs,
+                     self.mean_ms * factor)
+
+    def to_yaml(self) -> dict[str, Any]:
+        """The mapping the file format writes."""
+        return {"weight": round(self.weight, 6), "runs": self.runs,
+                "mean_ms": round(self.mean_ms, 3),
+                "latency": {"default": self.default.to_yaml(),
+                            **{name: h.to_yaml() for name, h in self.latency}}}
+
+
+@final
+@dataclass(frozen=True, slots=True)
 class TimingModel:
     """Delivery latency per channel, timer lateness and loss (module docstring).
 
@@ -174,6 +221,7 @@ class TimingModel:
         messages_first: the probability that a node's message runs before its timer due
             at the same ms (None: unknown, a uniform choice); tie_samples: the ties it was
             fitted from.
+        levels: load levels (module docstring; empty: the pooled histograms only).
         machine: where it was measured.
         time_scale: the time scale of the runs it was fitted from (None: not measured).
         sources: the event logs it was fitted from.
@@ -193,6 +241,11 @@ class TimingModel:
     together: tuple[tuple[str, float], ...] = ()
     messages_first: float | None = None
     tie_samples: int = 0
+    levels: tuple[Level, ...] = ()
+
+    def __post_init__(self) -> None:
+        if self.levels and abs(math.fsum(lv.weight for lv in self.levels) - 1.0) > 1e-6:
+            raise ValueError("the levels' weights must sum to 1")
 
     @classmethod
     def from_ranges(cls, default: Range | None, channels: tuple[tuple[str, Range | None], ...],
@@ -211,6 +264,14 @@ class TimingModel:
         """The correlation of the latencies of one publish's deliveries on `channel`."""
         found = dict(self.together)
         return found.get(channel, found.get("default", 0.0))
+
+    def at_level(self, index: int) -> TimingModel:
+        """The model of level `index` alone: its histograms in place of the pooled ones
+        (a channel it lacks keeps the pooled histogram), no levels."""
+        level = self.levels[index]
+        own = dict(self.latency) | dict(level.latency)
+        return replace(self, default=level.default, latency=tuple(sorted(own.items())),
+                       levels=())
 
     def starting(self, sent: int | None) -> bool:
         """Whether a message sent at fleet ms `sent` draws the start-up latency."""
@@ -247,7 +308,8 @@ class TimingModel:
                                            f"to {time_scale:g}"),
                            None if self.startup is None else self.startup.scaled(f),
                            round(self.startup_ms * f), self.origin, together=self.together,
-                           messages_first=self.messages_first, tie_samples=self.tie_samples)
+                           messages_first=self.messages_first, tie_samples=self.tie_samples,
+                           levels=tuple(lv.scaled(f) for lv in self.levels))
 
     def describe(self) -> str:
         """One line: default latency bounds and mean, channels, lateness, machine, scale."""
@@ -265,6 +327,10 @@ class TimingModel:
             f"at most")
         if self.messages_first is not None:
             shared += f"; a message before a timer at one ms {self.messages_first:.2f}"
+        if self.levels:
+            shared += (f"; {len(self.levels)} load levels by run, mean "
+                       + "/".join(f"{lv.mean_ms:.1f}" for lv in self.levels) + " ms, weights "
+                       + "/".join(f"{lv.weight:.2f}" for lv in self.levels))
         return (f"latency {low}-{high} ms (mean {self.default.mean:.2f} ms; "
                 f"{len(self.latency)} channel(s) of their own{start}{shared}), timer lateness "
                 f"{self.timer_lateness.bounds[0]}-{self.timer_lateness.bounds[1]} ms; "
@@ -286,6 +352,8 @@ class TimingModel:
             doc["together"] = dict(self.together)
         if self.messages_first is not None:
             doc["ties"] = {"messages_first": self.messages_first, "samples": self.tie_samples}
+        if self.levels:
+            doc["levels"] = [lv.to_yaml() for lv in self.levels]
         return doc
 
 
@@ -381,7 +449,29 @@ def parse_timing(doc: Any, where: str) -> TimingModel:
                        str(doc.get("machine") or ""), None if scale is None else float(scale),
                        tuple(str(s) for s in doc.get("sources") or ()), startup, window,
                        together=tuple(sorted((str(k), float(v)) for k, v in together.items())),
-                       **_ties(doc.get("ties"), where))
+                       levels=_levels(doc.get("levels"), where), **_ties(doc.get("ties"), where))
+
+
+def _levels(value: Any, where: str) -> tuple[Level, ...]:
+    """The load levels of a model file (none: no levels), weights renormalised."""
+    if value is None:
+        return ()
+    if not isinstance(value, list) or not all(
+            isinstance(lv, Mapping) and isinstance(lv.get("weight"), int | float)
+            and lv["weight"] > 0 and isinstance(lv.get("latency"), Mapping) for lv in value):
+        raise TimingError(f"{where}: levels: expected a list of {{weight: > 0, latency: "
+                          "{default: histogram, ...}}")
+    total = math.fsum(float(lv["weight"]) for lv in value)
+    out = []
+    for k, lv in enumerate(value):
+        latency = lv["latency"]
+        default = _histogram(latency.get("default", {"values": [0], "weights": [1]}), where,
+                             f"levels[{k}].latency.default")
+        own = tuple(sorted((str(name), _histogram(h, where, f"levels[{k}].latency.{name}"))
+                           for name, h in latency.items() if name != "default"))
+        out.append(Level(float(lv["weight"]) / total, default, own, int(lv.get("runs", 0)),
+                         float(lv.get("mean_ms", default.mean))))
+    return tuple(out)
 
 
 def _ties(value: Any, where: str) -> dict[str, Any]:
