@@ -7,7 +7,9 @@ the event logs show them (docs/statistical.md, "Fast protocols"): the copies of
 one publish arrive together (`together`, a Gaussian copula), and at one ms a
 node runs its message before its timer (`messages_first`). The slow test runs
 the fleet 40 times, calibrates from those runs and checks the prediction's
-agreement with their live frequency (docs/experiment.md).
+agreement with their live frequency (docs/experiment.md). A third: a run's
+latencies share its machine's load, so the calibration keeps load levels
+(`levels`), and a simulation draws its level before any latency.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from twinfleet.runtime.core.eventlog import EVENTS_FORMAT
 
 TPC = ROOT / "tests" / "data" / "tpc" / "tpc.yaml"
 RUNS = 40
+LEVELS = 8  # load levels of 5 runs each: the prediction stops moving from about 6 levels on
 
 
 def _delivery(node: str, topic: str, seq: int, stamp: int, t: int, i: int) -> dict[str, object]:
@@ -183,21 +186,19 @@ def _batch(folder: Path) -> tuple[float, str]:
     found = re.search(rf"tpc: (\d+)/{RUNS} passed, (\d+)/{RUNS} failed", done.stdout)
     assert found, done.stdout[-2000:] + done.stderr[-2000:]
     failed = int(found.group(2))
-    model = calibrate([Path(f"{events}.{k}") for k in range(1, RUNS + 1)], startup_ms=0)
+    model = calibrate([Path(f"{events}.{k}") for k in range(1, RUNS + 1)], startup_ms=0,
+                      levels=LEVELS)
     n = 1000
     low, high = clopper_pearson(_violating(model, n), n, 0.99)
     p = agreement_p_value(failed, RUNS, low, high, 0.99)
     return p, f"live {failed}/{RUNS} failed against predicted [{low:.3f}, {high:.3f}]: p {p:.3f}"
 
 
-# Not a reliable pass yet: alone it passed (55 s, 108 s), but in the whole suite, while the
-# other test worker loads the machine, batches disagreed (CI: 14/40 against [0.126, 0.186],
-# p 0.023; a second batch ran past the test's time limit). The load drifting under a batch is
-# what the timing model cannot capture (docs/statistical.md, "Fast protocols"). It still runs
-# in CI and reports XPASS when it agrees.
+# Runs under load differ more from one another than within themselves: calibrated with load
+# levels, beside a CPU-bound job the prediction follows the batch (docs/statistical.md,
+# "Fast protocols"); pooled, it fell far below (5/40 live against 0.008 predicted).
 @pytest.mark.slow
-@pytest.mark.xfail(strict=False, reason="a batch run beside the other test worker's load can "
-                   "disagree with a model calibrated from it (docs/statistical.md)")
 def test_the_fast_protocol_agrees_with_40_live_runs(tmp_path: Path) -> None:
     p, seen = _batch(tmp_path / "batch")
+    print(seen)  # the figures, for `pytest -rP`
     assert p >= 0.05, seen

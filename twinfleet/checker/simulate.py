@@ -1,7 +1,8 @@
 """One simulation of a `System` under a timing model: the unit of statistical checking.
 
-`Simulator.run(index)` starts from an initial world drawn by the start
-handlers' choices, then repeatedly takes one enabled event, drawn uniformly
+`Simulator.run(index)` draws its load level first, where the model has levels
+(`checker.timing`: every latency of the simulation comes from that level), starts
+from an initial world drawn by the start handlers' choices, then repeatedly takes one enabled event, drawn uniformly
 among those the rules enable (`System.actions`; KEEP_LAST drops and crash
 faults are not drawn: the model has no handler durations to make them
 likely), its `ctx.choose` answers and latencies drawn by a `SamplingChooser`,

@@ -425,10 +425,7 @@ def parse_timing(doc: Any, where: str) -> TimingModel:
     latency = doc.get("latency") or {}
     if not isinstance(latency, Mapping):
         raise TimingError(f"{where}: latency: expected a mapping of channel to histogram")
-    per = tuple(sorted((str(k), _histogram(v, where, f"latency.{k}"))
-                       for k, v in latency.items() if k != "default"))
-    default = _histogram(latency.get("default", {"values": [0], "weights": [1]}), where,
-                         "latency.default")
+    default, per = _latencies(latency, where, "latency")
     lateness = _histogram(doc.get("timer_lateness", {"values": [0], "weights": [1]}), where,
                           "timer_lateness")
     loss = doc.get("loss") or {}
@@ -452,6 +449,15 @@ def parse_timing(doc: Any, where: str) -> TimingModel:
                        levels=_levels(doc.get("levels"), where), **_ties(doc.get("ties"), where))
 
 
+def _latencies(latency: Mapping[Any, Any], where: str, key: str
+               ) -> tuple[Histogram, tuple[tuple[str, Histogram], ...]]:
+    """The default histogram and the per-channel ones of a `latency:` mapping at `key`."""
+    per = tuple(sorted((str(k), _histogram(v, where, f"{key}.{k}"))
+                       for k, v in latency.items() if k != "default"))
+    return _histogram(latency.get("default", {"values": [0], "weights": [1]}), where,
+                      f"{key}.default"), per
+
+
 def _levels(value: Any, where: str) -> tuple[Level, ...]:
     """The load levels of a model file (none: no levels), weights renormalised."""
     if value is None:
@@ -464,11 +470,7 @@ def _levels(value: Any, where: str) -> tuple[Level, ...]:
     total = math.fsum(float(lv["weight"]) for lv in value)
     out = []
     for k, lv in enumerate(value):
-        latency = lv["latency"]
-        default = _histogram(latency.get("default", {"values": [0], "weights": [1]}), where,
-                             f"levels[{k}].latency.default")
-        own = tuple(sorted((str(name), _histogram(h, where, f"levels[{k}].latency.{name}"))
-                           for name, h in latency.items() if name != "default"))
+        default, own = _latencies(lv["latency"], where, f"levels[{k}].latency")
         out.append(Level(float(lv["weight"]) / total, default, own, int(lv.get("runs", 0)),
                          float(lv.get("mean_ms", default.mean))))
     return tuple(out)
