@@ -197,8 +197,8 @@ def _batch(folder: Path) -> tuple[float, str]:
 # Runs under load differ more from one another than within themselves: calibrated with load
 # levels, beside a CPU-bound job the prediction follows the batch (docs/statistical.md,
 # "Fast protocols"); pooled, it fell far below (5/40 live against 0.008 predicted). Forty
-# fleets of four processes, one after the other: about 100 s on a quiet 2-core VM, 140 s
-# and more while other work loads it (most of a run is its processes starting).
+# fleets of four processes, one after the other: 107-125 s on the 2-core VM at a load average
+# of 17, 174-227 s beside a CPU-bound job (most of a run is its processes starting).
 @pytest.mark.slow
 @pytest.mark.timeout(480)
 def test_the_fast_protocol_agrees_with_40_live_runs(tmp_path: Path) -> None:
