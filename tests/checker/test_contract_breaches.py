@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 import yaml
 
+from tests.checker.tpc import tpc_scenario
 from twinfleet.checker import check
 from twinfleet.checker.driver import CheckOptions
 from twinfleet.cli import main
@@ -148,7 +149,7 @@ def test_the_console_script_reports_it_in_its_own_process(tmp_path):
     assert "Traceback" not in run.stderr and run.stdout == ""
 
 
-def test_a_sound_handler_is_run_twice_and_its_second_run_builds_no_events(monkeypatch):
+def test_a_sound_handler_is_run_twice_and_its_second_run_builds_no_events(monkeypatch, tmp_path):
     # Every fresh handler run is verified by a second run from the same state; when the
     # handler keeps the contract, that second run compares the new state, effects and reply
     # with the first's (`Runner._same_again`) instead of building and hashing its events
@@ -164,7 +165,6 @@ def test_a_sound_handler_is_run_twice_and_its_second_run_builds_no_events(monkey
         return exec_(self, *args)
 
     monkeypatch.setattr(Runner, "_exec", counting)
-    protocol = Path(__file__).resolve().parents[1] / "data" / "two_phase" / "two_phase_small.yaml"
-    result = check(protocol, CheckOptions(reduction="none"))
+    result = check(tpc_scenario(tmp_path), CheckOptions(reduction="none"))
     assert result.status == "holds" and result.handler_runs > 100
     assert result.handler_runs == 2 * full

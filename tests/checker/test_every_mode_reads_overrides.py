@@ -40,17 +40,17 @@ def _counts(record: dict) -> list[tuple[str, int]]:
                  marks=pytest.mark.slow)])
 def test_an_override_counts_as_the_value_in_the_file(tmp_path, capsys, mode):
     default = tpc_scenario(tmp_path, "default")
-    written = tpc_scenario(tmp_path, "written", vote_timeout_ms=1)
+    written = tpc_scenario(tmp_path, "written", decision_timeout_ms=1)
     if "--json" not in mode:
         mode = [*mode, "--json"]
     assert main(["check", str(written), *mode]) == 1
     in_file = _counts(_json(capsys))
-    assert main(["check", str(default), "vote_timeout_ms:=1", *mode]) == 1
+    assert main(["check", str(default), "decision_timeout_ms:=1", *mode]) == 1
     assert _counts(_json(capsys)) == in_file
     if "--min-width" in mode:
         return  # each check starts a Ray cluster (13 s): the other forms are the same words
-    assert main(["check", str(default), "--param", "p1.vote_timeout_ms=1",
-                 "--param", "p2.vote_timeout_ms=1", *mode]) == 1
+    assert main(["check", str(default), "--param", "p1.decision_timeout_ms=1",
+                 "--param", "p2.decision_timeout_ms=1", *mode]) == 1
     assert _counts(_json(capsys)) == in_file
     main(["check", str(default), *mode])
     assert _counts(_json(capsys)) != in_file  # the override changes the answer
@@ -60,7 +60,7 @@ def test_an_override_counts_as_the_value_in_the_file(tmp_path, capsys, mode):
                                   ["--statistical", "--workers", "2"], ["--strict"]])
 @pytest.mark.parametrize(("word", "says"), [
     ("vote_timout_ms:=1", "did you mean 'vote_timeout_ms'?"),
-    ("coord.decison_timeout_ms:=1", "did you mean 'decision_timeout_ms'?"),
+    ("p1.decison_timeout_ms:=1", "did you mean 'decision_timeout_ms'?"),
     ("cord.decision_timeout_ms:=1", "did you mean 'coord'?"),
 ])
 def test_an_unknown_override_is_exit_2_with_did_you_mean_in_every_mode(
@@ -97,10 +97,10 @@ def test_launch_refuses_a_misspelt_common_param_before_starting(tmp_path, capsys
 def test_a_statistical_trace_records_its_overrides_and_replays_with_them(tmp_path, capsys):
     path = tpc_scenario(tmp_path)
     out = tmp_path / "traces"
-    assert main(["check", str(path), "vote_timeout_ms:=1", "--statistical", "--simulations",
+    assert main(["check", str(path), "decision_timeout_ms:=1", "--statistical", "--simulations",
                  "64", "--seed", "7", "--json", "--traces-out", str(out)]) == 1
     traces = _json(capsys)["traces"]
-    assert traces and json.loads(Path(traces[0]).read_text())["params"] == ["vote_timeout_ms:=1"]
+    assert traces and json.loads(Path(traces[0]).read_text())["params"] == ["decision_timeout_ms:=1"]
     assert main(["replay", traces[0]]) == 1
     assert "replay confirmed" in capsys.readouterr().out
 
@@ -123,9 +123,9 @@ def test_experiment_checks_with_the_overrides_and_refuses_unknown_ones(tmp_path,
 
 def test_an_override_after_the_options_counts_too(tmp_path, capsys):
     default = tpc_scenario(tmp_path, "default")
-    assert main(["check", str(default), "vote_timeout_ms:=1", *STATISTICAL]) == 1
+    assert main(["check", str(default), "decision_timeout_ms:=1", *STATISTICAL]) == 1
     before = _counts(_json(capsys))
-    assert main(["check", str(default), *STATISTICAL, "vote_timeout_ms:=1"]) == 1
+    assert main(["check", str(default), *STATISTICAL, "decision_timeout_ms:=1"]) == 1
     assert _counts(_json(capsys)) == before
     assert main(["check", str(default), "--quiet", "vote_timout_ms:=1"]) == 2
     assert "did you mean 'vote_timeout_ms'?" in capsys.readouterr().err

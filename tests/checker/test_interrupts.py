@@ -77,7 +77,7 @@ def test_a_quiet_check_prints_its_summary_on_sigterm(tmp_path):
 @SLOW
 @pytest.mark.parametrize(("sig", "code"), [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_statistical_prints_the_estimate_so_far_and_writes_its_traces(tmp_path, sig, code):
-    path = tpc_scenario(tmp_path, vote_timeout_ms=1)
+    path = tpc_scenario(tmp_path, decision_timeout_ms=1)
     out_dir = tmp_path / "traces"
     with _twinfleet("check", str(path), "--statistical", "--simulations", "100000000",
                     "--traces-out", str(out_dir)) as proc:

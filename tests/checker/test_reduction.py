@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from tests.checker.helpers import counts, node, replay_confirms, run, scenario
+from tests.checker.tpc import tpc_scenario
 from twinfleet.checker.driver import CheckOptions, check, load
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.reduction import ASIDE_SHARE, ASIDE_WORLDS, Reduction, describe
@@ -228,18 +229,16 @@ def test_a_falling_goal_atom_turns_the_rising_rule_off(tmp_path):
     assert reduced.reduction_statistics["restarts"] >= 1
 
 
-TWO_PHASE = Path(__file__).resolve().parents[1] / "data" / "two_phase" / "two_phase_small.yaml"
-
-
 @pytest.mark.parametrize("search", ["bfs", "dfs"])
 def test_a_reduction_that_does_not_pay_steps_aside(tmp_path, search):
-    # A two-phase commit with 0-2 ms of latency: every message crosses between two nodes and
-    # the property reads both participants, so few worlds have a persistent set smaller than
-    # everything (none of the first 1,075 in a BFS, 36 of the first 1,000 in a DFS). The
-    # reduction steps aside, the search runs unreduced and finds exactly the unreduced
-    # graph, and the summary says why.
-    full = check(TWO_PHASE, CheckOptions(reduction="none", search=search))
-    reduced = check(TWO_PHASE, CheckOptions(reduction="por", search=search))
+    # A two-phase commit with 0-2 ms of latency (tests/checker/tpc.py, 438 worlds): every
+    # message crosses between two nodes and the property reads both participants, so few
+    # worlds have a persistent set smaller than everything (45 of the first 331 in a BFS,
+    # 34 of the first 300 in a DFS). The reduction steps aside, the search runs unreduced
+    # and finds exactly the unreduced graph, and the summary says why.
+    protocol = tpc_scenario(tmp_path)
+    full = check(protocol, CheckOptions(reduction="none", search=search))
+    reduced = check(protocol, CheckOptions(reduction="por", search=search))
     assert full.status == reduced.status == "holds"
     assert counts(reduced) == counts(full)
     assert reduced.reduction.startswith("none (por stepped aside: ")
@@ -311,9 +310,10 @@ def test_a_restart_walks_on_and_learns_the_sends_of_deeper_levels_at_once(monkey
 def test_a_checkpoint_keeps_the_step_aside(tmp_path):
     # Stopped after the reduction stepped aside, the search resumes unreduced and ends with
     # the unreduced counts, saying so.
+    protocol = tpc_scenario(tmp_path)  # steps aside after 331 worlds expanded, 420 found
     saved = str(tmp_path / "search.ckpt")
-    stopped = check(TWO_PHASE, CheckOptions(max_states=1_500, checkpoint=saved))
+    stopped = check(protocol, CheckOptions(max_states=425, checkpoint=saved))
     assert stopped.status == "unknown" and "stepped aside" in stopped.reduction
-    resumed = check(TWO_PHASE, CheckOptions(resume=saved))
+    resumed = check(protocol, CheckOptions(resume=saved))
     assert resumed.status == "holds" and "stepped aside" in resumed.reduction
-    assert counts(resumed) == counts(check(TWO_PHASE, CheckOptions(reduction="none")))
+    assert counts(resumed) == counts(check(protocol, CheckOptions(reduction="none")))

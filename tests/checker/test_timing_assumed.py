@@ -22,7 +22,7 @@ def _counts(record: dict) -> list[tuple[str, int]]:
 
 
 def test_statistical_draws_from_the_scenarios_latency(tmp_path, capsys):
-    path = tpc_scenario(tmp_path, vote_timeout_ms=3, latency=(0, 2))
+    path = tpc_scenario(tmp_path, decision_timeout_ms=3, latency=(0, 2))
     assert main(["check", str(path), *SIMULATE, "--json"]) == 1
     record = json.loads(capsys.readouterr().out)
     assert record["timing"] == {"latency": {"default": [0, 2]}, "timer_lateness": [0, 0],
@@ -60,7 +60,7 @@ def test_every_exhaustive_summary_states_the_timing_it_assumed(tmp_path, capsys)
 
 def test_the_statistical_text_summary_states_the_latency_per_channel_and_its_source(tmp_path,
                                                                                   capsys):
-    path = tpc_scenario(tmp_path, vote_timeout_ms=3, latency=None)
+    path = tpc_scenario(tmp_path, decision_timeout_ms=3, latency=None)
     doc = yaml.safe_load(path.read_text())
     doc["check"] = {"latency": {"default": [0, 2], "/vote": [1, 3]}}
     path.write_text(yaml.safe_dump(doc))

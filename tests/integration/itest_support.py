@@ -14,6 +14,7 @@ import subprocess
 import sys
 import time
 from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 from tests.support import ROOT, child_env, pick_free_port  # noqa: F401 (re-exported)
@@ -56,14 +57,12 @@ def spawned_by(root: int) -> list[int]:
     tests/conftest.py makes the test process their subreaper, so they stay descendants of
     the test process). Only descendants of the test process are ever considered.
     """
-    parents = {pid: _parent(pid) for pid in _pids()}
-    mine = _descendants(parents, os.getpid())
-    launchers = {pid: _launcher_of(pid) for pid in mine}
+    mine = _mine()
     found: set[int] = set()
     frontier = {root}
     while frontier:
-        frontier = {pid for pid in mine - found - frontier
-                    if parents[pid] in frontier or launchers[pid] in frontier}
+        frontier = {pid for pid, seen in mine.items() if pid not in found | frontier
+                    and (seen.parent in frontier or seen.launcher in frontier)}
         found |= frontier
     return sorted(found)
 
@@ -71,19 +70,32 @@ def spawned_by(root: int) -> list[int]:
 def fleet_nodes() -> list[int]:
     """The live node processes of the fleets this test process launched itself (`run_fleet`
     called in-process); not those of a launcher it started as a subprocess."""
-    parents = {pid: _parent(pid) for pid in _pids()}
-    return sorted(pid for pid in _descendants(parents, os.getpid())
-                  if _launcher_of(pid) == os.getpid())
+    return sorted(pid for pid, seen in _mine().items() if seen.launcher == os.getpid())
 
 
 def orphaned_nodes() -> list[int]:
     """Node processes this test process started through a launcher that has ended (a
     launcher run to its end with `subprocess.run` must leave none)."""
+    mine = _mine()
+    return sorted(pid for pid, seen in mine.items()
+                  if seen.launcher not in (None, os.getpid()) and seen.launcher not in mine)
+
+
+@dataclass(frozen=True)
+class _Seen:
+    """A process as one scan of /proc saw it: its parent, and the launcher it names (None:
+    not a node process)."""
+
+    parent: int | None
+    launcher: int | None
+
+
+def _mine() -> dict[int, _Seen]:
+    """The live descendants of this test process, by pid: the one scan of /proc that
+    `spawned_by`, `fleet_nodes` and `orphaned_nodes` read."""
     parents = {pid: _parent(pid) for pid in _pids()}
-    mine = _descendants(parents, os.getpid())
-    launchers = {pid: _launcher_of(pid) for pid in mine}
-    return sorted(pid for pid, launcher in launchers.items()
-                  if launcher is not None and launcher != os.getpid() and launcher not in mine)
+    return {pid: _Seen(parents[pid], _launcher_of(pid))
+            for pid in _descendants(parents, os.getpid())}
 
 
 def _pids() -> list[int]:
