@@ -50,6 +50,9 @@ def free_port() -> int:
 # longest chain of tests.
 LIVE_FOLDERS = frozenset({"adversarial", "agreement", "conformance", "integration", "ros2",
                           "viewer"})
+# A test of a live folder that starts no process and times nothing (marked `offline`: the pure
+# parts of the agreement, viewer and ROS 2 code) runs beside the live group, not in it; like a
+# unit test it may not open a Zenoh session.
 # The Ray tests (this folder, and tests marked `ray`) start clusters, not fleets: CPU-bound
 # like the checker tests, they form a group of their own (one Ray cluster at a time).
 RAY_FOLDERS = frozenset({"cluster"})
@@ -67,6 +70,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
         folder = parts[0] if len(parts) > 1 else ""
         if item.get_closest_marker("ray") or folder in RAY_FOLDERS:
             item.add_marker(pytest.mark.xdist_group("ray"))
+        elif item.get_closest_marker("offline"):
+            continue
         elif item.get_closest_marker("fleet") or folder in LIVE_FOLDERS:
             item.add_marker(pytest.mark.xdist_group("live"))
         elif folder in UNIT_FOLDERS and not item.get_closest_marker("slow"):
@@ -82,12 +87,13 @@ UNIT_FOLDERS = frozenset({"", "checker", "nodes", "runtime", "sweep", "fuzz", "i
 @pytest.fixture(autouse=True)
 def _unit_tests_open_no_zenoh_session(request: pytest.FixtureRequest,
                                       monkeypatch: pytest.MonkeyPatch) -> None:
-    if request.node.get_closest_marker("unit") is None:
+    if request.node.get_closest_marker("unit") is None and \
+            request.node.get_closest_marker("offline") is None:
         return
     import zenoh
 
     def refuse(*_args: object, **_kwargs: object) -> None:
-        raise AssertionError(f"{request.node.nodeid} is a unit test but opens a Zenoh session:"
-                             " mark it `fleet` (tests/conftest.py)")
+        raise AssertionError(f"{request.node.nodeid} is a unit or offline test but opens a Zenoh"
+                             " session: mark it `fleet` (tests/conftest.py)")
 
     monkeypatch.setattr(zenoh, "open", refuse)

@@ -19,6 +19,8 @@ from twinfleet.robots.discretization import (
 )
 from twinfleet.runtime.scenario.spec import load_scenario
 
+pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+
 ROOT = Path(__file__).resolve().parents[2]
 MAP50 = ROOT / "twinfleet" / "maps" / "map50.yaml"
 

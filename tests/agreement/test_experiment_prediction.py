@@ -31,6 +31,8 @@ from twinfleet.robots.table import (
     to_markdown,
 )
 
+pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+
 
 def _pmf(j: int, n: int, p: float) -> float:
     return math.comb(n, j) * p ** j * (1 - p) ** (n - j)

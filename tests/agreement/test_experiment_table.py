@@ -21,6 +21,8 @@ from twinfleet.robots.table import (
 )
 from twinfleet.runtime.scenario.spec import load_scenario
 
+pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+
 ROOT = Path(__file__).resolve().parents[2]
 BOTH = ("ros", "rebeca")
 

@@ -13,11 +13,15 @@ import json
 import random
 from pathlib import Path
 
+import pytest
+
 from twinfleet.agreement.calibrate import calibrate
 from twinfleet.checker.choices import LatencySite
 from twinfleet.checker.sampling import SamplingChooser
 from twinfleet.checker.timing import Histogram, TimingModel, load_timing, save_timing
 from twinfleet.runtime.core.eventlog import EVENTS_FORMAT
+
+pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
 
 
 def _log(path: Path) -> Path:

@@ -17,6 +17,8 @@ from twinfleet.nodes.msgs import FleetStatus, RobotStatus
 from twinfleet.ros2.live import fleet_interfaces
 from twinfleet.runtime.contract.messages import to_plain
 
+pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+
 rosidl_adapter = pytest.importorskip("rosidl_adapter.msg")
 type_description = pytest.importorskip("rosidl_generator_type_description")
 PKG = "twinfleet_msgs"

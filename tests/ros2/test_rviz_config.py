@@ -7,6 +7,7 @@ from __future__ import annotations
 import tomllib
 from pathlib import Path
 
+import pytest
 import yaml
 
 from tests.support import ROOT
@@ -15,6 +16,8 @@ from twinfleet.nodes.msgs import Path as PlanMsg
 from twinfleet.nodes.ros2_mapping import RobotRos2Mapping
 from twinfleet.ros2.commands import rviz_config
 from twinfleet.runtime.contract.messages import to_plain
+
+pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
 
 
 def _published_by_the_bridge() -> set[str]:

@@ -8,6 +8,7 @@ import contextlib
 import io
 from pathlib import Path
 
+import pytest
 from PIL import Image
 
 from twinfleet.cli import main
@@ -20,6 +21,8 @@ from twinfleet.runtime.tools.view.sequence_chart import (
     save_chart,
     to_svg,
 )
+
+pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
 
 STATION = Path(__file__).resolve().parents[1] / "data" / "station" / "station.yaml"
 
