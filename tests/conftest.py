@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import ctypes
+import enum
 import os
 import sys
 import tempfile
@@ -58,24 +59,51 @@ LIVE_FOLDERS = frozenset({"adversarial", "agreement", "conformance", "integratio
 RAY_FOLDERS = frozenset({"cluster"})
 
 
+# The install tests (marked `install`: tests/test_wheel.py) build three virtual environments
+# with pip, CPU-bound like the checker tests, and judge their two short fleets by the nodes'
+# exit codes and by a verdict that needs no timing (every node started and heard the
+# other): a group of their own (the environments are built once per worker), beside the
+# live group instead of a fifth of its length.
+class Group(enum.Enum):
+    """The xdist groups, longest first: the suite starts them first, so that none of them
+    starts last and runs on alone while the other worker idles."""
+
+    LIVE = "live"
+    RAY = "ray"
+    INSTALL = "install"
+
+
+def _group(item: pytest.Item, folder: str) -> Group | None:
+    if item.get_closest_marker("ray") or folder in RAY_FOLDERS:
+        return Group.RAY
+    if item.get_closest_marker("install"):
+        return Group.INSTALL
+    if item.get_closest_marker("offline"):
+        return None
+    if item.get_closest_marker("fleet") or folder in LIVE_FOLDERS:
+        return Group.LIVE
+    return None
+
+
 # tryfirst: pytest-xdist reads the xdist_group marks in its own collection hook (it turns
 # them into the `@live` suffix its scheduler groups by); a mark added after it has no effect.
 @pytest.hookimpl(tryfirst=True)
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    """Put every live test into the `live` xdist group, the Ray tests into `ray` (no effect
-    without xdist)."""
+    """Put every live test into the `live` xdist group, the Ray tests into `ray`, the install
+    tests into `install` (no effect without xdist), and the groups' tests first."""
     tests_root = config.rootpath / "tests"
+    order = list(Group)
+    rank: dict[str, int] = {}
     for item in items:
         parts = item.path.relative_to(tests_root).parts
         folder = parts[0] if len(parts) > 1 else ""
-        if item.get_closest_marker("ray") or folder in RAY_FOLDERS:
-            item.add_marker(pytest.mark.xdist_group("ray"))
-        elif item.get_closest_marker("offline"):
-            continue
-        elif item.get_closest_marker("fleet") or folder in LIVE_FOLDERS:
-            item.add_marker(pytest.mark.xdist_group("live"))
+        group = _group(item, folder)
+        if group is not None:
+            item.add_marker(pytest.mark.xdist_group(group.value))
         elif folder in UNIT_FOLDERS and not item.get_closest_marker("slow"):
             item.add_marker(pytest.mark.unit)
+        rank[item.nodeid] = order.index(group) if group is not None else len(order)
+    items.sort(key=lambda item: rank[item.nodeid])  # stable: a module's tests stay together
 
 
 # The quick loop (`pytest -m unit`, under a minute on 2 cores): the tests of these folders

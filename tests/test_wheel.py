@@ -47,7 +47,7 @@ try:
 except ImportError:  # pip always has it
     from pip._vendor.packaging.requirements import Requirement  # type: ignore[no-redef]
 
-pytestmark = [pytest.mark.slow, pytest.mark.fleet, pytest.mark.timeout(240)]
+pytestmark = [pytest.mark.slow, pytest.mark.install, pytest.mark.timeout(240)]
 
 LAYERS = ("runtime", "checker", "nodes", "agreement")
 #: Every sub-package of twinfleet: none of them may be importable as a top-level module.
