@@ -51,9 +51,10 @@ def free_port() -> int:
 # longest chain of tests.
 LIVE_FOLDERS = frozenset({"adversarial", "agreement", "conformance", "integration", "ros2",
                           "viewer"})
-# A test of a live folder that starts no process and times nothing (marked `offline`: the pure
-# parts of the agreement, viewer and ROS 2 code) runs beside the live group, not in it; like a
-# unit test it may not open a Zenoh session.
+# A test of a live folder that starts no fleet and times nothing (marked `offline`: the pure
+# parts of the agreement, viewer and ROS 2 code, commands that refuse bad input or print
+# help) runs beside the live group, not in it; like a unit test it may not open a Zenoh
+# session.
 # The Ray tests (this folder, and tests marked `ray`) start clusters, not fleets: CPU-bound
 # like the checker tests, they form a group of their own (one Ray cluster at a time).
 RAY_FOLDERS = frozenset({"cluster"})

@@ -93,6 +93,7 @@ def test_kill_9_of_the_launcher_takes_its_nodes_down(tmp_path) -> None:
 
 
 @pytest.mark.timeout(60)
+@pytest.mark.offline  # refused before any process starts
 def test_bad_scenario_and_map_files_end_in_one_line(tmp_path) -> None:
     good = write_scenario(tmp_path, "files").read_text()
     broken_map = tmp_path / "broken.yaml"

@@ -19,7 +19,7 @@ from twinfleet.robots.discretization import (
 )
 from twinfleet.runtime.scenario.spec import load_scenario
 
-pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+pytestmark = pytest.mark.offline  # starts no fleet, opens no Zenoh session
 
 ROOT = Path(__file__).resolve().parents[2]
 MAP50 = ROOT / "twinfleet" / "maps" / "map50.yaml"

@@ -31,7 +31,7 @@ from twinfleet.robots.table import (
     to_markdown,
 )
 
-pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+pytestmark = pytest.mark.offline  # starts no fleet, opens no Zenoh session
 
 
 def _pmf(j: int, n: int, p: float) -> float:

@@ -21,7 +21,7 @@ from twinfleet.checker.sampling import SamplingChooser
 from twinfleet.checker.timing import Histogram, TimingModel, load_timing, save_timing
 from twinfleet.runtime.core.eventlog import EVENTS_FORMAT
 
-pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+pytestmark = pytest.mark.offline  # starts no fleet, opens no Zenoh session
 
 
 def _log(path: Path) -> Path:

@@ -248,6 +248,7 @@ def test_mistyped_topic_and_fleet_are_reported(runtime_dir, c1a):
     assert fleet.returncode == 2 and "no fleet named 'c1b' is running" in fleet.stderr
 
 
+@pytest.mark.offline  # help texts: the commands end by themselves
 def test_every_verb_has_help(runtime_dir):
     for verb in (["node", "info"], ["topic", "info"], ["topic", "type"], ["topic", "echo"],
                  ["service", "type"],

@@ -15,7 +15,7 @@ from twinfleet.nodes.msgs import ObstacleScan, OccupancyGrid, Path, RobotPose
 from twinfleet.nodes.ros2_mapping import RobotRos2Mapping
 from twinfleet.ros2.cdr import MessageError, RosTypes
 
-pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+pytestmark = pytest.mark.offline  # starts no fleet, opens no Zenoh session
 
 GRID = OccupancyGrid(4, 3, 0.5, (1.0, -2.0, 0.0), bytes([0, 100, 255, 0] * 3))
 

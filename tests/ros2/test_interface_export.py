@@ -17,7 +17,7 @@ from twinfleet.nodes.msgs import FleetStatus, RobotStatus
 from twinfleet.ros2.live import fleet_interfaces
 from twinfleet.runtime.contract.messages import to_plain
 
-pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+pytestmark = pytest.mark.offline  # starts no fleet, opens no Zenoh session
 
 rosidl_adapter = pytest.importorskip("rosidl_adapter.msg")
 type_description = pytest.importorskip("rosidl_generator_type_description")

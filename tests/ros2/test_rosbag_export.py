@@ -26,7 +26,7 @@ from twinfleet.ros2.interfaces import fleet_interfaces
 from twinfleet.runtime.contract.messages import String, encode
 from twinfleet.runtime.tools.record.recorder import McapRecorder
 
-pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+pytestmark = pytest.mark.offline  # starts no fleet, opens no Zenoh session
 
 GRID = OccupancyGrid(4, 3, 0.5, (1.0, -2.0, 0.0), bytes([0, 100, 255, 0] * 3))
 SCENE = "twinfleet.nodes.scene:RobotScene"

@@ -17,7 +17,7 @@ from twinfleet.nodes.ros2_mapping import RobotRos2Mapping
 from twinfleet.ros2.commands import rviz_config
 from twinfleet.runtime.contract.messages import to_plain
 
-pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+pytestmark = pytest.mark.offline  # starts no fleet, opens no Zenoh session
 
 
 def _published_by_the_bridge() -> set[str]:

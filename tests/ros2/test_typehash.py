@@ -20,7 +20,7 @@ from rosbags.typesys import Stores, get_typestore
 from twinfleet.interfaces.typehash import rihs01, store_lookup
 from twinfleet.ros2.cdr import RosTypes
 
-pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+pytestmark = pytest.mark.offline  # starts no fleet, opens no Zenoh session
 
 SHARE = Path(sys.prefix) / "share"
 MAPPED = ("nav_msgs/msg/OccupancyGrid", "geometry_msgs/msg/PoseStamped", "nav_msgs/msg/Path",

@@ -31,7 +31,7 @@ from twinfleet.ros2.wire import (
     ros_type_name,
 )
 
-pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+pytestmark = pytest.mark.offline  # starts no fleet, opens no Zenoh session
 
 STRING_HASH = "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
 ZID = "aac3178e146ba6f1fc6e6a4085e77f21"

@@ -22,7 +22,7 @@ from twinfleet.runtime.tools.view.sequence_chart import (
     to_svg,
 )
 
-pytestmark = pytest.mark.offline  # starts no process, opens no Zenoh session
+pytestmark = pytest.mark.offline  # starts no fleet, opens no Zenoh session
 
 STATION = Path(__file__).resolve().parents[1] / "data" / "station" / "station.yaml"
 
