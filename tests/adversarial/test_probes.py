@@ -9,7 +9,6 @@ import os
 import signal
 import subprocess
 import sys
-from pathlib import Path
 
 import msgpack
 import pytest
@@ -26,6 +25,7 @@ from tests.adversarial.harness import (
     wait_matched,
     write_scenario,
 )
+from tests.integration.itest_support import node_pid, spawned_by
 from tests.support import ROOT, child_env, pick_free_port
 from twinfleet.runtime.core.guard import sign
 
@@ -67,12 +67,12 @@ def test_garbage_nesting_bad_requests_then_kill_9_of_a_robot(tmp_path) -> None:
             assert stats(s, fleet.fleet, "map_server")["handler_errors"] == 0
         finally:
             s.close()
-        pid = int(poll(lambda: _pid_of(fleet.scenario, "r1"), 5))
+        pid = int(poll(lambda: _pid_of(fleet.proc.pid, "r1"), 5))
         os.kill(pid, signal.SIGKILL)
         code = fleet.wait_end(30)
         out = fleet.output()
     assert code == 1 and "node r1 failed (exit code -9)" in out, out[-2000:]
-    assert not _pid_of(fleet.scenario, "r2")
+    assert not _pid_of(fleet.proc.pid, "r2")
 
 
 @pytest.mark.slow
@@ -82,10 +82,10 @@ def test_kill_9_of_the_launcher_takes_its_nodes_down(tmp_path) -> None:
     proc = launch(scenario, tmp_path / "orphans.log", "--listen",
                   f"tcp/127.0.0.1:{pick_free_port()}")
     try:
-        assert poll(lambda: _pid_of(scenario, "r2"), 30)
+        assert poll(lambda: _pid_of(proc.pid, "r2"), 30)
         os.kill(proc.pid, signal.SIGKILL)
         proc.wait(timeout=10)
-        assert poll(lambda: not any(_pid_of(scenario, n) for n in ("map_server", "r1", "r2")), 15)
+        assert poll(lambda: not any(_pid_of(proc.pid, n) for n in ("map_server", "r1", "r2")), 15)
     finally:
         stop(proc)
         with contextlib.suppress(ProcessLookupError):
@@ -116,16 +116,7 @@ def test_bad_scenario_and_map_files_end_in_one_line(tmp_path) -> None:
         assert str(path) in lines[0] and "Traceback" not in result.stdout, (name, lines)
 
 
-def _pid_of(scenario, node: str) -> int | None:
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            cmd = Path(f"/proc/{entry}/cmdline").read_bytes().split(b"\0")
-            state = Path(f"/proc/{entry}/stat").read_text().rsplit(")", 1)[-1].split()[0]
-        except OSError:
-            continue
-        if state != "Z" and str(scenario).encode() in cmd and node.encode() in cmd \
-                and b"--node" in cmd:
-            return int(entry)
-    return None
+def _pid_of(launcher: int, node: str) -> int | None:
+    """The live process of `node` that this test's `launcher` started (found by pid, never
+    by command line: another test's fleet is never a candidate)."""
+    return node_pid(spawned_by(launcher), node)
