@@ -65,3 +65,41 @@ def test_render_rejects_bad_input(tmp_path, capsys):
     assert main(["render", str(bad), "-o", str(tmp_path / "x.png")]) == 2
     assert "not a twinfleet-trace/1 trace" in capsys.readouterr().err
     assert main(["render", str(ROOT / "twinfleet" / "launch" / "c1a.yaml"), "-o", str(tmp_path / "x.bmp")]) == 2
+
+
+class _Stamp:
+    """A renderer of its own: draws any scenario with a scene as one grey picture."""
+
+    def __init__(self):
+        self.drawn = []
+
+    def cannot_draw(self, scenario):
+        return None
+
+    def draw(self, scenario, trace, output, *, options):
+        self.drawn.append((scenario.name, trace, dict(options)))
+        Image.new("RGB", (4, 3), (128, 128, 128)).save(output)
+        return 1
+
+
+def test_render_draws_with_the_renderer_its_examples_registered(tmp_path, monkeypatch, capsys):
+    from twinfleet.runtime.scenario import examples
+
+    stamp = _Stamp()
+    monkeypatch.setattr(examples, "_PICTURES", [])
+    examples.add_examples("twinfleet.launch", stamp)
+    out = tmp_path / "c1a.png"
+    assert main(["render", "c1a", "-o", str(out), "--scan-of", "r2"]) == 0
+    assert stamp.drawn == [("c1a", None, {"scan_of": "r2", "every_step": False, "cell_px": PX})]
+    assert Image.open(out).size == (4, 3)
+    assert "wrote" in capsys.readouterr().out
+
+
+def test_render_says_in_one_line_when_no_renderer_fits(tmp_path, monkeypatch, capsys):
+    from twinfleet.runtime.scenario import examples
+
+    monkeypatch.setattr(examples, "_PICTURES", [])
+    assert main(["render", "c1a", "-o", str(tmp_path / "c1a.png")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no example package registered a renderer" in err
+    assert not (tmp_path / "c1a.png").exists()

@@ -7,6 +7,9 @@ Checked on the source, grep-style (docs/design.md §1, docs/robots.md §9):
 - no robot type (node, parameter, message, scene or report class of the robots) is named
   outside the robots' packages, `twinfleet/nodes/` (their node code) and
   `twinfleet/robots/` (their experiment);
+- the command line (`twinfleet/cli/`) imports the robots' packages only where the
+  application is wired (`cli/main.py` registers their examples, renderer and command):
+  every other command reaches them through what was registered;
 - no code reads a reason as English (`reason.startswith(`): what ended a run is an
   `EndReason`, why a call failed a `CallFailure`.
 """
@@ -73,6 +76,30 @@ def test_the_scenario_checks_see_a_key_line(tmp_path):
     assert [line for line in old.splitlines() if re.search(r"\b(map|profile)\s*:", line)] == [
         "map: ../maps/map50.yaml", "profile: fixed"]
 
+
+
+#: where the command line is wired to the robots (their examples, renderer and command)
+WIRING = PACKAGE / "cli" / "main.py"
+
+
+def _imports(path: Path) -> list[str]:
+    """The modules `path` imports by a statement, at any depth (a function's lazy imports too)."""
+    found: list[str] = []
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found += [alias.name for alias in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            found.append(node.module)
+    return found
+
+
+def test_the_command_line_imports_the_robots_only_where_it_is_wired():
+    robots = tuple(f"twinfleet.{p.name}" for p in ROBOT_PACKAGES)
+    found = [f"{path.relative_to(ROOT)}: {name}" for path in _sources(PACKAGE / "cli")
+             if path != WIRING for name in _imports(path)
+             if name == "twinfleet" or name.startswith(tuple(f"{r}" for r in robots))]
+    assert found == []
+    assert any(name.startswith(robots) for name in _imports(WIRING))  # the check sees imports
 
 
 def test_no_reason_is_parsed_as_english():

@@ -28,7 +28,7 @@ from twinfleet.cli import render as render_command
 from twinfleet.cli import runtime_commands
 from twinfleet.cli.interrupts import Interrupts
 from twinfleet.interfaces.guard import install as refuse_borrowed_ros_names
-from twinfleet.robots import EXAMPLES
+from twinfleet.robots import EXAMPLES, PICTURES
 from twinfleet.robots import commands as robot_commands
 from twinfleet.ros2 import commands as ros2_commands
 from twinfleet.runtime.access.connection import (
@@ -40,7 +40,8 @@ from twinfleet.runtime.access.connection import (
 from twinfleet.runtime.scenario.examples import add_examples
 from twinfleet.sweep import commands as sweep_commands
 
-add_examples(EXAMPLES)  # the robots' scenarios, by name: ``twinfleet check c1a``
+# the robots' scenarios, by name (``twinfleet check c1a``), and their pictures (`render`)
+add_examples(EXAMPLES, PICTURES)
 
 DESCRIPTION = """\
 twinfleet runs a fleet of robot nodes (or any nodes you write in Python) as separate

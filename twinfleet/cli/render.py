@@ -22,8 +22,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                        "else as a message-sequence chart. Exit 0, or 2 on bad input.")
     p.add_argument("source", help="scenario YAML, or a trace JSON written by `twinfleet check`")
     p.add_argument("-o", "--output", required=True, metavar="FILE",
-                   help="FILE.png: one picture (a trace's last step, with the collision circled, "
-                        "or the chart); FILE.gif: one frame per step in which a robot moved; "
+                   help="FILE.png: one picture (a trace's last step, with the violation marked, "
+                        "or the chart); FILE.gif: one frame per step that changed the picture; "
                         "FILE.svg: the sequence chart as SVG")
     p.add_argument("--chart", action="store_true",
                    help="draw a trace as a message-sequence chart even when its scenario has "
@@ -34,8 +34,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "sent before A start at the top, those handled after B end at the "
                         "foot); default: every step, a trace longer than 60 steps in pages "
                         "FILE-1.png, FILE-2.png, ...")
-    p.add_argument("--scan-of", metavar="ROBOT", default=None,
-                   help="draw the scan rays of this robot (e.g. r1)")
+    p.add_argument("--scan-of", metavar="NODE", default=None,
+                   help="draw the scan rays of this node, where the scenario's renderer draws "
+                        "scans (the robots' example: a robot, e.g. r1)")
     p.add_argument("--every-step", action="store_true",
                    help="for a GIF of a trace, one frame per step even when nothing moved")
     p.add_argument("--cell-px", type=int, default=12, metavar="N",
@@ -45,6 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def cmd_render(args: argparse.Namespace) -> int:
     """`twinfleet render`: a scenario's start or a trace, on its map or as a chart."""
+    from twinfleet.runtime.scenario.examples import renderer_for
     from twinfleet.runtime.scenario.overrides import load_with_params
     from twinfleet.runtime.scenario.spec import ScenarioError, load_scenario
 
@@ -58,23 +60,21 @@ def cmd_render(args: argparse.Namespace) -> int:
             except TraceError as exc:
                 raise ValueError(str(exc)) from None
             scenario = load_with_params(trace["scenario"], trace.get("params") or ())
-            no_map = _no_map(scenario)
+            no_map = _no_picture(scenario)
             if args.chart or args.steps or no_map or args.output.endswith(".svg"):
                 if no_map and not args.chart:
                     print(f"drawn as a sequence chart: {no_map}")
                 return _chart(trace, args.output, args.steps)
         else:
             trace, scenario = None, load_scenario(source)
-            no_map = _no_map(scenario)
+            no_map = _no_picture(scenario)
             if no_map:
                 raise ValueError(f"{source}: nothing to draw: {no_map}; a trace of it "
                                  "(`twinfleet check SCENARIO --trace-out T.json`) is drawn as "
                                  "a sequence chart (`twinfleet render T.json -o chart.png`)")
-        from twinfleet.nodes.render import save_pictures, scenario_view, trace_views
-
-        views = (trace_views(scenario, trace, scan_of=args.scan_of, every_step=args.every_step)
-                 if trace else [scenario_view(scenario, scan_of=args.scan_of)])
-        frames = save_pictures(views, args.output, cell_px=args.cell_px)
+        options = {"scan_of": args.scan_of, "every_step": args.every_step,
+                   "cell_px": args.cell_px}
+        frames = renderer_for(scenario).draw(scenario, trace, args.output, options=options)
     except (ScenarioError, ValueError, KeyError, OSError) as exc:
         print(f"twinfleet render: {exc}", file=sys.stderr)
         return 2
@@ -95,13 +95,16 @@ def _steps(text: str) -> tuple[int, int]:
     return int(first), int(last)
 
 
-def _no_map(scenario: Any) -> str | None:
-    """Why a scenario's fleet cannot be drawn on a map, in its user's words (None: it can)."""
+def _no_picture(scenario: Any) -> str | None:
+    """Why no registered renderer draws a scenario, in its user's words (None: one does)."""
+    from twinfleet.runtime.scenario.examples import renderer_for
+
     if scenario.scene is None:
         return "the scenario names no scene (`scene:`), so there is no map to draw its fleet on"
-    if not any(hasattr(c.params, "robots") for c in scenario.nodes):
-        return (f"no node of {scenario.name} serves a map with robots on it (the robot "
-                "scene draws a map server and its robots)")
+    try:
+        renderer_for(scenario)
+    except ValueError as exc:
+        return str(exc)
     return None
 
 

@@ -10,6 +10,7 @@ times on one path), the discretization study, and `robots.commands.register` for
 `twinfleet experiment` command. Nothing below the command line imports this package.
 """
 
+from twinfleet.nodes.pictures import FleetPictures
 from twinfleet.robots.paper import PAPER, PaperRow, paper_row
 from twinfleet.robots.table import CheckCell, LiveSummary, Row
 
@@ -21,6 +22,9 @@ DEFAULT_TIME_SCALE = 2.0
 #: the package of the robots' example scenarios (package data, beside their maps), which the
 #: command line and the testing API add to the names scenarios resolve (`add_examples`)
 EXAMPLES = "twinfleet.launch"
+#: their picture renderer (`twinfleet render`), registered with them: ``add_examples(EXAMPLES,
+#: PICTURES)``
+PICTURES = FleetPictures()
 
-__all__ = ["DEFAULT_TIME_SCALE", "EXAMPLES", "PAPER", "CheckCell", "LiveSummary", "PaperRow", "Row",
-           "paper_row"]
+__all__ = ["DEFAULT_TIME_SCALE", "EXAMPLES", "PAPER", "PICTURES", "CheckCell", "LiveSummary",
+           "PaperRow", "Row", "paper_row"]
