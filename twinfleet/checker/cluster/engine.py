@@ -14,13 +14,11 @@ that send each other claims and answers directly. `RayEngine`: `checker.parallel
 
 from __future__ import annotations
 
-import gc
 import logging
 import os
 import pickle
 import re
 import secrets
-import sys
 import threading
 from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
@@ -44,7 +42,7 @@ from twinfleet.checker.cluster.links import TOKEN_BYTES, Links
 from twinfleet.checker.cluster.ray_host import answers, ray_notices, worker_env
 from twinfleet.checker.cluster.spec import ClusterError, SystemSpec, fingerprint, mismatch
 from twinfleet.checker.cluster.visited import VisitedTable
-from twinfleet.checker.collector import SEARCH_THRESHOLDS
+from twinfleet.checker.collector import Held, quick_switches, seldom_collections
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.system import System
@@ -120,13 +118,12 @@ def session(workers: int, address: str | None) -> Iterator[None]:
             head.stop()
 
 
-def _built(spec: SystemSpec, expected: dict[str, str]
+def _built(spec: SystemSpec, expected: dict[str, str], actor: Held
            ) -> tuple[System, PropertySet, Reduction | None]:
     """The system, properties and reduction of `spec`, built here (the search's collector
-    thresholds set for the whole worker process: it runs nothing else); ClusterError when
-    this machine's scenario, rules or node sources differ from the coordinator's
-    (`expected`)."""
-    gc.set_threshold(*SEARCH_THRESHOLDS)
+    thresholds held by `actor` until it is released); ClusterError when this machine's
+    scenario, rules or node sources differ from the coordinator's (`expected`)."""
+    actor.hold(seldom_collections())
     system, props, reduction = spec.build()
     differs = mismatch(fingerprint(system), expected)
     if differs is not None:
@@ -136,11 +133,11 @@ def _built(spec: SystemSpec, expected: dict[str, str]
 
 
 @ray.remote(num_cpus=1)
-class Worker:
+class Worker(Held):
     """An `Expander` on a system built from a `SystemSpec`."""
 
     def __init__(self, spec: SystemSpec, expected: dict[str, str], shards: int) -> None:
-        system, props, reduction = _built(spec, expected)
+        system, props, reduction = _built(spec, expected, self)
         self.core = Expander(system, props, shards, reduction)
 
     def propose(self, max_depth: int | None) -> tuple[Any, ...]:
@@ -232,28 +229,25 @@ class Shard:
         return self.core.dump()
 
 
-SWITCH_S = 0.00005
-
-
 # Four threads: the loop, and the coordinator's calls (Ray's typed overloads of `remote`
 # do not list the actor option); the links read on threads of their own.
 @ray.remote(num_cpus=1, max_concurrency=4)  # type: ignore[call-overload]
-class FlowWorker:
+class FlowWorker(Held):
     """A `FlowCore` whose loop (`run`) expands on one thread while claims, answers (over
     `Links`) and moved worlds arrive on others; one lock guards the core's shared parts,
     and only the loop touches the system (expansion, property checks, outcome cache)."""
 
     def __init__(self, spec: SystemSpec, expected: dict[str, str], index: int,
                  workers: int, token: bytes) -> None:
-        system, props, _ = _built(spec, expected)
+        system, props, _ = _built(spec, expected, self)
         self.core = FlowCore(system, props, index, workers)
         self.lock = threading.Condition()
         self.stopped = False
         host = ray.util.get_node_ip_address()  # type: ignore[no-untyped-call]
         self.links = Links(index, host, token, self._claims, self._answered)
-        # A claim's answer waits for the loop to let go of the interpreter, by default
-        # up to 5 ms: more than the rest of the round trip.
-        sys.setswitchinterval(SWITCH_S)
+        # A claim's answer waits for the loop to let go of the interpreter: 5 ms by default,
+        # more than the rest of the round trip; 50 µs while this worker works.
+        self.hold(quick_switches(0.00005))
 
     def address(self) -> tuple[str, int]:
         """Where this worker's links listen."""
@@ -369,6 +363,11 @@ def _get(refs: Any) -> Any:
         first = _ANSI.sub("", text.splitlines()[0]) if text else type(exc).__name__
         raise ClusterError(f"a worker or shard of the cluster failed, no verdict: "
                            f"{type(exc).__name__}: {first}") from None
+
+
+def _release(actors: list[Any]) -> None:
+    """Let workers restore their process's settings (those that answer within a second)."""
+    ray.wait([a.release.remote() for a in actors], num_returns=len(actors), timeout=1.0)
 
 
 def _up(backend: RayBackend | RayFlow, starting: list[Any]) -> bool:
@@ -487,8 +486,8 @@ class RayBackend:
         return list(_get(frontier)), list(_get(visited))
 
     def close(self) -> None:
-        """Stop every actor of this search (a cluster that outlives the command, or a shared
-        one, keeps no worker of it holding a CPU)."""
+        """Stop every actor (a cluster that outlives the command keeps none holding a CPU)."""
+        _release(self.actors)
         for actor in (*self.actors, *self.shards):
             ray.kill(actor, no_restart=True)
 
@@ -572,6 +571,7 @@ class RayFlow:
 
     def close(self) -> None:
         """Stop every actor of this search."""
+        _release(self.actors)
         for actor in self.actors:
             ray.kill(actor, no_restart=True)
 
