@@ -1,10 +1,11 @@
 """Re-measure every behavioural figure the docs state, and say whether it is still the same.
 
-    PYTHONPATH=. python3 benchmarks/docs_figures.py [--only TEXT] [--list] [--docs DIR]
+    PYTHONPATH=. python3 benchmarks/docs_figures.py [--only TEXT ...] [--list] [--docs DIR]
 
 A behavioural figure is what a deterministic command gives: a verdict, a number of
 states or transitions, the time of a violation. The script reads the docs' tables
-(README.md, docs/results.md, docs/reduction.md), so an edited figure is what it checks,
+(README.md, docs/results.md, docs/reduction.md, docs/experiment.md,
+docs/discretization.md), so an edited figure is what it checks,
 runs the command each figure names (`twinfleet check ... --json`, in this process through
 `twinfleet.cli.main`, each distinct command once), and prints per figure where it is,
 what the doc says, what was measured and whether the two are the same; the last line
@@ -14,7 +15,9 @@ Figures in prose rather than tables are named explicitly below (`PROSE`), each b
 pattern that must match its doc line. Not checked, being no behaviour of the checker:
 times in seconds, rates, bytes and ratios (the machine's, not the code's); "no answer
 in 60 s" cells; the generated-system rows of docs/reduction.md (sums over systems that
-another benchmark draws); the live columns of docs/experiment.md.
+another benchmark draws); the live columns of docs/experiment.md and its table kept
+from before issue #16; the fine and coarse rows of docs/discretization.md (scenarios its
+study writes, hundreds of thousands of states each).
 """
 
 from __future__ import annotations
@@ -122,8 +125,7 @@ def parse_claim(cell: str, *, rmc: bool) -> Claim | None:
     cell = cell.replace("*", "").strip()
     if not cell or cell.startswith((">", "(")):
         return None
-    verdict = ("holds" if re.match(r"(holds|satisfied)\b", cell, re.I)
-               else "violated" if re.match(r"(collision|violated)\b", cell, re.I) else None)
+    verdict = _verdict(cell)
     pair = _PAIR.search(cell)
     single = re.fullmatch(NUMBER, cell)
     if pair is None and single is None:
@@ -136,6 +138,13 @@ def parse_claim(cell: str, *, rmc: bool) -> Claim | None:
         unit = scale * 10.0 ** -len(value.partition(".")[2])
         t_ms = float(value) * scale
     return Claim(verdict, states, transitions, rmc, t_ms, unit)
+
+
+def _verdict(text: str) -> str | None:
+    """"holds" or "violated" as the doc words it at the start of `text` (None: not said)."""
+    if re.match(r"(holds|satisfied)\b", text, re.I):
+        return "holds"
+    return "violated" if re.match(r"(collision|violated)\b", text, re.I) else None
 
 
 def _int(text: str) -> int:
@@ -151,19 +160,22 @@ class Table:
 
     header: tuple[str, ...]
     rows: tuple[tuple[int, tuple[str, ...]], ...]
+    before: str = ""  # the last line of text above the table
 
 
 def tables(path: Path) -> Iterator[Table]:
     """Every table of a markdown file (indented ones included)."""
     block: list[tuple[int, tuple[str, ...]]] = []
+    before = ""
     for number, line in enumerate([*path.read_text().splitlines(), ""], 1):
         text = line.strip()
         if text.startswith("|"):
             block.append((number, tuple(c.strip() for c in text.strip("|").split("|"))))
             continue
         if len(block) > 2 and set(block[1][1][0]) <= set("-: "):
-            yield Table(block[0][1], tuple(block[2:]))
+            yield Table(block[0][1], tuple(block[2:]), before)
         block = []
+        before = text or before
 
 
 @dataclass(frozen=True)
@@ -229,6 +241,62 @@ def throughput_rows(docs: Docs) -> Iterator[Figure]:
             claim = Claim(states=_int(cells[2]), transitions=_int(cells[3]))
             yield Figure(f"docs/results.md:{number}", f"{case} {cells[1]}",
                          Run(case, semantics, "none"), claim)
+
+
+def experiment_rows(docs: Docs) -> Iterator[Figure]:
+    """experiment.md's checker columns (both semantics, unreduced: the tables predate the
+    reduction), not the table kept from before issue #16."""
+    for table in docs.tables("docs/experiment.md"):
+        head = table.header
+        if "before issue #16" in table.before or head[0] != "case":
+            continue
+        for number, cells in table.rows:
+            for semantics in ("ros", "rebeca"):
+                found = _experiment_cell(head, cells, semantics)
+                if found is not None:
+                    claim, reduction = found
+                    yield Figure(f"docs/experiment.md:{number}",
+                                 f"{cells[0]} {semantics} {reduction or ''}".strip(),
+                                 Run(cells[0], semantics, reduction), claim)
+
+
+def _experiment_cell(head: Sequence[str], cells: Sequence[str], semantics: str
+                     ) -> tuple[Claim, str | None] | None:
+    """The claim of one semantics' columns of an experiment.md row, and the reduction it
+    was measured with: the tables with transitions predate the reduction (unreduced),
+    those with states only are of the default (`por` under `ros`)."""
+    if f"{semantics}: states" in head:
+        at = head.index(f"{semantics}: states")
+        if not head[at + 1].startswith(f"{semantics}: transitions"):
+            return Claim(_verdict(cells[at - 1]), _int(cells[at])), None
+        text = f"{cells[at - 1]}, {cells[at]} / {cells[at + 1].split('/')[0]}"
+        claim = parse_claim(text, rmc=False)
+        return None if claim is None else (claim, "none")
+    if (column := f"{semantics}: result (states)") in head:
+        cell = cells[head.index(column)]
+        count = re.search(rf"\(({NUMBER})\)", cell)
+        return None if count is None else (Claim(_verdict(cell), _int(count[1])), None)
+    if (column := f"twinfleet `{semantics}` semantics") in head:
+        claim = parse_claim(cells[head.index(column)], rmc=True)
+        return None if claim is None else (claim, "none")
+    return None
+
+
+def discretization_rows(docs: Docs) -> Iterator[Figure]:
+    """discretization.md's "paper" rows (C1a as shipped; the fine and coarse settings are
+    scenarios `twinfleet.robots.discretization` writes, not measured here)."""
+    for table in docs.tables("docs/discretization.md"):
+        if table.header[:2] != ("setting", "profile / semantics"):
+            continue
+        for number, cells in table.rows:
+            if cells[0] != "paper":
+                continue
+            semantics = cells[1].split("/")[-1].strip()
+            case = "c1a_rebeca" if cells[1].startswith("rebeca") else "c1a"
+            claim = parse_claim(f"{cells[2]}, {cells[3]} / {cells[4]}", rmc=False)
+            if claim is not None:
+                yield Figure(f"docs/discretization.md:{number}", f"{case} {semantics}",
+                             Run(case, semantics, "none"), claim)
 
 
 #: results.md's "More variants" rows by the start of their first cell: base case, scan
@@ -355,7 +423,8 @@ def prose(docs: Docs) -> Iterator[Figure]:
 
 
 SOURCES: tuple[Callable[[Docs], Iterator[Figure]], ...] = (
-    rebeca_columns, other_rules, variant_rows, throughput_rows, reduction_rows, prose)
+    rebeca_columns, other_rules, variant_rows, throughput_rows, reduction_rows,
+    experiment_rows, discretization_rows, prose)
 
 
 # ------------------------------------------------------------------ measuring
@@ -387,10 +456,12 @@ def outcome(run: Run) -> Outcome:
                    float(at[1]) if at else None)
 
 
-def figures(docs: Docs, only: str | None) -> list[Figure]:
-    """Every figure the sources find, those whose place or label contains `only`."""
+def figures(docs: Docs, only: Sequence[str] | None) -> list[Figure]:
+    """Every figure the sources find; with `only`, those whose place or label contains
+    one of its texts."""
     found = [f for source in SOURCES for f in source(docs)]
-    return [f for f in found if only is None or only in f.where or only in f.label]
+    return [f for f in found
+            if only is None or any(text in f.where or text in f.label for text in only)]
 
 
 def compare(found: Sequence[Figure]) -> int:
@@ -408,8 +479,9 @@ def compare(found: Sequence[Figure]) -> int:
 def main(argv: Sequence[str] | None = None) -> int:
     """Command line (module docstring)."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--only", metavar="TEXT",
-                        help="only the figures whose place (file:line) or label contains TEXT")
+    parser.add_argument("--only", metavar="TEXT", action="append",
+                        help="only the figures whose place (file:line) or label contains TEXT "
+                             "(repeatable: any of them)")
     parser.add_argument("--list", action="store_true",
                         help="list the figures found in the docs without measuring them")
     parser.add_argument("--docs", type=Path, default=ROOT, metavar="DIR",
