@@ -5,7 +5,7 @@
 A behavioural figure is what a deterministic command gives: a verdict, a number of
 states or transitions, the time of a violation. The script reads the docs' tables
 (README.md, docs/results.md, docs/reduction.md, docs/experiment.md,
-docs/discretization.md), so an edited figure is what it checks,
+docs/discretization.md, docs/performance.md), so an edited figure is what it checks,
 runs the command each figure names (`twinfleet check ... --json`, in this process through
 `twinfleet.cli.main`, each distinct command once), and prints per figure where it is,
 what the doc says, what was measured and whether the two are the same; the last line
@@ -17,7 +17,9 @@ times in seconds, rates, bytes and ratios (the machine's, not the code's); "no a
 in 60 s" cells; the generated-system rows of docs/reduction.md (sums over systems that
 another benchmark draws); the live columns of docs/experiment.md and its table kept
 from before issue #16; the fine and coarse rows of docs/discretization.md (scenarios its
-study writes, hundreds of thousands of states each).
+study writes, hundreds of thousands of states each); docs/distributed.md's C1a with
+0-1 ms of latency (5,985,410 states, minutes); docs/rclpy.md's programs (their own
+tests, `tests/rclpy/`, check them).
 """
 
 from __future__ import annotations
@@ -243,6 +245,17 @@ def throughput_rows(docs: Docs) -> Iterator[Figure]:
                          Run(case, semantics, "none"), claim)
 
 
+def contract_rows(docs: Docs) -> Iterator[Figure]:
+    """performance.md's node-contract table: states / transitions (unreduced)."""
+    for table in docs.tables("docs/performance.md"):
+        if table.header[:2] != ("scenario", "states / transitions"):
+            continue
+        for number, cells in table.rows:
+            if (claim := parse_claim(cells[1], rmc=False)) is not None:
+                yield Figure(f"docs/performance.md:{number}", cells[0],
+                             Run(cells[0], None, "none"), claim)
+
+
 def experiment_rows(docs: Docs) -> Iterator[Figure]:
     """experiment.md's checker columns (both semantics, unreduced: the tables predate the
     reduction), not the table kept from before issue #16."""
@@ -424,7 +437,7 @@ def prose(docs: Docs) -> Iterator[Figure]:
 
 SOURCES: tuple[Callable[[Docs], Iterator[Figure]], ...] = (
     rebeca_columns, other_rules, variant_rows, throughput_rows, reduction_rows,
-    experiment_rows, discretization_rows, prose)
+    contract_rows, experiment_rows, discretization_rows, prose)
 
 
 # ------------------------------------------------------------------ measuring
