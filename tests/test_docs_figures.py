@@ -7,6 +7,7 @@ Here on the cheapest figures (the station's states, milliseconds each); the full
 from __future__ import annotations
 
 import importlib.util
+import re
 import shutil
 import sys
 from pathlib import Path
@@ -47,10 +48,10 @@ def test_every_table_and_named_sentence_is_found(figures: ModuleType, capsys) ->
     assert figures.main(["--list"]) == 0
     lines = capsys.readouterr().out.splitlines()
     assert len(lines) >= 90
-    said = {" ".join(line.split()) for line in lines}
-    for expected in ("docs/results.md:19 c1a_rebeca holds, 18,527 / 43,077",
-                     "README.md:277 c1a (por) 5,516",
-                     "docs/reduction.md:384 c1a_rebeca 18,527 / 43,076"):
+    said = {re.sub(r":\d+ ", " ", " ".join(line.split()), count=1) for line in lines}
+    for expected in ("docs/results.md c1a_rebeca holds, 18,527 / 43,077",
+                     "README.md c1a (por) 5,516",
+                     "docs/reduction.md c1a_rebeca 18,527 / 43,076"):
         assert expected in said
 
 
