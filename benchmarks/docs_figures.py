@@ -25,10 +25,12 @@ tests, `tests/rclpy/`, check them).
 from __future__ import annotations
 
 import argparse
+import atexit
 import contextlib
 import io
 import json
 import re
+import shutil
 import sys
 import tempfile
 from collections.abc import Callable, Iterator, Sequence
@@ -49,6 +51,7 @@ NUMBER = r"\d[\d,]*"
 _PAIR = re.compile(rf"({NUMBER})\s*/\s*({NUMBER})")
 _TIME = re.compile(r"t\s*=\s*(\d[\d,]*(?:\.\d+)?)\s*(ms|s)\b")
 _SCRATCH = Path(tempfile.mkdtemp(prefix="docs_figures-"))  # scenarios the script writes
+atexit.register(shutil.rmtree, _SCRATCH, ignore_errors=True)
 
 
 # ------------------------------------------------------------------ what is said, what is run
