@@ -127,7 +127,7 @@ class Figure:
 def parse_claim(cell: str, *, rmc: bool) -> Claim | None:
     """A table cell such as ``holds, **18,527 / 43,077**`` or ``collision, 2,832 / 6,262
     (t=9.6 s)``; None when it states no count (a time, "no answer in 60 s", empty)."""
-    cell = cell.replace("*", "").strip()
+    cell = re.sub("[*¹²³⁴⁵⁶⁷⁸⁹]", "", cell).strip()  # bold and footnote marks
     if not cell or cell.startswith((">", "(")):
         return None
     verdict = _verdict(cell)

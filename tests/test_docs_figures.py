@@ -39,6 +39,7 @@ def test_a_cell_reads_as_the_doc_means_it(figures: ModuleType) -> None:
     assert parse("collision, **2,901 / 6,429** at t = 9,832 ms", rmc=True) == claim(
         "violated", 2_901, 6_429, True, 9_832.0, 1.0)
     assert parse("**5,516**", rmc=False) == claim(states=5_516)
+    assert parse("393¹ / 400", rmc=False) == claim(states=393, transitions=400)  # a footnote mark
     for no_count in ("> 262,602 (no answer in 60 s)", "(skipped after 8)", "", "2.4"):
         assert parse(no_count, rmc=False) is None
 
