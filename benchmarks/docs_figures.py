@@ -361,8 +361,8 @@ def _reduction_scenario(first: str, kind: str) -> str | None:
         return str(crossing_scenario(_SCRATCH, int(word), 1, "ros"))
     named = {"station": DATA / "station" / "station.yaml",
              "settled": DATA / "station" / "settled.yaml",
-             "two-phase commit": DATA / "two_phase.yaml",
-             "two-phase commit, 2 participants": DATA / "two_phase_small.yaml"}
+             "two-phase commit": DATA / "two_phase" / "two_phase.yaml",
+             "two-phase commit, 2 participants": DATA / "two_phase" / "two_phase_small.yaml"}
     if word in named:
         return str(named[word])
     return word.lower() if re.fullmatch(r"c[12][abc]|headon", word, re.I) else None
@@ -446,6 +446,10 @@ SOURCES: tuple[Callable[[Docs], Iterator[Figure]], ...] = (
 # ------------------------------------------------------------------ measuring
 
 
+class RunError(RuntimeError):
+    """A figure's command gave no verdict (the line says which command)."""
+
+
 @cache
 def outcome(run: Run) -> Outcome:
     """What `run` gives (each distinct run once)."""
@@ -463,7 +467,7 @@ def outcome(run: Run) -> Outcome:
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(io.StringIO()):
         code = twinfleet(argv)
     if code not in (0, 1):
-        raise SystemExit(f"twinfleet {' '.join(argv)}: exit {code}, no verdict")
+        raise RunError(f"twinfleet {' '.join(argv)}: exit {code}, no verdict")
     doc: dict[str, Any] = json.loads(out.getvalue())
     message = (doc.get("violation") or {}).get("message", "")
     at = re.search(r"at t=(\d+) ms", message)
@@ -485,7 +489,11 @@ def compare(found: Sequence[Figure]) -> int:
     same = 0
     for k, figure in enumerate(found, 1):
         print(f"[{k}/{len(found)}] {figure.run.scenario}", file=sys.stderr, flush=True)
-        says, measured = figure.claim.says(), figure.claim.measured(outcome(figure.run))
+        says = figure.claim.says()
+        try:
+            measured = figure.claim.measured(outcome(figure.run))
+        except RunError as exc:
+            measured = f"no verdict ({exc})"
         same += says == measured
         print(f"{figure.where:<24} {figure.label:<30} doc says {says:<30} measured "
               f"{measured:<30} {'same' if says == measured else 'DIFFERS'}", flush=True)
