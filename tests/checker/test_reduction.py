@@ -248,6 +248,25 @@ def test_a_reduction_that_does_not_pay_steps_aside(tmp_path, search):
     assert stats["reduced"] < ASIDE_SHARE * stats["aside"]
 
 
+@pytest.mark.parametrize("search", ["bfs", "dfs"])
+def test_a_step_aside_with_nothing_reduced_goes_on_in_place(monkeypatch, search):
+    # Under BFS none of the first 403 worlds was reduced: they were expanded fully in the
+    # unreduced order, so the search keeps them and goes on unreduced instead of searching
+    # them again (one restart fewer; the two-phase commit had 1,075 worlds stored then).
+    # Under DFS some were reduced (16 of 300): that search must start again.
+    passes = []
+    monkeypatch.setattr(Search, "_explore", lambda self, f=Search._explore: (
+        passes.append(len(self.store)), f(self))[1])
+    reduced = check(TWO_PHASE, CheckOptions(reduction="por", search=search))
+    stats = reduced.reduction_statistics
+    assert stats is not None and "stepped aside" in reduced.reduction
+    assert counts(reduced) == counts(check(TWO_PHASE, CheckOptions(reduction="none",
+                                                                     search=search)))
+    passes_of_por = len(passes) - 1  # the unreduced check above made one
+    assert passes_of_por == stats["restarts"] + (search == "dfs") + 1
+    assert (stats["reduced"] == 0) is (search == "bfs")
+
+
 @pytest.mark.parametrize(("reduced", "full", "aside"), [
     (0, ASIDE_WORLDS - 1, False),  # too few worlds to judge
     (199, 801, True),  # under a fifth reduced

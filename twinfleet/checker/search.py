@@ -154,6 +154,7 @@ class Search(SearchState):
                 except _Restart:
                     frontier.appendleft(item)  # the level whole, for `Reduction.walk_on`
                     raise
+                reduction = self.reduction  # None once it stepped aside in place
             if max_depth is not None and depth >= max_depth:
                 self._pruned = True
                 continue
@@ -169,14 +170,15 @@ class Search(SearchState):
             self._expanding = None
             self._partial = 0
             if lifo and reduction is not None and (reduction.stale or reduction.steps_aside()):
-                raise _Restart
+                self._step_aside()  # a restart, unless it stepped aside in place
+                reduction = None
             self._expansions += 1
             if self._expansions >= self._next_forget:
                 self._forget()
             tick()
         if reduction is not None and reduction.stale:
             reduction.steps_aside()  # a search that did not pay starts again unreduced
-            raise _Restart
+            self._step_aside()
 
     def _next_level(self, depth: int) -> None:
         """A BFS starts expanding the worlds of `depth`: every world at most that deep is
@@ -186,11 +188,22 @@ class Search(SearchState):
         reduction = self.reduction
         if reduction is not None:
             if reduction.steps_aside():
-                raise _Restart
-            reduction.probe(len(self.store), self.limits.max_depth)
-            if reduction.stale:
-                raise _Restart
+                self._step_aside()
+            else:
+                reduction.probe(len(self.store), self.limits.max_depth)
+                if reduction.stale:
+                    raise _Restart
         self._level = (depth, len(self.store) - 1)
+
+    def _step_aside(self) -> None:
+        """Restart; unless the reduction stepped aside and no world of this pass was
+        reduced: then every world so far was expanded fully, in the unreduced search's
+        order, so the search goes on unreduced from here (a restart would search them
+        again: the two-phase commit's 400-480 worlds, a quarter of its extra time)."""
+        reduction = self.reduction
+        if reduction is None or reduction.aside is None or reduction.stats.reduced:
+            raise _Restart
+        self._aside, self.reduction = reduction.aside, None
 
     def _forget(self) -> None:
         """Let the system drop cached outcomes no world left to expand can use.
