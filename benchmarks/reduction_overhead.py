@@ -14,7 +14,10 @@ taking turns within each round so that a slow spell of the shared machine hits b
 
 Time is the CPU time (`time.process_time`) of the `check` call, System build included,
 the fastest of `--repeat` rounds per mode: on a machine shared by several jobs, CPU time
-does not count the waits for a core. Printed per row: states and seconds of each mode,
+does not count the waits for a core. A row whose unreduced checks take under 0.3 s is
+checked that many times more within each round (after a first, untimed round: a
+process's first check also imports), the modes taking turns check by check, and its
+time is per check. Printed per row: states and seconds of each mode,
 their ratio (`por` seconds over `none` seconds: above 1 the reduction cost time), the
 spread of the per-round ratios, and what the reduction did; the worst ratio last, over
 the rows whose unreduced check takes 0.5 s or more and over all (a check of a few
@@ -30,6 +33,7 @@ expanded fully anyway (the transitions of `none` plus all of the bookkeeping).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import tempfile
 import time
@@ -53,6 +57,8 @@ DATA = ROOT / "tests" / "data"
 NEVER_ENDS = {"demo"}  # its talker counts for ever
 GENERATED_LIMIT = 3_000  # the differential tests' state limit
 LONG_S = 0.5  # rows at least this long (unreduced CPU seconds) get a worst ratio of their own
+TINY_S = 0.3  # a row's checks are repeated within a round until the unreduced ones take this
+TIMES_MAX = 200  # most checks of one row per mode and round
 
 
 @dataclass
@@ -84,29 +90,48 @@ def reduction_off(path: Path) -> str | None:
     return None if reduction is not None else name
 
 
+def turns(path: Path, times: int, max_states: int | None) -> dict[str, tuple[int, float, str]]:
+    """Check `path` `times` times in each mode, the modes taking turns; per mode the states,
+    the CPU seconds per check and the reduction line."""
+    done: dict[str, tuple[int, float, str]] = {}
+    for _ in range(times):
+        for mode in ("none", "por"):
+            states, seconds, line = check_time(path, mode, max_states)
+            done[mode] = (states, done.get(mode, (0, 0.0, ""))[1] + seconds / times, line)
+    return done
+
+
 def rounds(paths: Sequence[Path], repeat: int, max_states: int | None = None
            ) -> dict[str, Run] | None:
     """Check every path of a row in both modes, `repeat` rounds; None if a path of a single
     row hits the limit. Several paths (generated systems) add up, leaving out those at the
-    limit."""
+    limit. A row whose unreduced checks take under `TINY_S` in all is checked again within
+    each round until they take that long (the number of checks fixed by a first, untimed
+    round), and its time is per check: one check of a few milliseconds is mostly noise."""
     runs = {mode: Run(rounds=[]) for mode in ("none", "por")}
     kept = list(paths)
-    for round_no in range(repeat):
+    times, first = 1, True
+    while len(runs["none"].rounds or ()) < repeat:
         totals = {"none": 0.0, "por": 0.0}
         for path in list(kept):
-            done = {mode: check_time(path, mode, max_states) for mode in ("none", "por")}
+            done = turns(path, times, max_states)
             if any(states < 0 for states, _, _ in done.values()):
                 kept.remove(path)
                 continue
             for mode, (states, seconds, line) in done.items():
                 totals[mode] += seconds
                 run = runs[mode]
-                if round_no == 0:
+                if first:
                     run.states += states
                     run.aside += "stepped aside" in line
                 run.reduction = line if len(paths) == 1 else f"{run.aside} stepped aside"
         if not kept:
             return None
+        if first:
+            first = False
+            times = min(TIMES_MAX, math.ceil(TINY_S / max(totals["none"], 1e-4)))
+            if times > 1:
+                continue
         for mode, total in totals.items():
             runs[mode].seconds = min(runs[mode].seconds, total)
             assert runs[mode].rounds is not None
@@ -122,7 +147,7 @@ def row(name: str, runs: dict[str, Run]) -> tuple[float, float]:
                                                         strict=True))
     spread = f"{per_round[0]:.2f}-{per_round[-1]:.2f}"
     did = por.reduction if len(por.reduction) < 70 else por.reduction[:67] + "..."
-    print(f"{name:<22}{none.states:>9,}{none.seconds:>8.2f}{por.states:>9,}{por.seconds:>8.2f}"
+    print(f"{name:<22}{none.states:>9,}{none.seconds:>8.3f}{por.states:>9,}{por.seconds:>8.3f}"
           f"{ratio:>7.2f}  {spread:<11}{did}", flush=True)
     return ratio, none.seconds
 

@@ -15,7 +15,13 @@ from tests.checker.helpers import counts, node, replay_confirms, run, scenario
 from tests.checker.tpc import tpc_scenario
 from twinfleet.checker.driver import CheckOptions, check, load
 from twinfleet.checker.properties import PropertySet
-from twinfleet.checker.reduction import ASIDE_SHARE, ASIDE_WORLDS, Reduction, describe
+from twinfleet.checker.reduction import (
+    ASIDE_NONE_WORLDS,
+    ASIDE_SHARE,
+    ASIDE_WORLDS,
+    Reduction,
+    describe,
+)
 from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.cli import main
@@ -244,8 +250,9 @@ def test_a_reduction_that_does_not_pay_steps_aside(tmp_path, search):
     assert reduced.reduction.startswith("none (por stepped aside: ")
     assert reduced.reduction.endswith("worlds reduced, under 20%; the search ran unreduced)")
     stats = reduced.reduction_statistics
-    assert stats is not None and stats["aside"] >= ASIDE_WORLDS
+    assert stats is not None and stats["aside"] >= ASIDE_NONE_WORLDS
     assert stats["reduced"] < ASIDE_SHARE * stats["aside"]
+    assert stats["reduced"] == 0 or stats["aside"] >= ASIDE_WORLDS
 
 
 @pytest.mark.parametrize("search", ["bfs", "dfs"])
@@ -268,7 +275,9 @@ def test_a_step_aside_with_nothing_reduced_goes_on_in_place(monkeypatch, search)
 
 
 @pytest.mark.parametrize(("reduced", "full", "aside"), [
-    (0, ASIDE_WORLDS - 1, False),  # too few worlds to judge
+    (0, ASIDE_NONE_WORLDS - 1, False),  # too few worlds to judge
+    (0, ASIDE_NONE_WORLDS, True),  # none reduced: judged sooner
+    (1, ASIDE_WORLDS - 2, False),  # some reduced: too few worlds to judge
     (199, 801, True),  # under a fifth reduced
     (200, 800, False),
     (4_043, 1_473, False),  # C1a's final search

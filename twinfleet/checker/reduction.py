@@ -90,6 +90,11 @@ WALK_ON_STEPS: Final = 512  # fewest steps walked on at a restart (`Reduction.wa
 # cases reduce 60-75 % of their worlds from the first levels on.
 ASIDE_WORLDS: Final = 300
 ASIDE_SHARE: Final = 0.2
+# With none of them reduced it steps aside from ASIDE_NONE_WORLDS expanded worlds on: every
+# shipped case reduces some of its first 100, and such a pass is the unreduced search's so
+# far, which then goes on in place (`Search`), so its earlier worlds cost only their
+# bookkeeping (the small two-phase commit: 400 worlds of it, 5-8 % of its time).
+ASIDE_NONE_WORLDS: Final = 100
 # Handler outcomes a reduced search keeps per cache generation (`System.widen_cache`): its
 # restarts run the handlers of the first levels again (C1a: 1.53 -> 1.22 s of CPU with the
 # outcomes kept across restarts; ~4.5 MB).
@@ -189,12 +194,13 @@ class Reduction:
 
     def steps_aside(self) -> bool:
         """True, and from now on `aside` says why, once the search expanded `ASIDE_WORLDS`
-        worlds and reduced fewer than `ASIDE_SHARE` of them: the search then starts again
-        unreduced (sound as any unreduced search; the worlds it had are searched again)."""
+        worlds and reduced fewer than `ASIDE_SHARE` of them, or `ASIDE_NONE_WORLDS` and
+        reduced none: the search then goes on unreduced (sound as any unreduced search;
+        the worlds it had are searched again unless none was reduced)."""
         s = self.stats
         expanded = s.reduced + s.full
-        if self.aside is None and expanded >= ASIDE_WORLDS and \
-                s.reduced < ASIDE_SHARE * expanded:
+        if self.aside is None and s.reduced < ASIDE_SHARE * expanded and \
+                expanded >= (ASIDE_WORLDS if s.reduced else ASIDE_NONE_WORLDS):
             s.aside = expanded
             self.aside = (f"por stepped aside: {s.reduced:,} of the first {expanded:,} worlds "
                           f"reduced, under {ASIDE_SHARE:.0%}; the search ran unreduced")
