@@ -99,15 +99,15 @@ class SearchState:
         """The counters so far."""
         store, c = self.store, self.counters
         hashed = 0 if store.exact else self.system.hashed + self._hashed_before
+        now = time.monotonic()  # one reading: the attempt never outlasts the elapsed time
         return SearchStatistics(
             len(store), c.transitions, c.initial, c.depth, len(self._frontier),
-            self._elapsed_before + time.monotonic() - self.guard.started, peak_rss_mb(),
+            self._elapsed_before + now - self.guard.started, peak_rss_mb(),
             store.nbytes(), store.digest_bits, store.collision_probability(hashed),
             c.peak_frontier,
             # an attempt begun before the search's clock started (a restart while the search
             # was set up) counts from the clock's start, as the elapsed time does
-            None if self._attempt is None else
-            time.monotonic() - max(self._attempt, self.guard.started),
+            None if self._attempt is None else now - max(self._attempt, self.guard.started),
             0 if self.reduction is None else self.reduction.stats.restarts,
             growth=self.growth.notes())
 
