@@ -50,6 +50,8 @@ from typing import TYPE_CHECKING, Any, final
 from twinfleet.checker.transition import RunEvent
 
 if TYPE_CHECKING:
+    from types import CodeType
+
     from twinfleet.checker.properties import PropertySet
     from twinfleet.checker.system import System
     from twinfleet.checker.transition import Transition, Variant
@@ -62,14 +64,15 @@ _CACHE_LIMIT = 4_096  # values kept per part (by the node states it reads)
 class Part:
     """A subexpression over a fixed set of nodes, evaluated on their states (cached)."""
 
-    __slots__ = ("_cache", "code", "names", "reads", "source")
+    __slots__ = ("_cache", "_tree", "code", "names", "reads")
 
     def __init__(self, tree: ast.expr, index: dict[str, int]) -> None:
-        self.source = ast.unparse(tree)
         used = sorted({n.id for n in ast.walk(tree) if isinstance(n, ast.Name)})
         self.names = tuple(n for n in used if n in index)
         self.reads = tuple(index[n] for n in self.names)
-        self.code = compile(self.source, "<property part>", "eval")
+        # compiled when first evaluated: in a small check many parts never are
+        self._tree: ast.expr | None = tree
+        self.code: CodeType | None = None
         self._cache: dict[tuple[bytes, ...], Any] = {}
 
     def value(self, system: System, states: Sequence[bytes]) -> Any:
@@ -80,6 +83,10 @@ class Part:
             env: dict[str, Any] = {"__builtins__": builtins}
             for i, name in zip(self.reads, self.names, strict=True):
                 env[name] = system.decode(i, states[i])
+            if self.code is None:
+                assert self._tree is not None
+                self.code = compile(ast.Expression(self._tree), "<property part>", "eval")
+                self._tree = None
             try:
                 found = bool(eval(self.code, env))
             except Exception as exc:  # the search reports it where it evaluates the property
