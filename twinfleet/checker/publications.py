@@ -20,6 +20,13 @@ thing, which depends on its own node's state and event only (the node
 contract). So the reduced search also meets a transition outside the
 relation, and restarts.
 
+Nodes of one class run the same handlers, so a send seen from one of them is
+entered for each of the others too (`peers`; not into the sender's own class,
+where "the other one" would need a mapping between instances). This adds
+edges, which only grows closures, so it is sound whether or not a twin ever
+sends it; it saves the restart that would come when the twin is first seen
+sending it (the station's two askers: 2 restarts become 1).
+
 A breadth-first search learns level by level (`freeze`): while frozen, what
 handlers are seen to send is only noted (`learned`), the reduction keeps
 reading the relation it started the level with, and the search restarts at
@@ -60,15 +67,18 @@ class Publications:
         unknown: the first event kind outside `KNOWN_KINDS` seen, or None.
         frozen: new edges are noted in `pending` (and an unknown kind in
             `pending_unknown`) instead of entering the relation (`freeze`).
+        peers: per node, the other nodes of its class, whose handlers get its sends too.
         derived: what `checker.closure` derives from the relation and from variant lists,
             kept across worlds; emptied whenever the relation grows, so nothing in it was
             derived from an older relation.
     """
 
-    __slots__ = ("derived", "frozen", "into", "out", "pending", "pending_unknown", "unknown",
-                 "version")
+    __slots__ = ("derived", "frozen", "into", "out", "peers", "pending", "pending_unknown",
+                 "unknown", "version")
 
-    def __init__(self, nodes: int) -> None:
+    def __init__(self, nodes: int, peers: Sequence[Sequence[int]] = ()) -> None:
+        #: per node, the other nodes of its class (`_add` gives their handlers its sends)
+        self.peers: Sequence[Sequence[int]] = peers or [()] * nodes
         self.into: list[dict[Handler, set[tuple[str, int]]]] = [{} for _ in range(nodes)]
         self.out: dict[Handler, set[Handler]] = {}
         self.version = 0
@@ -126,11 +136,14 @@ class Publications:
             self.version += 1
 
     def _add(self, target: int, sender: Handler, item: tuple[str, int]) -> None:
-        made = self.into[target].setdefault(sender, set())
-        if item not in made:
-            made.add(item)
-            self.out.setdefault(sender, set()).add((target, item[0]))
-            self._grew()
+        node, method = sender
+        peers = self.peers[node]
+        for y in (node, *peers) if target != node and target not in peers else (node,):
+            made = self.into[target].setdefault((y, method), set())
+            if item not in made:
+                made.add(item)
+                self.out.setdefault((y, method), set()).add((target, item[0]))
+                self._grew()
 
     def _grew(self) -> None:
         self.version += 1
@@ -171,3 +184,5 @@ class Publications:
         self.frozen, self.pending, self.pending_unknown = (
             state[4:] if len(state) > 4 else (False, set(), None))
         self.derived = {}
+        if not hasattr(self, "peers"):  # unpickled alone: no class information
+            self.peers = [()] * len(self.into)

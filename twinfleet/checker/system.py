@@ -161,7 +161,10 @@ class System:
         self._world = self._worlds.world
         self._decoded: dict[bytes, Any] = {}
         #: zero-delay sends seen in every handler run computed (`checker.reduction`)
-        self.publications = Publications(len(self.nodes))
+        classes = [type(n) for n in self.nodes]
+        self.publications = Publications(len(self.nodes), [
+            tuple(j for j, c in enumerate(classes) if c is k and j != i)
+            for i, k in enumerate(classes)])
 
     @property
     def semantics(self) -> Semantics:
