@@ -281,7 +281,8 @@ class Reduction:
         of them after its first 100 worlds, each searching those again; now 2, as in
         every shipped case, where C1a had 17 and C2c 18). Sound as `probe`: the walks
         take transitions of persistent sets of reachable worlds, and the relation only
-        holds sends that reachable transitions made."""
+        holds sends that reachable transitions made (and their copies for the senders'
+        twins, `Publications.peers`, which only make closures larger)."""
         self._walks(worlds[::-1], min(max(stored, WALK_ON_STEPS), PROBE_STATES), max_depth)
 
     def _walks(self, starts: list[World], budget: int, max_depth: int | None) -> None:
