@@ -262,10 +262,9 @@ TWO_PHASE = Path(__file__).resolve().parents[1] / "data" / "two_phase" / "two_ph
 @pytest.mark.parametrize("search", ["bfs", "dfs"])
 def test_a_step_aside_with_nothing_reduced_goes_on_in_place(monkeypatch, search):
     # The small two-phase commit of tests/data (2,843 worlds). Under BFS none of the first
-    # 403 worlds was reduced: they were expanded fully in the
-    # unreduced order, so the search keeps them and goes on unreduced instead of searching
-    # them again (one restart fewer; the two-phase commit had 1,075 worlds stored then).
-    # Under DFS some were reduced (16 of 300): that search must start again.
+    # 114 worlds was reduced: they were expanded fully in the unreduced order, so the
+    # search keeps them (160 stored) and goes on unreduced instead of searching them again
+    # (one pass fewer). Under DFS some were reduced (16 of 300): that search starts again.
     passes = []
     monkeypatch.setattr(Search, "_explore", lambda self, f=Search._explore: (
         passes.append(len(self.store)), f(self))[1])
