@@ -76,7 +76,7 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
                        + (" (relaxed order)" if relaxed else "")
                        + ("" if min_width <= 1 else "; the search goes on here until they "
                           "are up"))
-            return start(workers, make, address, stack.callback)
+            return start(workers, make, address, stack.callback, background=min_width > 1)
 
         def made(engine: Any) -> Backend:
             backend: Backend = engine.RayBackend(spec, expected, workers)

@@ -15,12 +15,20 @@ cluster and to this process's connection through the environment: nothing is
 written to ~/.ray and Ray prints no notice about it. Everything Ray says goes
 to a log file in the cluster's temporary directory, which is removed after a
 clean stop and kept, and named in the error, when the cluster failed.
+
+While the search goes on in this process, the cluster may start in the background
+(`Background`): its session's scheduling group (Linux's autogroup, one per session)
+gets the lowest priority, so its processes take the cores the search leaves idle
+and little of the search's own; `restore` puts it back, once the workers take
+the search over or `YIELD_S` after the start at the latest (a cluster starved for
+minutes on a busy machine fails on Ray's own timeouts).
 """
 
 from __future__ import annotations
 
 import contextlib
 import ctypes
+import errno
 import os
 import secrets
 import shutil
@@ -29,6 +37,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from typing import final
 
@@ -43,6 +52,13 @@ STOP_TIMEOUT_S = 15.0
 QUICK_STOP = {"RAY_GRACEFUL_SHUTDOWN_DRAIN_TIMEOUT_S": "0"}
 STARTED = b"Ray runtime started."  # what `ray start` logs once the cluster is up
 PR_SET_PDEATHSIG = 1  # prctl(2): a signal for the child when its parent thread ends
+# The niceness of a cluster starting beside the search: a weight of 15 against the search's
+# 1,024 (sched(7)); any user may set their own session's group to 0..19.
+BACKGROUND_NICENESS = 19
+# At most this long in the background: Ray's processes gave up (GCS connection timed out)
+# after 2.5 minutes starved at load 7 on this 2-core machine; up in 5-20 s at normal priority.
+YIELD_S = 20.0
+AUTOGROUP_RATE_S = 0.1  # sched(7): a user's autogroup niceness changes at most this often
 
 
 def free_port() -> int:
@@ -57,6 +73,51 @@ def _die_with_parent() -> None:  # pragma: no cover - runs in the child, between
     killed command leaves its cluster to Ray's own reaper)."""
     if sys.platform.startswith("linux"):
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
+
+
+def _group_niceness(pid: int, niceness: int) -> None:
+    """Set the niceness of the scheduling group (autogroup) of `pid`'s session; nothing
+    where the kernel has no autogroups (then the cluster runs at normal priority) or the
+    session ended. The kernel takes one change a tenth of a second from a user: a second
+    change sooner is retried."""
+    for _ in range(3):
+        try:
+            with open(f"/proc/{pid}/autogroup", "w") as group:
+                group.write(str(niceness))
+        except OSError as exc:
+            if exc.errno == errno.EAGAIN:
+                time.sleep(AUTOGROUP_RATE_S)
+                continue
+        return
+
+
+@final
+class Background:
+    """The priority of the session led by `pid` (a cluster's processes): `lower` for at
+    most some seconds, `restore` (module docstring)."""
+
+    def __init__(self, pid: int) -> None:
+        self.pid = pid
+        self._deadline: threading.Timer | None = None
+
+    def lower(self, at_most_s: float = YIELD_S) -> None:
+        """The lowest priority, for `at_most_s` seconds at most or until `restore`."""
+        _group_niceness(self.pid, BACKGROUND_NICENESS)
+        self._deadline = threading.Timer(at_most_s, self.restore)
+        self._deadline.daemon = True
+        self._deadline.start()
+
+    def restore(self) -> None:
+        """Normal priority again (after `lower`; once)."""
+        deadline, self._deadline = self._deadline, None
+        if deadline is not None:
+            deadline.cancel()
+            _group_niceness(self.pid, 0)
+
+    def cancel(self) -> None:
+        """Forget the deadline (the session ends)."""
+        if self._deadline is not None:
+            self._deadline.cancel()
 
 
 def driver_env() -> dict[str, str]:
@@ -103,6 +164,7 @@ class LocalHead:
                 command, env={**os.environ, **env, **driver_env(), **QUICK_STOP}, stdin=subprocess.DEVNULL,
                 stdout=out, stderr=subprocess.STDOUT, start_new_session=True,
                 preexec_fn=_die_with_parent)  # noqa: PLW1509 - started from the main thread
+        self.background = Background(self.process.pid)  # its session's priority
 
     def up(self) -> bool:
         """Whether `ray start` has started every process of the cluster (it says so in its
@@ -142,6 +204,7 @@ class LocalHead:
         group at once (`ray start` takes a SIGTERM only between steps of its start: 9 s
         measured on a busy machine, against 0.8 s once up)."""
         self._stopping = True
+        self.background.cancel()
         if self.process.poll() is None:
             if self._up:
                 self.process.terminate()

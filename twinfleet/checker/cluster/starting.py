@@ -95,7 +95,11 @@ class Starting:
                 raise self._error
             raise ClusterError(f"the cluster could not start: {type(self._error).__name__}: "
                                f"{self._error}")
-        return bool(self._built.ready())
+        if not self._built.ready():
+            return False
+        if self._head is not None:
+            self._head.background.restore()  # the workers take the search over from here
+        return True
 
     def __getattr__(self, name: str) -> Any:
         if name.startswith("_") or self._built is None:
@@ -155,17 +159,22 @@ def _shut(built: Any, engine: Any) -> None:
 
 
 def start(workers: int, make: Callable[[Any], Any], address: str | None,
-          on_stop: Callable[[Callable[[], None]], object]) -> Starting:
+          on_stop: Callable[[Callable[[], None]], object], background: bool = False
+          ) -> Starting:
     """A `Starting` backend on the cluster the command uses: a Ray this process already
     joined, the cluster at `address`, or a local one started now (its processes stopped
     through `on_stop`, after the backend's `close`, which `on_stop` is given too, in the
-    order of an ExitStack's callbacks: last given, first run)."""
+    order of an ExitStack's callbacks: last given, first run). `background`: the search
+    goes on here meanwhile, so a local cluster starts at low priority until its workers
+    are up (`head.Background`)."""
     head: LocalHead | None = None
     running = ray_running()
     if not running:
         if address is None:
             head = local_head(workers)
             on_stop(head.stop)
+            if background:
+                head.background.lower()
         else:
             answers(address)
     started = Starting(workers, make, head, None if running else address)
