@@ -7,7 +7,9 @@ from round to round: this machine's speed drifts), the command in one process an
 with `--workers N` as subprocesses, and prints for each run its wall time, its
 transitions per second of wall time, the peak memory of all its processes together
 (the command and every process it started: Ray's GCS, raylet and workers, sampled
-every 0.1 s) and where the search ran (the summary's engine line); then per case the
+every 0.1 s), the CPU time of the command's own process and its share of the wall
+time (what the search got of its core: a cluster starting beside it takes from that
+share, as does the rest of a busy machine) and where the search ran (the summary's engine line); then per case the
 ratio of the rates of each round's pair, their median and range. A search cut by
 `--max-time` compares rates; a complete one, wall times (the same ratio).
 
@@ -21,11 +23,18 @@ Cases (safety properties only, as in checker_distributed.py):
 
     python benchmarks/checker_workers_end_to_end.py [--cases lanes4_jitter,lanes3_jitter]
         [--workers 2] [--repeat 3] [--max-time 120]
+
+The acceptance run (the wide case and the 10-s case, two rounds each, about 5 minutes
+on an idle 2-core machine):
+
+    python benchmarks/checker_workers_end_to_end.py --cases lanes4_jitter,lanes3_jitter \
+        --repeat 2 --max-time 50
 """
 
 from __future__ import annotations
 
 import argparse
+import os
 import re
 import statistics
 import subprocess
@@ -46,6 +55,7 @@ from twinfleet.cli import main as cli  # noqa: E402
 
 CASES = ("lanes4_jitter", "lanes3_jitter", "c1a_jitter", "c1a_none")
 JITTER = {"latency": {"default": [0, 1]}}
+CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 
 
 def scenario(case: str, out: Path) -> Path:
@@ -65,6 +75,7 @@ class Run:
     wall_s: float
     transitions: int
     peak_mb: float
+    cpu_s: float
     engine: str
 
     @property
@@ -92,6 +103,16 @@ def _tree_rss_kb(root: int) -> int:
     return sum(rss.get(pid, 0) for pid in tree)
 
 
+def _cpu_s(pid: int) -> float:
+    """The user and system CPU time of process `pid` so far (0 once it ended)."""
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+    except OSError:
+        return 0.0
+    fields = stat[stat.rindex(")") + 2:].split()
+    return (int(fields[11]) + int(fields[12])) / CLOCK_TICKS
+
+
 def command(path: Path, reduction: str, max_time: float, workers: int) -> Run:
     """Run `twinfleet check` on `path` as a subprocess and measure it."""
     argv = [sys.executable, "-m", "twinfleet", "check", str(path), "--reduction", reduction,
@@ -100,10 +121,12 @@ def command(path: Path, reduction: str, max_time: float, workers: int) -> Run:
     proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True,
                             cwd=path.parent)
     peak = [0]
+    cpu = [0.0]  # the command's own CPU time, as last sampled (within 0.1 s of its end)
 
     def sample() -> None:
         while proc.poll() is None:
             peak[0] = max(peak[0], _tree_rss_kb(proc.pid))
+            cpu[0] = max(cpu[0], _cpu_s(proc.pid))
             time.sleep(0.1)
 
     sampler = threading.Thread(target=sample, daemon=True)
@@ -116,12 +139,13 @@ def command(path: Path, reduction: str, max_time: float, workers: int) -> Run:
         raise SystemExit(f"{' '.join(argv)}: exit {proc.returncode}")
     engine = next((line[len("engine: "):] for line in out.splitlines()
                    if line.startswith("engine: ")), "one process")
-    return Run(wall, int(found.group(1).replace(",", "")), peak[0] / 1024, engine)
+    return Run(wall, int(found.group(1).replace(",", "")), peak[0] / 1024, cpu[0], engine)
 
 
 def _line(label: str, run: Run) -> str:
     return (f"  {label:<14} {run.wall_s:6.1f} s  {run.transitions:>10,} transitions  "
-            f"{run.rate:>8,.0f} tr/s  peak {run.peak_mb:6.0f} MB  {run.engine[:90]}")
+            f"{run.rate:>8,.0f} tr/s  peak {run.peak_mb:6.0f} MB  "
+            f"cpu {run.cpu_s:5.1f} s ({run.cpu_s / run.wall_s:.2f} of wall)  {run.engine[:90]}")
 
 
 def case_rounds(path: Path, reduction: str, max_time: float, workers: int,
