@@ -1,5 +1,6 @@
 """A local cluster started beside the search runs at the lowest priority of its own
-session's scheduling group (Linux's autogroup) until `restore`, or a deadline."""
+session's scheduling group (Linux's autogroup) until its workers take the search over
+(`restore`), or a deadline."""
 
 from __future__ import annotations
 
@@ -8,15 +9,17 @@ import subprocess
 import sys
 from collections.abc import Iterator
 from pathlib import Path
+from typing import Any, cast
 
 import pytest
 
 from tests.integration.itest_support import poll
+from twinfleet.checker.cluster import starting
 from twinfleet.checker.cluster.head import BACKGROUND_NICENESS, Background
 
-pytestmark = [pytest.mark.timeout(60),
-              pytest.mark.skipif(not Path("/proc/self/autogroup").exists(),
-                                 reason="the kernel has no autogroups (Linux only)")]
+pytestmark = pytest.mark.timeout(60)
+autogroups = pytest.mark.skipif(not Path("/proc/self/autogroup").exists(),
+                                reason="the kernel has no autogroups (Linux only)")
 
 
 def niceness(pid: int) -> int:
@@ -36,6 +39,7 @@ def session() -> Iterator[subprocess.Popen[bytes]]:
         proc.wait()
 
 
+@autogroups
 def test_lowered_until_restored(session: subprocess.Popen[bytes]) -> None:
     background = Background(session.pid)
     before = niceness(session.pid)
@@ -48,6 +52,7 @@ def test_lowered_until_restored(session: subprocess.Popen[bytes]) -> None:
     assert niceness(session.pid) == 0
 
 
+@autogroups
 def test_restored_at_the_deadline(session: subprocess.Popen[bytes]) -> None:
     background = Background(session.pid)
     background.lower(at_most_s=0.5)
@@ -57,9 +62,68 @@ def test_restored_at_the_deadline(session: subprocess.Popen[bytes]) -> None:
         background.cancel()
 
 
+@autogroups
 def test_a_session_that_ended_is_no_error(session: subprocess.Popen[bytes]) -> None:
     background = Background(session.pid)
     session.kill()
     session.wait()
     background.lower(at_most_s=60)
     background.restore()  # nothing left to set: no error
+
+
+class _Head:
+    """A local cluster that is up at once, its priority recorded."""
+
+    address = "127.0.0.1:1"
+    driver_log = os.devnull
+
+    def __init__(self) -> None:
+        self.restored = 0
+        self.background = self
+
+    def wait_up(self) -> None:
+        return None
+
+    def restore(self) -> None:
+        self.restored += 1
+
+
+class _Engine:
+    """`checker.cluster.engine` without Ray: joining and leaving do nothing."""
+
+    @staticmethod
+    def connect(address: str, log: str, local: bool) -> None:
+        return None
+
+    @staticmethod
+    def disconnect() -> None:
+        return None
+
+
+class _Built:
+    """A backend whose workers come up when the test says so."""
+
+    def __init__(self) -> None:
+        self.up = False
+
+    def ready(self) -> bool:
+        return self.up
+
+    def close(self) -> None:
+        return None
+
+
+def test_restored_when_the_workers_take_over(monkeypatch: pytest.MonkeyPatch) -> None:
+    monkeypatch.setattr(starting, "_imported", lambda: _Engine)
+    monkeypatch.setattr(starting, "prepare_environment", lambda local: None)  # Ray's, not ours
+    head, built = _Head(), _Built()
+    started = starting.Starting(2, lambda engine: built, cast(Any, head), None)
+    try:
+        assert poll(lambda: not started._thread.is_alive(), timeout=30)
+        assert not started.ready()
+        assert head.restored == 0  # still beside the search: still in the background
+        built.up = True
+        assert started.ready()
+        assert head.restored == 1
+    finally:
+        started.close()
