@@ -150,6 +150,9 @@ class Rules:
     has_latency: bool = field(init=False)
     _ranges: dict[str, tuple[int, int] | None] = field(init=False, repr=False, compare=False)
     _shallowest: int = field(init=False, repr=False, compare=False)
+    # Per topic/service, its fault options (`copies`, once per message sent: kept)
+    _options: dict[str, tuple[str, ...]] = field(init=False, repr=False, compare=False)
+    _deadlines: bool = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         try:
@@ -164,6 +167,8 @@ class Rules:
         object.__setattr__(self, "_shallowest", min(self.depths.values(), default=1 << 62))
         ranges = dict(self.settings.topic_latency)
         object.__setattr__(self, "_ranges", ranges)
+        object.__setattr__(self, "_options", {})
+        object.__setattr__(self, "_deadlines", self.settings.has_deadlines)
         object.__setattr__(self, "has_latency", latency is not None
                            or any(r is not None for r in ranges.values()))
 
@@ -183,6 +188,8 @@ class Rules:
         if not events:
             return []
         now = events[0].due
+        if len(events) == 1 or events[1].due != now:
+            return [0]  # alone at t* (most steps of a fleet whose latencies spread them)
         group = []
         best: dict[int, int] = {}
         for i, ev in enumerate(events):
@@ -214,17 +221,12 @@ class Rules:
             pending.append(ev)
             return
         sender, target, msg = ev.sender, ev.target, ev.message
+        mates = [other.due for other in pending
+                 if other.target == target and other.sender == sender and other.message == msg]
         due = ev.due
-        if self.has_latency and msg:
-            for other in pending:
-                if (other.due > due and other.target == target and other.sender == sender
-                        and other.message == msg):
-                    due = other.due
-        rank = 0
-        for other in pending:
-            if (other.due == due and other.target == target and other.sender == sender
-                    and other.message == msg):
-                rank += 1
+        if mates and self.has_latency and msg:
+            due = max(due, *mates)
+        rank = mates.count(due)
         if due != ev.due or rank:
             ev = ev.moved(due, rank)
         pending.append(ev)
@@ -264,15 +266,18 @@ class Rules:
             due = now + low + (chooser.branch(high - low + 1,
                                               LatencySite(name, low, now, publish))
                                if high > low else 0)
-        settings = self.settings
-        limit = settings.deadline_for(name) if settings.has_deadlines else None
+        limit = self.settings.deadline_for(name) if self._deadlines else None
         return due, None if limit is None else now + limit
 
     def copies(self, name: str, chooser: ExploringChooser, target: int = -1) -> tuple[int, str]:
         """How many copies of one message on `name` to node `target` arrive (a branch of
         `chooser` when `name` may be dropped or duplicated, or is BEST_EFFORT for `target`,
         Rule 6), and the fault taken ("" for none)."""
-        options = self.settings.delivery_options(name)
+        options = self._options.get(name)
+        if options is None:
+            options = self._options[name] = self.settings.delivery_options(name)
+        if len(options) == 1 and not self.lossy:
+            return 1, ""
         if (name, target) in self.lossy and DROP not in options:
             options = (*options, DROP)
         if len(options) == 1:

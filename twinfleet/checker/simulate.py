@@ -38,9 +38,9 @@ from twinfleet.checker.outcome import Counterexample
 from twinfleet.checker.properties import Property, PropertySet, PropertyViolation
 from twinfleet.checker.sampling import SamplingChooser
 from twinfleet.checker.settled import settled
-from twinfleet.checker.system import System
+from twinfleet.checker.system import System, run_event
 from twinfleet.checker.timing import TimingModel
-from twinfleet.checker.transition import RunEvent, Step, Transition
+from twinfleet.checker.transition import Step, Transition
 from twinfleet.checker.world import Event
 
 SETTLE_AFTER = 64  # steps that changed no node state before asking whether none can
@@ -107,6 +107,9 @@ class Simulator:
         self._levels = [(m, _Cumulative()) for m in (
             [model.at_level(k) for k in range(len(model.levels))] or [model])]
         self._level_cum = list(accumulate(lv.weight for lv in model.levels))
+        # Without queue bounds or `within`, the other checks of a world find something only
+        # where nothing is pending (deadlock, quiescence): most steps skip them.
+        self._watch = bool(self._rest.queue_bounds) or bool(properties.within)
         self._first = model.messages_first
         # An expression without `now` is a function of node states alone: a step that
         # changed no state cannot change its value (most steps of a fleet change none).
@@ -153,9 +156,9 @@ class Simulator:
                 quiet = 0
             picks = enabled(world.events)
             pick = rng.choice(picks)
-            if self._first is not None:
+            if self._first is not None and len(picks) > 1:
                 pick = self._tie(rng, world.events, picks, pick)
-            t = self._take(world, RunEvent(pick), self._chooser(rng, level))
+            t = self._take(world, run_event(pick), self._chooser(rng, level))
             steps.append(t.step)
             world = t.world
             moved = bool(t.changed) or not self._timeless
@@ -230,7 +233,8 @@ class Simulator:
                     seen[prop.name] = (PropertyViolation(
                         prop.name, prop.kind,
                         f"invariant {prop.expr.source!r} is false at t={world.now} ms"), k)
-        other = self._rest.check_world(system, world)
+        other = self._rest.check_world(system, world) if self._watch or not world.events \
+            else None
         if other is not None:
             seen.setdefault(other.property, (other, k))
 

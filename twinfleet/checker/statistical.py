@@ -19,13 +19,14 @@ from __future__ import annotations
 import platform
 import time
 from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, final
 
 from twinfleet.checker.driver import load
 from twinfleet.checker.estimate import Decision, Sprt, clopper_pearson, wilson
-from twinfleet.checker.parallel import engine_for, split
+from twinfleet.checker.parallel import Engine, engine_for, split
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.simulate import Simulation, Simulator
 from twinfleet.checker.system import System
@@ -91,18 +92,28 @@ class SimulationJob:
         return _simulator(self).batch(indices)
 
 
-_SIMULATORS: dict[SimulationJob, Simulator] = {}  # one per job in each worker process
+# The simulator of the job this process runs now: built by the job's first batch here and
+# reused by its later ones (its kept handler runs are most of a simulation's speed), replaced
+# by another job's, and dropped when the statistical check that made it ends (`release`).
+_HELD: list[tuple[SimulationJob, Simulator]] = []
 
 
 def _simulator(job: SimulationJob) -> Simulator:
-    sim = _SIMULATORS.get(job)
-    if sim is None:
-        scenario = load(job.scenario, semantics=job.semantics, params=job.params)
-        system, props = timed_system(scenario, job.model, verify=job.verify)
-        sim = _SIMULATORS[job] = Simulator(system, props, job.model, seed=job.seed,
-                                           horizon_ms=job.horizon_ms, max_steps=job.max_steps,
-                                           until_decided=job.until_decided)
+    if _HELD and (_HELD[0][0] is job or _HELD[0][0] == job):
+        return _HELD[0][1]
+    _HELD.clear()  # first: the old job's System goes before the new one is built
+    scenario = load(job.scenario, semantics=job.semantics, params=job.params)
+    system, props = timed_system(scenario, job.model, verify=job.verify)
+    sim = Simulator(system, props, job.model, seed=job.seed, horizon_ms=job.horizon_ms,
+                    max_steps=job.max_steps, until_decided=job.until_decided)
+    _HELD.append((job, sim))
     return sim
+
+
+def release(job: SimulationJob) -> None:
+    """Drop this process's simulator of `job`, if it holds one (the check is over)."""
+    if _HELD and _HELD[0][0] == job:
+        _HELD.clear()
 
 
 def timed_system(scenario: Scenario, model: TimingModel, *,
@@ -248,27 +259,55 @@ def check_statistical(scenario: str | Path, options: StatisticalOptions) -> Stat
     limit = options.simulations or (1000 if result.sprt is None and options.precision is None
                                     else 10_000_000)
     engine = engine_for(options.workers, options.cluster)
-    start = time.perf_counter()
     try:
-        while len(result.simulations) < limit and not result.stopped:
-            first = len(result.simulations)
-            indices = list(range(first, min(first + ROUND, limit)))
-            batches = split(indices, engine.workers)
-            done = [s for b in engine.map(job, batches) for s in b]
-            _take(result, done, options)
-            result.elapsed_s = time.perf_counter() - start
-            if options.max_time_s is not None and result.elapsed_s >= options.max_time_s:
-                result.stopped = result.stopped or f"--max-time {options.max_time_s:g} s"
-            if options.progress is not None:
-                options.progress(result)
+        _rounds(engine, job, result, options, limit)
     except KeyboardInterrupt:  # Ctrl-C, or SIGTERM (twinfleet.cli): keep the estimate so far
         result.interrupted = True
         result.stopped = "interrupted"
     finally:
         engine.close()
+        release(job)  # this process's; `sim` itself stays for the traces
     result.stopped = result.stopped or f"{limit:,} simulations"
     result.traces = _write_traces(sim, result, path, options)
     return result
+
+
+def _rounds(engine: Engine, job: SimulationJob, result: StatisticalResult,
+            options: StatisticalOptions, limit: int) -> None:
+    """Run rounds on `engine` into `result` until the stopping rule or `limit` says stop.
+    With several workers and only `limit` to stop the run, each round is sent before the
+    one before it is read (a second thread waits for it): a worker done with its part of
+    one round starts on the next instead of waiting for the others, and no simulation is
+    run in vain."""
+    start = time.perf_counter()
+    ahead = engine.workers > 1 and result.sprt is None and options.precision is None \
+        and options.max_time_s is None
+
+    def send(first: int) -> Callable[[], list[list[Simulation]]]:
+        """The round from index `first`: its results when called (sent now if ahead)."""
+        batches = split(range(first, min(first + ROUND, limit)), engine.workers)
+        if waiting is None:
+            return lambda: engine.map(job, batches)
+        return waiting.submit(engine.map, job, batches).result
+
+    waiting = ThreadPoolExecutor(2) if ahead else None
+    try:
+        pending = send(0)
+        while True:
+            first = len(result.simulations) + ROUND
+            following = send(first) if ahead and first < limit else None
+            _take(result, [s for b in pending() for s in b], options)
+            result.elapsed_s = time.perf_counter() - start
+            if options.max_time_s is not None and result.elapsed_s >= options.max_time_s:
+                result.stopped = result.stopped or f"--max-time {options.max_time_s:g} s"
+            if options.progress is not None:
+                options.progress(result)
+            if len(result.simulations) >= limit or result.stopped:
+                return
+            pending = following or send(len(result.simulations))
+    finally:  # not waiting: on Ctrl-C a round still running ends with the engine's close
+        if waiting is not None:
+            waiting.shutdown(wait=False, cancel_futures=True)
 
 
 def statistical_timing(scenario: Scenario, timing: str | None) -> tuple[TimingModel, str, str]:

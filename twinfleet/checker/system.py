@@ -87,7 +87,8 @@ _SHARED = 256
 _RUN_EVENTS = tuple(RunEvent(i) for i in range(_SHARED))
 
 
-def _run_event(index: int) -> RunEvent:
+def run_event(index: int) -> RunEvent:
+    """`RunEvent(index)`, shared for the usual small indices (built once per step)."""
     return _RUN_EVENTS[index] if index < _SHARED else RunEvent(index)
 
 
@@ -190,7 +191,7 @@ class System:
     def actions(self, world: World) -> list[Action]:
         """What may happen next: each enabled event (`RunEvent`), then each crash fault, then
         each KEEP_LAST drop (`Drop`)."""
-        acts: list[Action] = [_run_event(i) for i in self.rules.enabled(world.events)]
+        acts: list[Action] = [run_event(i) for i in self.rules.enabled(world.events)]
         if self.settings.crash is not None:
             acts += [Crash(j) for j in self.rules.crashable(world)]
         acts += [Drop(i) for i in self.rules.droppable(world.events)]

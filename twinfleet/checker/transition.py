@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import pickle
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, final
+from typing import TYPE_CHECKING, NamedTuple, final
 
 from twinfleet.runtime.contract.context import Log
 from twinfleet.runtime.contract.kinds import FailureKind
@@ -71,13 +71,13 @@ class Failure:
 
 
 @final
-@dataclass(frozen=True, slots=True)
-class Step:
+class Step(NamedTuple):
     """One transition's identity: its action in the parent world and its choices.
 
     `action` is None for an initial world (the start handlers' run, not a transition);
     `choices` are the indices every choice point answered, in call order, and
-    `options` how many options each had.
+    `options` how many options each had. (A named tuple: one is built per step, and a
+    frozen dataclass sets each field through a call.)
     """
 
     action: Action | None
@@ -119,9 +119,9 @@ class Transition:
 
 
 @final
-@dataclass(frozen=True, slots=True)
-class Variant:
-    """What one run of a handler (one choice variant) does, independent of the world."""
+class Variant(NamedTuple):
+    """What one run of a handler (one choice variant) does, independent of the world (a
+    named tuple, as `Step` is: one is built per step)."""
 
     choices: tuple[int, ...]
     options: tuple[int, ...]
