@@ -80,28 +80,50 @@ def _same(a: list[Simulation], b: list[Simulation]) -> bool:
 
 # Run in a subprocess with one tree's code first on the path: c1a's simulations on W
 # workers, as JSON (wall s, simulations, per-simulation violated properties, estimates).
+# The CPU time of the worker processes is read from /proc (Linux) after each round, while
+# they live: the descendants of this process, each one's latest utime + stime.
 _MEASURE = """
-import json, sys, tempfile, time, twinfleet
+import json, os, sys, tempfile, time, twinfleet
 from twinfleet.checker.statistical import StatisticalOptions, check_statistical
 assert twinfleet.__file__.startswith(sys.argv[1]), twinfleet.__file__
+TICK = os.sysconf("SC_CLK_TCK")
+workers = {}
+def descendants():
+    parent = {}
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        try:
+            stat = open(f"/proc/{pid}/stat").read().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        parent[int(pid)] = (int(stat[1]), (int(stat[11]) + int(stat[12])) / TICK)
+    mine, grew = {os.getpid()}, True
+    while grew:
+        new = {p for p, (pp, _) in parent.items() if pp in mine} - mine
+        mine |= new
+        grew = bool(new)
+    return {p: parent[p][1] for p in mine - {os.getpid()}}
+def progress(result):
+    workers.update(descendants())
 cpu = time.process_time()
 with tempfile.TemporaryDirectory() as out:
-    r = check_statistical(sys.argv[1] + "/twinfleet/launch/c1a.yaml", StatisticalOptions(
-        simulations=int(sys.argv[2]), workers=int(sys.argv[3]), traces_out=out, max_traces=0))
-print(json.dumps({"wall": r.elapsed_s, "n": len(r.simulations), "cpu": time.process_time() - cpu,
+    r = check_statistical(sys.argv[1] + f"/twinfleet/launch/{sys.argv[4]}.yaml",
+        StatisticalOptions(simulations=int(sys.argv[2]), workers=int(sys.argv[3]),
+                           traces_out=out, max_traces=0, progress=progress))
+print(json.dumps({"wall": r.elapsed_s, "n": len(r.simulations),
+                  "cpu": time.process_time() - cpu + sum(workers.values()),
                   "violated": [list(s.violated) for s in r.simulations],
                   "estimates": [[e.name, e.violations, e.n, e.low, e.high]
                                 for e in r.estimates()]}))
 """
 
 
-def _measure(tree: Path, simulations: int, workers: int) -> dict[str, object]:
-    """One side's run; "cpu": the CPU s of the command in its own process (all of it on 1
-    worker, which a machine shared with other work does not inflate as it does the wall
-    time; worker processes are not counted)."""
+def _measure(tree: Path, simulations: int, workers: int, case: str) -> dict[str, object]:
+    """One side's run; "cpu": the CPU s of the command's process and of its worker
+    processes (which a machine shared with other work inflates less than the wall time;
+    both include importing twinfleet and building the System)."""
     env = {**os.environ, "PYTHONPATH": str(tree)}
     done = subprocess.run([sys.executable, "-c", _MEASURE, str(tree), str(simulations),
-                           str(workers)], env=env, cwd=tree,  # `-c` puts the cwd first
+                           str(workers), case], env=env, cwd=tree,  # `-c` puts the cwd first
                           capture_output=True, text=True, check=False)
     if done.returncode:
         raise SystemExit(f"{tree}: the measurement failed: {done.stderr.strip()[-2000:]}")
@@ -120,27 +142,26 @@ def _agree(before: dict[str, object], after: dict[str, object]) -> str:
             f"the same properties violated in every simulation: {same}")
 
 
-def speedup(before_rev: str, rate_n: int, estimate_n: int, workers: int) -> None:
+def speedup(before_rev: str, rate_n: int, estimate_n: int, workers: int, case: str) -> None:
     """Part 0 (module docstring)."""
     with tempfile.TemporaryDirectory(prefix="twinfleet-before-") as tmp:
         archive = subprocess.run(["git", "-C", str(ROOT), "archive", before_rev],
                                  capture_output=True, check=True).stdout
         subprocess.run(["tar", "-x", "-C", tmp], input=archive, check=True)
         trees = {"before": Path(tmp), "after": ROOT}
-        print(f"part 0: c1a, 120 s of fleet time per simulation, loopback model; before = "
-              f"{before_rev}, after = this checkout")
+        print(f"part 0: {case}, its live.horizon_s of fleet time per simulation, loopback "
+              f"model; before = {before_rev}, after = this checkout")
         runs: dict[tuple[str, int], dict[str, object]] = {}
         for label, n, w in (("1 worker", rate_n, 1), (f"{workers} workers", estimate_n, workers)):
             for side, tree in trees.items():
-                runs[(side, w)] = _measure(tree, n, w)
+                runs[(side, w)] = _measure(tree, n, w, case)
             wall = {side: n / runs[(side, w)]["wall"] for side in trees}  # type: ignore[operator]
             cpu = {side: n / runs[(side, w)]["cpu"] for side in trees}  # type: ignore[operator]
-            per_cpu = "" if w > 1 else (
-                f"; per CPU s: before {cpu['before']:6.2f}, after {cpu['after']:6.2f}, after / "
-                f"before {cpu['after'] / cpu['before']:.2f}")
             print(f"{label:<10} {n:>4} simulations: wall: before {wall['before']:6.2f} sim/s, "
                   f"after {wall['after']:6.2f} sim/s, after / before "
-                  f"{wall['after'] / wall['before']:.2f}{per_cpu} (load average "
+                  f"{wall['after'] / wall['before']:.2f}; per CPU s of all its processes: "
+                  f"before {cpu['before']:6.2f}, after {cpu['after']:6.2f}, after / before "
+                  f"{cpu['after'] / cpu['before']:.2f} (load average "
                   f"{os.getloadavg()[0]:.1f})", flush=True)
         print(f"estimates of {estimate_n}: " + _agree(runs[("before", workers)],
                                                       runs[("after", workers)]))
@@ -151,7 +172,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--simulations", type=int, default=8, help="per case in part 1")
     ap.add_argument("--cases", default=",".join(CASES), help="comma-separated case names")
-    ap.add_argument("--workers", type=int, default=2, help="workers of part 2")
+    ap.add_argument("--workers", type=int, default=2, help="workers of part 0's second run and of part 2")
     ap.add_argument("--no-contract-checks", dest="verify", action="store_false",
                     help="skip the node-contract checks of every handler run (both parts)")
     ap.add_argument("--skip-precision", action="store_true", help="skip part 2")
@@ -161,9 +182,11 @@ def main() -> None:
                     help="part 0: simulations on 1 worker, each side")
     ap.add_argument("--estimate", type=int, default=400,
                     help="part 0: simulations on --workers workers whose estimates are compared")
+    ap.add_argument("--speedup-case", default="c1a",
+                    help="part 0: the case measured (default c1a; c2a's simulations collide)")
     ap.add_argument("--only-speedup", action="store_true", help="part 0 only")
     args = ap.parse_args()
-    speedup(args.before, args.rate_simulations, args.estimate, args.workers)
+    speedup(args.before, args.rate_simulations, args.estimate, args.workers, args.speedup_case)
     if args.only_speedup:
         return
     cases = [c for c in args.cases.split(",") if c]

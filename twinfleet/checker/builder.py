@@ -39,6 +39,8 @@ class WorldBuilder:
         self.properties = properties
         self.exact = exact
         self.keyed = keyed
+        # Only `within` obligations are carried: without any, every world carries none
+        self._within = properties is not None and bool(properties.within)
         self._hashes: dict[bytes, bytes] = {}
         self.hashed = 0  # node-state content hashes computed: for the collision bound
 
@@ -50,7 +52,8 @@ class WorldBuilder:
         """The world with node `states` and `pending` events at `now`, after `parent`."""
         events = sort_events(pending)
         obligations: tuple[str, ...] = ()
-        if self.properties is not None:
+        if self._within:
+            assert self.properties is not None
             obligations = self.properties.update(self.reader, parent, now, states, events)
         if not self.keyed:
             return World(now, states, events, obligations, crashes=crashes)

@@ -142,11 +142,10 @@ class Simulator:
             if self.until_decided and (seen or (self.properties.eventually and not never)):
                 ended = "decided"
                 break
-            nxt = world.next_time
-            if nxt is None:
+            if not world.events:
                 ended = "nothing pending"
                 break
-            if nxt > self.horizon_ms:
+            if world.events[0].due > self.horizon_ms:
                 ended = "horizon"
                 break
             if quiet >= SETTLE_AFTER:
@@ -163,7 +162,8 @@ class Simulator:
             world = t.world
             moved = bool(t.changed) or not self._timeless
             quiet = 0 if moved or not self._settles else quiet + 1
-            self._note(t, len(steps), seen, moved)
+            if moved or t.failure is not None or self._watch or not world.events:
+                self._note(t, len(steps), seen, moved)  # else it has nothing to look at
             for name in [n for n in never if self._holds(n, world)] if moved else ():
                 del never[name]
         self._never(never, seen, ended, world.now, len(steps))
