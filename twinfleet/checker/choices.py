@@ -13,17 +13,17 @@ from __future__ import annotations
 import random
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Protocol, final
+from typing import NamedTuple, Protocol, final
 
 from twinfleet.runtime.contract.context import Chooser
 
 
 @final
-@dataclass(frozen=True, slots=True)
-class LatencySite:
+class LatencySite(NamedTuple):
     """What a latency branch decides: the delay of one message on `channel` (a topic or
     service), `low + index` ms. Exhaustive choosers ignore it; a chooser that samples
-    from a timing model (`checker.sampling`) weighs the indices by it."""
+    from a timing model (`checker.sampling`) weighs the indices by it. (A named tuple:
+    one is built per message sent.)"""
 
     channel: str
     low: int
