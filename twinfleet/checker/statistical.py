@@ -275,10 +275,10 @@ def check_statistical(scenario: str | Path, options: StatisticalOptions) -> Stat
 def _rounds(engine: Engine, job: SimulationJob, result: StatisticalResult,
             options: StatisticalOptions, limit: int) -> None:
     """Run rounds on `engine` into `result` until the stopping rule or `limit` says stop.
-    With several workers and only `limit` to stop the run, each round is sent before the
-    one before it is read (a second thread waits for it): a worker done with its part of
-    one round starts on the next instead of waiting for the others, and no simulation is
-    run in vain."""
+    With several workers and only `limit` to stop the run, the next round is sent before
+    the current one's results are read (a second thread waits for it): a worker done with
+    its part of a round starts on the next instead of waiting for the others; any other
+    stopping rule may end the run at any round, so rounds go one at a time there."""
     start = time.perf_counter()
     ahead = engine.workers > 1 and result.sprt is None and options.precision is None \
         and options.max_time_s is None
