@@ -150,9 +150,6 @@ class Rules:
     has_latency: bool = field(init=False)
     _ranges: dict[str, tuple[int, int] | None] = field(init=False, repr=False, compare=False)
     _shallowest: int = field(init=False, repr=False, compare=False)
-    # Per topic/service, its fault options (`copies`, once per message sent: kept)
-    _options: dict[str, tuple[str, ...]] = field(init=False, repr=False, compare=False)
-    _deadlines: bool = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         try:
@@ -167,8 +164,6 @@ class Rules:
         object.__setattr__(self, "_shallowest", min(self.depths.values(), default=1 << 62))
         ranges = dict(self.settings.topic_latency)
         object.__setattr__(self, "_ranges", ranges)
-        object.__setattr__(self, "_options", {})
-        object.__setattr__(self, "_deadlines", self.settings.has_deadlines)
         object.__setattr__(self, "has_latency", latency is not None
                            or any(r is not None for r in ranges.values()))
 
@@ -266,16 +261,15 @@ class Rules:
             due = now + low + (chooser.branch(high - low + 1,
                                               LatencySite(name, low, now, publish))
                                if high > low else 0)
-        limit = self.settings.deadline_for(name) if self._deadlines else None
+        settings = self.settings
+        limit = settings.deadline_for(name) if settings.has_deadlines else None
         return due, None if limit is None else now + limit
 
     def copies(self, name: str, chooser: ExploringChooser, target: int = -1) -> tuple[int, str]:
         """How many copies of one message on `name` to node `target` arrive (a branch of
         `chooser` when `name` may be dropped or duplicated, or is BEST_EFFORT for `target`,
         Rule 6), and the fault taken ("" for none)."""
-        options = self._options.get(name)
-        if options is None:
-            options = self._options[name] = self.settings.delivery_options(name)
+        options = self.settings.delivery_options(name)
         if len(options) == 1 and not self.lossy:
             return 1, ""
         if (name, target) in self.lossy and DROP not in options:
