@@ -40,8 +40,12 @@ RULE_FUNCTIONS: tuple[Callable[..., Any], ...] = (
 #: publish a delivery copies plus event keys computed as the event is made (for
 #: simulations: the same branches, due times and keys as before), and Rule 7, a late
 #: `@every` tick's next due time as a branch of the tick's own run (a variant of it,
-#: creating only the node's own timer, always after the instant: docs/reduction.md §6).
-PINNED = "c0056dec1bb57f7e"
+#: creating only the node's own timer, always after the instant: docs/reduction.md §6);
+#: then three rewrites for speed that keep every value: an event alone at t* is enabled
+#: at once (a group of one was picked as it is), a sent message's FIFO clamp and rank
+#: come from one pass over its channel-mates (the latest due time among them, the count
+#: at the clamped due time), and one fault option with nothing lossy is one copy at once.
+PINNED = "176aa66b7b72675a"
 
 _SKIPPED = (tokenize.NL, tokenize.COMMENT)
 _STATEMENT_START = (tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT)
