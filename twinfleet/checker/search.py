@@ -159,16 +159,21 @@ class Search(SearchState):
                 self._pruned = True
                 continue
             self._expanding = item
-            children = []
-            for t in (successors(world) if reduction is None
-                      else reduction.successors(world, find, None if lifo else self._level[1])):
-                counters.transitions += 1
-                self._partial += 1
-                children.append(discover(t, sid, depth + 1))
-            if edges is not None:
+            self._expanded_from = counters.transitions
+            below = depth + 1
+            transitions = (successors(world) if reduction is None
+                           else reduction.successors(world, find, None if lifo else self._level[1]))
+            if edges is None:  # the loop of every safety search: no list of children
+                for t in transitions:
+                    counters.transitions += 1
+                    discover(t, sid, below)
+            else:
+                children = []
+                for t in transitions:
+                    counters.transitions += 1
+                    children.append(discover(t, sid, below))
                 edges.set(sid, children)
             self._expanding = None
-            self._partial = 0
             if lifo and reduction is not None and (reduction.stale or reduction.steps_aside()):
                 self._step_aside()  # a restart, unless it stepped aside in place
                 reduction = None
@@ -224,16 +229,18 @@ class Search(SearchState):
         if t.failure is not None:
             raise Found(self.properties.check_failure(t.failure), self._path_to(parent, t))
         world = t.world
-        sid, new = self.store.add(world.key, parent, terminal=not world.events)
+        store = self.store
+        sid, new = store.add(world.key, parent, terminal=not world.events)
         if not new:
             return sid
         if parent < 0:
-            self.store.roots[sid] = t.step.choices
+            store.roots[sid] = t.step.choices
         counters = self.counters
         if depth > counters.depth:
             counters.depth = depth
-        for name, bits in self.store.holds.items():
-            bits.append(self._holds(self.properties.eventually_named(name), world))
+        if store.holds:
+            for name, bits in store.holds.items():
+                bits.append(self._holds(self.properties.eventually_named(name), world))
         violation = self.properties.check_world(self.system, world)
         if violation is not None:
             raise Found(violation, self._path_to(sid))

@@ -75,7 +75,7 @@ class SearchState:
         self._aside: str | None = None  # why the reduction stepped aside (`Search`)
         self._hashed_before = 0  # content hashes of the searches this one continues
         self._expanding: tuple[World, int, int] | None = None
-        self._partial = 0
+        self._expanded_from = 0  # `counters.transitions` when `_expanding` began
         # BFS: the depth being expanded and the largest id of a world at most that deep
         self._level: tuple[int, int] = (-1, -1)
         self._checkpoint = checkpoint
@@ -121,13 +121,12 @@ class SearchState:
         """
         saved = None
         if clean and self._expanding is not None:
-            self.counters.transitions -= self._partial
+            self.counters.transitions = self._expanded_from
             if self._lifo:
                 self._frontier.append(self._expanding)
             else:
                 self._frontier.appendleft(self._expanding)
             self._expanding = None
-            self._partial = 0
         if clean and self._checkpoint is not None and self._strategy != "random":
             self.save(self._checkpoint)
             saved = self._checkpoint
