@@ -29,7 +29,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from functools import partial
-from typing import final
+from typing import Any, final
 
 from twinfleet.checker.growth import SAMPLE_MASK
 from twinfleet.checker.outcome import (
@@ -145,6 +145,11 @@ class Search(SearchState):
         # without checkpoints, a tick is only the guard's (one call less per expansion)
         tick = self._tick if self._checkpoint is not None else partial(self.guard.tick,
                                                                            self.statistics)
+        # A BFS: the ids of the worlds the transitions of its level reached so far,
+        # by key. Most revisits reach a world found a moment ago from a sibling (interleavings
+        # that meet again), and a dict answers them without the store's probe or a call
+        # (three robots in lanes: half the transitions, 0.2-0.3 s of 5.5).
+        reached: dict[Any, int] | None = None if lifo else {}
         while frontier:
             item = pop()
             world, sid, depth = item
@@ -155,6 +160,8 @@ class Search(SearchState):
                     frontier.appendleft(item)  # the level whole, for `Reduction.walk_on`
                     raise
                 reduction = self.reduction  # None once it stepped aside in place
+                if reached is not None:
+                    reached.clear()  # a level deeper: its worlds are the next level's
             if max_depth is not None and depth >= max_depth:
                 self._pruned = True
                 continue
@@ -163,15 +170,22 @@ class Search(SearchState):
             below = depth + 1
             transitions = (successors(world) if reduction is None
                            else reduction.successors(world, find, None if lifo else self._level[1]))
-            if edges is None:  # the loop of every safety search: no list of children
+            children = []
+            if reached is not None:
                 for t in transitions:
                     counters.transitions += 1
-                    discover(t, sid, below)
+                    if t.failure is not None:
+                        discover(t, sid, below)  # raises Found
+                    key = t.world.key
+                    child = reached.get(key)
+                    if child is None:
+                        child = reached[key] = discover(t, sid, below)
+                    children.append(child)
             else:
-                children = []
                 for t in transitions:
                     counters.transitions += 1
                     children.append(discover(t, sid, below))
+            if edges is not None:
                 edges.set(sid, children)
             self._expanding = None
             if lifo and reduction is not None and (reduction.stale or reduction.steps_aside()):
