@@ -22,14 +22,16 @@ from hypothesis import strategies as st
 
 from tests.checker.program_systems import systems, write_scenario
 from twinfleet.checker import CheckOptions, check
-from twinfleet.checker.cluster.backend import LocalBackend
+from twinfleet.checker.cluster import backend
+from twinfleet.checker.cluster.backend import Checkpointing, LocalBackend
 from twinfleet.checker.cluster.coordinator import Coordinator
 from twinfleet.checker.cluster.level import Item
 from twinfleet.checker.cluster.spec import SystemSpec
-from twinfleet.checker.outcome import Limits
+from twinfleet.checker.outcome import Guard, Limits, Stop
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.reduction import plan
 from twinfleet.checker.system import System
+from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.scenario.overrides import load
 
 
@@ -106,3 +108,51 @@ def test_a_wide_then_narrow_search_moves_both_ways(tmp_path: Path) -> None:
     assert outcome.status == one.status and one.trace is not None
     assert outcome.counterexample is not None
     assert len(outcome.counterexample.steps) == len(one.trace["steps"])
+
+
+def _headon(tmp_path: Path) -> tuple[System, PropertySet]:
+    from twinfleet.cli import main as cli
+
+    cli(["examples", "--copy", "headon", str(tmp_path)])
+    scenario = load(str(tmp_path / "headon.yaml"))
+    props = PropertySet.from_scenario(scenario)
+    return System(scenario, properties=props), props
+
+
+def test_a_level_searched_here_ticks_within_itself_unless_checkpointed(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    # `--max-time` and Ctrl-C are seen inside a level the coordinator searches itself (a
+    # wide level takes seconds there), not only between levels; a search that saves
+    # checkpoints keeps ticking between levels only (a stop mid-level saves nothing whole).
+    system, props = _headon(tmp_path)
+    monkeypatch.setattr(backend, "TICK_WORLDS", 4)
+    ticks: list[int] = []
+    monkeypatch.setattr(Guard, "tick", lambda self, statistics: ticks.append(1))
+    within = Coordinator(system, props, Limits(), None, min_width=10**9).run()
+    ticked_within = len(ticks)
+    ticks.clear()
+    plan_ = Checkpointing(str(tmp_path / "c.ckpt"), 3600.0, {})
+    between = Coordinator(system, props, Limits(), None, min_width=10**9,
+                          checkpointing=plan_).run()
+    assert within.status == between.status
+    assert within.statistics.states == between.statistics.states
+    assert len(ticks) <= between.statistics.depth + 2 < ticked_within
+    assert ticked_within >= within.statistics.states // 4
+
+
+def test_a_stop_inside_a_level_ends_the_search_unknown(tmp_path: Path,
+                                                       monkeypatch: pytest.MonkeyPatch) -> None:
+    system, props = _headon(tmp_path)
+    monkeypatch.setattr(backend, "TICK_WORLDS", 1)
+    full = Coordinator(system, props, Limits(), None, min_width=10**9).run()
+    calls: list[int] = []
+
+    def tick(self: Guard, statistics: Any) -> None:
+        calls.append(1)
+        if len(calls) == full.statistics.states // 2:
+            raise Stop("max-time 1 s reached before the search finished")
+
+    monkeypatch.setattr(Guard, "tick", tick)
+    outcome = Coordinator(system, props, Limits(), None, min_width=10**9).run()
+    assert outcome.status is Status.UNKNOWN and "max-time" in outcome.reason
+    assert outcome.statistics.states < full.statistics.states

@@ -27,7 +27,7 @@ every handler run (one per choice variant, revisits included).
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from functools import partial
 from typing import Any, final
 
@@ -140,7 +140,6 @@ class Search(SearchState):
         reduction = self.reduction
         find = self.store.find
         lifo = self._lifo
-        discover = self._discover
         counters = self.counters
         # without checkpoints, a tick is only the guard's (one call less per expansion)
         tick = self._tick if self._checkpoint is not None else partial(self.guard.tick,
@@ -170,21 +169,7 @@ class Search(SearchState):
             below = depth + 1
             transitions = (successors(world) if reduction is None
                            else reduction.successors(world, find, None if lifo else self._level[1]))
-            children = []
-            if reached is not None:
-                for t in transitions:
-                    counters.transitions += 1
-                    if t.failure is not None:
-                        discover(t, sid, below)  # raises Found
-                    key = t.world.key
-                    child = reached.get(key)
-                    if child is None:
-                        child = reached[key] = discover(t, sid, below)
-                    children.append(child)
-            else:
-                for t in transitions:
-                    counters.transitions += 1
-                    children.append(discover(t, sid, below))
+            children = self._children(transitions, sid, below, reached)
             if edges is not None:
                 edges.set(sid, children)
             self._expanding = None
@@ -198,6 +183,27 @@ class Search(SearchState):
         if reduction is not None and reduction.stale:
             reduction.steps_aside()  # a search that did not pay starts again unreduced
             self._step_aside()
+
+    def _children(self, transitions: Iterable[Transition], sid: int, below: int,
+                  reached: dict[Any, int] | None) -> list[int]:
+        """The ids of one world's children, each discovered; a BFS answers a revisit within
+        its level from `reached` (by key), without the store."""
+        counters, discover, children = self.counters, self._discover, []
+        if reached is None:
+            for t in transitions:
+                counters.transitions += 1
+                children.append(discover(t, sid, below))
+            return children
+        for t in transitions:
+            counters.transitions += 1
+            if t.failure is not None:
+                discover(t, sid, below)  # raises Found
+            key = t.world.key
+            child = reached.get(key)
+            if child is None:
+                child = reached[key] = discover(t, sid, below)
+            children.append(child)
+        return children
 
     def _next_level(self, depth: int) -> None:
         """A BFS starts expanding the worlds of `depth`: every world at most that deep is

@@ -6,7 +6,7 @@ coordinator counts of the traffic between them and how it saves a search.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any, Protocol, cast, final
 
@@ -80,6 +80,17 @@ class Backend(Protocol):
         ...
 
 
+TICK_WORLDS = 512  # worlds of a local level between two ticks (~10-30 ms of expansion)
+
+
+def _ticking(frontier: list[Item], tick: Callable[[], None]) -> Iterator[Item]:
+    """The frontier's worlds, calling `tick` before every TICK_WORLDS-th."""
+    for i, item in enumerate(frontier):
+        if i % TICK_WORLDS == 0:
+            tick()
+        yield item
+
+
 @final
 class LocalBackend:
     """One expander and one shard in this process."""
@@ -87,10 +98,15 @@ class LocalBackend:
     workers = 1
 
     def __init__(self, system: System, properties: PropertySet,
-                 reduction: Reduction | None = None) -> None:
+                 reduction: Reduction | None = None,
+                 tick: Callable[[], None] | None = None) -> None:
         self.expander = Expander(system, properties, 1, reduction)
         self.shard = ShardCore()
         self._fresh = True  # used as a cluster: the coordinator's relation not learned yet
+        # Called every TICK_WORLDS worlds of an unreduced level (Ctrl-C, max-time): a level
+        # of a wide search takes seconds here. A `Stop` it raises leaves the frontier as the
+        # level found it, so only a search that saves no checkpoint is given one.
+        self.tick = tick
 
     def ready(self) -> bool:
         """Always (`Backend.ready`)."""
@@ -101,7 +117,10 @@ class LocalBackend:
         stored = None
         if self.expander.reduction is not None:
             stored = self.shard.stored(self.expander.propose(max_depth))
-        expansion, blobs = self.expander.expand(max_depth, stored)
+        items = None
+        if self.tick is not None and stored is None:
+            items = _ticking(self.expander.frontier, self.tick)
+        expansion, blobs = self.expander.expand(max_depth, stored, items)
         return [expansion], [self.expander.accept(self.shard.claim(blobs))]
 
     def lineage(self, key: int) -> list[int]:
@@ -208,14 +227,15 @@ class Placement:
         factory: starts the cluster's backend; None: everything in this process.
         flow_factory: starts the workers of a relaxed order instead, or None.
         min_width, back_width, patience, start_states: as `Coordinator` takes them.
-        tick: called while waiting for the workers (Ctrl-C, max-time).
+        tick: called while waiting for the workers (Ctrl-C, max-time), and, with
+            `tick_within_levels`, inside the levels searched here (`LocalBackend`).
         report: called with a line when the workers are up, or None.
     """
 
     def __init__(self, system: System, properties: PropertySet, reduction: Reduction | None,
                  factory: Factory | None, flow_factory: FlowFactory | None, *,
                  min_width: int, back_width: int, patience: int, tick: Callable[[], None],
-                 start_states: int = 0,
+                 start_states: int = 0, tick_within_levels: bool = False,
                  report: Callable[[str], None] | None) -> None:
         self.system, self.properties, self.reduction = system, properties, reduction
         self.factory, self.flow_factory = factory, flow_factory
@@ -224,7 +244,8 @@ class Placement:
         self.tick, self.report = tick, report
         self.start_states = start_states
         self.started_at: int | None = None  # the level where the cluster started
-        self.local = LocalBackend(system, properties, reduction)
+        self.local = LocalBackend(system, properties, reduction,
+                                  tick if tick_within_levels else None)
         self.backend: Backend = self.local
         self.cluster: Backend | None = None
         self.flow: FlowBackend | None = None  # the relaxed order's workers, once searching

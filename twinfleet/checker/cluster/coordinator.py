@@ -134,7 +134,8 @@ class Coordinator:
                                min_width=min_width,
                                back_width=min_width if back_width is None else back_width,
                                patience=patience, tick=partial(self.guard.tick, self.statistics),
-                               report=report, start_states=start_states)
+                               report=report, start_states=start_states,
+                               tick_within_levels=checkpointing is None)
         self.roots: dict[int, tuple[int, ...]] = {}
         self.traffic = Traffic()
         self.tally = Tally()
