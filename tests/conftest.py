@@ -5,6 +5,7 @@ from __future__ import annotations
 import ctypes
 import enum
 import os
+import signal
 import sys
 import tempfile
 
@@ -27,6 +28,13 @@ from twinfleet.runtime.scenario.examples import add_examples  # noqa: E402
 PR_SET_CHILD_SUBREAPER = 36
 if sys.platform == "linux":
     ctypes.CDLL(None, use_errno=True).prctl(PR_SET_CHILD_SUBREAPER, 1, 0, 0, 0)
+
+# Tests press Ctrl-C (send SIGINT) to the commands they start. A test run started in the
+# background by a non-interactive shell (`cmd &`) ignores SIGINT, an ignored signal stays
+# ignored across exec, and a command that finds SIGINT ignored at its start keeps ignoring it,
+# as POSIX asks: those tests would then wait for a command that never hears them.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 # Commands run in-process (`twinfleet.cli.main([...])`) read the fleet registry too: give them
 # the test session's private one, as `child_env` gives it to subprocesses, so that a fleet the
