@@ -244,8 +244,8 @@ class Placement:
         self.tick, self.report = tick, report
         self.start_states = start_states
         self.started_at: int | None = None  # the level where the cluster started
-        self.local = LocalBackend(system, properties, reduction,
-                                  tick if tick_within_levels else None)
+        self._level_tick = tick if tick_within_levels else None
+        self.local = self._new_local()
         self.backend: Backend = self.local
         self.cluster: Backend | None = None
         self.flow: FlowBackend | None = None  # the relaxed order's workers, once searching
@@ -334,8 +334,11 @@ class Placement:
         took part, forgets its search."""
         if self.cluster is not None:
             self.cluster.reset(self.relation())
-        self.local = LocalBackend(self.system, self.properties, self.reduction)
+        self.local = self._new_local()
         self.backend = self.local
+
+    def _new_local(self) -> LocalBackend:
+        return LocalBackend(self.system, self.properties, self.reduction, self._level_tick)
 
     def graph(self) -> tuple[list[Graph], list[bytes]]:
         """What every worker saw of the graph and every shard's visited keys, at the end
