@@ -412,7 +412,7 @@ def _distributed(system: System, props: PropertySet, strategy: str, reduction: R
     timing = _timing_ranges(scenario, options)
     spec = SystemSpec(str(path.resolve()), system.semantics.value,
                       tuple(options.params), tuple(sorted(flags.items())), options.timing,
-                      timing.get("latency"), timing.get("topic_latency"),
+                      tuple(sorted(timing.items())),
                       None if reduction is None else meta["reduction"])
     limits = limits_for(options, scenario.check)
     relaxed = unordered and reduction is None and limits.max_depth is None and saving is None
@@ -427,16 +427,19 @@ def _distributed(system: System, props: PropertySet, strategy: str, reduction: R
 
 
 def _timing_ranges(scenario: Scenario, options: CheckOptions) -> dict[str, Any]:
-    """`System` arguments that make a timing model's bounds the latency ranges (none
-    without `options.timing`)."""
+    """`System` arguments that make a timing model's bounds the latency ranges and the
+    timers' lateness (none without `options.timing`)."""
     if options.timing is None:
         return {}
     from twinfleet.checker.timing import load_timing
 
     topology = System(scenario).topology
-    default, per = load_timing(options.timing).ranges(set(topology.subscribers)
-                                                      | set(topology.servers))
-    return {"latency": default, "topic_latency": per}
+    model = load_timing(options.timing)
+    default, per = model.ranges(set(topology.subscribers) | set(topology.servers))
+    ranges: dict[str, Any] = {"latency": default, "topic_latency": per}
+    if model.timer_lateness.bounds[1] > 0:  # else the scenario's check.timer_lateness holds
+        ranges["timer_lateness"] = model.timer_lateness.bounds
+    return ranges
 
 
 def _assumed_timing(scenario: Scenario, system: System, options: CheckOptions) -> AssumedTiming:

@@ -173,8 +173,8 @@ def add_statistical_arguments(p: argparse.ArgumentParser) -> None:
                    help="timing model (`twinfleet calibrate`; default: the scenario's "
                    "check.latency, each value equally likely, else the loopback model shipped "
                    "with twinfleet, said on the first line). Without --statistical, its "
-                   "latency bounds become the exhaustive search's latency ranges (every "
-                   "value a branch)")
+                   "latency bounds become the exhaustive search's latency ranges and its "
+                   "timer lateness check.timer_lateness (every value a branch)")
     g.add_argument("--simulations", type=int, default=None, metavar="N",
                    help="at most N simulations (default 1000; unbounded with --precision "
                    "or --assert-below, which stop by themselves)")

@@ -49,7 +49,8 @@ the pooled histograms, as before.
 
 Two uses. `twinfleet check --timing FILE` takes the model's *bounds* as the
 exhaustive search's latency ranges (every value a branch, as `check.latency`
-is); `twinfleet check --statistical` draws each latency from the model's
+is) and timer lateness (as `check.timer_lateness`, when the model's reaches
+above 0 ms); `twinfleet check --statistical` draws each latency from the model's
 *weights* (`checker.sampling`). Latencies are whole fleet ms, as the checker's
 clock is: a live latency of t - stamp ms (both whole fleet ms) is counted as is.
 

@@ -13,7 +13,7 @@ import dataclasses
 import hashlib
 import inspect
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, final
 
@@ -36,8 +36,7 @@ class SystemSpec:
     params: tuple[str, ...]
     flags: tuple[tuple[str, Any], ...]  # System's search flags (debug_state, verify...)
     timing: str | None = None
-    latency: Any = field(default=None)  # System latency arguments, when a timing model set them
-    topic_latency: Any = field(default=None)
+    ranges: tuple[tuple[str, Any], ...] = ()  # System's timing arguments from a timing model
     reduction: str | None = None  # "por": the partial-order reduction runs on the workers too
 
     def build(self) -> tuple[System, PropertySet, Reduction | None]:
@@ -48,9 +47,7 @@ class SystemSpec:
 
         scenario = load(self.scenario, semantics=self.semantics, params=self.params)
         props = PropertySet.from_scenario(scenario)
-        extra = {} if self.latency is None else {"latency": self.latency,
-                                                 "topic_latency": self.topic_latency}
-        system = System(scenario, properties=props, **dict(self.flags), **extra)
+        system = System(scenario, properties=props, **dict(self.flags), **dict(self.ranges))
         reduction = None if self.reduction is None else plan(system, props, "bfs",
                                                              self.reduction)[0]
         if reduction is not None:
