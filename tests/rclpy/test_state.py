@@ -56,3 +56,13 @@ def test_clock_time_duration_and_logger():
     logs = [log for step in report.trace["steps"] for log in step["logs"]]
     assert len(logs) == 2 and all("WARN" in str(log) and "tick at" in str(log) for log in logs)
     assert not any("not shown" in str(log) for log in logs)  # DEBUG is below INFO
+
+
+def test_a_state_reads_as_its_attributes_first():
+    """A live violation's report shows each node's state cut to a few hundred characters:
+    the node's own attributes come first, as the node has them."""
+    node = system().node("asker").instantiate()
+    node._tf_engine.node.pair = (1, {"a": [1, 2]})
+    shown = repr(node.state)
+    assert shown.startswith("rclpy node(") and "pair=(1, {'a': [1, 2]})" in shown
+    assert shown.index("pair=") < shown.index("timers=")

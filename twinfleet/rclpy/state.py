@@ -138,6 +138,15 @@ class RclpyState:
     on_set: Sequence[Any]
     futures: Sequence[Any]
 
+    def __repr__(self) -> str:
+        """The node's attributes first, as a person reads them (a live violation's report
+        shows the first few hundred characters), then what its executor holds, if any."""
+        parts = [", ".join(f"{key}={plain_view(value)!r}" for key, value in self.attrs)]
+        held = (("timers", self.timers), ("waiting", self.waiting), ("tasks", self.tasks),
+                ("calls", [c for c in self.calls if c]))
+        parts += [f"{name}={list(value)!r}" for name, value in held if value]
+        return f"rclpy node({'; '.join(parts)})"
+
     def __getattr__(self, name: str) -> Any:  # property expressions: node.attribute
         for key, value in object.__getattribute__(self, "attrs"):
             if key == name:
