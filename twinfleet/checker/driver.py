@@ -191,7 +191,7 @@ class CheckResult:
                  f"initial states {s.initial_states}",
                  f"time {s.elapsed_s:.2f} s ({s.transitions_per_s:,.0f} transitions/s"
                  + ("" if s.attempt_s is None else
-                    f"; {s.attempt_transitions_per_s:,.0f}/s in the {s.attempt_s:.0f} s since "
+                    f"; {s.attempt_transitions_per_s:,.0f}/s in the {_seconds(s.attempt_s)} since "
                     "the last restart") + f")  peak memory {s.peak_rss_mb:.0f} MB",
                  f"visited-state store {s.store_bytes / 2**20:.1f} MB "
                  f"({s.bytes_per_state:.0f} B/state, {s.digest_bits}-bit digests, "
@@ -424,6 +424,11 @@ def _distributed(system: System, props: PropertySet, strategy: str, reduction: R
     note = run.note if strategy == "bfs" or relaxed else \
         f"{run.note}; strict BFS order instead of {strategy}"
     return run.outcome, note
+
+
+def _seconds(span: float) -> str:
+    """A span as a summary says it: seconds, or milliseconds below one second."""
+    return f"{span:.1f} s" if span >= 1 else f"{span * 1000:.1f} ms"
 
 
 def _timing_ranges(scenario: Scenario, options: CheckOptions) -> dict[str, Any]:
