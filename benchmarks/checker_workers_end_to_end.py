@@ -16,7 +16,9 @@ ratio of the rates of each round's pair, their median and range. A search cut by
 Cases (safety properties only, as in checker_distributed.py):
 - `lanes4_jitter`: four robots in lanes, every delivery 0-1 ms late, unreduced
   (about 700,000 states, 25-40 s in one process here);
-- `lanes3_jitter`: three robots, the same (a search of about 10 s);
+- `lanes3_jitter`: three robots, the same (431,142 transitions: a search of 6-7 s
+  here now); `lanes3_jitter_52`: the same robots in lanes of 52 columns instead of 36
+  (about 660,000 transitions: the 10-s search of the aim); any `lanesN_jitter_L` works;
 - `c1a_jitter`: the paper's C1a with deliveries 0-1 ms late, unreduced (levels of
   tens of thousands of worlds; cut by --max-time);
 - `c1a_none`: C1a unreduced (41,608 states; below the size at which a cluster starts).
@@ -24,11 +26,11 @@ Cases (safety properties only, as in checker_distributed.py):
     python benchmarks/checker_workers_end_to_end.py [--cases lanes4_jitter,lanes3_jitter]
         [--workers 2] [--repeat 3] [--max-time 120]
 
-The acceptance run (the wide case and the 10-s case, two rounds each, about 5 minutes
+The acceptance run (the wide case and the 10-s case, three rounds each, about 8 minutes
 on an idle 2-core machine):
 
-    python benchmarks/checker_workers_end_to_end.py --cases lanes4_jitter,lanes3_jitter \
-        --repeat 2 --max-time 50
+    python benchmarks/checker_workers_end_to_end.py --cases lanes4_jitter,lanes3_jitter_52 \
+        --repeat 3 --max-time 50
 """
 
 from __future__ import annotations
@@ -49,7 +51,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path[:0] = [str(ROOT), str(ROOT / "benchmarks")]
 
 from checker_distributed import safety_only  # noqa: E402
-from checker_scaling import lanes_scenario  # noqa: E402
+from checker_scaling import LANE_LENGTH, lanes_scenario  # noqa: E402
 
 from twinfleet.cli import main as cli  # noqa: E402
 
@@ -61,7 +63,9 @@ CLOCK_TICKS = os.sysconf("SC_CLK_TCK")
 def scenario(case: str, out: Path) -> Path:
     """The scenario file of `case`, written into `out`."""
     if case.startswith("lanes"):
-        return safety_only(lanes_scenario(out, int(case[5]), "ros"), **JITTER)
+        robots, _, length = case.removeprefix("lanes").partition("_jitter")
+        return safety_only(lanes_scenario(out, int(robots), "ros",
+                                          int(length[1:]) if length else LANE_LENGTH), **JITTER)
     if case in ("c1a_jitter", "c1a_none"):
         cli(["examples", "--copy", "c1a", str(out)])
         return safety_only(out / "c1a.yaml", **(JITTER if case == "c1a_jitter" else {}))
@@ -179,7 +183,7 @@ def main() -> None:
             path = scenario(case, out)
             print(f"{case} (reduction none, --max-time {args.max_time:g}):", flush=True)
             ratios = case_rounds(path, "none", args.max_time, args.workers, args.repeat)
-            summary.append(f"  {case:<14} x{statistics.median(ratios):.2f} median "
+            summary.append(f"  {case:<16} x{statistics.median(ratios):.2f} median "
                            f"(x{min(ratios):.2f}-x{max(ratios):.2f} over {len(ratios)} rounds)")
     print(f"--workers {args.workers} against one process, end to end:")
     print("\n".join(summary))
