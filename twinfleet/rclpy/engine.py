@@ -202,10 +202,11 @@ class Engine:
         with self.handling(ctx):
             entry = self.services[index]
             if self.busy(entry.group):
-                raise RuntimeError(
+                raise ContractError(
                     f"{self.name}: a request reached service {entry.name!r} while a suspended "
-                    "coroutine holds its callback group; twinfleet cannot defer a service "
-                    "reply yet: put the service in its own callback group")
+                    "coroutine holds its callback group, and twinfleet's rclpy answers a "
+                    "request within its own step (a deferred reply is not supported yet)",
+                    "put the service in a callback group of its own")
             response = self.tasks.serve(entry, wire.thaw(request))
             self.drain()
             return wire.freeze(response)

@@ -48,6 +48,11 @@ def _is_async(callback: Callable[..., Any]) -> bool:
     return known
 
 
+#: What a service that would answer later can do instead, under twinfleet's rclpy.
+DEFERRED_FIX = ("answer from what the node already holds: ask the other service ahead (a "
+                "timer or a subscription callback) and keep its answer in an attribute")
+
+
 class Tasks:
     """The coroutine part of one node's engine."""
 
@@ -146,7 +151,8 @@ class Tasks:
             except StopIteration as stop:
                 return stop.value
             result.close()
-            raise RuntimeError(f"{self.engine.name}: service {entry.name!r}: its callback "
-                               "awaited a pending future; twinfleet cannot defer a service "
-                               "reply yet")
+            raise ContractError(f"{self.engine.name}: service {entry.name!r}: its callback "
+                                "awaited a pending future, and twinfleet's rclpy answers a "
+                                "request within its callback (a deferred reply is not "
+                                "supported yet)", DEFERRED_FIX)
         return result
