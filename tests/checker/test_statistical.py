@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from tests.checker.smc_systems import Coin4, Nested, Receiver, Sender
+from tests.checker.tpc import tpc_scenario
 from twinfleet import testing
 from twinfleet.checker.estimate import Decision, Sprt, clopper_pearson
 from twinfleet.checker.properties import PropertySet
@@ -18,6 +19,7 @@ from twinfleet.checker.simulate import Simulation, Simulator
 from twinfleet.checker.statistical import StatisticalOptions, check_statistical
 from twinfleet.checker.system import System
 from twinfleet.checker.timing import Histogram, TimingModel
+from twinfleet.cli import main
 
 COIN = TimingModel(Histogram((0, 1), (0.5, 0.5)))  # two latencies, equally likely
 
@@ -166,3 +168,14 @@ def test_kept_handler_runs_on_a_robot_fleet_are_reused_and_give_the_same_simulat
         handler_runs.append(system.runner.handler_runs)
     assert out[0] == out[1]
     assert handler_runs[1] < handler_runs[0] / 2  # most steps reuse a kept run
+
+
+def test_the_progress_line_shows_the_final_tables_interval(tmp_path, capsys):
+    path = tpc_scenario(tmp_path, decision_timeout_ms=3, latency=(0, 2))
+    main(["check", str(path), "--statistical", "--simulations", "200", "--seed", "3",
+          "--max-traces", "0"])
+    captured = capsys.readouterr()
+    last = [ln for ln in captured.err.splitlines() if ln.startswith("[check]")][-1]
+    interval = last.split(" P ")[1].split("]")[0].split(" ", 1)[1] + "]"
+    table = [ln for ln in captured.out.splitlines() if ln.strip().startswith("any property")]
+    assert table and interval in table[0], (last, table)

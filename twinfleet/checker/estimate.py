@@ -2,8 +2,8 @@
 
 Pure arithmetic on counts (no scipy): `clopper_pearson` is the exact binomial
 interval, found by bisection on the regularized incomplete beta function
-(its continued fraction, evaluated by the modified Lentz method); `wilson` is
-the score interval, cheap enough for a progress line. `Sprt` is Wald's
+(its continued fraction, evaluated by the modified Lentz method): a few
+milliseconds, so progress lines show it too. `Sprt` is Wald's
 sequential probability ratio test of "the probability is below `bound`"
 with an indifference region [`bound` - `indifference`, `bound`]:
 
@@ -91,29 +91,6 @@ def clopper_pearson(k: int, n: int, confidence: float) -> tuple[float, float]:
     low = 0.0 if k == 0 else beta_quantile(tail, k, n - k + 1)
     high = 1.0 if k == n else beta_quantile(1.0 - tail, k + 1, n - k)
     return low, high
-
-
-def normal_quantile(q: float) -> float:
-    """The standard normal quantile (bisection on erf; for interval widths)."""
-    low, high = -40.0, 40.0
-    for _ in range(100):
-        mid = (low + high) / 2
-        if 0.5 * math.erfc(-mid / math.sqrt(2)) < q:
-            low = mid
-        else:
-            high = mid
-    return (low + high) / 2
-
-
-def wilson(k: int, n: int, confidence: float) -> tuple[float, float]:
-    """The Wilson score interval for p after `k` successes in `n` trials."""
-    if n == 0:
-        return 0.0, 1.0
-    z = normal_quantile(1.0 - (1.0 - confidence) / 2)
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def binomial_test(k: int, n: int, p: float) -> float:

@@ -25,7 +25,7 @@ from pathlib import Path
 from typing import Any, final
 
 from twinfleet.checker.driver import load
-from twinfleet.checker.estimate import Decision, Sprt, clopper_pearson, wilson
+from twinfleet.checker.estimate import Decision, Sprt, clopper_pearson
 from twinfleet.checker.parallel import Engine, engine_for, split
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.simulate import Simulation, Simulator
@@ -167,17 +167,16 @@ class StatisticalResult:
     params: tuple[str, ...] = ()
     interrupted: bool = False
 
-    def estimates(self, *, exact: bool = True) -> list[Estimate]:
-        """Per property (then any property) its count and interval (Wilson if not exact)."""
+    def estimates(self) -> list[Estimate]:
+        """Per property (then any property) its count and Clopper-Pearson interval."""
         n = len(self.simulations)
-        interval = clopper_pearson if exact else wilson
         names = [*self.names, *sorted({v for s in self.simulations for v in s.violated}
                                       - set(self.names)), ANY]
         out = []
         for name in names:
             k = sum(1 for s in self.simulations if s.violated and (
                 name == ANY or name in s.violated))
-            out.append(Estimate(name, k, n, *interval(k, n, self.confidence)))
+            out.append(Estimate(name, k, n, *clopper_pearson(k, n, self.confidence)))
         return out
 
     @property
