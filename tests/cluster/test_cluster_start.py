@@ -52,7 +52,8 @@ def test_a_small_search_never_imports_ray(tmp_path: Path) -> None:
                             timeout=240, check=False)
     assert result.returncode == 1, result  # headon's collision
     assert f"{SHOWS_RAY}False" in result.stdout, result.stdout
-    assert "engine: ran in one process: no level held 100 worlds" in result.stdout, result.stdout
+    assert "engine: ran in one process: " in result.stdout, result.stdout
+    assert "states, under the 50,000 at which Ray's workers start" in result.stdout, result.stdout
 
 
 def _gone(pid: int) -> bool:

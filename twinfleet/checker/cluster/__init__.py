@@ -113,10 +113,13 @@ def _note(coordinator: Coordinator, outcome: Outcome, workers: int, min_width: i
     elif coordinator.started_at is not None and coordinator.distributed_at is None:
         note = (f"ran in one process: the Ray workers started at depth "
                 f"{coordinator.started_at} were not up before the search ended or narrowed")
+    elif coordinator.distributed_at is None and outcome.statistics.states < START_STATES:
+        note = (f"ran in one process: {outcome.statistics.states:,} states, under the "
+                f"{START_STATES:,} at which Ray's workers start (a smaller search is over "
+                "before they would be up)")
     elif coordinator.distributed_at is None:
         note = (f"ran in one process: no level held {min_width} worlds (--min-width) after "
-                f"the first {START_STATES:,} states (a smaller search is over before Ray "
-                "would be up)")
+                f"the first {START_STATES:,} states")
     else:
         per = t.claims / max(1, outcome.statistics.states)
         runs = coordinator.system.runner.handler_runs + sum(t.handler_runs)
