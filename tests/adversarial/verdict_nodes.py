@@ -25,9 +25,11 @@ class CountState:
 
 @dataclass(frozen=True)
 class CounterParams:
-    """`fail_at`: raise in the tick that reaches this count (0: never)."""
+    """`fail_at`: raise in the tick that reaches this count (0: never); `misuse_at`:
+    publish a plain object there instead, which breaks the node contract."""
 
     fail_at: int = 0
+    misuse_at: int = 0
 
 
 class Counter(Node):
@@ -43,6 +45,8 @@ class Counter(Node):
         self.state.count += 1
         if self.params.fail_at and self.state.count == self.params.fail_at:
             raise ValueError(f"count reached {self.state.count}")
+        if self.params.misuse_at and self.state.count == self.params.misuse_at:
+            ctx.publish("/flood", self.state)  # not a registered message
 
 
 @dataclass(frozen=True)

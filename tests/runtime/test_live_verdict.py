@@ -20,8 +20,9 @@ from twinfleet.runtime.scenario.spec import NodeEntry, Scenario
 pytestmark = pytest.mark.timeout(30)
 
 
-def scenario(*props: dict[str, Any], fail_at: int = 0) -> Scenario:
-    return Scenario.build("counting", [NodeEntry("counter", Counter, {"fail_at": fail_at}),
+def scenario(*props: dict[str, Any], fail_at: int = 0, misuse_at: int = 0) -> Scenario:
+    return Scenario.build("counting", [NodeEntry("counter", Counter, {"fail_at": fail_at,
+                                                                      "misuse_at": misuse_at}),
                                        NodeEntry("other", Counter)], properties=list(props))
 
 
@@ -69,6 +70,16 @@ def test_an_invariant_violated_names_the_property_the_event_and_the_states():
     assert "invariant 'counter.count < 3' is false at t=150 ms" in v.summary  # fleet time: 3rd tick
     assert "after periodic → counter.tick" in v.details[0]
     assert v.details[1] == "counter: CountState(count=3)"
+
+
+def test_a_handler_that_breaks_the_node_contract_is_a_breach_not_a_violation():
+    fleet = Fleet(scenario({"name": "clean", "kind": "no_failure"}, misuse_at=2))
+    fleet.run(200)
+    v = fleet.verdict()
+    assert (v.status, v.exit_code) == (Status.BREACH, 4), v
+    assert v.summary.startswith("contract breach in counter.tick: ContractError: "), v.summary
+    assert "; fix: register the class with @message" in v.summary
+    assert not fleet.judge.violations  # the same code breaks no property: it has no verdict
 
 
 def test_a_handler_failure_violates_the_scenarios_no_failure_property():

@@ -206,7 +206,8 @@ def _launch_parser(sub: argparse._SubParsersAction) -> None:
                        "(runtime verification over the states the nodes report); the run ends "
                        "with `result: PASSED` (exit 0), `FAILED` and the property violated (1), "
                        "`INCONCLUSIVE` and why (3: a node dropped samples or stalled), "
-                       "`CONTRACT BREACH` (4: a node published a type its topic does not carry), "
+                       "`CONTRACT BREACH` (4: a handler broke the node contract, as `check` "
+                       "would say, e.g. published a type its topic does not carry), "
                        "or `interrupted` (130, Ctrl-C).")
     p.add_argument("scenario", help="scenario YAML file, or the name of a shipped example "
                                     "(twinfleet examples lists them)")

@@ -11,9 +11,11 @@ failed nothing costs one snapshot and one bytes comparison. With
 ``states=False`` (no property reads the node) only failures are reported.
 
 Wire format: a msgpack array ``[seq, now_ms, kind, handler, sender, topic,
-failure, state]``; ``seq`` counts reports from 1 (a gap is a lost report),
+failure, state, breach]``; ``seq`` counts reports from 1 (a gap is a lost report),
 ``failure`` is the failure's text or nil, ``state`` the snapshot bytes or nil
-when unchanged. The launcher's side is `runtime.fleet.live_verdict`.
+when unchanged, ``breach`` true when the failure is a breach of the node contract
+(the handler raised `ContractError`: the checker answers no verdict then, and
+neither does the launcher). The launcher's side is `runtime.fleet.live_verdict`.
 """
 
 from __future__ import annotations
@@ -45,6 +47,7 @@ class StateReport:
     topic: str
     failure: str | None
     state: bytes | None  # snapshot bytes; None: unchanged
+    breach: bool = False  # the failure breaks the node contract (`ContractError`)
 
     def event(self) -> str:
         """The causing event in words, e.g. ``delivery on /poses from r2 → map_server.on_pose``."""
@@ -56,7 +59,9 @@ class StateReport:
 def encode_report(seq: int, record: Handled, failure: str | None, state: bytes | None) -> bytes:
     """The wire form of a report on `record` (module docstring)."""
     e = record.entry
-    return _PACK([seq, record.now, e.kind.value, e.handler, e.sender, e.topic, failure, state])
+    breach = record.error is not None and record.error.contract
+    return _PACK([seq, record.now, e.kind.value, e.handler, e.sender, e.topic, failure, state,
+                  breach])
 
 
 def decode_report(node: str, payload: bytes) -> StateReport:
@@ -66,16 +71,18 @@ def decode_report(node: str, payload: bytes) -> StateReport:
         ValueError: the payload is not a state report.
     """
     try:
-        seq, now, kind, handler, sender, topic, failure, state = msgpack.unpackb(payload, raw=False)
+        seq, now, kind, handler, sender, topic, failure, state, breach = \
+            msgpack.unpackb(payload, raw=False)
     except Exception as exc:  # msgpack's errors, or the wrong shape
         raise ValueError(f"not a state report: {exc}") from None
     return StateReport(node, int(seq), int(now), str(kind), str(handler), str(sender),
-                       str(topic), failure, state)
+                       str(topic), failure, state, bool(breach))
 
 
 def _failure(record: Handled) -> str | None:
     if record.error is not None:
-        return str(record.error)
+        fix = f"; fix: {record.error.fix}" if record.error.contract and record.error.fix else ""
+        return f"{record.error}{fix}"
     reasons = [e.reason for e in record.effects if type(e) is Fail]
     return f"{record.node.name}.{record.entry.handler}: ctx.fail({'; '.join(reasons)})" \
         if reasons else None
