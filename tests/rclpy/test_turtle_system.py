@@ -65,7 +65,7 @@ def test_interface_show_and_topic_pub_reach_an_rclpy_fleet():
         assert pub.returncode == 0, pub.stdout + pub.stderr
         out, _ = fleet.communicate(timeout=60)
     # the turtle moved 5 on the outside command; the monitor saw it past the goal
-    assert "within_goal violated" in out and "('farthest', 5)" in out, out
+    assert "within_goal violated" in out and "monitor: rclpy node(farthest=5)" in out, out
 
 
 @pytest.mark.slow
