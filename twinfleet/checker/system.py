@@ -210,6 +210,11 @@ class System:
         return self._apply(world, action,
                            self.runner.run_drawn(ev, world.states[ev.target], chooser))
 
+    def apply(self, world: World, action: Action, variant: Variant) -> Transition:
+        """The transition of one of `variants(world, action)`: a walk that picks one
+        builds only that world."""
+        return self._apply(world, action, variant)
+
     def outcomes(self, world: World, action: Action) -> list[Transition]:
         """`action` taken with every combination of answers to its choice points."""
         return [self._apply(world, action, v) for v in self._variants(world, action)]

@@ -47,14 +47,14 @@ import builtins
 from collections.abc import Callable, Iterable, Sequence
 from typing import TYPE_CHECKING, Any, final
 
-from twinfleet.checker.transition import RunEvent
+from twinfleet.checker.transition import Crash, Drop, RunEvent
 
 if TYPE_CHECKING:
     from types import CodeType
 
     from twinfleet.checker.properties import PropertySet
     from twinfleet.checker.system import System
-    from twinfleet.checker.transition import Transition, Variant
+    from twinfleet.checker.transition import Action, Transition, Variant
     from twinfleet.checker.world import World
 
 _CACHE_LIMIT = 4_096  # values kept per part (by the node states it reads)
@@ -231,34 +231,61 @@ class Visibility:
         self.rises = 0  # events a rising goal let through (for the statistics)
         self._rose: set[tuple[int, bytes, bytes]] = set()  # (node, before, after) seen not to fall
 
+    @property
+    def watching(self) -> bool:
+        """True while `observe` reads transitions: a rising goal has not fallen yet."""
+        return self.rising and self.pending_fall is None
+
     def observe(self, system: System, world: World, transitions: Iterable[Transition]) -> None:
         """Check that no transition makes an atom of a rising goal fall; the first that does
         turns the relaxation off (`rising`; the search must restart), or, frozen, is noted
         (`pending_fall`)."""
-        if not self.rising or self.pending_fall is not None:
+        if self.watching:
+            self._falls(system, world.states, ((node, tr.event.method, tr.world.states)
+                                               for tr in transitions for node in tr.changed))
+
+    def observe_moves(self, system: System, world: World,
+                      moves: Iterable[tuple[Action, Variant]]) -> None:
+        """`observe` for the transitions of `moves` (`System.apply` of each), not built."""
+        if not self.watching:
             return
+        before, events = world.states, world.events
+        changes = []
+        for action, v in moves:
+            if type(action) is Drop:
+                continue  # nothing runs
+            if type(action) is Crash:
+                node, method = action.node, ""
+            else:
+                ev = events[action.index]
+                node, method = ev.target, ev.method
+            if v.state is not before[node]:
+                changes.append((node, method, (*before[:node], v.state, *before[node + 1:])))
+        self._falls(system, before, changes)
+
+    def _falls(self, system: System, before: tuple[bytes, ...],
+               changes: Iterable[tuple[int, str, tuple[bytes, ...]]]) -> None:
+        """`observe` on (node changed, the handler that ran, the states after) triples."""
         rising, seen = self._rising, self._rose
-        before = world.states
-        for tr in transitions:
-            for node in tr.changed:
-                if not rising[node]:
-                    continue
-                # a fall reads the node's state before and after only: once per pair
-                key = (node, before[node], tr.world.states[node])
-                if key in seen:
-                    continue
-                for expr in rising[node]:
-                    if expr.falls(system, before, tr.world.states, node):
-                        fell = (f"{system.names[node]}.{tr.event.method} makes an atom of "
-                                f"`{expr.source}` false")
-                        if self.frozen:
-                            self.pending_fall = fell
-                        else:
-                            self.rising, self.fell = False, fell
-                        return
-                if len(seen) >= _CACHE_LIMIT:
-                    seen.clear()
-                seen.add(key)
+        for node, method, after in changes:
+            if not rising[node]:
+                continue
+            # a fall reads the node's state before and after only: once per pair
+            key = (node, before[node], after[node])
+            if key in seen:
+                continue
+            for expr in rising[node]:
+                if expr.falls(system, before, after, node):
+                    fell = (f"{system.names[node]}.{method} makes an atom of "
+                            f"`{expr.source}` false")
+                    if self.frozen:
+                        self.pending_fall = fell
+                    else:
+                        self.rising, self.fell = False, fell
+                    return
+            if len(seen) >= _CACHE_LIMIT:
+                seen.clear()
+            seen.add(key)
 
     def commit(self, fell: str | None = None) -> None:
         """Turn the relaxation off if a fall was noted here, or `fell` (noted by another
