@@ -20,6 +20,7 @@ from twinfleet.checker.transition import RunEvent
 if TYPE_CHECKING:
     from twinfleet.checker.publications import Publications
     from twinfleet.checker.system import System
+    from twinfleet.checker.transition import Variant
     from twinfleet.checker.visibility import Visibility
     from twinfleet.checker.world import World
 
@@ -112,7 +113,7 @@ class Closure:
                     if h not in seen and h[0] not in frozen:
                         seen.add(h)
                         reach.append(h)
-            entry = _remember(derived, key, (seen, {}))
+            entry = remember(derived, key, (seen, {}))
         self._tops = entry
         return entry[0]
 
@@ -121,28 +122,7 @@ class Closure:
         other nodes; None if one is of a kind the reduction does not know."""
         if i in self._sends:
             return self._sends[i]
-        world = self.world
-        ev = world.events[i]
-        variants = self.system.variants(world, RunEvent(i))
-        # System keeps one variant list per (node state, event, time), met in many worlds:
-        # what it sends is kept beside it (the entry holds the list, so its id stays unique)
-        derived = self.publications.derived
-        entry = derived.get(id(variants))
-        if entry is not None and entry[0] is variants:
-            found: list[tuple[int, int]] | None = entry[1]
-        else:
-            found = []
-            for v in variants:
-                for e in v.events:
-                    if e.kind not in KNOWN_KINDS:
-                        found = None
-                        break
-                    if e.due == self.t and e.target != ev.target:
-                        found.append((e.target, e.priority))
-                if found is None:
-                    break
-            _remember(derived, id(variants), (variants, found))
-        self._sends[i] = found
+        found = self._sends[i] = sends_at(self.system, self.publications, self.world, i)
         return found
 
     def persistent(self, seed: int) -> list[int] | None:
@@ -285,7 +265,75 @@ class Closure:
 _DERIVED_LIMIT: Final = 8_192  # entries kept in `Publications.derived`
 
 
-def _remember(derived: dict[Any, Any], key: object, value: _T) -> _T:
+def sends_at(system: System, publications: Publications, world: World, i: int,
+             variants: list[Variant] | None = None) -> list[tuple[int, int]] | None:
+    """(target, priority) of the events due at `world`'s instant that some variant of its
+    enabled event i (`variants`, if the caller has them) creates at other nodes; None if
+    one is of a kind the reduction does not know. Read only: kept beside the variants."""
+    if variants is None:
+        variants = system.variants(world, RunEvent(i))
+    # System keeps one variant list per (node state, event, time), met in many worlds:
+    # what it sends is kept beside it (the entry holds the list, so its id stays unique)
+    derived = publications.derived
+    entry = derived.get(id(variants))
+    if entry is not None and entry[0] is variants:
+        found: list[tuple[int, int]] | None = entry[1]
+        return found
+    events = world.events
+    target, t = events[i].target, events[0].due
+    found = []
+    for v in variants:
+        for e in v.events:
+            if e.kind not in KNOWN_KINDS:
+                found = None
+                break
+            if e.due == t and e.target != target:
+                found.append((e.target, e.priority))
+        if found is None:
+            break
+    return remember(derived, id(variants), (variants, found))[1]
+
+
+def shape(system: System, publications: Publications, visibility: Visibility, world: World,
+          enabled: list[int]) -> tuple[Any, ...] | None:
+    """Everything a `Closure` of `world` reads, as a key: the events due at its instant
+    (whose handler, from whom, at what priority), which of them are enabled, and what
+    each enabled one may send there. Worlds of one shape have the same persistent sets
+    while the relation stays as it is (a key of `Publications.derived`): head-on's 242
+    closures have 55 shapes, C1a's 7,436 have 172. None when the closure reads more of
+    the world: an enabled event changes a property atom (the visibility proviso reads
+    the world's states), or a node is loose (its pairs are run in the world)."""
+    events = world.events
+    commuting = system.topology.commuting
+    sent: list[tuple[tuple[int, int], ...] | None] = []
+    declared = False  # an enabled event's handler is declared commuting
+    for i in enabled:
+        ev = events[i]
+        variants = system.variants(world, RunEvent(i))
+        if not visibility.silent(system, world, i, variants):
+            return None
+        found = sends_at(system, publications, world, i, variants)
+        sent.append(None if found is None else tuple(found))
+        declared = declared or (ev.target, ev.method) in commuting
+    if declared:
+        by_node: dict[int, list[int]] = {}
+        for i in enabled:
+            by_node.setdefault(events[i].target, []).append(i)
+        if loose_nodes(system, world, by_node):
+            return None
+    t = events[0].due
+    due = []
+    for ev in events:
+        if ev.due != t:
+            break
+        due.append((ev.target, ev.method, ev.sender, ev.priority, ev.kind))
+    return (_SHAPE, tuple(due), tuple(enabled), tuple(sent))
+
+
+_SHAPE: Final = "persistent set by shape"  # a key of `Publications.derived` (`shape`)
+
+
+def remember(derived: dict[Any, Any], key: object, value: _T) -> _T:
     """Store `value` under `key` in `derived` (emptied first when full); return it."""
     if len(derived) >= _DERIVED_LIMIT:
         derived.clear()
