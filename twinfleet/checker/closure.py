@@ -20,7 +20,6 @@ from twinfleet.checker.transition import RunEvent
 if TYPE_CHECKING:
     from twinfleet.checker.publications import Publications
     from twinfleet.checker.system import System
-    from twinfleet.checker.transition import Variant
     from twinfleet.checker.visibility import Visibility
     from twinfleet.checker.world import World
 
@@ -265,13 +264,12 @@ class Closure:
 _DERIVED_LIMIT: Final = 8_192  # entries kept in `Publications.derived`
 
 
-def sends_at(system: System, publications: Publications, world: World, i: int,
-             variants: list[Variant] | None = None) -> list[tuple[int, int]] | None:
+def sends_at(system: System, publications: Publications, world: World, i: int
+             ) -> list[tuple[int, int]] | None:
     """(target, priority) of the events due at `world`'s instant that some variant of its
-    enabled event i (`variants`, if the caller has them) creates at other nodes; None if
-    one is of a kind the reduction does not know. Read only: kept beside the variants."""
-    if variants is None:
-        variants = system.variants(world, RunEvent(i))
+    enabled event i creates at other nodes; None if one is of a kind the reduction does
+    not know. Read only: kept beside the variant list."""
+    variants = system.variants(world, RunEvent(i))
     # System keeps one variant list per (node state, event, time), met in many worlds:
     # what it sends is kept beside it (the entry holds the list, so its id stays unique)
     derived = publications.derived
@@ -294,25 +292,21 @@ def sends_at(system: System, publications: Publications, world: World, i: int,
     return remember(derived, id(variants), (variants, found))[1]
 
 
-def shape(system: System, publications: Publications, visibility: Visibility, world: World,
-          enabled: list[int]) -> tuple[Any, ...] | None:
-    """Everything a `Closure` of `world` reads, as a key: the events due at its instant
-    (whose handler, from whom, at what priority), which of them are enabled, and what
-    each enabled one may send there. Worlds of one shape have the same persistent sets
-    while the relation stays as it is (a key of `Publications.derived`): head-on's 242
-    closures have 55 shapes, C1a's 7,436 have 172. None when the closure reads more of
-    the world: an enabled event changes a property atom (the visibility proviso reads
-    the world's states), or a node is loose (its pairs are run in the world)."""
+def shape(system: System, publications: Publications, world: World, enabled: list[int]
+          ) -> tuple[Any, ...] | None:
+    """Everything a `Closure` of `world` reads but the visibility proviso, as a key: the
+    events due at its instant (whose handler, from whom, at what priority), which of them
+    are enabled, and what each enabled one may send there. Worlds of one shape whose
+    enabled events change no property atom have the same persistent sets while the
+    relation stays as it is (head-on's 242 closures have 55 shapes, C1a's 7,436 have
+    172). None when a node is loose: its pairs are run in the world."""
     events = world.events
     commuting = system.topology.commuting
     sent: list[tuple[tuple[int, int], ...] | None] = []
     declared = False  # an enabled event's handler is declared commuting
     for i in enabled:
         ev = events[i]
-        variants = system.variants(world, RunEvent(i))
-        if not visibility.silent(system, world, i, variants):
-            return None
-        found = sends_at(system, publications, world, i, variants)
+        found = sends_at(system, publications, world, i)
         sent.append(None if found is None else tuple(found))
         declared = declared or (ev.target, ev.method) in commuting
     if declared:

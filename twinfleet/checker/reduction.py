@@ -432,14 +432,19 @@ class Reduction:
                 return None
         key = None
         if self._closures >= SHAPES_AFTER:
-            key = shape(self.system, self.publications, self.visibility, world, enabled)
+            key = shape(self.system, self.publications, world, enabled)
         if key is not None:
             known = self.publications.derived.get(key, _UNKNOWN)
+            if known is None:
+                return None
             if known is not _UNKNOWN:
-                return None if known is None else [enabled[k] for k in known]
+                chosen = [enabled[k] for k in known]
+                if self.visibility.silent(self.system, world, chosen):
+                    return chosen
+                key = None  # a chosen event is visible here: the closure decides
         self._closures += 1
         best = self._closure(world, enabled)
-        if key is not None:
+        if key is not None and self.visibility.silent(self.system, world, enabled):
             where = {i: k for k, i in enumerate(enabled)}
             remember(self.publications.derived, key,
                      None if best is None else tuple(where[i] for i in best))

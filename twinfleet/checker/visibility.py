@@ -328,13 +328,13 @@ class Visibility:
         return any(not (only_rises and self._rises_unseen(acyclic))
                    for _, only_rises in self._changing(system, world, index)[1])
 
-    def silent(self, system: System, world: World, index: int,
-               variants: list[Variant] | None = None) -> bool:
-        """True if pending event `index` of `world` (its `variants`, if the caller has
-        them) changes no atom of any expression: no persistent set holding it needs the
-        proviso (`needs`), whatever the rest of the world."""
-        return not self._of[world.events[index].target] or \
-            not self._changing(system, world, index, variants)[1]
+    def silent(self, system: System, world: World, indices: Iterable[int]) -> bool:
+        """True if no pending event of `indices` of `world` changes an atom of any
+        expression: a persistent set of them needs no proviso (`needs`), whatever the
+        rest of the world."""
+        of = self._of
+        return not any(of[world.events[i].target] and self._changing(system, world, i)[1]
+                       for i in indices)
 
     def _rises_unseen(self, acyclic: Callable[[], bool] | None) -> bool:
         """The rising-goal rule (module docstring): a change that only makes atoms of a
@@ -343,15 +343,13 @@ class Visibility:
         return self.rising and acyclic is not None and acyclic()
 
     def _changing(self, system: System, world: World, index: int,
-                  variants: list[Variant] | None = None,
                   ) -> tuple[list[bytes], list[tuple[Expression, bool]]]:
         """The states pending event `index` leaves its node in (where it changes it), and
         the expressions that change, each with whether the change is only a rise. It reads
         only the node's state before (fixed by the variant list) and after, so it is
         decided once per list; a guard reads the world."""
         node = world.events[index].target
-        if variants is None:
-            variants = system.variants(world, RunEvent(index))
+        variants = system.variants(world, RunEvent(index))
         cached = self._changes.get(id(variants))
         if cached is None or cached[0] is not variants:
             states = world.states
