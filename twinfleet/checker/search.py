@@ -130,7 +130,9 @@ class Search(SearchState):
     def _explore(self) -> None:
         max_depth = self.limits.max_depth
         if not self._resumed:
-            for init in self.system.initial():
+            if self._initial is None:
+                self._initial = self.system.initial()
+            for init in self._initial:
                 self.counters.initial += 1
                 self._discover(init, -1, 0)
         frontier = self._frontier

@@ -29,6 +29,7 @@ from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.store import StateStore
 from twinfleet.checker.system import System
+from twinfleet.checker.transition import Transition
 from twinfleet.checker.world import World
 from twinfleet.runtime.contract.kinds import Status
 
@@ -73,6 +74,9 @@ class SearchState:
         self._elapsed_before = 0.0
         self._attempt: float | None = None  # when the search last started again (monotonic)
         self._aside: str | None = None  # why the reduction stepped aside (`Search`)
+        # the initial transitions, built once: a restart starts from them again, and
+        # building them runs every start handler (head-on: 0.7 ms a pass)
+        self._initial: list[Transition] | None = None
         self._hashed_before = 0  # content hashes of the searches this one continues
         self._expanding: tuple[World, int, int] | None = None
         self._expanded_from = 0  # `counters.transitions` when `_expanding` began
