@@ -24,6 +24,7 @@ if TYPE_CHECKING:
     from twinfleet.checker.world import World
 
 _INF: Final = 1 << 62  # the enabled priority of a node with nothing enabled
+_NO_ROOTS: Final[frozenset[tuple[int, str]]] = frozenset()
 _T = TypeVar("_T")
 
 
@@ -80,7 +81,7 @@ class Closure:
                 # (Rule 6) it could push the target over its depth and let a delivery of
                 # the target's enabled ones be dropped (`queued`: (node, priority) pairs).
                 harmless.add((ev.sender, ev.target))
-        self.due = due
+        self.due = frozenset(due)  # a key of `runnable`'s entries, frozen once
         self.harmless = harmless
         self.unknown = unknown
         self._sends: dict[int, list[tuple[int, int]] | None] = {}
@@ -99,9 +100,9 @@ class Closure:
         shared by the closures of every world with the same due handlers: read only."""
         # Few distinct (due handlers, frozen, loose handlers) recur in many worlds, so the
         # search (and `_top`'s maxima over the set) is done once per key and relation version.
-        roots = [self._handler(x) for x in loose if x in frozen]
+        roots = [self._handler(x) for x in loose if x in frozen] if loose else []
         derived = self.publications.derived
-        key = (frozenset(self.due), frozenset(frozen), frozenset(roots))
+        key = (self.due, frozenset(frozen), frozenset(roots) if roots else _NO_ROOTS)
         entry = derived.get(key)
         if entry is None:
             out = self.publications.out
