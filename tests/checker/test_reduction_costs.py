@@ -1,0 +1,136 @@
+"""What a reduced search spends besides its worlds (docs/reduction.md §5, §6): persistent
+sets looked up by shape, walks that build only the worlds they step to, and restarts that
+start from the initial transitions built once. Each must leave the search's choices, what
+it learns and its counts exactly as they were."""
+
+from __future__ import annotations
+
+import random
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from twinfleet.checker import reduction as reduction_module
+from twinfleet.checker.driver import load
+from twinfleet.checker.properties import PropertySet
+from twinfleet.checker.reduction import Reduction
+from twinfleet.checker.search import Search
+from twinfleet.checker.system import System
+from twinfleet.checker.world import World
+
+pytestmark = pytest.mark.timeout(60)
+
+LAUNCH = Path(__file__).resolve().parents[2] / "twinfleet" / "launch"
+STATION = Path(__file__).resolve().parents[1] / "data" / "station" / "station.yaml"
+
+
+def searched(path: Path) -> tuple[System, Reduction, Any]:
+    """A fresh reduced BFS of `path`: its system, reduction and outcome."""
+    scenario_ = load(str(path))
+    props = PropertySet.from_scenario(scenario_)
+    system = System(scenario_, properties=props)
+    reduction = Reduction(system, props)
+    outcome = Search(system, props, handle_sigint=False, reduction=reduction).run("bfs")
+    return system, reduction, outcome
+
+
+def choices(monkeypatch: pytest.MonkeyPatch, path: Path) -> tuple[dict[Any, Any], int, Any]:
+    """Per world key, the persistent set the last pass chose (None: all); the closures
+    computed in the whole run; the outcome."""
+    chosen: dict[Any, Any] = {}
+    closures = [0]
+    choose, closure = Reduction._choose, Reduction._closure
+
+    def recording(self: Reduction, world: World, enabled: list[int]) -> list[int] | None:
+        found = choose(self, world, enabled)
+        chosen[(self.stats.restarts, world.key)] = None if found is None else tuple(found)
+        return found
+
+    def counting(self: Reduction, world: World, enabled: list[int]) -> list[int] | None:
+        closures[0] += 1
+        return closure(self, world, enabled)
+
+    monkeypatch.setattr(Reduction, "_choose", recording)
+    monkeypatch.setattr(Reduction, "_closure", counting)
+    _, _, outcome = searched(path)
+    return chosen, closures[0], outcome
+
+
+@pytest.mark.parametrize("name", ["headon", "c2c"])
+def test_persistent_sets_by_shape_are_the_sets_the_closure_chooses(monkeypatch, name):
+    # Head-on has 55 shapes in its 242 closures: looked up by shape, the same set in every
+    # world, the same graph, from about a quarter of the closures.
+    path = LAUNCH / f"{name}.yaml"
+    by_shape, computed, outcome = choices(monkeypatch, path)
+    monkeypatch.setattr(reduction_module, "SHAPES_AFTER", 1 << 40)  # every world's closure
+    by_closure, every, plain = choices(monkeypatch, path)
+    assert by_shape == by_closure
+    assert outcome.statistics.states == plain.statistics.states
+    assert outcome.status == plain.status
+    assert computed < every / 2
+
+
+def walk_by_transitions(self: Reduction, world: World, rng: random.Random, limit: int) -> int:
+    """A walk that builds every transition of each world's persistent set and picks one:
+    what `Reduction._walk` did before it picked among (action, variant) pairs."""
+    seen = {world.key}
+    for steps in range(limit):
+        live = [t for t in self.reduced(world, self.candidates(world)[0])
+                if t.failure is None] if world.events else []
+        if not live:
+            return steps
+        world = rng.choice(live).world
+        if world.key in seen or self.properties.check_world(self.system, world):
+            return steps + 1
+        seen.add(world.key)
+    return limit
+
+
+@pytest.mark.parametrize(("path", "fewer"), [(LAUNCH / "headon.yaml", True), (STATION, False)])
+def test_a_walk_builds_only_the_worlds_it_steps_to(monkeypatch, path, fewer):
+    # Head-on's walk at its restart: 167 steps, 171 worlds built (one per step, 4 by a
+    # pair check of the map server's commuting handler) against 199 when every transition
+    # of a step was; the same steps, the same relation learned, the same search. The
+    # station's walk has one transition per step either way.
+    built = [0]
+    walking = [False]
+    apply, walk_on = System._apply, Reduction.walk_on
+
+    def counted(self: System, *args: Any) -> Any:
+        built[0] += walking[0]
+        return apply(self, *args)
+
+    def watched(self: Reduction, *args: Any) -> None:
+        walking[0] = True
+        walk_on(self, *args)
+        walking[0] = False
+
+    monkeypatch.setattr(System, "_apply", counted)
+    monkeypatch.setattr(Reduction, "walk_on", watched)
+    _, lean, outcome = searched(path)
+    lean_built = built[0]
+    built[0] = 0
+    monkeypatch.setattr(Reduction, "_walk", walk_by_transitions)
+    _, full, before = searched(path)
+    assert lean.stats.probe_steps == full.stats.probe_steps > 0
+    assert lean.learned_state() == full.learned_state()
+    assert outcome.statistics.states == before.statistics.states
+    assert lean.stats.probe_steps <= lean_built <= built[0]
+    assert (lean_built < built[0]) is fewer
+
+
+def test_a_restart_starts_from_the_initial_transitions_built_once(monkeypatch):
+    # Head-on restarts once; building its initial transitions runs every start handler
+    # (0.7 ms), once per search.
+    built = [0]
+    initial = System.initial
+
+    def counted(self: System) -> Any:
+        built[0] += 1
+        return initial(self)
+
+    monkeypatch.setattr(System, "initial", counted)
+    _, reduction, _ = searched(LAUNCH / "headon.yaml")
+    assert reduction.stats.restarts >= 1
+    assert built[0] == 1
