@@ -102,11 +102,12 @@ ASIDE_NONE_WORLDS: Final = 100
 RESTART_CACHE: Final = 4_096
 
 # A world's persistent set is looked up by its shape (`closure.shape`) once the run has
-# computed SHAPES_AFTER closures: a shape costs the visibility checks of every enabled event
-# (a closure checks only the set it takes), and pays once shapes recur, which they do in
-# all but the smallest searches (station: 16 shapes in 16 closures; head-on: 55 in 242;
-# C1a: 172 in 7,436).
-SHAPES_AFTER: Final = 64
+# computed SHAPES_AFTER closures: a shape reads the sends of every enabled event (a closure
+# only those of the nodes it adds), and pays once shapes recur, which they do in all but
+# the smallest searches (station: 16 shapes in 16 closures; head-on: 55 in 242; C1a: 172
+# in 7,436). From the start, the station cost 5 % more; from 16 or 64, head-on's check
+# took 1.07-1.13 or 1.14-1.16 times the unreduced one (two runs each, a loaded machine).
+SHAPES_AFTER: Final = 16
 
 # The fields of the settings the closure's rules were written for: a new rule (a field
 # set to anything but its default) turns the reduction off until it is covered here.
