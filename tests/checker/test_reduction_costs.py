@@ -1,7 +1,8 @@
 """What a reduced search spends besides its worlds (docs/reduction.md §5, §6): persistent
-sets looked up by shape, walks that build only the worlds they step to, and restarts that
-start from the initial transitions built once. Each must leave the search's choices, what
-it learns and its counts exactly as they were."""
+sets looked up by shape, walks that build only the worlds they step to, restarts that
+start from the initial transitions built once, and no restart for a pass that reduced
+nothing. Each must leave the search's choices, what it learns and its counts as they
+were."""
 
 from __future__ import annotations
 
@@ -12,7 +13,8 @@ from typing import Any
 import pytest
 
 from twinfleet.checker import reduction as reduction_module
-from twinfleet.checker.driver import load
+from twinfleet.checker import search as search_module
+from twinfleet.checker.driver import CheckOptions, check, load
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.reduction import Reduction
 from twinfleet.checker.search import Search
@@ -121,8 +123,8 @@ def test_a_walk_builds_only_the_worlds_it_steps_to(monkeypatch, path, fewer):
 
 
 def test_a_restart_starts_from_the_initial_transitions_built_once(monkeypatch):
-    # Head-on restarts once; building its initial transitions runs every start handler
-    # (0.7 ms), once per search.
+    # The station restarts once (its first level reduced a world); building its initial
+    # transitions runs every start handler, once per search.
     built = [0]
     initial = System.initial
 
@@ -131,6 +133,39 @@ def test_a_restart_starts_from_the_initial_transitions_built_once(monkeypatch):
         return initial(self)
 
     monkeypatch.setattr(System, "initial", counted)
-    _, reduction, _ = searched(LAUNCH / "headon.yaml")
-    assert reduction.stats.restarts >= 1
+    _, reduction, _ = searched(STATION)
+    assert reduction.stats.restarts == 1
     assert built[0] == 1
+
+
+def restart_when_stale(self: Search, depth: int, first: World) -> None:
+    """`Search._next_level` as it was: a pass that learned a send restarts, reduced or not."""
+    reduction = self.reduction
+    if reduction is not None:
+        if reduction.steps_aside():
+            self._step_aside()
+        else:
+            reduction.probe(len(self.store), self.limits.max_depth)
+            if reduction.stale:
+                raise search_module._Restart
+    self._level = (depth, len(self.store) - 1)
+
+
+@pytest.mark.parametrize(("name", "restarts"), [("headon", 0), ("c2c", 1)])
+def test_a_pass_that_reduced_nothing_learns_in_place(monkeypatch, name, restarts):
+    # Every search's first level learns sends and, with nothing reduced yet (its initial
+    # world has one event), restarted from scratch: now it learns in place, walks on from
+    # the same worlds and goes on, to the same graph and trace, one restart fewer.
+    path = LAUNCH / f"{name}.yaml"
+    options = CheckOptions(reduction="por")
+    in_place = check(path, options)
+    monkeypatch.setattr(Search, "_next_level", restart_when_stale)
+    restarting = check(path, options)
+    assert in_place.reduction_statistics is not None
+    assert restarting.reduction_statistics is not None
+    assert in_place.reduction_statistics["restarts"] == restarts
+    assert restarting.reduction_statistics["restarts"] == restarts + 1
+    assert in_place.statistics.states == restarting.statistics.states
+    assert in_place.statistics.transitions == restarting.statistics.transitions
+    assert in_place.status == restarting.status
+    assert in_place.trace == restarting.trace

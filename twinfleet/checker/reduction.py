@@ -248,6 +248,13 @@ class Reduction:
         self.stats = ReductionStatistics()
         self.begin()
 
+    def learned(self) -> None:
+        """Add what the search learned while frozen to the relation, and go on from it: no
+        world of the pass was reduced, so none relied on the relation (`Search`)."""
+        self.publications.commit()
+        self.visibility.commit()
+        self.begin()
+
     def restarted(self) -> None:
         """Count a restart, and add what the search learned while frozen to the relation;
         the other counters start again with the search."""

@@ -156,7 +156,7 @@ class Search(SearchState):
             world, sid, depth = item
             if not lifo and depth > self._level[0]:
                 try:
-                    self._next_level(depth)
+                    self._next_level(depth, world)
                 except _Restart:
                     frontier.appendleft(item)  # the level whole, for `Reduction.walk_on`
                     raise
@@ -207,19 +207,25 @@ class Search(SearchState):
             children.append(child)
         return children
 
-    def _next_level(self, depth: int) -> None:
-        """A BFS starts expanding the worlds of `depth`: every world at most that deep is
-        stored. Restart if the level before learned a send, or a walk ahead, once the search
-        is large, did (`Reduction.probe`); start again unreduced if the reduction does
-        not pay (`Reduction.steps_aside`)."""
+    def _next_level(self, depth: int, first: World) -> None:
+        """A BFS starts expanding the worlds of `depth` (`first` the first of them): every
+        world at most that deep is stored. Restart if the level before learned a send, or
+        a walk ahead, once the search is large, did (`Reduction.probe`); start again
+        unreduced if the reduction does not pay (`Reduction.steps_aside`). A pass that
+        reduced no world yet learns in place instead: it expanded every world fully, so
+        nothing it did relied on the relation (every search's first level, mostly)."""
         reduction = self.reduction
         if reduction is not None:
             if reduction.steps_aside():
                 self._step_aside()
             else:
                 reduction.probe(len(self.store), self.limits.max_depth)
-                if reduction.stale:
+                if reduction.stale and reduction.stats.reduced:
                     raise _Restart
+                if reduction.stale:
+                    reduction.walk_on([first, *(w for w, _, _ in self._frontier)],
+                                      len(self.store), self.limits.max_depth)
+                    reduction.learned()
         self._level = (depth, len(self.store) - 1)
 
     def _step_aside(self) -> None:
