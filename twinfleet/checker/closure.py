@@ -125,6 +125,22 @@ class Closure:
         found = self._sends[i] = sends_at(self.system, self.publications, self.world, i)
         return found
 
+    def smallest(self) -> list[int] | None:
+        """The smallest of the seeds' persistent sets (the first found of that size), or
+        None if no seed gives one."""
+        best: list[int] | None = None
+        # Seeds with the fewest events first (then by index); plain singletons before a loose
+        # node's one event, which costs its pair checks. Tuples sort without a key call.
+        loose = self.loose
+        for _, seed in sorted([(len(idxs) + (x in loose) / 2, x)
+                               for x, idxs in self.by_node.items()]):
+            found = self.persistent(seed)
+            if found is not None and (best is None or len(found) < len(best)):
+                best = found
+                if len(best) == 1:
+                    break
+        return best
+
     def persistent(self, seed: int) -> list[int] | None:
         """The persistent set grown from `seed`, if smaller than everything and invisible
         (a visible event may still be guarded by adding the nodes of a guard). A loose

@@ -464,17 +464,7 @@ class Reduction:
                           self._queued)
         if (len(closure.by_node) < 2 and not closure.loose) or closure.unknown:
             return None
-        best: list[int] | None = None
-        # Seeds with the fewest events first (then by index); plain singletons before a loose
-        # node's one event, which costs its pair checks. Tuples sort without a key call.
-        loose = closure.loose
-        for _, seed in sorted([(len(idxs) + (x in loose) / 2, x)
-                               for x, idxs in closure.by_node.items()]):
-            found = closure.persistent(seed)
-            if found is not None and (best is None or len(found) < len(best)):
-                best = found
-                if len(best) == 1:
-                    break
+        best = closure.smallest()
         self._count_commuted(world, closure, best)
         return best
 
