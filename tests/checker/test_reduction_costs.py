@@ -13,7 +13,6 @@ from typing import Any
 import pytest
 
 from twinfleet.checker import reduction as reduction_module
-from twinfleet.checker import search as search_module
 from twinfleet.checker.driver import CheckOptions, check, load
 from twinfleet.checker.properties import PropertySet
 from twinfleet.checker.reduction import Reduction
@@ -138,19 +137,6 @@ def test_a_restart_starts_from_the_initial_transitions_built_once(monkeypatch):
     assert built[0] == 1
 
 
-def restart_when_stale(self: Search, depth: int, first: World) -> None:
-    """`Search._next_level` as it was: a pass that learned a send restarts, reduced or not."""
-    reduction = self.reduction
-    if reduction is not None:
-        if reduction.steps_aside():
-            self._step_aside()
-        else:
-            reduction.probe(len(self.store), self.limits.max_depth)
-            if reduction.stale:
-                raise search_module._Restart
-    self._level = (depth, len(self.store) - 1)
-
-
 @pytest.mark.parametrize(("name", "restarts"), [("headon", 0), ("c2c", 1)])
 def test_a_pass_that_reduced_nothing_learns_in_place(monkeypatch, name, restarts):
     # Every search's first level learns sends and, with nothing reduced yet (its initial
@@ -159,7 +145,7 @@ def test_a_pass_that_reduced_nothing_learns_in_place(monkeypatch, name, restarts
     path = LAUNCH / f"{name}.yaml"
     options = CheckOptions(reduction="por")
     in_place = check(path, options)
-    monkeypatch.setattr(Search, "_next_level", restart_when_stale)
+    monkeypatch.setattr(Reduction, "must_restart", lambda self: self.stale)  # as it was
     restarting = check(path, options)
     assert in_place.reduction_statistics is not None
     assert restarting.reduction_statistics is not None

@@ -360,6 +360,11 @@ class Reduction:
             publications.pending_unknown is not None or \
             self.visibility.pending_fall is not None or self.visibility.rising != self._rising
 
+    def must_restart(self) -> bool:
+        """True when the relation grew (`stale`) and a world of this pass was reduced with
+        the old one; a pass that reduced none learns in place (`learned`)."""
+        return self.stale and self.stats.reduced > 0
+
     @property
     def disabled(self) -> str | None:
         """Why the reduction stopped for the run (an unknown event kind), or None."""
@@ -465,22 +470,24 @@ class Reduction:
         if (len(closure.by_node) < 2 and not closure.loose) or closure.unknown:
             return None
         best = closure.smallest()
-        self._count_commuted(world, closure, best)
+        _count_commuted(self, world, closure, best)
         return best
 
-    def _count_commuted(self, world: World, closure: Closure, chosen: list[int] | None
-                        ) -> None:
-        """Count `closure`'s pair checks, and the worlds where `chosen` took one event of a
-        loose node (naming the declared handlers relied on)."""
-        if not closure.pairs:
-            return  # no loose node gave one event without its pairs checked
-        self.stats.pairs += closure.pairs
-        self.stats.refuted += closure.refuted
-        taken = set(chosen or ())
-        for x, e in closure.loose.items():
-            if e in taken and not taken.issuperset(closure.by_node[x]):
-                self.stats.commuted += 1
-                self.relied.add(f"{self.system.names[x]}.{world.events[e].method}")
+
+def _count_commuted(reduction: Reduction, world: World, closure: Closure,
+                    chosen: list[int] | None) -> None:
+    """Count `closure`'s pair checks, and the worlds where `chosen` took one event of a
+    loose node (naming in `reduction.relied` the declared handlers relied on)."""
+    if not closure.pairs:
+        return  # no loose node gave one event without its pairs checked
+    stats = reduction.stats
+    stats.pairs += closure.pairs
+    stats.refuted += closure.refuted
+    taken = set(chosen or ())
+    for x, e in closure.loose.items():
+        if e in taken and not taken.issuperset(closure.by_node[x]):
+            stats.commuted += 1
+            reduction.relied.add(f"{reduction.system.names[x]}.{world.events[e].method}")
 
 
 def plan(system: System, properties: PropertySet, strategy: str,

@@ -220,7 +220,7 @@ class Search(SearchState):
                 self._step_aside()
             else:
                 reduction.probe(len(self.store), self.limits.max_depth)
-                if reduction.stale and reduction.stats.reduced:
+                if reduction.must_restart():
                     raise _Restart
                 if reduction.stale:
                     reduction.walk_on([first, *(w for w, _, _ in self._frontier)],
