@@ -8,7 +8,7 @@ it loads neither Zenoh nor asyncio. The layers are subpackages:
 robot case study) and ``twinfleet.cli`` on top.
 """
 
-from twinfleet.runtime.contract.context import Context, ContractError
+from twinfleet.runtime.contract.context import Context, ContractError, ReplyToken
 from twinfleet.runtime.contract.messages import CallError, CallFailure, Empty, String, message
 from twinfleet.runtime.contract.node import (
     QOS_DEFAULT,
@@ -43,6 +43,7 @@ __all__ = [
     "PureMemo",
     "QoS",
     "Reliability",
+    "ReplyToken",
     "String",
     "every",
     "file_param",

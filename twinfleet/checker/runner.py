@@ -6,7 +6,8 @@ is the checker's, snapshots the state again and turns the recorded effects
 into pending events (`Publish` → one delivery per subscriber, `Call` → a
 request to the server, or a TIMEOUT carrying a `CallError` after the call's
 timeout when there is no server or the request is lost, `After` → a timer, a
-service's return value → a reply), with the latency, deadline and fault
+service's return value → a reply, unless the handler deferred it (`Defer`): then
+a `Reply` effect, from any later handler, makes that reply event), with the latency, deadline and fault
 branches of `checker.semantics` (Rule 5). Node code is never special-cased.
 The result is a `checker.transition.Variant`, independent of the world, so
 the system can cache it.
@@ -58,7 +59,17 @@ from twinfleet.checker.transition import (
     fingerprint,
 )
 from twinfleet.checker.world import ENVIRONMENT, Event, event_key
-from twinfleet.runtime.contract.context import After, Call, Context, Fail, Log, Publish
+from twinfleet.runtime.contract.context import (
+    After,
+    Call,
+    Context,
+    Defer,
+    Fail,
+    Log,
+    Publish,
+    Reply,
+    ReplyToken,
+)
 from twinfleet.runtime.contract.dispatch import HandlerOutcome, run_handler
 from twinfleet.runtime.contract.kinds import EventKind, FailureKind
 from twinfleet.runtime.contract.messages import CallError, CallFailure
@@ -119,6 +130,7 @@ class Runner:
         self.rules = rules
         self.nodes: tuple[Node, ...] = topology.nodes
         self.names = tuple(node.name for node in self.nodes)
+        self._index = {name: i for i, name in enumerate(self.names)}
         self._breaches = Breaches(topology)
         self.debug_state = debug_state
         self.verify = verify
@@ -236,6 +248,9 @@ class Runner:
                 ) -> tuple[HandlerOutcome, _ClockContext]:
         """Run `ev`'s handler on `node` (its state loaded), under the probe if any."""
         ctx = _ClockContext(node, ev.due, chooser)
+        if ev.kind is EventKind.REQUEST:
+            ctx.serving = ReplyToken(self.topology.service_of.get((ev.target, ev.method), ""),
+                                     self.names[ev.sender], ev.reply_to, ev.args[0])
         self._current[ev.target] = None  # the state object is about to change
         with self._probe or _NO_PROBE:
             outcome = run_handler(node, ev.method, ctx, ev.args,
@@ -323,6 +338,7 @@ class Runner:
             out.append(Event(self.rules.tick_after(now, topology.period(i, ev.method), chooser),
                              EventKind.PERIODIC, i, ev.method, i, (), ev.priority))
         failure = None
+        answered = ev.kind is not EventKind.REQUEST
         for k, eff in enumerate(effects):
             match eff:
                 case Publish(topic=topic, msg=msg):
@@ -359,13 +375,30 @@ class Runner:
                                                  f"ctx.fail: {reason}")
                 case Log():
                     logs.append(eff)
-        if ev.kind is EventKind.REQUEST:
+                case Defer():
+                    answered = True
+                case Reply(token=token, msg=msg):
+                    failure = failure or self._reply(ev, token, msg, out, chooser)
+        if not answered:
             service = topology.service_of.get((i, ev.method), "")
             out.append(self._message(now, service, EventKind.REPLY, ev.sender, ev.reply_to, i,
                                      (reply,), topology.priority(ev.sender, ev.reply_to), "",
                                      chooser))
         self.hashed += len(out)
         return out, failure, logs, faults, lost_keys
+
+    def _reply(self, ev: Event, token: ReplyToken, msg: Any, out: list[Event],
+               chooser: ExploringChooser) -> Failure | None:
+        """The reply event of a deferred request (`Reply`), as the request's handler
+        would have sent it; a failure when the token names no node of the scenario."""
+        i, now, j = ev.target, ev.due, self._index.get(token.caller)
+        if j is None:
+            return Failure(FailureKind.CONTRACT, self.names[i], ev.method, f"ctx.reply() to a token "
+                           f"of caller {token.caller!r}, which is no node of the scenario; "
+                           "fix: reply with a token defer_reply() gave")
+        out.append(self._message(now, token.service, EventKind.REPLY, j, token.reply_to, i,
+                                 (msg,), self.topology.priority(j, token.reply_to), "", chooser))
+        return None
 
     def _copies(self, name: str, j: int, chooser: ExploringChooser, faults: list[str]) -> int:
         """How many copies of one message on `name` to node `j` arrive (fault branches)."""

@@ -19,7 +19,7 @@ from typing import Any, NamedTuple
 
 from twinfleet.checker.runner import Runner
 from twinfleet.checker.world import Event
-from twinfleet.runtime.contract.context import After, Call, Fail, Publish
+from twinfleet.runtime.contract.context import After, Call, Defer, Fail, Publish, Reply
 from twinfleet.runtime.contract.kinds import EventKind
 
 
@@ -64,7 +64,8 @@ def settled(runner: Runner, states: tuple[bytes, ...], pending: Sequence[Event])
 def _following(runner: Runner, item: _Pending, effects: Sequence[Any], reply: Any
                ) -> list[_Pending] | None:
     """The events a kept run of `item` sends, as `settled` follows them (None: it fails,
-    or it calls a service, whose outcome is more than the kept run's)."""
+    or it calls a service, whose outcome is more than the kept run's, or defers or sends a
+    reply, which `settled` does not follow)."""
     i, out = item.target, []
     subscribers = runner.topology.subscribers
     for eff in effects:
@@ -73,7 +74,7 @@ def _following(runner: Runner, item: _Pending, effects: Sequence[Any], reply: An
                 out += [_Pending(j, EventKind.DELIVERY, method, i, "",
                                  runner.key_of(EventKind.DELIVERY, j, method, i, "", (msg,)))
                         for j, method, _ in subscribers.get(topic, ())]
-            case Call() | Fail():
+            case Call() | Fail() | Defer() | Reply():
                 return None
             case After(handler=method, args=args):
                 out.append(_Pending(i, EventKind.TIMER, method, i, "",

@@ -1,7 +1,7 @@
 """The context a handler receives: its only way to act on the world.
 
 One `Context` class serves both drivers. A handler's effects are recorded as
-values (`Publish`, `Call`, `After`, `Fail`, `Log`) in `ctx.effects`; the live
+values (`Publish`, `Call`, `After`, `Fail`, `Log`, `Defer`, `Reply`) in `ctx.effects`; the live
 host performs them over Zenoh, the checker turns them into pending events.
 The only inputs that differ between the modes are the time stamped on the
 dispatch (`now_ms`) and the `Chooser` that answers `ctx.choose`.
@@ -93,7 +93,38 @@ class Log:
     fields: tuple[tuple[str, Any], ...]
 
 
-Effect = Publish | Call | After | Fail | Log
+@dataclass(frozen=True, slots=True)
+class ReplyToken:
+    """A request whose reply was deferred (`Context.defer_reply`): which call it answers.
+
+    It names the call as both drivers see it (the service, the calling node, the caller's
+    reply handler and the request), so it can live in the node's state: the checker's
+    states include it and a live node's state equals the model's. Two tokens are equal
+    only for calls the caller cannot tell apart (same handler, same request).
+    """
+
+    service: str
+    caller: str
+    reply_to: str
+    request: Any
+
+
+@dataclass(frozen=True, slots=True)
+class Defer:
+    """The service handler that ran will not reply now: `Reply` with `token` answers later."""
+
+    token: ReplyToken
+
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    """Answer the deferred request `token` with `msg`."""
+
+    token: ReplyToken
+    msg: Any
+
+
+Effect = Publish | Call | After | Fail | Log | Defer | Reply
 
 
 _FIRST = FirstChooser()
@@ -108,9 +139,12 @@ class Context:
         node: the node whose handler runs.
         now_ms: the time the handler sees.
         chooser: answers `choose` (default: always option 0).
+
+    A driver that runs a service handler sets `serving` to the request's `ReplyToken`
+    first (`defer_reply` hands it out); it is None for every other handler.
     """
 
-    __slots__ = ("node", "now_ms", "chooser", "effects", "choices")
+    __slots__ = ("node", "now_ms", "chooser", "effects", "choices", "serving")
 
     def __init__(self, node: Node, now_ms: int, chooser: Chooser | None = None) -> None:
         self.node = node
@@ -118,6 +152,7 @@ class Context:
         self.chooser: Chooser = _FIRST if chooser is None else chooser
         self.effects: list[Effect] = []
         self.choices: list[int] = []
+        self.serving: ReplyToken | None = None
 
     def __repr__(self) -> str:
         return (f"Context(node={self.node.name!r}, now_ms={self.now_ms}, "
@@ -178,6 +213,29 @@ class Context:
     def log(self, event: str, **fields: Any) -> None:
         """Record a structured log line."""
         self.effects.append(Log(event, tuple(sorted(fields.items()))))
+
+    def defer_reply(self) -> ReplyToken:
+        """Inside a `@service` handler: reply later, with `reply(token, response)` from any
+        handler of this node (the handler then returns None). Keep the token in
+        `self.state`; the caller waits for the reply (or its call's timeout)."""
+        token = self.serving
+        if token is None:
+            raise ContractError(f"{self.node.name}: defer_reply() outside a @service handler",
+                                "call defer_reply() in the service handler whose request "
+                                "is to be answered later")
+        if Defer(token) not in self.effects:
+            self.effects.append(Defer(token))
+        return token
+
+    def reply(self, token: ReplyToken, response: Any) -> None:
+        """Answer the request whose reply `defer_reply` deferred (once per token)."""
+        if not isinstance(token, ReplyToken):
+            raise ContractError(f"{self.node.name}: reply() needs the token defer_reply() "
+                                f"gave, got {token!r:.60}")
+        if not is_message(response):
+            raise ContractError(f"{self.node.name}: reply() to {token.service} needs a message "
+                                f"response, got {response!r:.60}", FIX_MESSAGE)
+        self.effects.append(Reply(token, response))
 
     def _own_method(self, fn: Callable[..., Any], what: str) -> str:
         owner = getattr(fn, "__self__", None)

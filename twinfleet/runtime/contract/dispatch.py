@@ -9,7 +9,7 @@ import typing
 from dataclasses import dataclass
 from typing import Any
 
-from twinfleet.runtime.contract.context import Context, ContractError, Effect
+from twinfleet.runtime.contract.context import Context, ContractError, Defer, Effect
 from twinfleet.runtime.contract.messages import is_message
 from twinfleet.runtime.contract.node import Node
 
@@ -45,7 +45,8 @@ def invoke(node: Node, method: str, ctx: Context, args: tuple[Any, ...] = (),
 
     Returns ``(reply, error)``; the effects stay in ``ctx.effects``. Exceptions never
     escape: they come back as the error, with ``ctx.effects`` emptied (the handler did
-    not complete). A service handler that returns a non-message keeps its effects.
+    not complete). A service handler that returns a non-message keeps its effects; one
+    that deferred its reply (`Context.defer_reply`) must return None, and its reply is None.
     """
     fn = getattr(node, method, None)
     if fn is None:
@@ -57,10 +58,23 @@ def invoke(node: Node, method: str, ctx: Context, args: tuple[Any, ...] = (),
         return None, HandlerError(node.name, method, f"{type(exc).__name__}: {exc}",
                                   traceback.format_exc(limit=8), isinstance(exc, ContractError),
                                   exc.fix if isinstance(exc, ContractError) else "")
+    if expects_reply and deferred(ctx):
+        if reply is None:
+            return None, None
+        ctx.effects.clear()
+        return None, HandlerError(node.name, method, f"service handler returned {reply!r:.60} "
+                                  "after defer_reply(); send it with ctx.reply(token, ...)",
+                                  contract=True, fix="return None from a handler that deferred "
+                                  "its reply")
     if expects_reply and not is_message(reply):
         return None, HandlerError(node.name, method,
                                   f"service handler returned {reply!r:.60}, not a message")
     return reply, None
+
+
+def deferred(ctx: Context) -> bool:
+    """True if the service handler that ran in `ctx` deferred its reply."""
+    return ctx.serving is not None and any(type(e) is Defer for e in ctx.effects)
 
 
 def run_handler(node: Node, method: str, ctx: Context, args: tuple[Any, ...] = (),

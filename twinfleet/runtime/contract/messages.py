@@ -183,15 +183,20 @@ def _field_map_codec(cls: type) -> tuple[str, Callable[[Any], dict[str, Any]]]:
     return codec
 
 
-def encode(msg: Any, *, stamp_ms: int = 0, seq: int = 0, sender: str = "") -> bytes:
-    """Encode a message into an envelope."""
+def encode(msg: Any, *, stamp_ms: int = 0, seq: int = 0, sender: str = "",
+           reply_to: str = "") -> bytes:
+    """Encode a message into an envelope (a service request's also names the caller's reply
+    handler, `reply_to`: a deferred reply's token names it, `decode_request`)."""
     type_name, field_map = _FIELD_MAPS.get(type(msg)) or _field_map_codec(type(msg))
     plain = field_map(msg)
     if not _SCALARS.issuperset(map(type, plain.values())):  # nested messages or sequences
         plain = to_plain(msg)
         del plain["_type"]
-    return _PACKER.pack({"type": type_name, "stamp_ms": stamp_ms, "seq": seq, "sender": sender,
-                         "data": plain})
+    envelope = {"type": type_name, "stamp_ms": stamp_ms, "seq": seq, "sender": sender,
+                "data": plain}
+    if reply_to:
+        envelope["reply_to"] = reply_to
+    return _PACKER.pack(envelope)
 
 
 def decode_fields(payload: bytes) -> tuple[Any, int, int, str]:
@@ -218,6 +223,19 @@ def decode_fields(payload: bytes) -> tuple[Any, int, int, str]:
     if not isinstance(stamp, int) or not isinstance(seq, int) or not isinstance(sender, str):
         raise DecodeError("envelope 'stamp_ms'/'seq' must be integers and 'sender' a string")
     return msg, stamp, seq, sender
+
+
+def decode_request(payload: bytes) -> tuple[Any, int, int, str, str]:
+    """`decode_fields` of a service request, and the caller's reply handler ("" if unnamed).
+
+    Raises:
+        DecodeError: with the reason, on any malformed payload.
+    """
+    msg, stamp, seq, sender = decode_fields(payload)
+    reply_to = _unpackb(payload, raw=False, strict_map_key=False).get("reply_to", "")
+    if not isinstance(reply_to, str):
+        raise DecodeError("envelope 'reply_to' must be a string")
+    return msg, stamp, seq, sender, reply_to
 
 
 def decode(payload: bytes) -> Envelope:

@@ -29,6 +29,7 @@ class Event:
             was queued); None for events that arrive.
         call: a TIMEOUT entry's call id: void once that call got an answer.
         responder: a REQUEST's way back to its caller, opaque to the core.
+        reply_to: a REQUEST's caller's reply handler (a deferred reply's token names it).
     """
 
     kind: EventKind
@@ -41,3 +42,4 @@ class Event:
     due: int | None = None
     call: int | None = None
     responder: Any = field(default=None, repr=False)
+    reply_to: str = ""

@@ -49,7 +49,7 @@ and never touches a socket:
    order before it asks for the next handler: `PublishOutput` (an
    envelope with the topic's next sequence number), `CallOutput` (a service call,
    whose answer comes back through `receive_reply`), `ReplyOutput` (the reply to
-   the request that ran), `LogOutput` (a log line), `StopOutput` (``stop_on_error`` after
+   the request that ran, or to one a handler deferred), `LogOutput` (a log line), `StopOutput` (``stop_on_error`` after
    a failure). `After` and `Call` arm due entries inside the core.
 6. Failures. A handler exception, a service reply that is not a message, an
    effect that cannot be encoded: counted, reported as `LogOutput`s, published as a
@@ -77,8 +77,13 @@ from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, Final, Protocol, final
 
-from twinfleet.runtime.contract.context import Chooser, Context, Effect
-from twinfleet.runtime.contract.dispatch import HandlerError, declared_message_type, invoke
+from twinfleet.runtime.contract.context import Chooser, Context, Effect, ReplyToken
+from twinfleet.runtime.contract.dispatch import (
+    HandlerError,
+    declared_message_type,
+    deferred,
+    invoke,
+)
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import (
     CallError,
@@ -86,6 +91,7 @@ from twinfleet.runtime.contract.messages import (
     DecodeError,
     NodeAlive,
     decode_fields,
+    decode_request,
 )
 from twinfleet.runtime.contract.names import OPERATOR_SENDER
 from twinfleet.runtime.contract.node import LIVELINESS_TOPIC, HandlerSpec, Node, Reliability
@@ -336,7 +342,7 @@ class NodeCore:
         """
         self._n["received"] += 1
         try:
-            msg, stamp, seq, sender = decode_fields(payload)
+            msg, stamp, seq, sender, reply_to = decode_request(payload)
             check_message(msg)
         except Rejected as exc:
             self._rejected[exc.reason] += 1
@@ -348,7 +354,7 @@ class NodeCore:
                     ReplyOutput(responder, None, f"server error: undecodable request ({exc})"))
         self._push(arrival_ms, self.due.priority(method),
                    Event(EventKind.REQUEST, method, (msg,), sender, self.services[method], seq,
-                         stamp, responder=responder))
+                         stamp, responder=responder, reply_to=reply_to))
         return _NOTHING
 
     def receive_reply(self, call: int, payload: bytes | None, failure: CallFailure | None,
@@ -388,6 +394,11 @@ class NodeCore:
                                                     (NodeAlive(node, alive),), node,
                                                     LIVELINESS_TOPIC))
         return True
+
+    def unanswered(self) -> list[ReplyOutput]:
+        """The "server error" answers of the deferred requests still waiting, to perform
+        when the node stops (no caller's query is left open)."""
+        return self._outbox.unanswered()
 
     def shift_arrivals(self, delta_ms: int) -> None:
         """Move every held arrival time `delta_ms` earlier: the clock's epoch moved (the
@@ -485,13 +496,15 @@ class NodeCore:
         if entry.sender in OUTSIDE_SENDERS:
             self._came_in(entry.sender, entry.topic)
         observers = self._observers
+        serving = None if entry.responder is None else ReplyToken(
+            entry.topic, entry.sender, entry.reply_to, entry.args[0])
         if not observers:
             return self._execute(entry.handler, entry.args, now, chooser or self._random,
-                                 entry.responder)[0]
+                                 entry.responder, serving)[0]
         if not isinstance(chooser, RecordingChooser):
             chooser = RecordingChooser(chooser or self._random)
         outputs, effects, error = self._execute(entry.handler, entry.args, now, chooser,
-                                                entry.responder)
+                                                entry.responder, serving)
         record = Handled(self.node, entry, now, tuple(effects), tuple(chooser.indices),
                          tuple(chooser.options), error)
         for observer in observers:
@@ -504,15 +517,22 @@ class NodeCore:
         self._outside[key] = self._outside.get(key, 0) + 1
 
     def _execute(self, method: str, args: tuple[Any, ...], now: int, chooser: Chooser,
-                 responder: Any) -> tuple[Sequence[Output], list[Effect], HandlerError | None]:
-        """Run one handler; what it did, as outputs (and its effects and error, for observers)."""
+                 responder: Any, serving: ReplyToken | None = None
+                 ) -> tuple[Sequence[Output], list[Effect], HandlerError | None]:
+        """Run one handler; what it did, as outputs (and its effects and error, for observers).
+        A request's `serving` is its token, should the handler defer its reply."""
         node = self.node
         ctx = Context(node, now, chooser)
+        ctx.serving = serving
         self._rollback.arm()
         reply, error = invoke(node, method, ctx, args, responder is not None)
         error = self._rollback.keep_or_restore(method, error, ctx)
         self._n["handled"] += 1
         effects = ctx.effects
+        parked = serving if error is None and deferred(ctx) else None
+        if parked is not None:
+            self._outbox.park(parked, responder)  # a `Reply` effect answers it
+            responder = None
         if error is None and responder is None:  # the common case: a handler that went well
             if not effects:
                 return _NOTHING, effects, None
@@ -520,6 +540,8 @@ class NodeCore:
             error = self._outbox.translate(effects, now, method, out)
             if error is None:
                 return out, effects, None
+            if parked is not None:  # the handler failed after all: the caller hears it now
+                responder = self._outbox.unpark(parked)
         else:
             out = []
             if effects:

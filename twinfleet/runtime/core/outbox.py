@@ -4,8 +4,11 @@ Outputs are values the driver performs in order, each named after the effect it
 carries out (`contract.context`: `Publish`, `Call`, `Log`), plus the reply and the stop (`runtime.host.node_host.NodeHost.perform`
 live): `PublishOutput` (an encoded envelope on a topic), `CallOutput` (a service call whose
 answer goes back to `NodeCore.receive_reply`), `ReplyOutput` (the reply to the
-request that ran), `LogOutput` (a log line), `StopOutput` (``stop_on_error`` after a
-failure). The `Outbox` numbers each topic's envelopes (a per-publisher
+request that ran, or to a deferred one), `LogOutput` (a log line), `StopOutput`
+(``stop_on_error`` after a failure). A request whose handler deferred its reply
+(`contract.context.Defer`) leaves its responder here, kept by its token (never in node
+state: a responder is the transport's query), until a `Reply` effect answers it
+(`park`, `unanswered`). The `Outbox` numbers each topic's envelopes (a per-publisher
 sequence number that receivers check for gaps; a message that cannot be
 encoded takes no number), arms the due entries of `ctx.after` and `ctx.call`,
 and reports failures: a line, a `Violation` published on /violations as if
@@ -19,7 +22,16 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, Final, NamedTuple, final
 
-from twinfleet.runtime.contract.context import After, Call, Effect, Fail, Log, Publish
+from twinfleet.runtime.contract.context import (
+    After,
+    Call,
+    Effect,
+    Fail,
+    Log,
+    Publish,
+    Reply,
+    ReplyToken,
+)
 from twinfleet.runtime.contract.dispatch import HandlerError
 from twinfleet.runtime.contract.kinds import EventKind
 from twinfleet.runtime.contract.messages import Violation, encode
@@ -102,6 +114,29 @@ class Outbox:
         self.name, self.due, self.stop_on_error = name, due, stop_on_error
         self._n = counters
         self._seq: dict[str, int] = {}  # topic -> last sequence number sent
+        # deferred requests, oldest first (a list: a token holds a message, maybe unhashable)
+        self._parked: list[tuple[ReplyToken, Any]] = []
+
+    def park(self, token: ReplyToken, responder: Any) -> None:
+        """Keep the responder of a request whose handler deferred its reply."""
+        self._parked.append((token, responder))
+
+    def unpark(self, token: ReplyToken) -> Any:
+        """The responder of the oldest deferred request `token` names, taken out (None:
+        none waits, it was answered already)."""
+        for k, (parked, responder) in enumerate(self._parked):
+            if parked == token:
+                del self._parked[k]
+                return responder
+        return None
+
+    def unanswered(self) -> list[ReplyOutput]:
+        """Answers to every deferred request still waiting ("server error"), taken out: a
+        node that stops finalises them, so no caller's query is left open."""
+        out = [ReplyOutput(responder, None, "server error: the server stopped before it "
+                           f"replied to {token.service}") for token, responder in self._parked]
+        self._parked.clear()
+        return out
 
     def translate(self, effects: Sequence[Effect], now: int, method: str,
                   out: list[Output]) -> HandlerError | None:
@@ -119,6 +154,8 @@ class Outbox:
                 match effect:
                     case Call():
                         out.append(self._query(effect, now))
+                    case Reply(token=token, msg=msg):
+                        out.append(self._answer(token, msg, now))
                     case After(delay_ms=delay, handler=handler, args=args):
                         self.due.arm(Event(EventKind.TIMER, handler, args, name, due=now + delay))
                         if 0 < delay < (n["period"] or delay + 1):  # the stall threshold's base
@@ -136,8 +173,17 @@ class Outbox:
 
     def _query(self, call: Call, now: int) -> CallOutput:
         cid = self.due.open_call(call, now)
-        payload = encode(call.request, stamp_ms=now, sender=self.name)
+        payload = encode(call.request, stamp_ms=now, sender=self.name, reply_to=call.reply_to)
         return CallOutput(cid, call.service, payload, call.timeout_ms)
+
+    def _answer(self, token: ReplyToken, msg: Any, now: int) -> Output:
+        payload = encode(msg, stamp_ms=now, sender=self.name)  # before unpark: may raise
+        responder = self.unpark(token)
+        if responder is None:
+            return LogOutput(f"t={now} reply to {token.service} for {token.caller} dropped: "
+                             "no deferred request of that token waits (answered already?)",
+                             err=True)
+        return ReplyOutput(responder, payload, "")
 
     def report(self, error: HandlerError, args: tuple[Any, ...], now: int,
                out: list[Output]) -> None:
