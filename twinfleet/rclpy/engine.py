@@ -34,7 +34,7 @@ from twinfleet.rclpy.entities import (
     TimerSlot,
     Waiting,
 )
-from twinfleet.rclpy.tasks import Tasks
+from twinfleet.rclpy.tasks import DEFERRED, Tasks
 from twinfleet.runtime.contract.context import Context, ContractError
 from twinfleet.runtime.contract.messages import CallError
 
@@ -198,18 +198,17 @@ class Engine:
             self.dispatch(EntityKind.CLIENT, index, (reply,))
 
     def on_request(self, ctx: Context, index: int, request: Any) -> Any:
-        """A request for service `index`: its response, frozen."""
+        """A request for service `index`: its response, frozen; None when the reply is
+        deferred (its callback suspended, or it waits for its busy group), as rclpy's
+        executor answers when the callback's task ends."""
         with self.handling(ctx):
             entry = self.services[index]
             if self.busy(entry.group):
-                raise ContractError(
-                    f"{self.name}: a request reached service {entry.name!r} while a suspended "
-                    "coroutine holds its callback group, and twinfleet's rclpy answers a "
-                    "request within its own step (a deferred reply is not supported yet)",
-                    "put the service in a callback group of its own")
-            response = self.tasks.serve(entry, wire.thaw(request))
+                self.hold(Waiting(EntityKind.SERVICE, index, (request, ctx.defer_reply())))
+                return None
+            response = self.tasks.serve(entry, wire.thaw(request), None)
             self.drain()
-            return wire.freeze(response)
+            return None if response is DEFERRED else wire.freeze(response)
 
     # ------------------------------------------------------------------ dispatch
 
@@ -258,6 +257,10 @@ class Engine:
             slot = self.dyn.timers[index]
             if slot is not None and not slot.destroyed:
                 self.tasks.start(slot.callback, (), slot.group)
+            return
+        if kind is EntityKind.SERVICE:
+            request, token = args
+            self.tasks.serve(self.services[index], wire.thaw(request), token)
             return
         entry = self.subscriptions[index]
         self.tasks.start(entry.callback, (wire.thaw(args[0]),), entry.group)

@@ -92,7 +92,8 @@ class Waiting:
 class Suspended:
     """A coroutine callback suspended at an `await`, as values: what it runs, the state it
     began in (snapshot bytes), the results of its earlier awaits, the time each of its
-    steps read (None: it read none) and the future it waits for."""
+    steps read (None: it read none), the future it waits for and, for a service callback,
+    the request its return value answers."""
 
     callback: Callable[..., Any]
     args: bytes  # encoded arguments (twinfleet.rclpy.state.encode_args)
@@ -101,6 +102,7 @@ class Suspended:
     results: list[Any] = field(default_factory=list)
     clocks: list[int | None] = field(default_factory=list)
     awaiting: Any = None  # the Future
+    reply: Any = None  # a service callback's ReplyToken: its return value answers that request
 
 
 @dataclass(slots=True)

@@ -117,10 +117,11 @@ class RclpyState:
             (None: a free slot).
         params: ``[name, value]`` of each declared parameter, sorted by name.
         waiting: ``[kind, index, [sample]]`` of each callback held back by its group (a sample
-            as the plain form of the frozen message).
+            as the plain form of the frozen message; a request with its `ReplyToken`).
         tasks: each suspended coroutine callback: ``callback``, ``group`` (held busy),
             ``awaiting`` (a future's number), ``results`` and ``clocks`` of its steps so
-            far, ``args`` and ``start`` (snapshot bytes of the state it began in).
+            far, ``args`` and ``start`` (snapshot bytes of the state it began in), ``reply``
+            (a service callback's `ReplyToken`, else None).
         calls: per client, the numbers of the futures of its calls without reply, in order.
         on_set: the on-set-parameters callbacks.
         futures: per future ``[status (0 pending, 1 done, 2 cancelled), result, callbacks]``.
@@ -287,7 +288,7 @@ def capture(engine: Engine) -> RclpyState:
     tasks = tuple({"callback": enc.callback(t.callback), "group": t.group,
                    "awaiting": enc.future(t.awaiting).index,
                    "results": tuple(enc(r) for r in t.results), "clocks": tuple(t.clocks),
-                   "args": t.args, "start": t.start} for t in dyn.tasks)
+                   "args": t.args, "start": t.start, "reply": t.reply} for t in dyn.tasks)
     calls = tuple(tuple(enc.future(f).index for f in c) for c in dyn.calls)
     on_set = tuple(enc.callback(cb) for cb in dyn.on_set)
     params = tuple((k, enc(dyn.params[k])) for k in sorted(dyn.params))
@@ -374,7 +375,7 @@ def apply_state(engine: Engine, st: RclpyState, *, fresh_dict: bool = False) -> 
                    for k, i, args in st.waiting]
     dyn.tasks = [Suspended(dec.callback(t["callback"]), t["args"], t["group"], t["start"],
                            [dec(r) for r in t["results"]], list(t["clocks"]),
-                           futures[t["awaiting"]]) for t in st.tasks]
+                           futures[t["awaiting"]], t["reply"]) for t in st.tasks]
     dyn.calls = [[futures[n] for n in c] for c in st.calls]
     dyn.on_set = [dec.callback(cb) for cb in st.on_set]
     engine.dyn = dyn

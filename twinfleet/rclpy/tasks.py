@@ -25,9 +25,10 @@ from collections.abc import Callable, Coroutine
 from typing import Any
 
 from twinfleet.rclpy import state as state_codec
+from twinfleet.rclpy import wire
 from twinfleet.rclpy.api.task import Future
 from twinfleet.rclpy.entities import ServiceEntry, Suspended
-from twinfleet.runtime.contract.context import Context, ContractError
+from twinfleet.runtime.contract.context import Context, ContractError, ReplyToken
 
 Engine = Any  # twinfleet.rclpy.engine.Engine (which imports this module)
 
@@ -48,9 +49,8 @@ def _is_async(callback: Callable[..., Any]) -> bool:
     return known
 
 
-#: What a service that would answer later can do instead, under twinfleet's rclpy.
-DEFERRED_FIX = ("answer from what the node already holds: ask the other service ahead (a "
-                "timer or a subscription callback) and keep its answer in an attribute")
+#: What `Tasks.serve` returns for a request whose reply comes later (`Context.reply`).
+DEFERRED: Any = object()
 
 
 class Tasks:
@@ -78,13 +78,29 @@ class Tasks:
         self.step(coro, record, None)
 
     def step(self, coro: Coroutine[Any, Any, Any], record: Suspended, value: Any) -> None:
-        """Run `coro` from its current await (fed `value`) to its end or its next await."""
-        engine = self.engine
-        engine.clock_read = False
+        """Run `coro` from its current await (fed `value`) to its end or its next await; a
+        service callback's end answers its request."""
+        done, got = self._send(coro, value)
+        if not done:
+            self._suspend(record, got)
+        elif record.reply is not None:
+            self._answer(record.reply, got)
+
+    def _send(self, coro: Coroutine[Any, Any, Any], value: Any) -> tuple[bool, Any]:
+        """One step of `coro`: (True, its return value) at its end, else (False, what it
+        awaits)."""
+        self.engine.clock_read = False
         try:
-            awaited = coro.send(value)
-        except StopIteration:
-            return
+            return False, coro.send(value)
+        except StopIteration as stop:
+            return True, stop.value
+
+    def _answer(self, token: Any, response: Any) -> None:
+        self.engine.ctx.reply(token, wire.freeze(response))
+
+    def _suspend(self, record: Suspended, awaited: Any) -> None:
+        """Keep `record` as a suspended task awaiting `awaited`."""
+        engine = self.engine
         record.clocks.append(engine.ctx.now() if engine.clock_read and engine.ctx else None)
         self._check_awaitable(awaited, record)
         record.awaiting = awaited
@@ -141,18 +157,35 @@ class Tasks:
             engine.dyn, engine.ctx, engine.clock_read = saved_dyn, saved_ctx, saved_clock
         return coro
 
-    def serve(self, entry: ServiceEntry, request: Any) -> Any:
-        """Answer a request now; a service callback that suspends cannot be answered later."""
+    def serve(self, entry: ServiceEntry, request: Any, token: ReplyToken | None) -> Any:
+        """Run a service callback on `request`: its response, or `DEFERRED` when it answers
+        later (a coroutine that suspended: its end replies; or `token`, a request that
+        waited for its group, whose reply was deferred when it came, is answered now)."""
+        engine = self.engine
         response = getattr(entry.srv_type, "Response")()  # noqa: B009  (a generated class)
-        result = entry.callback(request, response)
-        if inspect.iscoroutine(result):
-            try:
-                result.send(None)
-            except StopIteration as stop:
-                return stop.value
-            result.close()
-            raise ContractError(f"{self.engine.name}: service {entry.name!r}: its callback "
-                                "awaited a pending future, and twinfleet's rclpy answers a "
-                                "request within its callback (a deferred reply is not "
-                                "supported yet)", DEFERRED_FIX)
-        return result
+        args = (request, response)
+        record = None
+        if _is_async(entry.callback):  # the record before the run: a resume re-runs from it
+            record = self._record(entry, args, token)
+            result = entry.callback(*args)
+        else:
+            result = entry.callback(*args)
+            if inspect.iscoroutine(result):  # made, not run yet: the state is the start one
+                record = self._record(entry, args, token)
+        if record is not None:
+            done, result = self._send(result, None)
+            if not done:
+                if record.reply is None:
+                    record.reply = engine.ctx.defer_reply()
+                self._suspend(record, result)
+                return DEFERRED
+        if token is None:
+            return result
+        self._answer(token, result)
+        return DEFERRED
+
+    def _record(self, entry: ServiceEntry, args: tuple[Any, ...],
+                token: ReplyToken | None) -> Suspended:
+        engine = self.engine
+        return Suspended(entry.callback, state_codec.encode_args(engine, args), entry.group,
+                         state_codec.snapshot_state(engine), reply=token)
