@@ -82,20 +82,3 @@ def test_only_the_node_codes_thread_may_not_sleep():
             time.sleep(0)
     assert errors == []
     time.sleep(0)  # put back after the handler
-
-
-@pytest.mark.parametrize(("relay", "says", "fix"), [
-    ("Relay", "service 'relay': its callback awaited a pending future", "ask the other service"),
-    ("BusyRelay", "a request reached service 'relay' while a suspended coroutine holds its "
-                  "callback group", "a callback group of its own"),
-])
-def test_a_deferred_service_reply_is_a_breach_not_a_violation(relay, says, fix):
-    """rclpy answers an `async def` service callback when it returns; twinfleet's rclpy
-    answers within the request's step, so a reply that would come later leaves the
-    check without a verdict (exit 4) instead of failing a property the program keeps."""
-    system = testing.system({"backend": "relay:Backend", "relay": f"relay:{relay}",
-                             "asker": "relay:Asker"})
-    report = testing.check(system)
-    assert report.breach, report.explain()
-    assert says in report.message and "deferred reply is not supported yet" in report.message
-    assert fix in report.message, report.message

@@ -8,7 +8,10 @@ contract, as the native decorators do at class creation:
   ``@service(name)`` handler, named after the rclpy callback (``on_pose``) so that traces
   and logs read as the node's code does (``sub_<i>``/``srv_<i>`` when the name is taken
   or not a plain public name);
-- each client's replies as a ``@handler`` ``reply_<i>`` (the target of `ctx.call`);
+- each client's replies as ``@handler`` s ``reply_<i>`` (its first pending call) and
+  ``reply_<i>_<k>`` (further calls pending at once, `CALL_SLOTS` in all), the targets of
+  `ctx.call`: the handler a reply arrives at names the call it answers, as rclpy matches
+  a response to its request's sequence number, whatever order replies come back in;
 - timers as ``ctx.after`` events of one ``@handler`` ``timer(index)``, scheduled by
   ``@on_start`` and by each firing, so they can be cancelled, reset and made at run
   time;
@@ -28,7 +31,7 @@ from collections.abc import Callable
 from typing import Any, ClassVar
 
 from twinfleet.rclpy import param_service
-from twinfleet.rclpy.engine import Construction, Engine, building
+from twinfleet.rclpy.engine import CALL_SLOTS, Construction, Engine, building, reply_method
 from twinfleet.rclpy.state import RclpyState, apply_state, capture
 from twinfleet.runtime.contract.context import Context
 from twinfleet.runtime.contract.node import (
@@ -138,7 +141,9 @@ def adapt(cls: type) -> type[RclpyAdapter]:
         name = _handler_name(srv.callback, f"srv_{i}", namespace)
         namespace[name] = service(srv.name)(_on_request(i, name))
     for i in range(len(engine.clients)):
-        namespace[f"reply_{i}"] = handler(_on_reply(i))
+        for k in range(CALL_SLOTS):
+            name = reply_method(i, k)
+            namespace[name] = handler(_on_reply(i, k, name))
     made = _ADAPTED[cls] = type(cls.__name__, (RclpyAdapter,), namespace)
     return made
 
@@ -169,10 +174,10 @@ def _on_request(i: int, name: str) -> Callable[..., Any]:
     return _named(method, name)
 
 
-def _on_reply(i: int) -> Callable[..., Any]:
+def _on_reply(i: int, k: int, name: str) -> Callable[..., Any]:
     def method(self: RclpyAdapter, ctx: Context, reply: Any) -> None:
-        self._tf_engine.on_reply(ctx, i, reply)
-    return _named(method, f"reply_{i}")
+        self._tf_engine.on_reply(ctx, i, k, reply)
+    return _named(method, name)
 
 
 _HINTS = {bool: bool, int: int, float: float, str: str, bytes: bytes}

@@ -41,6 +41,16 @@ from twinfleet.runtime.contract.messages import CallError
 #: How long a `call_async` waits for its reply: rclpy's own calls never time out.
 CALL_TIMEOUT_MS = 3_600_000
 
+#: How many calls of one client may wait for replies at once: each has a reply handler of
+#: its own (`reply_method`), so that a reply completes the future of the call it answers.
+CALL_SLOTS = 8
+
+
+def reply_method(client: int, slot: int) -> str:
+    """The adapter's handler for replies to call slot `slot` of client `client`."""
+    return f"reply_{client}" if slot == 0 else f"reply_{client}_{slot}"
+
+
 @dataclass
 class Construction:
     """What the loader says about the node being built: the `--ros-args` of a launch."""
@@ -190,12 +200,12 @@ class Engine:
         with self.handling(ctx):
             self.dispatch(EntityKind.SUBSCRIPTION, index, (msg,))
 
-    def on_reply(self, ctx: Context, index: int, reply: Any) -> None:
-        """The reply to the oldest pending call of client `index`."""
+    def on_reply(self, ctx: Context, index: int, slot: int, reply: Any) -> None:
+        """The reply to the call in slot `slot` of client `index`."""
         with self.handling(ctx):
             if isinstance(reply, CallError):
                 return  # rclpy's future stays pending: a call without answer never completes
-            self.dispatch(EntityKind.CLIENT, index, (reply,))
+            self.dispatch(EntityKind.CLIENT, index, (reply, slot))
 
     def on_request(self, ctx: Context, index: int, request: Any) -> Any:
         """A request for service `index`: its response, frozen; None when the reply is
@@ -249,9 +259,14 @@ class Engine:
     def run(self, kind: EntityKind, index: int, args: tuple[Any, ...]) -> None:
         """Take one ready callback."""
         if kind is EntityKind.CLIENT:
+            reply, slot = args
             calls = self.dyn.calls[index]
-            if calls:
-                calls.pop(0).set_result(wire.thaw(args[0]))
+            future = calls[slot] if slot < len(calls) else None
+            if future is not None:
+                calls[slot] = None
+                while calls and calls[-1] is None:  # one form per set of pending calls
+                    calls.pop()
+                future.set_result(wire.thaw(reply))
             return
         if kind is EntityKind.TIMER:
             slot = self.dyn.timers[index]
@@ -299,8 +314,18 @@ class Engine:
         entry = self.clients[index]
         frozen = wire.freeze(request)
         future._engine = self
-        self.dyn.calls[index].append(future)
-        method = getattr(self.adapter, f"reply_{index}")
+        calls = self.dyn.calls[index]
+        slot = next((k for k, f in enumerate(calls) if f is None), len(calls))
+        if slot >= CALL_SLOTS:
+            raise ContractError(f"{self.name}: client {entry.name!r} has {CALL_SLOTS} calls "
+                                "waiting for replies, as many as twinfleet's rclpy follows",
+                                "wait for a reply (await it, or call again from its done "
+                                "callback) before calling once more")
+        if slot == len(calls):
+            calls.append(future)
+        else:
+            calls[slot] = future
+        method = getattr(self.adapter, reply_method(index, slot))
         self.effect(lambda ctx: ctx.call(entry.name, frozen, method, timeout_ms=CALL_TIMEOUT_MS))
 
     def log(self, severity: str, logger: str, text: str) -> None:

@@ -113,5 +113,6 @@ class Dynamic:
     params: dict[str, Any] = field(default_factory=dict)
     waiting: list[Waiting] = field(default_factory=list)
     tasks: list[Suspended] = field(default_factory=list)
-    calls: list[list[Any]] = field(default_factory=list)  # per client: pending Futures, in order
+    # per client: the Future of each call slot waiting for its reply (None: a free slot)
+    calls: list[list[Any]] = field(default_factory=list)
     on_set: list[Callable[..., Any]] = field(default_factory=list)

@@ -122,7 +122,8 @@ class RclpyState:
             ``awaiting`` (a future's number), ``results`` and ``clocks`` of its steps so
             far, ``args`` and ``start`` (snapshot bytes of the state it began in), ``reply``
             (a service callback's `ReplyToken`, else None).
-        calls: per client, the numbers of the futures of its calls without reply, in order.
+        calls: per client, per call slot, the number of the future of the call waiting for
+            its reply there (-1: a free slot).
         on_set: the on-set-parameters callbacks.
         futures: per future ``[status (0 pending, 1 done, 2 cancelled), result, callbacks]``.
     """
@@ -289,7 +290,7 @@ def capture(engine: Engine) -> RclpyState:
                    "awaiting": enc.future(t.awaiting).index,
                    "results": tuple(enc(r) for r in t.results), "clocks": tuple(t.clocks),
                    "args": t.args, "start": t.start, "reply": t.reply} for t in dyn.tasks)
-    calls = tuple(tuple(enc.future(f).index for f in c) for c in dyn.calls)
+    calls = tuple(tuple(-1 if f is None else enc.future(f).index for f in c) for c in dyn.calls)
     on_set = tuple(enc.callback(cb) for cb in dyn.on_set)
     params = tuple((k, enc(dyn.params[k])) for k in sorted(dyn.params))
     records: list[Any] = []
@@ -376,7 +377,7 @@ def apply_state(engine: Engine, st: RclpyState, *, fresh_dict: bool = False) -> 
     dyn.tasks = [Suspended(dec.callback(t["callback"]), t["args"], t["group"], t["start"],
                            [dec(r) for r in t["results"]], list(t["clocks"]),
                            futures[t["awaiting"]], t["reply"]) for t in st.tasks]
-    dyn.calls = [[futures[n] for n in c] for c in st.calls]
+    dyn.calls = [[None if n < 0 else futures[n] for n in c] for c in st.calls]
     dyn.on_set = [dec.callback(cb) for cb in st.on_set]
     engine.dyn = dyn
     engine.synced = None if st.futures or fresh_dict else records

@@ -6,11 +6,15 @@ request's reply is deferred, `Context.defer_reply`, and sent when the coroutine 
 request it answers, so two askers calling at once (relay_two.yaml) each get their own
 answer whatever order the replies come back in; `SloppyRelay` keeps the request in an
 attribute across the await, so with two requests in flight the first caller gets the
-second's answer (a property violation). `BusyRelay`'s request arrives while its timer's
+second's answer (a property violation). `ShortcutRelay` answers a "no" at once and a
+"yes" after the backend, so `TwiceAsker`'s two calls on one client (relay_twice.yaml)
+may be answered in the other order: each reply still completes its own call's future.
+`BusyRelay`'s request arrives while its timer's
 coroutine holds the service's group: it waits for the group and is served when it frees.
 """
 
 import sys
+from functools import partial
 
 from rclpy.callback_groups import ReentrantCallbackGroup
 from rclpy.node import Node
@@ -65,6 +69,43 @@ class SloppyRelay(Relay):
         return response
 
 
+class ShortcutRelay(Relay):
+    """Answers "no" at once and "yes" only after asking the backend."""
+
+    async def on_relay(self, request, response):
+        response.success = True
+        if not request.data:
+            response.message = "shortcut (no)"
+            return response
+        answer = await self.client.call_async(Trigger.Request())
+        response.message = f"{answer.message} (yes)"
+        return response
+
+
+class TwiceAsker(Node):
+    """Calls once with yes, then at once with no, on one client; notes the order the
+    replies complete its calls in, and counts replies given to the wrong call."""
+
+    def __init__(self):
+        super().__init__("twice_asker")
+        self.order = []
+        self.mismatched = 0
+        self.client = self.create_client(SetBool, "relay")
+        self.create_timer(0.05, self.tick)
+
+    def tick(self):
+        if not self.order and not getattr(self, "sent", False):
+            self.sent = True
+            for data in (True, False):
+                future = self.client.call_async(SetBool.Request(data=data))
+                future.add_done_callback(partial(self.done, data))
+
+    def done(self, data, future):
+        self.order.append(data)
+        if future.result().message.endswith("(yes)") != data:
+            self.mismatched += 1
+
+
 class BusyRelay(Node):
     """Its timer awaits the backend in the default group, which its service shares: a
     request arriving meanwhile waits for the group."""
@@ -117,11 +158,12 @@ class OtherAsker(Asker):
 def main():
     import oracle_main
 
-    relay = {"echo": EchoRelay, "busy": BusyRelay}.get(sys.argv[1] if len(sys.argv) > 1
-                                                      else "", Relay)
-    askers = [Asker, OtherAsker] if relay is EchoRelay else [Asker]
-    oracle_main.run([Backend, relay, *askers], ["got"],
-                    done=lambda nodes: all(n.got for n in nodes[2:]), timeout_s=5.0)
+    variant = sys.argv[1] if len(sys.argv) > 1 else ""
+    relay = {"echo": EchoRelay, "busy": BusyRelay, "twice": ShortcutRelay}.get(variant, Relay)
+    askers = {"echo": [Asker, OtherAsker], "twice": [TwiceAsker]}.get(variant, [Asker])
+    oracle_main.run([Backend, relay, *askers], ["got", "order", "mismatched"],
+                    done=lambda nodes: all(getattr(n, "got", "") or len(getattr(n, "order", ()))
+                                           == 2 for n in nodes[2:]), timeout_s=5.0)
 
 
 if __name__ == "__main__":
