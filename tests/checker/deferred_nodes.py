@@ -95,8 +95,34 @@ class AskerState:
     got: str = ""
 
 
+@dataclass
+class SlowState:
+    """The one deferred request."""
+
+    token: ReplyToken | None = None
+
+
+class SlowRelay(Node):
+    """Replies 1.5 s after the request: after the caller's 1 s timeout."""
+
+    def initial_state(self) -> SlowState:
+        return SlowState()
+
+    @service("/relay")
+    def relay(self, ctx: Context, req: Ask) -> None:
+        self.state.token = ctx.defer_reply()
+        ctx.after(1500, self.late)
+
+    @handler()
+    def late(self, ctx: Context) -> None:
+        if self.state.token is not None:
+            ctx.reply(self.state.token, Answer(self.state.token.caller, "late"))
+            self.state.token = None
+            ctx.publish("/late", Answer("", "replied"))
+
+
 class Asker(Node):
-    """Asks the relay once, at start, in its own name."""
+    """Asks the relay once, at start, in its own name; says what it got on /answered."""
 
     def initial_state(self) -> AskerState:
         return AskerState()
@@ -108,3 +134,4 @@ class Asker(Node):
     @handler()
     def done(self, ctx: Context, answer: Answer | CallError) -> None:
         self.state.got = "error" if isinstance(answer, CallError) else answer.to
+        ctx.publish("/answered", Answer(self.name, self.state.got))
