@@ -9,13 +9,14 @@ from twinfleet import Context, Node, ReplyToken, on_start, testing
 from twinfleet.runtime.contract.kinds import EventKind
 
 
-def fleet(relay: type[Node], askers: int, *extra: testing.PropertyConfig) -> testing.Scenario:
+def fleet(relay: type[Node], askers: int, *extra: testing.PropertyConfig,
+          **settings: object) -> testing.Scenario:
     nodes: dict[str, type[Node]] = {"backend": Backend, "relay": relay}
     properties = list(extra)
     for k in range(askers):
         nodes[f"a{k}"] = Asker
         properties.append(testing.eventually(f"a{k}_answered", f"a{k}.got == 'a{k}'"))
-    return testing.system(nodes, properties)
+    return testing.system(nodes, properties, **settings)
 
 
 def test_a_relay_that_answers_later_holds_with_one_and_two_askers():
@@ -69,3 +70,21 @@ def test_defer_reply_outside_a_service_handler_is_a_breach():
     report = testing.check(testing.system({"n": Outside}))
     assert report.breach and "defer_reply() outside a @service handler" in report.message
 
+
+
+def test_the_reduction_keeps_every_verdict_of_deferred_replies():
+    """A reply from a handler that is not the request's is a send the reduction must learn
+    (an edge from the replying handler to the caller): reduced and full searches agree on
+    every verdict, with latency too (replies then overtake each other)."""
+    for relay, askers in ((Relay, 2), (Relay, 3), (SloppyRelay, 2)):
+        for latency in (None, [0, 2]):
+            settings = {"check": {"latency": latency}} if latency else {}
+            orders = [testing.invariant("order", f"not ({a}.got != '' and {b}.got == '')")
+                      for a, b in (("a0", "a1"), ("a1", "a0"))]
+            for system in (fleet(relay, askers, **settings),
+                           *(fleet(relay, askers, order, **settings) for order in orders)):
+                full = testing.check(system, reduction="none")
+                reduced = testing.check(system, reduction="por")
+                assert (reduced.verdict, reduced.property) == (full.verdict, full.property), \
+                    (reduced.explain(), full.explain())
+                assert not reduced.holds or reduced.states <= full.states

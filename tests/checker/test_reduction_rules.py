@@ -29,7 +29,8 @@ RULE_FUNCTIONS: tuple[Callable[..., Any], ...] = (
     semantics.Rules.remove, semantics.Rules.delivery, semantics.Rules.copies,
     semantics.Rules.crashable, semantics.Rules.droppable, semantics.Rules.tick_after,
     semantics._earliest_sent,
-    runner.Runner._effects, system.System._apply, system.System._apply_crash,
+    runner.Runner._effects, runner._reply, runner._token, system.System._apply,
+    system.System._apply_crash,
 )
 
 #: The fingerprint of `RULE_FUNCTIONS` as the closure was last reviewed for them: Rule 6
@@ -45,7 +46,11 @@ RULE_FUNCTIONS: tuple[Callable[..., Any], ...] = (
 #: at once (a group of one was picked as it is), a sent message's FIFO clamp and rank
 #: come from one pass over its channel-mates (the latest due time among them, the count
 #: at the clamped due time), and one fault option with nothing lossy is one copy at once.
-PINNED = "176aa66b7b72675a"
+#: Then deferred replies: a request's handler that deferred (reply None) sends no reply,
+#: and a `Reply` effect of any handler sends the reply event the request's handler would
+#: have (`_reply`, for both): a zero-latency send at the instant to the caller, which the
+#: learned send relation sees like any other (an edge from the replying handler).
+PINNED = "a68a225f75d2cd1a"
 
 _SKIPPED = (tokenize.NL, tokenize.COMMENT)
 _STATEMENT_START = (tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT)

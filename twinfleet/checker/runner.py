@@ -6,8 +6,8 @@ is the checker's, snapshots the state again and turns the recorded effects
 into pending events (`Publish` → one delivery per subscriber, `Call` → a
 request to the server, or a TIMEOUT carrying a `CallError` after the call's
 timeout when there is no server or the request is lost, `After` → a timer, a
-service's return value → a reply, unless the handler deferred it (`Defer`): then
-a `Reply` effect, from any later handler, makes that reply event), with the latency, deadline and fault
+service's return value → a reply, unless the handler deferred it (`Defer`): a
+`Reply` effect of a later handler makes that reply event), with the latency, deadline and fault
 branches of `checker.semantics` (Rule 5). Node code is never special-cased.
 The result is a `checker.transition.Variant`, independent of the world, so
 the system can cache it.
@@ -63,7 +63,6 @@ from twinfleet.runtime.contract.context import (
     After,
     Call,
     Context,
-    Defer,
     Fail,
     Log,
     Publish,
@@ -96,9 +95,11 @@ class _ClockContext(Context):
 
     __slots__ = ("_t", "read_clock")
 
-    def __init__(self, node: Node, now_ms: int, chooser: Any) -> None:
+    def __init__(self, node: Node, now_ms: int, chooser: Any, serving: ReplyToken | None
+                 ) -> None:
         super().__init__(node, now_ms, chooser)
         self.read_clock = False
+        self.serving = serving
 
     @property
     def now_ms(self) -> int:
@@ -130,7 +131,6 @@ class Runner:
         self.rules = rules
         self.nodes: tuple[Node, ...] = topology.nodes
         self.names = tuple(node.name for node in self.nodes)
-        self._index = {name: i for i, name in enumerate(self.names)}
         self._breaches = Breaches(topology)
         self.debug_state = debug_state
         self.verify = verify
@@ -247,10 +247,7 @@ class Runner:
     def _invoke(self, node: Node, ev: Event, chooser: ExploringChooser
                 ) -> tuple[HandlerOutcome, _ClockContext]:
         """Run `ev`'s handler on `node` (its state loaded), under the probe if any."""
-        ctx = _ClockContext(node, ev.due, chooser)
-        if ev.kind is EventKind.REQUEST:
-            ctx.serving = ReplyToken(self.topology.service_of.get((ev.target, ev.method), ""),
-                                     self.names[ev.sender], ev.reply_to, ev.args[0])
+        ctx = _ClockContext(node, ev.due, chooser, _serving(self, ev))
         self._current[ev.target] = None  # the state object is about to change
         with self._probe or _NO_PROBE:
             outcome = run_handler(node, ev.method, ctx, ev.args,
@@ -338,7 +335,6 @@ class Runner:
             out.append(Event(self.rules.tick_after(now, topology.period(i, ev.method), chooser),
                              EventKind.PERIODIC, i, ev.method, i, (), ev.priority))
         failure = None
-        answered = ev.kind is not EventKind.REQUEST
         for k, eff in enumerate(effects):
             match eff:
                 case Publish(topic=topic, msg=msg):
@@ -375,30 +371,12 @@ class Runner:
                                                  f"ctx.fail: {reason}")
                 case Log():
                     logs.append(eff)
-                case Defer():
-                    answered = True
-                case Reply(token=token, msg=msg):
-                    failure = failure or self._reply(ev, token, msg, out, chooser)
-        if not answered:
-            service = topology.service_of.get((i, ev.method), "")
-            out.append(self._message(now, service, EventKind.REPLY, ev.sender, ev.reply_to, i,
-                                     (reply,), topology.priority(ev.sender, ev.reply_to), "",
-                                     chooser))
+                case Reply():
+                    failure = failure or _reply(self, ev, eff, out, chooser)
+        if ev.kind is EventKind.REQUEST and reply is not None:  # None: deferred (`Defer`)
+            _reply(self, ev, Reply(_token(self, ev), reply), out, chooser)
         self.hashed += len(out)
         return out, failure, logs, faults, lost_keys
-
-    def _reply(self, ev: Event, token: ReplyToken, msg: Any, out: list[Event],
-               chooser: ExploringChooser) -> Failure | None:
-        """The reply event of a deferred request (`Reply`), as the request's handler
-        would have sent it; a failure when the token names no node of the scenario."""
-        i, now, j = ev.target, ev.due, self._index.get(token.caller)
-        if j is None:
-            return Failure(FailureKind.CONTRACT, self.names[i], ev.method, f"ctx.reply() to a token "
-                           f"of caller {token.caller!r}, which is no node of the scenario; "
-                           "fix: reply with a token defer_reply() gave")
-        out.append(self._message(now, token.service, EventKind.REPLY, j, token.reply_to, i,
-                                 (msg,), self.topology.priority(j, token.reply_to), "", chooser))
-        return None
 
     def _copies(self, name: str, j: int, chooser: ExploringChooser, faults: list[str]) -> int:
         """How many copies of one message on `name` to node `j` arrive (fault branches)."""
@@ -433,6 +411,33 @@ class Runner:
             self._keys.clear()
         self._keys[slot] = (anchor, key)
         return key
+
+
+def _serving(runner: Runner, ev: Event) -> ReplyToken | None:
+    """The token of a request `ev`, should its handler defer the reply (else None)."""
+    return _token(runner, ev) if ev.kind is EventKind.REQUEST else None
+
+
+def _token(runner: Runner, ev: Event) -> ReplyToken:
+    """The call a request `ev` is, as a `ReplyToken`."""
+    service = runner.topology.service_of.get((ev.target, ev.method), "")
+    return ReplyToken(service, runner.names[ev.sender], ev.reply_to, ev.args[0])
+
+
+def _reply(runner: Runner, ev: Event, reply: Reply, out: list[Event],
+           chooser: ExploringChooser) -> Failure | None:
+    """The reply event of a request (its handler's return value, or a `Reply` effect of a
+    later handler when it deferred); a failure when the token names no node."""
+    token, names = reply.token, runner.names
+    if token.caller not in names:
+        return Failure(FailureKind.CONTRACT, names[ev.target], ev.method, f"ctx.reply() to a "
+                       f"token of caller {token.caller!r}, which is no node of the scenario; "
+                       "fix: reply with a token defer_reply() gave")
+    j = names.index(token.caller)
+    out.append(runner._message(ev.due, token.service, EventKind.REPLY, j, token.reply_to,
+                               ev.target, (reply.msg,), runner.topology.priority(
+                                   j, token.reply_to), "", chooser))
+    return None
 
 
 def _same_again(runner: Runner, ev: Event, data: bytes, v: Variant, first: int,

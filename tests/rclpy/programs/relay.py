@@ -53,20 +53,21 @@ class EchoRelay(Relay):
 
     async def on_relay(self, request, response):
         answer = await self.client.call_async(Trigger.Request())
+        return self.fill(response, answer, request)
+
+    def fill(self, response, answer, request):
         response.success = answer.success
         response.message = f"{answer.message} ({'yes' if request.data else 'no'})"
         return response
 
 
-class SloppyRelay(Relay):
+class SloppyRelay(EchoRelay):
     """Keeps the request in an attribute across the await: a later request overwrites it."""
 
     async def on_relay(self, request, response):
         self.last = request
         answer = await self.client.call_async(Trigger.Request())
-        response.success = answer.success
-        response.message = f"{answer.message} ({'yes' if self.last.data else 'no'})"
-        return response
+        return self.fill(response, answer, self.last)
 
 
 class ShortcutRelay(Relay):

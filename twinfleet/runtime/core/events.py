@@ -28,8 +28,8 @@ class Event:
         due: the fleet ms a timed entry is due (TIMER, PERIODIC, TIMEOUT; START: when it
             was queued); None for events that arrive.
         call: a TIMEOUT entry's call id: void once that call got an answer.
-        responder: a REQUEST's way back to its caller, opaque to the core.
-        reply_to: a REQUEST's caller's reply handler (a deferred reply's token names it).
+        responder: a REQUEST's call (`ReplyToken`) and its way back to its caller, opaque
+            to the core.
     """
 
     kind: EventKind
@@ -42,4 +42,3 @@ class Event:
     due: int | None = None
     call: int | None = None
     responder: Any = field(default=None, repr=False)
-    reply_to: str = ""

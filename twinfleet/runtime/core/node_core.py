@@ -118,6 +118,7 @@ _COUNTERS: Final = ("received", "undecodable", "errors", "failures", "gaps", "pu
                     "handled", "keep_last", "best_effort", "seq_jumps", "lossless", "stalls",
                     "max_late", "period", "external")
 _NOTHING: Final[tuple[()]] = ()
+_NO_REQUEST: Final = (None, None)  # what a handler not serving a request gets
 _PICKLE: Final = pickle.HIGHEST_PROTOCOL  # rollback copies never leave the process
 
 
@@ -354,7 +355,8 @@ class NodeCore:
                     ReplyOutput(responder, None, f"server error: undecodable request ({exc})"))
         self._push(arrival_ms, self.due.priority(method),
                    Event(EventKind.REQUEST, method, (msg,), sender, self.services[method], seq,
-                         stamp, responder=responder, reply_to=reply_to))
+                         stamp, responder=(ReplyToken(self.services[method], sender, reply_to,
+                                                      msg), responder)))
         return _NOTHING
 
     def receive_reply(self, call: int, payload: bytes | None, failure: CallFailure | None,
@@ -394,11 +396,6 @@ class NodeCore:
                                                     (NodeAlive(node, alive),), node,
                                                     LIVELINESS_TOPIC))
         return True
-
-    def unanswered(self) -> list[ReplyOutput]:
-        """The "server error" answers of the deferred requests still waiting, to perform
-        when the node stops (no caller's query is left open)."""
-        return self._outbox.unanswered()
 
     def shift_arrivals(self, delta_ms: int) -> None:
         """Move every held arrival time `delta_ms` earlier: the clock's epoch moved (the
@@ -496,15 +493,13 @@ class NodeCore:
         if entry.sender in OUTSIDE_SENDERS:
             self._came_in(entry.sender, entry.topic)
         observers = self._observers
-        serving = None if entry.responder is None else ReplyToken(
-            entry.topic, entry.sender, entry.reply_to, entry.args[0])
         if not observers:
             return self._execute(entry.handler, entry.args, now, chooser or self._random,
-                                 entry.responder, serving)[0]
+                                 entry.responder)[0]
         if not isinstance(chooser, RecordingChooser):
             chooser = RecordingChooser(chooser or self._random)
         outputs, effects, error = self._execute(entry.handler, entry.args, now, chooser,
-                                                entry.responder, serving)
+                                                entry.responder)
         record = Handled(self.node, entry, now, tuple(effects), tuple(chooser.indices),
                          tuple(chooser.options), error)
         for observer in observers:
@@ -517,22 +512,18 @@ class NodeCore:
         self._outside[key] = self._outside.get(key, 0) + 1
 
     def _execute(self, method: str, args: tuple[Any, ...], now: int, chooser: Chooser,
-                 responder: Any, serving: ReplyToken | None = None
-                 ) -> tuple[Sequence[Output], list[Effect], HandlerError | None]:
-        """Run one handler; what it did, as outputs (and its effects and error, for observers).
-        A request's `serving` is its token, should the handler defer its reply."""
+                 request: Any) -> tuple[Sequence[Output], list[Effect], HandlerError | None]:
+        """Run a handler (`request`: its token, responder); its outputs, effects, error."""
         node = self.node
         ctx = Context(node, now, chooser)
-        ctx.serving = serving
+        ctx.serving, responder = request or _NO_REQUEST
         self._rollback.arm()
         reply, error = invoke(node, method, ctx, args, responder is not None)
         error = self._rollback.keep_or_restore(method, error, ctx)
         self._n["handled"] += 1
         effects = ctx.effects
-        parked = serving if error is None and deferred(ctx) else None
-        if parked is not None:
-            self._outbox.park(parked, responder)  # a `Reply` effect answers it
-            responder = None
+        if ctx.serving is not None and error is None and deferred(ctx):
+            responder = self._outbox.park(ctx.serving, responder)  # a `Reply` answers it
         if error is None and responder is None:  # the common case: a handler that went well
             if not effects:
                 return _NOTHING, effects, None
@@ -540,8 +531,6 @@ class NodeCore:
             error = self._outbox.translate(effects, now, method, out)
             if error is None:
                 return out, effects, None
-            if parked is not None:  # the handler failed after all: the caller hears it now
-                responder = self._outbox.unpark(parked)
         else:
             out = []
             if effects:

@@ -8,7 +8,7 @@ request that ran, or to a deferred one), `LogOutput` (a log line), `StopOutput`
 (``stop_on_error`` after a failure). A request whose handler deferred its reply
 (`contract.context.Defer`) leaves its responder here, kept by its token (never in node
 state: a responder is the transport's query), until a `Reply` effect answers it
-(`park`, `unanswered`). The `Outbox` numbers each topic's envelopes (a per-publisher
+(`park`); a transport that closes answers the queries it still holds. The `Outbox` numbers each topic's envelopes (a per-publisher
 sequence number that receivers check for gaps; a message that cannot be
 encoded takes no number), arms the due entries of `ctx.after` and `ctx.call`,
 and reports failures: a line, a `Violation` published on /violations as if
@@ -117,9 +117,11 @@ class Outbox:
         # deferred requests, oldest first (a list: a token holds a message, maybe unhashable)
         self._parked: list[tuple[ReplyToken, Any]] = []
 
-    def park(self, token: ReplyToken, responder: Any) -> None:
-        """Keep the responder of a request whose handler deferred its reply."""
+    def park(self, token: ReplyToken, responder: Any) -> Any:
+        """Keep the responder of a request whose handler deferred its reply; None, the
+        responder the request's own step then has (nothing answers it now)."""
         self._parked.append((token, responder))
+        return None
 
     def unpark(self, token: ReplyToken) -> Any:
         """The responder of the oldest deferred request `token` names, taken out (None:
@@ -129,14 +131,6 @@ class Outbox:
                 del self._parked[k]
                 return responder
         return None
-
-    def unanswered(self) -> list[ReplyOutput]:
-        """Answers to every deferred request still waiting ("server error"), taken out: a
-        node that stops finalises them, so no caller's query is left open."""
-        out = [ReplyOutput(responder, None, "server error: the server stopped before it "
-                           f"replied to {token.service}") for token, responder in self._parked]
-        self._parked.clear()
-        return out
 
     def translate(self, effects: Sequence[Effect], now: int, method: str,
                   out: list[Output]) -> HandlerError | None:

@@ -152,7 +152,6 @@ class NodeHost:
         finally:
             if self._wake_timer is not None:
                 self._wake_timer.cancel()
-            self.perform(self.core.unanswered())  # finalise deferred requests' queries
 
     @property
     def alive(self) -> set[str]:

@@ -44,12 +44,13 @@ so a late joiner receives the last samples.
 
 Services. A queryable hands the `Query` to the loop; the host replies on the
 queryable's key (or with `reply_err` "server error: ...") and the query is
-finalised with ``with query:``. A caller gets the first reply, or a `CallFailure`
-from what Zenoh reports: an error reply from the server (`SERVER_ERROR`); the
-error reply ``Timeout`` Zenoh itself gives when a server took the query and the
-timeout passed (`TIMEOUT`); the query finalised with no reply at all, which is
-what Zenoh does when no queryable took it or the one that did went away
-(`NO_SERVER`).
+finalised with ``with query:``, at once or, for a deferred reply, from a later
+handler; a query still held when the transport closes is answered "server error".
+A caller gets the first reply, or a `CallFailure` from what Zenoh reports: an
+error reply from the server (`SERVER_ERROR`); the error reply ``Timeout`` Zenoh
+itself gives when a server took the query and the timeout passed (`TIMEOUT`);
+the query finalised with no reply at all, which is what Zenoh does when no
+queryable took it or the one that did went away (`NO_SERVER`).
 """
 
 from __future__ import annotations
@@ -75,6 +76,7 @@ from twinfleet.runtime.host.transport import (
     OnChange,
     OnDone,
     OnRequest,
+    Respond,
     TransportStatistics,
 )
 
@@ -235,6 +237,7 @@ class ZenohTransport:
         self._publishers: dict[str, Any] = {}
         self._advanced: list[Any] = []
         self._entities: list[Any] = []
+        self._held: set[Respond] = set()  # queries taken and not answered yet
 
     @property
     def _s(self) -> zenoh.Session:
@@ -353,21 +356,24 @@ class ZenohTransport:
             query.reply_err(b"server error: unauthenticated request (not signed with the "
                             b"fleet key, or a replay)")
 
-    @staticmethod
-    def _answer(key: str, query: zenoh.Query, payload: bytes, on_request: OnRequest) -> None:
+    def _answer(self, key: str, query: zenoh.Query, payload: bytes,
+                on_request: OnRequest) -> None:
         answered = False
+        held = self._held
 
         def respond(reply: bytes | None, reason: str) -> None:
             nonlocal answered
             if answered:
                 return
             answered = True
+            held.discard(respond)
             with query:  # finalises the query: the caller does not wait for its timeout
                 if reply is not None:
                     query.reply(key, reply)
                 else:
                     query.reply_err(reason.encode())
 
+        held.add(respond)  # until answered: a deferred reply comes from a later handler
         try:
             on_request(payload, respond)
         except Exception as exc:  # never leave a query unfinalised
@@ -467,6 +473,8 @@ class ZenohTransport:
         """Undeclare (advanced entities first), then close the session, on the loop thread."""
         if self._handoff is not None:
             self._handoff.closed = True
+        for respond in list(self._held):  # a deferred reply that will never come
+            respond(None, "server error: the server stopped before it replied")
         for entity in [*self._advanced, *self._publishers.values(), *self._entities]:
             with contextlib.suppress(Exception):  # already undeclared: nothing to do
                 entity.undeclare()
