@@ -75,6 +75,16 @@ def test_a_deferred_reply_runs_live(scenario):
 
 @pytest.mark.slow
 @pytest.mark.fleet
+def test_a_live_run_through_deferred_replies_is_a_path_of_the_model(tmp_path):
+    events = tmp_path / "relay_two.events.jsonl"
+    run = launch("relay_two.yaml", "--record-events", str(events))
+    assert run.returncode == 0, run.stdout + run.stderr
+    valid = twinfleet("validate", str(events), "relay_two.yaml")
+    assert valid.returncode == 0 and valid.stdout.startswith("VALID"), valid.stdout + valid.stderr
+
+
+@pytest.mark.slow
+@pytest.mark.fleet
 def test_a_trace_through_deferred_replies_replays_live(tmp_path):
     trace = check("relay_sloppy.yaml").save_trace(tmp_path / "sloppy.trace.json")
     replay = twinfleet("replay", str(trace), "--live", timeout_s=240.0)

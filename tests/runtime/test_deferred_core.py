@@ -11,7 +11,7 @@ import pytest
 from tests.checker.deferred_nodes import Answer, Ask, Relay
 from twinfleet import Context, ContractError, Node, ReplyToken, handler, service
 from twinfleet.runtime.contract.dispatch import invoke
-from twinfleet.runtime.contract.messages import decode, decode_request, encode
+from twinfleet.runtime.contract.messages import decode, decode_request, encode, encode_request
 from twinfleet.runtime.core.node_core import NodeCore
 from twinfleet.runtime.core.outbox import CallOutput, LogOutput, Output, ReplyOutput
 
@@ -33,7 +33,7 @@ def relay() -> tuple[Relay, NodeCore]:
 
 def ask(core: NodeCore, who: str, responder: Any, now: int) -> CallOutput:
     """`who` asks the relay; the relay's call to the backend."""
-    request = encode(Ask(who), sender=who, reply_to="done")
+    request = encode_request(Ask(who), stamp_ms=0, sender=who, reply_to="done")
     assert core.receive_request("relay", request, responder, now) == ()
     (query,) = drain(core, now)  # deferred: no reply yet, only the backend call
     assert isinstance(query, CallOutput) and query.service == "/backend"
@@ -78,7 +78,7 @@ class Twice(Node):
 def test_a_second_reply_to_one_token_is_dropped_with_a_line():
     core = NodeCore(Twice("t"), seed=1)
     core.start(0)
-    core.receive_request("serve", encode(Ask("a"), sender="a", reply_to="done"), "to a", 0)
+    core.receive_request("serve", encode_request(Ask("a"), stamp_ms=0, sender="a", reply_to="done"), "to a", 0)
     reply, line = drain(core, 0)
     assert isinstance(reply, ReplyOutput) and decode(reply.payload).msg.text == "one"  # type: ignore[arg-type]
     assert isinstance(line, LogOutput) and line.err and "answered already" in line.text
@@ -128,13 +128,13 @@ def test_defer_reply_outside_a_service_handler_and_a_bad_reply_are_refused():
 
 
 def test_a_request_names_its_callers_reply_handler():
-    msg, _, _, sender, reply_to = decode_request(encode(Ask("a"), sender="a", reply_to="done"))
+    msg, _, _, sender, reply_to = decode_request(encode_request(Ask("a"), stamp_ms=0, sender="a", reply_to="done"))
     assert (msg, sender, reply_to) == (Ask("a"), "a", "done")
     assert decode_request(encode(Ask("a")))[4] == ""
     node = Relay("relay")
     core = NodeCore(node, seed=1)
     core.start(0)
     drain(core, 0)
-    core.receive_request("relay", encode(Ask("a"), sender="a", reply_to="done"), "r", 0)
+    core.receive_request("relay", encode_request(Ask("a"), stamp_ms=0, sender="a", reply_to="done"), "r", 0)
     (query,) = drain(core, 0)
     assert isinstance(query, CallOutput) and decode_request(query.payload)[4] == "on_backend"

@@ -34,7 +34,7 @@ from twinfleet.runtime.contract.context import (
 )
 from twinfleet.runtime.contract.dispatch import HandlerError
 from twinfleet.runtime.contract.kinds import EventKind
-from twinfleet.runtime.contract.messages import Violation, encode
+from twinfleet.runtime.contract.messages import Violation, encode, encode_request
 from twinfleet.runtime.core.due import DueEntries
 from twinfleet.runtime.core.events import Event
 
@@ -167,7 +167,8 @@ class Outbox:
 
     def _query(self, call: Call, now: int) -> CallOutput:
         cid = self.due.open_call(call, now)
-        payload = encode(call.request, stamp_ms=now, sender=self.name, reply_to=call.reply_to)
+        payload = encode_request(call.request, stamp_ms=now, sender=self.name,
+                                 reply_to=call.reply_to)
         return CallOutput(cid, call.service, payload, call.timeout_ms)
 
     def _answer(self, token: ReplyToken, msg: Any, now: int) -> Output:
