@@ -166,5 +166,5 @@ def test_a_sound_handler_is_run_twice_and_its_second_run_builds_no_events(monkey
 
     monkeypatch.setattr(Runner, "_exec", counting)
     result = check(tpc_scenario(tmp_path), CheckOptions(reduction="none"))
-    assert result.status == "holds" and result.handler_runs > 100
+    assert result.status == "holds" and result.handler_runs > 50  # kept runs reused: 58
     assert result.handler_runs == 2 * full

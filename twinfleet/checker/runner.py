@@ -17,14 +17,17 @@ probed, the node's other attributes compared by identity, the module and class
 variables of its code watched, and the handler is run a second time from the same state with the same answers; a difference is
 a contract breach. The system caches outcomes, so only new runs are verified.
 
-`Runner.run_drawn` is `run` for a chooser that draws its answers (a
-simulation, `checker.simulate`): a handler that made no `ctx.choose` is run
-once per (node state, event) — and per time too if it read `ctx.now()` — and
-its recorded effects are kept; a later run of the same key turns the kept
-effects into events again with new draws (latency and fault branches are
-answered there, after the handler, and only set the due times and copies of
-the messages it sent). The same draws are taken in the same order as a real
-run would take them, so a simulation's results do not depend on the cache.
+`Runner.run_kept` is `run` reusing kept handler runs (a search's outcomes, with the
+system's outcome cache on, and a simulation's draws): a handler that made no
+`ctx.choose` is run once per (node state, event) — and per time too if it read
+`ctx.now()` — and its recorded effects are kept; a later run of the same key turns
+the kept effects into events again with the chooser's answers (latency and fault
+branches are answered there, after the handler, and only set the due times and
+copies of the messages it sent). The same answers are taken in the same order as a
+real run would take them, so results do not depend on the cache, and a run is
+verified once, when it is new: by the node contract its outcome is a function of
+that key (c1a_rebeca: 3,193 of 5,513 runs repeated an earlier one at another time,
+none of them reading the clock). `run` always runs: a trace's replay must.
 
 Equal node states are interned to one bytes object; the node object keeps
 the last state it was given, so running several events of one node in a row
@@ -81,7 +84,7 @@ _INTERN_LIMIT = 100_000  # interned node states kept before starting afresh
 _UNVERIFIED = CONTRACT_KINDS | {FailureKind.CHOICE_MISMATCH}
 _NO_PROBE = contextlib.nullcontext()
 _ADDRESS = re.compile(r" at 0x[0-9a-f]+")  # object addresses differ between two runs
-_DRAWN_LIMIT = 20_000  # handler outcomes kept per generation for simulations (two kept)
+_KEPT_LIMIT = 20_000  # handler runs kept for reuse per generation (two kept)
 _ANY_TIME = -1  # the time slot of a drawn-run key whose handler did not read the clock
 _KEY_LIMIT = 50_000  # message event keys kept by message identity before starting afresh
 
@@ -143,7 +146,7 @@ class Runner:
         self.reruns = 0  # re-executions that verified a run (checker.diagnosis)
         self._handled: _Handled | None = None  # the last `_exec` that reached its effects
         self._read_clock = False  # whether that handler read the time
-        self._drawn: GenerationCache[_Handled] = GenerationCache(_DRAWN_LIMIT)
+        self._kept: GenerationCache[_Handled] = GenerationCache(_KEPT_LIMIT)
         self._keys: dict[tuple[int, EventKind, int, str, int, str], tuple[Any, bytes]] = {}
 
     def interned(self) -> int:
@@ -160,30 +163,39 @@ class Runner:
         """Run `ev`'s handler on node state `data` (verified unless `verify` is off)."""
         return self._checked(ev, data, chooser)
 
-    def run_drawn(self, ev: Event, data: bytes, chooser: ExploringChooser) -> Variant:
-        """`run` for a fresh chooser that draws its answers (module docstring)."""
-        drawn = self._drawn
-        kept = drawn.get((data, ev.key, _ANY_TIME)) or drawn.get((data, ev.key, ev.due))
+    def run_kept(self, ev: Event, data: bytes, chooser: ExploringChooser) -> Variant:
+        """`run`, unless a run of the same (node state, event) is kept — of the same time
+        too if that run read the clock: then its recorded effects become events again, the
+        chooser answering their latency and fault branches as a real run would (module
+        docstring)."""
+        kept_runs = self._kept
+        kept = kept_runs.get((data, ev.key, _ANY_TIME)) or kept_runs.get((data, ev.key, ev.due))
+        first = len(chooser.indices)  # a trace's replay may share its chooser
         if kept is not None:
             new, effects, reply = kept
-            events, failure, logs, faults, lost = self._effects(ev, effects, reply, chooser)
+            try:
+                events, failure, logs, faults, lost = self._effects(ev, effects, reply, chooser)
+            except ChoiceMismatch as exc:  # a forced branch that does not exist
+                return _failed(chooser, data, FailureKind.CHOICE_MISMATCH,
+                               self.names[ev.target], ev.method, str(exc))
             n = len(chooser.indices)
             return Variant(tuple(chooser.indices), tuple(chooser.options), new, tuple(events),
-                           failure, tuple(logs), tuple(faults), tuple(range(n)), tuple(lost))
+                           failure, tuple(logs), tuple(faults), tuple(range(first, n)),
+                           tuple(lost))
         v = self._checked(ev, data, chooser)
         handled = self._handled
-        # Kept only when every answer was drawn after the handler (no ctx.choose) and the
-        # run was sound: a breach or a handler exception is reported by running it again.
-        if (handled is not None and len(chooser.indices) == len(v.branches)
+        # Kept only when every answer came after the handler (no ctx.choose) and the run was
+        # sound: a breach or a handler exception is reported by running it again.
+        if (handled is not None and len(v.choices) - first == len(v.branches)
                 and (v.failure is None or v.failure.kind is FailureKind.HANDLER)):
-            drawn.put((data, ev.key, ev.due if self._read_clock else _ANY_TIME), handled)
+            kept_runs.put((data, ev.key, ev.due if self._read_clock else _ANY_TIME), handled)
         return v
 
     def kept(self, data: bytes, key: bytes) -> _Handled | None:
         """The kept drawn run (new state, effects, reply) of the event whose untimed
         identity is `key` on node state `data`, if one is kept that did not read the clock
         (`checker.settled`)."""
-        return self._drawn.get((data, key, _ANY_TIME))
+        return self._kept.get((data, key, _ANY_TIME))
 
     def deadline_miss(self, ev: Event, data: bytes) -> Variant:
         """Taking `ev` after its deadline (Rule 5): nothing runs, the step fails."""
@@ -398,7 +410,7 @@ class Runner:
     def key_of(self, kind: EventKind, target: int, method: str, sender: int, reply_to: str,
              args: tuple[Any, ...]) -> bytes:
         """`event_key` of an event, kept by the identity of its one argument (a message)
-        or of its arguments (a timer's): a kept handler run (`run_drawn`) sends the same
+        or of its arguments (a timer's): a kept handler run (`run_kept`) sends the same
         objects again, and encoding them was a sixth of a simulation's time. The entry
         holds the object, so its id is not reused while the entry lives."""
         anchor = args[0] if len(args) == 1 else args

@@ -1,7 +1,7 @@
 """Whether a simulation has settled: no node state can change any more, whatever the timing.
 
 A simulation (`checker.simulate`) keeps handler runs that made no `ctx.choose`
-(`Runner.run_drawn`). From a world, follow every event the pending ones can lead to:
+(`Runner.run_kept`). From a world, follow every event the pending ones can lead to:
 each, run on its node's state, must have a kept run that did not read the clock,
 left the state unchanged, called no service (a call may time out instead) and did
 not `ctx.fail`; the events it sends are followed in turn. If all do, and some timer

@@ -95,7 +95,7 @@ class Simulator:
         self.system, self.properties, self.model = system, properties, model
         self.seed, self.horizon_ms, self.max_steps = seed, horizon_ms, max_steps
         self.until_decided = until_decided
-        # Reuse handler runs across steps and simulations (`Runner.run_drawn`); off: run
+        # Reuse handler runs across steps and simulations (`Runner.run_kept`); off: run
         # every handler (the same results, slower: for benchmarks and tests).
         self._take = system.draw if reuse else system.step
         self._rest = PropertySet([p for p in properties.all if p.kind != "invariant"],

@@ -24,7 +24,10 @@ the time (that is the node contract, which replay relies on too), so
 `outcomes` runs each (node state, event, time) once and keeps every choice
 variant's outcome — new node state and new events — in a cache: the
 interleavings of independent nodes repeat the same local steps many times
-(C1a: 128,800 transitions, 5,595 distinct handler runs). Entries are keyed by
+(C1a: 128,800 transitions, 5,595 distinct handler runs); a cache miss reuses a
+kept run of the same (node state, event) at another time when the handler did not
+read the clock (`Runner.run_kept`), so that run is not repeated, nor verified again
+(c1a_rebeca: 2,326 handler runs where 5,513 ran). Entries are keyed by
 absolute time, so the search drops those older than its frontier's earliest
 t* (`forget_before`), which no world left to expand can use; and whatever
 the search order it keeps at most two generations of 1,024 outcomes
@@ -203,12 +206,12 @@ class System:
 
     def draw(self, world: World, action: RunEvent, chooser: ExploringChooser) -> Transition:
         """`step` for a fresh chooser that draws its answers (a simulation): handler runs
-        are kept and reused as `Runner.run_drawn` says; the same transition as `step`."""
+        are kept and reused as `Runner.run_kept` says; the same transition as `step`."""
         ev = world.events[action.index]
         if ev.sk[3]:  # late: a deadline miss, nothing runs
             return self.step(world, action, chooser)
         return self._apply(world, action,
-                           self.runner.run_drawn(ev, world.states[ev.target], chooser))
+                           self.runner.run_kept(ev, world.states[ev.target], chooser))
 
     def apply(self, world: World, action: Action, variant: Variant) -> Transition:
         """The transition of one of `variants(world, action)`: a walk that picks one
@@ -245,8 +248,10 @@ class System:
 
     # ------------------------------------------------------------ variants
 
-    def _variant(self, world: World, action: Action, chooser: ExploringChooser) -> Variant:
-        """What taking `action` in `world` with `chooser` does, independent of the world."""
+    def _variant(self, world: World, action: Action, chooser: ExploringChooser,
+                 reuse: bool = False) -> Variant:
+        """What taking `action` in `world` with `chooser` does, independent of the world;
+        `reuse`: from a kept handler run if there is one (`Runner.run_kept`)."""
         if isinstance(action, Drop):  # nothing runs (`_apply_drop` does the dropping)
             return Variant((), (), world.states[world.events[action.index].target])
         if isinstance(action, Crash):
@@ -256,6 +261,8 @@ class System:
         data = world.states[ev.target]
         if ev.sk[3]:  # late: a deadline miss (Rule 5)
             return self.runner.deadline_miss(ev, data)
+        if reuse:
+            return self.runner.run_kept(ev, data, chooser)
         return self.runner.run(ev, data, chooser)
 
     def variants(self, world: World, action: Action) -> list[Variant]:
@@ -284,7 +291,7 @@ class System:
         prefix: tuple[int, ...] | None = ()
         while prefix is not None:
             chooser = PrefixChooser(prefix)
-            variants.append(self._variant(world, action, chooser))
+            variants.append(self._variant(world, action, chooser, memo is not None))
             prefix = chooser.next_prefix()
         self.publications.observe(sender, mk[-1], variants)
         if memo is not None:
