@@ -62,10 +62,7 @@ class WorldBuilder:
             return World(now, states, events, obligations, crashes=crashes, key=digest,
                          digest=digest)
         hashes = self._hashes
-        parts = []
-        for s in states:
-            h = hashes.get(s)
-            parts.append(h if h is not None else self._hash_state(s))
+        parts = [hashes.get(s) or self._hash_state(s) for s in states]  # a digest is never b""
         return World(now, states, events, obligations, crashes=crashes,
                      key=fast_key(parts, events, obligations, crashes))
 

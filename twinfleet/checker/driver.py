@@ -39,7 +39,6 @@ from twinfleet.checker.reduction import Reduction, describe, plan
 from twinfleet.checker.search import Search
 from twinfleet.checker.system import System
 from twinfleet.checker.timing import AssumedTiming
-from twinfleet.checker.trace import build_trace
 from twinfleet.runtime.contract.kinds import EXIT_INTERRUPTED, FailureKind, Status
 from twinfleet.runtime.contract.node import NodeSpec
 from twinfleet.runtime.contract.tracefile import write_trace
@@ -369,6 +368,8 @@ def _traced(result: CheckResult, system: System, outcome: Outcome, meta: Mapping
     given; the breach line instead if the counterexample does not run again."""
     assert outcome.violation is not None and outcome.counterexample is not None
     try:
+        from twinfleet.checker.trace import build_trace  # here: a check that holds needs none
+
         result.trace = build_trace(system, outcome.violation, outcome.counterexample,
                                    scenario_path=meta["scenario"], search=result.search,
                                    scenario_sha256=meta["sha256"], params=meta["params"])

@@ -172,16 +172,7 @@ class Runner:
         kept = kept_runs.get((data, ev.key, _ANY_TIME)) or kept_runs.get((data, ev.key, ev.due))
         first = len(chooser.indices)  # a trace's replay may share its chooser
         if kept is not None:
-            new, effects, reply = kept
-            try:
-                events, failure, logs, faults, lost = self._effects(ev, effects, reply, chooser)
-            except ChoiceMismatch as exc:  # a forced branch that does not exist
-                return _failed(chooser, data, FailureKind.CHOICE_MISMATCH,
-                               self.names[ev.target], ev.method, str(exc))
-            n = len(chooser.indices)
-            return Variant(tuple(chooser.indices), tuple(chooser.options), new, tuple(events),
-                           failure, tuple(logs), tuple(faults), tuple(range(first, n)),
-                           tuple(lost))
+            return _again(self, ev, data, kept, chooser, first)
         v = self._checked(ev, data, chooser)
         handled = self._handled
         # Kept only when every answer came after the handler (no ctx.choose) and the run was
@@ -450,6 +441,21 @@ def _reply(runner: Runner, ev: Event, reply: Reply, out: list[Event],
                                ev.target, (reply.msg,), runner.topology.priority(
                                    j, token.reply_to), "", chooser))
     return None
+
+
+def _again(runner: Runner, ev: Event, data: bytes, kept: _Handled, chooser: ExploringChooser,
+           first: int) -> Variant:
+    """`ev`'s handler run on `data` again from what a kept run of it did (`Runner.run_kept`):
+    its effects become events with `chooser`'s answers from position `first` on."""
+    new, effects, reply = kept
+    try:
+        events, failure, logs, faults, lost = runner._effects(ev, effects, reply, chooser)
+    except ChoiceMismatch as exc:  # a forced branch that does not exist
+        return _failed(chooser, data, FailureKind.CHOICE_MISMATCH, runner.names[ev.target],
+                       ev.method, str(exc))
+    n = len(chooser.indices)
+    return Variant(tuple(chooser.indices), tuple(chooser.options), new, tuple(events), failure,
+                   tuple(logs), tuple(faults), tuple(range(first, n)), tuple(lost))
 
 
 def _same_again(runner: Runner, ev: Event, data: bytes, v: Variant, first: int,

@@ -43,12 +43,10 @@ from twinfleet.checker.outcome import (
     Stop,
     peak_rss_mb,
 )
-from twinfleet.checker.paths import lasso_counterexample, steps_along
 from twinfleet.checker.properties import Property, PropertySet
 from twinfleet.checker.search_state import FORGET_EVERY, SearchState
 from twinfleet.checker.system import System
 from twinfleet.checker.transition import Transition
-from twinfleet.checker.walks import RandomWalks
 from twinfleet.checker.world import World, earliest_time
 from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.scenario.property_eval import Overtime, time_limit
@@ -286,6 +284,8 @@ class Search(SearchState):
         if sid < 0:  # a start handler failed: no steps
             assert failing is not None
             return Counterexample(failing.step.choices, ())
+        from twinfleet.checker.paths import steps_along  # here: a check that holds needs none
+
         initial, steps = steps_along(self.system, self.store, self.store.path_ids(sid))
         if failing is not None:
             steps.append(failing.step)
@@ -304,6 +304,8 @@ class Search(SearchState):
         return prop.expr.holds(self.system, world.states, world.now)
 
     def _lasso(self, prop: Property) -> None:
+        from twinfleet.checker.paths import lasso_counterexample
+
         found = lasso_counterexample(self.system, self.store, prop)
         if found is not None:
             raise Found(*found)
@@ -312,6 +314,8 @@ class Search(SearchState):
 
     def _random(self, walks: int, seed: int) -> Outcome:
         max_depth = self.limits.max_depth or 1000
+        from twinfleet.checker.walks import RandomWalks
+
         RandomWalks(self.system, self.properties, self.store, self.counters, self.guard,
                     self.statistics).run(walks, seed, max_depth)
         return self._outcome(Status.UNKNOWN, f"random search is not exhaustive: no violation in "

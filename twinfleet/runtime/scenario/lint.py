@@ -33,13 +33,13 @@ import textwrap
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import final
+from typing import Any, final
 
 import yaml
 
 from twinfleet.runtime.contract.names import InvalidName, resolve
 from twinfleet.runtime.contract.node import Node, NodeSpec
-from twinfleet.runtime.scenario.spec import Scenario
+from twinfleet.runtime.scenario.spec import Scenario, parse_yaml
 
 #: Modules whose import in a node module is worth a warning, with what they offer.
 RISKY_MODULES = {
@@ -84,11 +84,18 @@ def lint_nodes(classes: Sequence[type[Node]]) -> list[LintWarning]:
 @functools.cache
 def _module_lint(path: str) -> list[LintWarning]:
     """The import and `global` warnings of one source file (read once per process)."""
+    tree = _parsed(path)
+    return [] if tree is None else list(_module_warnings(tree, path))
+
+
+@functools.cache
+def _parsed(path: str) -> ast.Module | None:
+    """One source file's syntax tree (parsed once per process: both lints read it), or None
+    if it cannot be read."""
     try:
-        tree = ast.parse(Path(path).read_text(), filename=path)
+        return ast.parse(Path(path).read_text(), filename=path)
     except (OSError, SyntaxError, UnicodeDecodeError, SystemError, RecursionError):
-        return []
-    return list(_module_warnings(tree, path))
+        return None
 
 
 def _module_warnings(tree: ast.Module, path: str) -> Iterator[LintWarning]:
@@ -206,18 +213,50 @@ def _calls(cls: type[Node]) -> list[tuple[ast.Call, str]]:
     for _, fn in inspect.getmembers(cls, inspect.isfunction):
         if fn.__module__.startswith("twinfleet.runtime"):
             continue
-        try:
-            lines, first = inspect.getsourcelines(fn)
-            file = inspect.getsourcefile(fn) or "?"
-            tree = ast.parse(textwrap.dedent("".join(lines)))
-        except (OSError, TypeError, SyntaxError, SystemError, RecursionError):
-            continue  # SystemError: CPython 3.11's parser, called deep in a stack (a lint
-            # that cannot read a method says nothing about it)
+        located = _function_tree(fn)
+        if located is None:
+            continue
+        tree, file, offset = located
         for item in ast.walk(tree):
             if isinstance(item, ast.Call) and isinstance(item.func, ast.Attribute) and \
                     item.func.attr in ("publish", "call", "after") and item.args:
-                found.append((item, f"{file}:{first + item.lineno - 1}"))
+                found.append((item, f"{file}:{offset + item.lineno}"))
     return found
+
+
+def _function_tree(fn: Any) -> tuple[ast.AST, str, int] | None:
+    """The syntax tree of function `fn`, its file, and what turns the tree's line numbers
+    into the file's; None if its source cannot be read. Found in its module's tree (parsed
+    once per file) by the line its code starts at: reading each method's own lines
+    tokenised them in Python, most of what the lint of a node class cost."""
+    try:
+        file = inspect.getsourcefile(fn) or "?"
+        code = fn.__code__
+        found = _functions(file).get((code.co_firstlineno, code.co_name))
+        if found is not None:
+            return found, file, 0
+        lines, first = inspect.getsourcelines(fn)
+        return ast.parse(textwrap.dedent("".join(lines))), file, first - 1
+    except (OSError, TypeError, SyntaxError, SystemError, RecursionError):
+        return None  # SystemError: CPython 3.11's parser, called deep in a stack (a lint
+        # that cannot read a method says nothing about it)
+
+
+@functools.cache
+def _functions(file: str) -> dict[tuple[int, str], ast.FunctionDef | ast.AsyncFunctionDef]:
+    """The functions of one source file's module and class bodies by (the line their code
+    starts at: the first decorator's, as `co_firstlineno` counts it; their name)."""
+    tree = _parsed(file)
+    out: dict[tuple[int, str], ast.FunctionDef | ast.AsyncFunctionDef] = {}
+    bodies = [] if tree is None else [tree.body]
+    while bodies:
+        for item in bodies.pop():
+            if isinstance(item, ast.FunctionDef | ast.AsyncFunctionDef):
+                first = min([item.lineno, *(d.lineno for d in item.decorator_list)])
+                out.setdefault((first, item.name), item)
+            elif isinstance(item, ast.ClassDef):
+                bodies.append(item.body)
+    return out
 
 
 def _uses(cls: type[Node]) -> list[tuple[str, str, str]]:
@@ -285,8 +324,8 @@ def lint_settings(path: Path | None) -> list[LintWarning]:
     if path is None or path.suffix not in (".yaml", ".yml"):
         return []
     try:
-        doc = yaml.safe_load(path.read_text())
-    except (OSError, yaml.YAMLError):
+        doc = parse_yaml(path.read_text())
+    except (OSError, yaml.YAMLError, RecursionError):
         return []
     live = doc.get("live") if isinstance(doc, dict) else None
     if not isinstance(live, dict) or "timeout_s" not in live:
