@@ -120,6 +120,22 @@ def test_scan_sees_other_robot_and_not_behind():
     assert scan_cells(occ, (10, 10), 0, [(14, 10)], t) == ((14, 10),)
     assert scan_cells(occ, (10, 10), 0, [(6, 10)], t) == ()  # behind the robot
     assert scan_cells(occ, (10, 10), 0, [(30, 30)], t) == ()  # off the map: ignored
+    # off the map beside a row whose cell id (x * cols + y) it would share: ignored too
+    assert scan_cells(occ, (10, 10), 0, [(13, 30), (15, -10)], t) == ()
+
+
+def test_scanner_keeps_beams_per_cell_and_heading_and_scans_as_scan_cells(occ50):
+    # A scan starts from its cell and heading's beams, kept (two of every three scans here
+    # reuse them): the same hits as scanning afresh, robots on and off the map alike.
+    t = build_tables(REBECA)
+    sc = Scanner(occ50, t, beams=8)
+    rng = np.random.default_rng(5)
+    cells = [tuple(int(v) for v in rng.integers(0, 50, 2)) for _ in range(12)]
+    for k in range(150):
+        cell, d = cells[k % 12], k % 3
+        others = [tuple(int(v) for v in rng.integers(-3, 53, 2)) for _ in range(4)]
+        assert sc.scan(cell, d, others) == scan_cells(occ50, cell, d, others, t)
+    assert len(sc._beams) == 8  # least recently used evicted
 
 
 def test_scanner_memo_is_pure(occ50):

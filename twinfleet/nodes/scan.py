@@ -10,6 +10,7 @@ decimals, trunc to cells); the exact mode samples from the cell centre over
 from __future__ import annotations
 
 import math
+from collections import OrderedDict
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 
@@ -134,58 +135,117 @@ def scan_cells(
         Hit cells; the model mode drops a hit equal to the previous one, the
         exact mode drops every repeat.
     """
-    rows, cols = static_occ.shape
-    h = robot_dir % 8
-    if tables.mode == "model":
-        # trunc of (integer + offset) in floating point, exactly as the model.
-        xi = np.trunc(robot_cell[0] + tables.dx[h]).astype(np.int64)
-        yi = np.trunc(robot_cell[1] + tables.dy[h]).astype(np.int64)
-    else:
-        xi = np.floor(robot_cell[0] + 0.5 + tables.dx[h]).astype(np.int64)
-        yi = np.floor(robot_cell[1] + 0.5 + tables.dy[h]).astype(np.int64)
-    inside = (xi >= 0) & (xi < rows) & (yi >= 0) & (yi < cols)
-    xc = np.clip(xi, 0, rows - 1)
-    yc = np.clip(yi, 0, cols - 1)
-    hit = static_occ[xc, yc] & inside
+    return beam_hits(Beams.of(static_occ, robot_cell, robot_dir, tables), other_cells)
+
+
+@dataclass(frozen=True, eq=False)
+class Beams:
+    """The samples of one scan's beams as the static map sees them, whatever the other
+    robots do (a `Scanner` keeps them per robot cell and heading).
+
+    Attributes:
+        mode: the tables' scan mode.
+        rows, cols: the map's size (a sample's cell is ``divmod(id, cols)``).
+        ids: (beams, samples) cell ids ``x * cols + y`` of the samples, -1 outside the
+            map; only the samples up to the last beam's first static stop are kept.
+        static: (beams, samples) True where a sample hits a static obstacle.
+        blocked: ``static`` or outside the map: where a beam stops without robots.
+    """
+
+    mode: str
+    rows: int
+    cols: int
+    ids: np.ndarray = field(repr=False)
+    static: np.ndarray = field(repr=False)
+    blocked: np.ndarray = field(repr=False)
+
+    @staticmethod
+    def of(static_occ: np.ndarray, robot_cell: Cell, robot_dir: int,
+           tables: ScanTables) -> Beams:
+        """The beams of a robot at `robot_cell` heading `robot_dir` on `static_occ`."""
+        rows, cols = static_occ.shape
+        h = robot_dir % 8
+        if tables.mode == "model":
+            # trunc of (integer + offset) in floating point, exactly as the model.
+            xi = np.trunc(robot_cell[0] + tables.dx[h]).astype(np.int64)
+            yi = np.trunc(robot_cell[1] + tables.dy[h]).astype(np.int64)
+        else:
+            xi = np.floor(robot_cell[0] + 0.5 + tables.dx[h]).astype(np.int64)
+            yi = np.floor(robot_cell[1] + 0.5 + tables.dy[h]).astype(np.int64)
+        inside = (xi >= 0) & (xi < rows) & (yi >= 0) & (yi < cols)
+        static = static_occ[np.clip(xi, 0, rows - 1), np.clip(yi, 0, cols - 1)] & inside
+        blocked = static | ~inside
+        # Past every beam's first stop no sample can be a first hit: kept small per heading.
+        stops = np.where(blocked.any(axis=1), blocked.argmax(axis=1), blocked.shape[1] - 1)
+        end = int(stops.max()) + 1
+        ids = np.where(inside, xi * cols + yi, -1)[:, :end]
+        kind = np.int16 if rows * cols < 1 << 15 else np.int64
+        return Beams(tables.mode, rows, cols, ids.astype(kind), static[:, :end],
+                     blocked[:, :end])
+
+
+def beam_hits(beams: Beams, other_cells: Iterable[Cell]) -> tuple[Cell, ...]:
+    """`scan_cells` of `beams` with the other robots at `other_cells` (module docstring)."""
+    ids, rows, cols = beams.ids, beams.rows, beams.cols
+    hit = beams.static
     for ox, oy in other_cells:
         if 0 <= ox < rows and 0 <= oy < cols:
-            hit |= (xi == ox) & (yi == oy)
-    stop = hit | ~inside
-    first = stop.argmax(axis=1)
-    beams = np.arange(stop.shape[0])
-    got = hit[beams, first]
-    hx = xi[beams, first][got].tolist()
-    hy = yi[beams, first][got].tolist()
+            hit = hit | (ids == ox * cols + oy)
+    first = (hit | beams.blocked).argmax(axis=1)
+    lanes = np.arange(hit.shape[0])
+    found = ids[lanes, first][hit[lanes, first]].tolist()
     out: list[Cell] = []
-    if tables.mode == "model":
-        for c in zip(hx, hy, strict=True):
+    if beams.mode == "model":
+        for i in found:
+            c = divmod(i, cols)
             if not out or out[-1] != c:
                 out.append(c)
     else:
-        out = list(dict.fromkeys(zip(hx, hy, strict=True)))
+        out = list(dict.fromkeys(divmod(i, cols) for i in found))
     return tuple(out)
 
 
 class Scanner(PureMemo):  # its content grows, its answers do not change
     """Memoised :func:`scan_cells` for one static map (a pure function of its inputs).
 
+    A scan that is not memoised yet starts from the beams of its robot's cell and heading
+    (`Beams`, kept too): what the static map does to them is the same for any other
+    robots, and most of a scan's work (a model check of C1a scans 3-4 times per cell and
+    heading).
+
     Args:
         static_occ: un-inflated occupancy; copied and frozen.
         tables: beam tables.
         maxsize: number of memo entries kept (least recently used evicted).
+        beams: number of (cell, heading) `Beams` kept (least recently used evicted; each
+            a few kB to ~20 kB).
     """
 
-    def __init__(self, static_occ: np.ndarray, tables: ScanTables, maxsize: int = 65536) -> None:
+    def __init__(self, static_occ: np.ndarray, tables: ScanTables, maxsize: int = 65536,
+                 beams: int = 1024) -> None:
         self._occ = np.array(static_occ, dtype=bool)
         self._occ.setflags(write=False)
         self.tables = tables
         self._memo = CellsMemo(maxsize)
+        self._beams: OrderedDict[tuple[Cell, int], Beams] = OrderedDict()
+        self._beams_kept = beams
 
     def scan(self, robot_cell: Cell, robot_dir: int, other_cells: Iterable[Cell]) -> tuple[Cell, ...]:
         """Scan from ``robot_cell`` heading ``robot_dir`` with the other robots at ``other_cells``."""
         others = tuple(sorted(set(other_cells)))  # order and repeats do not matter
-        return self._memo.get((robot_cell, robot_dir % 8, others), lambda: scan_cells(
-            self._occ, robot_cell, robot_dir, others, self.tables))
+        return self._memo.get((robot_cell, robot_dir % 8, others), lambda: beam_hits(
+            self._beams_of(robot_cell, robot_dir % 8), others))
+
+    def _beams_of(self, robot_cell: Cell, heading: int) -> Beams:
+        kept, key = self._beams, (robot_cell, heading)
+        found = kept.get(key)
+        if found is not None:
+            kept.move_to_end(key)
+            return found
+        found = kept[key] = Beams.of(self._occ, robot_cell, heading, self.tables)
+        if len(kept) > self._beams_kept:
+            kept.popitem(last=False)
+        return found
 
 
 def frontal_clearance(
