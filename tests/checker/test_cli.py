@@ -83,6 +83,36 @@ def test_every_flag_of_every_command_has_help():
     assert {"check", "replay", "launch", "validate", "render", "topic echo"} <= commands_seen
 
 
+def test_each_command_module_adds_the_commands_the_cli_names_for_it():
+    # `check` builds its own module's parser only (`COMMAND_MODULES`), so the table must
+    # name every command its module adds, in --help's order.
+    import importlib
+
+    from twinfleet.cli.main import COMMAND_MODULES, named_command
+
+    everything: list[str] = []
+    for module, names in COMMAND_MODULES:
+        sub = argparse.ArgumentParser().add_subparsers()
+        importlib.import_module(module).register(sub)
+        assert tuple(sub.choices) == names
+        everything += names
+    assert list(build_parser()._subparsers._group_actions[0].choices) == everything  # type: ignore[union-attr]
+    assert list(build_parser("check")._subparsers._group_actions[0].choices) == \
+        ["check", "trace"]  # type: ignore[union-attr]
+    assert named_command(["--debug", "check", "c1a"]) == "check"
+    assert named_command(["--version"]) is None and named_command(["chek"]) is None
+
+
+def test_check_imports_no_other_command_module():
+    code = ("import sys\nfrom twinfleet.cli.main import build_parser, named_command\n"
+            "build_parser(named_command(['check', 'c1a'])).parse_args(['check', 'c1a'])\n"
+            "print(sorted(m for m in sys.modules if m.endswith('commands')))")
+    env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin"}
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=ROOT, timeout=60, env=env, check=True).stdout
+    assert out.strip() == "['twinfleet.checker.commands']"
+
+
 def test_python_m_checker_subprocess_and_cross_process_replay(tmp_path):
     env = {"PYTHONPATH": str(ROOT), "PATH": "/usr/bin:/bin", "PYTHONHASHSEED": "12345"}
     path = scenario(tmp_path, [node("ping", "Ping"), node("pong", "Pong")], name="pp")
