@@ -17,19 +17,43 @@ Public API: `load_interface(package, kind)` → a module-like namespace
 `from_fields(ros_type, mapping)`, `InterfaceError`, `FieldValueError`.
 """
 
-from twinfleet.interfaces.definitions import InterfaceError
-from twinfleet.interfaces.generate import (
-    RosMessage,
-    contract_name,
-    contract_type,
-    freeze,
-    from_fields,
-    load_interface,
-    message_type,
-    service_type,
-    thaw,
-)
-from twinfleet.interfaces.values import FieldValueError
+from __future__ import annotations
+
+import importlib
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:
+    from twinfleet.interfaces.definitions import InterfaceError
+    from twinfleet.interfaces.generate import (
+        RosMessage,
+        contract_name,
+        contract_type,
+        freeze,
+        from_fields,
+        load_interface,
+        message_type,
+        service_type,
+        thaw,
+    )
+    from twinfleet.interfaces.values import FieldValueError
+
+# Each public name's module, imported on first use: every command imports the package for
+# `guard`, which needs `definitions` only (and then only for a user's types), while
+# `generate` and what it imports are a twentieth of what `check` compiles.
+_HOMES = {"InterfaceError": "definitions", "FieldValueError": "values",
+          **dict.fromkeys(("RosMessage", "contract_name", "contract_type", "freeze",
+                           "from_fields", "load_interface", "message_type", "service_type",
+                           "thaw"), "generate")}
+
+
+def __getattr__(name: str) -> Any:
+    home = _HOMES.get(name)
+    if home is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{home}"), name)
+    globals()[name] = value
+    return value
+
 
 __all__ = ["FieldValueError", "InterfaceError", "RosMessage", "contract_name", "contract_type",
            "freeze", "from_fields", "load_interface", "message_type", "service_type", "thaw"]
