@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import re
 from pathlib import Path
 
 import pytest
@@ -37,3 +38,17 @@ def test_a_state_change_shows_the_attributes_that_changed(tmp_path: Path) -> Non
     changes = [line.strip() for line in out.splitlines()
                if line.strip().startswith("state talker:")]
     assert changes[-1] == "state talker: attrs.sent 1 -> 2", changes
+
+
+def test_a_suspended_callbacks_snapshots_show_as_their_length(tmp_path: Path) -> None:
+    """A coroutine callback suspended in an await keeps its arguments and start state as
+    snapshot bytes: `trace show` gives their length, not hundreds of hex digits."""
+    scenario = Path(__file__).parent / "programs" / "relay_sloppy.yaml"
+    path = tmp_path / "sloppy.trace.json"
+    code, out = _run("check", str(scenario), "--trace-out", str(path))
+    assert code == 1, out
+    code, out = _run("trace", "show", str(path))
+    assert code == 0
+    tasks = [line for line in out.splitlines() if "tasks [" in line]
+    assert tasks and all("'start': <" in line and " bytes>" in line for line in tasks), tasks
+    assert not re.search(r"[0-9a-f]{40}", out), out

@@ -13,6 +13,7 @@ arrived), and at the end the property the trace violates.
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import asdict, dataclass
 from typing import Any, final
@@ -184,10 +185,32 @@ def _field_change(key: str, before: Any, after: Any) -> list[str]:
     as the attributes that changed, `key.name before -> after`, rather than all of them."""
     old, new = named_pairs(before), named_pairs(after)
     if old is None or new is None:
-        return [f"{key} {before!r} -> {after!r}"]
+        return [f"{key} {_brief(before)!r} -> {_brief(after)!r}"]
     names = dict.fromkeys([*old, *new])
-    return [f"{key}.{n} {old.get(n)!r} -> {new.get(n)!r}" for n in names
+    return [f"{key}.{n} {_brief(old.get(n))!r} -> {_brief(new.get(n))!r}" for n in names
             if old.get(n) != new.get(n)]
+
+
+_SNAPSHOT_HEX = re.compile(r"[0-9a-f]{33,}")  # bytes in a trace's JSON: a snapshot, a digest
+
+
+class _Bytes(str):
+    """Bytes a trace holds as hex, shown by their length (the trace file keeps them)."""
+
+    def __repr__(self) -> str:
+        return f"<{len(self) // 2} bytes>"
+
+
+def _brief(value: Any) -> Any:
+    """`value` with the long hex strings in it (an rclpy coroutine's arguments and start
+    state, kept as snapshot bytes) shown as their length, not hundreds of digits."""
+    if isinstance(value, str):
+        return _Bytes(value) if _SNAPSHOT_HEX.fullmatch(value) else value
+    if isinstance(value, list):
+        return [_brief(v) for v in value]
+    if isinstance(value, dict):
+        return {k: _brief(v) for k, v in value.items()}
+    return value
 
 
 __all__ = ["Sent", "Shown", "Walk", "text_lines", "walk"]
