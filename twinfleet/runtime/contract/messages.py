@@ -185,23 +185,25 @@ def _field_map_codec(cls: type) -> tuple[str, Callable[[Any], dict[str, Any]]]:
 
 def encode(msg: Any, *, stamp_ms: int = 0, seq: int = 0, sender: str = "") -> bytes:
     """Encode a message into an envelope."""
+    return _PACKER.pack(_envelope(msg, stamp_ms, seq, sender))
+
+
+def encode_request(msg: Any, *, stamp_ms: int, sender: str, reply_to: str) -> bytes:
+    """`encode` a service request, whose envelope also names the caller's reply handler
+    (a deferred reply's token names it: `decode_request`)."""
+    envelope = _envelope(msg, stamp_ms, 0, sender)
+    envelope["reply_to"] = reply_to
+    return _PACKER.pack(envelope)
+
+
+def _envelope(msg: Any, stamp_ms: int, seq: int, sender: str) -> dict[str, Any]:
     type_name, field_map = _FIELD_MAPS.get(type(msg)) or _field_map_codec(type(msg))
     plain = field_map(msg)
     if not _SCALARS.issuperset(map(type, plain.values())):  # nested messages or sequences
         plain = to_plain(msg)
         del plain["_type"]
-    return _PACKER.pack({"type": type_name, "stamp_ms": stamp_ms, "seq": seq, "sender": sender,
-                         "data": plain})
-
-
-def encode_request(msg: Any, *, stamp_ms: int, sender: str, reply_to: str) -> bytes:
-    """`encode` a service request, whose envelope also names the caller's reply handler
-    (a deferred reply's token names it: `decode_request`). Requests are rare beside
-    samples, so `encode`, the samples' hot path, stays as it is."""
-    envelope = _unpackb(encode(msg, stamp_ms=stamp_ms, sender=sender), raw=False,
-                        strict_map_key=False)
-    envelope["reply_to"] = reply_to
-    return _PACKER.pack(envelope)
+    return {"type": type_name, "stamp_ms": stamp_ms, "seq": seq, "sender": sender,
+            "data": plain}
 
 
 def decode_fields(payload: bytes) -> tuple[Any, int, int, str]:
@@ -210,10 +212,32 @@ def decode_fields(payload: bytes) -> tuple[Any, int, int, str]:
     Raises:
         DecodeError: with the reason, on any malformed payload.
     """
+    return _fields(_unpacked(payload))
+
+
+def decode_request(payload: bytes) -> tuple[Any, int, int, str, str]:
+    """`decode_fields` of a service request, and the caller's reply handler ("" if unnamed).
+
+    Raises:
+        DecodeError: with the reason, on any malformed payload.
+    """
+    raw = _unpacked(payload)
+    msg, stamp, seq, sender = _fields(raw)
+    reply_to = raw.get("reply_to", "")
+    if not isinstance(reply_to, str):
+        raise DecodeError("envelope 'reply_to' must be a string")
+    return msg, stamp, seq, sender, reply_to
+
+
+def _unpacked(payload: bytes) -> Any:
     try:
-        raw = _unpackb(payload, raw=False, strict_map_key=False)
+        return _unpackb(payload, raw=False, strict_map_key=False)
     except Exception as exc:  # msgpack raises several unrelated types
         raise DecodeError(f"not msgpack: {exc}") from None
+
+
+def _fields(raw: Any) -> tuple[Any, int, int, str]:
+    """`decode_fields` of an unpacked envelope."""
     try:  # a str index fails on every msgpack value but a map (no cost when it succeeds)
         type_name, data = raw["type"], raw["data"]
     except (KeyError, TypeError):
@@ -228,19 +252,6 @@ def decode_fields(payload: bytes) -> tuple[Any, int, int, str]:
     if not isinstance(stamp, int) or not isinstance(seq, int) or not isinstance(sender, str):
         raise DecodeError("envelope 'stamp_ms'/'seq' must be integers and 'sender' a string")
     return msg, stamp, seq, sender
-
-
-def decode_request(payload: bytes) -> tuple[Any, int, int, str, str]:
-    """`decode_fields` of a service request, and the caller's reply handler ("" if unnamed).
-
-    Raises:
-        DecodeError: with the reason, on any malformed payload.
-    """
-    msg, stamp, seq, sender = decode_fields(payload)
-    reply_to = _unpackb(payload, raw=False, strict_map_key=False).get("reply_to", "")
-    if not isinstance(reply_to, str):
-        raise DecodeError("envelope 'reply_to' must be a string")
-    return msg, stamp, seq, sender, reply_to
 
 
 def decode(payload: bytes) -> Envelope:
