@@ -61,21 +61,28 @@ class Tasks:
 
     def start(self, callback: Callable[..., Any], args: tuple[Any, ...], group: int | None) -> None:
         """Run a ready callback; a coroutine callback may end up suspended."""
-        if not _is_async(callback):
-            result = callback(*args)
-            if inspect.iscoroutine(result):  # e.g. a lambda returning a coroutine
-                self._first_step(result, callback, args, group)
-            return
-        self._first_step(None, callback, args, group)
+        record, result = self._begin(callback, args, group, None)
+        if record is not None:
+            self.step(result, record, None)
 
-    def _first_step(self, coro: Coroutine[Any, Any, Any] | None, callback: Callable[..., Any],
-                    args: tuple[Any, ...], group: int | None) -> None:
+    def _begin(self, callback: Callable[..., Any], args: tuple[Any, ...], group: int | None,
+               reply: ReplyToken | None) -> tuple[Suspended | None, Any]:
+        """Call `callback(*args)`: (its task's record, the coroutine) for a coroutine callback
+        (recorded before it runs: a resume re-runs it from that state), else (None, its
+        result)."""
+        if _is_async(callback):
+            record = self._record(callback, args, group, reply)
+            return record, callback(*args)
+        result = callback(*args)
+        if inspect.iscoroutine(result):  # e.g. a lambda returning a coroutine: not run yet
+            return self._record(callback, args, group, reply), result
+        return None, result
+
+    def _record(self, callback: Callable[..., Any], args: tuple[Any, ...], group: int | None,
+                reply: ReplyToken | None) -> Suspended:
         engine = self.engine
-        record = Suspended(callback, state_codec.encode_args(engine, args), group,
-                           state_codec.snapshot_state(engine))
-        if coro is None:
-            coro = callback(*args)
-        self.step(coro, record, None)
+        return Suspended(callback, state_codec.encode_args(engine, args), group,
+                         state_codec.snapshot_state(engine), reply=reply)
 
     def step(self, coro: Coroutine[Any, Any, Any], record: Suspended, value: Any) -> None:
         """Run `coro` from its current await (fed `value`) to its end or its next await; a
@@ -163,15 +170,7 @@ class Tasks:
         waited for its group, whose reply was deferred when it came, is answered now)."""
         engine = self.engine
         response = getattr(entry.srv_type, "Response")()  # noqa: B009  (a generated class)
-        args = (request, response)
-        record = None
-        if _is_async(entry.callback):  # the record before the run: a resume re-runs from it
-            record = self._record(entry, args, token)
-            result = entry.callback(*args)
-        else:
-            result = entry.callback(*args)
-            if inspect.iscoroutine(result):  # made, not run yet: the state is the start one
-                record = self._record(entry, args, token)
+        record, result = self._begin(entry.callback, (request, response), entry.group, token)
         if record is not None:
             done, result = self._send(result, None)
             if not done:
@@ -183,9 +182,3 @@ class Tasks:
             return result
         self._answer(token, result)
         return DEFERRED
-
-    def _record(self, entry: ServiceEntry, args: tuple[Any, ...],
-                token: ReplyToken | None) -> Suspended:
-        engine = self.engine
-        return Suspended(entry.callback, state_codec.encode_args(engine, args), entry.group,
-                         state_codec.snapshot_state(engine), reply=token)
