@@ -218,7 +218,7 @@ class LiveJudge:
                         if p.kind not in ("no_failure",)]
         self.violations: list[tuple[str, str, tuple[str, ...]]] = []  # property, summary, details
         self.failures: dict[str, int] = {}  # node -> handler failures reported
-        self.breaches: list[str] = []  # each node's first failure that breaks the contract
+        self.breaches: dict[str, str] = {}  # node -> its first failure that breaks the contract
         self.errors: list[str] = []
         self.lost: dict[str, int] = {}
         self.reports = 0
@@ -262,7 +262,7 @@ class LiveJudge:
         if report.failure is not None:
             self.failures[report.node] = self.failures.get(report.node, 0) + 1
             if report.breach:
-                self._breached(report)
+                self.breaches.setdefault(report.node, f"contract breach in {report.failure}")
             elif not any(v[0] == self.failure_name for v in self.violations):
                 self._violated(self.failure_name, f"a handler failed: {report.failure}",
                                report, self.names)
@@ -337,10 +337,6 @@ class LiveJudge:
         """The states of the nodes `w` reads, as a violation report shows them."""
         return tuple(f"{n}: {repr(self.states[n])[:_STATE_CHARS]}" for n in self._read_by(w))
 
-    def _breached(self, report: StateReport) -> None:
-        if not any(line.startswith(f"contract breach in {report.node}.") for line in self.breaches):
-            self.breaches.append(f"contract breach in {report.failure}")
-
     def _violated(self, name: str, summary: str, report: StateReport | None,
                   nodes: Sequence[str]) -> None:
         details = [f"at t={self.now} ms, {_after(report)}"]
@@ -376,7 +372,8 @@ class LiveJudge:
         if wrong:  # the checker stops at such a send: the same breach, in the same words
             return Verdict(Status.BREACH, wrong[0], tuple(wrong[1:]))
         if self.breaches:  # as the checker, no verdict on code that breaks the contract
-            return Verdict(Status.BREACH, self.breaches[0], tuple(self.breaches[1:]))
+            first, *others = self.breaches.values()
+            return Verdict(Status.BREACH, first, tuple(others))
         if end.failed:  # a process that died is a fact of the run, lost samples or not
             nodes = ", ".join(f"{n} (exit code {c})" for n, c in end.failed.items())
             return Verdict(Status.VIOLATED, f"node failed: {nodes}")
