@@ -38,9 +38,12 @@ def scenario(tmp_path: Path, nodes: list[dict[str, Any]], *, properties: list[di
 
 def run(path: Path, **options: Any) -> CheckResult:
     """check() with a trace file in the scenario's directory; unreduced unless `reduction`
-    is given (hand counts and traces are of the full graph; None: the default)."""
+    is given (hand counts and traces are of the full graph; None: the default). A reduction
+    runs from the first world (`reduce_from` 0): these systems are far smaller than the
+    worlds a search stores before the reduction starts by default (`checker.late_start`)."""
     options.setdefault("trace_out", str(path.with_suffix(".trace.json")))
     options.setdefault("reduction", "none")
+    options.setdefault("reduce_from", 0)
     return check(path, CheckOptions(**options))
 
 

@@ -61,11 +61,11 @@ class CountingCluster:
 
 
 def _coordinated(path: Path, reduction: str, max_states: int,
-                 late: int = 0) -> tuple[Any, CountingCluster]:
+                 late: int = 0, reduce_from: int = 0) -> tuple[Any, CountingCluster]:
     scenario = load(str(path))
     props = PropertySet.from_scenario(scenario)
     system = System(scenario, properties=props)
-    reduced, name = plan(system, props, "bfs", reduction)
+    reduced, name = plan(system, props, "bfs", reduction, reduce_from)
     spec = SystemSpec(str(path), None, None, (), (),
                       reduction=None if reduced is None else name.split()[0])
     cluster = CountingCluster(spec, late)
@@ -78,13 +78,17 @@ def _coordinated(path: Path, reduction: str, max_states: int,
 @settings(max_examples=150, deadline=None, derandomize=True,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.function_scoped_fixture])
 @pytest.mark.slow
-@given(doc=systems(), reduction=st.sampled_from(["none", "por"]), late=st.integers(0, 3))
+@given(doc=systems(), reduction=st.sampled_from(["none", "por"]), late=st.integers(0, 3),
+       reduce_from=st.sampled_from([0, 40]))
 def test_moving_out_and_back_keeps_the_one_process_answers(tmp_path: Path, doc: dict[str, Any],
-                                                            reduction: str, late: int) -> None:
+                                                            reduction: str, late: int,
+                                                            reduce_from: int) -> None:
+    # (reduce_from 40: por starts late, `checker.late_start`, in both searches alike)
     path = write_scenario(doc, tmp_path / "generated.yaml")
-    one = check(path, CheckOptions(reduction=reduction, max_states=2_000))
+    one = check(path, CheckOptions(reduction=reduction, max_states=2_000,
+                                   reduce_from=reduce_from))
     assume(one.status.value != "unknown")
-    outcome, cluster = _coordinated(path, reduction, 2_000, late)
+    outcome, cluster = _coordinated(path, reduction, 2_000, late, reduce_from)
     assert outcome.status == one.status, (outcome.reason, one.reason)
     if one.violation is None:
         assert (outcome.statistics.states, outcome.statistics.transitions,

@@ -29,7 +29,7 @@ def test_walking_ahead_keeps_the_verdict_and_the_coordinator_walks_alike(
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr("twinfleet.checker.reduction.PROBE_STATES", 5)  # walk early
         patch.setattr("twinfleet.checker.reduction.PROBE_SHARE", 1)
-        reduced = check(path, CheckOptions(reduction="por", max_states=2_000))
+        reduced = check(path, CheckOptions(reduction="por", max_states=2_000, reduce_from=0))
         outcome, _ = _coordinated(path, "por", 2_000)
     assert reduced.status == full.status, (reduced.reason, full.reason)
     assert outcome.status == reduced.status
@@ -51,12 +51,12 @@ def test_a_send_met_deep_is_learned_before_the_search_gets_there(tmp_path: Path)
     with pytest.MonkeyPatch.context() as patch:  # no walks at restarts either
         patch.setattr("twinfleet.checker.reduction.Reduction.walk_on", lambda *_: None)
         patch.setattr("twinfleet.checker.reduction.PROBE_STATES", 10**9)
-        level_by_level = check(path, CheckOptions())
+        level_by_level = check(path, CheckOptions(reduce_from=0))
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr("twinfleet.checker.reduction.Reduction.walk_on", lambda *_: None)
         patch.setattr("twinfleet.checker.reduction.PROBE_STATES", 500)
         patch.setattr("twinfleet.checker.reduction.PROBE_SHARE", 1)
-        ahead = check(path, CheckOptions())
+        ahead = check(path, CheckOptions(reduce_from=0))
     assert ahead.status == level_by_level.status
     assert ahead.statistics.states == level_by_level.statistics.states
     assert ahead.trace == level_by_level.trace

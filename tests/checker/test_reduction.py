@@ -120,11 +120,18 @@ def test_cli_flag_and_json(tmp_path, capsys):
     code = main(["check", str(path), "--json", "--reduction", "none"])
     doc = json.loads(capsys.readouterr().out)
     assert code == 0 and doc["reduction"] == "none" and doc["states"] == 8
+    # por by default, but 8 worlds are far fewer than the reduction waits for: unreduced
     code = main(["check", str(path), "--json"])
     doc = json.loads(capsys.readouterr().out)
-    assert doc["reduction"].startswith("por") and doc["states"] == 4
+    assert doc["reduction"] == ("none (por starts once a search stored 1,000 worlds: a "
+                                "smaller one costs more to reduce than to search; this one "
+                                "stored fewer)")
+    assert doc["states"] == 8 and doc["reduction_statistics"]["reduced"] == 0
+    reduced = run(path, reduction="por")  # from the first world
+    assert reduced.reduction.startswith("por") and reduced.statistics.states == 4
     # S0 and S1 are reduced; S2 (one event left) and the terminal S3 count as full
-    assert (doc["reduction_statistics"]["reduced"], doc["reduction_statistics"]["full"]) == (2, 2)
+    assert reduced.reduction_statistics is not None
+    assert (reduced.reduction_statistics["reduced"], reduced.reduction_statistics["full"]) == (2, 2)
 
 
 def test_unknown_reduction_is_bad_input(tmp_path):
@@ -245,7 +252,7 @@ def test_a_reduction_that_does_not_pay_steps_aside(tmp_path, search):
     # and finds exactly the unreduced graph, and the summary says why.
     protocol = tpc_scenario(tmp_path)
     full = check(protocol, CheckOptions(reduction="none", search=search))
-    reduced = check(protocol, CheckOptions(reduction="por", search=search))
+    reduced = check(protocol, CheckOptions(reduction="por", reduce_from=0, search=search))
     assert full.status == reduced.status == "holds"
     assert counts(reduced) == counts(full)
     assert reduced.reduction.startswith("none (por stepped aside: ")
@@ -268,7 +275,7 @@ def test_a_step_aside_with_nothing_reduced_goes_on_in_place(monkeypatch, search)
     passes = []
     monkeypatch.setattr(Search, "_explore", lambda self, f=Search._explore: (
         passes.append(len(self.store)), f(self))[1])
-    reduced = check(TWO_PHASE, CheckOptions(reduction="por", search=search))
+    reduced = check(TWO_PHASE, CheckOptions(reduction="por", reduce_from=0, search=search))
     stats = reduced.reduction_statistics
     assert stats is not None and "stepped aside" in reduced.reduction
     assert counts(reduced) == counts(check(TWO_PHASE, CheckOptions(reduction="none",
@@ -327,9 +334,9 @@ def test_a_restart_walks_on_and_learns_the_sends_of_deeper_levels_at_once(monkey
     # them after its first 100 worlds (9 since a robot's sends count for its twin too). Walking on from the level where a restart comes
     # learns what deeper levels send, for the same graph and trace.
     path = Path(__file__).resolve().parents[2] / "twinfleet" / "launch" / "headon.yaml"
-    walking = check(path, CheckOptions(reduction="por"))
+    walking = check(path, CheckOptions(reduction="por", reduce_from=0))
     monkeypatch.setattr(Reduction, "walk_on", lambda *_: None)
-    level_by_level = check(path, CheckOptions(reduction="por"))
+    level_by_level = check(path, CheckOptions(reduction="por", reduce_from=0))
     assert walking.status == level_by_level.status == "violated"
     assert counts(walking) == counts(level_by_level)
     assert walking.trace == level_by_level.trace
@@ -344,7 +351,7 @@ def test_a_checkpoint_keeps_the_step_aside(tmp_path):
     # the unreduced counts, saying so.
     protocol = tpc_scenario(tmp_path)  # steps aside after 114 worlds expanded, 160 found
     saved = str(tmp_path / "search.ckpt")
-    stopped = check(protocol, CheckOptions(max_states=425, checkpoint=saved))
+    stopped = check(protocol, CheckOptions(max_states=425, checkpoint=saved, reduce_from=0))
     assert stopped.status == "unknown" and "stepped aside" in stopped.reduction
     resumed = check(protocol, CheckOptions(resume=saved))
     assert resumed.status == "holds" and "stepped aside" in resumed.reduction
@@ -358,7 +365,7 @@ def test_a_send_counts_for_the_other_nodes_of_its_class():
     # The station's two askers (one class): the first search level sees asker a's answer
     # handler publish /plugged to the station; asker b's is learned with it, not at a restart
     # when b first wins the station (2 restarts before, 1 now), for the same graph.
-    reduced = check(STATION, CheckOptions(reduction="por"))
+    reduced = check(STATION, CheckOptions(reduction="por", reduce_from=0))
     assert reduced.status == check(STATION, CheckOptions(reduction="none")).status
     assert reduced.statistics.states == 25
     assert reduced.reduction_statistics is not None

@@ -143,7 +143,7 @@ def test_a_pass_that_reduced_nothing_learns_in_place(monkeypatch, name, restarts
     # world has one event), restarted from scratch: now it learns in place, walks on from
     # the same worlds and goes on, to the same graph and trace, one restart fewer.
     path = LAUNCH / f"{name}.yaml"
-    options = CheckOptions(reduction="por")
+    options = CheckOptions(reduction="por", reduce_from=0)
     in_place = check(path, options)
     monkeypatch.setattr(Reduction, "must_restart", lambda self: self.stale)  # as it was
     restarting = check(path, options)

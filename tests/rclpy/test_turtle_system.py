@@ -16,7 +16,7 @@ pytestmark = pytest.mark.timeout(300)
 def test_check_holds():
     run = twinfleet("check", "turtle_system.yaml")
     assert run.returncode == 0 and "verdict: HOLDS" in run.stdout, run.stdout + run.stderr
-    assert "states 40 " in run.stdout
+    assert "states 49 " in run.stdout  # unreduced: far fewer worlds than por waits for
 
 
 def test_a_violation_replays(tmp_path):

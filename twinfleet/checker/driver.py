@@ -32,7 +32,13 @@ from twinfleet.checker.diagnosis import (
     breach_line,
 )
 from twinfleet.checker.growth import HINT, GrowthNote
-from twinfleet.checker.options import MIN_WIDTH, ReductionMode, SearchOrder, Semantics
+from twinfleet.checker.options import (
+    MIN_WIDTH,
+    REDUCE_FROM,
+    ReductionMode,
+    SearchOrder,
+    Semantics,
+)
 from twinfleet.checker.outcome import INTERRUPTED_REASON, Limits, Outcome, SearchStatistics
 from twinfleet.checker.properties import PropertySet, PropertyViolation
 from twinfleet.checker.reduction import Reduction, describe, plan
@@ -82,6 +88,7 @@ class CheckOptions:
     workers: int = 1  # Ray workers for the search (checker.cluster); 1 with no cluster: here
     cluster: str | None = None  # a Ray cluster to join instead of starting a local one
     min_width: int = MIN_WIDTH  # frontier width at which a search moves to the cluster
+    reduce_from: int = REDUCE_FROM  # worlds searched before por starts (0: from the first)
     report: Callable[[str], None] | None = field(default=None, compare=False)
     progress: Callable[[SearchStatistics], None] | None = field(default=None, compare=False)
 
@@ -284,7 +291,8 @@ def check(scenario: str | Path | Scenario | None,
     asked = options.search or scenario.check.search
     strategy = _strategy(meta.get("strategy") or asked or "bfs")
     reduction, reduction_name = _planned(system, props, strategy,
-                                         meta.get("reduction") or options.reduction)
+                                         meta.get("reduction") or options.reduction,
+                                         options.reduce_from)
     meta = {"scenario": None if path is None else str(path.resolve()),
             "sha256": None if path is None else ckpt.file_sha256(path),
             "semantics": system.semantics.value,
@@ -345,12 +353,12 @@ def _to_check(scenario: str | Path | Scenario | None, options: CheckOptions
     return scenario, path, data
 
 
-def _planned(system: System, props: PropertySet, strategy: str, asked: str | None
-             ) -> tuple[Reduction | None, str]:
+def _planned(system: System, props: PropertySet, strategy: str, asked: str | None,
+             reduce_from: int) -> tuple[Reduction | None, str]:
     """The reduction `checker.reduction.plan` makes for the search; one that does not fit
     the scenario is bad input."""
     try:
-        return plan(system, props, strategy, asked)
+        return plan(system, props, strategy, asked, reduce_from)
     except ValueError as exc:
         raise ScenarioError(f"{system.scenario.source}: {exc}") from None
 

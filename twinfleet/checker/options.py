@@ -54,6 +54,11 @@ REDUCTIONS: Final = tuple(ReductionMode)
 # costs 10-16 ms of round trips on a 2-core machine, against about 45 us a world in one
 # process: levels under a few hundred worlds are faster at home (docs/distributed.md).
 MIN_WIDTH: Final = 512
+# Worlds a `por` search stores unreduced before the reduction starts (`checker.late_start`):
+# below this a search takes a tenth of a second either way, and the reduction's bookkeeping,
+# learning and restarts cost more than the worlds it saves (head-on, 399 worlds: 1.12-1.19
+# times the unreduced check's time; the station, 31 worlds: 1.2). 0: reduce from the first.
+REDUCE_FROM: Final = 1_000
 
 
 def choice_of(kind: type[StrEnum], allowed: Sequence[StrEnum] | None = None

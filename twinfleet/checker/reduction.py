@@ -174,6 +174,7 @@ class ReductionStatistics:
     probe_steps: int = 0  # their steps
     ahead: int = 0  # 1 once the search walked ahead at `PROBE_STATES` worlds (`probe`)
     aside: int = 0  # worlds expanded when the reduction stepped aside (0: it did not)
+    prefix: int = 0  # worlds stored unreduced before the reduction started (`late_start`)
 
     def to_json(self) -> dict[str, int]:
         """The counters as a JSON-ready mapping."""
@@ -185,10 +186,12 @@ class Reduction:
     """Persistent-set expansion of worlds for one `System` and `PropertySet`."""
 
     def __init__(self, system: System, properties: PropertySet,
-                 visibility: Visibility | None = None) -> None:
+                 visibility: Visibility | None = None, reduce_from: int = 0) -> None:
         self.system, self.properties = system, properties
+        #: worlds searched unreduced first (`checker.late_start`); waiting: not there yet
+        self.reduce_from, self.waiting = reduce_from, reduce_from > 0
         self.rules = system.rules
-        self.visibility = visibility or Visibility(properties, system.names)
+        self.visibility = Visibility(properties, system.names) if visibility is None else visibility
         self.publications = system.publications
         self.stats = ReductionStatistics()
         self._version = self.publications.version
@@ -217,8 +220,7 @@ class Reduction:
         return self.aside is not None
 
     def begin(self) -> None:
-        """Start (or start again) a search: remember the relation and the assumptions it
-        is based on."""
+        """Start (or start again) a search: remember the relation and what it assumes."""
         self._version = self.publications.version
         self._rising = self.visibility.rising
 
@@ -229,20 +231,20 @@ class Reduction:
         return self.stats.to_json()
 
     def freeze(self) -> None:
-        """Learn level by level (`Publications.freeze`): the send relation, and the fall of
-        a rising goal."""
+        """Learn level by level (`Publications.freeze`): sends, and a rising goal's fall."""
         self.publications.freeze()
         self.visibility.frozen = True
 
     def learned_state(self) -> tuple[Any, ...]:
-        """What this search learned (the send relation, the rising-goal rule), for
-        `relearn` on another worker or a checkpoint."""
-        return (self.publications.__getstate__(), self.visibility.rising, self.visibility.fell)
+        """What this search learned (relation, rising-goal rule; waiting), for `relearn`."""
+        return (self.publications.__getstate__(), self.visibility.rising, self.visibility.fell,
+                self.waiting)
 
     def relearn(self, state: tuple[Any, ...]) -> None:
         """Start again from scratch with what `learned_state` gave, frozen, counters at 0."""
         self.publications.__setstate__(state[0])
         self.visibility.rising, self.visibility.fell = state[1], state[2]
+        self.waiting = len(state) > 3 and state[3]
         self.visibility.pending_fall, self.visibility.rises = None, 0
         self.freeze()
         self.stats = ReductionStatistics()
@@ -262,7 +264,8 @@ class Reduction:
         self.visibility.commit()
         s = self.stats
         self.stats = ReductionStatistics(restarts=s.restarts + 1, probes=s.probes,
-                                         probe_steps=s.probe_steps, ahead=s.ahead)
+                                         probe_steps=s.probe_steps, ahead=s.ahead,
+                                         prefix=s.prefix)
         self.visibility.rises = 0
 
     def probe(self, stored: int, max_depth: int | None) -> bool:
@@ -392,6 +395,8 @@ class Reduction:
         most as deep as `world`), C3t asks for `full`, else `reduced`. No set smaller than
         everything: every transition, already counted, and None."""
         enabled = self.rules.enabled(world.events)
+        if self.waiting:  # every transition: the reduction has not started (`late_start`)
+            return self._observed(world, list(self.system.successors(world, enabled))), None
         chosen = None if self.disabled else self._choose(world, enabled)
         if chosen is None:
             self.stats.full += 1
@@ -430,6 +435,10 @@ class Reduction:
         events = world.events
         return [t for k in self.rules.droppable(events) if events[k].target in nodes
                 for t in self.system.outcomes(world, Drop(k))]
+
+    def persistent(self, world: World) -> list[int] | None:
+        """`_choose` for `world` (nothing expanded: the caller puts the counters back)."""
+        return None if self.disabled else self._choose(world, self.rules.enabled(world.events))
 
     def _choose(self, world: World, enabled: list[int]) -> list[int] | None:
         """A persistent set of the `enabled` event indices smaller than all, or None."""
@@ -491,9 +500,10 @@ def _count_commuted(reduction: Reduction, world: World, closure: Closure,
 
 
 def plan(system: System, properties: PropertySet, strategy: str,
-         requested: str | None) -> tuple[Reduction | None, str]:
+         requested: str | None, reduce_from: int = 0) -> tuple[Reduction | None, str]:
     """The reduction a search runs, and its name for summaries: "por", "none", or
-    "none (why)" when the default or the request cannot be followed."""
+    "none (why)" when the default or the request cannot be followed. It starts once the
+    search stored `reduce_from` worlds (`checker.late_start`)."""
     asked = requested or default_reduction(system.semantics)
     if asked not in REDUCTIONS:
         raise ValueError(f"unknown reduction {asked!r}; expected {' or '.join(REDUCTIONS)}")
@@ -503,7 +513,7 @@ def plan(system: System, properties: PropertySet, strategy: str,
     why = why_off(system.rules, properties, visibility, strategy)
     if why is not None:
         return None, f"none ({why})"
-    return Reduction(system, properties, visibility), POR
+    return Reduction(system, properties, visibility, reduce_from), POR
 
 
 def describe(reduction: Reduction | None, name: str, strategy: str = "bfs") -> str:
@@ -514,8 +524,13 @@ def describe(reduction: Reduction | None, name: str, strategy: str = "bfs") -> s
         return f"none ({reduction.aside})"
     if reduction.disabled:
         return f"none ({reduction.disabled}; turned off during the search)"
+    if reduction.waiting:
+        return (f"none (por starts once a search stored {reduction.reduce_from:,} worlds: a "
+                "smaller one costs more to reduce than to search; this one stored fewer)")
     s = reduction.stats
     restarts = f", {s.restarts} restart{'s' * (s.restarts != 1)}" if s.restarts else ""
+    if s.prefix:
+        restarts += f"; started after {s.prefix:,} worlds searched unreduced"
     if reduction.visibility.fell:
         restarts += f"; goals not rising: {reduction.visibility.fell}"
     if s.probes:

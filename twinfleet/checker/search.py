@@ -29,9 +29,11 @@ from __future__ import annotations
 import time
 from collections.abc import Callable, Iterable
 from functools import partial
-from typing import Any, final
+from itertools import chain
+from typing import TYPE_CHECKING, Any, final
 
 from twinfleet.checker.growth import SAMPLE_MASK
+from twinfleet.checker.late_start import Start, start
 from twinfleet.checker.outcome import (
     INTERRUPTED_REASON,
     NO_LIMITS,
@@ -51,6 +53,9 @@ from twinfleet.checker.world import World, earliest_time
 from twinfleet.runtime.contract.kinds import Status
 from twinfleet.runtime.scenario.property_eval import Overtime, time_limit
 
+if TYPE_CHECKING:
+    from twinfleet.checker.reduction import Reduction
+
 __all__ = ["Counterexample", "Limits", "Outcome", "Search", "SearchStatistics", "bfs", "dfs",
            "peak_rss_mb", "random_walk"]
 
@@ -59,6 +64,10 @@ _GRACE_S = 0.25  # after max-time, before a property still running is interrupte
 
 class _Restart(Exception):
     """The send relation a reduced search relies on grew: explore again."""
+
+
+class _Start(_Restart):
+    """The reduction that waited starts: explore again, reduced (`checker.late_start`)."""
 
 
 @final
@@ -114,6 +123,8 @@ class Search(SearchState):
             try:
                 self._explore()
                 return
+            except _Start:
+                self._reset()
             except _Restart:
                 assert reduction is not None
                 if reduction.aside:  # it did not pay: the rest of the run is unreduced
@@ -173,14 +184,15 @@ class Search(SearchState):
             if edges is not None:
                 edges.set(sid, children)
             self._expanding = None
-            if lifo and reduction is not None and (reduction.stale or reduction.steps_aside()):
-                self._step_aside()  # a restart, unless it stepped aside in place
-                reduction = None
+            if lifo and reduction is not None and (reduction.waiting or reduction.stale
+                                                   or reduction.steps_aside()):
+                self._lifo_turn(reduction)  # a (re)start, unless it stepped aside in place
+                reduction = self.reduction
             self._expansions += 1
             if self._expansions >= self._next_forget:
                 self._forget()
             tick()
-        if reduction is not None and reduction.stale:
+        if reduction is not None and reduction.stale and not reduction.waiting:
             reduction.steps_aside()  # a search that did not pay starts again unreduced
             self._step_aside()
 
@@ -213,7 +225,9 @@ class Search(SearchState):
         reduced no world yet learns in place instead: it expanded every world fully, so
         nothing it did relied on the relation (every search's first level, mostly)."""
         reduction = self.reduction
-        if reduction is not None:
+        if reduction is not None and reduction.waiting:
+            self._start(reduction, chain((first,), (w for w, _, _ in self._frontier)))
+        elif reduction is not None:
             if reduction.steps_aside():
                 self._step_aside()
             else:
@@ -225,6 +239,23 @@ class Search(SearchState):
                                       len(self.store), self.limits.max_depth)
                     reduction.learned()
         self._level = (depth, len(self.store) - 1)
+
+    def _start(self, reduction: Reduction, frontier: Iterable[World]) -> None:
+        """While the reduction waits (`checker.late_start`): go on, start again reduced, or
+        go on unreduced for good."""
+        begun = start(reduction, len(self.store), frontier)
+        if begun is Start.REDUCE:
+            raise _Start
+        if begun is Start.ASIDE:
+            self._aside, self.reduction = reduction.aside, None
+
+    def _lifo_turn(self, reduction: Reduction) -> None:
+        """A DFS after an expansion that left the reduction waiting, its relation stale or
+        not paying: `_start`, or `_step_aside`."""
+        if reduction.waiting:
+            self._start(reduction, (w for w, _, _ in reversed(self._frontier)))
+        else:
+            self._step_aside()
 
     def _step_aside(self) -> None:
         """Restart; unless the reduction stepped aside and no world of this pass was

@@ -157,6 +157,7 @@ class SearchState:
                     (self.reduction.visibility.rising, self.reduction.visibility.fell,
                      self.reduction.visibility.pending_fall),
                     "reduction": None if self.reduction is None else self.reduction.stats,
+                    "waiting": self.reduction is not None and self.reduction.waiting,
                     "aside": self._aside,
                     "relied": [] if self.reduction is None else sorted(self.reduction.relied)}
         checkpoint.save(path, self._checkpoint_meta, self.store, list(self._frontier), counters)
@@ -175,7 +176,7 @@ class SearchState:
         if "publications" in c:  # what the reduced search so far relied on
             self.system.publications.__setstate__(c["publications"])
         if self.reduction is not None and c.get("reduction") is not None:
-            self.reduction.stats = c["reduction"]
+            self.reduction.stats, self.reduction.waiting = c["reduction"], c.get("waiting", False)
             self.reduction.relied = set(c.get("relied", ()))
         if self.reduction is not None and c.get("visibility") is not None:
             visibility = self.reduction.visibility

@@ -107,30 +107,30 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
 def _note(coordinator: Coordinator, outcome: Outcome, workers: int, min_width: int,
           here: bool) -> str:
     """The summary's line on where and in which order the search ran."""
-    t = coordinator.traffic
+    t, place = coordinator.traffic, coordinator.place
     if here:
         note = "strict BFS in one process (the distributed search's order and checkpoints)"
-    elif coordinator.started_at is not None and coordinator.distributed_at is None:
+    elif place.started_at is not None and place.distributed_at is None:
         note = (f"ran in one process: the Ray workers started at depth "
-                f"{coordinator.started_at} were not up before the search ended or narrowed")
-    elif coordinator.distributed_at is None and outcome.statistics.states < START_STATES:
+                f"{place.started_at} were not up before the search ended or narrowed")
+    elif place.distributed_at is None and outcome.statistics.states < START_STATES:
         note = (f"ran in one process: {outcome.statistics.states:,} states, under the "
                 f"{START_STATES:,} at which Ray's workers start (a smaller search is over "
                 "before they would be up)")
-    elif coordinator.distributed_at is None:
+    elif place.distributed_at is None:
         note = (f"ran in one process: no level held {min_width} worlds (--min-width) after "
                 f"the first {START_STATES:,} states")
     else:
         per = t.claims / max(1, outcome.statistics.states)
         runs = coordinator.system.runner.handler_runs + sum(t.handler_runs)
-        order = "relaxed order" if coordinator.flow is not None else "strict BFS"
-        levels = "" if coordinator.flow is not None else f"{t.levels} levels, "
+        order = "relaxed order" if place.flow is not None else "strict BFS"
+        levels = "" if place.flow is not None else f"{t.levels} levels, "
         note = (f"{order} on {workers} Ray worker(s) from depth "
-                f"{coordinator.distributed_at} ({levels}{per:.2f} claims per "
+                f"{place.distributed_at} ({levels}{per:.2f} claims per "
                 f"state, {t.stolen:,} worlds moved in {t.moves} blobs, {runs:,} handler runs"
                 + (f", back in this process {t.returns} time(s) when it narrowed" if t.returns
                    else "") + ")")
-        if coordinator.flow is not None:
+        if place.flow is not None:
             note += ("; the states and transitions of a strict BFS, depth and counterexample "
                      "as found (--search bfs: the shortest)")
     eventually = {p.name for p in coordinator.properties.eventually}

@@ -48,14 +48,13 @@ from twinfleet.checker.cluster.backend import (
     Traffic,
     balance,
 )
-from twinfleet.checker.cluster.flow import FlowBackend
 from twinfleet.checker.cluster.level import (
     ROOT,
     Failure,
     Learned,
     visited_from,
 )
-from twinfleet.checker.cluster.relaxed import run_relaxed, whole_lineage
+from twinfleet.checker.cluster.relaxed import ancestry, run_relaxed
 from twinfleet.checker.cluster.saving import (
     add_learned_counts,
     counters,
@@ -66,6 +65,7 @@ from twinfleet.checker.cluster.saving import (
 from twinfleet.checker.cluster.spec import ClusterError
 from twinfleet.checker.cluster.tally import Tally
 from twinfleet.checker.cluster.walk import failing_step, first_lasso, gathered, walk
+from twinfleet.checker.late_start import Start, start
 from twinfleet.checker.outcome import (
     INTERRUPTED_REASON,
     Counterexample,
@@ -145,21 +145,6 @@ class Coordinator:
         self._attempt: float | None = None  # when the search last started again (monotonic)
         self.saved: str | None = None  # the checkpoint file, once written
 
-    @property
-    def distributed_at(self) -> int | None:
-        """The level where the cluster took over, if it did."""
-        return self.place.distributed_at
-
-    @property
-    def started_at(self) -> int | None:
-        """The level where the cluster was started, if it was."""
-        return self.place.started_at
-
-    @property
-    def flow(self) -> FlowBackend | None:
-        """The relaxed order's workers, if they took over the search."""
-        return self.place.flow
-
     # ------------------------------------------------------------------ run
 
     def run(self) -> Outcome:
@@ -193,8 +178,10 @@ class Coordinator:
                 if found is not None:
                     return found
                 continue
-            if self.place.before_level(self.tally.frontier, self.tally.level, self.roots,
-                                       self.traffic, self.tally.states):
+            waits = self.reduction is not None and self.reduction.waiting and \
+                self.reduction.aside is None  # it decides on a sample of the frontier here
+            if not waits and self.place.before_level(self.tally.frontier, self.tally.level,
+                                                     self.roots, self.traffic, self.tally.states):
                 return self._flow()
             outcome = self._level()
             if outcome is not None:
@@ -205,28 +192,42 @@ class Coordinator:
         return self._outcome(Status.HOLDS, "every property holds")
 
     def _probed(self) -> bool:
-        """Walk ahead once the search is large, at the level the one-process search does
-        (`Reduction.probe`); True if that learned something and the search restarted."""
+        """Start the reduction that waits (`checker.late_start`), or walk ahead once the
+        search is large, at the level the one-process search does (`Reduction.probe`);
+        True if the search starts again from scratch."""
         reduction = self.reduction
-        if reduction is None or not reduction.probe(self.tally.states, self.limits.max_depth) or \
-                not reduction.stale:
+        if reduction is not None and reduction.waiting:  # (stays so if it steps aside)
+            frontier = (w for w, _, _ in self.place.local.expander.frontier)  # here till then
+            if start(reduction, self.tally.states, frontier) is not Start.REDUCE:
+                return False
+            self._restart([], counted=False)
+            return True
+        if reduction is None or not reduction.probe(self.tally.states, self.limits.max_depth) \
+                or not reduction.stale:
             return False
         self._restart([])
         return True
 
-    def _restart(self, learned: list[Learned]) -> None:
-        """Some worker learned a send: merge what all learned and search from scratch."""
+    def _restart(self, learned: list[Learned], counted: bool = True) -> None:
+        """Some worker learned a send: merge what all learned and search from scratch
+        (`counted`: as a restart)."""
         reduction = self.reduction
         assert reduction is not None
-        for found in learned:
-            reduction.publications.commit(found.edges, found.unknown)
-            reduction.visibility.commit(found.fell)
-        reduction.restarted()
+        self._merge(learned)
+        if counted:
+            reduction.restarted()
         reduction.begin()
         self.place.restart()
         self.roots = {}
         self.tally = Tally()
         self._attempt = time.monotonic()
+
+    def _merge(self, learned: list[Learned]) -> None:
+        """Add what the workers learned to the relation."""
+        assert self.reduction is not None
+        for found in learned:
+            self.reduction.publications.commit(found.edges, found.unknown)
+            self.reduction.visibility.commit(found.fell)
 
     def _start(self) -> Outcome | None:
         """The initial worlds, claimed and checked here."""
@@ -262,8 +263,11 @@ class Coordinator:
         if self.place.backend is not self.place.local:
             add_learned_counts(self.reduction, learned)
         if any(found.grew() for found in learned):
-            self._restart(learned)
-            return self._start()
+            if self.reduction is not None and self.reduction.waiting:
+                self._merge(learned)  # in place: no world relied on the relation yet
+            else:
+                self._restart(learned)
+                return self._start()
         if any(e.pruned for e in expansions) and not self.tally.frontier:
             return self._outcome(Status.UNKNOWN, f"max-depth {self.limits.max_depth} "
                                  "reached before the search finished")
@@ -370,12 +374,7 @@ class Coordinator:
         return Outcome(Status.VIOLATED, violation.property, self.statistics(), violation, path)
 
     def _ancestry(self) -> Callable[[int], list[int]]:
-        """How `walk` finds a key's ancestors: after a relaxed order, on the whole visited set
-        if it is small enough (`relaxed.whole_lineage`); else one call per change of
-        partition."""
-        whole = None if self.place.flow is None else \
-            whole_lineage(self.place.flow, self.tally.states, self.roots)
-        return self.place.lineage if whole is None else whole
+        return ancestry(self.place, self.tally.states, self.roots)
 
     def _progress(self) -> None:
         now = time.monotonic()

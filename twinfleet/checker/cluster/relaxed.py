@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 
-from twinfleet.checker.cluster.backend import Traffic
+from twinfleet.checker.cluster.backend import Placement, Traffic
 from twinfleet.checker.cluster.flow import FlowBackend, FlowStatus
 from twinfleet.checker.cluster.level import visited_from
 from twinfleet.checker.cluster.spec import ClusterError
@@ -67,3 +67,11 @@ def whole_lineage(flow: FlowBackend, states: int, roots: Mapping[int, tuple[int,
             raise ClusterError(f"the workers' visited sets lack a key of the path: {key}")
         return [found]
     return parent
+
+
+def ancestry(place: Placement, states: int, roots: Mapping[int, tuple[int, ...]]
+             ) -> Callable[[int], list[int]]:
+    """How `walk.walk` finds a key's ancestors: after a relaxed order, on the whole visited
+    set if it is small enough (`whole_lineage`); else one call per change of partition."""
+    whole = None if place.flow is None else whole_lineage(place.flow, states, roots)
+    return place.lineage if whole is None else whole
