@@ -59,8 +59,11 @@ def distributed(path: Path, workers: int, *, beyond_start: bool = True, relaxed:
                 **options: Any) -> CheckResult:
     """The search on `workers` Ray workers from its first level (a search that ends among
     its initial worlds, `beyond_start` False, never needs them); unreduced unless
-    `reduction` is given; a strict BFS (`--search bfs`) unless `relaxed`."""
+    `reduction` is given, then from the first world (`reduce_from` 0: a reduction that waits
+    keeps the search here, `checker.late_start`); a strict BFS (`--search bfs`) unless
+    `relaxed`."""
     options.setdefault("reduction", "none")
+    options.setdefault("reduce_from", 0)
     if not relaxed:
         options.setdefault("search", "bfs")
     result = check(path, CheckOptions(workers=workers, cluster="this", min_width=1, **options))
@@ -114,10 +117,23 @@ def assert_same_reduction(one: CheckResult, many: CheckResult) -> None:
 def test_a_violated_shipped_case_has_a_trace_as_short(tmp_path: Path, workers: int,
                                                       reduction: str) -> None:
     path = safety_copy("headon", tmp_path)
-    one = check(path, CheckOptions(reduction=reduction))
+    one = check(path, CheckOptions(reduction=reduction, reduce_from=0))
     many = distributed(path, workers, reduction=reduction)
     assert one.violation is not None and one.trace is not None
     assert_same_answer(one, many)
+
+
+def test_a_search_smaller_than_the_reductions_wait_stays_here_and_says_why(tmp_path: Path
+                                                                           ) -> None:
+    # --min-width 1 asks for the workers from the first level, but por decides on a sample
+    # of the frontier in this process once 1,000 worlds are stored: head-on ends before.
+    path = safety_copy("headon", tmp_path)
+    one = check(path, CheckOptions())
+    many = check(path, CheckOptions(workers=2, cluster="this", min_width=1))
+    assert_same_answer(one, many)
+    assert many.engine == ("ran in one process: por waits until 1,000 worlds are stored to "
+                           "decide, on a sample of the frontier here, whether to reduce, and "
+                           "this search stored fewer")
 
 
 def test_a_wide_holding_search_has_the_same_counts(tmp_path: Path) -> None:
@@ -139,7 +155,7 @@ def test_a_wide_reduced_search_has_the_same_counts_and_restarts(tmp_path: Path) 
     one = check(path, CheckOptions(max_depth=80, reduce_from=0))
     assert one.reduction_statistics is not None and one.reduction_statistics["restarts"] >= 1
     for workers in (2, 3):
-        many = distributed(path, workers, max_depth=80, reduction="por", reduce_from=0)
+        many = distributed(path, workers, max_depth=80, reduction="por")
         assert_same_answer(one, many)
         assert_same_reduction(one, many)
 
@@ -189,7 +205,7 @@ def test_generated_systems(tmp_path: Path, doc: dict[str, Any], workers: int,
                            reduction: str) -> None:
     # eventually properties stay: the lasso search runs on the gathered graph
     path = write_scenario(doc, tmp_path / "generated.yaml")
-    one = check(path, CheckOptions(reduction=reduction, max_states=1_000))
+    one = check(path, CheckOptions(reduction=reduction, max_states=1_000, reduce_from=0))
     assume(one.status.value != "unknown")  # a search cut by a limit proves nothing
     many = distributed(path, workers, max_states=1_000, reduction=reduction,
                        beyond_start=one.statistics.depth > 0)

@@ -107,12 +107,17 @@ def distributed(system: System, properties: PropertySet, limits: Limits, spec: S
 def _note(coordinator: Coordinator, outcome: Outcome, workers: int, min_width: int,
           here: bool) -> str:
     """The summary's line on where and in which order the search ran."""
-    t, place = coordinator.traffic, coordinator.place
+    t, place, reduction = coordinator.traffic, coordinator.place, coordinator.reduction
     if here:
         note = "strict BFS in one process (the distributed search's order and checkpoints)"
     elif place.started_at is not None and place.distributed_at is None:
         note = (f"ran in one process: the Ray workers started at depth "
                 f"{place.started_at} were not up before the search ended or narrowed")
+    elif place.distributed_at is None and reduction is not None and reduction.waiting and \
+            reduction.aside is None:
+        note = (f"ran in one process: por waits until {reduction.reduce_from:,} worlds are "
+                "stored to decide, on a sample of the frontier here, whether to reduce, and "
+                "this search stored fewer")
     elif place.distributed_at is None and outcome.statistics.states < START_STATES:
         note = (f"ran in one process: {outcome.statistics.states:,} states, under the "
                 f"{START_STATES:,} at which Ray's workers start (a smaller search is over "
