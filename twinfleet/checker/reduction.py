@@ -177,8 +177,8 @@ class ReductionStatistics:
     prefix: int = 0  # worlds stored unreduced before the reduction started (`late_start`)
 
     def to_json(self) -> dict[str, int]:
-        """The counters as a JSON-ready mapping."""
-        return dataclasses.asdict(self)
+        """The counters as a JSON-ready mapping (all ints: no deep copy)."""
+        return dict(vars(self))
 
 
 @final
@@ -395,8 +395,8 @@ class Reduction:
         most as deep as `world`), C3t asks for `full`, else `reduced`. No set smaller than
         everything: every transition, already counted, and None."""
         enabled = self.rules.enabled(world.events)
-        if self.waiting:  # every transition: the reduction has not started (`late_start`)
-            return self._observed(world, list(self.system.successors(world, enabled))), None
+        if self.waiting:  # every transition, unobserved: the reduced search after the start
+            return list(self.system.successors(world, enabled)), None  # sees its own falls
         chosen = None if self.disabled else self._choose(world, enabled)
         if chosen is None:
             self.stats.full += 1
