@@ -166,10 +166,10 @@ def test_send_relation_is_learned_with_restarts(tmp_path, reduction, expected):
         s = result.statistics
         assert s.attempt_s is not None and 0 < s.attempt_s <= s.elapsed_s
         assert s.attempt_transitions_per_s == pytest.approx(s.transitions / s.attempt_s)
-        assert "since the last restart" in result.summary()
+        assert "since the search last started again" in result.summary()
     else:
         assert result.statistics.attempt_s is None
-        assert "since the last restart" not in result.summary()
+        assert "since the search last started again" not in result.summary()
 
 
 REPORTERS = [node(f"r{v}", "Reporter", value=v) for v in (1, 2, 3)]

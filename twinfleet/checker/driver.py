@@ -198,7 +198,7 @@ class CheckResult:
                  f"time {s.elapsed_s:.2f} s ({s.transitions_per_s:,.0f} transitions/s"
                  + ("" if s.attempt_s is None else
                     f"; {s.attempt_transitions_per_s:,.0f}/s in the {_seconds(s.attempt_s)} since "
-                    "the last restart") + f")  peak memory {s.peak_rss_mb:.0f} MB",
+                    "the search last started again") + f")  peak memory {s.peak_rss_mb:.0f} MB",
                  f"visited-state store {s.store_bytes / 2**20:.1f} MB "
                  f"({s.bytes_per_state:.0f} B/state, {s.digest_bits}-bit digests, "
                  f"collision probability <= {s.collision_probability:.1e})",
