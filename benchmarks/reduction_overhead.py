@@ -1,7 +1,11 @@
 """Does the partial-order reduction pay for itself? `por` against `none`, side by side.
 
 Every scenario the script can find is checked both ways in one process, the modes
-taking turns within each round so that a slow spell of the shared machine hits both:
+taking turns within each round so that a slow spell of the shared machine hits both.
+`por` is what `check` runs by default, late start included (`checker.late_start`: a
+search of under 1,000 worlds runs unreduced, a larger one starts again reduced or steps
+aside); `--eager` reduces from the first world instead, to see what the late start saves.
+The scenarios:
 
 - the shipped examples (`twinfleet/launch/*.yaml`; `demo` never ends, and under `rebeca`
   the reduction is off by plan, which the row says instead of timing identical work);
@@ -24,6 +28,7 @@ the rows whose unreduced check takes 0.5 s or more and over all (a check of a fe
 milliseconds is mostly its fixed costs).
 
     python3 benchmarks/reduction_overhead.py [SCENARIO ...] [--repeat 3] [--generated 100]
+                                             [--eager]
 
 `--bookkeeping SCENARIO` instead measures what the reduction's work per world costs:
 every world's persistent set is computed as `por` computes it, then the world is
@@ -47,6 +52,7 @@ if str(ROOT) not in sys.path:
     sys.path.insert(0, str(ROOT))
 
 from twinfleet.checker.driver import CheckOptions, check, load  # noqa: E402
+from twinfleet.checker.options import REDUCE_FROM  # noqa: E402
 from twinfleet.checker.properties import PropertySet  # noqa: E402
 from twinfleet.checker.reduction import Reduction, plan  # noqa: E402
 from twinfleet.checker.search import Search  # noqa: E402
@@ -72,11 +78,13 @@ class Run:
     aside: int = 0  # systems of a generated row where the reduction stepped aside
 
 
-def check_time(path: Path, mode: str, max_states: int | None = None) -> tuple[int, float, str]:
+def check_time(path: Path, mode: str, max_states: int | None = None,
+               reduce_from: int = REDUCE_FROM) -> tuple[int, float, str]:
     """(states, CPU seconds, the summary's reduction line) of one check of `path`; states
     -1 when it reached `max_states`."""
     started = time.process_time()
-    result = check(path, CheckOptions(reduction=mode, max_states=max_states))
+    result = check(path, CheckOptions(reduction=mode, max_states=max_states,
+                                      reduce_from=reduce_from))
     seconds = time.process_time() - started
     hit = max_states is not None and result.statistics.states >= max_states
     return (-1 if hit else result.statistics.states), seconds, result.reduction
@@ -90,19 +98,20 @@ def reduction_off(path: Path) -> str | None:
     return None if reduction is not None else name
 
 
-def turns(path: Path, times: int, max_states: int | None) -> dict[str, tuple[int, float, str]]:
+def turns(path: Path, times: int, max_states: int | None, reduce_from: int
+          ) -> dict[str, tuple[int, float, str]]:
     """Check `path` `times` times in each mode, the modes taking turns; per mode the states,
     the CPU seconds per check and the reduction line."""
     done: dict[str, tuple[int, float, str]] = {}
     for _ in range(times):
         for mode in ("none", "por"):
-            states, seconds, line = check_time(path, mode, max_states)
+            states, seconds, line = check_time(path, mode, max_states, reduce_from)
             done[mode] = (states, done.get(mode, (0, 0.0, ""))[1] + seconds / times, line)
     return done
 
 
-def rounds(paths: Sequence[Path], repeat: int, max_states: int | None = None
-           ) -> dict[str, Run] | None:
+def rounds(paths: Sequence[Path], repeat: int, max_states: int | None = None,
+           reduce_from: int = REDUCE_FROM) -> dict[str, Run] | None:
     """Check every path of a row in both modes, `repeat` rounds; None if a path of a single
     row hits the limit. Several paths (generated systems) add up, leaving out those at the
     limit. A row whose unreduced checks take under `TINY_S` in all is checked again within
@@ -114,7 +123,7 @@ def rounds(paths: Sequence[Path], repeat: int, max_states: int | None = None
     while len(runs["none"].rounds or ()) < repeat:
         totals = {"none": 0.0, "por": 0.0}
         for path in list(kept):
-            done = turns(path, times, max_states)
+            done = turns(path, times, max_states, reduce_from)
             if any(states < 0 for states, _, _ in done.values()):
                 kept.remove(path)
                 continue
@@ -186,7 +195,7 @@ def compare(args: argparse.Namespace) -> int:
         if off is not None:
             print(f"{path.stem:<22}{'':>42}  {'':<11}{off}: the same search either way")
             continue
-        runs = rounds([path], args.repeat)
+        runs = rounds([path], args.repeat, reduce_from=0 if args.eager else REDUCE_FROM)
         assert runs is not None
         found.append((*row(path.stem, runs), path.stem))
     if args.generated and not args.scenarios:
@@ -194,7 +203,8 @@ def compare(args: argparse.Namespace) -> int:
             for crowded in (False, True):
                 count = args.generated if not crowded else max(1, args.generated // 3)
                 paths = generated(count, crowded, Path(tmp))
-                runs = rounds(paths, args.repeat, GENERATED_LIMIT)
+                runs = rounds(paths, args.repeat, GENERATED_LIMIT,
+                              0 if args.eager else REDUCE_FROM)
                 if runs is not None:
                     name = f"generated {'crowded' if crowded else 'plain'} ({count})"
                     found.append((*row(name, runs), name))
@@ -263,6 +273,8 @@ def main(argv: Sequence[str] | None = None) -> int:
                         help="generated plain systems (a third as many crowded ones); 0: none")
     parser.add_argument("--bookkeeping", type=Path, metavar="SCENARIO",
                         help="measure the reduction's work per world on SCENARIO instead")
+    parser.add_argument("--eager", action="store_true",
+                        help="por from the first world (no late start), as before it")
     args = parser.parse_args(argv)
     if args.bookkeeping is not None:
         return bookkeeping(args.bookkeeping, args.repeat)
