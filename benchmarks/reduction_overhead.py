@@ -10,7 +10,8 @@ The scenarios:
 - the shipped examples (`twinfleet/launch/*.yaml`; `demo` never ends, and under `rebeca`
   the reduction is off by plan, which the row says instead of timing identical work);
 - the scenarios under `tests/data` (the station, the two-phase commit with 0-2 ms of
-  latency: a protocol where `por` has little to prune);
+  latency: a protocol where `por` has little to prune) and the rclpy programs of
+  `tests/rclpy/programs` (each a few dozen worlds);
 - the generated systems of the differential tests (`tests/checker/program_systems.py`,
   derandomized: the same systems each run), plain and crowded, as two rows whose time
   is the sum over their systems (each takes milliseconds alone); a system that reaches
@@ -60,6 +61,7 @@ from twinfleet.checker.system import System  # noqa: E402
 
 LAUNCH = ROOT / "twinfleet" / "launch"
 DATA = ROOT / "tests" / "data"
+RCLPY = ROOT / "tests" / "rclpy" / "programs"  # unmodified rclpy nodes (`twinfleet.rclpy`)
 NEVER_ENDS = {"demo"}  # its talker counts for ever
 GENERATED_LIMIT = 3_000  # the differential tests' state limit
 LONG_S = 0.5  # rows at least this long (unreduced CPU seconds) get a worst ratio of their own
@@ -181,9 +183,10 @@ def generated(count: int, crowded: bool, folder: Path) -> list[Path]:
 
 
 def shipped() -> Iterable[Path]:
-    """The scenarios of the package and of the tests' data."""
+    """The scenarios of the package, of the tests' data and of the rclpy programs' tests."""
     yield from sorted(p for p in LAUNCH.glob("*.yaml") if p.stem not in NEVER_ENDS)
     yield from sorted(p for p in DATA.glob("*/*.yaml"))
+    yield from sorted(RCLPY.glob("*.yaml"))
 
 
 def compare(args: argparse.Namespace) -> int:

@@ -53,7 +53,8 @@ def start(reduction: Reduction, stored: int, frontier: Iterable[World]) -> Start
     workers take it over only then) expands every world fully.)"""
     from twinfleet.checker.reduction import ASIDE_SHARE  # here: loaded only when reducing
 
-    reduction.learned()
+    if reduction.stale:
+        reduction.learned()
     if reduction.aside is not None or reduction.disabled or stored < reduction.reduce_from:
         return Start.WAIT
     reduced, sampled = _sample(reduction, frontier)
