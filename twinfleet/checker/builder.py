@@ -13,7 +13,7 @@ from __future__ import annotations
 import hashlib
 from typing import TYPE_CHECKING, final
 
-from twinfleet.checker.world import Event, World, fast_key, sort_events, world_digest
+from twinfleet.checker.world import Event, World, joined_key, sort_events, world_digest
 
 if TYPE_CHECKING:
     from twinfleet.checker.properties import PropertySet, States
@@ -31,26 +31,32 @@ class WorldBuilder:
         exact: key worlds by their 128-bit digest (`World.digest`).
         keyed: key worlds as they are built; off, a world's key is computed if it is
             read (a simulation follows one path and never looks a world up).
+        ranked: events may have ranks other than 0 (semantics that keep send order).
     """
 
     def __init__(self, reader: States, properties: PropertySet | None, *, exact: bool,
-                 keyed: bool = True) -> None:
+                 keyed: bool = True, ranked: bool = True) -> None:
         self.reader = reader
         self.properties = properties
         self.exact = exact
         self.keyed = keyed
         # Only `within` obligations are carried: without any, every world carries none
         self._within = properties is not None and bool(properties.within)
+        self.ranked = ranked
         self._hashes: dict[bytes, bytes] = {}
+        # the node hashes of a tuple of node states, joined: most steps change no node's
+        # state, and a tuple of the same (interned) states is found by identity
+        self._joined: dict[tuple[bytes, ...], bytes] = {}
         self.hashed = 0  # node-state content hashes computed: for the collision bound
 
     def __len__(self) -> int:
         return len(self._hashes)
 
     def world(self, now: int, states: tuple[bytes, ...], pending: list[Event],
-              parent: World | None, crashes: int = 0) -> World:
-        """The world with node `states` and `pending` events at `now`, after `parent`."""
-        events = sort_events(pending)
+              parent: World | None, crashes: int = 0, appended: int | None = None) -> World:
+        """The world with node `states` and `pending` events at `now`, after `parent`;
+        `appended`: only the last so many of `pending` may be out of canonical order."""
+        events = sort_events(pending, appended)
         obligations: tuple[str, ...] = ()
         if self._within:
             assert self.properties is not None
@@ -61,10 +67,17 @@ class WorldBuilder:
             digest = world_digest(states, events, obligations, crashes)
             return World(now, states, events, obligations, crashes=crashes, key=digest,
                          digest=digest)
-        hashes = self._hashes
-        parts = [hashes.get(s) or self._hash_state(s) for s in states]  # a digest is never b""
+        joined = self._joined.get(states) or self._join(states)  # never b"": a node or more
         return World(now, states, events, obligations, crashes=crashes,
-                     key=fast_key(parts, events, obligations, crashes))
+                     key=joined_key(joined, events, obligations, crashes, ranked=self.ranked))
+
+    def _join(self, states: tuple[bytes, ...]) -> bytes:
+        if len(self._joined) >= _HASH_LIMIT:
+            self._joined.clear()
+        hashes = self._hashes
+        joined = self._joined[states] = b"".join([hashes.get(s) or self._hash_state(s)
+                                                  for s in states])  # a digest is never b""
+        return joined
 
     def _hash_state(self, data: bytes) -> bytes:
         if len(self._hashes) >= _HASH_LIMIT:

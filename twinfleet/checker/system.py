@@ -161,7 +161,8 @@ class System:
         self._memo: GenerationCache[list[Variant]] | None = (
             GenerationCache(_MEMO_LIMIT)
             if transition_cache and not debug_state and not check_determinism else None)
-        self._worlds = WorldBuilder(self, properties, exact=exact_states, keyed=keyed)
+        self._worlds = WorldBuilder(self, properties, exact=exact_states, keyed=keyed,
+                                    ranked=self.rules.fifo)
         self._world = self._worlds.world
         self._decoded: dict[bytes, Any] = {}
         #: zero-delay sends seen in every handler run computed (`checker.reduction`)
@@ -320,7 +321,7 @@ class System:
         i = ev.target
         if v.state is not states[i]:
             states, changed = (*states[:i], v.state, *states[i + 1:]), (i,)
-        new = self._world(ev.due, states, pending, world, world.crashes)
+        new = self._world(ev.due, states, pending, world, world.crashes, len(v.events))
         return Transition(Step(action, v.choices, v.options), new, ev, v.failure, v.logs,
                           v.faults, v.branches, v.events, changed, v.lost)
 

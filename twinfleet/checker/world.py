@@ -31,6 +31,7 @@ from __future__ import annotations
 import functools
 import hashlib
 import struct
+from bisect import insort
 from collections.abc import Callable, Iterable
 from operator import attrgetter
 from typing import Any, Final, final
@@ -267,16 +268,36 @@ def fast_key(state_hashes: list[bytes], events: tuple[Event, ...], obligations: 
     [len(events), crashes, t* if obligations else 0, due offsets..., ranks...],
     then the monitor names. Fixed-width parts make the layout unambiguous.
     """
+    return joined_key(b"".join(state_hashes), events, obligations, crashes)
+
+
+def joined_key(state_hashes: bytes, events: tuple[Event, ...], obligations: tuple[str, ...],
+               crashes: int = 0, *, ranked: bool = True) -> int:
+    """`fast_key` from its node hashes already joined (a builder keeps them by node states:
+    most steps change no node's state); `ranked` False: every event's rank is 0 (semantics
+    that ignore send order), which saves reading them."""
     n = len(events)
     base = events[0].due if n else 0
     pack = _PACKERS.get(n) or _packer(n)
-    parts = [*state_hashes, *[e._ident or e.ident() for e in events],
-             pack(n, crashes, base if obligations else 0, *[e.due - base for e in events],
-                  *[e.rank for e in events])]
+    try:  # an event's hash is computed once, when a key first needs it
+        idents = b"".join(map(_IDENT, events))
+    except TypeError:
+        idents = b"".join([e._ident or e.ident() for e in events])
+    ranks = [e.rank for e in events] if ranked else _ZEROS.get(n) or _zeros(n)
+    data = state_hashes + idents + pack(n, crashes, base if obligations else 0,
+                                         *[e.due - base for e in events], *ranks)
     if obligations:
-        parts.append("\0".join(obligations).encode())
-    digest = hashlib.blake2b(b"".join(parts), digest_size=8).digest()
-    return int.from_bytes(digest, "little")
+        data += "\0".join(obligations).encode()
+    return int.from_bytes(hashlib.blake2b(data, digest_size=8).digest(), "little")
+
+
+_IDENT = attrgetter("_ident")
+_ZEROS: dict[int, tuple[int, ...]] = {}
+
+
+def _zeros(n: int) -> tuple[int, ...]:
+    zeros = _ZEROS[n] = (0,) * n
+    return zeros
 
 
 # `fast_key`'s int64s packed by one prepared struct per event count (native byte order,
@@ -293,7 +314,19 @@ def _packer(n: int) -> Callable[..., bytes]:
 _SK = attrgetter("sk")
 
 
-def sort_events(events: list[Event]) -> tuple[Event, ...]:
-    """Events in canonical order."""
-    events.sort(key=_SK)
+def sort_events(events: list[Event], appended: int | None = None) -> tuple[Event, ...]:
+    """Events in canonical order; `appended`: only the last so many of `events` may be out
+    of it (a step's new events after its world's others), each then goes where a stable
+    sort would put it, without sorting the rest again."""
+    if appended is None or appended > _INSERTED:
+        events.sort(key=_SK)
+    elif appended:
+        tail = events[-appended:]
+        del events[-appended:]
+        for ev in tail:
+            insort(events, ev, key=_SK)
     return tuple(events)
+
+
+# More appended events than this are sorted with the rest (binary insertion pays for few).
+_INSERTED: Final = 4
