@@ -26,12 +26,8 @@ from typing import Any
 from twinfleet.cli.interrupts import Interrupts
 from twinfleet.interfaces.guard import install as refuse_borrowed_ros_names
 from twinfleet.robots import EXAMPLES, PICTURES
-from twinfleet.runtime.access.connection import (
-    EXIT_BAD_INPUT,
-    EXIT_INTERRUPTED,
-    CommandError,
-    error_prefix,
-)
+from twinfleet.runtime.access.errors import CommandError, error_prefix
+from twinfleet.runtime.contract.kinds import EXIT_BAD_INPUT, EXIT_INTERRUPTED
 from twinfleet.runtime.scenario.examples import add_examples
 
 # the robots' scenarios, by name (``twinfleet check c1a``), and their pictures (`render`)

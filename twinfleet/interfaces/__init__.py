@@ -19,8 +19,9 @@ Public API: `load_interface(package, kind)` → a module-like namespace
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from twinfleet.runtime.contract.lazy import lazy_names
 
 if TYPE_CHECKING:
     from twinfleet.interfaces.definitions import InterfaceError
@@ -45,15 +46,7 @@ _HOMES = {"InterfaceError": "definitions", "FieldValueError": "values",
                            "from_fields", "load_interface", "message_type", "service_type",
                            "thaw"), "generate")}
 
-
-def __getattr__(name: str) -> Any:
-    home = _HOMES.get(name)
-    if home is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{home}"), name)
-    globals()[name] = value
-    return value
-
+__getattr__ = lazy_names(__name__, _HOMES)
 
 __all__ = ["FieldValueError", "InterfaceError", "RosMessage", "contract_name", "contract_type",
            "freeze", "from_fields", "load_interface", "message_type", "service_type", "thaw"]

@@ -20,18 +20,12 @@ from __future__ import annotations
 
 import dataclasses
 import typing
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
-from twinfleet.interfaces.definitions import (
-    Container,
-    Definition,
-    FieldType,
-    InterfaceError,
-    message_definition,
-    ros_name,
-    standard_packages,
-)
 from twinfleet.runtime.contract.messages import add_type_check
+
+if TYPE_CHECKING:
+    from twinfleet.interfaces.definitions import Definition, FieldType
 
 _KINDS: dict[Any, str] = {bool: "a bool", int: "an integer", float: "a number", str: "a text",
                           bytes: "a bytes"}
@@ -46,6 +40,15 @@ def check_type(type_name: str, cls: type) -> None:
     """Raise TypeError (one line) if `cls` borrows a standard type's name with other fields."""
     if getattr(cls, "__ros_definition__", None) or cls.__module__.startswith("twinfleet."):
         return
+    # a user's type: only now the definitions (every command installs the check, and a
+    # fleet of twinfleet's own types never needs them)
+    from twinfleet.interfaces.definitions import (
+        InterfaceError,
+        message_definition,
+        ros_name,
+        standard_packages,
+    )
+
     ros_type = ros_name(type_name)
     if ros_type is None:
         return
@@ -88,6 +91,8 @@ def _mismatch(cls: type, definition: Definition) -> str | None:
 
 
 def _type_kind(t: FieldType) -> str:
+    from twinfleet.interfaces.definitions import Container
+
     if t.container is not Container.ONE:
         return "a sequence"
     if t.nested:
@@ -105,6 +110,8 @@ def _hint_kind(hint: Any) -> str | None:
         return "a sequence"
     nested = getattr(hint, "__message_type__", None)
     if isinstance(nested, str):
+        from twinfleet.interfaces.definitions import ros_name
+
         return f"a {ros_name(nested) or nested}"
     return None
 

@@ -10,9 +10,16 @@ times on one path), the discretization study, and `robots.commands.register` for
 `twinfleet experiment` command. Nothing below the command line imports this package.
 """
 
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
 from twinfleet.nodes.pictures import FleetPictures
-from twinfleet.robots.paper import PAPER, PaperRow, paper_row
-from twinfleet.robots.table import CheckCell, LiveSummary, Row
+from twinfleet.runtime.contract.lazy import lazy_names
+
+if TYPE_CHECKING:
+    from twinfleet.robots.paper import PAPER, PaperRow, paper_row
+    from twinfleet.robots.table import CheckCell, LiveSummary, Row
 
 #: The live time scale the experiment uses unless told otherwise: the fastest scale at
 #: which every measured live run stayed on the checker's path
@@ -25,6 +32,13 @@ EXAMPLES = "twinfleet.launch"
 #: their picture renderer (`twinfleet render`), registered with them: ``add_examples(EXAMPLES,
 #: PICTURES)``
 PICTURES = FleetPictures()
+
+# The paper's figures and the table's rows, imported on first use: every command imports
+# the package for `EXAMPLES` and `PICTURES`, and only the experiment needs those.
+_HOMES = {**dict.fromkeys(("PAPER", "PaperRow", "paper_row"), "paper"),
+          **dict.fromkeys(("CheckCell", "LiveSummary", "Row"), "table")}
+
+__getattr__ = lazy_names(__name__, _HOMES)
 
 __all__ = ["DEFAULT_TIME_SCALE", "EXAMPLES", "PAPER", "PICTURES", "CheckCell", "LiveSummary",
            "PaperRow", "Row", "paper_row"]

@@ -6,6 +6,7 @@ Imports the host and what lies below it; the fleet and the tools import it.
 
 __all__ = [
     "connection",
+    "errors",
     "fleetauth",
     "registry",
 ]

@@ -9,7 +9,8 @@ and a fleet name, or raises `CommandError`. Nothing here imports Zenoh until
 a command runs.
 
 `CommandError` is how a command says "bad input or no answer": `twinfleet.cli`
-prints its text as one line on stderr and exits with its code (2).
+prints its text as one line on stderr and exits with its code (2) (`errors`, imported
+here too).
 """
 
 from __future__ import annotations
@@ -20,6 +21,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+from twinfleet.runtime.access.errors import CommandError, error_prefix  # noqa: F401 (here too)
 from twinfleet.runtime.access.fleetauth import (
     CredentialsError,
     MonitorAuth,
@@ -43,21 +45,7 @@ DISCOVERY_S = 1.0
 WAIT_POLL_S = 0.1  # how often --wait looks at the fleet registry again
 
 
-class CommandError(Exception):
-    """A command cannot do what was asked; its text is one line naming what and where."""
-
-    def __init__(self, text: str, code: int = EXIT_BAD_INPUT) -> None:
-        super().__init__(text)
-        self.code = code
-
-
 _RUST_WHERE = re.compile(r"\s*at /\S+?\.rs:\d+\.?")
-
-
-def error_prefix(args: argparse.Namespace | None) -> str:
-    """The prefix of every command's one-line errors: ``twinfleet topic echo:``, say."""
-    words = [getattr(args, name, None) for name in ("command", "action")] if args else []
-    return " ".join(["twinfleet", *(w for w in words if isinstance(w, str))]) + ":"
 
 
 def zenoh_error_text(exc: BaseException) -> str:
