@@ -53,10 +53,9 @@ class WorldBuilder:
         return len(self._hashes)
 
     def world(self, now: int, states: tuple[bytes, ...], pending: list[Event],
-              parent: World | None, crashes: int = 0, appended: int | None = None) -> World:
-        """The world with node `states` and `pending` events at `now`, after `parent`;
-        `appended`: only the last so many of `pending` may be out of canonical order."""
-        events = sort_events(pending, appended)
+              parent: World | None, crashes: int = 0) -> World:
+        """The world with node `states` and `pending` events at `now`, after `parent`."""
+        events = sort_events(pending, _appended(pending, parent, crashes))
         obligations: tuple[str, ...] = ()
         if self._within:
             assert self.properties is not None
@@ -85,3 +84,14 @@ class WorldBuilder:
         h = self._hashes[data] = hashlib.blake2b(data, digest_size=8).digest()
         self.hashed += 1
         return h
+
+
+def _appended(pending: list[Event], parent: World | None, crashes: int) -> int | None:
+    """How many events a step appended to `pending` after its parent's others, which are
+    in canonical order: a step takes one event of its world and appends what it sent (a
+    KEEP_LAST drop, nothing; `checker.system`), so a world with its parent's crash count
+    has one event fewer than its parent before them. None (sort them all): an initial
+    world, or a crash fault, which drops all of a node's events and counts one crash more."""
+    if parent is None or crashes != parent.crashes:
+        return None
+    return len(pending) - len(parent.events) + 1

@@ -295,12 +295,9 @@ class Rules:
         now: due at t*, with at least their subscription's depth of other deliveries to it
         due at t*, and under `ros` the earliest-sent of their stream. Under relaxed timing
         (`enabled_within`'s `tolerance_ms`, None: any) "at t*" is "by t* + tolerance"."""
-        shallowest = self._shallowest
-        if len(events) <= shallowest:
+        if len(events) <= self._shallowest:
             return []
         limit = None if tolerance_ms is None else events[0].due + tolerance_ms
-        if limit is not None and events[shallowest].due > limit:
-            return []  # too few due by `limit` to fill the shallowest subscription
         waiting: dict[tuple[int, str], list[int]] = {}
         for i, ev in enumerate(events):
             if limit is not None and ev.due > limit:

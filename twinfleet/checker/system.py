@@ -321,7 +321,7 @@ class System:
         i = ev.target
         if v.state is not states[i]:
             states, changed = (*states[:i], v.state, *states[i + 1:]), (i,)
-        new = self._world(ev.due, states, pending, world, world.crashes, len(v.events))
+        new = self._world(ev.due, states, pending, world, world.crashes)
         return Transition(Step(action, v.choices, v.options), new, ev, v.failure, v.logs,
                           v.faults, v.branches, v.events, changed, v.lost)
 

@@ -318,7 +318,7 @@ def sort_events(events: list[Event], appended: int | None = None) -> tuple[Event
     """Events in canonical order; `appended`: only the last so many of `events` may be out
     of it (a step's new events after its world's others), each then goes where a stable
     sort would put it, without sorting the rest again."""
-    if appended is None or appended > _INSERTED:
+    if appended is None or not 0 <= appended <= _INSERTED:
         events.sort(key=_SK)
     elif appended:
         tail = events[-appended:]
