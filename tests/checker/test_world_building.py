@@ -3,7 +3,8 @@
 A step's new events are inserted into its world's sorted others (`sort_events` with
 `appended`), and a builder keys a world from its node states' joined hashes, kept by
 the tuple of states (`joined_key`, without reading ranks where every rank is 0): the
-same order and the same keys as sorting everything and `fast_key` over each part.
+same order and the same keys as sorting everything and `fast_key` over each part. A
+search asks `Rules.may_drop` before `Rules.droppable`: False only where that is empty.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import pytest
 from tests.checker.helpers import node, scenario
 from twinfleet.checker import System
 from twinfleet.checker.driver import load
+from twinfleet.checker.semantics import Rules, Semantics
 from twinfleet.checker.world import Event, World, fast_key, joined_key, sort_events
 from twinfleet.runtime.contract.kinds import EventKind
 
@@ -92,3 +94,15 @@ def test_every_built_world_has_the_key_of_its_parts(tmp_path, model, semantics):
         assert ranked == 0  # send order ignored: the builder reads no ranks
     elif model in ("crash", "sums"):
         assert ranked > 0  # FIFO ranks: read into the key
+
+
+@pytest.mark.parametrize("semantics", [Semantics.ROS, Semantics.REBECA])
+def test_may_drop_is_false_only_where_nothing_is_droppable(semantics):
+    rng = random.Random(11)
+    for _ in range(3000):
+        depths = {(t, m): rng.randrange(1, 4) for t in range(3) for m in ("a", "b")
+                  if rng.random() < 0.7}
+        rules = Rules(semantics, depths=depths)
+        events = sort_events([_event(rng) for _ in range(rng.randrange(10))])
+        if not rules.may_drop(events):
+            assert rules.droppable(events) == []

@@ -290,6 +290,13 @@ class Rules:
         way at the call's timeout here."""
         return _NO_SERVER[chooser.branch(len(_NO_SERVER))]
 
+    def may_drop(self, events: Sequence[Event]) -> bool:
+        """False when `droppable(events)` is surely empty: fewer events are due at t* than
+        the shallowest KEEP_LAST subscription holds (read off one index; a search asks this
+        of every world it expands, and a fleet's queues are mostly that short)."""
+        shallowest = self._shallowest
+        return len(events) > shallowest and events[shallowest].due == events[0].due
+
     def droppable(self, events: Sequence[Event], tolerance_ms: int | None = 0) -> list[int]:
         """Rule 6: indices (into the sorted `events`) of the deliveries KEEP_LAST may drop
         now: due at t*, with at least their subscription's depth of other deliveries to it

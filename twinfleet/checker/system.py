@@ -244,8 +244,9 @@ class System:
                 action = Crash(j)
                 for v in self._variants(world, action):
                     yield apply(world, action, v)
-        for index in self.rules.droppable(events):
-            yield self._apply_drop(world, index)
+        if self.rules.may_drop(events):
+            for index in self.rules.droppable(events):
+                yield self._apply_drop(world, index)
 
     # ------------------------------------------------------------ variants
 
