@@ -166,21 +166,23 @@ class Beams:
         rows, cols = static_occ.shape
         h = robot_dir % 8
         if tables.mode == "model":
-            # trunc of (integer + offset) in floating point, exactly as the model.
-            xi = np.trunc(robot_cell[0] + tables.dx[h]).astype(np.int64)
-            yi = np.trunc(robot_cell[1] + tables.dy[h]).astype(np.int64)
+            # trunc of (integer + offset) in floating point, exactly as the model (the cast
+            # to integers truncates).
+            xi = (robot_cell[0] + tables.dx[h]).astype(np.int64)
+            yi = (robot_cell[1] + tables.dy[h]).astype(np.int64)
         else:
             xi = np.floor(robot_cell[0] + 0.5 + tables.dx[h]).astype(np.int64)
             yi = np.floor(robot_cell[1] + 0.5 + tables.dy[h]).astype(np.int64)
         inside = (xi >= 0) & (xi < rows) & (yi >= 0) & (yi < cols)
-        static = static_occ[np.clip(xi, 0, rows - 1), np.clip(yi, 0, cols - 1)] & inside
+        ids = np.where(inside, xi * cols + yi, -1)
+        # a sample outside the map (-1) reads the map's last cell, which `inside` masks
+        static = static_occ.ravel()[ids] & inside
         blocked = static | ~inside
         # Past every beam's first stop no sample can be a first hit: kept small per heading.
         stops = np.where(blocked.any(axis=1), blocked.argmax(axis=1), blocked.shape[1] - 1)
         end = int(stops.max()) + 1
-        ids = np.where(inside, xi * cols + yi, -1)[:, :end]
         kind = np.int16 if rows * cols < 1 << 15 else np.int64
-        return Beams(tables.mode, rows, cols, ids.astype(kind), static[:, :end],
+        return Beams(tables.mode, rows, cols, ids[:, :end].astype(kind), static[:, :end],
                      blocked[:, :end])
 
 
@@ -193,16 +195,15 @@ def beam_hits(beams: Beams, other_cells: Iterable[Cell]) -> tuple[Cell, ...]:
             hit = hit | (ids == ox * cols + oy)
     first = (hit | beams.blocked).argmax(axis=1)
     lanes = np.arange(hit.shape[0])
-    found = ids[lanes, first][hit[lanes, first]].tolist()
-    out: list[Cell] = []
-    if beams.mode == "model":
+    found = ids[lanes, first][hit[lanes, first]].tolist()  # cell ids: one id, one cell
+    if beams.mode == "model":  # a cell again right after itself counts once
+        out, last = [], -1
         for i in found:
-            c = divmod(i, cols)
-            if not out or out[-1] != c:
-                out.append(c)
-    else:
-        out = list(dict.fromkeys(divmod(i, cols) for i in found))
-    return tuple(out)
+            if i != last:
+                out.append(divmod(i, cols))
+                last = i
+        return tuple(out)
+    return tuple(divmod(i, cols) for i in dict.fromkeys(found))  # each cell once
 
 
 class Scanner(PureMemo):  # its content grows, its answers do not change
