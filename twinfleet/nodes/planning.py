@@ -136,14 +136,14 @@ def _astar_model(grid: np.ndarray, start: Cell, goal: Cell) -> SearchResult:
     open_list = [start]
     max_open, expanded = 1, 0
     steps = [(NB[k][0], NB[k][1], SQRT2 if k % 2 else 1.0) for k in range(7)]
-    by_f = f.__getitem__
     while True:
-        if not open_list:
+        best, best_f = -1, INF
+        for i, c in enumerate(open_list):
+            if f[c] < best_f:  # strict: the earliest inserted wins ties
+                best, best_f = i, f[c]
+        if best < 0:
             return SearchResult(None, expanded, max_open)
-        cur = min(open_list, key=by_f)  # the first of equal ones: the earliest inserted
-        if by_f(cur) >= INF:  # never picked, as the model's infinity
-            return SearchResult(None, expanded, max_open)
-        open_list.remove(cur)  # its one entry: a cell enters the open list once
+        cur = open_list.pop(best)
         closed.add(cur)
         expanded += 1
         if cur == goal:
