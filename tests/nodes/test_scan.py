@@ -201,3 +201,11 @@ def test_stepwise_float_quirks():
     for d, n in want.items():
         ob = [(5 + NB[d][0], 5 + NB[d][1])]
         assert stepwise_free((5, 5), d, ob, 0.255, 0.4, 0.02) == n
+
+
+def test_tables_are_built_once_per_configuration_and_read_only():
+    # every map server instance asks for them (a check makes three of each node)
+    tables = build_tables(REBECA, 180.0, 10.0, 2.0, 0.255)
+    assert build_tables(REBECA, 180.0, 10.0, 2.0, 0.255) is tables
+    assert build_tables(REBECA, 180.0, 5.0, 2.0, 0.255) is not tables
+    assert not any(a.flags.writeable for a in (tables.dx, tables.dy, tables.beam_angles))

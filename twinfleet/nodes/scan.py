@@ -9,6 +9,7 @@ decimals, trunc to cells); the exact mode samples from the cell centre over
 
 from __future__ import annotations
 
+import functools
 import math
 from collections import OrderedDict
 from collections.abc import Iterable, Sequence
@@ -57,6 +58,10 @@ def _model_trig(angle_deg: int) -> tuple[float, float]:
     return round(math.cos(rad), 4), round(math.sin(rad), 4)
 
 
+# Kept per arguments: every node instance of a map server builds them (a check validates
+# a scenario's nodes, lints and searches with instances of their own: three), a few ms
+# each, and they are read-only.
+@functools.lru_cache(maxsize=4)
 def build_tables(
     profile: Profile,
     fov_deg: float = 180.0,
