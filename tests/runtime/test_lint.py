@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import ast
 from dataclasses import dataclass
+from pathlib import Path
 
 import pytest
 
 from twinfleet import Context, Node, String, on_start, service, subscribe
 from twinfleet.runtime.scenario.examples import shipped_scenarios
-from twinfleet.runtime.scenario.lint import lint_scenario
+from twinfleet.runtime.scenario.lint import lint_scenario, syntax_nodes
 from twinfleet.runtime.scenario.spec import NodeEntry, Scenario, load_scenario
 
 pytestmark = pytest.mark.timeout(60)
@@ -117,3 +119,10 @@ def test_launch_prints_the_warnings_before_the_fleet_starts(tmp_path):
     warnings = [line for line in run.stderr.splitlines() if line.startswith("warning:")]
     assert any("mistakes.py:" in w and "imports random" in w for w in warnings), run.stderr
     assert "Traceback" not in run.stderr
+
+
+def test_syntax_nodes_are_ast_walks_nodes_in_its_order():
+    root = Path(__file__).resolve().parents[2] / "twinfleet"
+    for path in sorted(root.rglob("*.py"))[:200]:
+        tree = ast.parse(path.read_text())
+        assert [id(n) for n in syntax_nodes(tree)] == [id(n) for n in ast.walk(tree)], path

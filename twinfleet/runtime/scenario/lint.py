@@ -98,8 +98,22 @@ def _parsed(path: str) -> ast.Module | None:
         return None
 
 
+def syntax_nodes(tree: ast.AST) -> list[ast.AST]:
+    """Every node of `tree` in `ast.walk`'s order (breadth first, fields in order), as a
+    list grown while it is read: `ast.walk`'s generators were a third of the lint."""
+    out = [tree]
+    for node in out:
+        for name in node._fields:
+            value = getattr(node, name, None)
+            if isinstance(value, list):
+                out += [v for v in value if isinstance(v, ast.AST)]
+            elif isinstance(value, ast.AST):
+                out.append(value)
+    return out
+
+
 def _module_warnings(tree: ast.Module, path: str) -> Iterator[LintWarning]:
-    for item in ast.walk(tree):
+    for item in syntax_nodes(tree):
         names: list[str] = []
         if isinstance(item, ast.Import):
             names = [alias.name for alias in item.names]
@@ -217,7 +231,7 @@ def _calls(cls: type[Node]) -> list[tuple[ast.Call, str]]:
         if located is None:
             continue
         tree, file, offset = located
-        for item in ast.walk(tree):
+        for item in syntax_nodes(tree):
             if isinstance(item, ast.Call) and isinstance(item.func, ast.Attribute) and \
                     item.func.attr in ("publish", "call", "after") and item.args:
                 found.append((item, f"{file}:{offset + item.lineno}"))
