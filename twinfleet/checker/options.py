@@ -105,8 +105,10 @@ def add_check_arguments(p: argparse.ArgumentParser, *,
                    help="partial-order reduction: por (explore one persistent set of "
                    "simultaneous events per world; same verdicts, far fewer states for "
                    "independent robots) or none (every interleaving). Default: por under ros, "
-                   "none under rebeca (its counts are compared with RMC's). It turns itself "
-                   "off, and says why in the summary, for settings it does not cover "
+                   "none under rebeca (its counts are compared with RMC's). por starts once "
+                   "the search has stored 1,000 worlds (a smaller search runs unreduced, "
+                   "which is faster there), and steps aside where it would not pay. It turns "
+                   "itself off, and says why in the summary, for settings it does not cover "
                    "(check.queue_bound, properties reading now, --search random, rebeca "
                    "node priorities)")
     p.add_argument("--fairness", type=choice_of(Fairness), choices=tuple(Fairness),
