@@ -28,9 +28,9 @@ RULE_FUNCTIONS: tuple[Callable[..., Any], ...] = (
     semantics.Rules.enabled, semantics.Rules._across_nodes, semantics.Rules.add,
     semantics.Rules.remove, semantics.Rules.delivery, semantics.Rules.copies,
     semantics.Rules.crashable, semantics.Rules.droppable, semantics.Rules.tick_after,
-    semantics._earliest_sent,
+    semantics._earliest_sent, semantics._lowest,
     runner.Runner._effects, runner._reply, runner._token, system.System._apply,
-    system.System._apply_crash,
+    system.System._apply_run, system.System._apply_crash,
 )
 
 #: The fingerprint of `RULE_FUNCTIONS` as the closure was last reviewed for them: Rule 6
@@ -50,7 +50,14 @@ RULE_FUNCTIONS: tuple[Callable[..., Any], ...] = (
 #: and a `Reply` effect of any handler sends the reply event the request's handler would
 #: have (`_reply`, for both): a zero-latency send at the instant to the caller, which the
 #: learned send relation sees like any other (an edge from the replying handler).
-PINNED = "a68a225f75d2cd1a"
+#: Then a fourth rewrite for speed that keeps every value (tests/checker/test_rule_rewrites.py
+#: runs the code it replaced beside it): Rules 2 and 4 from one pass over the events at t*
+#: (each node's lowest handler priority, then Rule 4 narrows the nodes: the same events, as
+#: every node it keeps has an event of its lowest priority; with no two nodes of one
+#: instance priority, `_lowest`, which keeps one node, is that pair's minimum), and a run
+#: event's step in `_apply_run`, whose pending events under `rebeca` are slices (there
+#: `remove` and `add` only drop and append, changing no event).
+PINNED = "61baa6023ce4ee8f"
 
 _SKIPPED = (tokenize.NL, tokenize.COMMENT)
 _STATEMENT_START = (tokenize.NEWLINE, tokenize.INDENT, tokenize.DEDENT)

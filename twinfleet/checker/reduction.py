@@ -115,7 +115,7 @@ _KNOWN_SETTINGS: Final = frozenset({"latency", "topic_latency", "deadline_defaul
                                     "deadlines", "queue_bounds", "drop", "duplicate", "crash"})
 _KNOWN_RULES: Final = frozenset({"semantics", "node_priorities", "global_priority",
                                  "settings", "depths", "lossy", "fifo", "has_latency",
-                                 "_ranges", "_shallowest"})
+                                 "_ranges", "_shallowest", "_one_node"})
 # The code of the enabling and effect rules the closure was argued for is pinned by
 # tests/checker/test_reduction_rules.py: a change there fails that test until the closure
 # has been reviewed for it (docs/reduction.md §5).

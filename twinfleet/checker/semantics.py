@@ -150,6 +150,7 @@ class Rules:
     has_latency: bool = field(init=False)
     _ranges: dict[str, tuple[int, int] | None] = field(init=False, repr=False, compare=False)
     _shallowest: int = field(init=False, repr=False, compare=False)
+    _one_node: bool = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         try:
@@ -162,6 +163,10 @@ class Rules:
             raise ValueError(f"latency must be [min, max] with 0 <= min <= max, got {latency}")
         object.__setattr__(self, "fifo", self.semantics is Semantics.ROS)
         object.__setattr__(self, "_shallowest", min(self.depths.values(), default=1 << 62))
+        # Rule 4 with no two nodes of one instance priority: a single node runs at a time
+        prios = self.node_priorities
+        object.__setattr__(self, "_one_node", not self.fifo and not self.global_priority
+                           and bool(prios) and len(set(prios)) == len(prios))
         ranges = dict(self.settings.topic_latency)
         object.__setattr__(self, "_ranges", ranges)
         object.__setattr__(self, "has_latency", latency is not None
@@ -185,30 +190,36 @@ class Rules:
         now = events[0].due
         if len(events) == 1 or events[1].due != now:
             return [0]  # alone at t* (most steps of a fleet whose latencies spread them)
-        group = []
+        if self._one_node:
+            return _lowest(events, now, self.node_priorities)
+        # One pass over the events at t* (a prefix: they are sorted by due) for each node's
+        # lowest handler priority; Rule 4 then narrows the nodes, not the events.
         best: dict[int, int] = {}
-        for i, ev in enumerate(events):
+        n = 0
+        for ev in events:
             if ev.due != now:
                 break
-            group.append(i)
-            if ev.priority < best.get(ev.target, ev.priority + 1):
-                best[ev.target] = ev.priority
-        picked = [i for i in group if events[i].priority == best[events[i].target]]
+            n += 1
+            target = ev.target
+            if target not in best or ev.priority < best[target]:
+                best[target] = ev.priority
         if self.fifo:
-            picked = _earliest_sent(events, picked)
-        elif len(best) > 1:
-            picked = self._across_nodes(events, picked)
-        return picked
+            return _earliest_sent(events, [i for i in range(n)
+                                           if events[i].priority == best[events[i].target]])
+        if len(best) > 1 and (self.global_priority or self.node_priorities):
+            best = self._across_nodes(best)
+        get = best.get
+        return [i for i in range(n) if get(events[i].target) == events[i].priority]
 
-    def _across_nodes(self, events: Sequence[Event], picked: list[int]) -> list[int]:
+    def _across_nodes(self, best: dict[int, int]) -> dict[int, int]:
+        """Rule 4: of `best` (each node's lowest handler priority at t*), the nodes that run:
+        the lowest handler priority across nodes, or the lowest instance priority."""
         if self.global_priority:
-            top = min(events[i].priority for i in picked)
-            return [i for i in picked if events[i].priority == top]
-        if not self.node_priorities:
-            return picked
+            top = min(best.values())
+            return {t: p for t, p in best.items() if p == top}
         prios = self.node_priorities
-        top = min(prios[events[i].target] for i in picked)
-        return [i for i in picked if prios[events[i].target] == top]
+        top = min([prios[t] for t in best])
+        return {t: p for t, p in best.items() if prios[t] == top}
 
     def add(self, pending: list[Event], ev: Event) -> None:
         """Append `ev` to `pending`, giving it its rank (and FIFO clamping) under `ros`."""
@@ -385,6 +396,23 @@ def _stream_heads(events: Sequence[Event], found: list[int]) -> list[int]:
         if j is None or events[i].rank < events[j].rank:
             first[events[i].sender] = i
     return list(first.values())
+
+
+def _lowest(events: Sequence[Event], now: int, prios: tuple[int, ...]) -> list[int]:
+    """Rules 2 and 4 where no two nodes share an instance priority: the node of the lowest
+    instance priority with an event at `now` runs its events of its lowest handler priority,
+    so the events at `now` of the lowest (instance priority, handler priority) are enabled."""
+    picked: list[int] = []
+    top = handler = 0
+    for i, ev in enumerate(events):
+        if ev.due != now:
+            break
+        p = prios[ev.target]
+        if not picked or p < top or (p == top and ev.priority < handler):
+            top, handler, picked = p, ev.priority, [i]
+        elif p == top and ev.priority == handler:
+            picked.append(i)
+    return picked
 
 
 def _earliest_sent(events: Sequence[Event], picked: list[int]) -> list[int]:

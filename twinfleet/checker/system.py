@@ -230,20 +230,20 @@ class System:
         # The search's inner loop, so `actions` and `outcomes` are spelled out here: a hit
         # of the outcome cache (the key of `_variants`) costs one lookup (C1a: 96 % hits).
         events, states = world.events, world.states
-        apply, memo = self._apply, self._memo
+        apply, run, memo = self._apply, self._apply_run, self._memo
         for index in self.rules.enabled(events) if enabled is None else enabled:
-            action: Action = _RUN_EVENTS[index] if index < _SHARED else RunEvent(index)
+            action = _RUN_EVENTS[index] if index < _SHARED else RunEvent(index)
             ev = events[index]
             found = None
             if memo is not None and not ev.sk[3]:
                 found = memo.get((states[ev.target], ev.key, ev.due))
             for v in found if found is not None else self._variants(world, action):
-                yield apply(world, action, v)
+                yield run(world, action, v)
         if self.settings.crash is not None:
             for j in self.rules.crashable(world):
-                action = Crash(j)
-                for v in self._variants(world, action):
-                    yield apply(world, action, v)
+                crash = Crash(j)
+                for v in self._variants(world, crash):
+                    yield apply(world, crash, v)
         if self.rules.may_drop(events):
             for index in self.rules.droppable(events):
                 yield self._apply_drop(world, index)
@@ -313,11 +313,20 @@ class System:
             return self._apply_crash(world, action.node, v)
         if type(action) is Drop:
             return self._apply_drop(world, action.index)
-        ev = world.events[action.index]
+        return self._apply_run(world, action, v)
+
+    def _apply_run(self, world: World, action: RunEvent, v: Variant) -> Transition:
+        """The transition of variant `v` of `action`, a pending event of `world` run."""
+        events = world.events
+        index = action.index
+        ev = events[index]
         rules = self.rules
-        pending = rules.remove(world.events, action.index)
-        for e in v.events:
-            rules.add(pending, e)
+        if rules.fifo:
+            pending = rules.remove(events, index)
+            for e in v.events:
+                rules.add(pending, e)
+        else:  # there `remove` and `add` change no event: the others, then the new ones
+            pending = [*events[:index], *events[index + 1:], *v.events]
         states, changed = world.states, ()
         i = ev.target
         if v.state is not states[i]:
