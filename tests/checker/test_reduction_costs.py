@@ -96,18 +96,21 @@ def test_a_walk_builds_only_the_worlds_it_steps_to(monkeypatch, path, fewer):
     # station's walk has one transition per step either way.
     built = [0]
     walking = [False]
-    apply, walk_on = System._apply, Reduction.walk_on
+    walk_on = Reduction.walk_on
 
-    def counted(self: System, *args: Any) -> Any:
-        built[0] += walking[0]
-        return apply(self, *args)
+    def counting(build: Any) -> Any:  # each way a step builds its world
+        def counted(self: System, *args: Any) -> Any:
+            built[0] += walking[0]
+            return build(self, *args)
+        return counted
 
     def watched(self: Reduction, *args: Any) -> None:
         walking[0] = True
         walk_on(self, *args)
         walking[0] = False
 
-    monkeypatch.setattr(System, "_apply", counted)
+    for name in ("_apply_run", "_apply_crash", "_apply_drop"):
+        monkeypatch.setattr(System, name, counting(getattr(System, name)))
     monkeypatch.setattr(Reduction, "walk_on", watched)
     _, lean, outcome = searched(path)
     lean_built = built[0]
