@@ -5,8 +5,9 @@ Rules 2 and 4 from one pass (each node's lowest handler priority, then the nodes
 keeps; with no two nodes of one instance priority, the lowest pair of (instance priority,
 handler priority)), and a step's pending events under semantics without send order taken
 as slices (`Rules.remove` and `Rules.add` change no event there). The code they replaced
-is kept below as it was; both run on the worlds of c1a_rebeca, c1a and generated systems,
-and on random event lists under every kind of priority setting.
+is kept below (the enabling rules as they were, and the world a step built from `remove`
+and `add`); old and new run on the worlds of c1a_rebeca, c1a and generated systems, and
+on random event lists under every kind of priority setting.
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ from tests.checker.program_systems import systems, write_scenario
 from twinfleet.checker import System
 from twinfleet.checker.driver import load
 from twinfleet.checker.semantics import Rules, Semantics, _earliest_sent
-from twinfleet.checker.transition import RunEvent, Step, Transition, Variant
+from twinfleet.checker.transition import RunEvent, Step, Variant
 from twinfleet.checker.world import Event, World
 from twinfleet.runtime.contract.kinds import EventKind
 
@@ -63,20 +64,15 @@ def enabled_before(rules: Rules, events: Sequence[Event]) -> list[int]:
     return [i for i in picked if prios[events[i].target] == top]
 
 
-def apply_before(system: System, world: World, action: RunEvent, v: Variant) -> Transition:
-    """`System._apply` of a `RunEvent` as it was reviewed."""
-    ev = world.events[action.index]
-    rules = system.rules
-    pending = rules.remove(world.events, action.index)
+def world_before(system: System, world: World, index: int, v: Variant) -> World:
+    """The world `System._apply` built for a run event as it was reviewed."""
+    ev = world.events[index]
+    pending = system.rules.remove(world.events, index)
     for e in v.events:
-        rules.add(pending, e)
-    states, changed = world.states, ()
-    i = ev.target
-    if v.state is not states[i]:
-        states, changed = (*states[:i], v.state, *states[i + 1:]), (i,)
-    new = system._world(ev.due, states, pending, world, world.crashes)
-    return Transition(Step(action, v.choices, v.options), new, ev, v.failure, v.logs,
-                      v.faults, v.branches, v.events, changed, v.lost)
+        system.rules.add(pending, e)
+    states = list(world.states)
+    states[ev.target] = v.state
+    return system._world(ev.due, tuple(states), pending, world, world.crashes)
 
 
 def _value(ev: Event) -> tuple[object, ...]:
@@ -123,15 +119,15 @@ def assert_as_before(system: System, limit: int) -> int:
         for index in enabled:
             action = RunEvent(index)
             for v in system.variants(world, action):
-                new, old = system._apply(world, action, v), apply_before(system, world,
-                                                                          action, v)
+                new, old = system._apply(world, action, v), world_before(system, world,
+                                                                          index, v)
                 assert [_value(e) for e in new.world.events] == [
-                    _value(e) for e in old.world.events]
-                assert new.world.key == old.world.key
-                assert new.world.states is old.world.states or (
-                    new.world.states == old.world.states)
-                assert (new.step, new.event, new.changed, new.sent) == (
-                    old.step, old.event, old.changed, old.sent)
+                    _value(e) for e in old.events]
+                assert (new.world.key, new.world.states) == (old.key, old.states)
+                ev = events[index]
+                changed = (ev.target,) if v.state is not world.states[ev.target] else ()
+                assert (new.step, new.event, new.changed, new.sent, new.failure) == (
+                    Step(action, v.choices, v.options), ev, changed, v.events, v.failure)
     return several
 
 
