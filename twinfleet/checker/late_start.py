@@ -51,12 +51,12 @@ def start(reduction: Reduction, stored: int, frontier: Iterable[World]) -> Start
     relation learned so far enters the reduction's relation in any case. A reduction that
     stepped aside stays waiting, so that a search sharing it (`checker.cluster`, whose
     workers take it over only then) expands every world fully.)"""
-    from twinfleet.checker.reduction import ASIDE_SHARE  # here: loaded only when reducing
-
     if reduction.stale:
         reduction.learned()
     if reduction.aside is not None or reduction.disabled or stored < reduction.reduce_from:
         return Start.WAIT
+    from twinfleet.checker.reduction import ASIDE_SHARE  # here: loaded only when reducing
+
     reduced, sampled = _sample(reduction, frontier)
     if sampled and reduced >= ASIDE_SHARE * sampled:
         reduction.waiting = False

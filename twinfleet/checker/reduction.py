@@ -126,14 +126,13 @@ def default_reduction(semantics: Semantics | str) -> str:
     return POR if Semantics(semantics) is Semantics.ROS else NONE
 
 
-def why_off(rules: Rules, properties: PropertySet, visibility: Visibility,
-            strategy: str) -> str | None:
+def why_off(rules: Rules, properties: PropertySet, strategy: str) -> str | None:
     """Why the reduction cannot run on this system and these properties, or None."""
     if strategy == "random":
         return "random walks pick among all actions"
     if properties.queue_bounds:
         return "check.queue_bound reads the pending counts"
-    if visibility.uses_now:
+    if any(p.expr is not None and p.expr.uses_now for p in properties.all):
         return "a property reads now"
     if rules.semantics is Semantics.REBECA and (
             rules.global_priority or len(set(rules.node_priorities)) > 1):
@@ -187,15 +186,14 @@ class Reduction:
 
     def __init__(self, system: System, properties: PropertySet,
                  visibility: Visibility | None = None, reduce_from: int = 0) -> None:
-        self.system, self.properties = system, properties
+        self.system, self.properties, self.rules = system, properties, system.rules
         #: worlds searched unreduced first (`checker.late_start`); waiting: not there yet
         self.reduce_from, self.waiting = reduce_from, reduce_from > 0
-        self.rules = system.rules
-        self.visibility = Visibility(properties, system.names) if visibility is None else visibility
+        self._visibility, self._frozen = visibility, False  # (`visibility`)
         self.publications = system.publications
         self.stats = ReductionStatistics()
         self._version = self.publications.version
-        self._rising = self.visibility.rising
+        self._rising = None if visibility is None else visibility.rising
         # (node, priority) of every KEEP_LAST subscription: once, not per world (`Closure`)
         self._queued = frozenset((n, system.topology.priority(n, m)) for n, m in self.rules.depths)
         self._commuting = bool(system.topology.commuting)
@@ -204,6 +202,14 @@ class Reduction:
         self._closures = 0  # closures computed, walks and restarts included (`_choose`)
         #: why the reduction stepped aside for the rest of the run (`steps_aside`), or None
         self.aside: str | None = None
+
+    @property
+    def visibility(self) -> Visibility:
+        """What the properties read, analysed when first asked (a waiting search never asks)."""
+        if self._visibility is None:
+            self._visibility = Visibility(self.properties, self.system.names)
+            self._visibility.frozen, self._rising = self._frozen, self._visibility.rising
+        return self._visibility
 
     def steps_aside(self) -> bool:
         """True, and from now on `aside` says why, once the search expanded `ASIDE_WORLDS`
@@ -222,18 +228,20 @@ class Reduction:
     def begin(self) -> None:
         """Start (or start again) a search: remember the relation and what it assumes."""
         self._version = self.publications.version
-        self._rising = self.visibility.rising
+        self._rising = None if self._visibility is None else self._visibility.rising
 
     def statistics(self) -> dict[str, int]:
         """The counters of the search, with the size of the learned relation."""
         self.stats.edges = self.publications.edges()
-        self.stats.rises = self.visibility.rises
+        self.stats.rises = 0 if self._visibility is None else self._visibility.rises
         return self.stats.to_json()
 
     def freeze(self) -> None:
         """Learn level by level (`Publications.freeze`): sends, and a rising goal's fall."""
         self.publications.freeze()
-        self.visibility.frozen = True
+        self._frozen = True
+        if self._visibility is not None:
+            self._visibility.frozen = True
 
     def learned_state(self) -> tuple[Any, ...]:
         """What this search learned (relation, rising-goal rule; waiting), for `relearn`."""
@@ -254,7 +262,8 @@ class Reduction:
         """Add what the search learned while frozen to the relation, and go on from it: no
         world of the pass was reduced, so none relied on the relation (`Search`)."""
         self.publications.commit()
-        self.visibility.commit()
+        if self._visibility is not None:
+            self._visibility.commit()
         self.begin()
 
     def restarted(self) -> None:
@@ -361,7 +370,8 @@ class Reduction:
         publications = self.publications
         return publications.version != self._version or bool(publications.pending) or \
             publications.pending_unknown is not None or \
-            self.visibility.pending_fall is not None or self.visibility.rising != self._rising
+            (v := self._visibility) is not None and (v.pending_fall is not None
+                                                     or v.rising != self._rising)
 
     def must_restart(self) -> bool:
         """True when the relation grew (`stale`) and a world of this pass was reduced with
@@ -404,7 +414,7 @@ class Reduction:
         out: list[Transition] = []
         for i in chosen:
             out += self.system.outcomes(world, RunEvent(i))
-        out += self._drops(world, {world.events[i].target for i in chosen})
+        out += _drops(self.system, world, {world.events[i].target for i in chosen})
         t = world.events[0].due
         return out, [tr.world.key for tr in out if tr.failure is None
                      and tr.world.events and tr.world.events[0].due == t]
@@ -425,16 +435,6 @@ class Reduction:
         """`transitions`, once checked for falling goal atoms (`Visibility.observe`)."""
         self.visibility.observe(self.system, world, transitions)
         return transitions
-
-    def _drops(self, world: World, nodes: set[int]) -> list[Transition]:
-        """The KEEP_LAST drops (Rule 6) of the chosen nodes' waiting deliveries: actions of
-        those nodes, so a node-granular set takes them with its events. A drop of another
-        node's delivery commutes with every chosen event: it only shortens that node's
-        queue, which no other node's enabling reads, and a send into the queue (a chosen
-        event's effect) leaves an enabled drop enabled."""
-        events = world.events
-        return [t for k in self.rules.droppable(events) if events[k].target in nodes
-                for t in self.system.outcomes(world, Drop(k))]
 
     def persistent(self, world: World) -> list[int] | None:
         """`_choose` for `world` (nothing expanded: the caller puts the counters back)."""
@@ -483,6 +483,17 @@ class Reduction:
         return best
 
 
+def _drops(system: System, world: World, nodes: set[int]) -> list[Transition]:
+    """The KEEP_LAST drops (Rule 6) of the chosen nodes' waiting deliveries: actions of
+    those nodes, so a node-granular set takes them with its events. A drop of another
+    node's delivery commutes with every chosen event: it only shortens that node's queue,
+    which no other node's enabling reads, and a send into the queue (a chosen event's
+    effect) leaves an enabled drop enabled."""
+    events = world.events
+    return [t for k in system.rules.droppable(events) if events[k].target in nodes
+            for t in system.outcomes(world, Drop(k))]
+
+
 def _count_commuted(reduction: Reduction, world: World, closure: Closure,
                     chosen: list[int] | None) -> None:
     """Count `closure`'s pair checks, and the worlds where `chosen` took one event of a
@@ -509,11 +520,10 @@ def plan(system: System, properties: PropertySet, strategy: str,
         raise ValueError(f"unknown reduction {asked!r}; expected {' or '.join(REDUCTIONS)}")
     if asked == NONE:
         return None, NONE if requested else f"none (default under {system.semantics})"
-    visibility = Visibility(properties, system.names)
-    why = why_off(system.rules, properties, visibility, strategy)
+    why = why_off(system.rules, properties, strategy)
     if why is not None:
         return None, f"none ({why})"
-    return Reduction(system, properties, visibility, reduce_from), POR
+    return Reduction(system, properties, reduce_from=reduce_from), POR
 
 
 def describe(reduction: Reduction | None, name: str, strategy: str = "bfs") -> str:
