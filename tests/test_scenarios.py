@@ -277,3 +277,17 @@ def test_a_mistyped_class_name_gets_a_did_you_mean(tmp_path):
     with pytest.raises(ScenarioError, match=r"unknown node class 'twinfleet\.nodes\.demo:Listenr'"
                                             r" .*; did you mean 'twinfleet\.nodes\.demo:Listener'\?"):
         load_scenario(write(tmp_path, doc))
+
+
+def test_a_name_with_no_example_package_registered_asks_for_a_path(monkeypatch):
+    # A library caller (not the command line, not twinfleet.testing) has registered no
+    # example package: the error says how to find the file, not "shipped: " with nothing.
+    from twinfleet.runtime.scenario import examples
+
+    monkeypatch.setattr(examples, "_PACKAGES", [])
+    with pytest.raises(ScenarioError, match=r"^c1a: cannot read scenario file: no such file, and "
+                       r"no example package is registered to find it by name: pass the file's "
+                       r"path, or register one first \(twinfleet\.runtime\.scenario\.examples\."
+                       r"add_examples; the command line and twinfleet\.testing register the "
+                       r"shipped examples\)$"):
+        load_scenario("c1a")

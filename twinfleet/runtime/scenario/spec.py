@@ -229,6 +229,12 @@ def resolve_scenario(spec: str | Path) -> Path:
     name = path.name.removesuffix(".yaml")
     if path.name == str(spec) and name in shipped:
         return shipped[name]
+    if not shipped:  # a library caller: only the command line and the testing API add them
+        raise ScenarioError(f"{spec}: cannot read scenario file: no such file, and no example "
+                            "package is registered to find it by name: pass the file's path, "
+                            "or register one first (twinfleet.runtime.scenario.examples."
+                            "add_examples; the command line and twinfleet.testing register "
+                            "the shipped examples)")
     raise ScenarioError(f"{spec}: cannot read scenario file: no such file, and no shipped "
                         f"example is called {name!r} (shipped: {', '.join(shipped)}; "
                         "`twinfleet examples` describes them)")
