@@ -20,7 +20,6 @@ relation it starts with was learned, only on the relation being checked as it go
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Iterable
 from enum import Enum, unique
 from itertools import islice
@@ -55,9 +54,11 @@ def start(reduction: Reduction, stored: int, frontier: Iterable[World]) -> Start
         reduction.learned()
     if reduction.aside is not None or reduction.disabled or stored < reduction.reduce_from:
         return Start.WAIT
-    from twinfleet.checker.reduction import ASIDE_SHARE  # here: loaded only when reducing
+    # here: the reduction's modules are loaded only where a search may reduce
+    from twinfleet.checker.reduction import ASIDE_SHARE, uncounted
 
-    reduced, sampled = _sample(reduction, frontier)
+    with uncounted(reduction):  # no world of the sample is expanded
+        reduced, sampled = _sample(reduction, frontier)
     if sampled and reduced >= ASIDE_SHARE * sampled:
         reduction.waiting = False
         reduction.stats.prefix = stored
@@ -70,11 +71,6 @@ def start(reduction: Reduction, stored: int, frontier: Iterable[World]) -> Start
 
 def _sample(reduction: Reduction, frontier: Iterable[World]) -> tuple[int, int]:
     """(worlds with a persistent set smaller than everything, worlds sampled) among the
-    first `SAMPLE` of `frontier` with an event pending. The reduction's counters and what
-    it relied on are put back: no world was expanded."""
-    counted, relied = dataclasses.replace(reduction.stats), set(reduction.relied)
-    rises = reduction.visibility.rises
+    first `SAMPLE` of `frontier` with an event pending."""
     worlds = list(islice((w for w in frontier if w.events), SAMPLE))
-    reduced = sum(reduction.persistent(w) is not None for w in worlds)
-    reduction.stats, reduction.relied, reduction.visibility.rises = counted, relied, rises
-    return reduced, len(worlds)
+    return sum(reduction.persistent(w) is not None for w in worlds), len(worlds)

@@ -52,7 +52,8 @@ from __future__ import annotations
 
 import dataclasses
 import random
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, Final, final
 
@@ -132,7 +133,7 @@ def why_off(rules: Rules, properties: PropertySet, strategy: str) -> str | None:
         return "random walks pick among all actions"
     if properties.queue_bounds:
         return "check.queue_bound reads the pending counts"
-    if any(p.expr is not None and p.expr.uses_now for p in properties.all):
+    if properties.reads()[1]:
         return "a property reads now"
     if rules.semantics is Semantics.REBECA and (
             rules.global_priority or len(set(rules.node_priorities)) > 1):
@@ -318,14 +319,12 @@ class Reduction:
         """One seeded walk (`_walk`) from each of the first `PROBE_WALKS` of `starts`,
         `budget` steps in all; the walks' own counters are put back, and they are counted
         as walks ahead."""
-        counted, relied, rises = dataclasses.replace(self.stats), set(self.relied), \
-            self.visibility.rises
         rng = random.Random(PROBE_SEED)
         left, walks = budget, 0
-        for start in starts[:PROBE_WALKS]:
-            walks += 1
-            left -= self._walk(start, rng, left if max_depth is None else min(left, max_depth))
-        self.stats, self.relied, self.visibility.rises = counted, relied, rises
+        with uncounted(self):
+            for start in starts[:PROBE_WALKS]:
+                walks += 1
+                left -= self._walk(start, rng, left if max_depth is None else min(left, max_depth))
         self.stats.probes += max(walks, 1)
         self.stats.probe_steps += budget - left
 
@@ -437,7 +436,7 @@ class Reduction:
         return transitions
 
     def persistent(self, world: World) -> list[int] | None:
-        """`_choose` for `world` (nothing expanded: the caller puts the counters back)."""
+        """`_choose` for `world`, nothing expanded (so called within `uncounted`)."""
         return None if self.disabled else self._choose(world, self.rules.enabled(world.events))
 
     def _choose(self, world: World, enabled: list[int]) -> list[int] | None:
@@ -481,6 +480,19 @@ class Reduction:
         best = closure.smallest()
         _count_commuted(self, world, closure, best)
         return best
+
+
+@contextmanager
+def uncounted(reduction: Reduction) -> Iterator[None]:
+    """Closures computed inside count nothing: the reduction's counters, the declared
+    handlers it relied on and the rising-goal count are put back (walks ahead, the late
+    start's sample: no world of the search was expanded)."""
+    counted, relied = dataclasses.replace(reduction.stats), set(reduction.relied)
+    rises = reduction.visibility.rises
+    try:
+        yield
+    finally:
+        reduction.stats, reduction.relied, reduction.visibility.rises = counted, relied, rises
 
 
 def _drops(system: System, world: World, nodes: set[int]) -> list[Transition]:
